@@ -1,0 +1,116 @@
+//! Error types. Configuration errors are found once, at `try_new`; buffer errors at the
+//! boundary of a call (a slice of the wrong length). No error depends on data *values*:
+//! the per-row arithmetic is infallible.
+
+use core::fmt;
+
+/// A configuration parameter was rejected by [`Config::try_new`](crate::Config::try_new).
+///
+/// Each variant names the parameter (as a `&'static str` field name of
+/// [`Params`](crate::Params)) so that a host can report it to the user.
+///
+/// ```
+/// use vltm_kernel::{Config, ConfigError, Params};
+/// let err = Config::try_new(&Params::new(-0.2, 100, 0.01)).unwrap_err();
+/// assert_eq!(err, ConfigError::NotPositive("wavelength"));
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum ConfigError {
+    /// The parameter must be finite (it was NaN or ±∞).
+    NotFinite(&'static str),
+    /// The parameter must be strictly positive.
+    NotPositive(&'static str),
+    /// The histogram length `nt` is zero.
+    EmptyTimeAxis,
+    /// The band `k_lo..=k_hi` reaches past the Nyquist bin ±N/2: the time bin Δt is too
+    /// coarse for the virtual wavelength (need roughly `Δt·(1/λ + m/(2πσ)) < 1/2`).
+    BandCrossesNyquist,
+    /// A derived size (DFT length, band, table length) does not fit the index types.
+    SizeOverflow(&'static str),
+}
+
+impl fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::NotFinite(p) => write!(f, "parameter `{p}` must be finite"),
+            Self::NotPositive(p) => write!(f, "parameter `{p}` must be > 0"),
+            Self::EmptyTimeAxis => f.write_str("parameter `nt` must be > 0 (empty time axis)"),
+            Self::BandCrossesNyquist => f.write_str(
+                "the frequency band crosses Nyquist: the time bin `dt` is too coarse for \
+                 `wavelength` (need dt*(1/wavelength + m/(2*pi*sigma)) < 1/2)",
+            ),
+            Self::SizeOverflow(p) => write!(f, "derived size `{p}` overflows"),
+        }
+    }
+}
+
+impl core::error::Error for ConfigError {}
+
+/// A caller-provided argument does not fit the configuration: a slice of the wrong length,
+/// a non-finite position, or two probes that cannot be merged. Found at the boundary of a
+/// call, never inside the per-bin loops; nothing was modified when it is returned.
+///
+/// ```
+/// use vltm_kernel::Error;
+/// let e = Error::Length { what: "histograms", expected: 8, found: 7 };
+/// assert_eq!(e.to_string(), "`histograms` has 7 elements, expected 8");
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+#[non_exhaustive]
+pub enum Error {
+    /// A slice has the wrong number of elements.
+    Length {
+        /// Which argument.
+        what: &'static str,
+        /// The length the configuration requires.
+        expected: usize,
+        /// The length that was passed.
+        found: usize,
+    },
+    /// A position has a NaN or infinite coordinate.
+    NonFinite {
+        /// Which argument.
+        what: &'static str,
+        /// Index of the offending point in its list.
+        index: usize,
+    },
+    /// Two probes differ in kind, focus, voxels or configuration and cannot be merged.
+    Incompatible(&'static str),
+}
+
+impl fmt::Display for Error {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Length { what, expected, found } => {
+                write!(f, "`{what}` has {found} elements, expected {expected}")
+            }
+            Self::NonFinite { what, index } => {
+                write!(f, "`{what}`[{index}] has a non-finite coordinate")
+            }
+            Self::Incompatible(why) => write!(f, "probes cannot be merged: {why}"),
+        }
+    }
+}
+
+impl core::error::Error for Error {}
+
+/// Checks a length once at a call boundary.
+#[inline]
+pub(crate) fn check_len(what: &'static str, expected: usize, found: usize) -> Result<(), Error> {
+    if expected == found {
+        Ok(())
+    } else {
+        Err(Error::Length { what, expected, found })
+    }
+}
+
+/// Checks that every coordinate of every point is finite.
+pub(crate) fn check_points(what: &'static str, pts: &[crate::Point]) -> Result<(), Error> {
+    match pts.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        None => Ok(()),
+        Some(index) => Err(Error::NonFinite { what, index }),
+    }
+}

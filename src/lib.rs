@@ -1,0 +1,1 @@
+//! Test and bench suite of vltm (no library code).
