@@ -171,7 +171,11 @@ impl Config {
         if finite("margin", p.margin)? < 0.0 {
             return Err(ConfigError::NotPositive("margin"));
         }
-        if let Legs::FirstAndLast { laser_origin, sensor_origin } = p.legs {
+        if let Legs::FirstAndLast {
+            laser_origin,
+            sensor_origin,
+        } = p.legs
+        {
             for c in laser_origin {
                 finite("laser_origin", c)?;
             }
@@ -184,7 +188,7 @@ impl Config {
         }
         let pad = libm::ceil(2.0 * cg * sigma / dt) + libm::ceil(2.0 * p.margin / dt);
         let n = p.nt as f64 + pad;
-        if !(n < MAX_N) {
+        if n >= MAX_N || n.is_nan() {
             return Err(ConfigError::SizeOverflow("n_fft"));
         }
         let n_fft = n as usize;
@@ -199,7 +203,13 @@ impl Config {
         }
         let k_lo = lo as i64;
         let bins = (hi - lo) as usize + 1;
-        Ok(Self { params: *p, sigma, n_fft, k_lo, bins })
+        Ok(Self {
+            params: *p,
+            sigma,
+            n_fft,
+            k_lo,
+            bins,
+        })
     }
 
     /// The parameters this configuration was built from.

@@ -84,7 +84,11 @@ pub enum Error {
 impl fmt::Display for Error {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
-            Self::Length { what, expected, found } => {
+            Self::Length {
+                what,
+                expected,
+                found,
+            } => {
                 write!(f, "`{what}` has {found} elements, expected {expected}")
             }
             Self::NonFinite { what, index } => {
@@ -103,7 +107,11 @@ pub(crate) fn check_len(what: &'static str, expected: usize, found: usize) -> Re
     if expected == found {
         Ok(())
     } else {
-        Err(Error::Length { what, expected, found })
+        Err(Error::Length {
+            what,
+            expected,
+            found,
+        })
     }
 }
 

@@ -10,8 +10,8 @@ mod trig;
 
 pub use config::{Config, Legs, Params, Point, Weights};
 pub use error::{ConfigError, Error};
+pub use num_complex;
 pub use probe::{Gate, Probe, Report, Target};
 pub use sample::Sample;
 pub use scan::{Row, RowBuffer, Scan};
 pub use trig::{cis_turns, cis_turns_f64};
-pub use num_complex;

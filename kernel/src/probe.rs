@@ -149,8 +149,12 @@ impl<'m> Probe<'m> {
             check_points("focus", &[a])?;
         }
         let found = state.len();
-        let state: &mut [Complex64] = bytemuck::try_cast_slice_mut(state)
-            .map_err(|_| Error::Length { what: "state", expected: need, found })?;
+        let state: &mut [Complex64] =
+            bytemuck::try_cast_slice_mut(state).map_err(|_| Error::Length {
+                what: "state",
+                expected: need,
+                found,
+            })?;
         state.fill(Complex64::new(0.0, 0.0));
         Ok(Self {
             target,
@@ -266,7 +270,8 @@ impl<'m> Probe<'m> {
         let mut report = self.report;
         match (self.target, self.gate) {
             (Target::Column(a), Gate::Gaussian) => {
-                report.aliased = column_band_finish(scan, a, self.voxels, self.state, self.leg_range, out);
+                report.aliased =
+                    column_band_finish(scan, a, self.voxels, self.state, self.leg_range, out);
             }
             (Target::Column(a), Gate::None) => {
                 let cfg = scan.config();
@@ -320,7 +325,12 @@ fn band_consts(cfg: &Config) -> (f32, f32) {
     ((cfg.k_lo() as f64 / span) as f32, (1.0 / span) as f32)
 }
 
-fn diag_band<T: Sample>(scan: &Scan<'_>, row: &Row<'_, T>, voxels: &[Point], acc: &mut [Complex64]) {
+fn diag_band<T: Sample>(
+    scan: &Scan<'_>,
+    row: &Row<'_, T>,
+    voxels: &[Point],
+    acc: &mut [Complex64],
+) {
     let cfg = scan.config();
     let j = cfg.bins().max(1);
     let (klo, inv) = band_consts(cfg);
@@ -330,7 +340,12 @@ fn diag_band<T: Sample>(scan: &Scan<'_>, row: &Row<'_, T>, voxels: &[Point], acc
     for (a, v) in acc.iter_mut().zip(voxels) {
         let d_lv = dist(&laser, v);
         let mut sum = Complex32::new(0.0, 0.0);
-        for ((sp, hg), off) in scan.spads().iter().zip(row.band().chunks_exact(j)).zip(row.offsets()) {
+        for ((sp, hg), off) in scan
+            .spads()
+            .iter()
+            .zip(row.band().chunks_exact(j))
+            .zip(row.offsets())
+        {
             let d_vs = dist(v, sp);
             let tau = d_lv + d_vs;
             let rel = tau + off;
@@ -342,7 +357,12 @@ fn diag_band<T: Sample>(scan: &Scan<'_>, row: &Row<'_, T>, voxels: &[Point], acc
     }
 }
 
-fn diag_ungated<T: Sample>(scan: &Scan<'_>, row: &Row<'_, T>, voxels: &[Point], acc: &mut [Complex64]) {
+fn diag_ungated<T: Sample>(
+    scan: &Scan<'_>,
+    row: &Row<'_, T>,
+    voxels: &[Point],
+    acc: &mut [Complex64],
+) {
     let cfg = scan.config();
     let inv_lam = (1.0 / cfg.wavelength()) as f32;
     let laser = row.laser();
@@ -358,7 +378,13 @@ fn diag_ungated<T: Sample>(scan: &Scan<'_>, row: &Row<'_, T>, voxels: &[Point], 
 }
 
 /// Factorised column, per row: `U[s][j] += w_la e^{iν_j d_la} HG_ls[j]` (DESIGN §B.3.2).
-fn column_band_push<T: Sample>(scan: &Scan<'_>, row: &Row<'_, T>, w: f32, d_la: f32, state: &mut [Complex64]) {
+fn column_band_push<T: Sample>(
+    scan: &Scan<'_>,
+    row: &Row<'_, T>,
+    w: f32,
+    d_la: f32,
+    state: &mut [Complex64],
+) {
     let cfg = scan.config();
     let j = cfg.bins().max(1);
     let (klo, inv) = band_consts(cfg);
@@ -395,7 +421,12 @@ fn column_band_finish(
         let d_ab = dist(&a, b);
         let mut sum = Complex64::new(0.0, 0.0);
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for ((sp, us), d4) in scan.spads().iter().zip(u.chunks_exact(j)).zip(scan.sensor_legs()) {
+        for ((sp, us), d4) in scan
+            .spads()
+            .iter()
+            .zip(u.chunks_exact(j))
+            .zip(scan.sensor_legs())
+        {
             let d_bs = dist(b, sp);
             let tau = d_ab + d_bs;
             (lo, hi) = widen(widen((lo, hi), (tau + d4) as f64), (tau + d4) as f64);
@@ -439,7 +470,12 @@ fn higher_order<T: Sample>(
     let d1 = scan.laser_leg(&laser);
     let turns_per_bin = -dt / lam;
     let step = c64(crate::trig::cis_turns_f64(turns_per_bin));
-    for ((h, sp), d4) in row.histograms().chunks_exact(nt.max(1)).zip(scan.spads()).zip(scan.sensor_legs()) {
+    for ((h, sp), d4) in row
+        .histograms()
+        .chunks_exact(nt.max(1))
+        .zip(scan.spads())
+        .zip(scan.sensor_legs())
+    {
         // Suffix sums, carrier re-seeded every 64 samples (phase reference t0).
         if let Some(last) = s_buf.last_mut() {
             *last = Complex64::new(0.0, 0.0);
@@ -447,7 +483,9 @@ fn higher_order<T: Sample>(
         let mut next = Complex64::new(0.0, 0.0);
         for (c, block) in h.chunks(64).enumerate().rev() {
             let base = c * 64;
-            let mut ph = c64(crate::trig::cis_turns_f64((base + block.len() - 1) as f64 * turns_per_bin));
+            let mut ph = c64(crate::trig::cis_turns_f64(
+                (base + block.len() - 1) as f64 * turns_per_bin,
+            ));
             let inv_step = step.conj();
             for (i, x) in block.iter().enumerate().rev() {
                 next += ph * x.value() as f64;
@@ -474,7 +512,9 @@ fn higher_order<T: Sample>(
             let mut ratio = libm::exp(-(2.0 * u0 * dt + dt * dt) * inv2s2);
             let mut corr = Complex64::new(0.0, 0.0);
             for n in n_star..(n_star + r).min(nt) {
-                let (Some(s0), Some(s1)) = (s_buf.get(n), s_buf.get(n + 1)) else { break };
+                let (Some(s0), Some(s1)) = (s_buf.get(n), s_buf.get(n + 1)) else {
+                    break;
+                };
                 corr += (*s0 - *s1) * g;
                 g *= ratio;
                 ratio *= q;

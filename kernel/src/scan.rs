@@ -34,9 +34,16 @@ fn dist64(a: &Point, b: &[f64; 3]) -> f64 {
 
 /// Casts a caller's `f32` buffer to complex numbers (always succeeds for even lengths:
 /// `Complex32` has the alignment of `f32`).
-pub(crate) fn as_complex<'b>(what: &'static str, buf: &'b mut [f32]) -> Result<&'b mut [Complex32], Error> {
+pub(crate) fn as_complex<'b>(
+    what: &'static str,
+    buf: &'b mut [f32],
+) -> Result<&'b mut [Complex32], Error> {
     let found = buf.len();
-    bytemuck::try_cast_slice_mut(buf).map_err(|_| Error::Length { what, expected: found & !1, found })
+    bytemuck::try_cast_slice_mut(buf).map_err(|_| Error::Length {
+        what,
+        expected: found & !1,
+        found,
+    })
 }
 
 /// The fixed part of a scan: the validated [`Config`], the SPAD positions and the band
@@ -91,7 +98,13 @@ impl<'t> Scan<'t> {
                 Legs::FirstAndLast { sensor_origin, .. } => dist64(p, &sensor_origin) as f32,
             };
         }
-        Ok(Self { cfg: *cfg, spads, twiddle, gate, d4 })
+        Ok(Self {
+            cfg: *cfg,
+            spads,
+            twiddle,
+            gate,
+            d4,
+        })
     }
 
     /// The configuration.
@@ -176,7 +189,11 @@ impl<'m> RowBuffer<'m> {
         check_len("row buffer", Self::len(&scan.cfg, ks), buf.len())?;
         let (hg, rest) = buf.split_at_mut(2 * ks * j);
         let (mono, offset) = rest.split_at_mut(2 * ks);
-        Ok(Self { hg: as_complex("row buffer", hg)?, mono: as_complex("row buffer", mono)?, offset })
+        Ok(Self {
+            hg: as_complex("row buffer", hg)?,
+            mono: as_complex("row buffer", mono)?,
+            offset,
+        })
     }
 
     /// Computes the spectra of one laser row. `hists` holds the Ks histograms one after the

@@ -31,8 +31,10 @@ pub fn cis_turns(t: f32) -> Complex32 {
     let f = r - 0.25 * q4;
     let x = TAU * f;
     let x2 = x * x;
-    let s = x * (1.0
-        + x2 * (-1.0 / 6.0 + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362_880.0)))));
+    let s = x
+        * (1.0
+            + x2 * (-1.0 / 6.0
+                + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362_880.0)))));
     let c = 1.0
         + x2 * (-0.5
             + x2 * (1.0 / 24.0
@@ -65,13 +67,23 @@ mod tests {
             let t = (i as f32 / n as f32 - 0.5) * 2000.0 + 1e-3 * i as f32 % 1.0;
             let c = cis_turns(t);
             let a = core::f64::consts::TAU * t as f64;
-            let e = (c.re as f64 - libm::cos(a)).abs().max((c.im as f64 - libm::sin(a)).abs());
+            let e = (c.re as f64 - libm::cos(a))
+                .abs()
+                .max((c.im as f64 - libm::sin(a)).abs());
             worst = worst.max(e);
         }
         assert!(worst < 2.5e-7, "max error {worst}");
-        for (t, re, im) in [(0.0f32, 1.0f32, 0.0f32), (0.5, -1.0, 0.0), (-0.25, 0.0, -1.0), (0.125, 0.70710677, 0.70710677)] {
+        for (t, re, im) in [
+            (0.0f32, 1.0f32, 0.0f32),
+            (0.5, -1.0, 0.0),
+            (-0.25, 0.0, -1.0),
+            (0.125, 0.70710677, 0.70710677),
+        ] {
             let c = cis_turns(t);
-            assert!((c.re - re).abs() < 1e-7 && (c.im - im).abs() < 1e-7, "{t}: {c}");
+            assert!(
+                (c.re - re).abs() < 1e-7 && (c.im - im).abs() < 1e-7,
+                "{t}: {c}"
+            );
         }
         assert!(cis_turns(f32::NAN).re.is_nan());
         assert!(cis_turns(f32::INFINITY).re.is_nan());
