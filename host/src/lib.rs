@@ -1,12 +1,19 @@
 //! vltm host library: wraps the no_std [`vltm_kernel`] for use on a workstation.
 //!
-//! This first version holds a small analytic transient simulator of point scatterers
-//! ([`sim`]) that produces a capture **row by row** (one laser position at a time, the way
-//! the kernel consumes it), and [`stream`], which runs kernel probes over such a source with
-//! `Vec`-backed memory. Capture readers, the full scene simulator and the command line with
-//! figures come next (see the workspace README).
+//! * [`capture`]: the capture model (geometry, time axis) and row access ([`capture::RowSource`]).
+//! * [`sim`]: an analytic transient simulator of patches and boxes, from a scene file.
+//! * [`stream`]: runs kernel probes over a row source.
+//! * [`figure`], [`npy`]: maximum-intensity-projection PNGs and `.npy` volumes.
 
+pub mod capture;
+pub mod error;
+pub mod figure;
+pub mod ltm;
+pub mod npy;
+pub mod pointsim;
 pub mod sim;
 pub mod stream;
+pub mod volume;
 
+pub use error::{Error, Result};
 pub use vltm_kernel as kernel;

@@ -3,7 +3,7 @@
 
 use std::process::ExitCode;
 use std::time::Instant;
-use vltm::sim::{Bounces, PointScene, Scatterer, wall_grid};
+use vltm::pointsim::{Bounces, PointScene, Scatterer, wall_grid};
 use vltm::stream::{Request, run};
 use vltm_kernel::{Config, Gate, Params, Point, Target};
 

@@ -1,0 +1,250 @@
+//! The capture model: geometry, time axis and row access.
+//!
+//! A capture holds `H[l][s][n]`: laser spot `l`, SPAD spot `s`, time bin `n` at path length
+//! `t0 + n·Δt` (metres, the point-sample convention of DESIGN §B.0). The kernel is fed one
+//! laser row at a time through [`RowSource`].
+
+use crate::error::{Error, Result};
+use vltm_kernel::Point;
+
+/// Where the lasers and SPADs are and how the time axis is defined.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Geometry {
+    /// Laser spots on the wall (z = 0), C order over `laser_shape`.
+    pub lasers: Vec<Point>,
+    /// Grid shape of the laser spots `[nx, ny]` (`[K, 1]` for a list).
+    pub laser_shape: [usize; 2],
+    /// SPAD spots on the wall, C order over `spad_shape`.
+    pub spads: Vec<Point>,
+    /// Grid shape of the SPAD spots `[nx, ny]` (`[16, 1]` for a 1-D array, `[1, 1]` single).
+    pub spad_shape: [usize; 2],
+    /// Position of the laser device (y-tal `laser_xyz`) [m].
+    pub laser_origin: [f64; 3],
+    /// Position of the sensor device (y-tal `sensor_xyz`) [m].
+    pub sensor_origin: [f64; 3],
+    /// Whether the time axis includes the device legs (y-tal
+    /// `t_accounts_first_and_last_bounces`).
+    pub legs_in_time: bool,
+    /// Confocal capture: row `l` holds one histogram, for a SPAD at the laser spot `l`
+    /// (`spads` is then equal to `lasers`).
+    pub confocal: bool,
+    /// Bins per histogram.
+    pub nt: usize,
+    /// Bin width [m of path].
+    pub dt: f64,
+    /// Path length of bin 0 [m].
+    pub t0: f64,
+}
+
+impl Geometry {
+    /// Number of SPAD histograms in each row (1 for confocal captures).
+    pub fn spads_per_row(&self) -> usize {
+        if self.confocal { 1 } else { self.spads.len() }
+    }
+
+    /// Checks shapes and values: grid sizes match, positions finite, Δt > 0, Nt > 0.
+    ///
+    /// # Errors
+    /// [`Error::Format`] naming `what` (the file) and the field.
+    pub fn validate(&self, what: &std::path::Path) -> Result<()> {
+        let shape = |s: [usize; 2]| s[0] * s[1];
+        if self.lasers.is_empty() || shape(self.laser_shape) != self.lasers.len() {
+            return Err(Error::format(what, "laser_grid", format!("{} laser spots", shape(self.laser_shape)), self.lasers.len()));
+        }
+        if self.spads.is_empty() || shape(self.spad_shape) != self.spads.len() {
+            return Err(Error::format(what, "sensor_grid", format!("{} SPAD spots", shape(self.spad_shape)), self.spads.len()));
+        }
+        if self.confocal && self.spads != self.lasers {
+            return Err(Error::format(what, "sensor_grid", "the laser grid (confocal)", "a different grid"));
+        }
+        for (name, pts) in [("laser_grid", &self.lasers), ("sensor_grid", &self.spads)] {
+            if let Some(i) = pts.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+                return Err(Error::format(what, name, "finite coordinates", format!("{:?} at index {i}", pts[i])));
+            }
+        }
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return Err(Error::format(what, "delta_t", "a finite value > 0", self.dt));
+        }
+        if !self.t0.is_finite() {
+            return Err(Error::format(what, "t_start", "a finite value", self.t0));
+        }
+        if self.nt == 0 {
+            return Err(Error::format(what, "H", "at least one time bin", 0));
+        }
+        Ok(())
+    }
+}
+
+/// A source of laser rows: the kernel's input. Implemented by in-memory captures, file
+/// readers that stream by row, and the simulator.
+pub trait RowSource {
+    /// The capture's geometry.
+    fn geometry(&self) -> &Geometry;
+    /// Writes the histograms of laser row `l` into `out` (resized to
+    /// `spads_per_row·Nt`, SPAD-major) and returns the laser spot.
+    ///
+    /// # Errors
+    /// I/O or format errors of the underlying file.
+    fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point>;
+}
+
+/// A capture held in memory: geometry plus `H` as `f32`, `[Kl][spads_per_row][Nt]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Capture {
+    /// Geometry and time axis.
+    pub geometry: Geometry,
+    /// Histograms, laser-major then SPAD then time.
+    pub data: Vec<f32>,
+}
+
+impl Capture {
+    /// Builds a capture, checking that `data` has `Kl·spads_per_row·Nt` values.
+    ///
+    /// # Errors
+    /// [`Error::Format`] for a size mismatch (`what` names the origin).
+    pub fn new(geometry: Geometry, data: Vec<f32>, what: &std::path::Path) -> Result<Self> {
+        geometry.validate(what)?;
+        let want = geometry.lasers.len() * geometry.spads_per_row() * geometry.nt;
+        if data.len() != want {
+            return Err(Error::format(what, "H", format!("{want} values"), data.len()));
+        }
+        Ok(Self { geometry, data })
+    }
+
+    /// The histograms of laser row `l`.
+    pub fn row(&self, l: usize) -> &[f32] {
+        let n = self.geometry.spads_per_row() * self.geometry.nt;
+        &self.data[l * n..(l + 1) * n]
+    }
+}
+
+impl RowSource for Capture {
+    fn geometry(&self) -> &Geometry {
+        &self.geometry
+    }
+    fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
+        out.clear();
+        out.extend_from_slice(self.row(l));
+        Ok(self.geometry.lasers[l])
+    }
+}
+
+/// Keys of vltm's `.npz` capture format (names follow y-tal's HDF5 fields).
+///
+/// | key | dtype, shape | meaning |
+/// |---|---|---|
+/// | `H` | f32 `(Lx, Ly, Sx, Sy, Nt)`, or `(Lx, Ly, Nt)` if confocal | histograms, time last |
+/// | `laser_grid_xyz` | f32 `(Lx, Ly, 3)` | laser spots |
+/// | `sensor_grid_xyz` | f32 `(Sx, Sy, 3)` | SPAD spots |
+/// | `laser_xyz`, `sensor_xyz` | f64 `(3,)` | device positions |
+/// | `delta_t`, `t_start` | f64 `()` | bin width, time of bin 0 [m] |
+/// | `t_accounts_first_and_last_bounces`, `confocal` | u8 `()` | flags |
+pub mod npz {
+    use super::{Capture, Geometry};
+    use crate::error::{Error, Result};
+    use ndarray::{Array, ArrayD, IxDyn};
+    use ndarray_npy::{NpzReader, NpzWriter, ReadableElement};
+    use std::fs::File;
+    use std::path::Path;
+
+    /// Writes `c` as a compressed `.npz` capture.
+    ///
+    /// # Errors
+    /// [`Error::Io`] if the file cannot be written.
+    pub fn write(c: &Capture, path: &Path) -> Result<()> {
+        let g = &c.geometry;
+        let io = |e: std::io::Error| Error::io(path, e);
+        let npz = |e: ndarray_npy::WriteNpzError| Error::io(path, std::io::Error::other(e.to_string()));
+        let mut w = NpzWriter::new_compressed(File::create(path).map_err(io)?);
+        let [lx, ly] = g.laser_shape;
+        let [sx, sy] = g.spad_shape;
+        let h_shape: Vec<usize> = if g.confocal { vec![lx, ly, g.nt] } else { vec![lx, ly, sx, sy, g.nt] };
+        let arr = |shape: Vec<usize>, v: Vec<f32>| Array::from_shape_vec(IxDyn(&shape), v).expect("shape checked by Capture::new");
+        let pts = |p: &[vltm_kernel::Point]| p.iter().flatten().copied().collect::<Vec<f32>>();
+        w.add_array("H", &arr(h_shape, c.data.clone())).map_err(npz)?;
+        w.add_array("laser_grid_xyz", &arr(vec![lx, ly, 3], pts(&g.lasers))).map_err(npz)?;
+        w.add_array("sensor_grid_xyz", &arr(vec![sx, sy, 3], pts(&g.spads))).map_err(npz)?;
+        w.add_array("laser_xyz", &ndarray::arr1(&g.laser_origin)).map_err(npz)?;
+        w.add_array("sensor_xyz", &ndarray::arr1(&g.sensor_origin)).map_err(npz)?;
+        w.add_array("delta_t", &ndarray::arr0(g.dt)).map_err(npz)?;
+        w.add_array("t_start", &ndarray::arr0(g.t0)).map_err(npz)?;
+        w.add_array("t_accounts_first_and_last_bounces", &ndarray::arr0(u8::from(g.legs_in_time))).map_err(npz)?;
+        w.add_array("confocal", &ndarray::arr0(u8::from(g.confocal))).map_err(npz)?;
+        w.finish().map_err(npz)?;
+        Ok(())
+    }
+
+    fn get<T: ReadableElement>(r: &mut NpzReader<File>, path: &Path, key: &str) -> Result<ArrayD<T>> {
+        r.by_name::<ndarray::OwnedRepr<T>, IxDyn>(key)
+            .map_err(|e| Error::format(path, key, "a readable array of the documented dtype", e.to_string()))
+    }
+
+    fn scalar<T: ReadableElement + Copy>(r: &mut NpzReader<File>, path: &Path, key: &str) -> Result<T> {
+        let a = get::<T>(r, path, key)?;
+        a.iter().next().copied().filter(|_| a.len() == 1).ok_or_else(|| Error::format(path, key, "a scalar", format!("shape {:?}", a.shape())))
+    }
+
+    fn grid(r: &mut NpzReader<File>, path: &Path, key: &str) -> Result<(Vec<vltm_kernel::Point>, [usize; 2])> {
+        let a = get::<f32>(r, path, key)?;
+        let s = a.shape().to_vec();
+        if s.len() != 3 || s[2] != 3 {
+            return Err(Error::format(path, key, "shape (nx, ny, 3)", format!("{s:?}")));
+        }
+        let v: Vec<f32> = a.iter().copied().collect();
+        Ok((v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(), [s[0], s[1]]))
+    }
+
+    fn xyz(r: &mut NpzReader<File>, path: &Path, key: &str) -> Result<[f64; 3]> {
+        let a = get::<f64>(r, path, key)?;
+        let v: Vec<f64> = a.iter().copied().collect();
+        <[f64; 3]>::try_from(v.as_slice()).map_err(|_| Error::format(path, key, "3 coordinates", format!("shape {:?}", a.shape())))
+    }
+
+    /// Reads a `.npz` capture written by [`write`] (or by numpy with the same keys).
+    ///
+    /// # Errors
+    /// [`Error::Io`] if unreadable, [`Error::Format`] naming the key for a missing or
+    /// malformed field.
+    pub fn read(path: &Path) -> Result<Capture> {
+        let f = File::open(path).map_err(|e| Error::io(path, e))?;
+        let mut r = NpzReader::new(f).map_err(|e| Error::format(path, "(archive)", "a NumPy .npz archive", e.to_string()))?;
+        let (lasers, laser_shape) = grid(&mut r, path, "laser_grid_xyz")?;
+        let (spads, spad_shape) = grid(&mut r, path, "sensor_grid_xyz")?;
+        let confocal = scalar::<u8>(&mut r, path, "confocal")? != 0;
+        let h = get::<f32>(&mut r, path, "H")?;
+        let s = h.shape().to_vec();
+        let want: Vec<usize> = if confocal {
+            vec![laser_shape[0], laser_shape[1]]
+        } else {
+            vec![laser_shape[0], laser_shape[1], spad_shape[0], spad_shape[1]]
+        };
+        if s.len() != want.len() + 1 || s[..want.len()] != want[..] {
+            return Err(Error::format(path, "H", format!("shape {want:?} + (Nt,)"), format!("{s:?}")));
+        }
+        let geometry = Geometry {
+            lasers,
+            laser_shape,
+            spads,
+            spad_shape,
+            laser_origin: xyz(&mut r, path, "laser_xyz")?,
+            sensor_origin: xyz(&mut r, path, "sensor_xyz")?,
+            legs_in_time: scalar::<u8>(&mut r, path, "t_accounts_first_and_last_bounces")? != 0,
+            confocal,
+            nt: s[s.len() - 1],
+            dt: scalar::<f64>(&mut r, path, "delta_t")?,
+            t0: scalar::<f64>(&mut r, path, "t_start")?,
+        };
+        Capture::new(geometry, h.iter().copied().collect(), path)
+    }
+}
+
+/// Opens a capture file by its extension (`.npz`).
+///
+/// # Errors
+/// [`Error::Argument`] for an unknown extension; read errors of the format.
+pub fn open(path: &std::path::Path) -> Result<Capture> {
+    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+        Some("npz") => npz::read(path),
+        _ => Err(Error::arg("CAPTURE", format!("{}: unknown capture format (expected .npz)", path.display()))),
+    }
+}

@@ -1,0 +1,66 @@
+//! The host library's error type: every message names the file or argument, the field and
+//! what was expected.
+
+use std::path::PathBuf;
+
+/// Errors of the vltm host library.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// Reading or writing a file failed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The OS error.
+        source: std::io::Error,
+    },
+    /// A file's content is not what vltm expects.
+    #[error("{}: field `{field}`: expected {expected}, found {found}", path.display())]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// The field (dataset, key, record).
+        field: String,
+        /// What was expected.
+        expected: String,
+        /// What was found.
+        found: String,
+    },
+    /// A user argument is malformed or out of range (the CLI exits with code 2).
+    #[error("argument `{arg}`: {msg}")]
+    Argument {
+        /// The argument (flag or parameter name).
+        arg: String,
+        /// What is wrong and what was expected.
+        msg: String,
+    },
+    /// The kernel rejected the wave/gate configuration.
+    #[error("kernel configuration: {0}")]
+    Config(#[from] vltm_kernel::ConfigError),
+    /// The kernel rejected a buffer or a position.
+    #[error("kernel: {0}")]
+    Kernel(#[from] vltm_kernel::Error),
+}
+
+impl Error {
+    /// A [`Error::Format`] error.
+    pub fn format(path: impl Into<PathBuf>, field: &str, expected: impl ToString, found: impl ToString) -> Self {
+        Self::Format { path: path.into(), field: field.into(), expected: expected.to_string(), found: found.to_string() }
+    }
+    /// An [`Error::Argument`] error.
+    pub fn arg(arg: &str, msg: impl ToString) -> Self {
+        Self::Argument { arg: arg.into(), msg: msg.to_string() }
+    }
+    /// An [`Error::Io`] error.
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+        Self::Io { path: path.into(), source }
+    }
+    /// Whether the error is the user's arguments (CLI exit code 2) rather than the data (1).
+    pub fn is_usage(&self) -> bool {
+        matches!(self, Self::Argument { .. } | Self::Config(_))
+    }
+}
+
+/// Result with the host [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -1,0 +1,498 @@
+//! High-level LTM probes over a capture, streamed row by row through the kernel and
+//! multi-threaded with rayon (DESIGN §A.5, §B.3).
+//!
+//! | call | computes | passes over the data |
+//! |---|---|---|
+//! | [`direct`] | diagonal `T(x_v, x_v)` over a volume (Eqs. 11–12) | 1 |
+//! | [`column`] | `T(x_a, ·)` with [`ColumnGate`] two-bounce (Eq. 14), higher-order (Eq. 18) or none, optionally restricted to a shell `r0 ≤ |x_a − x_b| < r1` | 1 |
+//! | [`indirect`] | in-focus indirect light (Eqs. 15–17): Γ from the diagonal, then `Σ_{a∈Γ} T(a, b)` over Γ-masked pairs with `r0 ≤ |x_a − x_b| < r1` | 2 |
+//!
+//! Threads: the diagonal and the higher-order column split the voxels into chunks, each with
+//! its own kernel probe, and every row's band spectra (computed once) are pushed into all
+//! chunks in parallel; factorised columns accumulate per row in one probe (cheap) and image
+//! the voxels in parallel at the end; the indirect sum keeps one factorised column per focus
+//! `a ∈ Γ`, pushed in parallel. Memory never grows with the number of laser rows.
+
+use crate::capture::{Capture, Geometry, RowSource};
+use crate::error::{Error, Result};
+use crate::volume::Volume;
+use indicatif::{ProgressBar, ProgressStyle};
+use rayon::prelude::*;
+use std::time::Instant;
+use vltm_kernel::{Config, Gate, Legs, Params, Point, Probe, Report, Row, RowBuffer, Scan, Target, Weights};
+
+/// Virtual wave and weighting options shared by every probe (the CLI's common flags).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Wave {
+    /// Virtual wavelength λ [m]; `None` = [`default_wavelength`] of the capture.
+    pub wavelength: Option<f64>,
+    /// Gate std σ [m]; `None` = 2λ/3.
+    pub sigma: Option<f64>,
+    /// Leg weights: the paper's `1/d` or y-tal's none.
+    pub weights: Weights,
+    /// Band half-width m in units of 1/σ.
+    pub band_half_width: f64,
+    /// Divide each laser row by the physical laser's falloff `cos θ / d²` to its spot.
+    pub compensate_laser: bool,
+}
+
+impl Default for Wave {
+    fn default() -> Self {
+        Self { wavelength: None, sigma: None, weights: Weights::Inv, band_half_width: 5.0, compensate_laser: false }
+    }
+}
+
+/// Aperture pitch of a grid (the coarser of its two axes; 0 for a single point).
+fn pitch(pts: &[Point], shape: [usize; 2]) -> f32 {
+    let d = |a: Point, b: Point| ((0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f32>()).sqrt();
+    let px = if shape[0] > 1 { d(pts[0], pts[shape[1]]) } else { 0.0 };
+    let py = if shape[1] > 1 { d(pts[0], pts[1]) } else { 0.0 };
+    px.max(py)
+}
+
+/// Default virtual wavelength: twice the coarser aperture pitch (the sampling limit of the
+/// virtual lens), and at least 6 time bins (so the band stays below Nyquist).
+pub fn default_wavelength(g: &Geometry) -> f64 {
+    let p = pitch(&g.lasers, g.laser_shape).max(pitch(&g.spads, g.spad_shape)) as f64;
+    (2.0 * p).max(6.0 * g.dt)
+}
+
+impl Wave {
+    /// The kernel configuration for a capture.
+    ///
+    /// # Errors
+    /// [`Error::Config`] naming the rejected parameter.
+    pub fn config(&self, g: &Geometry) -> Result<Config> {
+        let lam = self.wavelength.unwrap_or_else(|| default_wavelength(g));
+        let legs = if g.legs_in_time {
+            Legs::FirstAndLast { laser_origin: g.laser_origin, sensor_origin: g.sensor_origin }
+        } else {
+            Legs::WallToWall
+        };
+        let p = Params {
+            sigma: self.sigma,
+            band_half_width: self.band_half_width,
+            t0: g.t0,
+            legs,
+            weights: self.weights,
+            ..Params::new(lam, g.nt, g.dt)
+        };
+        Ok(Config::try_new(&p)?)
+    }
+}
+
+/// Execution options.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Exec {
+    /// Show a progress bar on stderr (hidden anyway when stderr is not a terminal).
+    pub progress: bool,
+}
+
+/// Result of a probe: intensities per voxel (volume order) and the kernel's counters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Output {
+    /// `|A|²` per voxel.
+    pub values: Vec<f32>,
+    /// Rows, non-finite samples, aliased voxels.
+    pub report: Report,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+    /// The kernel configuration used (λ, σ, J…).
+    pub config: Config,
+}
+
+/// The physical laser's falloff to spot `x_l`: `cos θ / d²` with `d = |laser_xyz − x_l|` and
+/// θ the angle to the wall normal (y-tal `compensate_laser_cos_dsqr`).
+pub fn laser_falloff(g: &Geometry, x_l: Point) -> f64 {
+    let v: [f64; 3] = core::array::from_fn(|i| g.laser_origin[i] - x_l[i] as f64);
+    let d2 = v.iter().map(|c| c * c).sum::<f64>();
+    (v[2].abs() / d2.sqrt()) / d2
+}
+
+/// Streams every row of `src` through `push` with the row's spectra (computed once per row).
+fn drive(
+    src: &mut dyn RowSource,
+    cfg: &Config,
+    wave: &Wave,
+    exec: Exec,
+    label: &str,
+    mut push: impl FnMut(&Scan<'_>, &Row<'_, f32>) -> Result<()>,
+) -> Result<()> {
+    let g = src.geometry().clone();
+    if wave.compensate_laser {
+        let f = laser_falloff(&g, g.lasers[0]);
+        if !(f.is_finite() && f > 0.0) {
+            return Err(Error::arg("--compensate-laser", "laser_xyz lies in the wall plane: cos θ / d² is 0"));
+        }
+    }
+    let ks = g.spads_per_row();
+    let mut tables = if g.confocal { Vec::new() } else { vec![0.0f32; Scan::tables_len(cfg, ks)] };
+    let mut buf = vec![0.0f32; RowBuffer::len(cfg, ks)];
+    let mut hist = Vec::new();
+    let bar = if exec.progress { ProgressBar::new(g.lasers.len() as u64) } else { ProgressBar::hidden() };
+    bar.set_style(ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} rows, {eta} left").unwrap_or_else(|_| ProgressStyle::default_bar()));
+    bar.set_message(label.to_string());
+    let fixed: Option<Scan<'_>> = if g.confocal { None } else { Some(Scan::new(cfg, &g.spads, &mut tables)?) };
+    let mut confocal_tables = if g.confocal { vec![0.0f32; Scan::tables_len(cfg, 1)] } else { Vec::new() };
+    for l in 0..g.lasers.len() {
+        let x_l = src.read_row(l, &mut hist)?;
+        if wave.compensate_laser {
+            let k = (1.0 / laser_falloff(&g, x_l)) as f32;
+            hist.iter_mut().for_each(|h| *h *= k);
+        }
+        let spad = [x_l];
+        let per_row;
+        let scan = match &fixed {
+            Some(s) => s,
+            None => {
+                per_row = Scan::new(cfg, &spad, &mut confocal_tables)?;
+                &per_row
+            }
+        };
+        let mut rows = RowBuffer::new(scan, &mut buf)?;
+        let row = rows.load(scan, x_l, &hist)?;
+        push(scan, &row)?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    Ok(())
+}
+
+/// Splits `voxels` into chunks for the thread pool.
+fn chunk_len(n: usize) -> usize {
+    n.div_ceil(4 * rayon::current_num_threads()).max(64)
+}
+
+/// Element-wise probes (diagonal, higher-order column) over voxel chunks in parallel.
+fn elementwise(
+    src: &mut dyn RowSource,
+    cfg: &Config,
+    wave: &Wave,
+    exec: Exec,
+    target: Target,
+    gate: Gate,
+    voxels: &[Point],
+    label: &str,
+) -> Result<(Vec<f64>, Report)> {
+    let ks = src.geometry().spads_per_row();
+    let cl = chunk_len(voxels.len());
+    let chunks: Vec<&[Point]> = voxels.chunks(cl).collect();
+    let mut states: Vec<Vec<f64>> =
+        chunks.iter().map(|c| vec![0.0; Probe::state_len(cfg, target, gate, c.len(), ks)]).collect();
+    // The probes need a Scan only for validation of sizes; build them on the first row.
+    let mut probes: Vec<Probe<'_>> = Vec::new();
+    let mut state_iter = Some(states.iter_mut());
+    drive(src, cfg, wave, exec, label, |scan, row| {
+        if let Some(it) = state_iter.take() {
+            probes = chunks.iter().zip(it).map(|(c, s)| Probe::new(scan, target, gate, c, s)).collect::<Result<_, _>>()?;
+        }
+        probes.par_iter_mut().try_for_each(|p| p.push_row(scan, row))?;
+        Ok(())
+    })?;
+    let mut out = vec![0.0f64; voxels.len()];
+    let mut report = Report::default();
+    let g = src.geometry().clone();
+    let ks_pts = if g.confocal { vec![g.lasers[0]] } else { g.spads.clone() };
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+    let scan = Scan::new(cfg, &ks_pts, &mut tables)?;
+    for (p, o) in probes.iter().zip(out.chunks_mut(cl)) {
+        let r = p.finish(&scan, o)?;
+        report = Report { rows: r.rows, non_finite: report.non_finite.max(r.non_finite), aliased: report.aliased + r.aliased };
+    }
+    Ok((out, report))
+}
+
+/// Direct light: the diagonal over `volume` (Eqs. 11–12).
+///
+/// # Errors
+/// Configuration, read and kernel errors.
+pub fn direct(src: &mut dyn RowSource, volume: &Volume, wave: &Wave, exec: Exec) -> Result<Output> {
+    let t = Instant::now();
+    let cfg = wave.config(src.geometry())?;
+    let (v, report) = elementwise(src, &cfg, wave, exec, Target::Diagonal, Gate::Gaussian, &volume.points, "direct")?;
+    Ok(Output { values: v.iter().map(|&x| x as f32).collect(), report, seconds: t.elapsed().as_secs_f64(), config: cfg })
+}
+
+/// The time gate of a column (the CLI's `--gate`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ColumnGate {
+    /// 4-vertex Gaussian gate (Eq. 14): first-order indirect light from `x_a`.
+    TwoBounce,
+    /// The late gate (Eq. 18): higher-order indirect light.
+    HigherOrder,
+    /// No gate (the paper's Fig. 6 control).
+    None,
+}
+
+/// A distance shell `r0 ≤ |x_a − x_b| < r1` [m] (near / middle / far decompositions).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Shell {
+    /// Inner radius (inclusive).
+    pub r0: f32,
+    /// Outer radius (exclusive).
+    pub r1: f32,
+}
+
+impl Shell {
+    /// Everything.
+    pub const ALL: Self = Self { r0: 0.0, r1: f32::INFINITY };
+
+    /// Parses `R0:R1` (metres; `R1` may be `inf`).
+    ///
+    /// # Errors
+    /// [`Error::Argument`] (`--shell`) unless `0 ≤ R0 < R1`.
+    pub fn parse(s: &str) -> Result<Self> {
+        let bad = || Error::arg("--shell", format!("expected R0:R1 with 0 <= R0 < R1 in metres, found `{s}`"));
+        let (a, b) = s.split_once(':').ok_or_else(bad)?;
+        let r0: f32 = a.trim().parse().map_err(|_| bad())?;
+        let r1: f32 = b.trim().parse().map_err(|_| bad())?;
+        if !(r0 >= 0.0 && r1 > r0) || r0.is_nan() {
+            return Err(bad());
+        }
+        Ok(Self { r0, r1 })
+    }
+
+    /// Whether `d` lies in the shell.
+    pub fn contains(&self, d: f32) -> bool {
+        d >= self.r0 && d < self.r1
+    }
+}
+
+fn dist(a: Point, b: Point) -> f32 {
+    ((0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f32>()).sqrt()
+}
+
+/// Checks that a focus point is in front of the wall.
+///
+/// # Errors
+/// [`Error::Argument`] (`--focus`) for z ≤ 0 or non-finite coordinates.
+pub fn check_focus(a: Point) -> Result<()> {
+    if a.iter().all(|c| c.is_finite()) && a[2] > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::arg("--focus", format!("{a:?} is on or behind the wall (need z > 0)")))
+    }
+}
+
+/// A column `T(x_a, ·)` over `volume`, with elements outside `shell` set to 0.
+///
+/// # Errors
+/// Focus on or behind the wall, configuration, read and kernel errors.
+pub fn column(
+    src: &mut dyn RowSource,
+    focus: Point,
+    volume: &Volume,
+    gate: ColumnGate,
+    shell: Shell,
+    wave: &Wave,
+    exec: Exec,
+) -> Result<Output> {
+    check_focus(focus)?;
+    let t = Instant::now();
+    let cfg = wave.config(src.geometry())?;
+    let target = Target::Column(focus);
+    let (mut v, report) = match gate {
+        ColumnGate::HigherOrder => elementwise(src, &cfg, wave, exec, target, Gate::HigherOrder, &volume.points, "column")?,
+        ColumnGate::TwoBounce | ColumnGate::None => {
+            let kgate = if gate == ColumnGate::None { Gate::None } else { Gate::Gaussian };
+            factorised_columns(src, &cfg, wave, exec, &[focus], kgate, &volume.points, "column")?.pop().unwrap_or_default()
+        }
+    };
+    for (x, p) in v.iter_mut().zip(&volume.points) {
+        if !shell.contains(dist(focus, *p)) {
+            *x = 0.0;
+        }
+    }
+    Ok(Output { values: v.iter().map(|&x| x as f32).collect(), report, seconds: t.elapsed().as_secs_f64(), config: cfg })
+}
+
+/// One factorised column per focus, accumulated in one pass, each imaged over `voxels`.
+fn factorised_columns(
+    src: &mut dyn RowSource,
+    cfg: &Config,
+    wave: &Wave,
+    exec: Exec,
+    foci: &[Point],
+    gate: Gate,
+    voxels: &[Point],
+    label: &str,
+) -> Result<Vec<(Vec<f64>, Report)>> {
+    let g = src.geometry().clone();
+    if g.confocal {
+        return Err(Error::arg("column", "a confocal capture has no separate camera aperture: columns need a SPAD grid"));
+    }
+    let ks = g.spads_per_row();
+    let n_state = Probe::state_len(cfg, Target::Column(foci[0]), gate, 0, ks);
+    let mut states: Vec<Vec<f64>> = foci.iter().map(|_| vec![0.0; n_state]).collect();
+    let mut probes: Vec<Probe<'_>> = Vec::new();
+    let mut state_iter = Some(states.iter_mut());
+    drive(src, cfg, wave, exec, label, |scan, row| {
+        if let Some(it) = state_iter.take() {
+            probes = foci.iter().zip(it).map(|(a, s)| Probe::new(scan, Target::Column(*a), gate, &[], s)).collect::<Result<_, _>>()?;
+        }
+        probes.par_iter_mut().try_for_each(|p| p.push_row(scan, row))?;
+        Ok(())
+    })?;
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+    let scan = Scan::new(cfg, &g.spads, &mut tables)?;
+    let cl = chunk_len(voxels.len());
+    probes
+        .iter()
+        .map(|p| {
+            let mut out = vec![0.0f64; voxels.len()];
+            let reports = voxels
+                .par_chunks(cl)
+                .zip(out.par_chunks_mut(cl))
+                .map(|(v, o)| p.image(&scan, v, o))
+                .collect::<Result<Vec<_>, _>>()?;
+            let aliased = reports.iter().map(|r| r.aliased).sum();
+            Ok((out, Report { aliased, ..p.report() }))
+        })
+        .collect()
+}
+
+/// Options of the in-focus indirect sum.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct IndirectOptions {
+    /// Relative threshold ε: Γ = {v : I_d(v) > ε·max I_d} (default 0.1).
+    pub epsilon: f32,
+    /// Pair distances accumulated: `r0 ≤ |x_a − x_b| < r1`; `r0` default 1.5σ (DESIGN §B.3.4).
+    pub shell: Option<Shell>,
+    /// Largest accumulator memory accepted [bytes] (default 8 GiB).
+    pub max_bytes: usize,
+}
+
+impl Default for IndirectOptions {
+    fn default() -> Self {
+        Self { epsilon: 0.1, shell: None, max_bytes: 8 << 30 }
+    }
+}
+
+/// Result of [`indirect`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct IndirectOutput {
+    /// In-focus indirect light `I_i(b)` (0 outside Γ).
+    pub values: Vec<f32>,
+    /// The direct light `I_d` of pass 1.
+    pub direct: Vec<f32>,
+    /// Γ membership per voxel.
+    pub gamma: Vec<bool>,
+    /// The pair shell used.
+    pub shell: Shell,
+    /// Counters of pass 2.
+    pub report: Report,
+    /// Wall-clock seconds for both passes.
+    pub seconds: f64,
+}
+
+/// Γ = {v : I_d(v) > ε·max I_d} (Eq. 15 with a relative threshold); empty if the maximum is
+/// not positive or not finite.
+pub fn gamma_mask(direct: &[f32], epsilon: f32) -> Vec<bool> {
+    let max = direct.iter().copied().fold(0.0f32, f32::max);
+    direct.iter().map(|&v| max.is_finite() && max > 0.0 && v > epsilon * max).collect()
+}
+
+/// In-focus indirect light (Eqs. 15–17): pass 1 the diagonal, Γ = {I_d > ε·max}, pass 2
+/// one factorised column per `a ∈ Γ`, and `I_i(b) = Σ_{a∈Γ, a≠b, r0≤|a−b|<r1} T(a, b)` for
+/// `b ∈ Γ`. Reads the source twice.
+///
+/// # Errors
+/// ε out of range, Γ too large for `max_bytes`, configuration, read and kernel errors.
+pub fn indirect(
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    opts: &IndirectOptions,
+    wave: &Wave,
+    exec: Exec,
+) -> Result<IndirectOutput> {
+    if !(opts.epsilon >= 0.0 && opts.epsilon < 1.0) {
+        return Err(Error::arg("--epsilon", format!("expected 0 <= E < 1, found {}", opts.epsilon)));
+    }
+    let t = Instant::now();
+    let d = direct(src, volume, wave, exec)?;
+    let gamma = gamma_mask(&d.values, opts.epsilon);
+    let mut out = indirect_over(src, volume, &gamma, opts, wave, exec)?;
+    out.direct = d.values;
+    out.seconds = t.elapsed().as_secs_f64();
+    Ok(out)
+}
+
+/// Pass 2 of [`indirect`] for a given Γ (e.g. from a direct-light image computed once and
+/// reused for several captures, such as a scene and its direct-only control).
+/// `IndirectOutput::direct` is left empty.
+///
+/// # Errors
+/// Γ of the wrong length or too large for `max_bytes`, configuration, read and kernel errors.
+pub fn indirect_over(
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    gamma: &[bool],
+    opts: &IndirectOptions,
+    wave: &Wave,
+    exec: Exec,
+) -> Result<IndirectOutput> {
+    let t = Instant::now();
+    if gamma.len() != volume.len() {
+        return Err(Error::arg("gamma", format!("expected {} flags, found {}", volume.len(), gamma.len())));
+    }
+    let cfg = wave.config(src.geometry())?;
+    let shell = opts.shell.unwrap_or(Shell { r0: 1.5 * cfg.sigma() as f32, r1: f32::INFINITY });
+    let idx: Vec<usize> = (0..gamma.len()).filter(|&i| gamma[i]).collect();
+    let mut values = vec![0.0f32; volume.len()];
+    let mut report = Report::default();
+    if !idx.is_empty() {
+        let ks = src.geometry().spads_per_row();
+        let bytes = idx.len() * Probe::state_bytes(&cfg, Target::Column([0.0, 0.0, 1.0]), Gate::Gaussian, 0, ks);
+        if bytes > opts.max_bytes {
+            return Err(Error::arg(
+                "--epsilon",
+                format!("Γ has {} voxels and needs {:.1} GB of accumulators; raise --epsilon", idx.len(), bytes as f64 / 1e9),
+            ));
+        }
+        let pts: Vec<Point> = idx.iter().map(|&i| volume.points[i]).collect();
+        let cols = factorised_columns(src, &cfg, wave, exec, &pts, Gate::Gaussian, &pts, "indirect")?;
+        let mut sum = vec![0.0f64; pts.len()];
+        for (ai, (col, r)) in cols.iter().enumerate() {
+            report = *r;
+            for (bi, t) in col.iter().enumerate() {
+                if ai != bi && shell.contains(dist(pts[ai], pts[bi])) {
+                    sum[bi] += t;
+                }
+            }
+        }
+        for (&i, s) in idx.iter().zip(sum) {
+            values[i] = s as f32;
+        }
+    }
+    Ok(IndirectOutput { values, direct: Vec::new(), gamma: gamma.to_vec(), shell, report, seconds: t.elapsed().as_secs_f64() })
+}
+
+/// Swaps the roles of lasers and SPADs by reciprocity (DESIGN §B.3.7): the SPAD array becomes
+/// the virtual projector and the laser grid the camera, `T_swap(a, b) = T(b, a)`. Needs the
+/// capture in memory (`Kl·Ks·Nt` values).
+///
+/// # Errors
+/// [`Error::Argument`] for confocal captures (nothing to swap).
+pub fn swap_roles(c: &Capture) -> Result<Capture> {
+    let g = &c.geometry;
+    if g.confocal {
+        return Err(Error::arg("--swap-roles", "a confocal capture has nothing to swap"));
+    }
+    let (kl, ks, nt) = (g.lasers.len(), g.spads.len(), g.nt);
+    let mut data = vec![0.0f32; c.data.len()];
+    for l in 0..kl {
+        for s in 0..ks {
+            data[(s * kl + l) * nt..(s * kl + l + 1) * nt].copy_from_slice(&c.data[(l * ks + s) * nt..(l * ks + s + 1) * nt]);
+        }
+    }
+    let geometry = Geometry {
+        lasers: g.spads.clone(),
+        laser_shape: g.spad_shape,
+        spads: g.lasers.clone(),
+        spad_shape: g.laser_shape,
+        laser_origin: g.sensor_origin,
+        sensor_origin: g.laser_origin,
+        ..g.clone()
+    };
+    Ok(Capture { geometry, data })
+}
