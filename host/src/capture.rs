@@ -49,21 +49,46 @@ impl Geometry {
     pub fn validate(&self, what: &std::path::Path) -> Result<()> {
         let shape = |s: [usize; 2]| s[0] * s[1];
         if self.lasers.is_empty() || shape(self.laser_shape) != self.lasers.len() {
-            return Err(Error::format(what, "laser_grid", format!("{} laser spots", shape(self.laser_shape)), self.lasers.len()));
+            return Err(Error::format(
+                what,
+                "laser_grid",
+                format!("{} laser spots", shape(self.laser_shape)),
+                self.lasers.len(),
+            ));
         }
         if self.spads.is_empty() || shape(self.spad_shape) != self.spads.len() {
-            return Err(Error::format(what, "sensor_grid", format!("{} SPAD spots", shape(self.spad_shape)), self.spads.len()));
+            return Err(Error::format(
+                what,
+                "sensor_grid",
+                format!("{} SPAD spots", shape(self.spad_shape)),
+                self.spads.len(),
+            ));
         }
         if self.confocal && self.spads != self.lasers {
-            return Err(Error::format(what, "sensor_grid", "the laser grid (confocal)", "a different grid"));
+            return Err(Error::format(
+                what,
+                "sensor_grid",
+                "the laser grid (confocal)",
+                "a different grid",
+            ));
         }
         for (name, pts) in [("laser_grid", &self.lasers), ("sensor_grid", &self.spads)] {
             if let Some(i) = pts.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
-                return Err(Error::format(what, name, "finite coordinates", format!("{:?} at index {i}", pts[i])));
+                return Err(Error::format(
+                    what,
+                    name,
+                    "finite coordinates",
+                    format!("{:?} at index {i}", pts[i]),
+                ));
             }
         }
         if !(self.dt.is_finite() && self.dt > 0.0) {
-            return Err(Error::format(what, "delta_t", "a finite value > 0", self.dt));
+            return Err(Error::format(
+                what,
+                "delta_t",
+                "a finite value > 0",
+                self.dt,
+            ));
         }
         if !self.t0.is_finite() {
             return Err(Error::format(what, "t_start", "a finite value", self.t0));
@@ -106,7 +131,12 @@ impl Capture {
         geometry.validate(what)?;
         let want = geometry.lasers.len() * geometry.spads_per_row() * geometry.nt;
         if data.len() != want {
-            return Err(Error::format(what, "H", format!("{want} values"), data.len()));
+            return Err(Error::format(
+                what,
+                "H",
+                format!("{want} values"),
+                data.len(),
+            ));
         }
         Ok(Self { geometry, data })
     }
@@ -154,50 +184,99 @@ pub mod npz {
     pub fn write(c: &Capture, path: &Path) -> Result<()> {
         let g = &c.geometry;
         let io = |e: std::io::Error| Error::io(path, e);
-        let npz = |e: ndarray_npy::WriteNpzError| Error::io(path, std::io::Error::other(e.to_string()));
+        let npz =
+            |e: ndarray_npy::WriteNpzError| Error::io(path, std::io::Error::other(e.to_string()));
         let mut w = NpzWriter::new_compressed(File::create(path).map_err(io)?);
         let [lx, ly] = g.laser_shape;
         let [sx, sy] = g.spad_shape;
-        let h_shape: Vec<usize> = if g.confocal { vec![lx, ly, g.nt] } else { vec![lx, ly, sx, sy, g.nt] };
-        let arr = |shape: Vec<usize>, v: Vec<f32>| Array::from_shape_vec(IxDyn(&shape), v).expect("shape checked by Capture::new");
+        let h_shape: Vec<usize> = if g.confocal {
+            vec![lx, ly, g.nt]
+        } else {
+            vec![lx, ly, sx, sy, g.nt]
+        };
+        let arr = |shape: Vec<usize>, v: Vec<f32>| {
+            Array::from_shape_vec(IxDyn(&shape), v).expect("shape checked by Capture::new")
+        };
         let pts = |p: &[vltm_kernel::Point]| p.iter().flatten().copied().collect::<Vec<f32>>();
-        w.add_array("H", &arr(h_shape, c.data.clone())).map_err(npz)?;
-        w.add_array("laser_grid_xyz", &arr(vec![lx, ly, 3], pts(&g.lasers))).map_err(npz)?;
-        w.add_array("sensor_grid_xyz", &arr(vec![sx, sy, 3], pts(&g.spads))).map_err(npz)?;
-        w.add_array("laser_xyz", &ndarray::arr1(&g.laser_origin)).map_err(npz)?;
-        w.add_array("sensor_xyz", &ndarray::arr1(&g.sensor_origin)).map_err(npz)?;
+        w.add_array("H", &arr(h_shape, c.data.clone()))
+            .map_err(npz)?;
+        w.add_array("laser_grid_xyz", &arr(vec![lx, ly, 3], pts(&g.lasers)))
+            .map_err(npz)?;
+        w.add_array("sensor_grid_xyz", &arr(vec![sx, sy, 3], pts(&g.spads)))
+            .map_err(npz)?;
+        w.add_array("laser_xyz", &ndarray::arr1(&g.laser_origin))
+            .map_err(npz)?;
+        w.add_array("sensor_xyz", &ndarray::arr1(&g.sensor_origin))
+            .map_err(npz)?;
         w.add_array("delta_t", &ndarray::arr0(g.dt)).map_err(npz)?;
         w.add_array("t_start", &ndarray::arr0(g.t0)).map_err(npz)?;
-        w.add_array("t_accounts_first_and_last_bounces", &ndarray::arr0(u8::from(g.legs_in_time))).map_err(npz)?;
-        w.add_array("confocal", &ndarray::arr0(u8::from(g.confocal))).map_err(npz)?;
+        w.add_array(
+            "t_accounts_first_and_last_bounces",
+            &ndarray::arr0(u8::from(g.legs_in_time)),
+        )
+        .map_err(npz)?;
+        w.add_array("confocal", &ndarray::arr0(u8::from(g.confocal)))
+            .map_err(npz)?;
         w.finish().map_err(npz)?;
         Ok(())
     }
 
-    fn get<T: ReadableElement>(r: &mut NpzReader<File>, path: &Path, key: &str) -> Result<ArrayD<T>> {
-        r.by_name::<ndarray::OwnedRepr<T>, IxDyn>(key)
-            .map_err(|e| Error::format(path, key, "a readable array of the documented dtype", e.to_string()))
+    fn get<T: ReadableElement>(
+        r: &mut NpzReader<File>,
+        path: &Path,
+        key: &str,
+    ) -> Result<ArrayD<T>> {
+        r.by_name::<ndarray::OwnedRepr<T>, IxDyn>(key).map_err(|e| {
+            Error::format(
+                path,
+                key,
+                "a readable array of the documented dtype",
+                e.to_string(),
+            )
+        })
     }
 
-    fn scalar<T: ReadableElement + Copy>(r: &mut NpzReader<File>, path: &Path, key: &str) -> Result<T> {
+    fn scalar<T: ReadableElement + Copy>(
+        r: &mut NpzReader<File>,
+        path: &Path,
+        key: &str,
+    ) -> Result<T> {
         let a = get::<T>(r, path, key)?;
-        a.iter().next().copied().filter(|_| a.len() == 1).ok_or_else(|| Error::format(path, key, "a scalar", format!("shape {:?}", a.shape())))
+        a.iter()
+            .next()
+            .copied()
+            .filter(|_| a.len() == 1)
+            .ok_or_else(|| Error::format(path, key, "a scalar", format!("shape {:?}", a.shape())))
     }
 
-    fn grid(r: &mut NpzReader<File>, path: &Path, key: &str) -> Result<(Vec<vltm_kernel::Point>, [usize; 2])> {
+    fn grid(
+        r: &mut NpzReader<File>,
+        path: &Path,
+        key: &str,
+    ) -> Result<(Vec<vltm_kernel::Point>, [usize; 2])> {
         let a = get::<f32>(r, path, key)?;
         let s = a.shape().to_vec();
         if s.len() != 3 || s[2] != 3 {
-            return Err(Error::format(path, key, "shape (nx, ny, 3)", format!("{s:?}")));
+            return Err(Error::format(
+                path,
+                key,
+                "shape (nx, ny, 3)",
+                format!("{s:?}"),
+            ));
         }
         let v: Vec<f32> = a.iter().copied().collect();
-        Ok((v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(), [s[0], s[1]]))
+        Ok((
+            v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
+            [s[0], s[1]],
+        ))
     }
 
     fn xyz(r: &mut NpzReader<File>, path: &Path, key: &str) -> Result<[f64; 3]> {
         let a = get::<f64>(r, path, key)?;
         let v: Vec<f64> = a.iter().copied().collect();
-        <[f64; 3]>::try_from(v.as_slice()).map_err(|_| Error::format(path, key, "3 coordinates", format!("shape {:?}", a.shape())))
+        <[f64; 3]>::try_from(v.as_slice()).map_err(|_| {
+            Error::format(path, key, "3 coordinates", format!("shape {:?}", a.shape()))
+        })
     }
 
     /// Reads a `.npz` capture written by [`write`] (or by numpy with the same keys).
@@ -207,7 +286,8 @@ pub mod npz {
     /// malformed field.
     pub fn read(path: &Path) -> Result<Capture> {
         let f = File::open(path).map_err(|e| Error::io(path, e))?;
-        let mut r = NpzReader::new(f).map_err(|e| Error::format(path, "(archive)", "a NumPy .npz archive", e.to_string()))?;
+        let mut r = NpzReader::new(f)
+            .map_err(|e| Error::format(path, "(archive)", "a NumPy .npz archive", e.to_string()))?;
         let (lasers, laser_shape) = grid(&mut r, path, "laser_grid_xyz")?;
         let (spads, spad_shape) = grid(&mut r, path, "sensor_grid_xyz")?;
         let confocal = scalar::<u8>(&mut r, path, "confocal")? != 0;
@@ -219,7 +299,12 @@ pub mod npz {
             vec![laser_shape[0], laser_shape[1], spad_shape[0], spad_shape[1]]
         };
         if s.len() != want.len() + 1 || s[..want.len()] != want[..] {
-            return Err(Error::format(path, "H", format!("shape {want:?} + (Nt,)"), format!("{s:?}")));
+            return Err(Error::format(
+                path,
+                "H",
+                format!("shape {want:?} + (Nt,)"),
+                format!("{s:?}"),
+            ));
         }
         let geometry = Geometry {
             lasers,
@@ -243,8 +328,16 @@ pub mod npz {
 /// # Errors
 /// [`Error::Argument`] for an unknown extension; read errors of the format.
 pub fn open(path: &std::path::Path) -> Result<Capture> {
-    match path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref() {
+    match path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+        .as_deref()
+    {
         Some("npz") => npz::read(path),
-        _ => Err(Error::arg("CAPTURE", format!("{}: unknown capture format (expected .npz)", path.display()))),
+        _ => Err(Error::arg(
+            "CAPTURE",
+            format!("{}: unknown capture format (expected .npz)", path.display()),
+        )),
     }
 }

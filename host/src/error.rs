@@ -45,16 +45,32 @@ pub enum Error {
 
 impl Error {
     /// A [`Error::Format`] error.
-    pub fn format(path: impl Into<PathBuf>, field: &str, expected: impl ToString, found: impl ToString) -> Self {
-        Self::Format { path: path.into(), field: field.into(), expected: expected.to_string(), found: found.to_string() }
+    pub fn format(
+        path: impl Into<PathBuf>,
+        field: &str,
+        expected: impl ToString,
+        found: impl ToString,
+    ) -> Self {
+        Self::Format {
+            path: path.into(),
+            field: field.into(),
+            expected: expected.to_string(),
+            found: found.to_string(),
+        }
     }
     /// An [`Error::Argument`] error.
     pub fn arg(arg: &str, msg: impl ToString) -> Self {
-        Self::Argument { arg: arg.into(), msg: msg.to_string() }
+        Self::Argument {
+            arg: arg.into(),
+            msg: msg.to_string(),
+        }
     }
     /// An [`Error::Io`] error.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Self::Io { path: path.into(), source }
+        Self::Io {
+            path: path.into(),
+            source,
+        }
     }
     /// Whether the error is the user's arguments (CLI exit code 2) rather than the data (1).
     pub fn is_usage(&self) -> bool {

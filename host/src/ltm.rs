@@ -19,7 +19,9 @@ use crate::volume::Volume;
 use indicatif::{ProgressBar, ProgressStyle};
 use rayon::prelude::*;
 use std::time::Instant;
-use vltm_kernel::{Config, Gate, Legs, Params, Point, Probe, Report, Row, RowBuffer, Scan, Target, Weights};
+use vltm_kernel::{
+    Config, Gate, Legs, Params, Point, Probe, Report, Row, RowBuffer, Scan, Target, Weights,
+};
 
 /// Virtual wave and weighting options shared by every probe (the CLI's common flags).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -38,14 +40,24 @@ pub struct Wave {
 
 impl Default for Wave {
     fn default() -> Self {
-        Self { wavelength: None, sigma: None, weights: Weights::Inv, band_half_width: 5.0, compensate_laser: false }
+        Self {
+            wavelength: None,
+            sigma: None,
+            weights: Weights::Inv,
+            band_half_width: 5.0,
+            compensate_laser: false,
+        }
     }
 }
 
 /// Aperture pitch of a grid (the coarser of its two axes; 0 for a single point).
 fn pitch(pts: &[Point], shape: [usize; 2]) -> f32 {
     let d = |a: Point, b: Point| ((0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f32>()).sqrt();
-    let px = if shape[0] > 1 { d(pts[0], pts[shape[1]]) } else { 0.0 };
+    let px = if shape[0] > 1 {
+        d(pts[0], pts[shape[1]])
+    } else {
+        0.0
+    };
     let py = if shape[1] > 1 { d(pts[0], pts[1]) } else { 0.0 };
     px.max(py)
 }
@@ -65,7 +77,10 @@ impl Wave {
     pub fn config(&self, g: &Geometry) -> Result<Config> {
         let lam = self.wavelength.unwrap_or_else(|| default_wavelength(g));
         let legs = if g.legs_in_time {
-            Legs::FirstAndLast { laser_origin: g.laser_origin, sensor_origin: g.sensor_origin }
+            Legs::FirstAndLast {
+                laser_origin: g.laser_origin,
+                sensor_origin: g.sensor_origin,
+            }
         } else {
             Legs::WallToWall
         };
@@ -109,31 +124,60 @@ pub fn laser_falloff(g: &Geometry, x_l: Point) -> f64 {
     (v[2].abs() / d2.sqrt()) / d2
 }
 
+/// What every pass needs: the kernel configuration and the user's options.
+#[derive(Clone, Copy)]
+struct Job<'a> {
+    cfg: &'a Config,
+    wave: &'a Wave,
+    exec: Exec,
+}
+
 /// Streams every row of `src` through `push` with the row's spectra (computed once per row).
 fn drive(
     src: &mut dyn RowSource,
-    cfg: &Config,
-    wave: &Wave,
-    exec: Exec,
+    job: Job<'_>,
     label: &str,
     mut push: impl FnMut(&Scan<'_>, &Row<'_, f32>) -> Result<()>,
 ) -> Result<()> {
+    let Job { cfg, wave, exec } = job;
     let g = src.geometry().clone();
     if wave.compensate_laser {
         let f = laser_falloff(&g, g.lasers[0]);
         if !(f.is_finite() && f > 0.0) {
-            return Err(Error::arg("--compensate-laser", "laser_xyz lies in the wall plane: cos θ / d² is 0"));
+            return Err(Error::arg(
+                "--compensate-laser",
+                "laser_xyz lies in the wall plane: cos θ / d² is 0",
+            ));
         }
     }
     let ks = g.spads_per_row();
-    let mut tables = if g.confocal { Vec::new() } else { vec![0.0f32; Scan::tables_len(cfg, ks)] };
+    let mut tables = if g.confocal {
+        Vec::new()
+    } else {
+        vec![0.0f32; Scan::tables_len(cfg, ks)]
+    };
     let mut buf = vec![0.0f32; RowBuffer::len(cfg, ks)];
     let mut hist = Vec::new();
-    let bar = if exec.progress { ProgressBar::new(g.lasers.len() as u64) } else { ProgressBar::hidden() };
-    bar.set_style(ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} rows, {eta} left").unwrap_or_else(|_| ProgressStyle::default_bar()));
+    let bar = if exec.progress {
+        ProgressBar::new(g.lasers.len() as u64)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} rows, {eta} left")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
     bar.set_message(label.to_string());
-    let fixed: Option<Scan<'_>> = if g.confocal { None } else { Some(Scan::new(cfg, &g.spads, &mut tables)?) };
-    let mut confocal_tables = if g.confocal { vec![0.0f32; Scan::tables_len(cfg, 1)] } else { Vec::new() };
+    let fixed: Option<Scan<'_>> = if g.confocal {
+        None
+    } else {
+        Some(Scan::new(cfg, &g.spads, &mut tables)?)
+    };
+    let mut confocal_tables = if g.confocal {
+        vec![0.0f32; Scan::tables_len(cfg, 1)]
+    } else {
+        Vec::new()
+    };
     for l in 0..g.lasers.len() {
         let x_l = src.read_row(l, &mut hist)?;
         if wave.compensate_laser {
@@ -166,38 +210,53 @@ fn chunk_len(n: usize) -> usize {
 /// Element-wise probes (diagonal, higher-order column) over voxel chunks in parallel.
 fn elementwise(
     src: &mut dyn RowSource,
-    cfg: &Config,
-    wave: &Wave,
-    exec: Exec,
+    job: Job<'_>,
     target: Target,
     gate: Gate,
     voxels: &[Point],
     label: &str,
 ) -> Result<(Vec<f64>, Report)> {
+    let cfg = job.cfg;
     let ks = src.geometry().spads_per_row();
     let cl = chunk_len(voxels.len());
     let chunks: Vec<&[Point]> = voxels.chunks(cl).collect();
-    let mut states: Vec<Vec<f64>> =
-        chunks.iter().map(|c| vec![0.0; Probe::state_len(cfg, target, gate, c.len(), ks)]).collect();
+    let mut states: Vec<Vec<f64>> = chunks
+        .iter()
+        .map(|c| vec![0.0; Probe::state_len(cfg, target, gate, c.len(), ks)])
+        .collect();
     // The probes need a Scan only for validation of sizes; build them on the first row.
     let mut probes: Vec<Probe<'_>> = Vec::new();
     let mut state_iter = Some(states.iter_mut());
-    drive(src, cfg, wave, exec, label, |scan, row| {
+    drive(src, job, label, |scan, row| {
         if let Some(it) = state_iter.take() {
-            probes = chunks.iter().zip(it).map(|(c, s)| Probe::new(scan, target, gate, c, s)).collect::<Result<_, _>>()?;
+            probes = chunks
+                .iter()
+                .zip(it)
+                .map(|(c, s)| Probe::new(scan, target, gate, c, s))
+                .collect::<Result<_, _>>()?;
         }
-        probes.par_iter_mut().try_for_each(|p| p.push_row(scan, row))?;
+        probes
+            .par_iter_mut()
+            .try_for_each(|p| p.push_row(scan, row))?;
         Ok(())
     })?;
     let mut out = vec![0.0f64; voxels.len()];
     let mut report = Report::default();
     let g = src.geometry().clone();
-    let ks_pts = if g.confocal { vec![g.lasers[0]] } else { g.spads.clone() };
+    let ks_pts = if g.confocal {
+        vec![g.lasers[0]]
+    } else {
+        g.spads.clone()
+    };
     let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
     let scan = Scan::new(cfg, &ks_pts, &mut tables)?;
     for (p, o) in probes.iter().zip(out.chunks_mut(cl)) {
         let r = p.finish(&scan, o)?;
-        report = Report { rows: r.rows, non_finite: report.non_finite.max(r.non_finite), aliased: report.aliased + r.aliased };
+        report = Report {
+            rows: r.rows,
+            non_finite: report.non_finite.max(r.non_finite),
+            aliased: report.aliased + r.aliased,
+        };
     }
     Ok((out, report))
 }
@@ -209,8 +268,20 @@ fn elementwise(
 pub fn direct(src: &mut dyn RowSource, volume: &Volume, wave: &Wave, exec: Exec) -> Result<Output> {
     let t = Instant::now();
     let cfg = wave.config(src.geometry())?;
-    let (v, report) = elementwise(src, &cfg, wave, exec, Target::Diagonal, Gate::Gaussian, &volume.points, "direct")?;
-    Ok(Output { values: v.iter().map(|&x| x as f32).collect(), report, seconds: t.elapsed().as_secs_f64(), config: cfg })
+    let (v, report) = elementwise(
+        src,
+        Job { cfg: &cfg, wave, exec },
+        Target::Diagonal,
+        Gate::Gaussian,
+        &volume.points,
+        "direct",
+    )?;
+    Ok(Output {
+        values: v.iter().map(|&x| x as f32).collect(),
+        report,
+        seconds: t.elapsed().as_secs_f64(),
+        config: cfg,
+    })
 }
 
 /// The time gate of a column (the CLI's `--gate`).
@@ -235,14 +306,22 @@ pub struct Shell {
 
 impl Shell {
     /// Everything.
-    pub const ALL: Self = Self { r0: 0.0, r1: f32::INFINITY };
+    pub const ALL: Self = Self {
+        r0: 0.0,
+        r1: f32::INFINITY,
+    };
 
     /// Parses `R0:R1` (metres; `R1` may be `inf`).
     ///
     /// # Errors
     /// [`Error::Argument`] (`--shell`) unless `0 ≤ R0 < R1`.
     pub fn parse(s: &str) -> Result<Self> {
-        let bad = || Error::arg("--shell", format!("expected R0:R1 with 0 <= R0 < R1 in metres, found `{s}`"));
+        let bad = || {
+            Error::arg(
+                "--shell",
+                format!("expected R0:R1 with 0 <= R0 < R1 in metres, found `{s}`"),
+            )
+        };
         let (a, b) = s.split_once(':').ok_or_else(bad)?;
         let r0: f32 = a.trim().parse().map_err(|_| bad())?;
         let r1: f32 = b.trim().parse().map_err(|_| bad())?;
@@ -270,7 +349,10 @@ pub fn check_focus(a: Point) -> Result<()> {
     if a.iter().all(|c| c.is_finite()) && a[2] > 0.0 {
         Ok(())
     } else {
-        Err(Error::arg("--focus", format!("{a:?} is on or behind the wall (need z > 0)")))
+        Err(Error::arg(
+            "--focus",
+            format!("{a:?} is on or behind the wall (need z > 0)"),
+        ))
     }
 }
 
@@ -292,10 +374,30 @@ pub fn column(
     let cfg = wave.config(src.geometry())?;
     let target = Target::Column(focus);
     let (mut v, report) = match gate {
-        ColumnGate::HigherOrder => elementwise(src, &cfg, wave, exec, target, Gate::HigherOrder, &volume.points, "column")?,
+        ColumnGate::HigherOrder => elementwise(
+            src,
+            Job { cfg: &cfg, wave, exec },
+            target,
+            Gate::HigherOrder,
+            &volume.points,
+            "column",
+        )?,
         ColumnGate::TwoBounce | ColumnGate::None => {
-            let kgate = if gate == ColumnGate::None { Gate::None } else { Gate::Gaussian };
-            factorised_columns(src, &cfg, wave, exec, &[focus], kgate, &volume.points, "column")?.pop().unwrap_or_default()
+            let kgate = if gate == ColumnGate::None {
+                Gate::None
+            } else {
+                Gate::Gaussian
+            };
+            factorised_columns(
+                src,
+                Job { cfg: &cfg, wave, exec },
+                &[focus],
+                kgate,
+                &volume.points,
+                "column",
+            )?
+            .pop()
+            .unwrap_or_default()
         }
     };
     for (x, p) in v.iter_mut().zip(&volume.points) {
@@ -303,34 +405,47 @@ pub fn column(
             *x = 0.0;
         }
     }
-    Ok(Output { values: v.iter().map(|&x| x as f32).collect(), report, seconds: t.elapsed().as_secs_f64(), config: cfg })
+    Ok(Output {
+        values: v.iter().map(|&x| x as f32).collect(),
+        report,
+        seconds: t.elapsed().as_secs_f64(),
+        config: cfg,
+    })
 }
 
 /// One factorised column per focus, accumulated in one pass, each imaged over `voxels`.
 fn factorised_columns(
     src: &mut dyn RowSource,
-    cfg: &Config,
-    wave: &Wave,
-    exec: Exec,
+    job: Job<'_>,
     foci: &[Point],
     gate: Gate,
     voxels: &[Point],
     label: &str,
 ) -> Result<Vec<(Vec<f64>, Report)>> {
+    let cfg = job.cfg;
     let g = src.geometry().clone();
     if g.confocal {
-        return Err(Error::arg("column", "a confocal capture has no separate camera aperture: columns need a SPAD grid"));
+        return Err(Error::arg(
+            "column",
+            "a confocal capture has no separate camera aperture: columns need a SPAD grid",
+        ));
     }
     let ks = g.spads_per_row();
     let n_state = Probe::state_len(cfg, Target::Column(foci[0]), gate, 0, ks);
     let mut states: Vec<Vec<f64>> = foci.iter().map(|_| vec![0.0; n_state]).collect();
     let mut probes: Vec<Probe<'_>> = Vec::new();
     let mut state_iter = Some(states.iter_mut());
-    drive(src, cfg, wave, exec, label, |scan, row| {
+    drive(src, job, label, |scan, row| {
         if let Some(it) = state_iter.take() {
-            probes = foci.iter().zip(it).map(|(a, s)| Probe::new(scan, Target::Column(*a), gate, &[], s)).collect::<Result<_, _>>()?;
+            probes = foci
+                .iter()
+                .zip(it)
+                .map(|(a, s)| Probe::new(scan, Target::Column(*a), gate, &[], s))
+                .collect::<Result<_, _>>()?;
         }
-        probes.par_iter_mut().try_for_each(|p| p.push_row(scan, row))?;
+        probes
+            .par_iter_mut()
+            .try_for_each(|p| p.push_row(scan, row))?;
         Ok(())
     })?;
     let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
@@ -346,7 +461,13 @@ fn factorised_columns(
                 .map(|(v, o)| p.image(&scan, v, o))
                 .collect::<Result<Vec<_>, _>>()?;
             let aliased = reports.iter().map(|r| r.aliased).sum();
-            Ok((out, Report { aliased, ..p.report() }))
+            Ok((
+                out,
+                Report {
+                    aliased,
+                    ..p.report()
+                },
+            ))
         })
         .collect()
 }
@@ -364,7 +485,11 @@ pub struct IndirectOptions {
 
 impl Default for IndirectOptions {
     fn default() -> Self {
-        Self { epsilon: 0.1, shell: None, max_bytes: 8 << 30 }
+        Self {
+            epsilon: 0.1,
+            shell: None,
+            max_bytes: 8 << 30,
+        }
     }
 }
 
@@ -389,7 +514,10 @@ pub struct IndirectOutput {
 /// not positive or not finite.
 pub fn gamma_mask(direct: &[f32], epsilon: f32) -> Vec<bool> {
     let max = direct.iter().copied().fold(0.0f32, f32::max);
-    direct.iter().map(|&v| max.is_finite() && max > 0.0 && v > epsilon * max).collect()
+    direct
+        .iter()
+        .map(|&v| max.is_finite() && max > 0.0 && v > epsilon * max)
+        .collect()
 }
 
 /// In-focus indirect light (Eqs. 15–17): pass 1 the diagonal, Γ = {I_d > ε·max}, pass 2
@@ -406,7 +534,10 @@ pub fn indirect(
     exec: Exec,
 ) -> Result<IndirectOutput> {
     if !(opts.epsilon >= 0.0 && opts.epsilon < 1.0) {
-        return Err(Error::arg("--epsilon", format!("expected 0 <= E < 1, found {}", opts.epsilon)));
+        return Err(Error::arg(
+            "--epsilon",
+            format!("expected 0 <= E < 1, found {}", opts.epsilon),
+        ));
     }
     let t = Instant::now();
     let d = direct(src, volume, wave, exec)?;
@@ -433,24 +564,42 @@ pub fn indirect_over(
 ) -> Result<IndirectOutput> {
     let t = Instant::now();
     if gamma.len() != volume.len() {
-        return Err(Error::arg("gamma", format!("expected {} flags, found {}", volume.len(), gamma.len())));
+        return Err(Error::arg(
+            "gamma",
+            format!("expected {} flags, found {}", volume.len(), gamma.len()),
+        ));
     }
     let cfg = wave.config(src.geometry())?;
-    let shell = opts.shell.unwrap_or(Shell { r0: 1.5 * cfg.sigma() as f32, r1: f32::INFINITY });
+    let shell = opts.shell.unwrap_or(Shell {
+        r0: 1.5 * cfg.sigma() as f32,
+        r1: f32::INFINITY,
+    });
     let idx: Vec<usize> = (0..gamma.len()).filter(|&i| gamma[i]).collect();
     let mut values = vec![0.0f32; volume.len()];
     let mut report = Report::default();
     if !idx.is_empty() {
         let ks = src.geometry().spads_per_row();
-        let bytes = idx.len() * Probe::state_bytes(&cfg, Target::Column([0.0, 0.0, 1.0]), Gate::Gaussian, 0, ks);
+        let bytes = idx.len()
+            * Probe::state_bytes(&cfg, Target::Column([0.0, 0.0, 1.0]), Gate::Gaussian, 0, ks);
         if bytes > opts.max_bytes {
             return Err(Error::arg(
                 "--epsilon",
-                format!("Γ has {} voxels and needs {:.1} GB of accumulators; raise --epsilon", idx.len(), bytes as f64 / 1e9),
+                format!(
+                    "Γ has {} voxels and needs {:.1} GB of accumulators; raise --epsilon",
+                    idx.len(),
+                    bytes as f64 / 1e9
+                ),
             ));
         }
         let pts: Vec<Point> = idx.iter().map(|&i| volume.points[i]).collect();
-        let cols = factorised_columns(src, &cfg, wave, exec, &pts, Gate::Gaussian, &pts, "indirect")?;
+        let cols = factorised_columns(
+            src,
+            Job { cfg: &cfg, wave, exec },
+            &pts,
+            Gate::Gaussian,
+            &pts,
+            "indirect",
+        )?;
         let mut sum = vec![0.0f64; pts.len()];
         for (ai, (col, r)) in cols.iter().enumerate() {
             report = *r;
@@ -464,7 +613,14 @@ pub fn indirect_over(
             values[i] = s as f32;
         }
     }
-    Ok(IndirectOutput { values, direct: Vec::new(), gamma: gamma.to_vec(), shell, report, seconds: t.elapsed().as_secs_f64() })
+    Ok(IndirectOutput {
+        values,
+        direct: Vec::new(),
+        gamma: gamma.to_vec(),
+        shell,
+        report,
+        seconds: t.elapsed().as_secs_f64(),
+    })
 }
 
 /// Swaps the roles of lasers and SPADs by reciprocity (DESIGN §B.3.7): the SPAD array becomes
@@ -476,13 +632,17 @@ pub fn indirect_over(
 pub fn swap_roles(c: &Capture) -> Result<Capture> {
     let g = &c.geometry;
     if g.confocal {
-        return Err(Error::arg("--swap-roles", "a confocal capture has nothing to swap"));
+        return Err(Error::arg(
+            "--swap-roles",
+            "a confocal capture has nothing to swap",
+        ));
     }
     let (kl, ks, nt) = (g.lasers.len(), g.spads.len(), g.nt);
     let mut data = vec![0.0f32; c.data.len()];
     for l in 0..kl {
         for s in 0..ks {
-            data[(s * kl + l) * nt..(s * kl + l + 1) * nt].copy_from_slice(&c.data[(l * ks + s) * nt..(l * ks + s + 1) * nt]);
+            data[(s * kl + l) * nt..(s * kl + l + 1) * nt]
+                .copy_from_slice(&c.data[(l * ks + s) * nt..(l * ks + s + 1) * nt]);
         }
     }
     let geometry = Geometry {

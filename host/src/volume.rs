@@ -24,8 +24,15 @@ pub struct Volume {
 pub const MAX_VOXELS: usize = 50_000_000;
 
 fn num(arg: &str, s: &str, what: &str) -> Result<f32> {
-    let v: f32 = s.trim().parse().map_err(|_| Error::arg(arg, format!("{what}: `{s}` is not a number")))?;
-    if v.is_finite() { Ok(v) } else { Err(Error::arg(arg, format!("{what}: `{s}` is not finite"))) }
+    let v: f32 = s
+        .trim()
+        .parse()
+        .map_err(|_| Error::arg(arg, format!("{what}: `{s}` is not a number")))?;
+    if v.is_finite() {
+        Ok(v)
+    } else {
+        Err(Error::arg(arg, format!("{what}: `{s}` is not finite")))
+    }
 }
 
 impl Volume {
@@ -39,17 +46,38 @@ impl Volume {
         if n.contains(&0) {
             return Err(Error::arg(arg, "every axis needs at least 1 sample"));
         }
-        let total = n.iter().try_fold(1usize, |a, &b| a.checked_mul(b)).filter(|&t| t <= MAX_VOXELS);
+        let total = n
+            .iter()
+            .try_fold(1usize, |a, &b| a.checked_mul(b))
+            .filter(|&t| t <= MAX_VOXELS);
         let Some(total) = total else {
-            return Err(Error::arg(arg, format!("{}×{}×{} voxels is more than {MAX_VOXELS}", n[0], n[1], n[2])));
+            return Err(Error::arg(
+                arg,
+                format!(
+                    "{}×{}×{} voxels is more than {MAX_VOXELS}",
+                    n[0], n[1], n[2]
+                ),
+            ));
         };
         if lo.iter().chain(&hi).any(|c| !c.is_finite()) {
             return Err(Error::arg(arg, "bounds must be finite"));
         }
         if lo[2].min(hi[2]) <= 0.0 {
-            return Err(Error::arg(arg, format!("z must be > 0 (in front of the wall), found {}", lo[2].min(hi[2]))));
+            return Err(Error::arg(
+                arg,
+                format!(
+                    "z must be > 0 (in front of the wall), found {}",
+                    lo[2].min(hi[2])
+                ),
+            ));
         }
-        let at = |i: usize, k: usize| if n[i] == 1 { lo[i] } else { lo[i] + (hi[i] - lo[i]) * k as f32 / (n[i] - 1) as f32 };
+        let at = |i: usize, k: usize| {
+            if n[i] == 1 {
+                lo[i]
+            } else {
+                lo[i] + (hi[i] - lo[i]) * k as f32 / (n[i] - 1) as f32
+            }
+        };
         let mut points = Vec::with_capacity(total);
         for ix in 0..n[0] {
             for iy in 0..n[1] {
@@ -58,7 +86,11 @@ impl Volume {
                 }
             }
         }
-        Ok(Self { points, shape: n, axes: Some([[lo[0], hi[0]], [lo[1], hi[1]], [lo[2], hi[2]]]) })
+        Ok(Self {
+            points,
+            shape: n,
+            axes: Some([[lo[0], hi[0]], [lo[1], hi[1]], [lo[2], hi[2]]]),
+        })
     }
 
     /// A list of points.
@@ -69,11 +101,21 @@ impl Volume {
         if points.is_empty() {
             return Err(Error::arg("--volume", "the point list is empty"));
         }
-        if let Some(p) = points.iter().find(|p| !(p[2] > 0.0) || !p.iter().all(|c| c.is_finite())) {
-            return Err(Error::arg("--volume", format!("voxel {p:?} is not in front of the wall (need finite z > 0)")));
+        if let Some(p) = points
+            .iter()
+            .find(|p| p[2].is_nan() || p[2] <= 0.0 || !p.iter().all(|c| c.is_finite()))
+        {
+            return Err(Error::arg(
+                "--volume",
+                format!("voxel {p:?} is not in front of the wall (need finite z > 0)"),
+            ));
         }
         let k = points.len();
-        Ok(Self { points, shape: [k, 1, 1], axes: None })
+        Ok(Self {
+            points,
+            shape: [k, 1, 1],
+            axes: None,
+        })
     }
 
     /// Parses a `SPEC` (`x0:x1:nx,y0:y1:ny,z0:z1:nz`) or a point list (`x,y,z;x,y,z`).
@@ -92,18 +134,33 @@ impl Volume {
         if spec.contains(':') {
             let axes: Vec<&str> = spec.split(',').collect();
             if axes.len() != 3 {
-                return Err(Error::arg(arg, format!("expected x0:x1:nx,y0:y1:ny,z0:z1:nz, found {} axes in `{spec}`", axes.len())));
+                return Err(Error::arg(
+                    arg,
+                    format!(
+                        "expected x0:x1:nx,y0:y1:ny,z0:z1:nz, found {} axes in `{spec}`",
+                        axes.len()
+                    ),
+                ));
             }
             let (mut lo, mut hi, mut n) = ([0.0; 3], [0.0; 3], [0; 3]);
             for (i, (ax, name)) in axes.iter().zip(["x", "y", "z"]).enumerate() {
                 let parts: Vec<&str> = ax.split(':').collect();
                 if parts.len() != 3 {
-                    return Err(Error::arg(arg, format!("axis {name}: expected {name}0:{name}1:n{name}, found `{ax}`")));
+                    return Err(Error::arg(
+                        arg,
+                        format!("axis {name}: expected {name}0:{name}1:n{name}, found `{ax}`"),
+                    ));
                 }
                 lo[i] = num(arg, parts[0], name)?;
                 hi[i] = num(arg, parts[1], name)?;
                 n[i] = parts[2].trim().parse().map_err(|_| {
-                    Error::arg(arg, format!("axis {name}: sample count `{}` is not a positive integer", parts[2]))
+                    Error::arg(
+                        arg,
+                        format!(
+                            "axis {name}: sample count `{}` is not a positive integer",
+                            parts[2]
+                        ),
+                    )
                 })?;
             }
             Self::grid(lo, hi, n)
@@ -130,13 +187,21 @@ impl Volume {
     /// Index of the voxel nearest to `p`.
     pub fn nearest(&self, p: Point) -> usize {
         let d = |q: &Point| (0..3).map(|i| (q[i] - p[i]).powi(2)).sum::<f32>();
-        (0..self.points.len()).min_by(|&a, &b| d(&self.points[a]).total_cmp(&d(&self.points[b]))).unwrap_or(0)
+        (0..self.points.len())
+            .min_by(|&a, &b| d(&self.points[a]).total_cmp(&d(&self.points[b])))
+            .unwrap_or(0)
     }
 
     /// Grid pitch along each axis (0 for single-sample axes and point lists).
     pub fn pitch(&self) -> [f32; 3] {
         match self.axes {
-            Some(ax) => core::array::from_fn(|i| if self.shape[i] > 1 { (ax[i][1] - ax[i][0]).abs() / (self.shape[i] - 1) as f32 } else { 0.0 }),
+            Some(ax) => core::array::from_fn(|i| {
+                if self.shape[i] > 1 {
+                    (ax[i][1] - ax[i][0]).abs() / (self.shape[i] - 1) as f32
+                } else {
+                    0.0
+                }
+            }),
             None => [0.0; 3],
         }
     }
@@ -149,7 +214,14 @@ impl Volume {
 pub fn parse_point(arg: &str, s: &str) -> Result<Point> {
     let c: Vec<&str> = s.split(',').collect();
     if c.len() != 3 {
-        return Err(Error::arg(arg, format!("expected X,Y,Z in metres, found `{s}`")));
+        return Err(Error::arg(
+            arg,
+            format!("expected X,Y,Z in metres, found `{s}`"),
+        ));
     }
-    Ok([num(arg, c[0], "x")?, num(arg, c[1], "y")?, num(arg, c[2], "z")?])
+    Ok([
+        num(arg, c[0], "x")?,
+        num(arg, c[1], "y")?,
+        num(arg, c[2], "z")?,
+    ])
 }

@@ -99,6 +99,8 @@ pub struct Probe<'m> {
     report: Report,
     /// Min / max over rows of the projector leg `d1_l + |x_l − x_a|` (columns).
     leg_range: (f64, f64),
+    /// The configuration of the scan the probe was made for (checked by `merge`).
+    cfg: Config,
 }
 
 impl<'m> Probe<'m> {
@@ -163,6 +165,7 @@ impl<'m> Probe<'m> {
             state,
             report: Report::default(),
             leg_range: (f64::INFINITY, f64::NEG_INFINITY),
+            cfg: *cfg,
         })
     }
 
@@ -242,7 +245,10 @@ impl<'m> Probe<'m> {
         if self.target != other.target || self.gate != other.gate {
             return Err(Error::Incompatible("different target or gate"));
         }
-        if self.voxels != other.voxels || self.state.len() != other.state.len() {
+        if self.voxels != other.voxels
+            || self.state.len() != other.state.len()
+            || self.cfg != other.cfg
+        {
             return Err(Error::Incompatible("different voxels or configuration"));
         }
         let n = match self.gate {
@@ -254,7 +260,9 @@ impl<'m> Probe<'m> {
         }
         self.report.rows += other.report.rows;
         self.report.non_finite += other.report.non_finite;
-        self.leg_range = widen(widen(self.leg_range, other.leg_range.0), other.leg_range.1);
+        // Union of the two ranges; an empty one is (+∞, −∞) and must leave the other as is.
+        let (lo, hi) = other.leg_range;
+        self.leg_range = (self.leg_range.0.min(lo), self.leg_range.1.max(hi));
         Ok(())
     }
 
