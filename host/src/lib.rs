@@ -2,17 +2,18 @@
 //!
 //! * [`capture`]: the capture model (geometry, time axis) and row access ([`capture::RowSource`]).
 //! * [`sim`]: an analytic transient simulator of patches and boxes, from a scene file.
-//! * [`stream`]: runs kernel probes over a row source.
+//! * [`volume`]: voxel grids (`SPEC`) and point lists.
+//! * [`ltm`]: the high-level probes (direct, column, in-focus indirect), multi-threaded.
+//! * [`demo`]: the built-in scene of `vltm demo`.
 //! * [`figure`], [`npy`]: maximum-intensity-projection PNGs and `.npy` volumes.
 
 pub mod capture;
+pub mod demo;
 pub mod error;
 pub mod figure;
 pub mod ltm;
 pub mod npy;
-pub mod pointsim;
 pub mod sim;
-pub mod stream;
 pub mod volume;
 
 pub use error::{Error, Result};

@@ -270,7 +270,11 @@ pub fn direct(src: &mut dyn RowSource, volume: &Volume, wave: &Wave, exec: Exec)
     let cfg = wave.config(src.geometry())?;
     let (v, report) = elementwise(
         src,
-        Job { cfg: &cfg, wave, exec },
+        Job {
+            cfg: &cfg,
+            wave,
+            exec,
+        },
         Target::Diagonal,
         Gate::Gaussian,
         &volume.points,
@@ -376,7 +380,11 @@ pub fn column(
     let (mut v, report) = match gate {
         ColumnGate::HigherOrder => elementwise(
             src,
-            Job { cfg: &cfg, wave, exec },
+            Job {
+                cfg: &cfg,
+                wave,
+                exec,
+            },
             target,
             Gate::HigherOrder,
             &volume.points,
@@ -390,7 +398,11 @@ pub fn column(
             };
             factorised_columns(
                 src,
-                Job { cfg: &cfg, wave, exec },
+                Job {
+                    cfg: &cfg,
+                    wave,
+                    exec,
+                },
                 &[focus],
                 kgate,
                 &volume.points,
@@ -594,7 +606,11 @@ pub fn indirect_over(
         let pts: Vec<Point> = idx.iter().map(|&i| volume.points[i]).collect();
         let cols = factorised_columns(
             src,
-            Job { cfg: &cfg, wave, exec },
+            Job {
+                cfg: &cfg,
+                wave,
+                exec,
+            },
             &pts,
             Gate::Gaussian,
             &pts,

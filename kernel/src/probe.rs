@@ -287,7 +287,10 @@ impl<'m> Probe<'m> {
     /// Whether the probe is a factorised column (Gaussian or un-gated), whose state does not
     /// depend on the imaged voxels and can be imaged anywhere with [`Probe::image`].
     pub const fn is_factorised(&self) -> bool {
-        matches!((self.target, self.gate), (Target::Column(_), Gate::Gaussian | Gate::None))
+        matches!(
+            (self.target, self.gate),
+            (Target::Column(_), Gate::Gaussian | Gate::None)
+        )
     }
 
     /// Factorised columns only: images arbitrary voxels `b` (not only the probe's own list)
@@ -297,13 +300,19 @@ impl<'m> Probe<'m> {
     /// # Errors
     /// [`Error::Incompatible`] for probes that are not factorised columns; [`Error::Length`]
     /// if `out.len() ≠ voxels.len()`; [`Error::NonFinite`] for a non-finite voxel.
-    pub fn image(&self, scan: &Scan<'_>, voxels: &[Point], out: &mut [f64]) -> Result<Report, Error> {
+    pub fn image(
+        &self,
+        scan: &Scan<'_>,
+        voxels: &[Point],
+        out: &mut [f64],
+    ) -> Result<Report, Error> {
         check_len("out", voxels.len(), out.len())?;
         check_points("voxels", voxels)?;
         let mut report = self.report;
         match (self.target, self.gate) {
             (Target::Column(a), Gate::Gaussian) => {
-                report.aliased = column_band_finish(scan, a, voxels, self.state, self.leg_range, out);
+                report.aliased =
+                    column_band_finish(scan, a, voxels, self.state, self.leg_range, out);
             }
             (Target::Column(a), Gate::None) => {
                 let cfg = scan.config();
@@ -318,7 +327,11 @@ impl<'m> Probe<'m> {
                     *o = sum.norm_sqr();
                 }
             }
-            _ => return Err(Error::Incompatible("only factorised columns can image other voxels")),
+            _ => {
+                return Err(Error::Incompatible(
+                    "only factorised columns can image other voxels",
+                ));
+            }
         }
         Ok(report)
     }

@@ -1,152 +1,493 @@
-//! `vltm` command line. This version has one subcommand, `demo`: a built-in two-point scene
-//! (DESIGN §B.6 test bench) streamed through the kernel, with a summary table.
+//! `vltm`: virtual light transport matrices of hidden scenes from NLOS captures.
+//!
+//! Exit codes: 0 success, 2 bad arguments, 1 bad or unreadable input data.
 
+use anyhow::Context;
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::time::Instant;
-use vltm::pointsim::{Bounces, PointScene, Scatterer, wall_grid};
-use vltm::stream::{Request, run};
-use vltm_kernel::{Config, Gate, Params, Point, Target};
+use vltm::capture::{self, Capture};
+use vltm::figure::Figure;
+use vltm::ltm::{self, ColumnGate, Exec, IndirectOptions, Shell, Wave};
+use vltm::volume::{Volume, parse_point};
+use vltm_kernel::{Point, Weights};
 
-fn usage() -> ExitCode {
-    eprintln!(
-        "usage: vltm demo\n  demo  simulate a two-point hidden scene and probe its light transport matrix"
-    );
-    ExitCode::from(2)
+/// Virtual light transport matrices (LTM) of hidden scenes from non-line-of-sight captures
+/// (Marco et al., ICCV 2021).
+///
+/// Terms: the relay wall is the plane z = 0, the hidden scene is at z > 0, all lengths are
+/// metres of optical path. The virtual projector focuses light at x_a, the virtual camera
+/// images x_b; T(x_a, x_b) is the light that goes from x_a to x_b.
+#[derive(Parser, Debug)]
+#[command(name = "vltm", version, about, long_about = None, propagate_version = true)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+    /// Worker threads (default: all cores).
+    #[arg(long, global = true)]
+    threads: Option<usize>,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Built-in scene → figures and a summary table (no input files needed).
+    Demo {
+        /// Output directory.
+        #[arg(long, default_value = "vltm-demo")]
+        out: PathBuf,
+    },
+    /// Print a capture's dimensions, geometry, time axis and counts.
+    Info {
+        /// Capture file (.npz).
+        capture: PathBuf,
+    },
+    /// Render a synthetic capture from a scene file (JSON).
+    Simulate {
+        /// Scene file.
+        scene: PathBuf,
+        /// Output capture (.npz).
+        #[arg(long)]
+        out: PathBuf,
+    },
+    /// Direct light: the LTM diagonal T(x_v, x_v) over a volume (3-vertex gate).
+    Direct {
+        /// Capture file.
+        capture: PathBuf,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// First-order (or higher-order) indirect light from a focus point: the LTM column T(x_a, ·).
+    Column {
+        /// Capture file.
+        capture: PathBuf,
+        /// Focus x_a of the virtual projector, "X,Y,Z" in metres (z > 0).
+        #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+        focus: String,
+        /// Time gate: two-bounce = 4-vertex gate at |x_l-x_a|+|x_a-x_b|+|x_b-x_s| (Eq. 14);
+        /// higher-order = light arriving after that (Eq. 18); none = monochromatic, no gate.
+        #[arg(long, value_enum, default_value_t = GateArg::TwoBounce)]
+        gate: GateArg,
+        /// Keep only voxels with R0 <= |x_a - x_b| < R1 metres (near/middle/far light).
+        #[arg(long, value_name = "R0:R1")]
+        shell: Option<String>,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// In-focus indirect light: Γ = voxels whose direct light exceeds ε·max, then the sum of
+    /// T(x_a, x_b) over pairs in Γ at least --min-separation apart (Eqs. 15-17).
+    Indirect {
+        /// Capture file.
+        capture: PathBuf,
+        /// Relative threshold ε of the Γ mask (0 <= ε < 1).
+        #[arg(long, default_value_t = 0.1)]
+        epsilon: f32,
+        /// Minimum |x_a - x_b| of a pair in metres (default 1.5 σ).
+        #[arg(long, value_name = "R")]
+        min_separation: Option<f32>,
+        /// Keep only pairs with R0 <= |x_a - x_b| < R1 metres (overrides --min-separation).
+        #[arg(long, value_name = "R0:R1")]
+        shell: Option<String>,
+        #[command(flatten)]
+        common: Common,
+    },
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug)]
+enum GateArg {
+    TwoBounce,
+    HigherOrder,
+    None,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug)]
+enum WeightsArg {
+    /// The paper's 1/d per leg of the virtual lenses.
+    Inv,
+    /// No weights (y-tal's default).
+    One,
+}
+
+/// Options shared by every probe.
+#[derive(Args, Debug)]
+struct Common {
+    /// Voxels: "x0:x1:nx,y0:y1:ny,z0:z1:nz" (metres, inclusive end points) or "x,y,z;x,y,z".
+    #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
+    volume: String,
+    /// Virtual wavelength λ in metres (default: twice the aperture pitch).
+    #[arg(long, value_name = "M")]
+    wavelength: Option<f64>,
+    /// Std of the Gaussian time gate in metres of path (default 2λ/3).
+    #[arg(long, value_name = "M")]
+    sigma: Option<f64>,
+    /// Lens weights per leg: inv = the paper's 1/d, one = none (y-tal).
+    #[arg(long, value_enum, default_value_t = WeightsArg::Inv)]
+    weights: WeightsArg,
+    /// Frequency band half-width in units of 1/σ (truncation error ≈ erfc(m/√2)).
+    #[arg(long, default_value_t = 5.0, value_name = "M")]
+    band: f64,
+    /// Divide each laser row by the physical laser's cos θ / d² falloff to its spot.
+    #[arg(long)]
+    compensate_laser: bool,
+    /// Use the SPADs as the virtual projector and the lasers as the camera (reciprocity;
+    /// 1-D SPAD arrays focus illumination along their axis).
+    #[arg(long)]
+    swap_roles: bool,
+    /// Output volume (float32 .npy of shape (nx, ny, nz)).
+    #[arg(long, value_name = "F.npy")]
+    out: Option<PathBuf>,
+    /// Output figure: front (x-y) and top (x-z) maximum-intensity projections.
+    #[arg(long, value_name = "F.png")]
+    png: Option<PathBuf>,
+}
+
+impl Common {
+    fn wave(&self) -> Wave {
+        Wave {
+            wavelength: self.wavelength,
+            sigma: self.sigma,
+            weights: match self.weights {
+                WeightsArg::Inv => Weights::Inv,
+                WeightsArg::One => Weights::One,
+            },
+            band_half_width: self.band,
+            compensate_laser: self.compensate_laser,
+        }
+    }
+
+    fn load(&self, path: &Path) -> vltm::Result<Capture> {
+        let c = capture::open(path)?;
+        if self.swap_roles {
+            ltm::swap_roles(&c)
+        } else {
+            Ok(c)
+        }
+    }
+}
+
+/// An error with its exit code.
+struct Failure {
+    code: u8,
+    err: anyhow::Error,
+}
+
+impl From<vltm::Error> for Failure {
+    fn from(e: vltm::Error) -> Self {
+        Self {
+            code: if e.is_usage() { 2 } else { 1 },
+            err: e.into(),
+        }
+    }
+}
+
+impl From<anyhow::Error> for Failure {
+    fn from(err: anyhow::Error) -> Self {
+        let code = match err.downcast_ref::<vltm::Error>() {
+            Some(e) if e.is_usage() => 2,
+            _ => 1,
+        };
+        Self { code, err }
+    }
 }
 
 fn main() -> ExitCode {
-    let args: Vec<String> = std::env::args().skip(1).collect();
-    match args.first().map(String::as_str) {
-        Some("demo") if args.len() == 1 => demo(),
-        _ => usage(),
+    let cli = Cli::parse();
+    if let Some(n) = cli.threads
+        && (n == 0
+            || rayon::ThreadPoolBuilder::new()
+                .num_threads(n)
+                .build_global()
+                .is_err())
+    {
+        eprintln!("vltm: argument `--threads`: expected a positive number of threads, found {n}");
+        return ExitCode::from(2);
+    }
+    match run(cli.command) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(f) => {
+            let msg = format!("{:#}", f.err).replace('\n', " ");
+            eprintln!("vltm: {msg}");
+            ExitCode::from(f.code)
+        }
     }
 }
 
-fn demo() -> ExitCode {
-    // DESIGN §B.6: 1 m wall, 12×12 lasers × 12×12 SPADs, Nt = 500, Δt = 1 cm, λ = 0.2 m.
-    let a: Point = [-0.35, 0.0, 0.8];
-    let b: Point = [0.35, 0.0, 0.8];
-    let scene = PointScene {
-        scatterers: [a, b]
-            .map(|position| Scatterer {
-                position,
-                albedo: 1.0,
-                area: 0.04,
-            })
-            .to_vec(),
-        lasers: wall_grid(12, 1.0),
-        spads: wall_grid(12, 1.0),
-        nt: 500,
-        dt: 0.01,
-        pulse_sigma: 0.01,
-    };
-    let cfg = match Config::try_new(&Params::new(0.2, scene.nt, scene.dt)) {
-        Ok(c) => c,
-        Err(e) => {
-            eprintln!("vltm: {e}");
-            return ExitCode::from(1);
+fn exec() -> Exec {
+    Exec { progress: true }
+}
+
+fn run(cmd: Command) -> Result<(), Failure> {
+    match cmd {
+        Command::Demo { out } => {
+            let table = vltm::demo::run(&out)?;
+            print!("{table}");
+            Ok(())
         }
-    };
-    // x–z slice y = 0, x ∈ [−0.6, 0.6], z ∈ [0.5, 1.1], pitch 5 cm.
-    let slice: Vec<Point> = (0..25)
-        .flat_map(|i| (0..13).map(move |k| [-0.6 + 0.05 * i as f32, 0.0, 0.5 + 0.05 * k as f32]))
-        .collect();
-    let requests = [
-        Request {
-            target: Target::Diagonal,
-            gate: Gate::Gaussian,
-            voxels: slice.clone(),
-        },
-        Request {
-            target: Target::Column(a),
-            gate: Gate::Gaussian,
-            voxels: vec![b],
-        },
-        Request {
-            target: Target::Column(a),
-            gate: Gate::None,
-            voxels: vec![b],
-        },
-    ];
-    println!(
-        "vltm demo: two point patches A = {a:?}, B = {b:?}; 12x12 lasers x 12x12 SPADs, Nt = 500, dt = 1 cm"
-    );
-    println!(
-        "kernel: lambda = 0.2 m, sigma = {:.4} m, N = {}, J = {} band bins\n",
-        cfg.sigma(),
-        cfg.n_fft(),
-        cfg.bins()
-    );
-    println!(
-        "{:<34} {:>12} {:>12} {:>8} {:>9}",
-        "probe", "with A<->B", "direct only", "ratio", "time [s]"
-    );
-    let mut results = Vec::new();
-    for inter in [true, false] {
-        let bounces = Bounces {
-            direct: true,
-            inter_reflections: inter,
-        };
-        let t = Instant::now();
-        let out = run(&cfg, &scene.spads, &requests, scene.lasers.len(), |l, h| {
-            scene.row(l, bounces, h);
-            scene.lasers[l]
-        });
-        match out {
-            Ok(r) => results.push((r, t.elapsed().as_secs_f64())),
-            Err(e) => {
-                eprintln!("vltm: {e}");
-                return ExitCode::from(1);
-            }
+        Command::Info { capture } => info(&capture),
+        Command::Simulate { scene, out } => {
+            let s = vltm::sim::Scene::load(&scene)?;
+            let c = s.render()?;
+            capture::npz::write(&c, &out)?;
+            let g = &c.geometry;
+            println!(
+                "wrote {}: {} lasers x {} SPADs x {} bins (dt {} m, t0 {} m)",
+                out.display(),
+                g.lasers.len(),
+                g.spads_per_row(),
+                g.nt,
+                g.dt,
+                g.t0
+            );
+            Ok(())
+        }
+        Command::Direct { capture, common } => {
+            let volume = Volume::parse(&common.volume)?;
+            let mut c = common.load(&capture)?;
+            let o = ltm::direct(&mut c, &volume, &common.wave(), exec())?;
+            summarize(
+                "direct", &o.values, &volume, o.seconds, &o.report, &o.config,
+            );
+            write_outputs(&common, "direct", &o.values, &volume, "direct light", &[])
+        }
+        Command::Column {
+            capture,
+            focus,
+            gate,
+            shell,
+            common,
+        } => {
+            let a = parse_point("--focus", &focus)?;
+            ltm::check_focus(a)?;
+            let volume = Volume::parse(&common.volume)?;
+            let shell = shell
+                .as_deref()
+                .map(Shell::parse)
+                .transpose()?
+                .unwrap_or(Shell::ALL);
+            let g = match gate {
+                GateArg::TwoBounce => ColumnGate::TwoBounce,
+                GateArg::HigherOrder => ColumnGate::HigherOrder,
+                GateArg::None => ColumnGate::None,
+            };
+            let mut c = common.load(&capture)?;
+            let o = ltm::column(&mut c, a, &volume, g, shell, &common.wave(), exec())?;
+            summarize(
+                "column", &o.values, &volume, o.seconds, &o.report, &o.config,
+            );
+            let title = format!("column T(x_a, .), gate {gate:?}");
+            write_outputs(
+                &common,
+                "column",
+                &o.values,
+                &volume,
+                &title,
+                &[(a, "x_a".into())],
+            )
+        }
+        Command::Indirect {
+            capture,
+            epsilon,
+            min_separation,
+            shell,
+            common,
+        } => {
+            let volume = Volume::parse(&common.volume)?;
+            let shell = match (shell, min_separation) {
+                (Some(s), _) => Some(Shell::parse(&s)?),
+                (None, Some(r)) if r >= 0.0 => Some(Shell {
+                    r0: r,
+                    r1: f32::INFINITY,
+                }),
+                (None, Some(r)) => {
+                    return Err(vltm::Error::arg(
+                        "--min-separation",
+                        format!("expected R >= 0, found {r}"),
+                    )
+                    .into());
+                }
+                (None, None) => None,
+            };
+            let opts = IndirectOptions {
+                epsilon,
+                shell,
+                ..Default::default()
+            };
+            let mut c = common.load(&capture)?;
+            let o = ltm::indirect(&mut c, &volume, &opts, &common.wave(), exec())?;
+            let n_gamma = o.gamma.iter().filter(|&&g| g).count();
+            println!(
+                "Γ: {n_gamma} of {} voxels above ε = {epsilon} of the direct maximum; pairs with {} <= |x_a - x_b| < {} m",
+                volume.len(),
+                o.shell.r0,
+                o.shell.r1
+            );
+            let cfg = common.wave().config(&c.geometry)?;
+            summarize("indirect", &o.values, &volume, o.seconds, &o.report, &cfg);
+            write_outputs(
+                &common,
+                "indirect",
+                &o.values,
+                &volume,
+                "in-focus indirect light",
+                &[],
+            )
         }
     }
-    let (full, t_full) = &results[0];
-    let (ctrl, t_ctrl) = &results[1];
-    for (i, name) in [
-        (1, "T(A,B), 4-vertex gate (Eq. 14)"),
-        (2, "T(A,B), no gate (Fig. 6)"),
-    ] {
-        let (x, y) = (full[i].0[0], ctrl[i].0[0]);
-        println!(
-            "{name:<34} {x:>12.4e} {y:>12.4e} {:>8.1} {:>9.2}",
-            x / y,
-            t_full.max(*t_ctrl)
-        );
-    }
+}
+
+fn info(path: &Path) -> Result<(), Failure> {
+    let c = capture::open(path)?;
+    let g = &c.geometry;
+    let (kl, ks) = (g.lasers.len(), g.spads_per_row());
+    let span = |p: &[Point]| {
+        let lo: Vec<f32> = (0..3)
+            .map(|i| p.iter().map(|q| q[i]).fold(f32::INFINITY, f32::min))
+            .collect();
+        let hi: Vec<f32> = (0..3)
+            .map(|i| p.iter().map(|q| q[i]).fold(f32::NEG_INFINITY, f32::max))
+            .collect();
+        format!(
+            "x {:.3}..{:.3}, y {:.3}..{:.3}, z {:.3}..{:.3} m",
+            lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]
+        )
+    };
+    println!("capture      {}", path.display());
     println!(
-        "(DESIGN §B.6(b), numpy float64 prototype of the same scene: 97.1 / 0.90 gated, 4477 / 3315 un-gated)"
-    );
-    // Local maxima of the diagonal over the slice (3x3 neighbourhood), strongest first.
-    let img = &full[0].0;
-    let at = |i: i32, k: i32| {
-        if (0..25).contains(&i) && (0..13).contains(&k) {
-            img[(i * 13 + k) as usize]
+        "scan         {}",
+        if g.confocal {
+            "confocal"
         } else {
-            0.0
+            "non-confocal"
         }
-    };
-    let max = img.iter().cloned().fold(0.0, f64::max);
-    let mut peaks: Vec<(f64, Point)> = (0..25)
-        .flat_map(|i| (0..13).map(move |k| (i, k)))
-        .filter(|&(i, k)| {
-            let v = at(i, k);
-            v > 0.1 * max
-                && (-1..=1)
-                    .all(|di| (-1..=1).all(|dk| (di, dk) == (0, 0) || at(i + di, k + dk) < v))
-        })
-        .map(|(i, k)| (at(i, k), slice[(i * 13 + k) as usize]))
-        .collect();
-    peaks.sort_by(|p, q| q.0.total_cmp(&p.0));
-    println!("\ndiagonal (direct light) over the y = 0 slice: local maxima above 10% of the max");
-    for (v, p) in &peaks {
-        let err = [a, b]
-            .iter()
-            .map(|t| ((0..3).map(|c| (t[c] - p[c]).powi(2)).sum::<f32>()).sqrt())
-            .fold(f32::MAX, f32::min);
-        println!(
-            "  ({:+.2}, {:+.2}, {:+.2})  I = {v:.3e}  distance to nearest true point {err:.3} m",
-            p[0], p[1], p[2]
+    );
+    println!(
+        "lasers       {} = {}x{} ({})",
+        kl,
+        g.laser_shape[0],
+        g.laser_shape[1],
+        span(&g.lasers)
+    );
+    println!(
+        "SPADs        {} = {}x{} ({})",
+        g.spads.len(),
+        g.spad_shape[0],
+        g.spad_shape[1],
+        span(&g.spads)
+    );
+    println!(
+        "laser_xyz    {:?} m, sensor_xyz {:?} m",
+        g.laser_origin, g.sensor_origin
+    );
+    println!(
+        "time axis    {} bins x {} m from t0 = {} m to {} m; device legs {}",
+        g.nt,
+        g.dt,
+        g.t0,
+        g.t0 + (g.nt as f64 - 1.0) * g.dt,
+        if g.legs_in_time {
+            "included"
+        } else {
+            "not included (wall to wall)"
+        }
+    );
+    let (mut sum, mut max, mut nonzero, mut bad) = (0.0f64, f32::NEG_INFINITY, 0usize, 0usize);
+    for &h in &c.data {
+        if h.is_finite() {
+            sum += h as f64;
+            max = max.max(h);
+            nonzero += usize::from(h != 0.0);
+        } else {
+            bad += 1;
+        }
+    }
+    println!(
+        "histograms   {} = {kl} x {ks} x {} values; sum {sum:.4e}, max {max:.4e}, non-zero {nonzero}, non-finite {bad}",
+        c.data.len(),
+        g.nt
+    );
+    println!(
+        "default λ    {:.4} m (twice the aperture pitch)",
+        ltm::default_wavelength(g)
+    );
+    Ok(())
+}
+
+fn summarize(
+    what: &str,
+    v: &[f32],
+    volume: &Volume,
+    seconds: f64,
+    report: &vltm_kernel::Report,
+    cfg: &vltm_kernel::Config,
+) {
+    let (i, m) =
+        v.iter().enumerate().fold(
+            (0, f32::NEG_INFINITY),
+            |a, (i, &x)| if x > a.1 { (i, x) } else { a },
+        );
+    let p = volume.points.get(i).copied().unwrap_or_default();
+    println!(
+        "{what}: {} voxels, {} rows in {seconds:.2} s (λ = {:.4} m, σ = {:.4} m, J = {}); peak {m:.4e} at ({:.3}, {:.3}, {:.3}) m",
+        v.len(),
+        report.rows,
+        cfg.wavelength(),
+        cfg.sigma(),
+        cfg.bins(),
+        p[0],
+        p[1],
+        p[2]
+    );
+    if report.non_finite > 0 {
+        eprintln!(
+            "vltm: warning: {} non-finite histogram samples were read as 0",
+            report.non_finite
         );
     }
-    ExitCode::SUCCESS
+    if report.aliased > 0 {
+        eprintln!(
+            "vltm: warning: {} voxels have path lengths outside the capture's alias-free window",
+            report.aliased
+        );
+    }
+}
+
+fn write_outputs(
+    c: &Common,
+    stem: &str,
+    v: &[f32],
+    volume: &Volume,
+    title: &str,
+    marks: &[(Point, String)],
+) -> Result<(), Failure> {
+    let (npy, png) = match (&c.out, &c.png) {
+        (None, None) => (
+            Some(PathBuf::from(format!("{stem}.npy"))),
+            Some(PathBuf::from(format!("{stem}.png"))),
+        ),
+        (a, b) => (a.clone(), b.clone()),
+    };
+    if let Some(p) = npy {
+        vltm::npy::write_f32(&p, v, &volume.shape)
+            .with_context(|| format!("writing {}", p.display()))?;
+        println!("wrote {}", p.display());
+    }
+    if let Some(p) = png {
+        match volume.axes {
+            Some([x, y, z]) => {
+                let fig = Figure {
+                    data: v,
+                    shape: volume.shape,
+                    x,
+                    y,
+                    z,
+                    title: title.to_string(),
+                    marks: marks.to_vec(),
+                };
+                fig.write_png(&p)
+                    .with_context(|| format!("writing {}", p.display()))?;
+                println!("wrote {}", p.display());
+            }
+            None => eprintln!("vltm: note: no figure for a point list (only for grid volumes)"),
+        }
+    }
+    Ok(())
 }
