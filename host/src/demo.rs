@@ -61,13 +61,20 @@ fn argmax(v: &[f32]) -> usize {
         .unwrap_or(0)
 }
 
-/// Name and distance of the object nearest to `p`.
-fn nearest(p: Point) -> (&'static str, f32) {
-    [("panel", PANEL), ("figure", FIGURE), ("box", BOX)]
+/// Name of the object whose surface (sample points) is nearest to `p`, and that distance.
+fn nearest(scene: &Scene, p: Point) -> (String, f32) {
+    let names: Vec<&str> = scene.objects.iter().map(|o| o.name()).collect();
+    scene
+        .sample_points()
         .iter()
-        .map(|(n, c)| (*n, dist(p, p32(*c))))
+        .map(|sp| {
+            (
+                names.get(sp.group).copied().unwrap_or("?").to_string(),
+                dist(p, p32(sp.position)),
+            )
+        })
         .min_by(|a, b| a.1.total_cmp(&b.1))
-        .unwrap_or(("?", f32::NAN))
+        .unwrap_or(("?".into(), f32::NAN))
 }
 
 /// One result row of the table.
@@ -85,7 +92,8 @@ pub fn run(out: &Path) -> Result<String> {
     std::fs::create_dir_all(out).map_err(|e| Error::io(out, e))?;
     let t_all = Instant::now();
     let t = Instant::now();
-    let mut full: Capture = scene(Bounces::All).render()?;
+    let truth = scene(Bounces::All);
+    let mut full: Capture = truth.render()?;
     let mut control: Capture = scene(Bounces::Direct).render()?;
     let t_render = t.elapsed().as_secs_f64();
     let vol = volume()?;
@@ -192,11 +200,11 @@ pub fn run(out: &Path) -> Result<String> {
     let _ = writeln!(
         table,
         "{:<32} {:>8}  {:<22} {:>14}",
-        "probe", "time [s]", "peak (x, y, z) [m]", "nearest object"
+        "probe", "time [s]", "peak (x, y, z) [m]", "nearest surface"
     );
     for l in &lines {
         let p = vol.points[argmax(&l.values)];
-        let (obj, e) = nearest(p);
+        let (obj, e) = nearest(&truth, p);
         let _ = writeln!(
             table,
             "{:<32} {:>8.2}  ({:+.2}, {:+.2}, {:+.2})    {obj} ({e:.2} m)",

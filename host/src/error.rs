@@ -8,12 +8,12 @@ use std::path::PathBuf;
 #[non_exhaustive]
 pub enum Error {
     /// Reading or writing a file failed.
-    #[error("{}: {source}", path.display())]
+    #[error("{}: {err}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
-        /// The OS error.
-        source: std::io::Error,
+        /// The OS error (part of the message, not a separate cause, so it prints once).
+        err: std::io::Error,
     },
     /// A file's content is not what vltm expects.
     #[error("{}: field `{field}`: expected {expected}, found {found}", path.display())]
@@ -66,10 +66,10 @@ impl Error {
         }
     }
     /// An [`Error::Io`] error.
-    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
+    pub fn io(path: impl Into<PathBuf>, err: std::io::Error) -> Self {
         Self::Io {
             path: path.into(),
-            source,
+            err,
         }
     }
     /// Whether the error is the user's arguments (CLI exit code 2) rather than the data (1).

@@ -190,7 +190,21 @@ impl From<anyhow::Error> for Failure {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(c) => c,
+        Err(e) if !e.use_stderr() => {
+            // --help and --version.
+            let _ = e.print();
+            return ExitCode::SUCCESS;
+        }
+        Err(e) => {
+            // One line, like every other error: clap's first line without its "error: ".
+            let text = e.render().to_string();
+            let first = text.lines().next().unwrap_or("bad arguments");
+            eprintln!("vltm: {} (see --help)", first.trim_start_matches("error: "));
+            return ExitCode::from(2);
+        }
+    };
     if let Some(n) = cli.threads
         && (n == 0
             || rayon::ThreadPoolBuilder::new()
@@ -204,7 +218,12 @@ fn main() -> ExitCode {
     match run(cli.command) {
         Ok(()) => ExitCode::SUCCESS,
         Err(f) => {
-            let msg = format!("{:#}", f.err).replace('\n', " ");
+            // vltm errors already name their cause; context chains print as "context: cause".
+            let msg = match f.err.downcast_ref::<vltm::Error>() {
+                Some(e) => e.to_string(),
+                None => format!("{:#}", f.err),
+            };
+            let msg = msg.replace('\n', " ");
             eprintln!("vltm: {msg}");
             ExitCode::from(f.code)
         }
