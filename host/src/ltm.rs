@@ -253,9 +253,10 @@ fn elementwise(
     for (p, o) in probes.iter().zip(out.chunks_mut(cl)) {
         let r = p.finish(&scan, o)?;
         report = Report {
-            rows: r.rows,
             non_finite: report.non_finite.max(r.non_finite),
+            dropped: report.dropped.max(r.dropped),
             aliased: report.aliased + r.aliased,
+            ..r
         };
     }
     Ok((out, report))

@@ -64,6 +64,8 @@ pub struct Report {
     pub rows: u64,
     /// Non-finite histogram samples seen (read as 0).
     pub non_finite: u64,
+    /// Photon events dropped for an out-of-range SPAD or time bin.
+    pub dropped: u64,
     /// Factorised columns only: voxels whose path times left [`Config::alias_free`] for some
     /// (laser, SPAD) pair; their values include wrap-around of the band sum.
     pub aliased: usize,
@@ -204,7 +206,12 @@ impl<'m> Probe<'m> {
         let cfg = scan.config();
         let ks = scan.spads().len();
         check_len("row spectra", ks * cfg.bins(), row.band().len())?;
-        check_len("row histograms", ks * cfg.nt(), row.histograms().len())?;
+        // A row made for another time axis has spectra of other frequencies.
+        check_len("row histograms", ks * cfg.nt(), ks * row.nt())?;
+        if self.gate == Gate::HigherOrder {
+            // The time-domain gate needs the histograms (photon-event rows have none).
+            check_len("row histograms", ks * cfg.nt(), row.histograms().len())?;
+        }
         let n_vox = self.voxels.len();
         let (acc, scratch) = self.state.split_at_mut(match self.gate {
             Gate::HigherOrder => n_vox,
@@ -233,6 +240,7 @@ impl<'m> Probe<'m> {
         }
         self.report.rows += 1;
         self.report.non_finite += u64::from(row.non_finite());
+        self.report.dropped += u64::from(row.dropped());
         Ok(())
     }
 
@@ -260,6 +268,7 @@ impl<'m> Probe<'m> {
         }
         self.report.rows += other.report.rows;
         self.report.non_finite += other.report.non_finite;
+        self.report.dropped += other.report.dropped;
         // Union of the two ranges; an empty one is (+∞, −∞) and must leave the other as is.
         let (lo, hi) = other.leg_range;
         self.leg_range = (self.leg_range.0.min(lo), self.leg_range.1.max(hi));

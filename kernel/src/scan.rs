@@ -159,6 +159,7 @@ pub struct RowBuffer<'m> {
     hg: &'m mut [Complex32],
     mono: &'m mut [Complex32],
     offset: &'m mut [f32],
+    dropped: u32,
 }
 
 /// One laser row, ready for the probes: the laser spot, its histograms, and their band
@@ -171,6 +172,9 @@ pub struct Row<'r, T> {
     mono: &'r [Complex32],
     offset: &'r [f32],
     non_finite: u32,
+    dropped: u32,
+    /// Nt of the scan the row was made for (checked by the probes).
+    nt: usize,
 }
 
 impl<'m> RowBuffer<'m> {
@@ -193,6 +197,7 @@ impl<'m> RowBuffer<'m> {
             hg: as_complex("row buffer", hg)?,
             mono: as_complex("row buffer", mono)?,
             offset,
+            dropped: 0,
         })
     }
 
@@ -216,29 +221,15 @@ impl<'m> RowBuffer<'m> {
         check_len("row buffer", ks * j, self.hg.len())?;
         check_len("histograms", ks * nt, hists.len())?;
         check_points("laser", &[laser])?;
-        let d1 = scan.laser_leg(&laser);
-        let span = cfg.span();
-        let k_lo = cfg.k_lo() as f64;
         let turns_per_bin = -cfg.dt() / cfg.wavelength();
         let carrier_step = cis_turns_f64(turns_per_bin);
         let mut non_finite = 0u32;
         let chunks = hists.chunks_exact(nt.max(1));
-        for ((((h, hg), mono), off), d4) in chunks
+        for ((h, hg), mono) in chunks
             .zip(self.hg.chunks_exact_mut(j.max(1)))
             .zip(self.mono.iter_mut())
-            .zip(self.offset.iter_mut())
-            .zip(scan.d4)
         {
-            let x = d1 + *d4 as f64 - cfg.t0();
-            *off = x as f32;
-            // Band: DFT, then gate weights and leg phases e^{iν_j x} by recurrence.
             scan.dft_band(h, hg);
-            let mut p = cis_turns_f64(k_lo * x / span);
-            let step = cis_turns_f64(x / span);
-            for (v, g) in hg.iter_mut().zip(scan.gate) {
-                *v = *v * p * *g;
-                p *= step;
-            }
             // Un-gated: Σ H_n e^{−iΩ nΔt}, re-seeded every 64 samples.
             let mut acc = Complex32::new(0.0, 0.0);
             for (c, block) in h.chunks(64).enumerate() {
@@ -249,8 +240,9 @@ impl<'m> RowBuffer<'m> {
                     ph *= carrier_step;
                 }
             }
-            *mono = acc * cis_turns_f64(x / cfg.wavelength());
+            *mono = acc;
         }
+        self.fold_legs(scan, &laser);
         Ok(Row {
             laser,
             hists,
@@ -258,6 +250,112 @@ impl<'m> RowBuffer<'m> {
             mono: self.mono,
             offset: self.offset,
             non_finite,
+            dropped: 0,
+            nt,
+        })
+    }
+
+    /// Folds the gate weights and the leg phases into the raw spectra of a row:
+    /// `HG[s][j] ·= Ĝ_j·e^{iν_j x_s}`, `M_s ·= e^{iΩ x_s}`, `x_s = d1 + d4_s − t0`.
+    fn fold_legs(&mut self, scan: &Scan<'_>, laser: &Point) {
+        let cfg = &scan.cfg;
+        let j = cfg.bins().max(1);
+        let d1 = scan.laser_leg(laser);
+        let span = cfg.span();
+        let k_lo = cfg.k_lo() as f64;
+        for (((hg, mono), off), d4) in self
+            .hg
+            .chunks_exact_mut(j)
+            .zip(self.mono.iter_mut())
+            .zip(self.offset.iter_mut())
+            .zip(scan.d4)
+        {
+            let x = d1 + *d4 as f64 - cfg.t0();
+            *off = x as f32;
+            let mut p = cis_turns_f64(k_lo * x / span);
+            let step = cis_turns_f64(x / span);
+            for (v, g) in hg.iter_mut().zip(scan.gate) {
+                *v = *v * p * *g;
+                p *= step;
+            }
+            *mono *= cis_turns_f64(x / cfg.wavelength());
+        }
+    }
+
+    /// Starts a row fed by photon events ([`RowBuffer::push_photon`]) instead of histograms:
+    /// zeroes the spectra. For firmware that folds TCSPC events as they arrive, with no
+    /// histogram memory at all.
+    pub fn begin_photons(&mut self) {
+        self.hg.fill(Complex32::new(0.0, 0.0));
+        self.mono.fill(Complex32::new(0.0, 0.0));
+        self.dropped = 0;
+    }
+
+    /// Adds one photon of SPAD `spad` (index into [`Scan::spads`]) in time bin `bin`
+    /// (path length `t0 + bin·Δt`). Cost: `J` complex additions (an integer phase
+    /// accumulator into the twiddle table) and one phase. Photons with `spad ≥ Ks` or
+    /// `bin ≥ Nt` are not added and are counted ([`Row::dropped`]); never fails or panics.
+    ///
+    /// A row of photon events equals the same row loaded as a histogram of counts (up to
+    /// `f32` rounding of the summation order).
+    pub fn push_photon(&mut self, scan: &Scan<'_>, spad: usize, bin: usize) {
+        let cfg = &scan.cfg;
+        let (j, nt, n) = (cfg.bins(), cfg.nt(), cfg.n_fft());
+        let Some(hg) = self.hg.get_mut(spad * j..(spad + 1) * j) else {
+            self.dropped += 1;
+            return;
+        };
+        let Some(mono) = self.mono.get_mut(spad) else {
+            self.dropped += 1;
+            return;
+        };
+        if bin >= nt {
+            self.dropped += 1;
+            return;
+        }
+        // Twiddle index (k_j·bin) mod N, stepping by bin per band bin (all < N ≤ 2³⁰).
+        let mut q = (cfg.k_lo().rem_euclid(n as i64) as usize * bin) % n;
+        let step = bin % n;
+        for v in hg.iter_mut() {
+            if let Some(w) = scan.twiddle.get(q) {
+                *v += *w;
+            }
+            q += step;
+            if q >= n {
+                q -= n;
+            }
+        }
+        *mono += cis_turns_f64(bin as f64 * -cfg.dt() / cfg.wavelength());
+    }
+
+    /// Ends a photon-event row: folds gate weights and legs in and returns the row for the
+    /// probes. The row has no histograms, so the higher-order (time-domain) gate cannot use
+    /// it ([`Probe::push_row`](crate::Probe::push_row) returns [`Error::Length`]).
+    ///
+    /// # Errors
+    /// [`Error::Length`] if this buffer was made for another scan size;
+    /// [`Error::NonFinite`] for a non-finite laser position.
+    pub fn end_photons<'r>(
+        &'r mut self,
+        scan: &Scan<'_>,
+        laser: Point,
+    ) -> Result<Row<'r, u16>, Error> {
+        check_len(
+            "row buffer",
+            scan.spads.len() * scan.cfg.bins(),
+            self.hg.len(),
+        )?;
+        check_points("laser", &[laser])?;
+        self.fold_legs(scan, &laser);
+        Ok(Row {
+            laser,
+            hists: &[],
+            hg: self.hg,
+            mono: self.mono,
+            offset: self.offset,
+            non_finite: 0,
+            dropped: self.dropped,
+            nt: scan.cfg.nt(),
         })
     }
 }
@@ -270,6 +368,14 @@ impl<'r, T: Sample> Row<'r, T> {
     /// Number of non-finite samples in this row (read as 0).
     pub const fn non_finite(&self) -> u32 {
         self.non_finite
+    }
+    /// Histogram length Nt of the scan this row was made for.
+    pub const fn nt(&self) -> usize {
+        self.nt
+    }
+    /// Photon-event rows: photons dropped for an out-of-range SPAD or time bin.
+    pub const fn dropped(&self) -> u32 {
+        self.dropped
     }
     /// The row's histograms, SPAD-major.
     pub const fn histograms(&self) -> &'r [T] {
