@@ -1,6 +1,6 @@
 //! The capture model: geometry, time axis and row access.
 //!
-//! A capture holds `H[l][s][n]`: laser spot `l`, SPAD spot `s`, time bin `n` at path length
+//! A capture holds `H[l](s)[n]`: laser spot `l`, SPAD spot `s`, time bin `n` at path length
 //! `t0 + n·Δt` (metres, the point-sample convention of DESIGN §B.0). The kernel is fed one
 //! laser row at a time through [`RowSource`].
 
@@ -18,9 +18,9 @@ pub struct Geometry {
     pub spads: Vec<Point>,
     /// Grid shape of the SPAD spots `[nx, ny]` (`[16, 1]` for a 1-D array, `[1, 1]` single).
     pub spad_shape: [usize; 2],
-    /// Position of the laser device (y-tal `laser_xyz`) [m].
+    /// Position of the laser device (y-tal `laser_xyz`) (m).
     pub laser_origin: [f64; 3],
-    /// Position of the sensor device (y-tal `sensor_xyz`) [m].
+    /// Position of the sensor device (y-tal `sensor_xyz`) (m).
     pub sensor_origin: [f64; 3],
     /// Whether the time axis includes the device legs (y-tal
     /// `t_accounts_first_and_last_bounces`).
@@ -30,9 +30,9 @@ pub struct Geometry {
     pub confocal: bool,
     /// Bins per histogram.
     pub nt: usize,
-    /// Bin width [m of path].
+    /// Bin width (m of path).
     pub dt: f64,
-    /// Path length of bin 0 [m].
+    /// Path length of bin 0 (m).
     pub t0: f64,
 }
 
@@ -167,7 +167,7 @@ impl RowSource for Capture {
 /// | `laser_grid_xyz` | f32 `(Lx, Ly, 3)` | laser spots |
 /// | `sensor_grid_xyz` | f32 `(Sx, Sy, 3)` | SPAD spots |
 /// | `laser_xyz`, `sensor_xyz` | f64 `(3,)` | device positions |
-/// | `delta_t`, `t_start` | f64 `()` | bin width, time of bin 0 [m] |
+/// | `delta_t`, `t_start` | f64 `()` | bin width, time of bin 0 (m) |
 /// | `t_accounts_first_and_last_bounces`, `confocal` | u8 `()` | flags |
 pub mod npz {
     use super::{Capture, Geometry};
@@ -279,7 +279,7 @@ pub mod npz {
         })
     }
 
-    /// Reads a `.npz` capture written by [`write`] (or by numpy with the same keys).
+    /// Reads a `.npz` capture written by [`write()`] (or by numpy with the same keys).
     ///
     /// # Errors
     /// [`Error::Io`] if unreadable, [`Error::Format`] naming the key for a missing or

@@ -4,7 +4,7 @@
 //! | call | computes | passes over the data |
 //! |---|---|---|
 //! | [`direct`] | diagonal `T(x_v, x_v)` over a volume (Eqs. 11–12) | 1 |
-//! | [`column`] | `T(x_a, ·)` with [`ColumnGate`] two-bounce (Eq. 14), higher-order (Eq. 18) or none, optionally restricted to a shell `r0 ≤ |x_a − x_b| < r1` | 1 |
+//! | [`column()`] | `T(x_a, ·)` with [`ColumnGate`] two-bounce (Eq. 14), higher-order (Eq. 18) or none, optionally restricted to a shell `r0 ≤ |x_a − x_b| < r1` | 1 |
 //! | [`indirect`] | in-focus indirect light (Eqs. 15–17): Γ from the diagonal, then `Σ_{a∈Γ} T(a, b)` over Γ-masked pairs with `r0 ≤ |x_a − x_b| < r1` | 2 |
 //!
 //! Threads: the diagonal and the higher-order column split the voxels into chunks, each with
@@ -26,9 +26,9 @@ use vltm_kernel::{
 /// Virtual wave and weighting options shared by every probe (the CLI's common flags).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Wave {
-    /// Virtual wavelength λ [m]; `None` = [`default_wavelength`] of the capture.
+    /// Virtual wavelength λ (m); `None` = [`default_wavelength`] of the capture.
     pub wavelength: Option<f64>,
-    /// Gate std σ [m]; `None` = 2λ/3.
+    /// Gate std σ (m); `None` = 2λ/3.
     pub sigma: Option<f64>,
     /// Leg weights: the paper's `1/d` or y-tal's none.
     pub weights: Weights,
@@ -300,7 +300,7 @@ pub enum ColumnGate {
     None,
 }
 
-/// A distance shell `r0 ≤ |x_a − x_b| < r1` [m] (near / middle / far decompositions).
+/// A distance shell `r0 ≤ |x_a − x_b| < r1` (m) (near / middle / far decompositions).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Shell {
     /// Inner radius (inclusive).
@@ -492,7 +492,7 @@ pub struct IndirectOptions {
     pub epsilon: f32,
     /// Pair distances accumulated: `r0 ≤ |x_a − x_b| < r1`; `r0` default 1.5σ (DESIGN §B.3.4).
     pub shell: Option<Shell>,
-    /// Largest accumulator memory accepted [bytes] (default 8 GiB).
+    /// Largest accumulator memory accepted (bytes) (default 8 GiB).
     pub max_bytes: usize,
 }
 

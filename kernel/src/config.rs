@@ -216,15 +216,15 @@ impl Config {
     pub const fn params(&self) -> &Params {
         &self.params
     }
-    /// Virtual wavelength λ [m].
+    /// Virtual wavelength λ (m).
     pub const fn wavelength(&self) -> f64 {
         self.params.wavelength
     }
-    /// Gate std σ [m] (default applied).
+    /// Gate std σ (m) (default applied).
     pub const fn sigma(&self) -> f64 {
         self.sigma
     }
-    /// Angular wavenumber Ω = 2π/λ [rad/m].
+    /// Angular wavenumber Ω = 2π/λ (rad/m).
     pub fn omega(&self) -> f64 {
         2.0 * PI / self.params.wavelength
     }
@@ -232,11 +232,11 @@ impl Config {
     pub const fn nt(&self) -> usize {
         self.params.nt
     }
-    /// Bin width Δt [m].
+    /// Bin width Δt (m).
     pub const fn dt(&self) -> f64 {
         self.params.dt
     }
-    /// Time of bin 0 [m].
+    /// Time of bin 0 (m).
     pub const fn t0(&self) -> f64 {
         self.params.t0
     }
@@ -256,11 +256,11 @@ impl Config {
     pub const fn bins(&self) -> usize {
         self.bins
     }
-    /// Frequency ν_j = 2π(k_lo + j)/(NΔt) of band bin j [rad/m].
+    /// Frequency ν_j = 2π(k_lo + j)/(NΔt) of band bin j (rad/m).
     pub fn nu(&self, j: usize) -> f64 {
         2.0 * PI * (self.k_lo + j as i64) as f64 / self.span()
     }
-    /// Bin spacing Δν = 2π/(NΔt) [rad/m].
+    /// Bin spacing Δν = 2π/(NΔt) (rad/m).
     pub fn dnu(&self) -> f64 {
         2.0 * PI / self.span()
     }
@@ -278,21 +278,21 @@ impl Config {
     pub const fn weights(&self) -> Weights {
         self.params.weights
     }
-    /// Length of the virtual DFT period N·Δt [m].
+    /// Length of the virtual DFT period N·Δt (m).
     pub fn span(&self) -> f64 {
         self.n_fft as f64 * self.params.dt
     }
-    /// Last sample time relative to t0, `(Nt − 1)·Δt` [m].
+    /// Last sample time relative to t0, `(Nt − 1)·Δt` (m).
     pub fn window(&self) -> f64 {
         (self.params.nt - 1) as f64 * self.params.dt
     }
-    /// Guard interval of `τ − t0` [m]: the Gaussian gate contributes nothing outside
+    /// Guard interval of `τ − t0` (m): the Gaussian gate contributes nothing outside
     /// `[−c_g·σ, (Nt−1)Δt + c_g·σ]` (DESIGN §B.2.2).
     pub fn guard(&self) -> (f64, f64) {
         let a = self.params.gate_support * self.sigma;
         (-a, self.window() + a)
     }
-    /// Interval of `τ − t0` [m] on which the band sum has no wrap-around: the guard
+    /// Interval of `τ − t0` (m) on which the band sum has no wrap-around: the guard
     /// interval widened by the DFT's slack `NΔt − (Nt−1)Δt − 2c_gσ` (≥ `margin`).
     pub fn alias_free(&self) -> (f64, f64) {
         let (lo, hi) = self.guard();

@@ -115,12 +115,12 @@ impl<'t> Scan<'t> {
     pub const fn spads(&self) -> &'t [Point] {
         self.spads
     }
-    /// Sensor legs `d4_s` (0 for wall-to-wall time axes) [m].
+    /// Sensor legs `d4_s` (0 for wall-to-wall time axes) (m).
     pub const fn sensor_legs(&self) -> &'t [f32] {
         self.d4
     }
 
-    /// The laser leg `d1_l` for a laser spot (0 for wall-to-wall time axes) [m].
+    /// The laser leg `d1_l` for a laser spot (0 for wall-to-wall time axes) (m).
     pub fn laser_leg(&self, laser: &Point) -> f64 {
         match self.cfg.legs() {
             Legs::WallToWall => 0.0,
@@ -256,7 +256,7 @@ impl<'m> RowBuffer<'m> {
     }
 
     /// Folds the gate weights and the leg phases into the raw spectra of a row:
-    /// `HG[s][j] ·= Ĝ_j·e^{iν_j x_s}`, `M_s ·= e^{iΩ x_s}`, `x_s = d1 + d4_s − t0`.
+    /// `HG(s)[j] ·= Ĝ_j·e^{iν_j x_s}`, `M_s ·= e^{iΩ x_s}`, `x_s = d1 + d4_s − t0`.
     fn fold_legs(&mut self, scan: &Scan<'_>, laser: &Point) {
         let cfg = &scan.cfg;
         let j = cfg.bins().max(1);
@@ -389,7 +389,7 @@ impl<'r, T: Sample> Row<'r, T> {
     pub const fn ungated(&self) -> &'r [Complex32] {
         self.mono
     }
-    /// Leg offsets `x_s = d1_l + d4_s − t0` [m].
+    /// Leg offsets `x_s = d1_l + d4_s − t0` (m).
     pub const fn offsets(&self) -> &'r [f32] {
         self.offset
     }
