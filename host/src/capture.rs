@@ -1,6 +1,6 @@
 //! The capture model: geometry, time axis and row access.
 //!
-//! A capture holds `H[l](s)[n]`: laser spot `l`, SPAD spot `s`, time bin `n` at path length
+//! A capture holds `H[l][s][n]`: laser spot `l`, SPAD spot `s`, time bin `n` at path length
 //! `t0 + n·Δt` (metres, the point-sample convention of DESIGN §B.0). The kernel is fed one
 //! laser row at a time through [`RowSource`].
 

@@ -2,7 +2,7 @@
 //!
 //! A [`Scene`] (a JSON scene file, or built in code) holds the capture setup (laser and SPAD
 //! spots on the relay wall, time axis, device positions) and the hidden objects. [`Scene::render`]
-//! turns it into a [`Capture`] `H[l](s)[n]`; [`Scene::source`] streams it row by row as a
+//! turns it into a [`Capture`] `H[l][s][n]`; [`Scene::source`] streams it row by row as a
 //! [`RowSource`]. The formulas and conventions are those of the numpy prototype
 //! `reference/sim.py` beside DESIGN.md, which `fixtures/sim/make_reference.py` checks this module
 //! against (`tests/sim.rs`).
@@ -1505,9 +1505,9 @@ struct Tables {
     tl: Vec<f64>,
     /// `[l][p]`: laser-leg factor (cosines)/d².
     gl: Vec<f64>,
-    /// `[p](s)`: `|p − x_s| + d4_s`.
+    /// `[p][s]`: `|p − x_s| + d4_s`.
     ts: Vec<f64>,
-    /// `[p](s)`: SPAD-leg factor (cosines)/d².
+    /// `[p][s]`: SPAD-leg factor (cosines)/d².
     gs: Vec<f64>,
     ks: usize,
     confocal: bool,

@@ -438,7 +438,7 @@ fn diag_ungated<T: Sample>(
     }
 }
 
-/// Factorised column, per row: `U(s)[j] += w_la e^{iν_j d_la} HG_ls[j]` (DESIGN §B.3.2).
+/// Factorised column, per row: `U[s][j] += w_la e^{iν_j d_la} HG_ls[j]` (DESIGN §B.3.2).
 fn column_band_push<T: Sample>(
     scan: &Scan<'_>,
     row: &Row<'_, T>,
@@ -463,7 +463,7 @@ fn column_band_push<T: Sample>(
     }
 }
 
-/// Factorised column, at the end: `A(b) = Σ_s w_bs Σ_j e^{iν_j(d_ab + d_bs)} U(s)[j]`.
+/// Factorised column, at the end: `A(b) = Σ_s w_bs Σ_j e^{iν_j(d_ab + d_bs)} U[s][j]`.
 fn column_band_finish(
     scan: &Scan<'_>,
     a: Point,

@@ -256,7 +256,7 @@ impl<'m> RowBuffer<'m> {
     }
 
     /// Folds the gate weights and the leg phases into the raw spectra of a row:
-    /// `HG(s)[j] ·= Ĝ_j·e^{iν_j x_s}`, `M_s ·= e^{iΩ x_s}`, `x_s = d1 + d4_s − t0`.
+    /// `HG[s][j] ·= Ĝ_j·e^{iν_j x_s}`, `M_s ·= e^{iΩ x_s}`, `x_s = d1 + d4_s − t0`.
     fn fold_legs(&mut self, scan: &Scan<'_>, laser: &Point) {
         let cfg = &scan.cfg;
         let j = cfg.bins().max(1);
