@@ -13,6 +13,7 @@ pub mod error;
 pub mod figure;
 pub mod ltm;
 pub mod npy;
+pub mod ptu;
 pub mod sim;
 pub mod volume;
 
