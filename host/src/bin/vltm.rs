@@ -325,6 +325,13 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 }
                 (None, None) => None,
             };
+            if !(0.0..1.0).contains(&epsilon) {
+                return Err(vltm::Error::arg(
+                    "--epsilon",
+                    format!("expected 0 <= E < 1, found {epsilon}"),
+                )
+                .into());
+            }
             let opts = IndirectOptions {
                 epsilon,
                 shell,
@@ -334,7 +341,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
             let o = ltm::indirect(&mut c, &volume, &opts, &common.wave(), exec())?;
             let n_gamma = o.gamma.iter().filter(|&&g| g).count();
             println!(
-                "Γ: {n_gamma} of {} voxels above ε = {epsilon} of the direct maximum; pairs with {} <= |x_a - x_b| < {} m",
+                "Γ: {n_gamma} of {} voxels above ε = {epsilon} of the direct maximum; pairs with {:.3} <= |x_a - x_b| < {:.3} m",
                 volume.len(),
                 o.shell.r0,
                 o.shell.r1

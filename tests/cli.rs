@@ -1,0 +1,643 @@
+//! The `vltm` command line on the committed fixtures (`fixtures/README.md`): every subcommand
+//! runs and writes readable outputs; bad arguments exit with code 2 and bad data with code 1,
+//! each with a one-line error starting with `vltm: ` (DESIGN §A.6).
+//!
+//! **Which binary.** Cargo sets `CARGO_BIN_EXE_vltm` only for the tests of the package that owns
+//! the binary (`host/`), not for this root package. So [`bin`] runs
+//! `cargo build -p vltm --bin vltm` once per test process (a `OnceLock`), with the cargo that
+//! runs the tests (`$CARGO`), the profile and the target directory of this test executable
+//! (`<target>/<dir>/deps/cli-<hash>` → `<target>/<dir>/vltm`; `debug/` → `--profile test`,
+//! `release/` → `--profile release`), and uses the resulting path. That always tests the
+//! current sources (a stale `target/release/vltm` cannot slip through) and is a no-op when the
+//! binary is up to date. (Cargo releases the build-directory lock before it runs test
+//! executables, so the nested build does not wait on the outer `cargo test`; checked with
+//! cargo 1.95.) `VLTM_BIN=/path/to/vltm`
+//! overrides it (e.g. for cross-compiled or installed binaries).
+//!
+//! Outputs go to unique temporary directories under `std::env::temp_dir()` (process id + test
+//! name), removed at the end of each test.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use std::sync::OnceLock;
+
+use vltm::capture;
+use vltm::ltm::{self, Exec, Wave};
+use vltm::volume::Volume;
+
+/// A small volume around the two patches of the fixtures: 13 × 3 × 8 voxels, 10 cm pitch.
+const SPEC: &str = "-0.6:0.6:13,-0.1:0.1:3,0.5:1.2:8";
+const SHAPE: [usize; 3] = [13, 3, 8];
+/// Patch A of `fixtures/scenes/two_patches.json`.
+const FOCUS: &str = "-0.45,0,0.8";
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn fixture(stem: &str) -> PathBuf {
+    root().join("fixtures").join(format!("{stem}.npz"))
+}
+
+/// The `vltm` binary (see the module documentation).
+fn bin() -> &'static Path {
+    static BIN: OnceLock<PathBuf> = OnceLock::new();
+    BIN.get_or_init(|| {
+        if let Some(p) = std::env::var_os("VLTM_BIN") {
+            return PathBuf::from(p);
+        }
+        let exe = std::env::current_exe().expect("test executable path");
+        // <target>/<profile dir>/deps/cli-<hash>
+        let profile_dir = exe
+            .parent()
+            .and_then(Path::parent)
+            .expect("test executable in <target>/<profile>/deps");
+        let target_dir = profile_dir.parent().expect("target directory");
+        // `cargo test` builds into `debug/` with the `test` profile (opt-level 3 in this
+        // workspace: building the binary with it shares the test build's dependencies and keeps
+        // the demo fast); `cargo test --release` into `release/`; custom profiles into their name.
+        let profile = match profile_dir.file_name().and_then(|n| n.to_str()) {
+            Some("debug") => "test".to_string(),
+            Some(p) => p.to_string(),
+            None => panic!("unexpected test executable path {}", exe.display()),
+        };
+        let out = Command::new(env!("CARGO"))
+            .current_dir(root())
+            .env("CARGO_TARGET_DIR", target_dir)
+            .args([
+                "build",
+                "--quiet",
+                "-p",
+                "vltm",
+                "--bin",
+                "vltm",
+                "--profile",
+            ])
+            .arg(&profile)
+            .output()
+            .expect("run cargo");
+        assert!(
+            out.status.success(),
+            "cargo build -p vltm --profile {profile} failed:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let p = profile_dir.join(format!("vltm{}", std::env::consts::EXE_SUFFIX));
+        assert!(p.is_file(), "no binary at {}", p.display());
+        p
+    })
+}
+
+/// A temporary directory, unique per process and test, removed on drop.
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(test: &str) -> Self {
+        let p = std::env::temp_dir().join(format!("vltm-cli-{}-{test}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&p);
+        std::fs::create_dir_all(&p).expect("create temp dir");
+        Self(p)
+    }
+    fn path(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// Runs `vltm args…` in `cwd`.
+fn run_in(cwd: &Path, args: &[&str]) -> Output {
+    Command::new(bin())
+        .current_dir(cwd)
+        .args(args)
+        .output()
+        .expect("run vltm")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+/// Runs `vltm args…` and asserts success; returns stdout.
+fn ok(cwd: &Path, args: &[&str]) -> String {
+    let o = run_in(cwd, args);
+    assert!(
+        o.status.success(),
+        "vltm {args:?} failed ({:?}):\n{}",
+        o.status.code(),
+        text(&o.stderr)
+    );
+    text(&o.stdout)
+}
+
+/// Runs `vltm args…` and asserts exit code `code` and a one-line stderr starting with
+/// `vltm: `; returns that line.
+fn fails(cwd: &Path, args: &[&str], code: i32) -> String {
+    let o = run_in(cwd, args);
+    let err = text(&o.stderr);
+    assert_eq!(
+        o.status.code(),
+        Some(code),
+        "vltm {args:?}: expected exit code {code}, stderr: {err}"
+    );
+    let lines: Vec<&str> = err.lines().collect();
+    assert!(
+        lines.len() == 1 && lines[0].starts_with("vltm: "),
+        "vltm {args:?}: expected one line starting with `vltm: `, found {} line(s):\n{err}",
+        lines.len()
+    );
+    println!("exit {code}: vltm {args:?}\n  {}", lines[0]);
+    lines[0].to_string()
+}
+
+/// Reads a `.npy` volume and checks its shape and that every value is finite; returns it.
+fn npy(path: &Path, shape: [usize; 3]) -> Vec<f32> {
+    let (v, s) = vltm::npy::read_f32(path).unwrap_or_else(|e| panic!("{e}"));
+    assert_eq!(s, shape, "{}: shape", path.display());
+    assert!(
+        v.iter().all(|x| x.is_finite()),
+        "{}: non-finite values",
+        path.display()
+    );
+    v
+}
+
+/// CRC-32 (IEEE), as PNG chunks use.
+fn crc32(bytes: &[u8]) -> u32 {
+    let mut c = !0u32;
+    for &b in bytes {
+        c ^= u32::from(b);
+        for _ in 0..8 {
+            c = if c & 1 != 0 {
+                (c >> 1) ^ 0xEDB8_8320
+            } else {
+                c >> 1
+            };
+        }
+    }
+    !c
+}
+
+/// Checks a PNG's structure (the `image` crate is not a dependency of this package): the
+/// signature, an `IHDR` first with a non-empty size, at least one `IDAT`, `IEND` last, and
+/// every chunk's CRC. Returns (width, height).
+fn png(path: &Path) -> (u32, u32) {
+    let b = std::fs::read(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+    let what = path.display();
+    assert!(
+        b.starts_with(b"\x89PNG\r\n\x1a\n"),
+        "{what}: not a PNG signature"
+    );
+    let (mut at, mut chunks) = (8, Vec::new());
+    while at < b.len() {
+        assert!(at + 12 <= b.len(), "{what}: truncated chunk at byte {at}");
+        let len = u32::from_be_bytes(b[at..at + 4].try_into().expect("4 bytes")) as usize;
+        let end = at + 8 + len;
+        assert!(end + 4 <= b.len(), "{what}: truncated chunk at byte {at}");
+        let crc = u32::from_be_bytes(b[end..end + 4].try_into().expect("4 bytes"));
+        assert_eq!(crc32(&b[at + 4..end]), crc, "{what}: bad CRC at byte {at}");
+        chunks.push((b[at + 4..at + 8].to_vec(), at + 8, len));
+        at = end + 4;
+    }
+    let names: Vec<&[u8]> = chunks.iter().map(|c| c.0.as_slice()).collect();
+    assert_eq!(names.first(), Some(&&b"IHDR"[..]), "{what}: IHDR first");
+    assert_eq!(names.last(), Some(&&b"IEND"[..]), "{what}: IEND last");
+    assert!(names.contains(&&b"IDAT"[..]), "{what}: no IDAT");
+    let (_, start, len) = chunks[0];
+    assert_eq!(len, 13, "{what}: IHDR length");
+    let w = u32::from_be_bytes(b[start..start + 4].try_into().expect("4 bytes"));
+    let h = u32::from_be_bytes(b[start + 4..start + 8].try_into().expect("4 bytes"));
+    assert!(w > 0 && h > 0, "{what}: size {w}x{h}");
+    (w, h)
+}
+
+// ---------------------------------------------------------------------------------------------
+// subcommands
+// ---------------------------------------------------------------------------------------------
+
+#[test]
+fn info_describes_a_capture() {
+    let t = TempDir::new("info");
+    let out = ok(
+        &t.0,
+        &["info", fixture("two_patches").to_str().expect("utf-8")],
+    );
+    print!("{out}");
+    for want in [
+        "non-confocal",
+        "lasers       64 = 8x8",
+        "SPADs        64 = 8x8",
+        "175 bins x 0.02 m from t0 = 1 m",
+        "non-finite 0",
+    ] {
+        assert!(out.contains(want), "`vltm info` lacks `{want}`:\n{out}");
+    }
+}
+
+/// `simulate` renders a scene file to the same capture as the committed fixture.
+#[test]
+fn simulate_writes_the_committed_capture() {
+    let t = TempDir::new("simulate");
+    let out_npz = t.path("s.npz");
+    let scene = root().join("fixtures/scenes/two_patches_line.json");
+    let out = ok(
+        &t.0,
+        &[
+            "simulate",
+            scene.to_str().expect("utf-8"),
+            "--out",
+            out_npz.to_str().expect("utf-8"),
+        ],
+    );
+    print!("{out}");
+    assert!(out.contains("64 lasers x 8 SPADs x 175 bins"), "{out}");
+    let fresh = capture::open(&out_npz).expect("read the simulated capture");
+    let committed = capture::open(&fixture("two_patches_line")).expect("fixture");
+    assert_eq!(fresh.geometry, committed.geometry);
+    assert!(
+        fresh.data == committed.data,
+        "simulated H differs from the fixture"
+    );
+}
+
+/// `direct` writes the `.npy` and `.png` it is asked for, and its volume equals the library's
+/// `ltm::direct` on the same capture; without `--out`/`--png` it writes `direct.npy` and
+/// `direct.png` in the current directory. `--threads 1` and `--swap-roles` run too.
+#[test]
+fn direct_writes_volume_and_figure() {
+    let t = TempDir::new("direct");
+    let cap = fixture("two_patches");
+    let cap = cap.to_str().expect("utf-8");
+    let (f_npy, f_png) = (t.path("d.npy"), t.path("d.png"));
+    let out = ok(
+        &t.0,
+        &[
+            "direct",
+            cap,
+            "--volume",
+            SPEC,
+            "--out",
+            f_npy.to_str().expect("utf-8"),
+            "--png",
+            f_png.to_str().expect("utf-8"),
+        ],
+    );
+    print!("{out}");
+    let v = npy(&f_npy, SHAPE);
+    let (w, h) = png(&f_png);
+    println!("d.png: {w}x{h}");
+    let vol = Volume::parse(SPEC).expect("spec");
+    let lib = ltm::direct(
+        &mut capture::open(Path::new(cap)).expect("fixture"),
+        &vol,
+        &Wave::default(),
+        Exec::default(),
+    )
+    .expect("direct");
+    let max = lib.values.iter().copied().fold(0.0f32, f32::max);
+    let diff = v
+        .iter()
+        .zip(&lib.values)
+        .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+    assert!(
+        max > 0.0 && diff <= 1e-6 * max,
+        "CLI and library direct images differ by {diff:e} (peak {max:e})"
+    );
+
+    // Default output names, in the current directory; one thread.
+    ok(&t.0, &["direct", cap, "--volume", SPEC, "--threads", "1"]);
+    let v1 = npy(&t.path("direct.npy"), SHAPE);
+    png(&t.path("direct.png"));
+    assert!(v1 == v, "--threads 1 changed the direct image");
+
+    // --swap-roles on the 1-D SPAD array: SPADs as projector, lasers as camera.
+    let line = fixture("two_patches_line");
+    let sw = t.path("swap.npy");
+    ok(
+        &t.0,
+        &[
+            "direct",
+            line.to_str().expect("utf-8"),
+            "--volume",
+            SPEC,
+            "--swap-roles",
+            "--weights",
+            "one",
+            "--compensate-laser",
+            "--out",
+            sw.to_str().expect("utf-8"),
+        ],
+    );
+    let v = npy(&sw, SHAPE);
+    assert!(v.iter().any(|&x| x > 0.0), "--swap-roles: empty image");
+}
+
+/// `column` with each gate writes readable outputs; `--shell R0:R1` zeroes every voxel outside
+/// the shell around the focus.
+#[test]
+fn column_runs_every_gate_and_shell() {
+    let t = TempDir::new("column");
+    let cap = fixture("two_patches");
+    let cap = cap.to_str().expect("utf-8");
+    for gate in ["two-bounce", "higher-order", "none"] {
+        let (f_npy, f_png) = (
+            t.path(&format!("{gate}.npy")),
+            t.path(&format!("{gate}.png")),
+        );
+        let out = ok(
+            &t.0,
+            &[
+                "column",
+                cap,
+                "--focus",
+                FOCUS,
+                "--volume",
+                SPEC,
+                "--gate",
+                gate,
+                "--out",
+                f_npy.to_str().expect("utf-8"),
+                "--png",
+                f_png.to_str().expect("utf-8"),
+            ],
+        );
+        print!("{out}");
+        let v = npy(&f_npy, SHAPE);
+        assert!(v.iter().any(|&x| x > 0.0), "--gate {gate}: empty column");
+        png(&f_png);
+    }
+    let f = t.path("shell.npy");
+    ok(
+        &t.0,
+        &[
+            "column",
+            cap,
+            "--focus",
+            FOCUS,
+            "--volume",
+            SPEC,
+            "--shell",
+            "0.3:0.8",
+            "--out",
+            f.to_str().expect("utf-8"),
+        ],
+    );
+    let v = npy(&f, SHAPE);
+    let vol = Volume::parse(SPEC).expect("spec");
+    let a = [-0.45f32, 0.0, 0.8];
+    let (mut inside, mut outside_nonzero) = (0usize, 0usize);
+    for (x, p) in v.iter().zip(&vol.points) {
+        let d = ((0..3).map(|i| (p[i] - a[i]).powi(2)).sum::<f32>()).sqrt();
+        if (0.3..0.8).contains(&d) {
+            inside += usize::from(*x > 0.0);
+        } else if *x != 0.0 {
+            outside_nonzero += 1;
+        }
+    }
+    println!("--shell 0.3:0.8: {inside} non-zero voxels inside, {outside_nonzero} outside");
+    assert!(
+        inside > 0 && outside_nonzero == 0,
+        "--shell 0.3:0.8: {inside} non-zero voxels inside, {outside_nonzero} outside"
+    );
+}
+
+/// `indirect` writes a volume that is zero outside Γ (voxels whose direct light exceeds
+/// ε·max) and reports Γ.
+#[test]
+fn indirect_writes_a_gamma_masked_volume() {
+    let t = TempDir::new("indirect");
+    let cap = fixture("two_patches");
+    let cap = cap.to_str().expect("utf-8");
+    let (f_npy, f_png, f_dir) = (t.path("i.npy"), t.path("i.png"), t.path("d.npy"));
+    let out = ok(
+        &t.0,
+        &[
+            "indirect",
+            cap,
+            "--volume",
+            SPEC,
+            "--epsilon",
+            "0.2",
+            "--min-separation",
+            "0.3",
+            "--out",
+            f_npy.to_str().expect("utf-8"),
+            "--png",
+            f_png.to_str().expect("utf-8"),
+        ],
+    );
+    print!("{out}");
+    assert!(
+        out.contains("Γ: ") && out.contains("pairs with 0.3 <= |x_a - x_b|"),
+        "{out}"
+    );
+    let v = npy(&f_npy, SHAPE);
+    png(&f_png);
+    ok(
+        &t.0,
+        &[
+            "direct",
+            cap,
+            "--volume",
+            SPEC,
+            "--out",
+            f_dir.to_str().expect("utf-8"),
+        ],
+    );
+    let d = npy(&f_dir, SHAPE);
+    let gamma = ltm::gamma_mask(&d, 0.2);
+    let n = gamma.iter().filter(|&&g| g).count();
+    assert!(
+        out.contains(&format!("Γ: {n} of {} voxels", d.len())),
+        "Γ count differs from the direct image's ({n}):\n{out}"
+    );
+    assert!(
+        v.iter().zip(&gamma).all(|(&x, &g)| g || x == 0.0) && v.iter().any(|&x| x > 0.0),
+        "indirect volume must be non-zero and zero outside Γ"
+    );
+    // --shell overrides --min-separation.
+    ok(
+        &t.0,
+        &[
+            "indirect",
+            cap,
+            "--volume",
+            SPEC,
+            "--shell",
+            "0.5:inf",
+            "--out",
+            f_npy.to_str().expect("utf-8"),
+        ],
+    );
+    npy(&f_npy, SHAPE);
+}
+
+/// `demo --out DIR`: the table names the figure and its indirect-light ratio, and the 8 PNG
+/// figures, 8 `.npy` volumes and `summary.txt` (= the table) are written. (~15 s.)
+#[test]
+fn demo_writes_figures_volumes_and_summary() {
+    let t = TempDir::new("demo");
+    let dir = t.path("out");
+    let out = ok(&t.0, &["demo", "--out", dir.to_str().expect("utf-8")]);
+    print!("{out}");
+    for want in [
+        "figure at [0.35, 0.0, 0.8]",
+        "indirect light at the figure's centre voxel",
+        "direct (diagonal)",
+        "column far 0.45-1.20 m, Γ",
+    ] {
+        assert!(out.contains(want), "demo table lacks `{want}`:\n{out}");
+    }
+    // "… T(x_a, x_b) is 17.4x the direct-only control with the 4-vertex gate …"
+    let ratio: f32 = out
+        .split("T(x_a, x_b) is ")
+        .nth(1)
+        .and_then(|s| s.split('x').next())
+        .and_then(|s| s.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no gated ratio in the table:\n{out}"));
+    assert!(
+        ratio >= 3.0,
+        "demo: gated indirect light at the figure is only {ratio}x the control"
+    );
+    let summary = std::fs::read_to_string(dir.join("summary.txt")).expect("summary.txt");
+    assert_eq!(summary, out, "summary.txt differs from the printed table");
+    let mut files: Vec<String> = std::fs::read_dir(&dir)
+        .expect("demo dir")
+        .filter_map(|e| e.ok()?.file_name().into_string().ok())
+        .collect();
+    files.sort();
+    let count = |ext: &str| files.iter().filter(|f| f.ends_with(ext)).count();
+    assert_eq!(
+        (count(".png"), count(".npy")),
+        (8, 8),
+        "demo files: {files:?}"
+    );
+    for f in &files {
+        let p = dir.join(f);
+        if f.ends_with(".png") {
+            png(&p);
+        } else if f.ends_with(".npy") {
+            let v = npy(&p, [21, 11, 13]);
+            assert!(v.iter().any(|&x| x > 0.0), "{f}: empty");
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// errors
+// ---------------------------------------------------------------------------------------------
+
+/// Bad arguments: exit code 2 and one line naming the argument.
+#[test]
+fn bad_arguments_exit_2_with_one_line() {
+    let t = TempDir::new("badargs");
+    let cap = fixture("two_patches");
+    let cap = cap.to_str().expect("utf-8");
+    let col = |extra: &[&'static str]| {
+        let mut a = vec!["column", cap, "--volume", SPEC, "--focus", FOCUS];
+        a.extend_from_slice(extra);
+        a
+    };
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["direct", cap, "--volume", "1:2:3,4"], "--volume"),
+        (
+            vec!["direct", cap, "--volume", "-1:1:3,0:0:x,0.5:1:3"],
+            "--volume",
+        ),
+        (
+            vec!["direct", cap, "--volume", "-1:1:3,0:0:1,0:1:5"],
+            "--volume",
+        ),
+        (
+            vec!["column", cap, "--volume", SPEC, "--focus", "0,0,0"],
+            "--focus",
+        ),
+        (
+            vec!["column", cap, "--volume", SPEC, "--focus", "0,0,-0.5"],
+            "--focus",
+        ),
+        (
+            vec!["column", cap, "--volume", SPEC, "--focus", "0,0"],
+            "--focus",
+        ),
+        (col(&["--gate", "three-bounce"]), "--gate"),
+        (col(&["--weights", "two"]), "--weights"),
+        (col(&["--shell", "0.8:0.3"]), "--shell"),
+        (col(&["--shell", "near"]), "--shell"),
+        (
+            vec!["indirect", cap, "--volume", SPEC, "--epsilon", "1.5"],
+            "--epsilon",
+        ),
+        (
+            vec!["indirect", cap, "--volume", SPEC, "--epsilon=-0.1"],
+            "--epsilon",
+        ),
+        (
+            vec!["--threads", "0", "direct", cap, "--volume", SPEC],
+            "--threads",
+        ),
+        (
+            vec!["direct", cap, "--volume", SPEC, "--threads", "0"],
+            "--threads",
+        ),
+        (vec!["frobnicate"], "frobnicate"),
+    ];
+    for (args, names) in &cases {
+        let line = fails(&t.0, args, 2);
+        assert!(
+            line.contains(names),
+            "vltm {args:?}: the error should name `{names}`: {line}"
+        );
+    }
+}
+
+/// Unreadable or corrupt captures: exit code 1 and one line naming the file.
+#[test]
+fn bad_captures_exit_1_naming_the_file() {
+    let t = TempDir::new("baddata");
+    let good = std::fs::read(fixture("two_patches_single")).expect("fixture");
+    let truncated = t.path("truncated.npz");
+    std::fs::write(&truncated, &good[..good.len() / 2]).expect("write");
+    let text_file = t.path("notes.npz");
+    std::fs::write(&text_file, "this is not a capture\n").expect("write");
+    let empty = t.path("empty.npz");
+    std::fs::write(&empty, b"").expect("write");
+    // A valid archive whose `H` stream is damaged: flip bytes in the middle of the file.
+    let damaged = t.path("damaged.npz");
+    let mut d = good.clone();
+    let mid = d.len() / 2;
+    d[mid..mid + 64].iter_mut().for_each(|b| *b ^= 0x5A);
+    std::fs::write(&damaged, &d).expect("write");
+    let missing = t.path("missing.npz");
+    for p in [&truncated, &text_file, &empty, &damaged, &missing] {
+        let s = p.to_str().expect("utf-8");
+        for args in [
+            vec!["info", s],
+            vec!["direct", s, "--volume", SPEC],
+            vec!["column", s, "--volume", SPEC, "--focus", FOCUS],
+        ] {
+            let line = fails(&t.0, &args, 1);
+            assert!(
+                line.contains(s),
+                "vltm {args:?}: the error should name the file: {line}"
+            );
+        }
+    }
+    // A corrupt scene file for `simulate` is bad data too.
+    let scene = t.path("scene.json");
+    std::fs::write(&scene, "{\"setup\": 1}").expect("write");
+    let s = scene.to_str().expect("utf-8");
+    let out = t.path("x.npz");
+    let line = fails(
+        &t.0,
+        &["simulate", s, "--out", out.to_str().expect("utf-8")],
+        1,
+    );
+    assert!(
+        line.contains(s),
+        "simulate: the error should name the file: {line}"
+    );
+}
