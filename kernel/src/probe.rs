@@ -213,10 +213,12 @@ impl<'m> Probe<'m> {
             check_len("row histograms", ks * cfg.nt(), row.histograms().len())?;
         }
         let n_vox = self.voxels.len();
-        let (acc, scratch) = self.state.split_at_mut(match self.gate {
+        let split = match self.gate {
             Gate::HigherOrder => n_vox,
             _ => self.state.len(),
-        });
+        };
+        // `min`: the state is at least `n_vox` long (`new` checked it); no panicking branch.
+        let (acc, scratch) = self.state.split_at_mut(split.min(self.state.len()));
         let laser = row.laser();
         match (self.target, self.gate) {
             (Target::Diagonal, Gate::Gaussian) => diag_band(scan, row, self.voxels, acc),
@@ -449,14 +451,18 @@ fn column_band_push<T: Sample>(
     let cfg = scan.config();
     let j = cfg.bins().max(1);
     let (klo, inv) = band_consts(cfg);
-    let (u, phase) = state.split_at_mut(state.len() - cfg.bins());
+    let (u, phase) = state.split_at_mut(state.len().saturating_sub(cfg.bins()));
     let mut p = cis_turns(klo * d_la) * w;
     let step = cis_turns(inv * d_la);
     for ph in phase.iter_mut() {
         *ph = c64(p);
         p *= step;
     }
-    for (us, hg) in u.chunks_exact_mut(j).zip(row.band().chunks_exact(j)) {
+    // Not `zip`: an out-of-line `Zip::new` re-derives the chunks' `size_hint` by a division
+    // whose divisor (`j ≥ 1`) it cannot see, a panicking branch in the no-panic link.
+    let mut hgs = row.band().chunks_exact(j);
+    for us in u.chunks_exact_mut(j) {
+        let Some(hg) = hgs.next() else { break };
         for ((u, h), ph) in us.iter_mut().zip(hg).zip(phase.iter()) {
             *u += c64(*h) * *ph;
         }
@@ -476,7 +482,7 @@ fn column_band_finish(
     let j = cfg.bins().max(1);
     let (klo, inv) = band_consts(cfg);
     let (af_lo, af_hi) = cfg.alias_free();
-    let u = &state[..state.len() - cfg.bins()];
+    let u = state.split_at(state.len().saturating_sub(cfg.bins())).0;
     let mut aliased = 0;
     for (o, b) in out.iter_mut().zip(voxels) {
         let d_ab = dist(&a, b);

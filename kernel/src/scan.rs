@@ -82,8 +82,14 @@ impl<'t> Scan<'t> {
         check_len("tables", Self::tables_len(cfg, spads.len()), tables.len())?;
         check_points("spads", spads)?;
         let n = cfg.n_fft();
-        let (tw, rest) = tables.split_at_mut(2 * n);
-        let (gate, d4) = rest.split_at_mut(cfg.bins());
+        // `_checked` (the lengths were checked above): no panicking branch in the ELF.
+        let too_short = Error::Length {
+            what: "tables",
+            expected: Self::tables_len(cfg, spads.len()),
+            found: tables.len(),
+        };
+        let (tw, rest) = tables.split_at_mut_checked(2 * n).ok_or(too_short)?;
+        let (gate, d4) = rest.split_at_mut_checked(cfg.bins()).ok_or(too_short)?;
         let twiddle = as_complex("tables", tw)?;
         for (q, w) in twiddle.iter_mut().enumerate() {
             let a = -core::f64::consts::TAU * q as f64 / n as f64;
@@ -131,7 +137,8 @@ impl<'t> Scan<'t> {
     /// Band spectrum of one histogram into `out` (J values), without legs or gate weights:
     /// `out[j] = Σ_n h[n]·e^{−2πi k_j n/N}`. Non-finite samples read as 0.
     fn dft_band<T: Sample>(&self, h: &[T], out: &mut [Complex32]) {
-        let n = self.cfg.n_fft() as u64;
+        // `max(1)`: N ≥ Nt ≥ 1 already; lets the optimiser drop the division-by-zero branch.
+        let n = self.cfg.n_fft().max(1) as u64;
         let k_lo = self.cfg.k_lo();
         for (j, o) in out.iter_mut().enumerate() {
             let step = (k_lo + j as i64).rem_euclid(n as i64) as usize;
@@ -191,8 +198,13 @@ impl<'m> RowBuffer<'m> {
         let ks = scan.spads.len();
         let j = scan.cfg.bins();
         check_len("row buffer", Self::len(&scan.cfg, ks), buf.len())?;
-        let (hg, rest) = buf.split_at_mut(2 * ks * j);
-        let (mono, offset) = rest.split_at_mut(2 * ks);
+        let too_short = Error::Length {
+            what: "row buffer",
+            expected: Self::len(&scan.cfg, ks),
+            found: buf.len(),
+        };
+        let (hg, rest) = buf.split_at_mut_checked(2 * ks * j).ok_or(too_short)?;
+        let (mono, offset) = rest.split_at_mut_checked(2 * ks).ok_or(too_short)?;
         Ok(Self {
             hg: as_complex("row buffer", hg)?,
             mono: as_complex("row buffer", mono)?,
@@ -300,7 +312,7 @@ impl<'m> RowBuffer<'m> {
     /// `f32` rounding of the summation order).
     pub fn push_photon(&mut self, scan: &Scan<'_>, spad: usize, bin: usize) {
         let cfg = &scan.cfg;
-        let (j, nt, n) = (cfg.bins(), cfg.nt(), cfg.n_fft());
+        let (j, nt, n) = (cfg.bins(), cfg.nt(), cfg.n_fft().max(1));
         let Some(hg) = self.hg.get_mut(spad * j..(spad + 1) * j) else {
             self.dropped += 1;
             return;

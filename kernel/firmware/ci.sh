@@ -1,0 +1,115 @@
+#!/usr/bin/env bash
+# Embedded checks of vltm-kernel in QEMU: the fixture is up to date with the host kernel, the
+# firmware on Cortex-M4F (mps2-an386) and Cortex-M0 (microbit) reproduces the host's numbers,
+# the defmt firmware runs (and is decoded when defmt-print is installed), the kernel's per-row
+# paths link with panic-never on both ISAs (and a planted panic does not), the instruction
+# counts of the real setup, and the sizes.
+#
+# Needs (installs nothing): qemu-system-arm (apt), rustup targets thumbv7em-none-eabihf and
+# thumbv6m-none-eabi; optional: defmt-print (cargo install defmt-print --locked),
+# arm-none-eabi-size (apt binutils-arm-none-eabi) or llvm-size (rustup component llvm-tools).
+# Honours CARGO_TARGET_DIR (share it with other builds to save the host build scripts).
+# Ends with "N passed, M failed: firmware"; exit status 1 if anything failed.
+set -uo pipefail
+here="$(cd "$(dirname "$0")" && pwd)"
+cd "$here"
+export CARGO_TERM_COLOR=never
+tdir="${CARGO_TARGET_DIR:-$here/target}"
+export CARGO_TARGET_DIR="$tdir"
+M4=thumbv7em-none-eabihf M0=thumbv6m-none-eabi
+passed=0 failed=0 failures=()
+
+step() { # step NAME COMMAND...: runs COMMAND, counts it
+  local name="$1"; shift
+  local t0=$SECONDS
+  echo "== $name"
+  if "$@"; then passed=$((passed + 1)); echo "   ok ($((SECONDS - t0)) s)"
+  else failed=$((failed + 1)); failures+=("$name"); echo "   FAILED: $name ($((SECONDS - t0)) s)"; fi
+}
+
+command -v qemu-system-arm >/dev/null || {
+  echo "qemu-system-arm not found: apt-get install -y --no-install-recommends qemu-system-arm" >&2
+  echo "0 passed, 1 failed: firmware"; exit 1; }
+missing=$(comm -23 <(printf '%s\n' $M0 $M4) <(rustup target list --installed 2>/dev/null | sort))
+[ -z "$missing" ] || {
+  echo "missing rustup targets: $missing (rustup target add $M4 $M0)" >&2
+  echo "0 passed, 1 failed: firmware"; exit 1; }
+
+fw() { cargo build -q --release "$@"; }        # firmware build, in kernel/firmware
+elf() { echo "$tdir/$1/release/$2"; }
+
+fmt_check() { cargo fmt --check && (cd gen && cargo fmt --check); }
+step "rustfmt (firmware, gen)" fmt_check
+
+fixture_up_to_date() {
+  local out; out=$(mktemp -d)
+  (cd gen && cargo run -q --release -- fixture "$out" >/dev/null) || return 1
+  cmp "$out/scan.bin" fixture/scan.bin && cmp "$out/expected.txt" fixture/expected.txt || {
+    echo "fixture/ is stale (the host kernel's numbers changed): regenerate with" \
+         "'cd kernel/firmware/gen && cargo run --release -- fixture' and review the diff"
+    diff "$out/expected.txt" fixture/expected.txt | head -20; rm -rf "$out"; return 1; }
+  rm -rf "$out"
+}
+step "fixture: host kernel (x86) reproduces fixture/expected.txt" fixture_up_to_date
+
+for t in $M4 $M0; do
+  m=$([ $t = $M4 ] && echo m4f || echo m0)
+  step "text firmware $t: build" fw --target $t --bin vltm-firmware
+  step "text firmware on $m: verdict 0, numbers = host" ./run-qemu.sh $m text "$(elf $t vltm-firmware)"
+done
+
+negative() { # a host value changed by 1.1e-6 of its maximum must be reported
+  local bad; bad=$(mktemp)
+  sed 's/^\(RESULT voxel=5 diag=\)8\.841629305460933e8/\18.84164e8/' fixture/expected.txt >"$bad"
+  ! cmp -s "$bad" fixture/expected.txt || { rm -f "$bad"; return 1; }
+  if VLTM_FW_EXPECTED="$bad" ./run-qemu.sh m4f text "$(elf $M4 vltm-firmware)" >/dev/null 2>&1; then
+    rm -f "$bad"; echo "run-qemu.sh accepted a wrong value"; return 1; fi
+  rm -f "$bad"
+}
+step "run-qemu.sh rejects a value off by 1.1e-6" negative
+
+defmt_note=""
+command -v defmt-print >/dev/null || defmt_note=" (defmt-print not installed: exit status only)"
+for t in $M4 $M0; do
+  m=$([ $t = $M4 ] && echo m4f || echo m0)
+  step "defmt firmware $t: build" env DEFMT_LOG=debug cargo build -q --release --target $t \
+    --features defmt --bin vltm-firmware-defmt
+  step "defmt firmware on $m$defmt_note" ./run-qemu.sh $m defmt "$(elf $t vltm-firmware-defmt)"
+done
+
+for t in $M4 $M0; do
+  m=$([ $t = $M4 ] && echo m4f || echo m0)
+  step "no-panic proof $t: links with panic-never" fw --target $t --no-default-features \
+    --features nopanic --bin vltm-firmware-nopanic
+  step "no-panic firmware on $m: exit 0" ./run-qemu.sh $m status "$(elf $t vltm-firmware-nopanic)"
+done
+canary() { # the same bin with one panicking index must fail to link, with panic-never's message
+  local log; log=$(mktemp)
+  if cargo build -q --release --target $M4 --no-default-features --features nopanic,panic-canary \
+       --bin vltm-firmware-nopanic >"$log" 2>&1; then
+    rm -f "$log"; echo "the panic canary linked: the no-panic check is not working"; return 1; fi
+  grep -q 'panic-never' "$log" || { cat "$log"; rm -f "$log"; return 1; }
+  rm -f "$log"
+  fw --target $M4 --no-default-features --features nopanic --bin vltm-firmware-nopanic # restore
+}
+step "no-panic self-test: a planted panic fails to link" canary
+
+step "cycles firmware $M4: build" fw --target $M4 --features cycles --bin vltm-firmware-cycles
+step "instruction counts, real setup, on m4f (-icount)" ./run-qemu.sh m4f cycles "$(elf $M4 vltm-firmware-cycles)"
+
+size=$(command -v arm-none-eabi-size || true)
+[ -n "$size" ] || size="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/llvm-size"
+if [ -x "$size" ]; then
+  echo "== sizes ($(basename "$size"); text = flash incl. the 16 KB scan, bss = static RAM)"
+  for t in $M4 $M0; do
+    for b in vltm-firmware vltm-firmware-defmt vltm-firmware-nopanic; do
+      [ -f "$(elf $t $b)" ] && "$size" "$(elf $t $b)" | tail -1 | awk -v t=$t -v b=$b '{printf "   %-22s %-22s text %7d data %5d bss %6d\n", t, b, $1, $2, $3}'
+    done
+  done
+else
+  echo "== sizes: skipped (no arm-none-eabi-size or llvm-size)"
+fi
+
+[ ${#failures[@]} -eq 0 ] || printf 'failed: %s\n' "${failures[@]}"
+echo "$passed passed, $failed failed: firmware"
+[ "$failed" -eq 0 ]

@@ -1,0 +1,240 @@
+//! Host side of the firmware fixture.
+//!
+//! * `vltm-firmware-gen fixture [DIR]` simulates the fixture scan (two point scatterers,
+//!   direct and P1 ↔ P2 indirect returns, Gaussian pulse, deterministic background), writes
+//!   `DIR/scan.bin` and runs the firmware's own pipeline (`../src/pipeline.rs`, the same
+//!   kernel calls in the same order) on x86 to write `DIR/expected.txt`. DIR defaults to
+//!   `../fixture` (run from `gen/`).
+//! * `vltm-firmware-gen budget` prints the kernel memory of the paper's real setup.
+
+#[path = "../../src/fixture.rs"]
+mod fixture;
+#[path = "../../src/pipeline.rs"]
+mod pipeline;
+
+use fixture::*;
+use std::fmt::Write as _;
+use std::path::PathBuf;
+use vltm_kernel::{Config, Gate, Params, Point, Probe, RowBuffer, Scan, Target};
+
+fn dist(a: Point, b: Point) -> f64 {
+    (0..3)
+        .map(|i| (a[i] as f64 - b[i] as f64).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// Pulse std (m of path): 1.5 bins.
+const PULSE_SIGMA: f64 = 0.015;
+/// Peak counts of P1's direct return.
+const PEAK: f64 = 60.0;
+
+/// The fixture scan, `N_LASERS × N_SPADS × NT` counts (layout of scan.bin).
+fn simulate() -> Vec<u16> {
+    // (amplitude relative to PEAK, path length) of every return for laser l and SPAD s.
+    let paths = |l: Point, s: Point| -> [(f64, f64); 4] {
+        [
+            (1.0, dist(l, P1) + dist(P1, s)),
+            (0.6, dist(l, P2) + dist(P2, s)),
+            (0.5, dist(l, P1) + dist(P1, P2) + dist(P2, s)),
+            (0.5, dist(l, P2) + dist(P2, P1) + dist(P1, s)),
+        ]
+    };
+    let mut rng = 0x2545_f491_u32; // LCG for the background: 0, 1 or 2 counts per bin
+    let mut scan = Vec::with_capacity(N_LASERS * ROW);
+    for &l in &LASERS {
+        for &s in &SPADS {
+            let p = paths(l, s);
+            for n in 0..NT {
+                let t = T0 + n as f64 * DT;
+                let signal: f64 = p
+                    .iter()
+                    .map(|&(a, tau)| {
+                        a * PEAK * (-(t - tau).powi(2) / (2.0 * PULSE_SIGMA * PULSE_SIGMA)).exp()
+                    })
+                    .sum();
+                rng = rng.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                let bg = (rng >> 30) as f64 * 2.0 / 3.0; // 0, 0.67, 1.33, 2
+                scan.push((signal + bg).round() as u16);
+            }
+        }
+    }
+    scan
+}
+
+fn fixture(dir: PathBuf) {
+    let cfg = Config::try_new(&params()).expect("fixture params");
+    assert_eq!(
+        (cfg.bins(), cfg.n_fft()),
+        (BINS, N_FFT),
+        "update BINS / N_FFT in src/fixture.rs"
+    );
+    assert_eq!(Scan::tables_len(&cfg, N_SPADS), TABLES_LEN);
+    assert_eq!(RowBuffer::len(&cfg, N_SPADS), ROWBUF_LEN);
+    let diag_len = Probe::state_len(&cfg, Target::Diagonal, Gate::Gaussian, N_VOXELS, N_SPADS);
+    let col_len = Probe::state_len(
+        &cfg,
+        Target::Column(FOCUS),
+        Gate::Gaussian,
+        N_VOXELS,
+        N_SPADS,
+    );
+    let ho_len = Probe::state_len(&cfg, Target::Diagonal, Gate::HigherOrder, N_VOXELS, N_SPADS);
+    assert_eq!((diag_len, col_len, ho_len), (DIAG_LEN, COLUMN_LEN, HO_LEN));
+    assert_eq!(VOXELS[P1_VOXEL], P1);
+    assert_eq!(VOXELS[P2_VOXEL], P2);
+
+    let scan = simulate();
+    let bytes: Vec<u8> = scan.iter().flat_map(|c| c.to_le_bytes()).collect();
+    std::fs::create_dir_all(&dir).expect("mkdir");
+    std::fs::write(dir.join("scan.bin"), &bytes).expect("write scan.bin");
+
+    let (mut tables, mut row) = (vec![0.0f32; TABLES_LEN], vec![0.0f32; ROWBUF_LEN]);
+    let (mut d, mut c, mut p) = (
+        vec![0.0f64; DIAG_LEN],
+        vec![0.0f64; COLUMN_LEN],
+        vec![0.0f64; DIAG_LEN],
+    );
+    let mut r = pipeline::Results::ZERO;
+    let bufs = pipeline::Buffers {
+        tables: &mut tables,
+        row: &mut row,
+        diag: &mut d,
+        column: &mut c,
+        diag_photons: &mut p,
+    };
+    pipeline::run(&scan, bufs, &mut r).expect("pipeline");
+    let verdict = pipeline::verdict(&r);
+    assert_eq!(
+        verdict, 0,
+        "the fixture fails the firmware's own checks: {r:#?}"
+    );
+
+    let mut txt = String::new();
+    let photons: u64 = scan.iter().map(|&c| u64::from(c)).sum();
+    writeln!(
+        txt,
+        "# vltm-firmware fixture: T = |A|^2 from vltm-kernel on the host ({}), the firmware's pipeline.",
+        std::env::consts::ARCH
+    )
+    .unwrap();
+    writeln!(
+        txt,
+        "# scan.bin: {N_LASERS} lasers x {N_SPADS} SPADs x {NT} bins u16 LE, {} bytes, {photons} counts; \
+         lambda={WAVELENGTH} dt={DT} t0={T0} J={BINS} N={N_FFT}",
+        bytes.len()
+    )
+    .unwrap();
+    writeln!(
+        txt,
+        "# diag: Gaussian diagonal; col: Gaussian column T(P1, v); diag_photons: diagonal from photon events"
+    )
+    .unwrap();
+    for i in 0..N_VOXELS {
+        writeln!(
+            txt,
+            "RESULT voxel={i} diag={:e} col={:e} diag_photons={:e}",
+            r.diag[i], r.col[i], r.diag_photons[i]
+        )
+        .unwrap();
+    }
+    let rep = |name: &str, x: vltm_kernel::Report| {
+        format!(
+            "REPORT {name} rows={} non_finite={} dropped={} aliased={}",
+            x.rows, x.non_finite, x.dropped, x.aliased
+        )
+    };
+    writeln!(txt, "{}", rep("diag", r.report_diag)).unwrap();
+    writeln!(txt, "{}", rep("col", r.report_col)).unwrap();
+    writeln!(txt, "{}", rep("diag_photons", r.report_photons)).unwrap();
+    std::fs::write(dir.join("expected.txt"), &txt).expect("write expected.txt");
+    print!("{txt}");
+    eprintln!(
+        "wrote {} ({} bytes) and expected.txt; verdict {verdict}",
+        dir.join("scan.bin").display(),
+        bytes.len()
+    );
+}
+
+/// The paper's real setup (ICCV 2021 §6): 24 × 24 lasers, a 28-pixel SPAD line,
+/// Δt = 2.55 cm (85 ps), a 6.5 m window, λ = 0.13 m.
+pub fn real_params() -> Params {
+    let dt = 0.0255;
+    Params::new(0.13, (6.5f64 / dt).round() as usize, dt)
+}
+
+fn budget() {
+    let p = real_params();
+    let cfg = Config::try_new(&p).expect("real params");
+    let (ks, kv, kl) = (28usize, 64 * 64usize, 24 * 24usize);
+    let tables = 4 * Scan::tables_len(&cfg, ks);
+    let rowbuf = 4 * RowBuffer::len(&cfg, ks);
+    let hist = 2 * ks * cfg.nt();
+    let diag = Probe::state_bytes(&cfg, Target::Diagonal, Gate::Gaussian, kv, ks);
+    let col = Probe::state_bytes(
+        &cfg,
+        Target::Column([0.0, 0.0, 1.0]),
+        Gate::Gaussian,
+        kv,
+        ks,
+    );
+    let ho = Probe::state_bytes(
+        &cfg,
+        Target::Column([0.0, 0.0, 1.0]),
+        Gate::HigherOrder,
+        kv,
+        ks,
+    );
+    println!(
+        "real setup: {kl} lasers, Ks={ks}, Nt={}, dt={} m, lambda={} m, sigma={:.4} m: N={} J={} (k {}..={}), R={}",
+        cfg.nt(),
+        cfg.dt(),
+        cfg.wavelength(),
+        cfg.sigma(),
+        cfg.n_fft(),
+        cfg.bins(),
+        cfg.k_lo(),
+        cfg.k_hi(),
+        cfg.ho_support()
+    );
+    println!("| buffer | formula | bytes |");
+    println!("|---|---|---|");
+    println!("| band tables `Scan::tables_len` (f32) | 4·(2N + J + Ks) | {tables} |");
+    println!("| row buffer `RowBuffer::len` (f32) | 4·Ks·(2J + 3) | {rowbuf} |");
+    println!(
+        "| one row of u16 histograms (caller's, optional with photon events) | 2·Ks·Nt | {hist} |"
+    );
+    println!("| diagonal × Gaussian, 64×64 voxels `Probe::state_bytes` | 8·2Kv | {diag} |");
+    println!("| column × Gaussian, factorised `Probe::state_bytes` | 8·2J(Ks + 1) | {col} |");
+    println!("| (column × higher-order, 64×64 voxels) | 8·2(Kv + Nt + 1) | {ho} |");
+    println!(
+        "| total: tables + row buffer + histograms + diagonal + column | | {} |",
+        tables + rowbuf + hist + diag + col
+    );
+    println!(
+        "| voxel list (caller's, 12 B per voxel), 64×64 | 12·Kv | {} |",
+        12 * kv
+    );
+    println!(
+        "per row: band DFT Ks·J·Nt = {} MACs; diagonal Kv·Ks = {} (voxel, SPAD) pairs × J = {} band terms; column Ks·J = {} terms",
+        ks * cfg.bins() * cfg.nt(),
+        kv * ks,
+        kv * ks * cfg.bins(),
+        ks * cfg.bins()
+    );
+}
+
+fn main() {
+    let mut args = std::env::args().skip(1);
+    match args.next().as_deref() {
+        Some("fixture") => fixture(
+            args.next()
+                .map_or_else(|| PathBuf::from("../fixture"), PathBuf::from),
+        ),
+        Some("budget") => budget(),
+        _ => {
+            eprintln!("usage: vltm-firmware-gen fixture [DIR] | budget");
+            std::process::exit(2);
+        }
+    }
+}
