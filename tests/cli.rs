@@ -431,7 +431,7 @@ fn indirect_writes_a_gamma_masked_volume() {
     );
     print!("{out}");
     assert!(
-        out.contains("Γ: ") && out.contains("pairs with 0.3 <= |x_a - x_b|"),
+        out.contains("Γ: ") && out.contains("pairs with 0.300 <= |x_a - x_b|"),
         "{out}"
     );
     let v = npy(&f_npy, SHAPE);
