@@ -323,7 +323,8 @@ pub mod npz {
     }
 }
 
-/// Opens a capture file by its extension (`.npz`).
+/// Opens a capture file by its extension: `.npz` (vltm), `.ptu` (PicoQuant T3, with its
+/// sidecar `<same name>.json` describing rows, SPADs and time axis; see [`crate::ptu`]).
 ///
 /// # Errors
 /// [`Error::Argument`] for an unknown extension; read errors of the format.
@@ -335,9 +336,13 @@ pub fn open(path: &std::path::Path) -> Result<Capture> {
         .as_deref()
     {
         Some("npz") => npz::read(path),
+        Some("ptu") => crate::ptu::read_all(path, path.with_extension("json")),
         _ => Err(Error::arg(
             "CAPTURE",
-            format!("{}: unknown capture format (expected .npz)", path.display()),
+            format!(
+                "{}: unknown capture format (expected .npz or .ptu)",
+                path.display()
+            ),
         )),
     }
 }

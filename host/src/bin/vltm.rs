@@ -12,6 +12,14 @@ use vltm::ltm::{self, ColumnGate, Exec, IndirectOptions, Shell, Wave};
 use vltm::volume::{Volume, parse_point};
 use vltm_kernel::{Point, Weights};
 
+/// `println!` that ignores a closed stdout (`vltm info CAPTURE | head` must not panic).
+macro_rules! say {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($t)*);
+    }};
+}
+
 /// Virtual light transport matrices (LTM) of hidden scenes from non-line-of-sight captures
 /// (Marco et al., ICCV 2021).
 ///
@@ -48,6 +56,10 @@ enum Command {
         /// Output capture (.npz).
         #[arg(long)]
         out: PathBuf,
+        /// Also write the capture as a synthetic PicoQuant T3 photon stream (HydraHarp V2)
+        /// with its sidecar F.json (counts rounded to whole photons).
+        #[arg(long, value_name = "F.ptu")]
+        ptu: Option<PathBuf>,
     },
     /// Direct light: the LTM diagonal T(x_v, x_v) over a volume (3-vertex gate).
     Direct {
@@ -238,16 +250,21 @@ fn run(cmd: Command) -> Result<(), Failure> {
     match cmd {
         Command::Demo { out } => {
             let table = vltm::demo::run(&out)?;
-            print!("{table}");
+            let _ = std::io::Write::write_all(&mut std::io::stdout(), table.as_bytes());
             Ok(())
         }
         Command::Info { capture } => info(&capture),
-        Command::Simulate { scene, out } => {
+        Command::Simulate { scene, out, ptu } => {
             let s = vltm::sim::Scene::load(&scene)?;
             let c = s.render()?;
             capture::npz::write(&c, &out)?;
+            if let Some(p) = ptu {
+                let w = vltm::ptu::write_t3(&c, &p, &vltm::ptu::T3WriteOptions::default())?;
+                let side = w.sidecar_path.unwrap_or_else(|| p.with_extension("json"));
+                say!("wrote {} and its sidecar {}", p.display(), side.display());
+            }
             let g = &c.geometry;
-            println!(
+            say!(
                 "wrote {}: {} lasers x {} SPADs x {} bins (dt {} m, t0 {} m)",
                 out.display(),
                 g.lasers.len(),
@@ -340,7 +357,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
             let mut c = common.load(&capture)?;
             let o = ltm::indirect(&mut c, &volume, &opts, &common.wave(), exec())?;
             let n_gamma = o.gamma.iter().filter(|&&g| g).count();
-            println!(
+            say!(
                 "Γ: {n_gamma} of {} voxels above ε = {epsilon} of the direct maximum; pairs with {:.3} <= |x_a - x_b| < {:.3} m",
                 volume.len(),
                 o.shell.r0,
@@ -376,8 +393,8 @@ fn info(path: &Path) -> Result<(), Failure> {
             lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]
         )
     };
-    println!("capture      {}", path.display());
-    println!(
+    say!("capture      {}", path.display());
+    say!(
         "scan         {}",
         if g.confocal {
             "confocal"
@@ -385,25 +402,26 @@ fn info(path: &Path) -> Result<(), Failure> {
             "non-confocal"
         }
     );
-    println!(
+    say!(
         "lasers       {} = {}x{} ({})",
         kl,
         g.laser_shape[0],
         g.laser_shape[1],
         span(&g.lasers)
     );
-    println!(
+    say!(
         "SPADs        {} = {}x{} ({})",
         g.spads.len(),
         g.spad_shape[0],
         g.spad_shape[1],
         span(&g.spads)
     );
-    println!(
+    say!(
         "laser_xyz    {:?} m, sensor_xyz {:?} m",
-        g.laser_origin, g.sensor_origin
+        g.laser_origin,
+        g.sensor_origin
     );
-    println!(
+    say!(
         "time axis    {} bins x {} m from t0 = {} m to {} m; device legs {}",
         g.nt,
         g.dt,
@@ -425,12 +443,12 @@ fn info(path: &Path) -> Result<(), Failure> {
             bad += 1;
         }
     }
-    println!(
+    say!(
         "histograms   {} = {kl} x {ks} x {} values; sum {sum:.4e}, max {max:.4e}, non-zero {nonzero}, non-finite {bad}",
         c.data.len(),
         g.nt
     );
-    println!(
+    say!(
         "default λ    {:.4} m (twice the aperture pitch)",
         ltm::default_wavelength(g)
     );
@@ -451,7 +469,7 @@ fn summarize(
             |a, (i, &x)| if x > a.1 { (i, x) } else { a },
         );
     let p = volume.points.get(i).copied().unwrap_or_default();
-    println!(
+    say!(
         "{what}: {} voxels, {} rows in {seconds:.2} s (λ = {:.4} m, σ = {:.4} m, J = {}); peak {m:.4e} at ({:.3}, {:.3}, {:.3}) m",
         v.len(),
         report.rows,
@@ -494,7 +512,7 @@ fn write_outputs(
     if let Some(p) = npy {
         vltm::npy::write_f32(&p, v, &volume.shape)
             .with_context(|| format!("writing {}", p.display()))?;
-        println!("wrote {}", p.display());
+        say!("wrote {}", p.display());
     }
     if let Some(p) = png {
         match volume.axes {
@@ -510,7 +528,7 @@ fn write_outputs(
                 };
                 fig.write_png(&p)
                     .with_context(|| format!("writing {}", p.display()))?;
-                println!("wrote {}", p.display());
+                say!("wrote {}", p.display());
             }
             None => eprintln!("vltm: note: no figure for a point list (only for grid volumes)"),
         }
