@@ -324,7 +324,8 @@ pub mod npz {
 }
 
 /// Opens a capture file by its extension: `.npz` (vltm), `.ptu` (PicoQuant T3, with its
-/// sidecar `<same name>.json` describing rows, SPADs and time axis; see [`crate::ptu`]).
+/// sidecar `<same name>.json` describing rows, SPADs and time axis; see [`crate::ptu`]),
+/// `.hdf5` / `.h5` (y-tal `HDF5_TAL`, [`crate::tal::read_all`]).
 ///
 /// # Errors
 /// [`Error::Argument`] for an unknown extension; read errors of the format.
@@ -337,10 +338,11 @@ pub fn open(path: &std::path::Path) -> Result<Capture> {
     {
         Some("npz") => npz::read(path),
         Some("ptu") => crate::ptu::read_all(path, path.with_extension("json")),
+        Some("hdf5" | "h5") => crate::tal::read_all(path),
         _ => Err(Error::arg(
             "CAPTURE",
             format!(
-                "{}: unknown capture format (expected .npz or .ptu)",
+                "{}: unknown capture format (expected .npz, .ptu, .hdf5 or .h5)",
                 path.display()
             ),
         )),

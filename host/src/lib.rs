@@ -5,6 +5,7 @@
 //! * [`volume`]: voxel grids (`SPEC`) and point lists.
 //! * [`ltm`]: the high-level probes (direct, column, in-focus indirect), multi-threaded.
 //! * [`demo`]: the built-in scene of `vltm demo`.
+//! * [`tal`]: y-tal / mitransient `HDF5_TAL` captures, streamed by laser row.
 //! * [`figure`], [`npy`]: maximum-intensity-projection PNGs and `.npy` volumes.
 
 pub mod capture;
@@ -15,6 +16,7 @@ pub mod ltm;
 pub mod npy;
 pub mod ptu;
 pub mod sim;
+pub mod tal;
 pub mod volume;
 
 pub use error::{Error, Result};
