@@ -6,7 +6,7 @@ use anyhow::Context;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use vltm::capture::{self, Capture};
+use vltm::capture::{self, RowSource};
 use vltm::figure::Figure;
 use vltm::ltm::{self, ColumnGate, Exec, IndirectOptions, Shell, Wave};
 use vltm::volume::{Volume, parse_point};
@@ -166,12 +166,19 @@ impl Common {
         }
     }
 
-    fn load(&self, path: &Path) -> vltm::Result<Capture> {
-        let c = capture::open(path)?;
+    /// The capture as a row source: y-tal HDF5 files are streamed row by row (memory
+    /// O(Ks·Nt)); other formats, and `--swap-roles` (a transpose), are read into memory.
+    fn load(&self, path: &Path) -> vltm::Result<Box<dyn RowSource>> {
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
         if self.swap_roles {
-            ltm::swap_roles(&c)
+            Ok(Box::new(ltm::swap_roles(&capture::open(path)?)?))
+        } else if matches!(ext.as_deref(), Some("hdf5" | "h5")) {
+            Ok(Box::new(vltm::tal::open(path)?))
         } else {
-            Ok(c)
+            Ok(Box::new(capture::open(path)?))
         }
     }
 }
@@ -278,7 +285,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
         Command::Direct { capture, common } => {
             let volume = Volume::parse(&common.volume)?;
             let mut c = common.load(&capture)?;
-            let o = ltm::direct(&mut c, &volume, &common.wave(), exec())?;
+            let o = ltm::direct(&mut *c, &volume, &common.wave(), exec())?;
             summarize(
                 "direct", &o.values, &volume, o.seconds, &o.report, &o.config,
             );
@@ -305,7 +312,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 GateArg::None => ColumnGate::None,
             };
             let mut c = common.load(&capture)?;
-            let o = ltm::column(&mut c, a, &volume, g, shell, &common.wave(), exec())?;
+            let o = ltm::column(&mut *c, a, &volume, g, shell, &common.wave(), exec())?;
             summarize(
                 "column", &o.values, &volume, o.seconds, &o.report, &o.config,
             );
@@ -355,7 +362,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 ..Default::default()
             };
             let mut c = common.load(&capture)?;
-            let o = ltm::indirect(&mut c, &volume, &opts, &common.wave(), exec())?;
+            let o = ltm::indirect(&mut *c, &volume, &opts, &common.wave(), exec())?;
             let n_gamma = o.gamma.iter().filter(|&&g| g).count();
             say!(
                 "Γ: {n_gamma} of {} voxels above ε = {epsilon} of the direct maximum; pairs with {:.3} <= |x_a - x_b| < {:.3} m",
@@ -363,7 +370,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 o.shell.r0,
                 o.shell.r1
             );
-            let cfg = common.wave().config(&c.geometry)?;
+            let cfg = common.wave().config(c.geometry())?;
             summarize("indirect", &o.values, &volume, o.seconds, &o.report, &cfg);
             write_outputs(
                 &common,
@@ -422,7 +429,7 @@ fn info(path: &Path) -> Result<(), Failure> {
         g.sensor_origin
     );
     say!(
-        "time axis    {} bins x {} m from t0 = {} m to {} m; device legs {}",
+        "time axis    {} bins x {} m from t0 = {} m to {:.4} m; device legs {}",
         g.nt,
         g.dt,
         g.t0,
