@@ -48,14 +48,26 @@ fixture_up_to_date() {
     echo "fixture/ is stale (the host kernel's numbers changed): regenerate with" \
          "'cd kernel/firmware/gen && cargo run --release -- fixture' and review the diff"
     diff "$out/expected.txt" fixture/expected.txt | head -20; rm -rf "$out"; return 1; }
+  cmp "$out/expected_fixed.txt" fixture/expected_fixed.txt || {
+    echo "fixture/expected_fixed.txt is stale (the host's fixed-point numbers changed): regenerate"
+    diff "$out/expected_fixed.txt" fixture/expected_fixed.txt | head -20; rm -rf "$out"; return 1; }
   rm -rf "$out"
 }
-step "fixture: host kernel (x86) reproduces fixture/expected.txt" fixture_up_to_date
+step "fixture: host kernel (x86) reproduces fixture/expected.txt and expected_fixed.txt" fixture_up_to_date
 
 for t in $M4 $M0; do
   m=$([ $t = $M4 ] && echo m4f || echo m0)
   step "text firmware $t: build" fw --target $t --bin vltm-firmware
   step "text firmware on $m: verdict 0, numbers = host" ./run-qemu.sh $m text "$(elf $t vltm-firmware)"
+done
+
+# The fixed-point path (integer per-bin arithmetic, IEEE soft-float seeds): bit-identical to
+# the host on both ISAs, hence VLTM_FW_RTOL=0.
+for t in $M0 $M4; do
+  m=$([ $t = $M4 ] && echo m4f || echo m0)
+  step "fixed-point firmware $t: build" fw --target $t --features fixed --bin vltm-firmware-fixed
+  step "fixed-point firmware on $m: verdict 0, bit-identical to host" env VLTM_FW_RTOL=0 \
+    VLTM_FW_EXPECTED="$here/fixture/expected_fixed.txt" ./run-qemu.sh $m text "$(elf $t vltm-firmware-fixed)"
 done
 
 negative() { # a host value changed by 1.1e-6 of its maximum must be reported
@@ -83,6 +95,12 @@ for t in $M4 $M0; do
     --features nopanic --bin vltm-firmware-nopanic
   step "no-panic firmware on $m: exit 0" ./run-qemu.sh $m status "$(elf $t vltm-firmware-nopanic)"
 done
+for t in $M4 $M0; do
+  m=$([ $t = $M4 ] && echo m4f || echo m0)
+  step "no-panic proof, fixed-point path, $t: links with panic-never" fw --target $t \
+    --no-default-features --features nopanic --bin vltm-firmware-fixed-nopanic
+  step "no-panic fixed-point firmware on $m: exit 0" ./run-qemu.sh $m status "$(elf $t vltm-firmware-fixed-nopanic)"
+done
 canary() { # the same bin with one panicking index must fail to link, with panic-never's message
   local log; log=$(mktemp)
   if cargo build -q --release --target $M4 --no-default-features --features nopanic,panic-canary \
@@ -102,7 +120,7 @@ size=$(command -v arm-none-eabi-size || true)
 if [ -x "$size" ]; then
   echo "== sizes ($(basename "$size"); text = flash incl. the 16 KB scan, bss = static RAM)"
   for t in $M4 $M0; do
-    for b in vltm-firmware vltm-firmware-defmt vltm-firmware-nopanic; do
+    for b in vltm-firmware vltm-firmware-defmt vltm-firmware-nopanic vltm-firmware-fixed vltm-firmware-fixed-nopanic; do
       [ -f "$(elf $t $b)" ] && "$size" "$(elf $t $b)" | tail -1 | awk -v t=$t -v b=$b '{printf "   %-22s %-22s text %7d data %5d bss %6d\n", t, b, $1, $2, $3}'
     done
   done

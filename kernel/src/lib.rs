@@ -3,11 +3,18 @@
 
 mod config;
 mod error;
+mod fixed;
 mod probe;
 mod sample;
 mod scan;
 mod trig;
 
+pub use self::fixed::{
+    CIS_ERR, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedRow, FixedRowBuffer,
+    FixedScan, cis_q15,
+};
+/// The Q1.15 type of the fixed-point tables (from the `fixed` crate 1.31).
+pub use ::fixed::types::I1F15;
 pub use config::{Config, Legs, Params, Point, Weights};
 pub use error::{ConfigError, Error};
 pub use num_complex;

@@ -2,6 +2,7 @@
 //! in `static` memory. See README.md.
 #![no_std]
 
+pub mod fixed_pipeline;
 pub mod fixture;
 pub mod pipeline;
 

@@ -7,6 +7,8 @@
 //!   `../fixture` (run from `gen/`).
 //! * `vltm-firmware-gen budget` prints the kernel memory of the paper's real setup.
 
+#[path = "../../src/fixed_pipeline.rs"]
+mod fixed_pipeline;
 #[path = "../../src/fixture.rs"]
 mod fixture;
 #[path = "../../src/pipeline.rs"]
@@ -148,6 +150,7 @@ fn fixture(dir: PathBuf) {
     writeln!(txt, "{}", rep("col", r.report_col)).unwrap();
     writeln!(txt, "{}", rep("diag_photons", r.report_photons)).unwrap();
     std::fs::write(dir.join("expected.txt"), &txt).expect("write expected.txt");
+    fixed_fixture(&dir, &scan, &r);
     print!("{txt}");
     eprintln!(
         "wrote {} ({} bytes) and expected.txt; verdict {verdict}",
@@ -237,4 +240,64 @@ fn main() {
             std::process::exit(2);
         }
     }
+}
+
+/// `expected_fixed.txt`: the fixed-point pipeline on the host (the M0 firmware must print the
+/// same numbers), checked against the float pipeline's `r` first.
+fn fixed_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results) {
+    use fixed_pipeline::*;
+    let mut tables = vec![vltm_kernel::I1F15::ZERO; FIXED_TABLES_LEN];
+    let (mut row, mut d, mut c) = (
+        vec![0i32; FIXED_ROW_LEN],
+        vec![0i64; FIXED_DIAG_LEN],
+        vec![0i64; FIXED_COLUMN_LEN],
+    );
+    let mut f = FixedResults::ZERO;
+    let bufs = FixedBuffers {
+        tables: &mut tables,
+        row: &mut row,
+        diag: &mut d,
+        column: &mut c,
+    };
+    run_fixed(scan, bufs, &mut f).expect("fixed pipeline");
+    assert_eq!(
+        verdict_fixed(&f),
+        0,
+        "fixed pipeline fails its checks: {f:#?}"
+    );
+    // |√T_fixed − √T_float| relative to the largest amplitude: the quantisation of
+    // tests/fixed_point.rs, well below 1e-3 here.
+    let rel = |a: &[f64], b: &[f64]| {
+        let big = b.iter().fold(0.0f64, |m, x| m.max(x.sqrt()));
+        a.iter()
+            .zip(b)
+            .fold(0.0f64, |m, (x, y)| m.max((x.sqrt() - y.sqrt()).abs() / big))
+    };
+    let (ed, ec) = (rel(&f.diag, &r.diag), rel(&f.col, &r.col));
+    assert!(
+        ed < 1e-3 && ec < 1e-3,
+        "fixed vs float: diag {ed:e}, col {ec:e}"
+    );
+    let mut txt = String::new();
+    writeln!(
+        txt,
+        "# vltm-firmware fixed-point fixture: T = |A|^2 from the kernel's fixed-point path on the host ({}).",
+        std::env::consts::ARCH
+    )
+    .unwrap();
+    writeln!(
+        txt,
+        "# same scan.bin; max |sqrt(T_fixed) - sqrt(T_float)| / max sqrt(T_float): diag {ed:.2e}, col {ec:.2e}"
+    )
+    .unwrap();
+    for i in 0..N_VOXELS {
+        writeln!(
+            txt,
+            "RESULT voxel={i} diag={:e} col={:e}",
+            f.diag[i], f.col[i]
+        )
+        .unwrap();
+    }
+    std::fs::write(dir.join("expected_fixed.txt"), &txt).expect("write expected_fixed.txt");
+    print!("{txt}");
 }

@@ -1,0 +1,113 @@
+//! The fixture scan through the kernel's **fixed-point** path (`vltm_kernel::Fixed*`, for
+//! MCUs without an FPU): Gaussian diagonal and factorised Gaussian column from the `u16`
+//! histograms. Shared word for word by the firmware (bin `vltm-firmware-fixed`) and the host
+//! generator (`gen`, which writes `fixture/expected_fixed.txt`), like `pipeline.rs`.
+//!
+//! The per-bin arithmetic is integer; distances, weights and phase seeds are IEEE `f32`/`f64`
+//! (soft float on the M0), so the firmware reproduces the host bit for bit.
+
+use crate::fixture::{BINS, N_FFT};
+use crate::fixture::{FOCUS, LASERS, N_LASERS, N_SPADS, N_VOXELS, ROW, SPADS, VOXELS, params};
+use crate::pipeline::Failure;
+use vltm_kernel::{
+    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedRowBuffer, FixedScan, I1F15,
+};
+
+/// Headroom budget of the fixture: its 16 rows, 4 SPADs, legs ≥ 0.3 m (voxels at z ≥ 0.35 m).
+pub const LIMITS: FixedLimits = FixedLimits::new(N_LASERS as u32, N_SPADS as u32, 0.3);
+/// `FixedScan::tables_len`: `2N + J` Q1.15.
+pub const FIXED_TABLES_LEN: usize = 2 * N_FFT + BINS;
+/// `FixedRowBuffer::len`: `Ks·(2J + 1)` `i32`.
+pub const FIXED_ROW_LEN: usize = N_SPADS * (2 * BINS + 1);
+/// `FixedDiagonal::state_len`: `2Kv` `i64`.
+pub const FIXED_DIAG_LEN: usize = 2 * N_VOXELS;
+/// `FixedColumn::state_len`: `2·Ks·J` `i64`.
+pub const FIXED_COLUMN_LEN: usize = 2 * N_SPADS * BINS;
+
+/// Caller-owned buffers of the fixed-point pipeline.
+pub struct FixedBuffers<'a> {
+    /// Q1.15 tables.
+    pub tables: &'a mut [I1F15],
+    /// Row spectra.
+    pub row: &'a mut [i32],
+    /// Diagonal accumulators.
+    pub diag: &'a mut [i64],
+    /// Column state.
+    pub column: &'a mut [i64],
+}
+
+/// Intensities `T = |A|²` of the fixed-point pipeline.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct FixedResults {
+    /// Gaussian diagonal.
+    pub diag: [f64; N_VOXELS],
+    /// Gaussian column `T(FOCUS, v)`.
+    pub col: [f64; N_VOXELS],
+    /// Rows accumulated by each probe; aliased voxels of the column.
+    pub rows: [u32; 2],
+    /// Column voxels outside the alias-free range.
+    pub aliased: usize,
+}
+
+impl FixedResults {
+    /// All zeros.
+    pub const ZERO: Self = Self {
+        diag: [0.0; N_VOXELS],
+        col: [0.0; N_VOXELS],
+        rows: [0; 2],
+        aliased: 0,
+    };
+}
+
+/// Runs the fixture scan through the fixed-point path.
+///
+/// # Errors
+/// [`Failure`] if the configuration, the budget or a buffer is rejected.
+pub fn run_fixed(
+    scan_data: &[u16],
+    b: FixedBuffers<'_>,
+    out: &mut FixedResults,
+) -> Result<(), Failure> {
+    let cfg = Config::try_new(&params()).map_err(Failure::Config)?;
+    let fc = FixedConfig::try_new(&cfg, &LIMITS).map_err(Failure::Config)?;
+    if cfg.bins() != BINS || cfg.n_fft() != N_FFT {
+        return Err(Failure::Sizes);
+    }
+    if scan_data.len() != N_LASERS * ROW {
+        return Err(Failure::ScanData);
+    }
+    let scan = FixedScan::new(&fc, &SPADS, b.tables)?;
+    let mut rows = FixedRowBuffer::new(&scan, b.row)?;
+    let mut diag = FixedDiagonal::new(&VOXELS, b.diag)?;
+    let mut col = FixedColumn::new(&scan, FOCUS, b.column)?;
+    for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
+        let row = rows.load(&scan, laser, hists)?;
+        diag.push_row(&scan, &row)?;
+        col.push_row(&scan, &row)?;
+    }
+    diag.finish(&fc, &mut out.diag)?;
+    out.aliased = col.finish(&scan, &VOXELS, &mut out.col)?;
+    out.rows = [diag.rows(), col.rows()];
+    Ok(())
+}
+
+/// The fixed-point firmware's own checks (0 = passed): 3 / 4 as `pipeline::verdict` (the
+/// diagonal peaks at P1, the column in the slice at P2), 6 if rows ≠ 16 or voxels aliased.
+pub fn verdict_fixed(r: &FixedResults) -> i32 {
+    use crate::fixture::{P1_VOXEL, P2_VOXEL, SLICE};
+    use crate::pipeline::argmax;
+    if argmax(&r.diag) != P1_VOXEL {
+        return 3;
+    }
+    let mut slice = [0.0f64; SLICE];
+    for ((s, c), i) in slice.iter_mut().zip(r.col).zip(0..) {
+        *s = if i == P1_VOXEL { 0.0 } else { c };
+    }
+    if argmax(&slice) != P2_VOXEL {
+        return 4;
+    }
+    if r.rows != [N_LASERS as u32; 2] || r.aliased != 0 {
+        return 6;
+    }
+    0
+}

@@ -1,0 +1,469 @@
+//! The fixed-point path (`vltm_kernel::Fixed*`, kernel/src/fixed.rs) against the `f64`
+//! time-domain reference (`reference/mod.rs`) and against the float kernel, on random small
+//! scans of `u16` counts: the Gaussian diagonal and the factorised Gaussian column.
+//!
+//! # Tolerance (amplitudes; `|√T_k − |A_r|| ≤ |A_k − A_r|` is compared)
+//!
+//! With `S = Σ_l Σ_s w_l w_s Σ_n |H_ls[n]|` (the element's scale, `Reference::scale`) and
+//! `W = Σ_l Σ_s w_l w_s`, the fixed path computes, per (l, s),
+//! `Z = Σ_j ĝ_j·p_j·c_j·D_j` where `D_j = Σ_n h_n·W_{k_j n}` (Q15 twiddles), `ĝ_j` the Q15 gate
+//! weight (× Ĝ_max), `p_j` the leg phase and `c_j` the path phase (NCO, Q15). First-order
+//! error terms, each a worst case with all errors aligned:
+//!
+//! 1. twiddles, ≤ 2⁻¹⁵ per component: `|ΔD_j| ≤ √2·2⁻¹⁵·Σ|h|`, through `Σ_j Ĝ_j = G`:
+//!    `√2·2⁻¹⁵·G·Σ|h|`;
+//! 2. gate weights, `|Δĝ_j| ≤ 2⁻¹⁵` (× Ĝ_max): `J·Ĝ_max·2⁻¹⁵·Σ|h|`;
+//! 3. NCO cos/sin, ≤ `CIS_ERR` = 1.2·2⁻¹⁵ per component, two factors (p and c; three for
+//!    the column, whose projector leg has its own phase): `3·√2·CIS_ERR·G·Σ|h|`;
+//! 4. phase steps rounded to 2⁻³² turns, `|k| ≤ k_max` steps from the exact `k·step`:
+//!    `3·2π·k_max·2⁻³³·G·Σ|h|` rad;
+//! 5. `HG` rounded to ½ LSB per component (`hg_lsb` counts), `J` of them, and the band sum
+//!    rounded once more: `(J + 1)·(√2/2)·hg_lsb` — an absolute term per (l, s), × `w_l w_s`;
+//! 6. the weighted term rounded into the accumulator: diagonal `(√2/2)·diag_lsb` per (l, s);
+//!    column `(√2/2)·column_lsb` per (l, s, j), × `w_s` at the finish.
+//!
+//! Summed over (l, s) with the weights: `ε_q·S + W·(J + 1)·(√2/2)·hg_lsb + (last term)`,
+//! `ε_q = √2·2⁻¹⁵·G + J·Ĝ_max·2⁻¹⁵ + 3√2·CIS_ERR·G + 3π·k_max·2⁻³²·G`. The distances, the
+//! `1/d` weights and the phase-step seeds are `f32`/`f64` as in the float path, whose own
+//! terms are added unchanged (tests/proptest_kernel.rs): `ε_f32 = u·(2πΦ + J + Nt + 64)`,
+//! band truncation `erfc(m/√2)`, guard and periodisation `2e^{−c_g²/2}`.
+//! So `tol = (ε_q + ε_f32 + erfc(m/√2) + 2e^{−c_g²/2})·S + atol`. With G ≈ 1 and J·Ĝ_max ≈ 3,
+//! ε_q ≈ 1.9e-4: the fixed path is ~2⁻¹² of the element's scale, against ~1e-6 for `f32`.
+//!
+//! The statistical test (STYLE §8.24) compares fixed with float on the same band algorithm,
+//! which isolates the quantisation: independent roundings uniform in ±e add in quadrature,
+//! so the RMS of `M` of them is `e·√(M/3)` against the worst case `M·e`: the RMS of
+//! `|A_fixed − A_float| / bound` must be ≤ 1/√3, and is in fact far smaller.
+
+mod reference;
+mod support;
+
+use num_complex::Complex64;
+use proptest::prelude::*;
+use proptest::test_runner::{FileFailurePersistence, RngAlgorithm, RngSeed};
+use reference::{Reference, p64};
+use support::{Data, all_rows, run};
+use vltm_kernel::{
+    CIS_ERR, Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedRowBuffer,
+    FixedScan, Gate, I1F15, Params, Point, Target, Weights,
+};
+
+const SEED: u64 = 0xf1ed_0015_c0de_0005;
+const U32: f64 = f32::EPSILON as f64 / 2.0;
+const MIN_DISTANCE: f64 = 0.25;
+
+#[derive(Clone, Debug)]
+struct Case {
+    lasers: Vec<Point>,
+    spads: Vec<Point>,
+    voxels: Vec<Point>,
+    focus: Point,
+    nt: usize,
+    dt: f64,
+    lambda_over_dt: f64,
+    m: f64,
+    cg: f64,
+    inv: bool,
+    /// 0: noise + returns; 1: every bin 65535 (the budget's edge).
+    saturated: bool,
+    seed: u64,
+    pos: f64,
+}
+
+fn wall() -> impl Strategy<Value = Point> {
+    (-1.0f32..=1.0, -1.0f32..=1.0).prop_map(|(x, y)| [x, y, 0.0])
+}
+
+fn hidden() -> impl Strategy<Value = Point> {
+    // z ≥ 0.3: every leg is longer than MIN_DISTANCE, so the weights equal the float path's.
+    (-1.0f32..=1.0, -1.0f32..=1.0, 0.3f32..=1.5).prop_map(|(x, y, z)| [x, y, z])
+}
+
+prop_compose! {
+    fn case()(
+        lasers in prop::collection::vec(wall(), 1..=5),
+        spads in prop::collection::vec(wall(), 1..=5),
+        voxels in prop::collection::vec(hidden(), 1..=4),
+        focus in hidden(),
+        nt in 16usize..=300,
+        dt in 0.005f64..=0.04,
+        lambda_over_dt in 8.0f64..=20.0,
+        m in 4.0f64..=6.5,
+        cg in 4.5f64..=6.5,
+        inv in any::<bool>(),
+        saturated in prop::bool::weighted(0.1),
+        seed in any::<u64>(),
+        pos in 0.0f64..=1.0,
+    ) -> Case {
+        Case { lasers, spads, voxels, focus, nt, dt, lambda_over_dt, m, cg, inv, saturated, seed, pos }
+    }
+}
+
+/// SplitMix64.
+struct Rng(u64);
+
+impl Rng {
+    fn next_u64(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+    fn f(&mut self) -> f64 {
+        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+impl Case {
+    fn params(&self, t0: f64) -> Params {
+        Params {
+            band_half_width: self.m,
+            gate_support: self.cg,
+            t0,
+            weights: if self.inv { Weights::Inv } else { Weights::One },
+            ..Params::new(self.lambda_over_dt * self.dt, self.nt, self.dt)
+        }
+    }
+
+    /// Parameters (window over the diagonal paths) and histograms `[(l·Ks + s)·Nt + n]`.
+    fn prepare(&self) -> (Params, Vec<u16>) {
+        let (kl, ks, nt) = (self.lasers.len(), self.spads.len(), self.nt);
+        let geo = Reference::new(
+            &self.params(0.0),
+            &self.lasers,
+            &self.spads,
+            vec![0.0; kl * ks * nt],
+        );
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for v in &self.voxels {
+            let (a, b) = geo.tau_range(&p64(*v), &p64(*v));
+            (lo, hi) = (lo.min(a), hi.max(b));
+        }
+        let window = (nt - 1) as f64 * self.dt;
+        let t0 = lo + 0.5 * (hi - lo) - self.pos * window;
+        if self.saturated {
+            return (self.params(t0), vec![u16::MAX; kl * ks * nt]);
+        }
+        let mut rng = Rng(self.seed);
+        let mut h: Vec<f64> = (0..kl * ks * nt).map(|_| (3.0 * rng.f()).floor()).collect();
+        let geo = Reference { t0, ..geo };
+        let (v, b, a) = (
+            p64(self.voxels[0]),
+            p64(*self.voxels.last().unwrap()),
+            p64(self.focus),
+        );
+        for l in 0..kl {
+            for s in 0..ks {
+                for (tau, amp) in [
+                    (geo.tau(l, s, &v, &v), 2000.0),
+                    (geo.tau(l, s, &a, &b), 600.0),
+                ] {
+                    let bin = ((tau - t0) / self.dt).round();
+                    if bin >= 0.0 && bin < nt as f64 {
+                        h[(l * ks + s) * nt + bin as usize] += amp;
+                    }
+                }
+            }
+        }
+        (self.params(t0), h.iter().map(|&x| x as u16).collect())
+    }
+}
+
+/// `p` with the margin widened until every column path time is alias-free.
+fn alias_free(p: Params, r: &Reference, focus: Point, voxels: &[Point]) -> Params {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    for v in voxels {
+        let (a, b) = r.tau_range(&p64(focus), &p64(*v));
+        (lo, hi) = (lo.min(a), hi.max(b));
+    }
+    let (af_lo, af_hi) = Config::try_new(&p).unwrap().alias_free();
+    let need = (af_lo - (lo - p.t0)).max((hi - p.t0) - af_hi);
+    if need > 0.0 {
+        Params {
+            margin: p.margin + need + 2.0 * p.dt,
+            ..p
+        }
+    } else {
+        p
+    }
+}
+
+/// Fixed-point amplitudes `|A|` (diagonal if `focus` is None, else the column).
+fn run_fixed(
+    fc: &FixedConfig,
+    lasers: &[Point],
+    spads: &[Point],
+    hists: &[u16],
+    voxels: &[Point],
+    focus: Option<Point>,
+) -> (Vec<f64>, Vec<Complex64>) {
+    let nt = fc.config().nt();
+    let mut tables = vec![I1F15::ZERO; FixedScan::tables_len(fc)];
+    let scan = FixedScan::new(fc, spads, &mut tables).unwrap();
+    let mut buf = vec![0i32; FixedRowBuffer::len(fc, spads.len())];
+    let mut rows = FixedRowBuffer::new(&scan, &mut buf).unwrap();
+    let mut out = vec![0.0; voxels.len()];
+    let len = spads.len() * nt;
+    match focus {
+        None => {
+            let mut st = vec![0i64; FixedDiagonal::state_len(voxels.len())];
+            let mut d = FixedDiagonal::new(voxels, &mut st).unwrap();
+            for (l, x_l) in lasers.iter().enumerate() {
+                let row = rows
+                    .load(&scan, *x_l, &hists[l * len..(l + 1) * len])
+                    .unwrap();
+                d.push_row(&scan, &row).unwrap();
+            }
+            // The budget is exhausted: one more row is refused.
+            let row = rows.load(&scan, lasers[0], &hists[..len]).unwrap();
+            assert!(d.push_row(&scan, &row).is_err());
+            d.finish(fc, &mut out).unwrap();
+            let lsb = fc.diag_lsb();
+            let z = d
+                .raw()
+                .chunks_exact(2)
+                .map(|a| Complex64::new(a[0] as f64 * lsb, a[1] as f64 * lsb))
+                .collect();
+            return (out.iter().map(|t| t.sqrt()).collect(), z);
+        }
+        Some(a) => {
+            let mut st = vec![0i64; FixedColumn::state_len(fc, spads.len())];
+            let mut c = FixedColumn::new(&scan, a, &mut st).unwrap();
+            for (l, x_l) in lasers.iter().enumerate() {
+                let row = rows
+                    .load(&scan, *x_l, &hists[l * len..(l + 1) * len])
+                    .unwrap();
+                c.push_row(&scan, &row).unwrap();
+            }
+            let aliased = c.finish(&scan, voxels, &mut out).unwrap();
+            assert_eq!(aliased, 0);
+        }
+    }
+    (out.iter().map(|t| t.sqrt()).collect(), Vec::new())
+}
+
+/// One element's comparison.
+#[derive(Debug, Clone, Copy)]
+struct Cmp {
+    /// `|A_fixed − A_ref|`, `|A_fixed − A_float|`.
+    err_ref: f64,
+    err_float: f64,
+    /// Full tolerance vs the reference; quantisation-only bound vs the float path.
+    tol: f64,
+    tol_q: f64,
+    scale: f64,
+    /// Diagonal only: `arg(A_fixed / A_ref)` (rad) and `|A_ref| / S`.
+    phase: Option<(f64, f64)>,
+}
+
+fn compare(case: &Case) -> Vec<Cmp> {
+    compare_shifted(case, 0.0)
+}
+
+/// As [`compare`], with the kernels' (fixed and float) `t0` moved by `dt0` — a mistake the
+/// tolerance must detect — while the reference keeps the true `t0`.
+fn compare_shifted(case: &Case, dt0: f64) -> Vec<Cmp> {
+    let (p, hists) = case.prepare();
+    let h64: Vec<f64> = hists.iter().map(|&x| f64::from(x)).collect();
+    let truth = Reference::new(&p, &case.lasers, &case.spads, h64);
+    let mut out = Vec::new();
+    for column in [false, true] {
+        let p = if column {
+            alias_free(p, &truth, case.focus, &case.voxels)
+        } else {
+            p
+        };
+        let truth_p = p;
+        let p = Params {
+            t0: p.t0 + dt0,
+            ..p
+        };
+        let cfg = Config::try_new(&p).unwrap();
+        let limits = FixedLimits::new(
+            case.lasers.len() as u32,
+            case.spads.len() as u32,
+            MIN_DISTANCE,
+        );
+        let fc = FixedConfig::try_new(&cfg, &limits).unwrap();
+        let (target, focus) = if column {
+            (Target::Column(case.focus), Some(case.focus))
+        } else {
+            (Target::Diagonal, None)
+        };
+        let (fixed, z_fixed) =
+            run_fixed(&fc, &case.lasers, &case.spads, &hists, &case.voxels, focus);
+        let data = Data {
+            lasers: &case.lasers,
+            spads: &case.spads,
+            hists: &hists,
+        };
+        let (t_float, _) = run(
+            &cfg,
+            data,
+            target,
+            Gate::Gaussian,
+            &case.voxels,
+            &all_rows(case.lasers.len()),
+        );
+        let amps = match focus {
+            None => truth.diagonal(reference::Gate::Gaussian, &case.voxels),
+            Some(a) => truth.column(reference::Gate::Gaussian, a, &case.voxels),
+        };
+        // Error model of the module docs.
+        let j = cfg.bins() as f64;
+        let g: f64 = (0..cfg.bins()).map(|j| cfg.gate_weight(j)).sum();
+        let k_max = cfg.k_lo().abs().max(cfg.k_hi().abs()) as f64;
+        let eps_q = std::f64::consts::SQRT_2 * 2f64.powi(-15) * g
+            + j * fc.gate_max() * 2f64.powi(-15)
+            + 3.0 * std::f64::consts::SQRT_2 * CIS_ERR * g
+            + 3.0 * std::f64::consts::PI * k_max * 2f64.powi(-32) * g;
+        let nu_max = (0..cfg.bins())
+            .map(|j| cfg.nu(j).abs())
+            .fold(cfg.omega(), f64::max);
+        let h_half = std::f64::consts::FRAC_1_SQRT_2;
+        let (kl, ks) = (case.lasers.len() as f64, case.spads.len() as f64);
+        for (i, v) in case.voxels.iter().enumerate() {
+            let a = focus.unwrap_or(*v);
+            let (pa, pb) = (p64(a), p64(*v));
+            let s_ab = truth.scale(&pa, &pb);
+            let w_sum: f64 = truth
+                .lasers
+                .iter()
+                .flat_map(|xl| truth.spads.iter().map(move |xs| (xl, xs)))
+                .map(|(xl, xs)| {
+                    truth.w(reference::dist(xl, &pa)) * truth.w(reference::dist(&pb, xs))
+                })
+                .sum();
+            let ws_sum: f64 = truth
+                .spads
+                .iter()
+                .map(|xs| truth.w(reference::dist(&pb, xs)))
+                .sum();
+            let (_, tau_max) = truth.tau_range(&pa, &pb);
+            let turns = nu_max * (tau_max.abs() + truth_p.t0.abs()) / (2.0 * std::f64::consts::PI);
+            let eps_f32 = U32 * (2.0 * std::f64::consts::PI * turns + j + cfg.nt() as f64 + 64.0);
+            let tail = reference::erfc(p.band_half_width / 2f64.sqrt())
+                + 2.0 * (-p.gate_support.powi(2) / 2.0).exp();
+            let atol = w_sum * (j + 1.0) * h_half * fc.hg_lsb()
+                + if column {
+                    ws_sum * kl * j * h_half * fc.column_lsb()
+                } else {
+                    kl * ks * h_half * fc.diag_lsb()
+                };
+            out.push(Cmp {
+                err_ref: (fixed[i] - amps[i].norm()).abs(),
+                err_float: (fixed[i] - t_float[i].sqrt()).abs(),
+                tol: (eps_q + eps_f32 + tail) * s_ab + atol,
+                tol_q: (eps_q + 2.0 * eps_f32) * s_ab + atol,
+                scale: s_ab,
+                phase: z_fixed
+                    .get(i)
+                    .map(|z| ((z / amps[i]).arg(), amps[i].norm() / s_ab)),
+            });
+        }
+    }
+    out
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig {
+        cases: 256,
+        rng_algorithm: RngAlgorithm::ChaCha,
+        rng_seed: RngSeed::Fixed(SEED),
+        failure_persistence: Some(Box::new(FileFailurePersistence::WithSource("proptest-regressions"))),
+        ..ProptestConfig::default()
+    })]
+
+    /// Diagonal and column within the derived tolerance of the reference and of the float path.
+    #[test]
+    fn fixed_matches_reference(case in case()) {
+        for c in compare(&case) {
+            prop_assert!(c.err_ref <= c.tol, "vs reference: {c:?}");
+            prop_assert!(c.err_float <= c.tol_q, "vs float: {c:?}");
+        }
+    }
+}
+
+/// STYLE §8.24: a sweep over wavelength × gate half-width × data, RMS and max of the error
+/// relative to the bound, fixed vs float (quantisation only) and fixed vs reference.
+#[test]
+fn fixed_error_statistics() {
+    use proptest::strategy::ValueTree;
+    use proptest::test_runner::{Config as PtConfig, TestRng, TestRunner};
+    let rng = TestRng::from_seed(RngAlgorithm::ChaCha, &[SEED.to_le_bytes(); 4].concat());
+    let mut runner = TestRunner::new_with_rng(PtConfig::default(), rng);
+    let (mut n, mut sq_q, mut max_q, mut sq_r, mut max_r, mut max_rel) =
+        (0usize, 0.0, 0.0f64, 0.0, 0.0f64, 0.0f64);
+    let (mut n_ph, mut sum_ph, mut max_ph) = (0usize, 0.0f64, 0.0f64);
+    for _ in 0..300 {
+        let case = case().new_tree(&mut runner).unwrap().current();
+        for c in compare(&case) {
+            let (rq, rr) = (c.err_float / c.tol_q, c.err_ref / c.tol);
+            sq_q += rq * rq;
+            sq_r += rr * rr;
+            max_q = max_q.max(rq);
+            max_r = max_r.max(rr);
+            max_rel = max_rel.max(c.err_float / c.scale);
+            n += 1;
+            // Phase of strong elements (|A| ≥ 5 % of S): error ≤ tol/|A| rad.
+            if let Some((ph, sig)) = c.phase.filter(|&(_, sig)| sig >= 0.05) {
+                assert!(ph.abs() <= c.tol / (sig * c.scale), "phase {ph} rad, {c:?}");
+                sum_ph += ph;
+                max_ph = max_ph.max(ph.abs());
+                n_ph += 1;
+            }
+        }
+    }
+    let (rms_q, rms_r) = ((sq_q / n as f64).sqrt(), (sq_r / n as f64).sqrt());
+    let bias = sum_ph / n_ph.max(1) as f64;
+    println!(
+        "{n_ph} strong diagonal elements: phase bias {bias:.3e} rad, max |phase error| {max_ph:.3e} rad"
+    );
+    // No systematic rotation: the rounding is to nearest everywhere (the NCO, the tables,
+    // the shifts), so the mean phase error must be far below its max.
+    assert!(n_ph >= 50, "too few strong elements: {n_ph}");
+    assert!(
+        bias.abs() <= max_ph / 3.0 + 1e-9,
+        "phase bias {bias} vs max {max_ph}"
+    );
+    println!(
+        "{n} elements: fixed−float / bound: RMS {rms_q:.3e} max {max_q:.3e}; \
+         fixed−reference / tol: RMS {rms_r:.3e} max {max_r:.3e}; max |fixed−float|/S {max_rel:.3e}"
+    );
+    assert!(max_q <= 1.0 && max_r <= 1.0);
+    assert!(rms_q <= 1.0 / 3f64.sqrt(), "RMS {rms_q}");
+    assert!(rms_r <= 1.0 / 3f64.sqrt(), "RMS {rms_r}");
+}
+
+/// The comparison has teeth: the kernels' t0 off by half a bin fails the tolerance by > 3×.
+#[test]
+fn tolerance_detects_half_bin_shift() {
+    let grid = |n: usize, half: f32, z: f32| -> Vec<Point> {
+        let c = |i: usize| -half + 2.0 * half * i as f32 / (n - 1) as f32;
+        (0..n)
+            .flat_map(|i| (0..n).map(move |j| [c(i), c(j), z]))
+            .collect()
+    };
+    let case = Case {
+        lasers: grid(3, 0.4, 0.0),
+        spads: grid(2, 0.3, 0.0),
+        voxels: vec![[0.1, 0.0, 0.8], [-0.2, 0.1, 0.6], [0.3, -0.3, 1.0]],
+        focus: [0.0, 0.0, 0.7],
+        nt: 300,
+        dt: 0.01,
+        lambda_over_dt: 10.0,
+        m: 5.0,
+        cg: 5.0,
+        inv: true,
+        saturated: false,
+        seed: 7,
+        pos: 0.5,
+    };
+    let worst = |c: &[Cmp]| c.iter().fold(0.0f64, |m, c| m.max(c.err_ref / c.tol));
+    assert!(worst(&compare(&case)) <= 1.0);
+    let shifted = compare_shifted(&case, case.dt / 2.0);
+    let (diag, col) = shifted.split_at(case.voxels.len());
+    assert!(worst(diag) > 3.0, "diagonal: {diag:?}");
+    assert!(worst(col) > 3.0, "column: {col:?}");
+}
