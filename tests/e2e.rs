@@ -19,7 +19,10 @@ use vltm::ltm::{self, ColumnGate, Exec, IndirectOptions, Shell, Wave};
 use vltm::sim::{Bounces, Scene};
 use vltm::volume::Volume;
 
-const EXEC: Exec = Exec { progress: false };
+const EXEC: Exec = Exec {
+    progress: false,
+    path: vltm::ltm::Path::Auto,
+};
 
 /// The imaged volume: 25 × 5 × 15 voxels, 5 cm pitch in x and z (10 cm in y), with voxels at
 /// the patch centres (±0.45, 0, 0.8) and the point scatterers (±0.3, 0, 0.8).

@@ -101,7 +101,10 @@ pub fn run(out: &Path) -> Result<String> {
         wavelength: Some(0.2),
         ..Wave::default()
     };
-    let exec = Exec { progress: false };
+    let exec = Exec {
+        progress: false,
+        ..Exec::default()
+    };
     let a = p32(PANEL);
     let mut lines = Vec::new();
 

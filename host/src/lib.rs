@@ -3,6 +3,7 @@
 //! * [`capture`]: the capture model (geometry, time axis) and row access ([`capture::RowSource`]).
 //! * [`sim`]: an analytic transient simulator of patches and boxes, from a scene file.
 //! * [`volume`]: voxel grids (`SPEC`) and point lists.
+//! * [`fast`]: host fast paths (stage 1 as a matrix product, the planar FFT convolution).
 //! * [`ltm`]: the high-level probes (direct, column, in-focus indirect), multi-threaded.
 //! * [`demo`]: the built-in scene of `vltm demo`.
 //! * [`tal`]: y-tal / mitransient `HDF5_TAL` captures, streamed by laser row.
@@ -11,6 +12,7 @@
 pub mod capture;
 pub mod demo;
 pub mod error;
+pub mod fast;
 pub mod figure;
 pub mod ltm;
 pub mod npy;

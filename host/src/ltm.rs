@@ -15,9 +15,12 @@
 
 use crate::capture::{Capture, Geometry, RowSource};
 use crate::error::{Error, Result};
+use crate::fast::{BandDft, Planar, planar};
 use crate::volume::Volume;
 use indicatif::{ProgressBar, ProgressStyle};
+use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
+use std::sync::Mutex;
 use std::time::Instant;
 use vltm_kernel::{
     Config, Gate, Legs, Params, Point, Probe, Report, Row, RowBuffer, Scan, Target, Weights,
@@ -96,11 +99,28 @@ impl Wave {
     }
 }
 
+/// How the voxel sums of the diagonal and of Gaussian columns are evaluated (the CLI's
+/// `--path`). All paths compute the same numbers (see `tests/proptest_fast.rs` for the
+/// tolerances); they differ in cost.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Path {
+    /// The planar FFT convolution when the SPADs form a regular grid and the volume is a
+    /// wall-parallel grid whose pitch divides the SPAD pitch, and it is cheaper; else band.
+    #[default]
+    Auto,
+    /// The kernel's band sum per (voxel, SPAD) (DESIGN §B.2.3): any geometry.
+    Band,
+    /// The planar FFT convolution ([`crate::fast::planar`]); an error if it does not apply.
+    Planar,
+}
+
 /// Execution options.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Exec {
     /// Show a progress bar on stderr (hidden anyway when stderr is not a terminal).
     pub progress: bool,
+    /// Evaluation path.
+    pub path: Path,
 }
 
 /// Result of a probe: intensities per voxel (volume order) and the kernel's counters.
@@ -141,15 +161,9 @@ fn drive(
 ) -> Result<()> {
     let Job { cfg, wave, exec } = job;
     let g = src.geometry().clone();
-    if wave.compensate_laser {
-        let f = laser_falloff(&g, g.lasers[0]);
-        if !(f.is_finite() && f > 0.0) {
-            return Err(Error::arg(
-                "--compensate-laser",
-                "laser_xyz lies in the wall plane: cos θ / d² is 0",
-            ));
-        }
-    }
+    check_laser_falloff(&g, wave)?;
+    let dft = BandDft::new(cfg);
+    let mut clean = Vec::new();
     let ks = g.spads_per_row();
     let mut tables = if g.confocal {
         Vec::new()
@@ -158,16 +172,7 @@ fn drive(
     };
     let mut buf = vec![0.0f32; RowBuffer::len(cfg, ks)];
     let mut hist = Vec::new();
-    let bar = if exec.progress {
-        ProgressBar::new(g.lasers.len() as u64)
-    } else {
-        ProgressBar::hidden()
-    };
-    bar.set_style(
-        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} rows, {eta} left")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    bar.set_message(label.to_string());
+    let bar = progress_bar(exec, g.lasers.len(), label);
     let fixed: Option<Scan<'_>> = if g.confocal {
         None
     } else {
@@ -194,12 +199,114 @@ fn drive(
             }
         };
         let mut rows = RowBuffer::new(scan, &mut buf)?;
-        let row = rows.load(scan, x_l, &hist)?;
+        let row = load_row(&mut rows, scan, &dft, x_l, &hist, &mut clean)?;
         push(scan, &row)?;
         bar.inc(1);
     }
     bar.finish_and_clear();
     Ok(())
+}
+
+/// Stage 1 of one row through the host's matrix product ([`BandDft`]); non-finite samples
+/// are zeroed in a copy (`clean`) for the product and counted by the kernel.
+fn load_row<'r>(
+    rows: &'r mut RowBuffer<'_>,
+    scan: &Scan<'_>,
+    dft: &BandDft,
+    x_l: Point,
+    hist: &'r [f32],
+    clean: &mut Vec<f32>,
+) -> Result<Row<'r, f32>> {
+    let data: &[f32] = if hist.iter().all(|x| x.is_finite()) {
+        hist
+    } else {
+        clean.clear();
+        clean.extend(hist.iter().map(|&x| if x.is_finite() { x } else { 0.0 }));
+        clean
+    };
+    Ok(rows.load_with(scan, x_l, hist, |band, ungated| {
+        dft.apply(data, band, ungated);
+    })?)
+}
+
+/// Reads rows in batches and hands each to one of `workers` in parallel (one worker per
+/// thread, each with its own row buffer), so stage 1 and the per-row probe work use every
+/// core. Memory: `2·threads` rows of histograms, never the whole capture.
+fn drive_rows<W: Send>(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    scan: &Scan<'_>,
+    label: &str,
+    workers: Vec<W>,
+    work: impl Fn(&mut W, &Row<'_, f32>) -> Result<()> + Sync,
+) -> Result<Vec<W>> {
+    let Job { cfg, wave, exec } = job;
+    let g = src.geometry().clone();
+    check_laser_falloff(&g, wave)?;
+    let ks = g.spads_per_row();
+    let dft = BandDft::new(cfg);
+    // (worker, row buffer, copy of a row with non-finite samples zeroed)
+    type Slot<W> = Mutex<(W, Vec<f32>, Vec<f32>)>;
+    let slots: Vec<Slot<W>> = workers
+        .into_iter()
+        .map(|w| Mutex::new((w, vec![0.0f32; RowBuffer::len(cfg, ks)], Vec::new())))
+        .collect();
+    let n_slots = slots.len().max(1);
+    let bar = progress_bar(exec, g.lasers.len(), label);
+    let batch = 2 * rayon::current_num_threads();
+    let mut rows: Vec<(Point, Vec<f32>)> = Vec::new();
+    for start in (0..g.lasers.len()).step_by(batch) {
+        let end = (start + batch).min(g.lasers.len());
+        rows.resize_with(end - start, || ([0.0; 3], Vec::new()));
+        for (l, (x, hist)) in (start..end).zip(rows.iter_mut()) {
+            *x = src.read_row(l, hist)?;
+            if wave.compensate_laser {
+                let k = (1.0 / laser_falloff(&g, *x)) as f32;
+                hist.iter_mut().for_each(|h| *h *= k);
+            }
+        }
+        rows.par_iter().try_for_each(|(x_l, hist)| {
+            let i = rayon::current_thread_index().unwrap_or(0) % n_slots;
+            let mut slot = slots[i].lock().unwrap_or_else(|e| e.into_inner());
+            let (w, buf, clean) = &mut *slot;
+            let mut rb = RowBuffer::new(scan, buf)?;
+            let row = load_row(&mut rb, scan, &dft, *x_l, hist, clean)?;
+            work(w, &row)
+        })?;
+        bar.inc((end - start) as u64);
+    }
+    bar.finish_and_clear();
+    Ok(slots
+        .into_iter()
+        .map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner()).0)
+        .collect())
+}
+
+fn check_laser_falloff(g: &Geometry, wave: &Wave) -> Result<()> {
+    if wave.compensate_laser {
+        let f = laser_falloff(g, g.lasers[0]);
+        if !(f.is_finite() && f > 0.0) {
+            return Err(Error::arg(
+                "--compensate-laser",
+                "laser_xyz lies in the wall plane: cos θ / d² is 0",
+            ));
+        }
+    }
+    Ok(())
+}
+
+fn progress_bar(exec: Exec, n: usize, label: &str) -> ProgressBar {
+    let bar = if exec.progress {
+        ProgressBar::new(n as u64)
+    } else {
+        ProgressBar::hidden()
+    };
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} rows, {eta} left")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_message(label.to_string());
+    bar
 }
 
 /// Splits `voxels` into chunks for the thread pool.
@@ -262,20 +369,35 @@ fn elementwise(
     Ok((out, report))
 }
 
-/// Direct light: the diagonal over `volume` (Eqs. 11–12).
+/// Direct light: the diagonal over `volume` (Eqs. 11–12), on the path chosen by
+/// [`Exec::path`] (the planar FFT convolution when it applies and is cheaper, else the
+/// kernel's band sum).
 ///
 /// # Errors
-/// Configuration, read and kernel errors.
+/// Configuration, read and kernel errors; [`Error::Argument`] (`--path`) when the planar
+/// path is forced and does not apply.
 pub fn direct(src: &mut dyn RowSource, volume: &Volume, wave: &Wave, exec: Exec) -> Result<Output> {
     let t = Instant::now();
     let cfg = wave.config(src.geometry())?;
+    let job = Job {
+        cfg: &cfg,
+        wave,
+        exec,
+    };
+    if let Some(planar) =
+        choose_planar(src.geometry(), &cfg, volume, exec.path, PlanarUse::Diagonal)?
+    {
+        let (values, report) = direct_planar(src, job, volume, &planar)?;
+        return Ok(Output {
+            values,
+            report,
+            seconds: t.elapsed().as_secs_f64(),
+            config: cfg,
+        });
+    }
     let (v, report) = elementwise(
         src,
-        Job {
-            cfg: &cfg,
-            wave,
-            exec,
-        },
+        job,
         Target::Diagonal,
         Gate::Gaussian,
         &volume.points,
@@ -287,6 +409,204 @@ pub fn direct(src: &mut dyn RowSource, volume: &Volume, wave: &Wave, exec: Exec)
         seconds: t.elapsed().as_secs_f64(),
         config: cfg,
     })
+}
+
+/// What the planar convolution would be used for (its cost differs).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum PlanarUse {
+    /// Per row, for the diagonal.
+    Diagonal,
+    /// Once, to image a factorised column.
+    Column,
+}
+
+/// The planar convolution for this probe, if [`Exec::path`] allows it, it applies and (for
+/// [`Path::Auto`]) it costs fewer flops than the band sum (DESIGN §B.8 cost model).
+fn choose_planar(
+    g: &Geometry,
+    cfg: &Config,
+    volume: &Volume,
+    path: Path,
+    usage: PlanarUse,
+) -> Result<Option<Planar>> {
+    if path == Path::Band {
+        return Ok(None);
+    }
+    let why = if g.confocal {
+        Err("a confocal capture has no SPAD grid".to_string())
+    } else if volume.axes.is_none() {
+        Err("the volume is a point list, not a grid".to_string())
+    } else {
+        Ok(())
+    };
+    let planar = why.and_then(|()| Planar::new(cfg, &g.spads, &volume.points, volume.shape));
+    match (planar, path) {
+        (Err(e), Path::Planar) => Err(Error::arg(
+            "--path",
+            format!("the planar FFT path does not apply: {e}"),
+        )),
+        (Err(_), _) => Ok(None),
+        (Ok(p), Path::Planar) => Ok(Some(p)),
+        (Ok(p), _) => {
+            let (mx, my, slices) = p.shape();
+            let m = (mx * my) as f64;
+            let j = cfg.bins() as f64;
+            let f = 2.5 * m * m.log2();
+            let per_row =
+                j * (f + slices as f64 * (6.0 * m + 1.5 * f)) + volume.len() as f64 * 8.0 * j;
+            let band = volume.len() as f64 * g.spads.len() as f64 * (14.0 * j + 60.0);
+            // The column images once; its table costs `slices·J` forward FFTs.
+            let planar = match usage {
+                PlanarUse::Diagonal => per_row,
+                PlanarUse::Column => per_row + slices as f64 * j * 2.0 * f,
+            };
+            Ok((planar < band).then_some(p))
+        }
+    }
+}
+
+/// Voxels that have some (laser, SPAD) path outside the guard interval: the band path zeroes
+/// those paths, the convolution cannot, so these voxels are evaluated on the band path.
+fn outside_guard(g: &Geometry, cfg: &Config, voxels: &[Point]) -> Vec<bool> {
+    let d1: Vec<f64> = g
+        .lasers
+        .iter()
+        .map(|l| match cfg.legs() {
+            Legs::WallToWall => 0.0,
+            Legs::FirstAndLast { laser_origin, .. } => dist64(l, &laser_origin),
+        })
+        .collect();
+    let d4: Vec<f64> = g
+        .spads
+        .iter()
+        .map(|s| match cfg.legs() {
+            Legs::WallToWall => 0.0,
+            Legs::FirstAndLast { sensor_origin, .. } => dist64(s, &sensor_origin),
+        })
+        .collect();
+    let (lo, hi) = cfg.guard();
+    let range = |pts: &[Point], legs: &[f64], v: &Point| {
+        pts.iter()
+            .zip(legs)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (p, d)| {
+                let x = dist(*p, *v) as f64 + d;
+                (a.min(x), b.max(x))
+            })
+    };
+    voxels
+        .par_iter()
+        .map(|v| {
+            let (l0, l1) = range(&g.lasers, &d1, v);
+            let (s0, s1) = range(&g.spads, &d4, v);
+            // A margin of 1e-4·σ for the f32 path lengths of the kernel.
+            let m = 1e-4 * cfg.sigma();
+            l0 + s0 - cfg.t0() < lo + m || l1 + s1 - cfg.t0() > hi - m
+        })
+        .collect()
+}
+
+fn dist64(a: &Point, b: &[f64; 3]) -> f64 {
+    (0..3)
+        .map(|i| (a[i] as f64 - b[i]).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+/// Per-thread state of the planar diagonal.
+struct DiagWorker<'a> {
+    scratch: planar::Scratch,
+    acc: Vec<Complex64>,
+    fallback: Option<Probe<'a>>,
+    rows: u64,
+    non_finite: u64,
+}
+
+/// The diagonal by the planar FFT convolution, rows in parallel; voxels with paths outside
+/// the guard on the kernel's band path.
+fn direct_planar(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    volume: &Volume,
+    planar: &Planar,
+) -> Result<(Vec<f32>, Report)> {
+    let cfg = job.cfg;
+    let g = src.geometry().clone();
+    let skip = outside_guard(&g, cfg, &volume.points);
+    let fb_idx: Vec<usize> = (0..skip.len()).filter(|&i| skip[i]).collect();
+    let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| volume.points[i]).collect();
+    let ks = g.spads.len();
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+    let scan = Scan::new(cfg, &g.spads, &mut tables)?;
+    let nw = rayon::current_num_threads().max(1);
+    let n_state = Probe::state_len(cfg, Target::Diagonal, Gate::Gaussian, fb_pts.len(), ks);
+    let mut states: Vec<Vec<f64>> = (0..nw).map(|_| vec![0.0; n_state]).collect();
+    let mut workers = Vec::with_capacity(nw);
+    for st in &mut states {
+        let fallback = if fb_pts.is_empty() {
+            None
+        } else {
+            Some(Probe::new(
+                &scan,
+                Target::Diagonal,
+                Gate::Gaussian,
+                &fb_pts,
+                st,
+            )?)
+        };
+        workers.push(DiagWorker {
+            scratch: planar.scratch(),
+            acc: vec![Complex64::new(0.0, 0.0); volume.len()],
+            fallback,
+            rows: 0,
+            non_finite: 0,
+        });
+    }
+    let pts = &volume.points;
+    let workers = drive_rows(src, job, &scan, "direct", workers, |w, row| {
+        let laser = row.laser();
+        planar.apply(
+            row.band(),
+            pts,
+            |v| {
+                let d = dist(laser, *v);
+                (d, cfg.weight(d))
+            },
+            &skip,
+            &mut w.scratch,
+            &mut w.acc,
+        );
+        if let Some(p) = &mut w.fallback {
+            p.push_row(&scan, row)?;
+        }
+        w.rows += 1;
+        w.non_finite += u64::from(row.non_finite());
+        Ok(())
+    })?;
+    let mut acc = vec![Complex64::new(0.0, 0.0); volume.len()];
+    let mut report = Report::default();
+    let mut merged: Option<Probe<'_>> = None;
+    for w in workers {
+        for (a, b) in acc.iter_mut().zip(&w.acc) {
+            *a += b;
+        }
+        report.rows += w.rows;
+        report.non_finite += w.non_finite;
+        if let Some(p) = w.fallback {
+            match &mut merged {
+                None => merged = Some(p),
+                Some(m) => m.merge(&p)?,
+            }
+        }
+    }
+    let mut values: Vec<f32> = acc.iter().map(|a| a.norm_sqr() as f32).collect();
+    if let Some(m) = merged {
+        let mut out = vec![0.0f64; fb_pts.len()];
+        m.finish(&scan, &mut out)?;
+        for (&i, v) in fb_idx.iter().zip(out) {
+            values[i] = v as f32;
+        }
+    }
+    Ok((values, report))
 }
 
 /// The time gate of a column (the CLI's `--gate`).
@@ -397,20 +717,17 @@ pub fn column(
             } else {
                 Gate::Gaussian
             };
-            factorised_columns(
+            single_column(
                 src,
                 Job {
                     cfg: &cfg,
                     wave,
                     exec,
                 },
-                &[focus],
+                focus,
                 kgate,
-                &volume.points,
-                "column",
+                volume,
             )?
-            .pop()
-            .unwrap_or_default()
         }
     };
     for (x, p) in v.iter_mut().zip(&volume.points) {
@@ -424,6 +741,119 @@ pub fn column(
         seconds: t.elapsed().as_secs_f64(),
         config: cfg,
     })
+}
+
+/// One factorised column, rows in parallel (one probe per thread, merged), imaged over the
+/// volume by the planar convolution (Gaussian gate, when it applies) or the kernel.
+fn single_column(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    focus: Point,
+    gate: Gate,
+    volume: &Volume,
+) -> Result<(Vec<f64>, Report)> {
+    let cfg = job.cfg;
+    let g = src.geometry().clone();
+    if g.confocal {
+        return Err(Error::arg(
+            "column",
+            "a confocal capture has no separate camera aperture: columns need a SPAD grid",
+        ));
+    }
+    let planar = if gate == Gate::Gaussian {
+        choose_planar(&g, cfg, volume, job.exec.path, PlanarUse::Column)?
+    } else {
+        None
+    };
+    let ks = g.spads.len();
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+    let scan = Scan::new(cfg, &g.spads, &mut tables)?;
+    let target = Target::Column(focus);
+    let n_state = Probe::state_len(cfg, target, gate, 0, ks);
+    let nw = rayon::current_num_threads().max(1);
+    let mut states: Vec<Vec<f64>> = (0..nw).map(|_| vec![0.0; n_state]).collect();
+    let probes = states
+        .iter_mut()
+        .map(|st| Probe::new(&scan, target, gate, &[], st))
+        .collect::<Result<Vec<_>, _>>()?;
+    let probes = drive_rows(src, job, &scan, "column", probes, |p, row| {
+        Ok(p.push_row(&scan, row)?)
+    })?;
+    let mut it = probes.into_iter();
+    let Some(mut p) = it.next() else {
+        return Ok((vec![0.0; volume.len()], Report::default()));
+    };
+    for q in it {
+        p.merge(&q)?;
+    }
+    let voxels = &volume.points;
+    if let (Some(planar), Some((u, legs))) = (planar, p.column_spectra()) {
+        let u32s: Vec<Complex32> = u
+            .iter()
+            .map(|z| Complex32::new(z.re as f32, z.im as f32))
+            .collect();
+        let skip = vec![false; voxels.len()];
+        // One pass over the slices (milliseconds; the rows were the parallel part).
+        let mut acc = vec![Complex64::new(0.0, 0.0); voxels.len()];
+        let mut scratch = planar.scratch();
+        planar.apply(
+            &u32s,
+            voxels,
+            |b| (dist(focus, *b), 1.0),
+            &skip,
+            &mut scratch,
+            &mut acc,
+        );
+        let aliased = column_aliased(&scan, focus, voxels, legs);
+        let out = acc.iter().map(|a| a.norm_sqr()).collect();
+        return Ok((
+            out,
+            Report {
+                aliased,
+                ..p.report()
+            },
+        ));
+    }
+    let cl = chunk_len(voxels.len());
+    let mut out = vec![0.0f64; voxels.len()];
+    let reports = voxels
+        .par_chunks(cl)
+        .zip(out.par_chunks_mut(cl))
+        .map(|(v, o)| p.image(&scan, v, o))
+        .collect::<Result<Vec<_>, _>>()?;
+    let aliased = reports.iter().map(|r| r.aliased).sum();
+    Ok((
+        out,
+        Report {
+            aliased,
+            ..p.report()
+        },
+    ))
+}
+
+/// The kernel's alias count of a factorised column (voxels whose path times
+/// `d1 + d_la + d_ab + d_bs + d4 − t0` leave [`Config::alias_free`]), for columns imaged on
+/// the host.
+fn column_aliased(scan: &Scan<'_>, a: Point, voxels: &[Point], legs: (f64, f64)) -> usize {
+    let cfg = scan.config();
+    let (af_lo, af_hi) = cfg.alias_free();
+    if legs.0 > legs.1 {
+        return 0;
+    }
+    voxels
+        .par_iter()
+        .filter(|b| {
+            let d_ab = dist(a, **b);
+            let (lo, hi) = scan.spads().iter().zip(scan.sensor_legs()).fold(
+                (f64::INFINITY, f64::NEG_INFINITY),
+                |(lo, hi), (sp, d4)| {
+                    let x = (d_ab + dist(**b, *sp) + d4) as f64;
+                    (lo.min(x), hi.max(x))
+                },
+            );
+            legs.0 + lo - cfg.t0() < af_lo || legs.1 + hi - cfg.t0() > af_hi
+        })
+        .count()
 }
 
 /// One factorised column per focus, accumulated in one pass, each imaged over `voxels`.

@@ -295,6 +295,23 @@ impl<'m> Probe<'m> {
         Ok(self.report)
     }
 
+    /// Factorised Gaussian columns only: the accumulated spectra
+    /// `U_a[s·J + j] = Σ_l w(|x_l − x_a|)·e^{iν_j|x_l − x_a|}·HG_ls[j]` (DESIGN §B.3.2) and the
+    /// range (min, max) of the projector legs `d1_l + |x_l − x_a|` seen so far (m), for hosts
+    /// that image the column by other means (an FFT convolution over a SPAD grid). `None`
+    /// for other probes.
+    pub fn column_spectra(&self) -> Option<(&[Complex64], (f64, f64))> {
+        match (self.target, self.gate) {
+            (Target::Column(_), Gate::Gaussian) => Some((
+                self.state
+                    .split_at(self.state.len().saturating_sub(self.cfg.bins()))
+                    .0,
+                self.leg_range,
+            )),
+            _ => None,
+        }
+    }
+
     /// Whether the probe is a factorised column (Gaussian or un-gated), whose state does not
     /// depend on the imaged voxels and can be imaged anywhere with [`Probe::image`].
     pub const fn is_factorised(&self) -> bool {

@@ -229,31 +229,52 @@ impl<'m> RowBuffer<'m> {
         hists: &'r [T],
     ) -> Result<Row<'r, T>, Error> {
         let cfg = &scan.cfg;
+        let (nt, j) = (cfg.nt().max(1), cfg.bins().max(1));
+        let turns_per_bin = -cfg.dt() / cfg.wavelength();
+        let carrier_step = cis_turns_f64(turns_per_bin);
+        self.load_with(scan, laser, hists, |hg, mono| {
+            for ((h, hg), mono) in hists
+                .chunks_exact(nt)
+                .zip(hg.chunks_exact_mut(j))
+                .zip(mono.iter_mut())
+            {
+                scan.dft_band(h, hg);
+                // Un-gated: Σ H_n e^{−iΩ nΔt}, re-seeded every 64 samples.
+                let mut acc = Complex32::new(0.0, 0.0);
+                for (c, block) in h.chunks(64).enumerate() {
+                    let mut ph = cis_turns_f64((c * 64) as f64 * turns_per_bin);
+                    for &s in block {
+                        acc += ph * s.value();
+                        ph *= carrier_step;
+                    }
+                }
+                *mono = acc;
+            }
+        })
+    }
+
+    /// Like [`RowBuffer::load`], with the raw spectra computed by the caller (a host with a
+    /// matrix-multiply or FFT library): `spectra(band, ungated)` must write
+    /// `band[s·J + j] = Σ_n h_s[n]·e^{−2πi k_j n/N}` (`k_j = k_lo + j`) and
+    /// `ungated[s] = Σ_n h_s[n]·e^{−iΩ nΔt}`, reading non-finite samples as 0. The kernel then
+    /// counts non-finite samples and folds gate weights and legs in, exactly as `load`.
+    ///
+    /// # Errors
+    /// As [`RowBuffer::load`]; `spectra` is not called then.
+    pub fn load_with<'r, T: Sample>(
+        &'r mut self,
+        scan: &Scan<'_>,
+        laser: Point,
+        hists: &'r [T],
+        spectra: impl FnOnce(&mut [Complex32], &mut [Complex32]),
+    ) -> Result<Row<'r, T>, Error> {
+        let cfg = &scan.cfg;
         let (ks, nt, j) = (scan.spads.len(), cfg.nt(), cfg.bins());
         check_len("row buffer", ks * j, self.hg.len())?;
         check_len("histograms", ks * nt, hists.len())?;
         check_points("laser", &[laser])?;
-        let turns_per_bin = -cfg.dt() / cfg.wavelength();
-        let carrier_step = cis_turns_f64(turns_per_bin);
-        let mut non_finite = 0u32;
-        let chunks = hists.chunks_exact(nt.max(1));
-        for ((h, hg), mono) in chunks
-            .zip(self.hg.chunks_exact_mut(j.max(1)))
-            .zip(self.mono.iter_mut())
-        {
-            scan.dft_band(h, hg);
-            // Un-gated: Σ H_n e^{−iΩ nΔt}, re-seeded every 64 samples.
-            let mut acc = Complex32::new(0.0, 0.0);
-            for (c, block) in h.chunks(64).enumerate() {
-                let mut ph = cis_turns_f64((c * 64) as f64 * turns_per_bin);
-                for &s in block {
-                    non_finite += u32::from(!s.is_valid());
-                    acc += ph * s.value();
-                    ph *= carrier_step;
-                }
-            }
-            *mono = acc;
-        }
+        spectra(self.hg, self.mono);
+        let non_finite = hists.iter().map(|s| u32::from(!s.is_valid())).sum();
         self.fold_legs(scan, &laser);
         Ok(Row {
             laser,

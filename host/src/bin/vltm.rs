@@ -144,6 +144,10 @@ struct Common {
     /// 1-D SPAD arrays focus illumination along their axis).
     #[arg(long)]
     swap_roles: bool,
+    /// Evaluation path: auto (planar FFT convolution when the SPADs form a grid and the
+    /// volume's pitch divides theirs, and it is cheaper), band (any geometry), planar.
+    #[arg(long, value_enum, default_value_t = PathArg::Auto)]
+    path: PathArg,
     /// Output volume (float32 .npy of shape (nx, ny, nz)).
     #[arg(long, value_name = "F.npy")]
     out: Option<PathBuf>,
@@ -152,7 +156,26 @@ struct Common {
     png: Option<PathBuf>,
 }
 
+/// `--path` values.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+enum PathArg {
+    Auto,
+    Band,
+    Planar,
+}
+
 impl Common {
+    fn exec(&self) -> Exec {
+        Exec {
+            progress: true,
+            path: match self.path {
+                PathArg::Auto => ltm::Path::Auto,
+                PathArg::Band => ltm::Path::Band,
+                PathArg::Planar => ltm::Path::Planar,
+            },
+        }
+    }
+
     fn wave(&self) -> Wave {
         Wave {
             wavelength: self.wavelength,
@@ -249,10 +272,6 @@ fn main() -> ExitCode {
     }
 }
 
-fn exec() -> Exec {
-    Exec { progress: true }
-}
-
 fn run(cmd: Command) -> Result<(), Failure> {
     match cmd {
         Command::Demo { out } => {
@@ -285,7 +304,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
         Command::Direct { capture, common } => {
             let volume = Volume::parse(&common.volume)?;
             let mut c = common.load(&capture)?;
-            let o = ltm::direct(&mut *c, &volume, &common.wave(), exec())?;
+            let o = ltm::direct(&mut *c, &volume, &common.wave(), common.exec())?;
             summarize(
                 "direct", &o.values, &volume, o.seconds, &o.report, &o.config,
             );
@@ -312,7 +331,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 GateArg::None => ColumnGate::None,
             };
             let mut c = common.load(&capture)?;
-            let o = ltm::column(&mut *c, a, &volume, g, shell, &common.wave(), exec())?;
+            let o = ltm::column(&mut *c, a, &volume, g, shell, &common.wave(), common.exec())?;
             summarize(
                 "column", &o.values, &volume, o.seconds, &o.report, &o.config,
             );
@@ -362,7 +381,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 ..Default::default()
             };
             let mut c = common.load(&capture)?;
-            let o = ltm::indirect(&mut *c, &volume, &opts, &common.wave(), exec())?;
+            let o = ltm::indirect(&mut *c, &volume, &opts, &common.wave(), common.exec())?;
             let n_gamma = o.gamma.iter().filter(|&&g| g).count();
             say!(
                 "Γ: {n_gamma} of {} voxels above ε = {epsilon} of the direct maximum; pairs with {:.3} <= |x_a - x_b| < {:.3} m",

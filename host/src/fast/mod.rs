@@ -1,0 +1,15 @@
+//! Host-only fast paths (DESIGN §B.8): the same band spectra and probes as the kernel,
+//! evaluated with libraries a workstation has.
+//!
+//! * [`band`]: stage 1 of a whole laser row as one `sgemm` (`matrixmultiply`).
+//! * [`planar`]: the planar FFT convolution over a SPAD grid and wall-parallel voxel slices
+//!   (`rustfft`), for the diagonal per row and for imaging factorised columns.
+//!
+//! [`crate::ltm`] picks a path per probe ([`crate::ltm::Path`]); every path is checked against
+//! the float64 reference in `tests/proptest_fast.rs`.
+
+pub mod band;
+pub mod planar;
+
+pub use band::BandDft;
+pub use planar::Planar;

@@ -1,0 +1,456 @@
+//! The planar FFT convolution (DESIGN §B.8.1): for a regular SPAD grid on the wall and voxel
+//! slices parallel to it, the camera leg of every voxel of a slice is one 2-D convolution.
+//!
+//! For band bin j, slice depth z and a laser row (or a factorised column's spectra `U_a`):
+//!
+//! ```text
+//! C_j(v) = Σ_s HG_s[j] · κ_{j,z}(x_v − x_s),   κ_{j,z}(Δ) = w(d) e^{iν_j d},  d = √(|Δ|² + z²)
+//! A(v)  += w_leg(v) · Σ_j e^{iν_j d_leg(v)} · C_j(v)
+//! ```
+//!
+//! with `d_leg = |x_l − x_v|` (diagonal, per row) or `|x_a − x_b|` and `w_leg = 1` (the
+//! end of a factorised column). The convolution is zero-padded to `Mx × My ≥
+//! (nsx + nvx − 1) × (nsy + nvy − 1)` (powers of two): one forward 2-D FFT of the SPAD image per
+//! bin (shared by all slices), then per (slice, bin) a pointwise product with the
+//! precomputed `κ̂` and one inverse 2-D FFT. Both transforms are pruned: the forward pass
+//! skips the all-zero rows of the padded SPAD image, the inverse pass computes only the
+//! output rows that hold voxels. Transforms are `rustfft` (AVX), `f32`.
+//!
+//! **Voxel pitch.** Voxels finer than the SPADs by an integer factor `r` per axis (`p_s =
+//! r·p_v`, e.g. a 32×32 slice over a 16×16 SPAD grid) are split into `r_x·r_y` polyphase
+//! sub-grids, each on the SPAD lattice with its own sub-pitch offset and its own `κ̂`; a
+//! 1-D SPAD line is the `nsy = 1` case. Other pitch ratios, tilted or non-planar SPAD sets
+//! and point-list volumes are not planar: [`Planar::new`] says why and the caller uses the
+//! band or lookup path.
+//!
+//! Equality with the band sum: exact up to `f32` FFT rounding (≈ 1e-6 of the largest
+//! term), **for paths inside the guard interval**. The band path zeroes each (laser, SPAD)
+//! path outside [`vltm_kernel::Config::guard`]; a convolution cannot, so the caller
+//! evaluates the few voxels that have such paths on the band path (see `ltm`).
+//!
+//! Cost per row `J·[F(M)·(nsx/Mx + 1) + S·(6M + F(M)·(1 + nvx/Mx))] + Kv·(8J + 40)` flops
+//! (S = slices × phases, F(M) = 2.5·M·log₂M per pruned half), against the band path's
+//! `Kv·Ks·(14J + 60)`. Memory: `κ̂` = S·J·M complex `f32` (shared, read-only) and per worker
+//! `3·J·M` complex scratch.
+
+use num_complex::{Complex32, Complex64};
+use rustfft::{Fft, FftPlanner};
+use std::sync::Arc;
+use vltm_kernel::{Config, Point, cis_turns};
+
+/// Largest `κ̂` table accepted (bytes); larger problems are not planar.
+pub const MAX_TABLE_BYTES: usize = 2 << 30;
+
+/// A regular 1-D lattice `origin + k·pitch`, k = 0..n.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Axis {
+    origin: f64,
+    pitch: f64,
+    n: usize,
+}
+
+/// Sorted distinct values of `xs` merged within `tol`, checked to form a lattice.
+fn lattice(xs: impl Iterator<Item = f64>, tol: f64) -> Option<Axis> {
+    let mut v: Vec<f64> = xs.collect();
+    v.sort_by(f64::total_cmp);
+    let mut d: Vec<f64> = Vec::new();
+    for x in v {
+        match d.last() {
+            Some(&l) if (x - l).abs() <= tol => {}
+            _ => d.push(x),
+        }
+    }
+    let n = d.len();
+    let origin = *d.first()?;
+    let pitch = if n > 1 {
+        (d[n - 1] - origin) / (n - 1) as f64
+    } else {
+        0.0
+    };
+    d.iter()
+        .enumerate()
+        .all(|(k, &x)| (x - (origin + k as f64 * pitch)).abs() <= tol)
+        .then_some(Axis { origin, pitch, n })
+}
+
+/// The SPADs as a full regular grid in a plane `z = const`: lattice index per SPAD.
+struct SpadGrid {
+    x: Axis,
+    y: Axis,
+    z: f64,
+    index: Vec<(usize, usize)>,
+}
+
+fn spad_grid(spads: &[Point], tol: f64) -> Result<SpadGrid, String> {
+    let z0 = spads.first().ok_or("no SPADs")?[2] as f64;
+    if spads.iter().any(|p| (p[2] as f64 - z0).abs() > tol) {
+        return Err("the SPADs are not in one plane z = const".into());
+    }
+    let x = lattice(spads.iter().map(|p| p[0] as f64), tol)
+        .ok_or("the SPAD x coordinates are not a regular lattice")?;
+    let y = lattice(spads.iter().map(|p| p[1] as f64), tol)
+        .ok_or("the SPAD y coordinates are not a regular lattice")?;
+    if x.n * y.n != spads.len() {
+        return Err(format!(
+            "{} SPADs do not fill their {}×{} lattice",
+            spads.len(),
+            x.n,
+            y.n
+        ));
+    }
+    let idx = |a: &Axis, c: f32| {
+        if a.n == 1 {
+            0
+        } else {
+            ((c as f64 - a.origin) / a.pitch).round() as usize
+        }
+    };
+    let index: Vec<(usize, usize)> = spads
+        .iter()
+        .map(|p| (idx(&x, p[0]), idx(&y, p[1])))
+        .collect();
+    let mut seen = vec![false; spads.len()];
+    for &(i, j) in &index {
+        let k = i * y.n + j;
+        if k >= seen.len() || std::mem::replace(&mut seen[k], true) {
+            return Err("two SPADs share a lattice site".into());
+        }
+    }
+    Ok(SpadGrid { x, y, z: z0, index })
+}
+
+/// How a voxel axis maps onto a SPAD axis: polyphase factor, offsets, sub-grid lengths.
+#[derive(Clone, Debug)]
+struct AxisMap {
+    /// SPAD lattice pitch used for the kernel offsets (m).
+    pitch: f64,
+    /// Per phase φ: offset `v(φ) − s(0)` (m) and number of voxels `⌈(nv − φ)/r⌉`.
+    phases: Vec<(f64, usize)>,
+}
+
+fn axis_map(s: &Axis, v: &[f64], tol: f64, name: &str) -> Result<AxisMap, String> {
+    let nv = v.len();
+    let pv = if nv > 1 {
+        (v[nv - 1] - v[0]) / (nv - 1) as f64
+    } else {
+        0.0
+    };
+    let (pitch, r) = match (s.n > 1, nv > 1) {
+        (_, false) => (if s.n > 1 { s.pitch } else { 1.0 }, 1),
+        (false, true) => (pv, 1),
+        (true, true) => {
+            let r = (s.pitch / pv).round();
+            if r < 1.0 || (r * pv - s.pitch).abs() > tol {
+                return Err(format!(
+                    "voxel pitch {pv:.6} m along {name} does not divide the SPAD pitch {:.6} m",
+                    s.pitch
+                ));
+            }
+            (s.pitch, r as usize)
+        }
+    };
+    let phases = (0..r.min(nv))
+        .map(|f| (v[f] - s.origin, (nv - f).div_ceil(r)))
+        .collect();
+    Ok(AxisMap { pitch, phases })
+}
+
+/// One (depth, phase) slice: its `κ̂` and where its voxels sit in the inverse transform.
+#[derive(Clone, Debug)]
+struct Slice {
+    /// (cell `i'x·My + i'y` of the output image, voxel index).
+    outputs: Vec<(u32, u32)>,
+}
+
+/// Precomputed planar convolution for one (SPAD grid, voxel grid, configuration).
+pub struct Planar {
+    bins: usize,
+    mx: usize,
+    my: usize,
+    nsx: usize,
+    /// Output rows (i'x) the inverse y-pass must compute.
+    rows_out: usize,
+    /// Cell of each SPAD in the `[Mx][My]` image.
+    spad_cell: Vec<usize>,
+    slices: Vec<Slice>,
+    /// `κ̂[slice][j][ky][kx]` (transposed spectrum layout), scaled by 1/(Mx·My).
+    khat: Vec<Complex32>,
+    klo_per_span: f32,
+    inv_span: f32,
+    fy: Arc<dyn Fft<f32>>,
+    fx: Arc<dyn Fft<f32>>,
+    ix: Arc<dyn Fft<f32>>,
+    iy: Arc<dyn Fft<f32>>,
+}
+
+/// Per-worker scratch of [`Planar::apply`].
+pub struct Scratch {
+    x: Vec<Complex32>,
+    y: Vec<Complex32>,
+    z: Vec<Complex32>,
+    fft: Vec<Complex32>,
+}
+
+impl std::fmt::Debug for Planar {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Planar")
+            .field("bins", &self.bins)
+            .field("mx", &self.mx)
+            .field("my", &self.my)
+            .field("slices", &self.slices.len())
+            .finish_non_exhaustive()
+    }
+}
+
+/// `dst[c·stride + r] = src[r·cols + c]` for r < rows, c < cols.
+fn transpose(src: &[Complex32], rows: usize, cols: usize, dst: &mut [Complex32], stride: usize) {
+    const B: usize = 8;
+    for r0 in (0..rows).step_by(B) {
+        for c0 in (0..cols).step_by(B) {
+            for r in r0..(r0 + B).min(rows) {
+                for c in c0..(c0 + B).min(cols) {
+                    dst[c * stride + r] = src[r * cols + c];
+                }
+            }
+        }
+    }
+}
+
+impl Planar {
+    /// Prepares the convolution of `spads` onto the voxel grid `voxels` (C order over
+    /// `shape = [nx, ny, nz]`, as [`crate::volume::Volume`]), or says why it does not apply.
+    /// Lattice tolerance: `1e-5·λ` (a phase error ≤ 6e-5 rad).
+    ///
+    /// # Errors
+    /// A one-line reason (irregular SPADs, pitch ratio, table too large).
+    pub fn new(
+        cfg: &Config,
+        spads: &[Point],
+        voxels: &[Point],
+        shape: [usize; 3],
+    ) -> Result<Self, String> {
+        let tol = 1e-5 * cfg.wavelength();
+        let [nx, ny, nz] = shape;
+        if nx * ny * nz != voxels.len() || voxels.is_empty() {
+            return Err("the voxels are not a grid".into());
+        }
+        let g = spad_grid(spads, tol)?;
+        let at = |ix: usize, iy: usize, iz: usize| voxels[(ix * ny + iy) * nz + iz];
+        // The volume must be a product grid: x depends on ix only, y on iy, z on iz.
+        for ix in 0..nx {
+            for iy in 0..ny {
+                for iz in 0..nz {
+                    let p = at(ix, iy, iz);
+                    let q = [at(ix, 0, 0)[0], at(0, iy, 0)[1], at(0, 0, iz)[2]];
+                    if (0..3).any(|c| (p[c] - q[c]).abs() as f64 > tol) {
+                        return Err("the voxels are not a wall-parallel grid".into());
+                    }
+                }
+            }
+        }
+        let vx: Vec<f64> = (0..nx).map(|i| at(i, 0, 0)[0] as f64).collect();
+        let vy: Vec<f64> = (0..ny).map(|i| at(0, i, 0)[1] as f64).collect();
+        let vz: Vec<f64> = (0..nz).map(|i| at(0, 0, i)[2] as f64).collect();
+        for a in [&vx, &vy] {
+            if a.len() > 1 && lattice(a.iter().copied(), tol).is_none_or(|l| l.n != a.len()) {
+                return Err("the voxel axes are not regular".into());
+            }
+        }
+        let mapx = axis_map(&g.x, &vx, tol, "x")?;
+        let mapy = axis_map(&g.y, &vy, tol, "y")?;
+        let nvx = mapx.phases.iter().map(|p| p.1).max().unwrap_or(1);
+        let nvy = mapy.phases.iter().map(|p| p.1).max().unwrap_or(1);
+        let mx = (g.x.n + nvx - 1).next_power_of_two();
+        let my = (g.y.n + nvy - 1).next_power_of_two();
+        let m = mx * my;
+        let bins = cfg.bins();
+        let n_slices = nz * mapx.phases.len() * mapy.phases.len();
+        let bytes = n_slices
+            .checked_mul(bins)
+            .and_then(|x| x.checked_mul(m))
+            .and_then(|x| x.checked_mul(8))
+            .filter(|&b| b <= MAX_TABLE_BYTES)
+            .ok_or_else(|| {
+                format!(
+                    "its kernel table would exceed {} GiB",
+                    MAX_TABLE_BYTES >> 30
+                )
+            })?;
+        let _ = bytes;
+        let mut planner = FftPlanner::<f32>::new();
+        let fy = planner.plan_fft_forward(my);
+        let fx = planner.plan_fft_forward(mx);
+        let ix = planner.plan_fft_inverse(mx);
+        let iy = planner.plan_fft_inverse(my);
+        let spad_cell = g.index.iter().map(|&(i, j)| i * my + j).collect();
+        let span = cfg.span();
+        let scale = 1.0 / m as f64;
+        let mut slices = Vec::with_capacity(n_slices);
+        let mut khat = vec![Complex32::new(0.0, 0.0); n_slices * bins * m];
+        let mut specs = Vec::with_capacity(n_slices);
+        for (iz, &z) in vz.iter().enumerate() {
+            let dz = z - g.z;
+            for (fx_, &(dx, cx)) in mapx.phases.iter().enumerate() {
+                for (fy_, &(dy, cy)) in mapy.phases.iter().enumerate() {
+                    let rx = mapx.phases.len();
+                    let ry = mapy.phases.len();
+                    let mut outputs = Vec::with_capacity(cx * cy);
+                    for i in 0..cx {
+                        for j in 0..cy {
+                            let v = ((i * rx + fx_) * ny + (j * ry + fy_)) * nz + iz;
+                            outputs.push(((i * my + j) as u32, v as u32));
+                        }
+                    }
+                    slices.push(Slice { outputs });
+                    specs.push((dz, dx, dy, cx, cy));
+                }
+            }
+        }
+        let (nsx, nsy) = (g.x.n, g.y.n);
+        let (px, py) = (mapx.pitch, mapy.pitch);
+        let mut scratch = vec![
+            Complex32::new(0.0, 0.0);
+            fy.get_inplace_scratch_len()
+                .max(fx.get_inplace_scratch_len())
+        ];
+        let mut img = vec![Complex32::new(0.0, 0.0); m];
+        for (si, &(dz, dx, dy, cx, cy)) in specs.iter().enumerate() {
+            for j in 0..bins {
+                img.fill(Complex32::new(0.0, 0.0));
+                let k = (cfg.k_lo() + j as i64) as f64;
+                for ax in -(nsx as i64 - 1)..cx as i64 {
+                    for ay in -(nsy as i64 - 1)..cy as i64 {
+                        let ex = dx + ax as f64 * px;
+                        let ey = dy + ay as f64 * py;
+                        let d = (ex * ex + ey * ey + dz * dz).sqrt();
+                        let turns = k * d / span;
+                        let a = std::f64::consts::TAU * (turns - turns.round());
+                        let w = cfg.weight(d as f32) as f64 * scale;
+                        let cx_ = ax.rem_euclid(mx as i64) as usize;
+                        let cy_ = ay.rem_euclid(my as i64) as usize;
+                        img[cx_ * my + cy_] =
+                            Complex32::new((w * a.cos()) as f32, (w * a.sin()) as f32);
+                    }
+                }
+                fy.process_with_scratch(&mut img, &mut scratch);
+                let out = &mut khat[(si * bins + j) * m..(si * bins + j + 1) * m];
+                transpose(&img, mx, my, out, mx);
+                fx.process_with_scratch(out, &mut scratch);
+            }
+        }
+        let rows_out = nvx;
+        Ok(Self {
+            bins,
+            mx,
+            my,
+            nsx,
+            rows_out,
+            spad_cell,
+            slices,
+            khat,
+            klo_per_span: (cfg.k_lo() as f64 / span) as f32,
+            inv_span: (1.0 / span) as f32,
+            fy,
+            fx,
+            ix,
+            iy,
+        })
+    }
+
+    /// FFT size `(Mx, My)` and number of (depth, phase) slices.
+    pub fn shape(&self) -> (usize, usize, usize) {
+        (self.mx, self.my, self.slices.len())
+    }
+
+    /// Bytes of the shared `κ̂` table.
+    pub fn table_bytes(&self) -> usize {
+        self.khat.len() * 8
+    }
+
+    /// A worker's scratch.
+    pub fn scratch(&self) -> Scratch {
+        let m = self.mx * self.my;
+        let f = [&self.fy, &self.fx, &self.ix, &self.iy]
+            .iter()
+            .map(|f| f.get_inplace_scratch_len())
+            .max()
+            .unwrap_or(0);
+        Scratch {
+            x: vec![Complex32::new(0.0, 0.0); self.bins * m],
+            y: vec![Complex32::new(0.0, 0.0); self.bins * m],
+            z: vec![Complex32::new(0.0, 0.0); self.bins * m],
+            fft: vec![Complex32::new(0.0, 0.0); f.max(1)],
+        }
+    }
+
+    /// Adds `w_leg(v)·Σ_j e^{iν_j d_leg(v)}·Σ_s spectra[s·J + j]·κ_j(x_v − x_s)` to `acc[v]`
+    /// for every voxel with `skip[v] == false` (see the module docs); `leg(v)` returns
+    /// `(d_leg, w_leg)`. `spectra` is Ks·J (the kernel's `Row::band` or a column's `U_a`).
+    pub fn apply(
+        &self,
+        spectra: &[Complex32],
+        voxels: &[Point],
+        leg: impl Fn(&Point) -> (f32, f32),
+        skip: &[bool],
+        s: &mut Scratch,
+        acc: &mut [Complex64],
+    ) {
+        let (mx, my, j_n) = (self.mx, self.my, self.bins);
+        let m = mx * my;
+        // Forward: SPAD image per bin → FFT along y (non-zero rows only) → transpose → along x.
+        for j in 0..j_n {
+            let img = &mut s.y[j * m..(j + 1) * m];
+            img[..self.nsx * my].fill(Complex32::new(0.0, 0.0));
+            for (cell, h) in self
+                .spad_cell
+                .iter()
+                .zip(spectra.iter().skip(j).step_by(j_n))
+            {
+                img[*cell] = *h;
+            }
+            self.fy
+                .process_with_scratch(&mut img[..self.nsx * my], &mut s.fft);
+            let img = &s.y[j * m..j * m + self.nsx * my];
+            let xt = &mut s.x[j * m..(j + 1) * m];
+            xt.fill(Complex32::new(0.0, 0.0));
+            transpose(img, self.nsx, my, xt, mx);
+        }
+        self.fx.process_with_scratch(&mut s.x, &mut s.fft);
+        let (klo, inv) = (self.klo_per_span, self.inv_span);
+        for (si, slice) in self.slices.iter().enumerate() {
+            let kh = &self.khat[si * j_n * m..(si + 1) * j_n * m];
+            for ((y, x), k) in s.y.iter_mut().zip(&s.x).zip(kh) {
+                *y = x * k;
+            }
+            self.ix.process_with_scratch(&mut s.y, &mut s.fft);
+            for j in 0..j_n {
+                let src = &s.y[j * m..(j + 1) * m];
+                let dst = &mut s.z[j * m..(j + 1) * m];
+                // [ky][kx] → [ix][ky], only the rows ix < rows_out.
+                for r in 0..my {
+                    for c in 0..self.rows_out {
+                        dst[c * my + r] = src[r * mx + c];
+                    }
+                }
+                self.iy
+                    .process_with_scratch(&mut dst[..self.rows_out * my], &mut s.fft);
+            }
+            for &(cell, v) in &slice.outputs {
+                let (cell, v) = (cell as usize, v as usize);
+                if skip.get(v).copied().unwrap_or(true) {
+                    continue;
+                }
+                let (d, w) = leg(&voxels[v]);
+                let step = cis_turns(inv * d);
+                let mut p = cis_turns(klo * d);
+                let mut sum = Complex32::new(0.0, 0.0);
+                for j in 0..j_n {
+                    sum += s.z[j * m + cell] * p;
+                    p *= step;
+                }
+                let sum = sum * w;
+                acc[v] += Complex64::new(sum.re as f64, sum.im as f64);
+            }
+        }
+    }
+}
