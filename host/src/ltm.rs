@@ -15,7 +15,7 @@
 
 use crate::capture::{Capture, Geometry, RowSource};
 use crate::error::{Error, Result};
-use crate::fast::{BandDft, Planar, planar};
+use crate::fast::{BandDft, Lookup, Planar, planar};
 use crate::volume::Volume;
 use indicatif::{ProgressBar, ProgressStyle};
 use num_complex::{Complex32, Complex64};
@@ -104,14 +104,18 @@ impl Wave {
 /// tolerances); they differ in cost.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Path {
-    /// The planar FFT convolution when the SPADs form a regular grid and the volume is a
-    /// wall-parallel grid whose pitch divides the SPAD pitch, and it is cheaper; else band.
+    /// The cheapest applicable path by the cost model of DESIGN §B.8: planar FFT convolution
+    /// when the SPADs form a regular grid and the volume is a wall-parallel grid whose pitch
+    /// divides the SPAD pitch; else the baseband lookup for the diagonal; else band.
     #[default]
     Auto,
     /// The kernel's band sum per (voxel, SPAD) (DESIGN §B.2.3): any geometry.
     Band,
     /// The planar FFT convolution ([`crate::fast::planar`]); an error if it does not apply.
     Planar,
+    /// Diagonal only: the gated baseband + cubic lookup ([`crate::fast::lookup`]), any
+    /// geometry (columns use the band path).
+    Lookup,
 }
 
 /// Execution options.
@@ -395,6 +399,25 @@ pub fn direct(src: &mut dyn RowSource, volume: &Volume, wave: &Wave, exec: Exec)
             config: cfg,
         });
     }
+    let g = src.geometry();
+    let lookup_cost = {
+        let l = Lookup::new(&cfg).grid_len() as f64;
+        let ks = g.spads_per_row() as f64;
+        ks * 5.0 * l * l.log2() + volume.len() as f64 * ks * 80.0
+    };
+    let band_cost =
+        volume.len() as f64 * g.spads_per_row() as f64 * (14.0 * cfg.bins() as f64 + 60.0);
+    if !g.confocal
+        && (exec.path == Path::Lookup || (exec.path == Path::Auto && lookup_cost < band_cost))
+    {
+        let (values, report) = direct_lookup(src, job, volume)?;
+        return Ok(Output {
+            values,
+            report,
+            seconds: t.elapsed().as_secs_f64(),
+            config: cfg,
+        });
+    }
     let (v, report) = elementwise(
         src,
         job,
@@ -429,7 +452,7 @@ fn choose_planar(
     path: Path,
     usage: PlanarUse,
 ) -> Result<Option<Planar>> {
-    if path == Path::Band {
+    if matches!(path, Path::Band | Path::Lookup) {
         return Ok(None);
     }
     let why = if g.confocal {
@@ -510,6 +533,48 @@ fn dist64(a: &Point, b: &[f64; 3]) -> f64 {
         .map(|i| (a[i] as f64 - b[i]).powi(2))
         .sum::<f64>()
         .sqrt()
+}
+
+/// The diagonal by the baseband lookup, rows in parallel (one scratch and accumulator per
+/// thread). The lookup applies the guard itself.
+fn direct_lookup(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    volume: &Volume,
+) -> Result<(Vec<f32>, Report)> {
+    let cfg = job.cfg;
+    let g = src.geometry().clone();
+    let ks = g.spads.len();
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+    let scan = Scan::new(cfg, &g.spads, &mut tables)?;
+    let lookup = Lookup::new(cfg);
+    let nw = rayon::current_num_threads().max(1);
+    let workers: Vec<_> = (0..nw)
+        .map(|_| {
+            (
+                lookup.scratch(ks),
+                vec![Complex64::new(0.0, 0.0); volume.len()],
+                Report::default(),
+            )
+        })
+        .collect();
+    let pts = &volume.points;
+    let workers = drive_rows(src, job, &scan, "direct", workers, |(s, acc, r), row| {
+        lookup.apply(&scan, row, pts, s, acc);
+        r.rows += 1;
+        r.non_finite += u64::from(row.non_finite());
+        Ok(())
+    })?;
+    let mut acc = vec![Complex64::new(0.0, 0.0); volume.len()];
+    let mut report = Report::default();
+    for (_, a, r) in workers {
+        for (x, y) in acc.iter_mut().zip(&a) {
+            *x += y;
+        }
+        report.rows += r.rows;
+        report.non_finite += r.non_finite;
+    }
+    Ok((acc.iter().map(|a| a.norm_sqr() as f32).collect(), report))
 }
 
 /// Per-thread state of the planar diagonal.

@@ -60,6 +60,9 @@ enum Command {
         /// with its sidecar F.json (counts rounded to whole photons).
         #[arg(long, value_name = "F.ptu")]
         ptu: Option<PathBuf>,
+        /// Store H uncompressed in the .npz (larger file, much faster to read).
+        #[arg(long)]
+        uncompressed: bool,
     },
     /// Direct light: the LTM diagonal T(x_v, x_v) over a volume (3-vertex gate).
     Direct {
@@ -144,8 +147,9 @@ struct Common {
     /// 1-D SPAD arrays focus illumination along their axis).
     #[arg(long)]
     swap_roles: bool,
-    /// Evaluation path: auto (planar FFT convolution when the SPADs form a grid and the
-    /// volume's pitch divides theirs, and it is cheaper), band (any geometry), planar.
+    /// Evaluation path: auto (the cheapest that applies), band (the kernel's band sum, any
+    /// geometry), planar (FFT convolution over a SPAD grid), lookup (baseband + cubic
+    /// interpolation; diagonal only).
     #[arg(long, value_enum, default_value_t = PathArg::Auto)]
     path: PathArg,
     /// Output volume (float32 .npy of shape (nx, ny, nz)).
@@ -162,6 +166,7 @@ enum PathArg {
     Auto,
     Band,
     Planar,
+    Lookup,
 }
 
 impl Common {
@@ -172,6 +177,7 @@ impl Common {
                 PathArg::Auto => ltm::Path::Auto,
                 PathArg::Band => ltm::Path::Band,
                 PathArg::Planar => ltm::Path::Planar,
+                PathArg::Lookup => ltm::Path::Lookup,
             },
         }
     }
@@ -280,10 +286,15 @@ fn run(cmd: Command) -> Result<(), Failure> {
             Ok(())
         }
         Command::Info { capture } => info(&capture),
-        Command::Simulate { scene, out, ptu } => {
+        Command::Simulate {
+            scene,
+            out,
+            ptu,
+            uncompressed,
+        } => {
             let s = vltm::sim::Scene::load(&scene)?;
             let c = s.render()?;
-            capture::npz::write(&c, &out)?;
+            capture::npz::write_with(&c, &out, !uncompressed)?;
             if let Some(p) = ptu {
                 let w = vltm::ptu::write_t3(&c, &p, &vltm::ptu::T3WriteOptions::default())?;
                 let side = w.sidecar_path.unwrap_or_else(|| p.with_extension("json"));

@@ -4,12 +4,16 @@
 //! * [`band`]: stage 1 of a whole laser row as one `sgemm` (`matrixmultiply`).
 //! * [`planar`]: the planar FFT convolution over a SPAD grid and wall-parallel voxel slices
 //!   (`rustfft`), for the diagonal per row and for imaging factorised columns.
+//! * [`lookup`]: the gated baseband + lookup diagonal (§B.2.4): one inverse FFT per SPAD and
+//!   row, then a cubic interpolation per (voxel, SPAD), for any geometry (`rustfft`).
 //!
 //! [`crate::ltm`] picks a path per probe ([`crate::ltm::Path`]); every path is checked against
 //! the float64 reference in `tests/proptest_fast.rs`.
 
 pub mod band;
+pub mod lookup;
 pub mod planar;
 
 pub use band::BandDft;
+pub use lookup::Lookup;
 pub use planar::Planar;

@@ -1,0 +1,249 @@
+//! Per-row cost of the host fast paths against the kernel's portable paths, and how they
+//! scale (criterion, **one thread**: the host runs one row per core on top of this).
+//!
+//! * `stage1`: band spectra of one laser row, kernel `RowBuffer::load` (integer-phase DFT)
+//!   vs `fast::BandDft` (one sgemm), for Nt = 200 / 400 / 800 (exh16 geometry, 16×16 SPADs).
+//! * `planar_diagonal`: one row of the planar-FFT diagonal for the exh16 setup (16×16 SPADs,
+//!   800 bins of 6 mm, λ = σ = 0.5 m, J = 33) over 16×16×24 voxels (pitch = SPAD pitch) and
+//!   32×32×24 (half pitch, 4 polyphase sub-grids), and for 8×8 / 32×32 SPAD grids (voxels
+//!   on the SPAD grid, 24 slices); plus 6 vs 24 slices.
+//! * `column_image`: imaging a factorised column over 16×16×24 voxels once, kernel vs planar.
+//!
+//! The kernel's band diagonal over the same 16×16×24 voxels is `benches/kernel.rs`
+//! (`exh16/diagonal_gaussian`, ≈ 150 ms per row). Memory of every path is printed first; none
+//! depends on the number of laser rows. Run: `cargo bench --bench fast` (≈ 2 min).
+
+use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
+use num_complex::{Complex32, Complex64};
+use std::hint::black_box;
+use vltm::fast::{BandDft, Planar};
+use vltm_kernel::{Config, Gate, Params, Point, Probe, RowBuffer, Scan, Target};
+
+fn axis(n: usize, lo: f32, pitch: f32) -> impl Iterator<Item = f32> + Clone {
+    (0..n).map(move |i| lo + pitch * i as f32)
+}
+
+/// An n×n SPAD grid of pitch 0.125 m centred on the origin.
+fn spads(n: usize) -> Vec<Point> {
+    let lo = -0.0625 * (n as f32 - 1.0);
+    axis(n, lo, 0.125)
+        .flat_map(|x| axis(n, lo, 0.125).map(move |y| [x, y, 0.0]))
+        .collect()
+}
+
+/// Voxels over the SPAD grid's extent at pitch 0.125/r, `nz` slices from 0.4 m.
+fn voxels(n: usize, r: usize, nz: usize) -> (Vec<Point>, [usize; 3]) {
+    let lo = -0.0625 * (n as f32 - 1.0);
+    let m = n * r;
+    let p = 0.125 / r as f32;
+    let pts = axis(m, lo, p)
+        .flat_map(|x| {
+            axis(m, lo, p).flat_map(move |y| (0..nz).map(move |k| [x, y, 0.4 + 0.04 * k as f32]))
+        })
+        .collect();
+    (pts, [m, m, nz])
+}
+
+fn config(nt: usize) -> Config {
+    Config::try_new(&Params {
+        sigma: Some(0.5),
+        ..Params::new(0.5, nt, 0.006)
+    })
+    .unwrap()
+}
+
+/// Deterministic counts: background + returns.
+fn hists(len: usize, nt: usize) -> Vec<f32> {
+    let mut x = 0x9E37_79B9_7F4A_7C15u64;
+    let mut next = || {
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        x
+    };
+    let mut h: Vec<f32> = (0..len).map(|_| (next() % 3) as f32).collect();
+    for chunk in h.chunks_mut(nt) {
+        for _ in 0..4 {
+            let i = (next() as usize) % nt;
+            chunk[i] += 200.0;
+        }
+    }
+    h
+}
+
+fn stage1(c: &mut Criterion) {
+    let mut g = c.benchmark_group("stage1");
+    g.sample_size(10);
+    let sp = spads(16);
+    for nt in [200, 400, 800] {
+        let cfg = config(nt);
+        let h = hists(sp.len() * nt, nt);
+        let mut tables = vec![0.0f32; Scan::tables_len(&cfg, sp.len())];
+        let scan = Scan::new(&cfg, &sp, &mut tables).unwrap();
+        let mut buf = vec![0.0f32; RowBuffer::len(&cfg, sp.len())];
+        let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
+        let dft = BandDft::new(&cfg);
+        g.throughput(Throughput::Elements((sp.len() * nt) as u64));
+        g.bench_function(BenchmarkId::new("kernel_load", nt), |b| {
+            b.iter(|| {
+                black_box(
+                    rows.load(&scan, [0.1, 0.0, 0.0], black_box(&h))
+                        .unwrap()
+                        .band()[0],
+                )
+            });
+        });
+        g.bench_function(BenchmarkId::new("sgemm_load_with", nt), |b| {
+            b.iter(|| {
+                let row = rows
+                    .load_with(&scan, [0.1, 0.0, 0.0], black_box(&h), |band, m| {
+                        dft.apply(&h, band, m);
+                    })
+                    .unwrap();
+                black_box(row.band()[0])
+            });
+        });
+    }
+    g.finish();
+}
+
+struct Case {
+    name: String,
+    ns: usize,
+    r: usize,
+    nz: usize,
+}
+
+fn planar_diagonal(c: &mut Criterion) {
+    let cfg = config(800);
+    let mut g = c.benchmark_group("planar_diagonal");
+    g.sample_size(10);
+    let cases = [
+        Case {
+            name: "exh16_16x16x24".into(),
+            ns: 16,
+            r: 1,
+            nz: 24,
+        },
+        Case {
+            name: "exh16_32x32x24".into(),
+            ns: 16,
+            r: 2,
+            nz: 24,
+        },
+        Case {
+            name: "exh16_16x16x6".into(),
+            ns: 16,
+            r: 1,
+            nz: 6,
+        },
+        Case {
+            name: "spads8_8x8x24".into(),
+            ns: 8,
+            r: 1,
+            nz: 24,
+        },
+        Case {
+            name: "spads32_32x32x24".into(),
+            ns: 32,
+            r: 1,
+            nz: 24,
+        },
+    ];
+    for case in cases {
+        let sp = spads(case.ns);
+        let (vox, shape) = voxels(case.ns, case.r, case.nz);
+        let planar = Planar::new(&cfg, &sp, &vox, shape).unwrap();
+        let mut scratch = planar.scratch();
+        let (mx, my, slices) = planar.shape();
+        eprintln!(
+            "planar {}: Ks = {}, Kv = {}, FFT {mx}×{my}, {slices} slices, κ̂ {:.1} MB shared, \
+             scratch {:.2} MB + {} B accumulators per worker",
+            case.name,
+            sp.len(),
+            vox.len(),
+            planar.table_bytes() as f64 / 1e6,
+            (3 * cfg.bins() * mx * my * 8) as f64 / 1e6,
+            16 * vox.len(),
+        );
+        let spectra: Vec<Complex32> = (0..sp.len() * cfg.bins())
+            .map(|i| Complex32::new((i % 7) as f32 - 3.0, (i % 5) as f32 - 2.0))
+            .collect();
+        let skip = vec![false; vox.len()];
+        let mut acc = vec![Complex64::new(0.0, 0.0); vox.len()];
+        let laser: Point = [0.1, -0.2, 0.0];
+        g.throughput(Throughput::Elements((vox.len() * sp.len()) as u64));
+        g.bench_function(BenchmarkId::from_parameter(&case.name), |b| {
+            b.iter(|| {
+                planar.apply(
+                    black_box(&spectra),
+                    &vox,
+                    |v| {
+                        let d = ((0..3).map(|i| (v[i] - laser[i]).powi(2)).sum::<f32>()).sqrt();
+                        (d, cfg.weight(d))
+                    },
+                    &skip,
+                    &mut scratch,
+                    &mut acc,
+                );
+            });
+        });
+    }
+    g.finish();
+}
+
+fn column_image(c: &mut Criterion) {
+    let cfg = config(800);
+    let sp = spads(16);
+    let (vox, shape) = voxels(16, 1, 24);
+    let h = hists(sp.len() * 800, 800);
+    let mut tables = vec![0.0f32; Scan::tables_len(&cfg, sp.len())];
+    let scan = Scan::new(&cfg, &sp, &mut tables).unwrap();
+    let mut buf = vec![0.0f32; RowBuffer::len(&cfg, sp.len())];
+    let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
+    let row = rows.load(&scan, [0.1, 0.0, 0.0], &h).unwrap();
+    let focus: Point = [0.0, 0.1, 0.8];
+    let target = Target::Column(focus);
+    let mut state = vec![0.0f64; Probe::state_len(&cfg, target, Gate::Gaussian, 0, sp.len())];
+    let mut probe = Probe::new(&scan, target, Gate::Gaussian, &[], &mut state).unwrap();
+    probe.push_row(&scan, &row).unwrap();
+    let mut g = c.benchmark_group("column_image");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements((vox.len() * sp.len()) as u64));
+    let mut out = vec![0.0f64; vox.len()];
+    g.bench_function("kernel_16x16x24", |b| {
+        b.iter(|| probe.image(&scan, black_box(&vox), &mut out).unwrap());
+    });
+    g.bench_function("planar_16x16x24_incl_table", |b| {
+        b.iter(|| {
+            let planar = Planar::new(&cfg, &sp, &vox, shape).unwrap();
+            let (u, _) = probe.column_spectra().unwrap();
+            let u: Vec<Complex32> = u
+                .iter()
+                .map(|z| Complex32::new(z.re as f32, z.im as f32))
+                .collect();
+            let mut acc = vec![Complex64::new(0.0, 0.0); vox.len()];
+            let skip = vec![false; vox.len()];
+            planar.apply(
+                &u,
+                &vox,
+                |b| {
+                    let d = ((0..3).map(|i| (b[i] - focus[i]).powi(2)).sum::<f32>()).sqrt();
+                    (d, 1.0)
+                },
+                &skip,
+                &mut planar.scratch(),
+                &mut acc,
+            );
+            black_box(acc[0])
+        });
+    });
+    g.finish();
+}
+
+criterion_group! {
+    name = fast;
+    config = Criterion::default().warm_up_time(std::time::Duration::from_millis(500));
+    targets = stage1, planar_diagonal, column_image
+}
+criterion_main!(fast);

@@ -1,0 +1,894 @@
+//! The gated baseband + lookup evaluation of the diagonal (DESIGN §B.2.4): per laser row, one
+//! inverse FFT per SPAD turns the band spectrum into a finely sampled, demodulated gated
+//! phasor, and every (voxel, SPAD) pair then costs a 4-point interpolation instead of a
+//! `J`-term band sum. Any geometry (1-D SPAD lines with a voxel pitch that does not divide
+//! the SPAD pitch, tilted walls, point lists), where [`super::Planar`] does not apply.
+//!
+//! Units: metres of path throughout. For laser row `l`, SPAD `s` and voxel `v`,
+//! `τ = d_lv + d_vs` is the hidden path only; the legs `d1_l + d4_s − t0` are folded into
+//! the row's band spectra `HG_ls[j]` (`Row::band`, Ks × J) and listed in `Row::offsets`.
+//!
+//! **Method.** With `k_d = round(k_c)` the band centre (`k_c = NΔt/λ`), `span = NΔt` and a
+//! grid length `L ≥ N`, the band is placed at bins `(k_lo + j − k_d) mod L` of a length-`L`
+//! spectrum and inverse-transformed (`rustfft`, `f32`):
+//!
+//! ```text
+//! Y_s[n] = Σ_j HG_s[j]·e^{2πi (k_lo + j − k_d) n / L} = e^{−2πi k_d τ_n/span}·Z_s(τ_n),   τ_n = n·span/L
+//! Z_s(τ) = e^{2πi k_d n/L} · e^{2πi (k_d/L) t} · Σ_{q=−1..2} ℓ_q(t)·Y_s[n + q],    n + t = τ·L/span
+//! ```
+//!
+//! `Y_s` is the band sum's own `span`-periodic function (no extra wrap-around), demodulated
+//! to a smooth envelope of bandwidth `~m/σ`; `ℓ_q` are the 4-point cubic **Lagrange**
+//! weights (nodes −1, 0, 1, 2). The carrier `e^{2πi k_d τ/span}` is split at the grid:
+//! `e^{2πi k_d n/L}` from a table (exact integer phase `k_d·n mod L`, made once in `f64`)
+//! and the sub-sample rest `e^{2πi (k_d/L)·t}` (≤ 1/8 turn) by the polynomials of
+//! [`vltm_kernel::cis_turns`] without its range reduction: no large-argument phase error,
+//! no `rint` and no data-dependent quadrant branch per pair. The amplitude added to `acc[v]`
+//! is `w(d_lv)·Σ_s w(d_vs)·Z_s(d_lv + d_vs)`, summed over the SPADs in `Complex32` and added
+//! to the `Complex64` accumulator, as the kernel's band diagonal does. The guard is the
+//! kernel's, bit for bit: a pair with `τ + offset_s` (in `f32`) outside [`Config::guard`]
+//! adds 0. Distances are `f32` `√(x² + y² + z²)` (correctly rounded, as the kernel's); the
+//! grid position `τ·L/span` is formed in `f64` from the `f32` τ.
+//!
+//! Each SPAD's table is stored rotated so that its guarded τ range is one contiguous run
+//! (no modulo in the inner loop; a rounding step past either end takes a cold wrapping
+//! path). The SPADs are processed in blocks of 8 as a structure of arrays: distances,
+//! guard, Lagrange weights and the small phase vectorise; the 4-value table reads are
+//! scalar.
+//!
+//! **Grid density.** `L` is the smallest `2^a·3^b·5^c ≥ max(N, R·span/σ, 8·span/λ)` with
+//! [`SAMPLES_PER_SIGMA`] `R = 12`, i.e. an oversampling `L/N ≈ max(1, 12Δt/σ)` (3.56 for
+//! λ = 0.13 m, Δt = 2.55 cm, σ = 2λ/3; ≈ 1 for λ/Δt ≥ 18). Lagrange's error falls as
+//! `(δ/σ)⁴` (`δ = span/L`). Measured worst amplitude error of one SPAD's `Z(τ)` against the
+//! `f64` band sum over the whole guard interval, relative to `max |Z|`, on random rows with
+//! peaks, λ/Δt ∈ {6, 13, 40} (test `interpolation_error`), by `R`: 6 → 5.1e-5,
+//! 8 → 1.6e-5, 10 → 9.1e-6, **12 → 4.4e-6**, 14 → 2.1e-6, 16 → 1.5e-6 (DESIGN §B.2.4:
+//! 1.5e-6 at σ ≈ 13Δt). Against the kernel's band diagonal (tests `matches_band_diagonal_*`:
+//! one row, 16 SPADs × 200 voxels, λ/Δt from 6 to 40, `1/d` and unit weights, legs on and
+//! off, 27–63 % of the voxels with some paths outside the guard): intensities within
+//! 5.2e-6·max I (the kernel's own `f32` error against the `f64` band sum is up to 3.3e-6 on
+//! the same probes), amplitudes within 2.6e-6·max |A| of the `f64` band sum. A 1 cm voxel
+//! shift gives 0.25·max I (test `catches_a_one_centimetre_shift`).
+//!
+//! **Cost per row**: `Ks·5L·log₂L` flops of inverse FFTs (+ `Ks·L` copies), then
+//! `Kv·Ks·(E0 + ~16)` (a distance, the guard test, Lagrange weights, 4 real×complex MACs, a
+//! table phase and a small phase, one weight), against the band path's `Kv·Ks·(14J + E0)`.
+//! Measured (ignored test `timing`, one core of a shared 2-core AMD EPYC VM, 28 SPADs on a
+//! line × 4096 voxels, Nt = 254, λ = 0.13 m, Δt = 2.55 cm: N = 288, J = 136, L = 1024):
+//! 19–30 ns per (voxel, SPAD) pair against 270–420 ns for the kernel's band diagonal in the
+//! same run (13–14× faster; 2.2–3.5 ms per row, of which 0.06 ms are the FFT tables).
+//! Parallel callers split the voxels; each worker rebuilds the row's tables (cheap).
+//!
+//! **Memory**: per worker ([`LookupScratch`], [`Lookup::scratch_bytes`]) `Ks·(L + 8) + L`
+//! complex `f32` (the rotated tables and one FFT buffer), rustfft's scratch and `~40·Ks`
+//! bytes of SPAD blocks; the shared [`Lookup`] holds the FFT plan and the `2L + 8`-entry
+//! carrier table. No allocation per row.
+
+use num_complex::{Complex32, Complex64};
+use rustfft::{Fft, FftPlanner};
+use std::sync::Arc;
+use vltm_kernel::{Config, Point, Row, Sample, Scan, Weights};
+
+/// Grid samples per gate std σ: the grid step is `δ = span/L ≤ σ/R` (see the module docs
+/// for the interpolation error this gives).
+pub const SAMPLES_PER_SIGMA: f64 = 12.0;
+
+/// Extra table entries past `L` per SPAD (the 4-point stencil reads up to 3 past its start;
+/// the rest absorbs rounding at the guard edges before the wrapping fallback is needed).
+const EXTRA: usize = 8;
+
+/// Precomputed inverse-FFT plan and constants for one configuration.
+pub struct Lookup {
+    cfg: Config,
+    /// Grid length L.
+    len: usize,
+    /// Position of band bin 0 in the length-L spectrum: `(k_lo − k_d) mod L`.
+    first: usize,
+    /// Grid samples per metre of τ, `L/span`.
+    per_m: f64,
+    /// Carrier turns per grid sample, `k_d/L`.
+    theta: f32,
+    /// `carrier[k] = e^{2πi k_d k/L}`, `2L + EXTRA` entries.
+    carrier: Vec<Complex32>,
+    /// Guard interval of `τ + offset` in `f32` (the kernel's comparison).
+    guard: (f32, f32),
+    ifft: Arc<dyn Fft<f32>>,
+}
+
+/// Per-worker scratch of [`Lookup::apply`]: the row's baseband tables (SPAD-major) and the
+/// FFT buffers. Resized (not reallocated in steady state) when the SPAD count changes.
+#[derive(Clone, Debug)]
+pub struct LookupScratch {
+    /// One length-L spectrum / signal.
+    spec: Vec<Complex32>,
+    /// rustfft's scratch.
+    fft: Vec<Complex32>,
+    /// Per SPAD `L + EXTRA` values, `tab_s[k] = Y_s[(b_s + k) mod L]`.
+    tables: Vec<Complex32>,
+    /// Per SPAD the table origin `b_s` (an integer, as `f64`) and `b_s mod L`.
+    base: Vec<(f64, usize)>,
+    /// The row's SPADs in blocks of [`BLOCK`] (padded with never-valid SPADs).
+    blocks: Vec<SpadBlock>,
+}
+
+/// SPADs per block of the inner loop (structure of arrays, so that the arithmetic per
+/// (voxel, SPAD) vectorises; the table reads stay scalar).
+const BLOCK: usize = 8;
+
+/// One block of SPADs: positions, leg offsets and table origins.
+#[derive(Clone, Copy, Debug)]
+struct SpadBlock {
+    x: [f32; BLOCK],
+    y: [f32; BLOCK],
+    z: [f32; BLOCK],
+    /// `Row::offsets`; NaN for padding (never inside the guard).
+    off: [f32; BLOCK],
+    /// Table origin `b_s` as `f64`.
+    base: [f64; BLOCK],
+}
+
+impl SpadBlock {
+    const EMPTY: Self = Self {
+        x: [0.0; BLOCK],
+        y: [0.0; BLOCK],
+        z: [0.0; BLOCK],
+        off: [f32::NAN; BLOCK],
+        base: [0.0; BLOCK],
+    };
+}
+
+impl std::fmt::Debug for Lookup {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Lookup")
+            .field("len", &self.len)
+            .field("n_fft", &self.cfg.n_fft())
+            .field("bins", &self.cfg.bins())
+            .finish_non_exhaustive()
+    }
+}
+
+/// Smallest `2^a·3^b·5^c ≥ n` (a size rustfft transforms with its fast butterflies).
+fn fast_len(n: usize) -> usize {
+    let n = n.max(1);
+    let mut best = usize::MAX;
+    let mut p5 = 1usize;
+    while p5 < 2 * n {
+        let mut p35 = p5;
+        while p35 < 2 * n {
+            let mut p = p35;
+            while p < n {
+                p *= 2;
+            }
+            best = best.min(p);
+            p35 *= 3;
+        }
+        p5 *= 5;
+    }
+    best
+}
+
+/// The kernel's distance: `f32` `√(x² + y² + z²)`, correctly rounded.
+#[inline]
+fn dist(a: &Point, b: &Point) -> f32 {
+    let (x, y, z) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
+    (x * x + y * y + z * z).sqrt()
+}
+
+/// `e^{i2πt}` for a small phase `|t| ≤ 1/8` turn: the polynomials of
+/// [`vltm_kernel::cis_turns`] (Taylor series of sin to x⁹ and cos to x¹⁰ on `|x| ≤ π/4`,
+/// truncation < 2e-9) without its range reduction, so no `rint` and no quadrant branch.
+#[inline(always)]
+fn cis_small(t: f32) -> Complex32 {
+    let x = std::f32::consts::TAU * t;
+    let x2 = x * x;
+    let s = x
+        * (1.0
+            + x2 * (-1.0 / 6.0
+                + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362_880.0)))));
+    let c = 1.0
+        + x2 * (-0.5
+            + x2 * (1.0 / 24.0
+                + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40_320.0 + x2 * (-1.0 / 3_628_800.0)))));
+    Complex32::new(c, s)
+}
+
+/// The 4-point cubic Lagrange weights at `t ∈ [0, 1)` for the nodes −1, 0, 1, 2.
+#[inline(always)]
+fn lagrange_weights(t: f32) -> [f32; 4] {
+    let (tp, tm, t2) = (t + 1.0, t - 1.0, t - 2.0);
+    let a = t * tm;
+    let b = tp * t2;
+    [
+        a * t2 * (-1.0 / 6.0),
+        b * tm * 0.5,
+        b * t * -0.5,
+        a * tp * (1.0 / 6.0),
+    ]
+}
+
+/// 4-point cubic Lagrange interpolation at `t ∈ [0, 1)` between `q[1]` and `q[2]`.
+#[inline(always)]
+fn lagrange(q: &[Complex32; 4], t: f32) -> Complex32 {
+    let w = lagrange_weights(t);
+    q[0] * w[0] + q[1] * w[1] + q[2] * w[2] + q[3] * w[3]
+}
+
+impl Lookup {
+    /// Plans the grid for `cfg` (length `L`, see the module docs).
+    pub fn new(cfg: &Config) -> Self {
+        Self::with_density(cfg, SAMPLES_PER_SIGMA)
+    }
+
+    /// As [`Lookup::new`] with `r` grid samples per σ instead of [`SAMPLES_PER_SIGMA`].
+    fn with_density(cfg: &Config, r: f64) -> Self {
+        let n = cfg.n_fft();
+        let span = cfg.span();
+        let want = (r * span / cfg.sigma()).ceil();
+        // δ ≤ σ/r for the interpolation, δ ≤ λ/8 for `cis_small` (|θ·t| ≤ 1/8 turn).
+        let want = want.max((8.0 * span / cfg.wavelength()).ceil());
+        let len = fast_len(n.max(if want.is_finite() { want as usize } else { n }));
+        let k_d = (span / cfg.wavelength()).round() as i64;
+        let first = (cfg.k_lo() - k_d).rem_euclid(len as i64) as usize;
+        let (g_lo, g_hi) = cfg.guard();
+        let ifft = FftPlanner::<f32>::new().plan_fft_inverse(len);
+        let step = k_d.rem_euclid(len as i64) as u64;
+        let carrier = (0..2 * len + EXTRA)
+            .map(|k| {
+                let q = (step * (k % len) as u64) % len as u64;
+                let a = std::f64::consts::TAU * q as f64 / len as f64;
+                Complex32::new(a.cos() as f32, a.sin() as f32)
+            })
+            .collect();
+        Self {
+            cfg: *cfg,
+            len,
+            first,
+            per_m: len as f64 / span,
+            theta: (k_d as f64 / len as f64) as f32,
+            carrier,
+            guard: (g_lo as f32, g_hi as f32),
+            ifft,
+        }
+    }
+
+    /// Grid length `L` (a `2^a·3^b·5^c` size ≥ N).
+    pub fn grid_len(&self) -> usize {
+        self.len
+    }
+
+    /// Oversampling `L/N` of the grid relative to the kernel's DFT length.
+    pub fn oversampling(&self) -> f64 {
+        self.len as f64 / self.cfg.n_fft() as f64
+    }
+
+    /// Bytes of a worker's scratch for `n_spads` SPADs (tables + FFT buffers).
+    pub fn scratch_bytes(&self, n_spads: usize) -> usize {
+        8 * (n_spads * (self.len + EXTRA) + self.len + self.ifft.get_inplace_scratch_len())
+            + 16 * n_spads
+            + n_spads.div_ceil(BLOCK) * std::mem::size_of::<SpadBlock>()
+    }
+
+    /// A worker's scratch for rows of `n_spads` SPADs.
+    pub fn scratch(&self, n_spads: usize) -> LookupScratch {
+        let zero = Complex32::new(0.0, 0.0);
+        LookupScratch {
+            spec: vec![zero; self.len],
+            fft: vec![zero; self.ifft.get_inplace_scratch_len()],
+            tables: vec![zero; n_spads * (self.len + EXTRA)],
+            base: vec![(0.0, 0); n_spads],
+            blocks: vec![SpadBlock::EMPTY; n_spads.div_ceil(BLOCK)],
+        }
+    }
+
+    /// Builds the row's baseband tables: per SPAD one inverse FFT, stored rotated so that
+    /// the guarded τ range starts at entry ~2.
+    fn tables(
+        &self,
+        spads: &[Point],
+        row_band: &[Complex32],
+        offsets: &[f32],
+        s: &mut LookupScratch,
+    ) {
+        let (l, j) = (self.len, self.cfg.bins().max(1));
+        let ks = offsets.len();
+        s.blocks.clear();
+        s.blocks.resize(ks.div_ceil(BLOCK), SpadBlock::EMPTY);
+        s.tables.resize(ks * (l + EXTRA), Complex32::new(0.0, 0.0));
+        s.base.resize(ks, (0.0, 0));
+        s.spec.resize(l, Complex32::new(0.0, 0.0));
+        let g_lo = self.guard.0 as f64;
+        for (((hg, off), tab), base) in row_band
+            .chunks_exact(j)
+            .zip(offsets)
+            .zip(s.tables.chunks_exact_mut(l + EXTRA))
+            .zip(s.base.iter_mut())
+        {
+            s.spec.fill(Complex32::new(0.0, 0.0));
+            let (head, tail) = hg.split_at(hg.len().min(l - self.first));
+            s.spec[self.first..self.first + head.len()].copy_from_slice(head);
+            s.spec[..tail.len()].copy_from_slice(tail);
+            self.ifft.process_with_scratch(&mut s.spec, &mut s.fft);
+            // Origin two samples before the guard's lower edge in τ = rel − offset.
+            let b = ((g_lo - *off as f64) * self.per_m).floor() - 2.0;
+            let b_mod = (b as i64).rem_euclid(l as i64) as usize;
+            *base = (b, b_mod);
+            let (a, c) = s.spec.split_at(b_mod);
+            tab[..c.len()].copy_from_slice(c);
+            tab[c.len()..l].copy_from_slice(a);
+            let (period, extra) = tab.split_at_mut(l);
+            extra.copy_from_slice(&period[..EXTRA]);
+        }
+        for (i, ((p, off), base)) in spads.iter().zip(offsets).zip(&s.base).enumerate() {
+            let b = &mut s.blocks[i / BLOCK];
+            let k = i % BLOCK;
+            (b.x[k], b.y[k], b.z[k], b.off[k], b.base[k]) = (p[0], p[1], p[2], *off, base.0);
+        }
+    }
+
+    #[cfg(test)]
+    /// `Z_s(τ)` from SPAD `s`'s rotated table `tab` with origin `(b_s, b_s mod L)`.
+    #[inline(always)]
+    fn gated(&self, tab: &[Complex32], base: (f64, usize), tau: f32) -> Complex32 {
+        let x = tau as f64 * self.per_m - base.0;
+        // x ≥ 2 inside the guard: truncation is the floor there (and `x ≥ 1` is checked).
+        let i = x as i64;
+        let start = (i - 1) as usize; // wraps to a huge index for i < 1
+        let q = tab.get(start..).and_then(|q| q.first_chunk::<4>());
+        match (q, self.carrier.get(base.1.wrapping_add(i as usize))) {
+            (Some(q), Some(c)) if x >= 1.0 => {
+                let t = (x - i as f64) as f32;
+                lagrange(q, t) * (c * cis_small(self.theta * t))
+            }
+            _ => self.gated_wrapped(tab, base.1, x),
+        }
+    }
+
+    /// [`Lookup::gated`] outside the table's contiguous run (rounding at a guard edge):
+    /// wraps the grid index explicitly.
+    #[cold]
+    #[inline(never)]
+    fn gated_wrapped(&self, tab: &[Complex32], b_mod: usize, x: f64) -> Complex32 {
+        let l = self.len as i64;
+        let m = x.floor();
+        let k = ((m as i64) - 1).rem_euclid(l) as usize;
+        let q = tab[k..]
+            .first_chunk::<4>()
+            .expect("tables hold L + 8 entries");
+        let c = self.carrier[(b_mod as i64 + m as i64).rem_euclid(l) as usize];
+        let t = (x - m) as f32;
+        lagrange(q, t) * (c * cis_small(self.theta * t))
+    }
+
+    /// Adds to `acc[v]` the diagonal amplitude contribution of this row for every voxel:
+    /// `Σ_s w(d_lv)·w(d_vs)·Z_ls(d_lv + d_vs)`, Z from the row's band spectra
+    /// (`row.band()`, Ks×J, gate weights and legs folded in:
+    /// `Z_ls(τ) = Σ_j HG_ls[j]·e^{iν_j τ}` with τ the hidden path only), with the kernel's
+    /// guard: paths with `τ + row.offsets()[s]` outside `cfg.guard()` contribute 0.
+    ///
+    /// Equals the kernel's `Probe` (diagonal, Gaussian gate) `push_row` to the interpolation
+    /// error of the module docs. No allocation once `s` has the row's SPAD count.
+    ///
+    /// # Panics
+    /// If `scan` has another configuration than this `Lookup`, if `row` was loaded for
+    /// another SPAD count, or if `acc.len() ≠ voxels.len()`.
+    pub fn apply<T: Sample>(
+        &self,
+        scan: &Scan<'_>,
+        row: &Row<'_, T>,
+        voxels: &[Point],
+        s: &mut LookupScratch,
+        acc: &mut [Complex64],
+    ) {
+        let cfg = scan.config();
+        assert!(*cfg == self.cfg, "Lookup made for another configuration");
+        let spads = scan.spads();
+        let ks = spads.len();
+        assert_eq!(row.band().len(), ks * cfg.bins(), "row of another scan");
+        assert_eq!(row.offsets().len(), ks, "row of another scan");
+        assert_eq!(acc.len(), voxels.len(), "one accumulator per voxel");
+        self.tables(spads, row.band(), row.offsets(), s);
+        let laser = row.laser();
+        let (g_lo, g_hi) = self.guard;
+        let stride = self.len + EXTRA;
+        let inv = matches!(cfg.weights(), Weights::Inv);
+        let d_min = cfg.params().d_min as f32;
+        let (per_m, theta) = (self.per_m, self.theta);
+        // Per block: Lagrange weights × w(d_vs) (0 outside the guard), the small carrier
+        // phase, the stencil start and the grid position.
+        let mut wq = [[0.0f32; BLOCK]; 4];
+        let mut cs = [Complex32::new(0.0, 0.0); BLOCK];
+        let mut start = [0i32; BLOCK];
+        let mut ok = [false; BLOCK];
+        let mut xs = [0.0f64; BLOCK];
+        for (a, v) in acc.iter_mut().zip(voxels) {
+            let d_lv = dist(&laser, v);
+            let mut sum = Complex32::new(0.0, 0.0);
+            for (bi, b) in s.blocks.iter().enumerate() {
+                // Vectorisable part: no table reads.
+                for k in 0..BLOCK {
+                    let (dx, dy, dz) = (v[0] - b.x[k], v[1] - b.y[k], v[2] - b.z[k]);
+                    let d_vs = (dx * dx + dy * dy + dz * dz).sqrt();
+                    let tau = d_lv + d_vs;
+                    let rel = tau + b.off[k];
+                    let inside = rel >= g_lo && rel <= g_hi;
+                    let x = tau as f64 * per_m - b.base[k];
+                    let i = x as i32;
+                    let t = if inside { (x - i as f64) as f32 } else { 0.0 };
+                    let w = match (inside, inv) {
+                        (false, _) => 0.0,
+                        (true, true) => 1.0 / d_vs.max(d_min),
+                        (true, false) => 1.0,
+                    };
+                    let l = lagrange_weights(t);
+                    for (wq, l) in wq.iter_mut().zip(l) {
+                        wq[k] = l * w;
+                    }
+                    cs[k] = cis_small(theta * t);
+                    start[k] = i.saturating_sub(1);
+                    ok[k] = inside;
+                    xs[k] = x;
+                }
+                // Table reads (scalar).
+                let tabs = s.tables.get(bi * BLOCK * stride..).unwrap_or_default();
+                for (k, tab) in tabs.chunks_exact(stride).take(BLOCK).enumerate() {
+                    if !ok[k] {
+                        continue;
+                    }
+                    let st = start[k] as usize; // huge for start < 0
+                    let c_at = s.base[bi * BLOCK + k].1.wrapping_add(st).wrapping_add(1);
+                    let w = [wq[0][k], wq[1][k], wq[2][k], wq[3][k]];
+                    let q = tab.get(st..).and_then(|q| q.first_chunk::<4>());
+                    sum += match (q, self.carrier.get(c_at)) {
+                        (Some(q), Some(c)) if start[k] >= 0 => {
+                            (q[0] * w[0] + q[1] * w[1] + q[2] * w[2] + q[3] * w[3]) * (c * cs[k])
+                        }
+                        // Outside the contiguous run (rounding at a guard edge).
+                        _ => {
+                            let w = cfg.weight(dist(v, &spads[bi * BLOCK + k]));
+                            self.gated_wrapped(tab, s.base[bi * BLOCK + k].1, xs[k]) * w
+                        }
+                    };
+                }
+            }
+            let z = sum * cfg.weight(d_lv);
+            *a += Complex64::new(z.re as f64, z.im as f64);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::rngs::StdRng;
+    use rand::{Rng, SeedableRng};
+    use std::f64::consts::TAU;
+    use vltm_kernel::{Gate, Legs, Params, Probe, RowBuffer, Target};
+
+    /// A test geometry: SPADs on a line (x axis, z = 0), one laser spot, voxels in a box.
+    struct Case {
+        cfg: Config,
+        spads: Vec<Point>,
+        laser: Point,
+        voxels: Vec<Point>,
+        hists: Vec<f32>,
+    }
+
+    /// Random row with peaks at random path lengths and a noise floor.
+    fn case(p: &Params, ks: usize, kv: usize, seed: u64) -> Case {
+        let cfg = Config::try_new(p).unwrap();
+        let mut rng = StdRng::seed_from_u64(seed);
+        let spads: Vec<Point> = (0..ks)
+            .map(|i| [-0.7 + 1.4 * i as f32 / ks as f32 + 0.013, 0.05, 0.0])
+            .collect();
+        let laser = [0.2, -0.3, 0.0];
+        let voxels: Vec<Point> = (0..kv)
+            .map(|_| {
+                [
+                    rng.random_range(-0.8..0.8),
+                    rng.random_range(-0.8..0.8),
+                    rng.random_range(0.1..1.6),
+                ]
+            })
+            .collect();
+        let nt = cfg.nt();
+        let mut hists = vec![0.0f32; ks * nt];
+        for h in hists.chunks_exact_mut(nt) {
+            for x in h.iter_mut() {
+                *x = rng.random::<f32>();
+            }
+            for _ in 0..4 {
+                h[rng.random_range(0..nt)] += rng.random_range(20.0..100.0);
+            }
+        }
+        Case {
+            cfg,
+            spads,
+            laser,
+            voxels,
+            hists,
+        }
+    }
+
+    struct Outcome {
+        /// Kernel band diagonal intensities.
+        band: Vec<f64>,
+        /// Lookup amplitudes.
+        lookup: Vec<Complex64>,
+        /// f64 band sum (same f32 τ and guard decisions) amplitudes.
+        exact: Vec<Complex64>,
+        /// Fraction of voxels with at least one guarded-out path.
+        cut: f64,
+    }
+
+    /// Runs one row through the kernel's band diagonal, the lookup (voxels shifted by
+    /// `shift` m in z) and an f64 band sum.
+    fn run(c: &Case, shift: f32) -> Outcome {
+        let cfg = &c.cfg;
+        let ks = c.spads.len();
+        let kv = c.voxels.len();
+        let mut tables = vec![0.0; Scan::tables_len(cfg, ks)];
+        let scan = Scan::new(cfg, &c.spads, &mut tables).unwrap();
+        let mut buf = vec![0.0; RowBuffer::len(cfg, ks)];
+        let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
+        let row = rows.load(&scan, c.laser, &c.hists).unwrap();
+        let mut state = vec![0.0; Probe::state_len(cfg, Target::Diagonal, Gate::Gaussian, kv, ks)];
+        let mut probe = Probe::new(
+            &scan,
+            Target::Diagonal,
+            Gate::Gaussian,
+            &c.voxels,
+            &mut state,
+        )
+        .unwrap();
+        probe.push_row(&scan, &row).unwrap();
+        let mut band = vec![0.0; kv];
+        probe.finish(&scan, &mut band).unwrap();
+
+        let lk = Lookup::new(cfg);
+        let mut s = lk.scratch(ks);
+        let moved: Vec<Point> = c
+            .voxels
+            .iter()
+            .map(|v| [v[0], v[1], v[2] + shift])
+            .collect();
+        let mut lookup = vec![Complex64::new(0.0, 0.0); kv];
+        lk.apply(&scan, &row, &moved, &mut s, &mut lookup);
+
+        let (g_lo, g_hi) = cfg.guard();
+        let (g_lo, g_hi) = (g_lo as f32, g_hi as f32);
+        let j = cfg.bins();
+        let mut cuts = 0;
+        let exact = c
+            .voxels
+            .iter()
+            .map(|v| {
+                let d_lv = dist(&c.laser, v);
+                let mut sum = Complex64::new(0.0, 0.0);
+                let mut cut = false;
+                for ((sp, hg), off) in c
+                    .spads
+                    .iter()
+                    .zip(row.band().chunks_exact(j))
+                    .zip(row.offsets())
+                {
+                    let d_vs = dist(v, sp);
+                    let tau = d_lv + d_vs;
+                    let rel = tau + off;
+                    if !(rel >= g_lo && rel <= g_hi) {
+                        cut = true;
+                        continue;
+                    }
+                    let z: Complex64 = hg
+                        .iter()
+                        .enumerate()
+                        .map(|(j, h)| {
+                            let k = (cfg.k_lo() + j as i64) as f64;
+                            let ph = Complex64::from_polar(1.0, TAU * k * tau as f64 / cfg.span());
+                            Complex64::new(h.re as f64, h.im as f64) * ph
+                        })
+                        .sum();
+                    sum += z * cfg.weight(d_vs) as f64;
+                }
+                cuts += usize::from(cut);
+                sum * cfg.weight(d_lv) as f64
+            })
+            .collect();
+        Outcome {
+            band,
+            lookup,
+            exact,
+            cut: cuts as f64 / kv as f64,
+        }
+    }
+
+    /// max | |A_f64|² − I_band | / max I_band: the kernel's own `f32` error, for scale.
+    fn kernel_error(o: &Outcome) -> f64 {
+        let i_max = o.band.iter().copied().fold(0.0, f64::max);
+        o.band
+            .iter()
+            .zip(&o.exact)
+            .map(|(b, e)| (e.norm_sqr() - b).abs())
+            .fold(0.0, f64::max)
+            / i_max
+    }
+
+    /// (max |I_lookup − I_band| / max I_band, max |A_lookup − A_f64| / max |A_f64|).
+    fn errors(o: &Outcome) -> (f64, f64) {
+        let i_max = o.band.iter().copied().fold(0.0, f64::max);
+        let a_max = o.exact.iter().map(|a| a.norm()).fold(0.0, f64::max);
+        let di = o
+            .band
+            .iter()
+            .zip(&o.lookup)
+            .map(|(b, l)| (l.norm_sqr() - b).abs())
+            .fold(0.0, f64::max);
+        let da = o
+            .exact
+            .iter()
+            .zip(&o.lookup)
+            .map(|(e, l)| (e - l).norm())
+            .fold(0.0, f64::max);
+        (di / i_max, da / a_max)
+    }
+
+    /// Parameters: λ = 0.13 m, Δt = λ/ratio, a window from t0 = 0.9 m to ~2.6 m so that
+    /// a good part of the voxels have paths outside the guard on either side.
+    fn params(ratio: f64) -> Params {
+        let lam = 0.13;
+        let dt = lam / ratio;
+        Params {
+            t0: 0.9,
+            ..Params::new(lam, (1.7 / dt) as usize, dt)
+        }
+    }
+
+    const TOL: f64 = 1e-4;
+
+    fn check(p: &Params, seed: u64) -> (f64, f64) {
+        let c = case(p, 16, 200, seed);
+        let o = run(&c, 0.0);
+        let (di, da) = errors(&o);
+        let lk = Lookup::new(&c.cfg);
+        println!(
+            "λ/Δt {:5.1}  σ/Δt {:5.2}  N {:5}  L {:5} (×{:.2})  J {:4}  cut {:3.0}%  \
+             intensity err {di:.2e}  amplitude err {da:.2e}  (kernel vs f64: {:.2e})",
+            p.wavelength / p.dt,
+            c.cfg.sigma() / p.dt,
+            c.cfg.n_fft(),
+            lk.grid_len(),
+            lk.oversampling(),
+            c.cfg.bins(),
+            100.0 * o.cut,
+            kernel_error(&o)
+        );
+        assert!(o.cut > 0.1 && o.cut < 0.9, "guard cut {:.2}", o.cut);
+        assert!(di <= TOL, "intensity error {di:.3e}");
+        assert!(da <= TOL / 2.0, "amplitude error {da:.3e}");
+        (di, da)
+    }
+
+    #[test]
+    fn matches_band_diagonal_ratios() {
+        let mut worst = (0.0f64, 0.0f64);
+        for (k, ratio) in [6.0, 8.0, 13.0, 20.0, 40.0].into_iter().enumerate() {
+            let (di, da) = check(&params(ratio), 10 + k as u64);
+            worst = (worst.0.max(di), worst.1.max(da));
+        }
+        println!(
+            "worst: intensity {:.2e}, amplitude {:.2e}",
+            worst.0, worst.1
+        );
+    }
+
+    #[test]
+    fn matches_band_diagonal_weights_and_legs() {
+        let legs = Legs::FirstAndLast {
+            laser_origin: [0.3, -1.0, -0.4],
+            sensor_origin: [-0.2, 0.5, -0.3],
+        };
+        for (k, (ratio, weights, legs, t0)) in [
+            (6.0, Weights::One, Legs::WallToWall, 0.9),
+            (10.0, Weights::Inv, legs, 2.1),
+            (25.0, Weights::One, legs, 2.1),
+            (40.0, Weights::Inv, legs, 2.1),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let p = Params {
+                weights,
+                legs,
+                t0,
+                ..params(ratio)
+            };
+            check(&p, 20 + k as u64);
+        }
+    }
+
+    #[test]
+    fn catches_a_one_centimetre_shift() {
+        let c = case(&params(8.0), 16, 200, 3);
+        let (di, da) = errors(&run(&c, 0.01));
+        println!("1 cm shift: intensity err {di:.2e}, amplitude err {da:.2e}");
+        assert!(di > 10.0 * TOL && da > 10.0 * TOL, "{di:.2e} {da:.2e}");
+    }
+
+    #[test]
+    fn fast_lengths() {
+        assert_eq!(fast_len(1), 1);
+        assert_eq!(fast_len(7), 8);
+        assert_eq!(fast_len(847), 864);
+        assert_eq!(fast_len(1001), 1024);
+        for n in 1..3000 {
+            let l = fast_len(n);
+            let mut r = l;
+            for p in [2, 3, 5] {
+                while r.is_multiple_of(p) {
+                    r /= p;
+                }
+            }
+            assert!(l >= n && r == 1 && l < n + n / 8 + 2, "{n} → {l}");
+        }
+    }
+
+    /// The cold wrapping path equals the contiguous fast path, also one period away.
+    #[test]
+    fn wrapped_path_agrees() {
+        let c = case(&params(8.0), 3, 1, 5);
+        let cfg = &c.cfg;
+        let mut tables = vec![0.0; Scan::tables_len(cfg, 3)];
+        let scan = Scan::new(cfg, &c.spads, &mut tables).unwrap();
+        let mut buf = vec![0.0; RowBuffer::len(cfg, 3)];
+        let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
+        let row = rows.load(&scan, c.laser, &c.hists).unwrap();
+        let lk = Lookup::new(cfg);
+        let mut s = lk.scratch(3);
+        lk.tables(scan.spads(), row.band(), row.offsets(), &mut s);
+        let (g_lo, g_hi) = cfg.guard();
+        let stride = lk.len + EXTRA;
+        let period = lk.len as f64;
+        let mut worst: f32 = 0.0;
+        for (si, off) in row.offsets().iter().enumerate() {
+            let tab = &s.tables[si * stride..(si + 1) * stride];
+            for i in 0..500 {
+                let rel = g_lo + (g_hi - g_lo) * (i as f64 + 0.5) / 500.0;
+                let tau = (rel - *off as f64) as f32;
+                let fast = lk.gated(tab, s.base[si], tau);
+                let x = tau as f64 * lk.per_m - s.base[si].0;
+                for shift in [0.0, period, -period, -3.0 * period] {
+                    let z = lk.gated_wrapped(tab, s.base[si].1, x + shift);
+                    worst = worst.max((z - fast).norm() / fast.norm().max(1e-30));
+                    assert!((z - fast).norm() <= 1e-4 * fast.norm() + 1e-9, "{z} {fast}");
+                }
+            }
+        }
+        println!("wrapped vs fast path: worst relative difference {worst:.2e}");
+    }
+
+    /// Worst amplitude error of one SPAD's interpolated `Z(τ)` against the f64 band sum,
+    /// relative to `max |Z|`, over dense τ in the guard, for a density of `r` samples per σ.
+    fn interp_error(p: &Params, r: f64, seed: u64) -> f64 {
+        let c = case(p, 4, 1, seed);
+        let cfg = &c.cfg;
+        let mut tables = vec![0.0; Scan::tables_len(cfg, 4)];
+        let scan = Scan::new(cfg, &c.spads, &mut tables).unwrap();
+        let mut buf = vec![0.0; RowBuffer::len(cfg, 4)];
+        let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
+        let row = rows.load(&scan, c.laser, &c.hists).unwrap();
+        let lk = Lookup::with_density(cfg, r);
+        let mut s = lk.scratch(4);
+        lk.tables(scan.spads(), row.band(), row.offsets(), &mut s);
+        let (g_lo, g_hi) = cfg.guard();
+        let j = cfg.bins();
+        let mut worst: f64 = 0.0;
+        for (si, off) in row.offsets().iter().enumerate() {
+            let hg = &row.band()[si * j..(si + 1) * j];
+            let tab = &s.tables[si * (lk.len + EXTRA)..(si + 1) * (lk.len + EXTRA)];
+            let n = 4000;
+            let (mut zmax, mut emax) = (0.0f64, 0.0f64);
+            for i in 0..=n {
+                let rel = g_lo + (g_hi - g_lo) * (i as f64 + 0.37) / (n + 1) as f64;
+                let tau = (rel - *off as f64) as f32;
+                let exact: Complex64 = hg
+                    .iter()
+                    .enumerate()
+                    .map(|(j, h)| {
+                        let k = (cfg.k_lo() + j as i64) as f64;
+                        Complex64::new(h.re as f64, h.im as f64)
+                            * Complex64::from_polar(1.0, TAU * k * tau as f64 / cfg.span())
+                    })
+                    .sum();
+                let z = lk.gated(tab, s.base[si], tau);
+                zmax = zmax.max(exact.norm());
+                emax = emax.max((Complex64::new(z.re as f64, z.im as f64) - exact).norm());
+            }
+            worst = worst.max(emax / zmax);
+        }
+        worst
+    }
+
+    #[test]
+    fn interpolation_error() {
+        let ratios = [6.0, 13.0, 40.0];
+        for r in [4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0] {
+            let e = ratios
+                .iter()
+                .enumerate()
+                .map(|(k, &q)| interp_error(&params(q), r, 40 + k as u64))
+                .fold(0.0, f64::max);
+            println!("{r:4} samples/σ: worst relative amplitude error {e:.2e}");
+            if r == SAMPLES_PER_SIGMA {
+                assert!(e < 1e-5, "{e:.2e}");
+            }
+        }
+    }
+
+    /// `cargo test --release -p vltm --lib fast::lookup::tests::timing -- --ignored --nocapture`
+    #[test]
+    #[ignore = "timing, prints numbers only"]
+    fn timing() {
+        use std::time::Instant;
+        let p = Params::new(0.13, 254, 0.0255);
+        let cfg = Config::try_new(&p).unwrap();
+        let ks = 28;
+        let spads: Vec<Point> = (0..ks)
+            .map(|i| [-0.7 + 1.4 * i as f32 / (ks - 1) as f32, 0.0, 0.0])
+            .collect();
+        let voxels: Vec<Point> = (0..4096)
+            .map(|i| {
+                let (x, y, z) = (i / 256, (i / 16) % 16, i % 16);
+                [
+                    -0.8 + 0.1 * x as f32,
+                    -0.8 + 0.1 * y as f32,
+                    0.3 + 0.1 * z as f32,
+                ]
+            })
+            .collect();
+        let mut rng = StdRng::seed_from_u64(7);
+        let hists: Vec<f32> = (0..ks * 254).map(|_| rng.random::<f32>()).collect();
+        let mut tables = vec![0.0; Scan::tables_len(&cfg, ks)];
+        let scan = Scan::new(&cfg, &spads, &mut tables).unwrap();
+        let mut buf = vec![0.0; RowBuffer::len(&cfg, ks)];
+        let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
+        let row = rows.load(&scan, [0.1, 0.2, 0.0], &hists).unwrap();
+        let kv = voxels.len();
+        let mut state = vec![0.0; Probe::state_len(&cfg, Target::Diagonal, Gate::Gaussian, kv, ks)];
+        let mut probe =
+            Probe::new(&scan, Target::Diagonal, Gate::Gaussian, &voxels, &mut state).unwrap();
+        let lk = Lookup::new(&cfg);
+        let mut s = lk.scratch(ks);
+        let mut acc = vec![Complex64::new(0.0, 0.0); kv];
+        let reps = 20;
+        let t = Instant::now();
+        for _ in 0..reps {
+            probe.push_row(&scan, &row).unwrap();
+        }
+        let band = t.elapsed().as_secs_f64() / reps as f64;
+        let t = Instant::now();
+        for _ in 0..reps * 10 {
+            lk.apply(&scan, &row, &voxels, &mut s, &mut acc);
+        }
+        let look = t.elapsed().as_secs_f64() / (reps * 10) as f64;
+        let t = Instant::now();
+        for _ in 0..reps * 10 {
+            lk.tables(scan.spads(), row.band(), row.offsets(), &mut s);
+        }
+        let ffts = t.elapsed().as_secs_f64() / (reps * 10) as f64;
+        let pairs = (kv * ks) as f64;
+        println!(
+            "{ks} SPADs × {kv} voxels, Nt 254, N {}, J {}, L {} (×{:.2}): band diagonal \
+             {:.2} ms/row ({:.1} ns/pair), lookup {:.3} ms/row ({:.2} ns/pair, of which \
+             FFT tables {:.3} ms), speed-up {:.1}×",
+            cfg.n_fft(),
+            cfg.bins(),
+            lk.grid_len(),
+            lk.oversampling(),
+            band * 1e3,
+            band / pairs * 1e9,
+            look * 1e3,
+            look / pairs * 1e9,
+            ffts * 1e3,
+            band / look
+        );
+    }
+}
