@@ -333,7 +333,17 @@ pub mod npz {
             dt: scalar::<f64>(&mut r, path, "delta_t")?,
             t0: scalar::<f64>(&mut r, path, "t_start")?,
         };
-        Capture::new(geometry, h.iter().copied().collect(), path)
+        // A C-order array is already `[Kl][Ks][Nt]`: take its buffer (iterating an `IxDyn`
+        // array element by element costs ~0.5 s per 50 M values).
+        let data = if h.is_standard_layout() {
+            match h.into_raw_vec_and_offset() {
+                (v, None | Some(0)) => v,
+                (v, Some(o)) => v[o..].to_vec(),
+            }
+        } else {
+            h.iter().copied().collect()
+        };
+        Capture::new(geometry, data, path)
     }
 }
 
