@@ -10,7 +10,7 @@ run, wall times, ratios and the agreement of the two intensity volumes.
         [--probes direct16,direct32,column] [--out-dir target/side_by_side]
 
 Capture: `--capture` (a vltm `.npz` with a regular planar SPAD grid), or by default
-`benches/scenes/exh16.json` rendered once with `vltm simulate` into
+`benches/scenes/exh16.json` rendered once with `vltm simulate --uncompressed` into
 `<out-dir>/exh16.npz` (reused when present): 16x16 lasers x 16x16 SPADs on the same grid
 (pitch 0.125 m), 800 bins of 6 mm from t0 = 0, patches A, B (facing each other, with the
 A <-> B inter-reflection) and C.
@@ -286,7 +286,7 @@ def main():
         capture = os.path.join(a.out_dir, os.path.splitext(os.path.basename(a.scene))[0] + '.npz')
         if not os.path.exists(capture):
             t = time.perf_counter()
-            subprocess.run([a.vltm, '--threads', str(a.cpus), 'simulate', a.scene, '--out', capture],
+            subprocess.run([a.vltm, '--threads', str(a.cpus), 'simulate', a.scene, '--out', capture, '--uncompressed'],
                            check=True, stdout=subprocess.DEVNULL)
             print(f'rendered {a.scene} -> {capture} in {time.perf_counter() - t:.1f} s')
     if a.focus:

@@ -195,8 +195,9 @@ impl Common {
         }
     }
 
-    /// The capture as a row source: y-tal HDF5 files are streamed row by row (memory
-    /// O(Ks·Nt)); other formats, and `--swap-roles` (a transpose), are read into memory.
+    /// The capture as a row source: y-tal HDF5 files and uncompressed `.npz` captures are
+    /// streamed row by row (memory O(Ks·Nt)); other formats, and `--swap-roles` (a
+    /// transpose), are read into memory.
     fn load(&self, path: &Path) -> vltm::Result<Box<dyn RowSource>> {
         let ext = path
             .extension()
@@ -206,6 +207,10 @@ impl Common {
             Ok(Box::new(ltm::swap_roles(&capture::open(path)?)?))
         } else if matches!(ext.as_deref(), Some("hdf5" | "h5")) {
             Ok(Box::new(vltm::tal::open(path)?))
+        } else if ext.as_deref() == Some("npz")
+            && let Some(s) = capture::npz::open_stream(path)?
+        {
+            Ok(Box::new(s))
         } else {
             Ok(Box::new(capture::open(path)?))
         }
