@@ -248,8 +248,13 @@ impl Planar {
                 }
             }
         }
-        let vx: Vec<f64> = (0..nx).map(|i| at(i, 0, 0)[0] as f64).collect();
-        let vy: Vec<f64> = (0..ny).map(|i| at(0, i, 0)[1] as f64).collect();
+        // Descending axes (a SPEC `0.5:-0.5:11`) are walked in ascending order.
+        let rev_x = nx > 1 && at(nx - 1, 0, 0)[0] < at(0, 0, 0)[0];
+        let rev_y = ny > 1 && at(0, ny - 1, 0)[1] < at(0, 0, 0)[1];
+        let ix_of = |i: usize| if rev_x { nx - 1 - i } else { i };
+        let iy_of = |i: usize| if rev_y { ny - 1 - i } else { i };
+        let vx: Vec<f64> = (0..nx).map(|i| at(ix_of(i), 0, 0)[0] as f64).collect();
+        let vy: Vec<f64> = (0..ny).map(|i| at(0, iy_of(i), 0)[1] as f64).collect();
         let vz: Vec<f64> = (0..nz).map(|i| at(0, 0, i)[2] as f64).collect();
         for a in [&vx, &vy] {
             if a.len() > 1 && lattice(a.iter().copied(), tol).is_none_or(|l| l.n != a.len()) {
@@ -297,7 +302,7 @@ impl Planar {
                     let mut outputs = Vec::with_capacity(cx * cy);
                     for i in 0..cx {
                         for j in 0..cy {
-                            let v = ((i * rx + fx_) * ny + (j * ry + fy_)) * nz + iz;
+                            let v = (ix_of(i * rx + fx_) * ny + iy_of(j * ry + fy_)) * nz + iz;
                             outputs.push(((i * my + j) as u32, v as u32));
                         }
                     }
