@@ -8,6 +8,7 @@
 //!   32×32×24 (half pitch, 4 polyphase sub-grids), and for 8×8 / 32×32 SPAD grids (voxels
 //!   on the SPAD grid, 24 slices); plus 6 vs 24 slices.
 //! * `column_image`: imaging a factorised column over 16×16×24 voxels once, kernel vs planar.
+//! * `lookup_diagonal`: one row of the baseband-lookup diagonal on the paper's 1-D setup.
 //!
 //! The kernel's band diagonal over the same 16×16×24 voxels is `benches/kernel.rs`
 //! (`exh16/diagonal_gaussian`, ≈ 150 ms per row). Memory of every path is printed first; none
@@ -241,9 +242,48 @@ fn column_image(c: &mut Criterion) {
     g.finish();
 }
 
+/// The baseband lookup on the paper's real setup (a 28-pixel SPAD line, 64×64 voxels whose
+/// pitch is not a divisor of the SPAD pitch: no planar path), one row; the kernel's band sum
+/// on the same row is `benches/kernel.rs` `paper1d/diagonal_gaussian`.
+fn lookup_diagonal(c: &mut Criterion) {
+    let (dt, window) = (0.0255, 6.5);
+    let nt = (window / dt) as usize;
+    let cfg = Config::try_new(&Params::new(0.13, nt, dt)).unwrap();
+    let line =
+        |n: usize, half: f32| (0..n).map(move |i| -half + 2.0 * half * i as f32 / (n - 1) as f32);
+    let sp: Vec<Point> = line(28, 0.9).map(|x| [x, 0.0, 0.0]).collect();
+    let vox: Vec<Point> = line(64, 1.0)
+        .flat_map(|x| line(64, 1.0).map(move |y| [x, y, 1.2]))
+        .collect();
+    let h = hists(sp.len() * nt, nt);
+    let mut tables = vec![0.0f32; Scan::tables_len(&cfg, sp.len())];
+    let scan = Scan::new(&cfg, &sp, &mut tables).unwrap();
+    let mut buf = vec![0.0f32; RowBuffer::len(&cfg, sp.len())];
+    let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
+    let row = rows.load(&scan, [0.1, -0.2, 0.0], &h).unwrap();
+    let lookup = vltm::fast::Lookup::new(&cfg);
+    let mut scratch = lookup.scratch(sp.len());
+    let mut acc = vec![Complex64::new(0.0, 0.0); vox.len()];
+    eprintln!(
+        "lookup paper1d: Ks = {}, Kv = {}, grid L = {} ({:.2}× N), scratch {:.2} MB per worker",
+        sp.len(),
+        vox.len(),
+        lookup.grid_len(),
+        lookup.oversampling(),
+        lookup.scratch_bytes(sp.len()) as f64 / 1e6
+    );
+    let mut g = c.benchmark_group("lookup_diagonal");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements((vox.len() * sp.len()) as u64));
+    g.bench_function("paper1d_64x64", |b| {
+        b.iter(|| lookup.apply(&scan, black_box(&row), &vox, &mut scratch, &mut acc));
+    });
+    g.finish();
+}
+
 criterion_group! {
     name = fast;
     config = Criterion::default().warm_up_time(std::time::Duration::from_millis(500));
-    targets = stage1, planar_diagonal, column_image
+    targets = stage1, planar_diagonal, column_image, lookup_diagonal
 }
 criterion_main!(fast);
