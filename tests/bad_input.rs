@@ -143,7 +143,22 @@ fn config_not_positive() {
             margin: -0.01,
             ..base()
         }),
-        ConfigError::NotPositive("margin")
+        ConfigError::Negative("margin")
+    );
+    // A positive d_min too small for the f32 weights (1/d_min = ∞) is out of range.
+    for d_min in [1e-39, 1e-45, 1e-300] {
+        assert_eq!(
+            err(Params { d_min, ..base() }),
+            ConfigError::OutOfRange("d_min"),
+            "d_min = {d_min:e}"
+        );
+    }
+    assert!(
+        Config::try_new(&Params {
+            d_min: 1e-30,
+            ..base()
+        })
+        .is_ok()
     );
     // With σ defaulted from λ, a bad λ is reported as λ.
     assert_eq!(

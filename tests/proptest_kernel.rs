@@ -419,7 +419,7 @@ impl Scene {
             report,
         };
         for ((tk, a), s) in t_k.iter().zip(&amps).zip(&scales) {
-            let err = (tk.sqrt() - a.norm()).abs();
+            let err = support::nan_is_inf((tk.sqrt() - a.norm()).abs());
             if *s > 0.0 {
                 out.worst = out.worst.max(err / (eps * s));
                 out.worst_rel = out.worst_rel.max(err / s);

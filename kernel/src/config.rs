@@ -158,18 +158,21 @@ impl Config {
     ///
     /// # Errors
     /// [`ConfigError`] naming the parameter: λ, σ, Δt, m, c_g, d_min ≤ 0 or non-finite;
-    /// t0, margin or a leg origin non-finite; margin < 0; `nt = 0`; a band crossing the
-    /// Nyquist bin; a DFT length over 2³⁰.
+    /// d_min whose f32 reciprocal overflows; t0, margin or a leg origin non-finite;
+    /// margin < 0; `nt = 0`; a band crossing the Nyquist bin; a DFT length over 2³⁰.
     pub fn try_new(p: &Params) -> Result<Self, ConfigError> {
         let lam = positive("wavelength", p.wavelength)?;
         let sigma = positive("sigma", p.sigma_or_default())?;
         let m = positive("band_half_width", p.band_half_width)?;
         let cg = positive("gate_support", p.gate_support)?;
         let dt = positive("dt", p.dt)?;
-        positive("d_min", p.d_min)?;
+        if !(1.0 / (positive("d_min", p.d_min)? as f32)).is_finite() {
+            // The weights are f32: a d_min that rounds to 0 or a subnormal would give w = ∞.
+            return Err(ConfigError::OutOfRange("d_min"));
+        }
         finite("t0", p.t0)?;
         if finite("margin", p.margin)? < 0.0 {
-            return Err(ConfigError::NotPositive("margin"));
+            return Err(ConfigError::Negative("margin"));
         }
         if let Legs::FirstAndLast {
             laser_origin,

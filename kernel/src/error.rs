@@ -22,6 +22,11 @@ pub enum ConfigError {
     NotFinite(&'static str),
     /// The parameter must be strictly positive.
     NotPositive(&'static str),
+    /// The parameter must not be negative (zero is allowed).
+    Negative(&'static str),
+    /// The parameter is finite and positive but outside what the f32 arithmetic can carry
+    /// (for `d_min`: its reciprocal, the largest leg weight, must be a finite f32).
+    OutOfRange(&'static str),
     /// The histogram length `nt` is zero.
     EmptyTimeAxis,
     /// The band `k_lo..=k_hi` reaches past the Nyquist bin ±N/2: the time bin Δt is too
@@ -36,6 +41,8 @@ impl fmt::Display for ConfigError {
         match self {
             Self::NotFinite(p) => write!(f, "parameter `{p}` must be finite"),
             Self::NotPositive(p) => write!(f, "parameter `{p}` must be > 0"),
+            Self::Negative(p) => write!(f, "parameter `{p}` must be >= 0"),
+            Self::OutOfRange(p) => write!(f, "parameter `{p}` is out of the f32 range"),
             Self::EmptyTimeAxis => f.write_str("parameter `nt` must be > 0 (empty time axis)"),
             Self::BandCrossesNyquist => f.write_str(
                 "the frequency band crosses Nyquist: the time bin `dt` is too coarse for \

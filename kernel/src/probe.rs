@@ -114,12 +114,16 @@ impl<'m> Probe<'m> {
         n_voxels: usize,
         n_spads: usize,
     ) -> usize {
-        2 * match (target, gate) {
-            (Target::Column(_), Gate::Gaussian) => (n_spads + 1) * cfg.bins(),
+        // Saturating: a size that overflows `usize` matches no real slice, so `new` rejects it.
+        let complex = match (target, gate) {
+            (Target::Column(_), Gate::Gaussian) => {
+                n_spads.saturating_add(1).saturating_mul(cfg.bins())
+            }
             (Target::Column(_), Gate::None) => n_spads,
-            (_, Gate::HigherOrder) => n_voxels + cfg.nt() + 1,
+            (_, Gate::HigherOrder) => n_voxels.saturating_add(cfg.nt() + 1),
             (Target::Diagonal, _) => n_voxels,
-        }
+        };
+        complex.saturating_mul(2)
     }
 
     /// Bytes of state: `8 ·` [`Probe::state_len`].
@@ -130,7 +134,7 @@ impl<'m> Probe<'m> {
         n_voxels: usize,
         n_spads: usize,
     ) -> usize {
-        8 * Self::state_len(cfg, target, gate, n_voxels, n_spads)
+        Self::state_len(cfg, target, gate, n_voxels, n_spads).saturating_mul(8)
     }
 
     /// A zeroed probe over `voxels` with its state in `state`.

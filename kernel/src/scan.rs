@@ -70,7 +70,8 @@ pub struct Scan<'t> {
 impl<'t> Scan<'t> {
     /// Length in `f32` of the tables buffer: `2N + J + Ks`.
     pub const fn tables_len(cfg: &Config, n_spads: usize) -> usize {
-        2 * cfg.n_fft() + cfg.bins() + n_spads
+        // Saturating: a size that overflows `usize` matches no real slice, so `new` rejects it.
+        (2 * cfg.n_fft() + cfg.bins()).saturating_add(n_spads)
     }
 
     /// Builds the tables into `tables` (length [`Scan::tables_len`]).
@@ -187,7 +188,8 @@ pub struct Row<'r, T> {
 impl<'m> RowBuffer<'m> {
     /// Length in `f32` of a row buffer for `n_spads` SPADs: `Ks·(2J + 3)`.
     pub const fn len(cfg: &Config, n_spads: usize) -> usize {
-        n_spads * (2 * cfg.bins() + 3)
+        // Saturating: a size that overflows `usize` matches no real slice, so `new` rejects it.
+        n_spads.saturating_mul(2 * cfg.bins() + 3)
     }
 
     /// Wraps `buf` (length [`RowBuffer::len`]) for rows of `scan`.
@@ -334,7 +336,8 @@ impl<'m> RowBuffer<'m> {
     pub fn push_photon(&mut self, scan: &Scan<'_>, spad: usize, bin: usize) {
         let cfg = &scan.cfg;
         let (j, nt, n) = (cfg.bins(), cfg.nt(), cfg.n_fft().max(1));
-        let Some(hg) = self.hg.get_mut(spad * j..(spad + 1) * j) else {
+        let start = spad.saturating_mul(j);
+        let Some(hg) = self.hg.get_mut(start..start.saturating_add(j)) else {
             self.dropped += 1;
             return;
         };
@@ -346,8 +349,10 @@ impl<'m> RowBuffer<'m> {
             self.dropped += 1;
             return;
         }
-        // Twiddle index (k_j·bin) mod N, stepping by bin per band bin (all < N ≤ 2³⁰).
-        let mut q = (cfg.k_lo().rem_euclid(n as i64) as usize * bin) % n;
+        // Twiddle index (k_j·bin) mod N, stepping by bin per band bin (all < N ≤ 2³⁰); the
+        // first product is taken in u64 (it reaches 2⁶⁰, past a 32-bit usize).
+        let k0 = cfg.k_lo().rem_euclid(n as i64) as u64;
+        let mut q = ((k0 * bin as u64) % n as u64) as usize;
         let step = bin % n;
         for v in hg.iter_mut() {
             if let Some(w) = scan.twiddle.get(q) {

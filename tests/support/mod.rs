@@ -74,6 +74,12 @@ pub fn max_rel_diff(x: &[f64], y: &[f64]) -> f64 {
     let diff = x
         .iter()
         .zip(y)
-        .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        .fold(0.0f64, |m, (a, b)| m.max(nan_is_inf((a - b).abs())));
     if diff == 0.0 { 0.0 } else { diff / scale }
+}
+
+/// An error measure with NaN turned into +∞, so that `f64::max` (which drops NaN) cannot
+/// hide a NaN result from a `worst ≤ tol` assertion.
+pub fn nan_is_inf(err: f64) -> f64 {
+    if err.is_nan() { f64::INFINITY } else { err }
 }
