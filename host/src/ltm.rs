@@ -104,18 +104,32 @@ impl Wave {
 /// tolerances); they differ in cost.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Path {
-    /// The cheapest applicable path by the cost model of DESIGN §B.8: planar FFT convolution
-    /// when the SPADs form a regular grid and the volume is a wall-parallel grid whose pitch
-    /// divides the SPAD pitch; else the baseband lookup for the diagonal; else band.
+    /// The cheapest applicable path by the flop model of DESIGN §B.8: for the diagonal the
+    /// least of planar (when the SPADs form a regular grid and the volume is a wall-parallel
+    /// grid whose pitch divides the SPAD pitch), lookup (not confocal) and band; for
+    /// Gaussian-gated columns planar or band.
     #[default]
     Auto,
-    /// The kernel's band sum per (voxel, SPAD) (DESIGN §B.2.3): any geometry.
+    /// The kernel's band sum per (voxel, SPAD) (DESIGN §B.2.3): any geometry, every probe.
     Band,
-    /// The planar FFT convolution ([`crate::fast::planar`]); an error if it does not apply.
+    /// The planar FFT convolution ([`crate::fast::planar`]) for the diagonal and
+    /// Gaussian-gated columns; an error if it does not apply (another geometry, another gate).
     Planar,
     /// Diagonal only: the gated baseband + cubic lookup ([`crate::fast::lookup`]), any
-    /// geometry (columns use the band path).
+    /// non-confocal geometry; an error for columns and confocal captures.
     Lookup,
+}
+
+impl Path {
+    /// The path's name as the CLI's `--path` spells it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::Band => "band",
+            Self::Planar => "planar",
+            Self::Lookup => "lookup",
+        }
+    }
 }
 
 /// Execution options.
@@ -138,6 +152,8 @@ pub struct Output {
     pub seconds: f64,
     /// The kernel configuration used (λ, σ, J…).
     pub config: Config,
+    /// The evaluation path that computed the voxel sums (never [`Path::Auto`]).
+    pub path: Path,
 }
 
 /// The physical laser's falloff to spot `x_l`: `cos θ / d²` with `d = |laser_xyz − x_l|` and
@@ -388,27 +404,34 @@ pub fn direct(src: &mut dyn RowSource, volume: &Volume, wave: &Wave, exec: Exec)
         wave,
         exec,
     };
-    if let Some(planar) =
-        choose_planar(src.geometry(), &cfg, volume, exec.path, PlanarUse::Diagonal)?
-    {
+    let g = src.geometry();
+    if g.confocal && exec.path == Path::Lookup {
+        return Err(Error::arg(
+            "--path",
+            "the lookup path does not apply to a confocal capture (use band)",
+        ));
+    }
+    let band_cost = band_flops(g, &cfg, volume.len());
+    let lookup_cost = (!g.confocal).then(|| {
+        let l = Lookup::new(&cfg).grid_len() as f64;
+        let ks = g.spads_per_row() as f64;
+        // One complex inverse FFT per SPAD, then E0 + 16 flops per (voxel, SPAD) (§B.8).
+        ks * 5.0 * l * l.log2() + volume.len() as f64 * ks * 76.0
+    });
+    // Planar competes with the cheaper of band and lookup under `Auto`.
+    let rival = lookup_cost.map_or(band_cost, |l| l.min(band_cost));
+    if let Some(planar) = choose_planar(g, &cfg, volume, exec.path, PlanarUse::Diagonal, rival)? {
         let (values, report) = direct_planar(src, job, volume, &planar)?;
         return Ok(Output {
             values,
             report,
             seconds: t.elapsed().as_secs_f64(),
             config: cfg,
+            path: Path::Planar,
         });
     }
-    let g = src.geometry();
-    let lookup_cost = {
-        let l = Lookup::new(&cfg).grid_len() as f64;
-        let ks = g.spads_per_row() as f64;
-        ks * 5.0 * l * l.log2() + volume.len() as f64 * ks * 80.0
-    };
-    let band_cost =
-        volume.len() as f64 * g.spads_per_row() as f64 * (14.0 * cfg.bins() as f64 + 60.0);
-    if !g.confocal
-        && (exec.path == Path::Lookup || (exec.path == Path::Auto && lookup_cost < band_cost))
+    if exec.path == Path::Lookup
+        || (exec.path == Path::Auto && lookup_cost.is_some_and(|l| l < band_cost))
     {
         let (values, report) = direct_lookup(src, job, volume)?;
         return Ok(Output {
@@ -416,6 +439,7 @@ pub fn direct(src: &mut dyn RowSource, volume: &Volume, wave: &Wave, exec: Exec)
             report,
             seconds: t.elapsed().as_secs_f64(),
             config: cfg,
+            path: Path::Lookup,
         });
     }
     let (v, report) = elementwise(
@@ -431,6 +455,7 @@ pub fn direct(src: &mut dyn RowSource, volume: &Volume, wave: &Wave, exec: Exec)
         report,
         seconds: t.elapsed().as_secs_f64(),
         config: cfg,
+        path: Path::Band,
     })
 }
 
@@ -443,14 +468,21 @@ enum PlanarUse {
     Column,
 }
 
+/// Flops per row of the kernel's band sum over `n_voxels` (DESIGN §B.8: `Kv·Ks·(14J + E0)`).
+fn band_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
+    n_voxels as f64 * g.spads_per_row() as f64 * (14.0 * cfg.bins() as f64 + 60.0)
+}
+
 /// The planar convolution for this probe, if [`Exec::path`] allows it, it applies and (for
-/// [`Path::Auto`]) it costs fewer flops than the band sum (DESIGN §B.8 cost model).
+/// [`Path::Auto`]) it costs fewer flops than `rival`, the cheapest other path (DESIGN §B.8
+/// cost model, per row for the diagonal, once for a column's imaging).
 fn choose_planar(
     g: &Geometry,
     cfg: &Config,
     volume: &Volume,
     path: Path,
     usage: PlanarUse,
+    rival: f64,
 ) -> Result<Option<Planar>> {
     if matches!(path, Path::Band | Path::Lookup) {
         return Ok(None);
@@ -474,16 +506,16 @@ fn choose_planar(
             let (mx, my, slices) = p.shape();
             let m = (mx * my) as f64;
             let j = cfg.bins() as f64;
-            let f = 2.5 * m * m.log2();
+            // Complex FFTs of M points, 5·M·log₂M (§B.8), pruned inverse ones about half that.
+            let f = 5.0 * m * m.log2();
             let per_row =
-                j * (f + slices as f64 * (6.0 * m + 1.5 * f)) + volume.len() as f64 * 8.0 * j;
-            let band = volume.len() as f64 * g.spads.len() as f64 * (14.0 * j + 60.0);
+                j * (f + slices as f64 * (6.0 * m + 0.75 * f)) + volume.len() as f64 * 8.0 * j;
             // The column images once; its table costs `slices·J` forward FFTs.
             let planar = match usage {
                 PlanarUse::Diagonal => per_row,
-                PlanarUse::Column => per_row + slices as f64 * j * 2.0 * f,
+                PlanarUse::Column => per_row + slices as f64 * j * f,
             };
-            Ok((planar < band).then_some(p))
+            Ok((planar < rival).then_some(p))
         }
     }
 }
@@ -749,7 +781,9 @@ pub fn check_focus(a: Point) -> Result<()> {
 /// A column `T(x_a, ·)` over `volume`, with elements outside `shell` set to 0.
 ///
 /// # Errors
-/// Focus on or behind the wall, configuration, read and kernel errors.
+/// Focus on or behind the wall, configuration, read and kernel errors; [`Error::Argument`]
+/// (`--path`) when a path is forced that does not evaluate this column (`lookup`; `planar`
+/// with a gate other than two-bounce or where the convolution does not apply).
 pub fn column(
     src: &mut dyn RowSource,
     focus: Point,
@@ -760,22 +794,40 @@ pub fn column(
     exec: Exec,
 ) -> Result<Output> {
     check_focus(focus)?;
+    match (exec.path, gate) {
+        (Path::Lookup, _) => {
+            return Err(Error::arg(
+                "--path",
+                "the lookup path evaluates the diagonal only (use auto, band or planar for columns)",
+            ));
+        }
+        (Path::Planar, ColumnGate::HigherOrder | ColumnGate::None) => {
+            return Err(Error::arg(
+                "--path",
+                "the planar path images Gaussian-gated (two-bounce) columns only (use auto or band)",
+            ));
+        }
+        _ => {}
+    }
     let t = Instant::now();
     let cfg = wave.config(src.geometry())?;
     let target = Target::Column(focus);
-    let (mut v, report) = match gate {
-        ColumnGate::HigherOrder => elementwise(
-            src,
-            Job {
-                cfg: &cfg,
-                wave,
-                exec,
-            },
-            target,
-            Gate::HigherOrder,
-            &volume.points,
-            "column",
-        )?,
+    let (mut v, report, path) = match gate {
+        ColumnGate::HigherOrder => {
+            let (v, r) = elementwise(
+                src,
+                Job {
+                    cfg: &cfg,
+                    wave,
+                    exec,
+                },
+                target,
+                Gate::HigherOrder,
+                &volume.points,
+                "column",
+            )?;
+            (v, r, Path::Band)
+        }
         ColumnGate::TwoBounce | ColumnGate::None => {
             let kgate = if gate == ColumnGate::None {
                 Gate::None
@@ -805,18 +857,20 @@ pub fn column(
         report,
         seconds: t.elapsed().as_secs_f64(),
         config: cfg,
+        path,
     })
 }
 
 /// One factorised column, rows in parallel (one probe per thread, merged), imaged over the
-/// volume by the planar convolution (Gaussian gate, when it applies) or the kernel.
+/// volume by the planar convolution (Gaussian gate, when it applies) or the kernel; with the
+/// path that imaged it.
 fn single_column(
     src: &mut dyn RowSource,
     job: Job<'_>,
     focus: Point,
     gate: Gate,
     volume: &Volume,
-) -> Result<(Vec<f64>, Report)> {
+) -> Result<(Vec<f64>, Report, Path)> {
     let cfg = job.cfg;
     let g = src.geometry().clone();
     if g.confocal {
@@ -826,7 +880,8 @@ fn single_column(
         ));
     }
     let planar = if gate == Gate::Gaussian {
-        choose_planar(&g, cfg, volume, job.exec.path, PlanarUse::Column)?
+        let rival = band_flops(&g, cfg, volume.len());
+        choose_planar(&g, cfg, volume, job.exec.path, PlanarUse::Column, rival)?
     } else {
         None
     };
@@ -846,7 +901,7 @@ fn single_column(
     })?;
     let mut it = probes.into_iter();
     let Some(mut p) = it.next() else {
-        return Ok((vec![0.0; volume.len()], Report::default()));
+        return Ok((vec![0.0; volume.len()], Report::default(), Path::Band));
     };
     for q in it {
         p.merge(&q)?;
@@ -877,6 +932,7 @@ fn single_column(
                 aliased,
                 ..p.report()
             },
+            Path::Planar,
         ));
     }
     let cl = chunk_len(voxels.len());
@@ -893,6 +949,7 @@ fn single_column(
             aliased,
             ..p.report()
         },
+        Path::Band,
     ))
 }
 
