@@ -7,13 +7,14 @@
 //! * [`ltm`]: the high-level probes (direct, column, in-focus indirect), multi-threaded.
 //! * [`demo`]: the built-in scene of `vltm demo`.
 //! * [`tal`]: y-tal / mitransient `HDF5_TAL` captures, streamed by laser row.
-//! * [`figure`], [`npy`]: maximum-intensity-projection PNGs and `.npy` volumes.
+//! * [`figure`], [`npy`], [`h5`]: maximum-intensity-projection PNGs, `.npy` and HDF5 volumes.
 
 pub mod capture;
 pub mod demo;
 pub mod error;
 pub mod fast;
 pub mod figure;
+pub mod h5;
 pub mod ltm;
 pub mod npy;
 pub mod ptu;
