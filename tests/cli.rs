@@ -335,6 +335,86 @@ fn direct_writes_volume_and_figure() {
     assert!(v.iter().any(|&x| x > 0.0), "--swap-roles: empty image");
 }
 
+/// `--out F.h5` writes the same volume as HDF5 (`intensity`, `volume_xyz`, the parameters as
+/// attributes), read back with the pure-Rust reader.
+#[test]
+fn direct_and_column_write_hdf5_volumes() {
+    let t = TempDir::new("h5out");
+    let cap = fixture("two_patches");
+    let cap = cap.to_str().expect("utf-8");
+    let s = |p: &Path| p.to_str().expect("utf-8").to_string();
+    for (probe, extra) in [("direct", vec![]), ("column", vec!["--focus", FOCUS])] {
+        let (f_npy, f_h5) = (
+            t.path(&format!("{probe}.npy")),
+            t.path(&format!("{probe}.h5")),
+        );
+        for f in [&f_npy, &f_h5] {
+            let mut args = vec![probe, cap, "--volume", SPEC];
+            args.extend(&extra);
+            let f = s(f);
+            args.extend(["--out", f.as_str()]);
+            ok(&t.0, &args);
+        }
+        let v = npy(&f_npy, SHAPE);
+        let (h, shape) = vltm::h5::read_volume(&f_h5).expect("read the HDF5 volume");
+        assert_eq!(shape, SHAPE.to_vec(), "{probe}: HDF5 shape");
+        assert!(h == v, "{probe}: the HDF5 and .npy volumes differ");
+    }
+}
+
+/// The shared y-tal capture through the command line as a user runs it: `info` names its
+/// format and geometry, `direct` streams it row by row and writes a volume whose peak is on
+/// patch A (x_a = (−0.25, 0.15, 0.7): the volume's voxel (−0.25, 0.15, 0.65), as y-tal's).
+#[test]
+fn ytal_capture_through_the_command_line() {
+    let t = TempDir::new("ytalcli");
+    let h5 = root().join("../shared/data/two_patches/two_patches.hdf5");
+    let h5 = h5.to_str().expect("utf-8");
+    let out = ok(&t.0, &["info", h5]);
+    print!("{out}");
+    for want in [
+        "H_format T_Lx_Ly_Sx_Sy",
+        "exhaustive",
+        "lasers       64 = 8x8",
+        "SPADs        64 = 8x8",
+        "400 bins x 0.01 m from t0 = 1 m",
+    ] {
+        assert!(out.contains(want), "`vltm info` lacks `{want}`:\n{out}");
+    }
+    let single = root().join("../shared/data/single/single.hdf5");
+    let out = ok(&t.0, &["info", single.to_str().expect("utf-8")]);
+    assert!(
+        out.contains("H_format T_Sx_Sy") && out.contains("reciprocity"),
+        "{out}"
+    );
+    let f = t.path("d.npy");
+    let spec = "-0.75:0.75:16,-0.75:0.75:16,0.4:1.35:20";
+    let out = ok(
+        &t.0,
+        &[
+            "direct",
+            h5,
+            "--volume",
+            spec,
+            "--wavelength",
+            "0.4",
+            "--sigma",
+            "0.4",
+            "--weights",
+            "one",
+            "--compensate-laser",
+            "--out",
+            f.to_str().expect("utf-8"),
+        ],
+    );
+    print!("{out}");
+    let v = npy(&f, [16, 16, 20]);
+    let peak = (0..v.len())
+        .max_by(|&i, &j| v[i].total_cmp(&v[j]))
+        .expect("voxels");
+    assert_eq!(peak, (5 * 16 + 9) * 20 + 5, "peak voxel {peak}");
+}
+
 /// `column` with each gate writes readable outputs; `--shell R0:R1` zeroes every voxel outside
 /// the shell around the focus.
 #[test]
@@ -530,6 +610,47 @@ fn demo_writes_figures_volumes_and_summary() {
 // errors
 // ---------------------------------------------------------------------------------------------
 
+/// `vltm --help` explains the physics terms; each subcommand's help explains its own.
+#[test]
+fn help_explains_the_terms() {
+    let t = TempDir::new("help");
+    let top = ok(&t.0, &["--help"]);
+    for term in [
+        "relay wall",
+        "z = 0",
+        "metres of optical path",
+        "x_a",
+        "x_b",
+        "T(x_a, x_b)",
+    ] {
+        assert!(
+            top.contains(term),
+            "vltm --help should explain `{term}`:\n{top}"
+        );
+    }
+    let column = ok(&t.0, &["column", "--help"]);
+    for term in [
+        "--gate",
+        "two-bounce",
+        "higher-order",
+        "--shell",
+        "--wavelength",
+        "--sigma",
+    ] {
+        assert!(
+            column.contains(term),
+            "vltm column --help should explain `{term}`:\n{column}"
+        );
+    }
+    let indirect = ok(&t.0, &["indirect", "--help"]);
+    for term in ["--epsilon", "--min-separation", "Γ"] {
+        assert!(
+            indirect.contains(term),
+            "vltm indirect --help should explain `{term}`:\n{indirect}"
+        );
+    }
+}
+
 /// Bad arguments: exit code 2 and one line naming the argument.
 #[test]
 fn bad_arguments_exit_2_with_one_line() {
@@ -584,6 +705,10 @@ fn bad_arguments_exit_2_with_one_line() {
             "--threads",
         ),
         (vec!["frobnicate"], "frobnicate"),
+        // clap's own errors keep what they name on the one line: the missing argument,
+        // the values a choice accepts.
+        (vec!["direct", cap], "--volume <SPEC>"),
+        (col(&["--gate", "late"]), "two-bounce, higher-order, none"),
     ];
     for (args, names) in &cases {
         let line = fails(&t.0, args, 2);

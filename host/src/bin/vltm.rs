@@ -8,6 +8,7 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use vltm::capture::{self, RowSource};
 use vltm::figure::Figure;
+use vltm::h5::Provenance;
 use vltm::ltm::{self, ColumnGate, Exec, IndirectOptions, Shell, Wave};
 use vltm::volume::{Volume, parse_point};
 use vltm_kernel::{Point, Weights};
@@ -27,7 +28,7 @@ macro_rules! say {
 /// metres of optical path. The virtual projector focuses light at x_a, the virtual camera
 /// images x_b; T(x_a, x_b) is the light that goes from x_a to x_b.
 #[derive(Parser, Debug)]
-#[command(name = "vltm", version, about, long_about = None, propagate_version = true)]
+#[command(name = "vltm", version, propagate_version = true)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -148,12 +149,14 @@ struct Common {
     #[arg(long)]
     swap_roles: bool,
     /// Evaluation path: auto (the cheapest that applies), band (the kernel's band sum, any
-    /// geometry), planar (FFT convolution over a SPAD grid), lookup (baseband + cubic
-    /// interpolation; diagonal only).
+    /// geometry), planar (FFT convolution over a SPAD grid; diagonal and two-bounce columns),
+    /// lookup (baseband + cubic interpolation; diagonal only). For indirect it applies to
+    /// pass 1 (the diagonal); pass 2 images its Γ columns with the band sum.
     #[arg(long, value_enum, default_value_t = PathArg::Auto)]
     path: PathArg,
-    /// Output volume (float32 .npy of shape (nx, ny, nz)).
-    #[arg(long, value_name = "F.npy")]
+    /// Output volume: float32 .npy of shape (nx, ny, nz), or HDF5 for a .h5/.hdf5 name
+    /// (datasets `intensity` and `volume_xyz`, the parameters as attributes).
+    #[arg(long, value_name = "F.npy|F.h5")]
     out: Option<PathBuf>,
     /// Output figure: front (x-y) and top (x-z) maximum-intensity projections.
     #[arg(long, value_name = "F.png")]
@@ -199,15 +202,11 @@ impl Common {
     /// streamed row by row (memory O(Ks·Nt)); other formats, and `--swap-roles` (a
     /// transpose), are read into memory.
     fn load(&self, path: &Path) -> vltm::Result<Box<dyn RowSource>> {
-        let ext = path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
         if self.swap_roles {
             Ok(Box::new(ltm::swap_roles(&capture::open(path)?)?))
-        } else if matches!(ext.as_deref(), Some("hdf5" | "h5")) {
+        } else if is_hdf5(path) {
             Ok(Box::new(vltm::tal::open(path)?))
-        } else if ext.as_deref() == Some("npz")
+        } else if extension(path).as_deref() == Some("npz")
             && let Some(s) = capture::npz::open_stream(path)?
         {
             Ok(Box::new(s))
@@ -215,6 +214,18 @@ impl Common {
             Ok(Box::new(capture::open(path)?))
         }
     }
+}
+
+/// The file name's extension, lower case.
+fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+}
+
+/// Whether `path` names a y-tal HDF5 capture (`.hdf5` / `.h5`).
+fn is_hdf5(path: &Path) -> bool {
+    matches!(extension(path).as_deref(), Some("hdf5" | "h5"))
 }
 
 /// An error with its exit code.
@@ -251,10 +262,19 @@ fn main() -> ExitCode {
             return ExitCode::SUCCESS;
         }
         Err(e) => {
-            // One line, like every other error: clap's first line without its "error: ".
+            // One line, like every other error: clap's message up to its first blank line
+            // (the argument it names, the values it expects), without "error: " and the
+            // usage block.
             let text = e.render().to_string();
-            let first = text.lines().next().unwrap_or("bad arguments");
-            eprintln!("vltm: {} (see --help)", first.trim_start_matches("error: "));
+            let msg = text
+                .lines()
+                .take_while(|l| !l.trim().is_empty())
+                .map(str::trim)
+                .collect::<Vec<_>>()
+                .join(" ");
+            let msg = msg.trim_start_matches("error: ");
+            let msg = if msg.is_empty() { "bad arguments" } else { msg };
+            eprintln!("vltm: {msg} (see --help)");
             return ExitCode::from(2);
         }
     };
@@ -322,9 +342,21 @@ fn run(cmd: Command) -> Result<(), Failure> {
             let mut c = common.load(&capture)?;
             let o = ltm::direct(&mut *c, &volume, &common.wave(), common.exec())?;
             summarize(
-                "direct", &o.values, &volume, o.seconds, &o.report, &o.config,
+                "direct",
+                &o.values,
+                &volume,
+                o.seconds,
+                &o.report,
+                &o.config,
+                Some(o.path),
             );
-            write_outputs(&common, "direct", &o.values, &volume, "direct light", &[])
+            let meta = Provenance {
+                probe: "direct",
+                config: &o.config,
+                focus: None,
+                capture: &capture,
+            };
+            write_outputs(&common, &meta, &o.values, &volume, "direct light", &[])
         }
         Command::Column {
             capture,
@@ -349,12 +381,24 @@ fn run(cmd: Command) -> Result<(), Failure> {
             let mut c = common.load(&capture)?;
             let o = ltm::column(&mut *c, a, &volume, g, shell, &common.wave(), common.exec())?;
             summarize(
-                "column", &o.values, &volume, o.seconds, &o.report, &o.config,
+                "column",
+                &o.values,
+                &volume,
+                o.seconds,
+                &o.report,
+                &o.config,
+                Some(o.path),
             );
             let title = format!("column T(x_a, .), gate {gate:?}");
+            let meta = Provenance {
+                probe: "column",
+                config: &o.config,
+                focus: Some(a),
+                capture: &capture,
+            };
             write_outputs(
                 &common,
-                "column",
+                &meta,
                 &o.values,
                 &volume,
                 &title,
@@ -406,10 +450,18 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 o.shell.r1
             );
             let cfg = common.wave().config(c.geometry())?;
-            summarize("indirect", &o.values, &volume, o.seconds, &o.report, &cfg);
+            summarize(
+                "indirect", &o.values, &volume, o.seconds, &o.report, &cfg, None,
+            );
+            let meta = Provenance {
+                probe: "indirect",
+                config: &cfg,
+                focus: None,
+                capture: &capture,
+            };
             write_outputs(
                 &common,
-                "indirect",
+                &meta,
                 &o.values,
                 &volume,
                 "in-focus indirect light",
@@ -436,6 +488,26 @@ fn info(path: &Path) -> Result<(), Failure> {
         )
     };
     say!("capture      {}", path.display());
+    if is_hdf5(path) {
+        let r = vltm::tal::open(path)?;
+        say!(
+            "format       y-tal HDF5_TAL, H_format {} (tal value {}), H shape {:?} (time first)",
+            r.h_format().tal_name(),
+            r.h_format().tal_value(),
+            r.h_shape()
+        );
+        say!(
+            "tal scan     {}",
+            match r.scan_type() {
+                vltm::tal::ScanType::Exhaustive =>
+                    "exhaustive (every laser spot x every SPAD spot)",
+                vltm::tal::ScanType::Confocal => "confocal (the SPAD looks at the laser spot)",
+                vltm::tal::ScanType::Single =>
+                    "single (one laser spot, the SPAD grid scanned): shown below by reciprocity \
+                     as the SPAD grid's spots as lasers x one SPAD at the laser spot",
+            }
+        );
+    }
     say!(
         "scan         {}",
         if g.confocal {
@@ -504,6 +576,7 @@ fn summarize(
     seconds: f64,
     report: &vltm_kernel::Report,
     cfg: &vltm_kernel::Config,
+    path: Option<ltm::Path>,
 ) {
     let (i, m) =
         v.iter().enumerate().fold(
@@ -511,8 +584,9 @@ fn summarize(
             |a, (i, &x)| if x > a.1 { (i, x) } else { a },
         );
     let p = volume.points.get(i).copied().unwrap_or_default();
+    let path = path.map_or(String::new(), |p| format!(", path {}", p.name()));
     say!(
-        "{what}: {} voxels, {} rows in {seconds:.2} s (λ = {:.4} m, σ = {:.4} m, J = {}); peak {m:.4e} at ({:.3}, {:.3}, {:.3}) m",
+        "{what}: {} voxels, {} rows in {seconds:.2} s (λ = {:.4} m, σ = {:.4} m, J = {}{path}); peak {m:.4e} at ({:.3}, {:.3}, {:.3}) m",
         v.len(),
         report.rows,
         cfg.wavelength(),
@@ -536,24 +610,31 @@ fn summarize(
     }
 }
 
+/// Writes the volume (`--out`: `.npy`, or HDF5 for `.h5`/`.hdf5`) and the figure (`--png`);
+/// with neither, `<probe>.npy` and `<probe>.png`.
 fn write_outputs(
     c: &Common,
-    stem: &str,
+    meta: &Provenance<'_>,
     v: &[f32],
     volume: &Volume,
     title: &str,
     marks: &[(Point, String)],
 ) -> Result<(), Failure> {
-    let (npy, png) = match (&c.out, &c.png) {
+    let stem = meta.probe;
+    let (out, png) = match (&c.out, &c.png) {
         (None, None) => (
             Some(PathBuf::from(format!("{stem}.npy"))),
             Some(PathBuf::from(format!("{stem}.png"))),
         ),
         (a, b) => (a.clone(), b.clone()),
     };
-    if let Some(p) = npy {
-        vltm::npy::write_f32(&p, v, &volume.shape)
-            .with_context(|| format!("writing {}", p.display()))?;
+    if let Some(p) = out {
+        if is_hdf5(&p) {
+            vltm::h5::write_volume(&p, v, volume, meta)
+        } else {
+            vltm::npy::write_f32(&p, v, &volume.shape)
+        }
+        .with_context(|| format!("writing {}", p.display()))?;
         say!("wrote {}", p.display());
     }
     if let Some(p) = png {
