@@ -112,6 +112,18 @@ canary() { # the same bin with one panicking index must fail to link, with panic
 }
 step "no-panic self-test: a planted panic fails to link" canary
 
+readme_example() { # the README's minimal firmware is src/bin/minimal.rs, verbatim
+  awk '/^plus a `memory.x`/ {on=1} on && /^```rust$/ {code=1; next} code && /^```$/ {exit} code' \
+    README.md | diff - src/bin/minimal.rs
+}
+step "README's minimal firmware = src/bin/minimal.rs" readme_example
+for t in $M4 $M0; do
+  m=$([ $t = $M4 ] && echo m4f || echo m0)
+  step "minimal firmware (README) $t: build" fw --target $t --no-default-features \
+    --features minimal --bin vltm-firmware-minimal
+  step "minimal firmware on $m: exit 0" ./run-qemu.sh $m status "$(elf $t vltm-firmware-minimal)"
+done
+
 step "cycles firmware $M4: build" fw --target $M4 --features cycles --bin vltm-firmware-cycles
 step "instruction counts, real setup, on m4f (-icount)" ./run-qemu.sh m4f cycles "$(elf $M4 vltm-firmware-cycles)"
 
