@@ -2,9 +2,10 @@
 //! (`gen/`, which includes this file with `#[path]`). Change it only together with
 //! `fixture/scan.bin` and `fixture/expected.txt` (regenerate with `gen`, see the README).
 //!
-//! Scene: two point scatterers P1 (bright) and P2 in the plane z = 0.5 m, the direct
-//! 3-vertex returns of both and the 4-vertex returns P1 ↔ P2, a Gaussian pulse and a small
-//! deterministic background, in `u16` counts.
+//! Scene (`fixture/scene.json`, rendered by the host simulator `vltm simulate`): two point
+//! scatterers P1 (bright) and P2 in the plane z = 0.5 m, the direct 3-vertex returns of both
+//! and the 4-vertex returns P1 ↔ P2, a Gaussian pulse and seeded Poisson counts with a small
+//! background, in `u16` counts. Regenerate with `fixture/regenerate.sh`.
 //!
 //! `scan.bin` layout: `N_LASERS` rows in the order of [`LASERS`]; a row is `N_SPADS`
 //! histograms in the order of [`SPADS`] (SPAD-major, the kernel's layout), each `NT`

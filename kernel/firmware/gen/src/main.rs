@@ -1,70 +1,84 @@
 //! Host side of the firmware fixture.
 //!
-//! * `vltm-firmware-gen fixture [DIR]` simulates the fixture scan (two point scatterers,
-//!   direct and P1 ↔ P2 indirect returns, Gaussian pulse, deterministic background), writes
-//!   `DIR/scan.bin` and runs the firmware's own pipeline (`../src/pipeline.rs`, the same
-//!   kernel calls in the same order) on x86 to write `DIR/expected.txt`. DIR defaults to
-//!   `../fixture` (run from `gen/`).
+//! * `vltm-firmware-gen fixture CAPTURE.npz [DIR]` takes the fixture scan that the host
+//!   simulator rendered of `../fixture/scene.json` (two point scatterers, direct and
+//!   P1 ↔ P2 indirect paths, Gaussian pulse, seeded Poisson counts:
+//!   `vltm simulate ../fixture/scene.json --out CAPTURE.npz --uncompressed`), checks that its
+//!   geometry is the firmware's, writes `DIR/scan.bin` and runs the firmware's own pipeline
+//!   (`../src/pipeline.rs`, the same kernel calls in the same order) on x86 to write
+//!   `DIR/expected.txt` (and the fixed-point `expected_fixed.txt`). DIR defaults to
+//!   `../fixture` (run from `gen/`). `../fixture/regenerate.sh` does both steps.
 //! * `vltm-firmware-gen budget` prints the kernel memory of the paper's real setup.
 
 #[path = "../../src/fixed_pipeline.rs"]
 mod fixed_pipeline;
 #[path = "../../src/fixture.rs"]
 mod fixture;
+mod npz;
 #[path = "../../src/pipeline.rs"]
 mod pipeline;
 
 use fixture::*;
 use std::fmt::Write as _;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use vltm_kernel::{Config, Gate, Params, Point, Probe, RowBuffer, Scan, Target};
 
-fn dist(a: Point, b: Point) -> f64 {
-    (0..3)
-        .map(|i| (a[i] as f64 - b[i] as f64).powi(2))
-        .sum::<f64>()
-        .sqrt()
-}
-
-/// Pulse std (m of path): 1.5 bins.
-const PULSE_SIGMA: f64 = 0.015;
-/// Peak counts of P1's direct return.
-const PEAK: f64 = 60.0;
-
-/// The fixture scan, `N_LASERS × N_SPADS × NT` counts (layout of scan.bin).
-fn simulate() -> Vec<u16> {
-    // (amplitude relative to PEAK, path length) of every return for laser l and SPAD s.
-    let paths = |l: Point, s: Point| -> [(f64, f64); 4] {
-        [
-            (1.0, dist(l, P1) + dist(P1, s)),
-            (0.6, dist(l, P2) + dist(P2, s)),
-            (0.5, dist(l, P1) + dist(P1, P2) + dist(P2, s)),
-            (0.5, dist(l, P2) + dist(P2, P1) + dist(P1, s)),
-        ]
+/// The fixture scan, `N_LASERS × N_SPADS × NT` counts (layout of scan.bin), from the capture
+/// that the host simulator rendered of `fixture/scene.json` (`vltm simulate … --uncompressed`):
+/// its geometry and time axis must be the firmware's (`src/fixture.rs`), its values whole
+/// counts that fit a `u16`.
+fn load_scan(capture: &Path) -> Vec<u16> {
+    let fail = |what: String| -> ! {
+        eprintln!("{}: {what}", capture.display());
+        std::process::exit(1)
     };
-    let mut rng = 0x2545_f491_u32; // LCG for the background: 0, 1 or 2 counts per bin
-    let mut scan = Vec::with_capacity(N_LASERS * ROW);
-    for &l in &LASERS {
-        for &s in &SPADS {
-            let p = paths(l, s);
-            for n in 0..NT {
-                let t = T0 + n as f64 * DT;
-                let signal: f64 = p
-                    .iter()
-                    .map(|&(a, tau)| {
-                        a * PEAK * (-(t - tau).powi(2) / (2.0 * PULSE_SIGMA * PULSE_SIGMA)).exp()
-                    })
-                    .sum();
-                rng = rng.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
-                let bg = (rng >> 30) as f64 * 2.0 / 3.0; // 0, 0.67, 1.33, 2
-                scan.push((signal + bg).round() as u16);
-            }
+    let bytes = std::fs::read(capture).unwrap_or_else(|e| fail(e.to_string()));
+    let arrays = npz::read(&bytes).unwrap_or_else(|e| fail(e));
+    let get = |name: &str| match arrays.get(name) {
+        Some(Ok(a)) => a,
+        Some(Err(e)) => fail(e.clone()),
+        None => fail(format!("no array `{name}`")),
+    };
+    let points = |name: &str, want: &[Point]| {
+        let a = get(name);
+        let got: Vec<Point> = a
+            .values
+            .chunks_exact(3)
+            .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
+            .collect();
+        if got != want {
+            fail(format!("`{name}` {got:?} is not src/fixture.rs's {want:?}"));
         }
+    };
+    points("laser_grid_xyz", &LASERS);
+    points("sensor_grid_xyz", &SPADS);
+    let scalar = |name: &str| match get(name).values[..] {
+        [x] => x,
+        _ => fail(format!("`{name}` is not a scalar")),
+    };
+    if (scalar("delta_t"), scalar("t_start")) != (DT, T0) {
+        fail(format!("time axis is not dt = {DT}, t0 = {T0}"));
     }
-    scan
+    let h = get("H");
+    if h.shape != [N_LASERS, 1, N_SPADS, 1, NT] {
+        fail(format!(
+            "H has shape {:?}, expected [{N_LASERS}, 1, {N_SPADS}, 1, {NT}]",
+            h.shape
+        ));
+    }
+    h.values
+        .iter()
+        .map(|&v| {
+            if v.fract() == 0.0 && (0.0..=f64::from(u16::MAX)).contains(&v) {
+                v as u16
+            } else {
+                fail(format!("H holds {v}, not a u16 count (render with noise)"))
+            }
+        })
+        .collect()
 }
 
-fn fixture(dir: PathBuf) {
+fn fixture(capture: &Path, dir: PathBuf) {
     let cfg = Config::try_new(&params()).expect("fixture params");
     assert_eq!(
         (cfg.bins(), cfg.n_fft()),
@@ -86,7 +100,7 @@ fn fixture(dir: PathBuf) {
     assert_eq!(VOXELS[P1_VOXEL], P1);
     assert_eq!(VOXELS[P2_VOXEL], P2);
 
-    let scan = simulate();
+    let scan = load_scan(capture);
     let bytes: Vec<u8> = scan.iter().flat_map(|c| c.to_le_bytes()).collect();
     std::fs::create_dir_all(&dir).expect("mkdir");
     std::fs::write(dir.join("scan.bin"), &bytes).expect("write scan.bin");
@@ -230,13 +244,20 @@ fn budget() {
 fn main() {
     let mut args = std::env::args().skip(1);
     match args.next().as_deref() {
-        Some("fixture") => fixture(
-            args.next()
-                .map_or_else(|| PathBuf::from("../fixture"), PathBuf::from),
-        ),
+        Some("fixture") => {
+            let Some(capture) = args.next() else {
+                eprintln!("usage: vltm-firmware-gen fixture CAPTURE.npz [DIR]");
+                std::process::exit(2);
+            };
+            fixture(
+                Path::new(&capture),
+                args.next()
+                    .map_or_else(|| PathBuf::from("../fixture"), PathBuf::from),
+            );
+        }
         Some("budget") => budget(),
         _ => {
-            eprintln!("usage: vltm-firmware-gen fixture [DIR] | budget");
+            eprintln!("usage: vltm-firmware-gen fixture CAPTURE.npz [DIR] | budget");
             std::process::exit(2);
         }
     }
@@ -277,6 +298,9 @@ fn fixed_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results) {
     assert!(
         ed < 1e-3 && ec < 1e-3,
         "fixed vs float: diag {ed:e}, col {ec:e}"
+    );
+    eprintln!(
+        "fixed-point vs float, max |√T_fixed − √T_float| / max √T_float: diag {ed:.2e}, col {ec:.2e}"
     );
     let mut txt = String::new();
     writeln!(
