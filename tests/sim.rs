@@ -374,6 +374,106 @@ fn a_box_is_six_outward_faces() {
     assert!(render(&scene).iter().all(|&v| v == 0.0));
 }
 
+/// A box turned by `normal`: its samples lie on its six faces in its own frame, with outward
+/// normals along its axes and the full surface area; `[0, 0, −1]` is the axis-aligned box
+/// (the same sample points); turning the box changes what the wall sees; and the turned box
+/// is still closed (no light from itself).
+#[test]
+fn a_turned_box_has_its_faces_along_its_axes() {
+    let (c, size, n) = ([0.1, -0.05, 0.7], [0.2, 0.3, 0.4], 3);
+    let setup = Setup::new(
+        Aperture::grid([4, 4], [1.0, 1.0], [0.0, 0.0]),
+        Aperture::grid([3, 3], [0.8, 0.8], [0.0, 0.0]),
+        300,
+        0.01,
+    );
+    let turned = |normal: Option<[f64; 3]>| Cuboid {
+        samples: n,
+        normal,
+        ..Cuboid::new("C", c, size)
+    };
+    let sorted = |b: Cuboid| {
+        let mut v: Vec<[f64; 7]> = Scene::new(setup.clone())
+            .with(b)
+            .sample_points()
+            .iter()
+            .map(|p| {
+                let q = p.normal.unwrap();
+                [
+                    p.position[0],
+                    p.position[1],
+                    p.position[2],
+                    q[0],
+                    q[1],
+                    q[2],
+                    p.area,
+                ]
+            })
+            .map(|v| v.map(|x| (x * 1e9).round() / 1e9 + 0.0))
+            .collect();
+        v.sort_by(|a, b| a.partial_cmp(b).unwrap());
+        v
+    };
+    assert_eq!(sorted(turned(None)), sorted(turned(Some([0.0, 0.0, -2.0]))));
+
+    let b = turned(Some([1.0, 0.3, -1.0]));
+    let u = b.axes();
+    for i in 0..3 {
+        for j in 0..3 {
+            let d: f64 = (0..3).map(|k| u[i][k] * u[j][k]).sum();
+            assert!(
+                (d - f64::from(u8::from(i == j))).abs() < 1e-12,
+                "axes not orthonormal"
+            );
+        }
+    }
+    let front = [1.0, 0.3, -1.0].map(|x: f64| x / (2.09f64).sqrt());
+    assert!(
+        (0..3).all(|k| (u[2][k] + front[k]).abs() < 1e-12),
+        "front face normal"
+    );
+    let pts = Scene::new(setup.clone()).with(b.clone()).sample_points();
+    assert_eq!(pts.len(), 6 * n * n);
+    let area: f64 = pts.iter().map(|p| p.area).sum();
+    let want = 2.0 * (size[0] * size[1] + size[1] * size[2] + size[0] * size[2]);
+    assert!((area - want).abs() < 1e-12, "area {area} vs {want}");
+    for p in &pts {
+        let local: [f64; 3] =
+            std::array::from_fn(|i| (0..3).map(|k| (p.position[k] - c[k]) * u[i][k]).sum());
+        let nrm = p.normal.unwrap();
+        let along: [f64; 3] = std::array::from_fn(|i| (0..3).map(|k| nrm[k] * u[i][k]).sum());
+        let axis = (0..3)
+            .max_by(|&i, &j| along[i].abs().total_cmp(&along[j].abs()))
+            .unwrap();
+        assert!(
+            (along[axis].abs() - 1.0).abs() < 1e-12,
+            "normal along an axis: {along:?}"
+        );
+        // On that face (outward side), inside it.
+        assert!(
+            (local[axis] - along[axis] * size[axis] / 2.0).abs() < 1e-12,
+            "{local:?}"
+        );
+        assert!(
+            (0..3).all(|k| local[k].abs() <= size[k] / 2.0 + 1e-12),
+            "{local:?}"
+        );
+    }
+    let mut scene = Scene::new(setup).with(b);
+    scene.bounces = Bounces::Direct;
+    let h_turned = render(&scene);
+    let mut straight = scene.clone();
+    straight.objects = vec![turned(None).into()];
+    let h_straight = render(&straight);
+    assert!(h_turned.iter().any(|&v| v > 0.0));
+    assert!(h_turned != h_straight, "turning the box changed nothing");
+    scene.bounces = Bounces::Indirect;
+    assert!(
+        render(&scene).iter().all(|&v| v == 0.0),
+        "a closed box lights itself"
+    );
+}
+
 #[test]
 fn five_vertex_paths_appear_only_with_max_vertices_5_at_their_time() {
     let (la, sp) = ([-0.1, 0.0, 0.0], [0.15, 0.05, 0.0]);
@@ -619,6 +719,16 @@ fn bad_scenes_are_rejected_naming_the_field() {
             r#""area": 0.01, "normal": [0, 0, 0]"#,
             "objects[2].normal",
         ),
+        (
+            r#""size": [0.2, 0.3, 0.2]"#,
+            r#""size": [0.2, 0.3, 0.2], "normal": [0, 0, 0]"#,
+            "objects[1].normal",
+        ),
+        (
+            r#""size": [0.2, 0.3, 0.2]"#,
+            r#""size": [2.4, 0.3, 0.2], "normal": [1, 0, -1]"#,
+            "objects[1].center",
+        ), // turned 45°, its long side reaches through the wall (axis-aligned it would not)
         (r#""area": 0.01"#, r#""area": 0"#, "objects[2].area"),
         (
             r#""size": 0.2}"#,

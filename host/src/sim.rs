@@ -136,9 +136,12 @@
 //!   * `"patch"`: a rectangle with `normal` (any non-zero length; usually facing the wall,
 //!     negative z), `size` `[w, h]` or one number for a square (sides along the tangents `a`,
 //!     `b` above), `samples` n (default 4, ≤ 1024): n × n points.
-//!   * `"box"`: an axis-aligned box of `size` `[sx, sy, sz]` (or one number): its 6 faces are
-//!     patches with outward normals (+x, −x, +y, −y, +z, −z, in that order), each sampled
-//!     `samples` × `samples`.
+//!   * `"box"`: a box of `size` `[sx, sy, sz]` (or one number): its 6 faces are patches with
+//!     outward normals (+x, −x, +y, −y, +z, −z of the box, in that order), each sampled
+//!     `samples` × `samples`. Axis-aligned by default; an optional `normal` (the outward normal
+//!     of its front face, like a patch's) turns it: the box's axes become `(a, −b, −n̂)` with
+//!     `a`, `b` the tangents above, so `[0, 0, −1]` is the axis-aligned box and `[1, 0, −1]`
+//!     turns it 45° about y.
 //!   * `"point"`: one isotropic point scatterer (sim.py `point_scene`) of `area` > 0 (m²), with
 //!     an optional `normal` for the cosine factors.
 //!
@@ -680,7 +683,7 @@ impl Noise {
 pub enum Object {
     /// A sampled rectangle (`"type": "patch"`).
     Patch(Patch),
-    /// An axis-aligned box of 6 patches (`"type": "box"`).
+    /// A box of 6 patches, axis-aligned or turned (`"type": "box"`).
     Box(Cuboid),
     /// One point scatterer (`"type": "point"`).
     Point(PointScatterer),
@@ -714,7 +717,9 @@ impl Object {
             }
             Self::Box(b) => box_faces(b)
                 .into_iter()
-                .flat_map(|(c, n, size)| sample_rect(c, n, size, b.samples, b.albedo, group))
+                .flat_map(|(c, n, sides, size)| {
+                    sample_rect_along(c, n, sides, size, b.samples, b.albedo, group)
+                })
                 .collect(),
             Self::Point(p) => vec![SamplePoint {
                 position: p.center,
@@ -809,7 +814,10 @@ impl Object {
                     ));
                 }
                 check_samples(b.samples)?;
-                center[2] - b.size[2] / 2.0
+                if let Some(n) = &b.normal {
+                    check_normal(n)?;
+                }
+                b.corners().iter().fold(f64::INFINITY, |m, c| m.min(c[2]))
             }
             Self::Point(p) => {
                 if let Some(n) = &p.normal {
@@ -878,7 +886,8 @@ impl Patch {
     }
 }
 
-/// An axis-aligned box: 6 faces with outward normals, each sampled `samples × samples`.
+/// A box: 6 faces with outward normals, each sampled `samples × samples`; axis-aligned unless
+/// `normal` turns it.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Cuboid {
@@ -887,9 +896,15 @@ pub struct Cuboid {
     pub name: String,
     /// Centre (m).
     pub center: [f64; 3],
-    /// Sides `[sx, sy, sz]` (m); one number in JSON for a cube.
+    /// Sides `[sx, sy, sz]` (m) along the box's own axes; one number in JSON for a cube.
     #[serde(deserialize_with = "scalar_or_array")]
     pub size: [f64; 3],
+    /// Outward normal of the box's front face (any non-zero length); `None` (default): the
+    /// axis-aligned box, whose front face (−z) faces the wall. The box's axes are
+    /// `(a, −b, −n̂)`, with `(a, b)` the tangents of `n̂` (the patches' convention), so
+    /// `[0, 0, −1]` is the axis-aligned box and e.g. `[1, 0, −1]` turns it 45° about y.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub normal: Option<[f64; 3]>,
     /// Albedo in [0, 1].
     #[serde(default = "default_albedo")]
     pub albedo: f64,
@@ -899,15 +914,39 @@ pub struct Cuboid {
 }
 
 impl Cuboid {
-    /// A box with albedo 1 and [`DEFAULT_SAMPLES`] samples per face side.
+    /// An axis-aligned box with albedo 1 and [`DEFAULT_SAMPLES`] samples per face side.
     pub fn new(name: &str, center: [f64; 3], size: [f64; 3]) -> Self {
         Self {
             name: name.into(),
             center,
             size,
+            normal: None,
             albedo: 1.0,
             samples: DEFAULT_SAMPLES,
         }
+    }
+
+    /// The box's unit axes (local x, y, z): the world axes, or `(a, −b, −n̂)` for a `normal`.
+    pub fn axes(&self) -> [[f64; 3]; 3] {
+        match self.normal {
+            None => [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]],
+            Some(n) => {
+                let n = unit(n);
+                let (a, b) = tangents(n);
+                [a, b.map(|c| -c), n.map(|c| -c)]
+            }
+        }
+    }
+
+    /// The 8 corners (m).
+    pub fn corners(&self) -> [[f64; 3]; 8] {
+        let u = self.axes();
+        core::array::from_fn(|i| {
+            let s = [i & 1, (i >> 1) & 1, (i >> 2) & 1].map(|b| if b == 1 { 0.5 } else { -0.5 });
+            [0, 1, 2].map(|k| {
+                self.center[k] + (0..3).map(|j| s[j] * self.size[j] * u[j][k]).sum::<f64>()
+            })
+        })
     }
 }
 
@@ -1293,7 +1332,20 @@ fn sample_rect(
     albedo: f64,
     group: usize,
 ) -> Vec<SamplePoint> {
-    let (a, b) = tangents(n);
+    sample_rect_along(c, n, tangents(n), size, samples, albedo, group)
+}
+
+/// [`sample_rect`] with the rectangle's sides along `(a, b)` (unit, ⊥ `n`) instead of the
+/// tangents of `n`.
+fn sample_rect_along(
+    c: [f64; 3],
+    n: [f64; 3],
+    (a, b): ([f64; 3], [f64; 3]),
+    size: [f64; 2],
+    samples: usize,
+    albedo: f64,
+    group: usize,
+) -> Vec<SamplePoint> {
     let m = samples.max(1);
     let area = size[0] * size[1] / (m * m) as f64;
     let u = |i: usize| (i as f64 + 0.5) / m as f64 - 0.5;
@@ -1314,18 +1366,27 @@ fn sample_rect(
     out
 }
 
-/// The faces of a box: (centre, outward normal, sides along sim.py's tangents).
-fn box_faces(b: &Cuboid) -> Vec<([f64; 3], [f64; 3], [f64; 2])> {
+/// A face of a box: centre, outward normal, the directions of its sides, their lengths.
+type Face = ([f64; 3], [f64; 3], ([f64; 3], [f64; 3]), [f64; 2]);
+
+/// The faces of a box, along its axes `u` (+u₀, −u₀, +u₁, −u₁, +u₂, −u₂): sides along sim.py's
+/// tangents of the face normal for an axis-aligned box (as the reference), along the box's
+/// other two axes for a turned one.
+fn box_faces(b: &Cuboid) -> Vec<Face> {
+    let u = b.axes();
     let mut faces = Vec::with_capacity(6);
     for axis in 0..3 {
         for sign in [1.0, -1.0] {
-            let mut n = [0.0; 3];
-            n[axis] = sign;
-            let mut c = b.center;
-            c[axis] += sign * b.size[axis] / 2.0;
-            let (ta, tb) = tangents(n);
-            let extent = |t: [f64; 3]| (0..3).map(|k| t[k].abs() * b.size[k]).sum::<f64>();
-            faces.push((c, n, [extent(ta), extent(tb)]));
+            let n = u[axis].map(|x| sign * x);
+            let c = [0, 1, 2].map(|k| b.center[k] + sign * b.size[axis] / 2.0 * u[axis][k]);
+            let (j, k) = ((axis + 1) % 3, (axis + 2) % 3);
+            faces.push(if b.normal.is_none() {
+                let (ta, tb) = tangents(n);
+                let extent = |t: [f64; 3]| (0..3).map(|i| t[i].abs() * b.size[i]).sum::<f64>();
+                (c, n, (ta, tb), [extent(ta), extent(tb)])
+            } else {
+                (c, n, (u[j], u[k]), [b.size[j], b.size[k]])
+            });
         }
     }
     faces
