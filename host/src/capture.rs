@@ -111,6 +111,57 @@ pub trait RowSource {
     /// # Errors
     /// I/O or format errors of the underlying file.
     fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point>;
+
+    /// The rows in scan order as an iterator of `(laser spot, histograms of all SPADs)`
+    /// (`spads_per_row·Nt` values, SPAD-major), read one at a time: the shape in which the
+    /// kernel takes a scan. Each item owns its histograms; [`RowSource::read_row`] reuses a
+    /// buffer instead (what the high-level probes do).
+    ///
+    /// ```
+    /// use vltm::capture::{self, RowSource};
+    /// let mut c = capture::open(std::path::Path::new("../fixtures/two_patches_single.npz"))?;
+    /// let per_row = c.geometry.spads_per_row() * c.geometry.nt;
+    /// let mut n = 0;
+    /// for row in c.iter_rows() {
+    ///     let (laser, histograms) = row?;
+    ///     assert_eq!((laser[2], histograms.len()), (0.0, per_row)); // a spot on the wall
+    ///     n += 1;
+    /// }
+    /// assert_eq!(n, 64);
+    /// # Ok::<(), vltm::Error>(())
+    /// ```
+    fn iter_rows(&mut self) -> Rows<'_, Self>
+    where
+        Self: Sized,
+    {
+        Rows { src: self, next: 0 }
+    }
+}
+
+/// Iterator over the rows of a [`RowSource`] ([`RowSource::iter_rows`]).
+#[derive(Debug)]
+pub struct Rows<'a, S: RowSource> {
+    src: &'a mut S,
+    next: usize,
+}
+
+impl<S: RowSource> Iterator for Rows<'_, S> {
+    type Item = Result<(Point, Vec<f32>)>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let l = self.next;
+        if l >= self.src.geometry().lasers.len() {
+            return None;
+        }
+        self.next += 1;
+        let mut out = Vec::new();
+        Some(self.src.read_row(l, &mut out).map(|p| (p, out)))
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        let n = self.src.geometry().lasers.len().saturating_sub(self.next);
+        (n, Some(n))
+    }
 }
 
 /// A capture held in memory: geometry plus `H` as `f32`, `[Kl][spads_per_row][Nt]`.
