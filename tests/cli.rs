@@ -582,6 +582,23 @@ fn demo_writes_figures_volumes_and_summary() {
         ratio >= 3.0,
         "demo: gated indirect light at the figure is only {ratio}x the control"
     );
+    // Ground truth: the direct image peaks on each object (within about one voxel, 6 cm pitch).
+    for obj in ["panel", "figure", "box"] {
+        let line = out
+            .lines()
+            .find(|l| l.trim_start().starts_with(obj) && l.contains("from its surface"))
+            .unwrap_or_else(|| panic!("no direct-light line for {obj}:\n{out}"));
+        let d: f32 = line
+            .split(" m, ")
+            .nth(1)
+            .and_then(|s| s.split(" m from").next())
+            .and_then(|s| s.trim().parse().ok())
+            .unwrap_or_else(|| panic!("no distance in `{line}`"));
+        assert!(
+            d <= 0.1,
+            "demo: the direct peak near {obj} is {d} m from it: {line}"
+        );
+    }
     let summary = std::fs::read_to_string(dir.join("summary.txt")).expect("summary.txt");
     assert_eq!(summary, out, "summary.txt differs from the printed table");
     let mut files: Vec<String> = std::fs::read_dir(&dir)

@@ -81,7 +81,9 @@ fn nearest(scene: &Scene, p: Point) -> (String, f32) {
 struct Line {
     name: &'static str,
     values: Vec<f32>,
-    seconds: f64,
+    /// Time of the probe run; `None` for a row derived from the row above it (a mask or a
+    /// shell applied to the same column).
+    seconds: Option<f64>,
 }
 
 /// Runs the demo into `out` (created if needed) and prints the table; returns the table text.
@@ -101,8 +103,9 @@ pub fn run(out: &Path) -> Result<String> {
         wavelength: Some(0.2),
         ..Wave::default()
     };
+    // Progress bars go to stderr and are hidden when it is not a terminal.
     let exec = Exec {
-        progress: false,
+        progress: true,
         ..Exec::default()
     };
     let a = p32(PANEL);
@@ -113,7 +116,7 @@ pub fn run(out: &Path) -> Result<String> {
     lines.push(Line {
         name: "direct (diagonal)",
         values: d.values.clone(),
-        seconds: d.seconds,
+        seconds: Some(d.seconds),
     });
     let col = |src: &mut Capture, gate, shell| ltm::column(src, a, &vol, gate, shell, &wave, exec);
     let gated = col(&mut full, ColumnGate::TwoBounce, Shell::ALL)?;
@@ -137,37 +140,37 @@ pub fn run(out: &Path) -> Result<String> {
     lines.push(Line {
         name: "column, gated",
         values: gated.values.clone(),
-        seconds: gated.seconds,
+        seconds: Some(gated.seconds),
     });
     lines.push(Line {
         name: "column, gated, Γ-masked",
         values: mask(&gated.values),
-        seconds: gated.seconds,
+        seconds: None,
     });
     lines.push(Line {
         name: "column, no gate",
         values: ungated.values.clone(),
-        seconds: ungated.seconds,
+        seconds: Some(ungated.seconds),
     });
     lines.push(Line {
         name: "column, no gate, Γ-masked",
         values: mask(&ungated.values),
-        seconds: ungated.seconds,
+        seconds: None,
     });
     lines.push(Line {
         name: "column, higher-order, Γ-masked",
         values: mask(&higher.values),
-        seconds: higher.seconds,
+        seconds: Some(higher.seconds),
     });
     lines.push(Line {
         name: "column near 0.15-0.45 m, Γ",
         values: shelled(near),
-        seconds: gated.seconds,
+        seconds: None,
     });
     lines.push(Line {
         name: "column far 0.45-1.20 m, Γ",
         values: shelled(far),
-        seconds: gated.seconds,
+        seconds: None,
     });
 
     // Indirect light on the figure against the direct-only control, same Γ.
@@ -208,11 +211,44 @@ pub fn run(out: &Path) -> Result<String> {
     for l in &lines {
         let p = vol.points[argmax(&l.values)];
         let (obj, e) = nearest(&truth, p);
+        let time = l
+            .seconds
+            .map_or("(same)".to_string(), |s| format!("{s:.2}"));
         let _ = writeln!(
             table,
-            "{:<32} {:>8.2}  ({:+.2}, {:+.2}, {:+.2})    {obj} ({e:.2} m)",
-            l.name, l.seconds, p[0], p[1], p[2]
+            "{:<32} {time:>8}  ({:+.2}, {:+.2}, {:+.2})    {obj} ({e:.2} m)",
+            l.name, p[0], p[1], p[2]
         );
+    }
+    let _ = writeln!(
+        table,
+        "(same): the column of the row above, masked by Γ or cut to a shell (no run of its own)"
+    );
+    // Ground truth: the direct image's brightest voxel within 0.15 m of each object's surface,
+    // against that surface.
+    let _ = writeln!(
+        table,
+        "\ndirect light near each object (brightest voxel within 0.15 m of its surface):"
+    );
+    let surf: Vec<(String, f32)> = vol.points.iter().map(|&p| nearest(&truth, p)).collect();
+    let d_max = d.values.iter().copied().fold(0.0f32, f32::max);
+    for o in &truth.objects {
+        let best = (0..vol.len())
+            .filter(|&i| surf[i].0 == o.name() && surf[i].1 <= 0.15)
+            .max_by(|&i, &j| d.values[i].total_cmp(&d.values[j]));
+        if let Some(i) = best {
+            let p = vol.points[i];
+            let _ = writeln!(
+                table,
+                "  {:<8} peak ({:+.2}, {:+.2}, {:+.2}) m, {:.2} m from its surface, {:.2} of the image maximum",
+                o.name(),
+                p[0],
+                p[1],
+                p[2],
+                surf[i].1,
+                d.values[i] / d_max
+            );
+        }
     }
     let _ = writeln!(
         table,
