@@ -8,7 +8,10 @@
 //!   32×32×24 (half pitch, 4 polyphase sub-grids), and for 8×8 / 32×32 SPAD grids (voxels
 //!   on the SPAD grid, 24 slices); plus 6 vs 24 slices.
 //! * `column_image`: imaging a factorised column over 16×16×24 voxels once, kernel vs planar.
-//! * `lookup_diagonal`: one row of the baseband-lookup diagonal on the paper's 1-D setup.
+//! * `lookup_diagonal`: one row of the baseband-lookup diagonal on the paper's 1-D setup, and
+//!   on the exh16 case of `planar_diagonal` (the two paths on the same row).
+//! * `indirect_gamma`: in-focus indirect light (Eq. 17) as `ltm::indirect` runs it: per row
+//!   the `push_row` of 64 factorised columns (one per voxel of Γ), once their imaging over Γ.
 //!
 //! The kernel's band diagonal over the same 16×16×24 voxels is `benches/kernel.rs`
 //! (`exh16/diagonal_gaussian`, ≈ 150 ms per row). Memory of every path is printed first; none
@@ -278,12 +281,82 @@ fn lookup_diagonal(c: &mut Criterion) {
     g.bench_function("paper1d_64x64", |b| {
         b.iter(|| lookup.apply(&scan, black_box(&row), &vox, &mut scratch, &mut acc));
     });
+    // The exh16 case of `planar_diagonal` (16×16 SPADs, 16×16×24 voxels at the SPAD pitch):
+    // the lookup and the planar path measured on the same row.
+    let cfg = config(800);
+    let sp = spads(16);
+    let (vox, _) = voxels(16, 1, 24);
+    let h = hists(sp.len() * 800, 800);
+    let mut tables = vec![0.0f32; Scan::tables_len(&cfg, sp.len())];
+    let scan = Scan::new(&cfg, &sp, &mut tables).unwrap();
+    let mut buf = vec![0.0f32; RowBuffer::len(&cfg, sp.len())];
+    let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
+    let row = rows.load(&scan, [0.1, 0.0, 0.0], &h).unwrap();
+    let lookup = vltm::fast::Lookup::new(&cfg);
+    let mut scratch = lookup.scratch(sp.len());
+    let mut acc = vec![Complex64::new(0.0, 0.0); vox.len()];
+    g.throughput(Throughput::Elements((vox.len() * sp.len()) as u64));
+    g.bench_function("exh16_16x16x24", |b| {
+        b.iter(|| lookup.apply(&scan, black_box(&row), &vox, &mut scratch, &mut acc));
+    });
+    g.finish();
+}
+
+/// In-focus indirect light (Eq. 17, §B.3.4) as `ltm::indirect` evaluates it: one factorised
+/// column per voxel of Γ, so per row `G·Ks·J` (`push_row` of G column probes), then once the
+/// G columns imaged over Γ (`G²·Ks` band sums). exh16 setup, G = 64 voxels of a 8×8 patch of
+/// the 16×16 grid at z = 0.8 m.
+fn indirect_gamma(c: &mut Criterion) {
+    let cfg = config(800);
+    let sp = spads(16);
+    let h = hists(sp.len() * 800, 800);
+    let mut tables = vec![0.0f32; Scan::tables_len(&cfg, sp.len())];
+    let scan = Scan::new(&cfg, &sp, &mut tables).unwrap();
+    let mut buf = vec![0.0f32; RowBuffer::len(&cfg, sp.len())];
+    let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
+    let row = rows.load(&scan, [0.1, 0.0, 0.0], &h).unwrap();
+    let gamma: Vec<Point> = axis(8, -0.4375, 0.125)
+        .flat_map(|x| axis(8, -0.4375, 0.125).map(move |y| [x, y, 0.8]))
+        .collect();
+    let n_state = Probe::state_len(&cfg, Target::Column(gamma[0]), Gate::Gaussian, 0, sp.len());
+    let mut states = vec![vec![0.0f64; n_state]; gamma.len()];
+    let mut probes: Vec<Probe<'_>> = gamma
+        .iter()
+        .zip(states.iter_mut())
+        .map(|(a, s)| Probe::new(&scan, Target::Column(*a), Gate::Gaussian, &[], s).unwrap())
+        .collect();
+    eprintln!(
+        "indirect exh16: G = {} columns, {:.2} MB of column state",
+        gamma.len(),
+        (gamma.len() * n_state * 8) as f64 / 1e6
+    );
+    let mut g = c.benchmark_group("indirect_gamma");
+    g.sample_size(10);
+    g.throughput(Throughput::Elements((gamma.len() * sp.len()) as u64));
+    g.bench_function("push_row_64_columns", |b| {
+        b.iter(|| {
+            for p in probes.iter_mut() {
+                p.push_row(&scan, black_box(&row)).unwrap();
+            }
+        });
+    });
+    let mut out = vec![0.0f64; gamma.len()];
+    g.throughput(Throughput::Elements(
+        (gamma.len() * gamma.len() * sp.len()) as u64,
+    ));
+    g.bench_function("image_64_columns_over_gamma_once", |b| {
+        b.iter(|| {
+            for p in &probes {
+                p.image(&scan, black_box(&gamma), &mut out).unwrap();
+            }
+        });
+    });
     g.finish();
 }
 
 criterion_group! {
     name = fast;
     config = Criterion::default().warm_up_time(std::time::Duration::from_millis(500));
-    targets = stage1, planar_diagonal, column_image, lookup_diagonal
+    targets = stage1, planar_diagonal, column_image, lookup_diagonal, indirect_gamma
 }
 criterion_main!(fast);

@@ -315,7 +315,9 @@ fn check_laser_falloff(g: &Geometry, wave: &Wave) -> Result<()> {
     Ok(())
 }
 
-fn progress_bar(exec: Exec, n: usize, label: &str) -> ProgressBar {
+/// A progress bar over `n` rows on stderr (hidden unless `exec.progress`; indicatif also hides
+/// it when stderr is not a terminal).
+pub(crate) fn progress_bar(exec: Exec, n: usize, label: &str) -> ProgressBar {
     let bar = if exec.progress {
         ProgressBar::new(n as u64)
     } else {

@@ -1252,16 +1252,32 @@ impl Scene {
     /// # Errors
     /// As [`Scene::validate`] (errors name `<scene>`).
     pub fn render(&self) -> Result<Capture> {
+        self.render_with_progress(false)
+    }
+
+    /// [`Scene::render`] with a progress bar over the laser rows on stderr when `progress`
+    /// (hidden when stderr is not a terminal).
+    ///
+    /// # Errors
+    /// As [`Scene::render`].
+    pub fn render_with_progress(&self, progress: bool) -> Result<Capture> {
         let src = self.source()?;
         let geometry = src.geometry.clone();
         let row_len = geometry.spads_per_row() * geometry.nt;
         let mut data = vec![0.0f32; geometry.lasers.len() * row_len];
+        let exec = crate::ltm::Exec {
+            progress,
+            ..Default::default()
+        };
+        let bar = crate::ltm::progress_bar(exec, geometry.lasers.len(), "simulate");
         data.par_chunks_mut(row_len).enumerate().for_each_init(
             Scratch::default,
             |scratch, (l, out)| {
                 src.tables.row(l, scratch, out);
+                bar.inc(1);
             },
         );
+        bar.finish_and_clear();
         if let Some(noise) = &self.noise {
             noise.apply(&mut data, row_len)?;
         }

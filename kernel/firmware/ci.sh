@@ -102,6 +102,21 @@ for t in $M4 $M0; do
     --no-default-features --features nopanic --bin vltm-firmware-fixed-nopanic
   step "no-panic fixed-point firmware on $m: exit 0" ./run-qemu.sh $m status "$(elf $t vltm-firmware-fixed-nopanic)"
 done
+no_fmt() { # the no-panic ELFs hold no core::fmt symbol; the text firmware (teeth) does
+  local nm e n
+  nm=$(command -v arm-none-eabi-nm || true)
+  [ -n "$nm" ] || nm="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/llvm-nm"
+  [ -x "$nm" ] || { echo "no arm-none-eabi-nm or llvm-nm"; return 1; }
+  for e in "$(elf $M4 vltm-firmware-nopanic)" "$(elf $M0 vltm-firmware-nopanic)" \
+           "$(elf $M4 vltm-firmware-fixed-nopanic)" "$(elf $M0 vltm-firmware-fixed-nopanic)"; do
+    n=$("$nm" -C "$e" | grep -c 'core::fmt' || true)
+    [ "$n" -eq 0 ] || { echo "$e: $n core::fmt symbols"; "$nm" -C "$e" | grep 'core::fmt' | head -5; return 1; }
+  done
+  n=$("$nm" -C "$(elf $M4 vltm-firmware)" | grep -c 'core::fmt' || true)
+  [ "$n" -gt 0 ] || { echo "the check finds no core::fmt even in the text firmware"; return 1; }
+}
+step "no-panic ELFs (M4F, M0; float, fixed) hold no core::fmt" no_fmt
+
 canary() { # the same bin with one panicking index must fail to link, with panic-never's message
   local log; log=$(mktemp)
   if cargo build -q --release --target $M4 --no-default-features --features nopanic,panic-canary \

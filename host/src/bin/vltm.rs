@@ -318,7 +318,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
             uncompressed,
         } => {
             let s = vltm::sim::Scene::load(&scene)?;
-            let c = s.render()?;
+            let c = s.render_with_progress(true)?;
             capture::npz::write_with(&c, &out, !uncompressed)?;
             if let Some(p) = ptu {
                 let w = vltm::ptu::write_t3(&c, &p, &vltm::ptu::T3WriteOptions::default())?;
