@@ -95,6 +95,7 @@ fn wave(wl: f64) -> Wave {
         weights: Weights::One,
         band_half_width: 6.0,
         compensate_laser: true,
+        auto_margin: true,
     }
 }
 

@@ -39,6 +39,12 @@ pub struct Wave {
     pub band_half_width: f64,
     /// Divide each laser row by the physical laser's falloff `cos θ / d²` to its spot.
     pub compensate_laser: bool,
+    /// For Gaussian-gated columns and in-focus indirect light: widen the virtual DFT period
+    /// ([`Params::margin`]) so that every path time of the probed elements is alias-free,
+    /// i.e. paths outside the capture's window contribute nothing (DESIGN §B.2.2) instead of
+    /// wrapping around (default true). The factorised column cannot zero single paths as the
+    /// diagonal does; this buys the same result with a larger band (`J ∝ N`).
+    pub auto_margin: bool,
 }
 
 impl Default for Wave {
@@ -49,6 +55,7 @@ impl Default for Wave {
             weights: Weights::Inv,
             band_half_width: 5.0,
             compensate_laser: false,
+            auto_margin: true,
         }
     }
 }
@@ -97,6 +104,81 @@ impl Wave {
         };
         Ok(Config::try_new(&p)?)
     }
+
+    /// The configuration for factorised Gaussian columns focused at `foci` and imaged over
+    /// `voxels`: [`Wave::config`], with [`Params::margin`] widened (under
+    /// [`Wave::auto_margin`]) until every path time `d1 + |x_l − x_a| + |x_a − x_b| +
+    /// |x_b − x_s| + d4 − t0` lies in [`Config::alias_free`].
+    ///
+    /// # Errors
+    /// As [`Wave::config`] (a margin so large that N overflows is a `SizeOverflow`).
+    pub fn column_config(&self, g: &Geometry, foci: &[Point], voxels: &[Point]) -> Result<Config> {
+        let cfg = self.config(g)?;
+        if !self.auto_margin || foci.is_empty() || voxels.is_empty() {
+            return Ok(cfg);
+        }
+        let (d1, d4) = legs(g, &cfg);
+        let span = |pts: &[Point], legs: &[f64], v: &Point| {
+            pts.iter()
+                .zip(legs)
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (p, d)| {
+                    let x = f64::from(dist(*p, *v)) + d;
+                    (a.min(x), b.max(x))
+                })
+        };
+        let proj: Vec<(f64, f64)> = foci.iter().map(|a| span(&g.lasers, &d1, a)).collect();
+        let cam: Vec<(f64, f64)> = voxels.iter().map(|b| span(&g.spads, &d4, b)).collect();
+        let (lo, hi) = foci
+            .par_iter()
+            .zip(&proj)
+            .map(|(a, p)| {
+                voxels.iter().zip(&cam).fold(
+                    (f64::INFINITY, f64::NEG_INFINITY),
+                    |(lo, hi), (b, c)| {
+                        let d_ab = f64::from(dist(*a, *b));
+                        (lo.min(p.0 + d_ab + c.0), hi.max(p.1 + d_ab + c.1))
+                    },
+                )
+            })
+            .reduce(
+                || (f64::INFINITY, f64::NEG_INFINITY),
+                |x, y| (x.0.min(y.0), x.1.max(y.1)),
+            );
+        let (af_lo, af_hi) = cfg.alias_free();
+        // 1e-4·σ for the f32 path lengths of the kernel, as the guard check of the diagonal.
+        let slack = 1e-4 * cfg.sigma();
+        let need = ((af_lo + slack) - (lo - g.t0))
+            .max((hi - g.t0) - (af_hi - slack))
+            .max(0.0);
+        if need == 0.0 {
+            return Ok(cfg);
+        }
+        Ok(Config::try_new(&Params {
+            margin: need,
+            ..*cfg.params()
+        })?)
+    }
+}
+
+/// The device legs `d1_l`, `d4_s` of every laser and SPAD spot (0 without legs in time).
+fn legs(g: &Geometry, cfg: &Config) -> (Vec<f64>, Vec<f64>) {
+    let d1 = g
+        .lasers
+        .iter()
+        .map(|l| match cfg.legs() {
+            Legs::WallToWall => 0.0,
+            Legs::FirstAndLast { laser_origin, .. } => dist64(l, &laser_origin),
+        })
+        .collect();
+    let d4 = g
+        .spads
+        .iter()
+        .map(|s| match cfg.legs() {
+            Legs::WallToWall => 0.0,
+            Legs::FirstAndLast { sensor_origin, .. } => dist64(s, &sensor_origin),
+        })
+        .collect();
+    (d1, d4)
 }
 
 /// How the voxel sums of the diagonal and of Gaussian columns are evaluated (the CLI's
@@ -525,22 +607,7 @@ fn choose_planar(
 /// Voxels that have some (laser, SPAD) path outside the guard interval: the band path zeroes
 /// those paths, the convolution cannot, so these voxels are evaluated on the band path.
 fn outside_guard(g: &Geometry, cfg: &Config, voxels: &[Point]) -> Vec<bool> {
-    let d1: Vec<f64> = g
-        .lasers
-        .iter()
-        .map(|l| match cfg.legs() {
-            Legs::WallToWall => 0.0,
-            Legs::FirstAndLast { laser_origin, .. } => dist64(l, &laser_origin),
-        })
-        .collect();
-    let d4: Vec<f64> = g
-        .spads
-        .iter()
-        .map(|s| match cfg.legs() {
-            Legs::WallToWall => 0.0,
-            Legs::FirstAndLast { sensor_origin, .. } => dist64(s, &sensor_origin),
-        })
-        .collect();
+    let (d1, d4) = legs(g, cfg);
     let (lo, hi) = cfg.guard();
     let range = |pts: &[Point], legs: &[f64], v: &Point| {
         pts.iter()
@@ -812,7 +879,11 @@ pub fn column(
         _ => {}
     }
     let t = Instant::now();
-    let cfg = wave.config(src.geometry())?;
+    let cfg = if gate == ColumnGate::TwoBounce {
+        wave.column_config(src.geometry(), &[focus], &volume.points)?
+    } else {
+        wave.config(src.geometry())?
+    };
     let target = Target::Column(focus);
     let (mut v, report, path) = match gate {
         ColumnGate::HigherOrder => {
@@ -1136,12 +1207,13 @@ pub fn indirect_over(
             format!("expected {} flags, found {}", volume.len(), gamma.len()),
         ));
     }
-    let cfg = wave.config(src.geometry())?;
+    let idx: Vec<usize> = (0..gamma.len()).filter(|&i| gamma[i]).collect();
+    let pts: Vec<Point> = idx.iter().map(|&i| volume.points[i]).collect();
+    let cfg = wave.column_config(src.geometry(), &pts, &pts)?;
     let shell = opts.shell.unwrap_or(Shell {
         r0: 1.5 * cfg.sigma() as f32,
         r1: f32::INFINITY,
     });
-    let idx: Vec<usize> = (0..gamma.len()).filter(|&i| gamma[i]).collect();
     let mut values = vec![0.0f32; volume.len()];
     let mut report = Report::default();
     if !idx.is_empty() {
@@ -1158,7 +1230,6 @@ pub fn indirect_over(
                 ),
             ));
         }
-        let pts: Vec<Point> = idx.iter().map(|&i| volume.points[i]).collect();
         let cols = factorised_columns(
             src,
             Job {

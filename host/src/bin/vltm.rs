@@ -195,6 +195,7 @@ impl Common {
             },
             band_half_width: self.band,
             compensate_laser: self.compensate_laser,
+            auto_margin: true,
         }
     }
 
