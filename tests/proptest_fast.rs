@@ -1132,28 +1132,23 @@ fn forced_paths_that_do_not_apply_are_errors() {
     let sc = fixed_case().build(Kind::Diagonal);
     let msg = path_error(sc.column(Path::Lookup), "lookup column");
     assert!(msg.contains("diagonal only"), "{msg}");
-    for gate in [ColumnGate::HigherOrder, ColumnGate::None] {
-        let r = ltm::column(
-            &mut sc.capture.clone(),
+    let column = |gate, path| {
+        let mut c = sc.capture.clone();
+        ltm::column(
+            &mut c,
             sc.focus,
             &sc.volume,
             gate,
             Shell::ALL,
             &sc.wave,
-            exec(Path::Planar),
-        );
-        let msg = path_error(r, "planar column");
+            exec(path),
+        )
+    };
+    for gate in [ColumnGate::HigherOrder, ColumnGate::None] {
+        let msg = path_error(column(gate, Path::Planar), "planar column");
         assert!(msg.contains("two-bounce"), "{gate:?}: {msg}");
         // The same column on the band path is fine.
-        let r = ltm::column(
-            &mut sc.capture.clone(),
-            sc.focus,
-            &sc.volume,
-            gate,
-            Shell::ALL,
-            &sc.wave,
-            exec(Path::Band),
-        );
+        let r = column(gate, Path::Band);
         assert!(r.is_ok(), "{gate:?} on the band path: {:?}", r.err());
     }
     for path in [Path::Planar, Path::Lookup, Path::Band] {
