@@ -840,4 +840,15 @@ fn simulate_ptu_round_trip() {
     std::fs::write(t.path("c.json"), v.to_string()).expect("write sidecar");
     let err = fails(&t.0, &["info", &s(&ptu)], 1);
     assert!(err.contains("c.json") || err.contains("rows"), "{err}");
+    // `direct` streams the photons (no whole-file read): the same error, and a truncated
+    // record stream is a data error naming the file.
+    let err = fails(&t.0, &["direct", &s(&ptu), "--volume", SPEC], 1);
+    assert!(err.contains("c.json") || err.contains("rows"), "{err}");
+    std::fs::write(t.path("c.json"), side).expect("restore sidecar");
+    let bytes = std::fs::read(&ptu).expect("ptu");
+    let cut = t.path("cut.ptu");
+    std::fs::write(&cut, &bytes[..bytes.len() - 6]).expect("write");
+    std::fs::copy(t.path("c.json"), t.path("cut.json")).expect("sidecar");
+    let err = fails(&t.0, &["direct", &s(&cut), "--volume", SPEC], 1);
+    assert!(err.contains("cut.ptu"), "{err}");
 }

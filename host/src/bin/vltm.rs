@@ -199,14 +199,20 @@ impl Common {
         }
     }
 
-    /// The capture as a row source: y-tal HDF5 files and uncompressed `.npz` captures are
-    /// streamed row by row (memory O(Ks·Nt)); other formats, and `--swap-roles` (a
-    /// transpose), are read into memory.
+    /// The capture as a row source: y-tal HDF5 files, PicoQuant PTU photon streams and
+    /// uncompressed `.npz` captures are streamed row by row (memory O(Ks·Nt)); compressed
+    /// `.npz`, and `--swap-roles` (a transpose), are read into memory.
     fn load(&self, path: &Path) -> vltm::Result<Box<dyn RowSource>> {
         if self.swap_roles {
             Ok(Box::new(ltm::swap_roles(&capture::open(path)?)?))
         } else if is_hdf5(path) {
             Ok(Box::new(vltm::tal::open(path)?))
+        } else if extension(path).as_deref() == Some("ptu") {
+            // Photons binned row by row in one pass over the file (sidecar F.json).
+            Ok(Box::new(vltm::ptu::PtuSource::open(
+                path,
+                path.with_extension("json"),
+            )?))
         } else if extension(path).as_deref() == Some("npz")
             && let Some(s) = capture::npz::open_stream(path)?
         {
