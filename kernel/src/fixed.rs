@@ -86,8 +86,15 @@
 //! per unit of `k`. The HG rounding (½ LSB each) is an absolute term of `J·Ĝ_max·2^(sh−15)`
 //! counts per (laser, SPAD) pair, times the pair's weights.
 //!
-//! Not in fixed point (use the float path): the un-gated and higher-order gates, photon-event
-//! rows, `f32` histograms.
+//! # Photon events
+//!
+//! [`FixedPhotons`] folds TCSPC events as they arrive into the integer DFT sums `D_j` of each
+//! SPAD (`J` integer additions per photon); [`FixedRowBuffer::load_photons`] finishes the row
+//! with the same code as [`FixedRowBuffer::load`]. Integer sums are exact in any order, so a
+//! row of photons is **bit-identical** to the row of their histogram (`tests/fixed_point.rs`).
+//!
+//! Not in fixed point (use the float path): the un-gated and higher-order gates, `f32`
+//! histograms.
 
 use crate::config::{Config, Legs, Point, Weights};
 use crate::error::{ConfigError, Error, check_len, check_points};
@@ -535,13 +542,67 @@ impl<'m> FixedRowBuffer<'m> {
         laser: Point,
         hists: &[u16],
     ) -> Result<FixedRow<'r>, Error> {
+        let cfg = &scan.fc.cfg;
+        let (nt, n, k_lo) = (cfg.nt(), cfg.n_fft().max(1), cfg.k_lo());
+        check_len("histograms", scan.spads.len() * nt, hists.len())?;
+        let twiddle = scan.twiddle.as_chunks::<2>().0;
+        self.fill(scan, laser, |s, jj| {
+            let h = hists.get(s * nt..(s + 1) * nt).unwrap_or(&[]);
+            let step = (k_lo + jj as i64).rem_euclid(n as i64) as usize;
+            let (mut re, mut im, mut q) = (0i64, 0i64, 0usize);
+            for &c in h {
+                if let Some([wr, wi]) = twiddle.get(q) {
+                    let c = i32::from(c);
+                    re += i64::from(c * i32::from(wr.to_bits()));
+                    im += i64::from(c * i32::from(wi.to_bits()));
+                }
+                q += step;
+                if q >= n {
+                    q -= n;
+                }
+            }
+            (re, im)
+        })
+    }
+
+    /// Band spectra of one row from its photon events ([`FixedPhotons`]): **bit-identical**
+    /// to [`FixedRowBuffer::load`] on the histograms of the same photons, since the DFT sums
+    /// are integers (exact, in any order) and the rest of the computation is shared.
+    ///
+    /// # Errors
+    /// [`Error::Length`] for a buffer or `photons` made for another scan;
+    /// [`Error::NonFinite`] for a non-finite laser position.
+    pub fn load_photons<'r>(
+        &'r mut self,
+        scan: &FixedScan<'_>,
+        laser: Point,
+        photons: &FixedPhotons<'_>,
+    ) -> Result<FixedRow<'r>, Error> {
+        let j = scan.fc.cfg.bins();
+        check_len(
+            "photon sums",
+            FixedPhotons::len(&scan.fc, scan.spads.len()),
+            photons.d.len(),
+        )?;
+        let d = photons.d.as_chunks::<2>().0;
+        self.fill(scan, laser, |s, jj| {
+            d.get(s * j + jj).map_or((0, 0), |&[re, im]| (re, im))
+        })
+    }
+
+    /// The shared tail of [`FixedRowBuffer::load`] and [`FixedRowBuffer::load_photons`]:
+    /// `HG_j = round(D_j·ĝ_j·p_j / 2^(30+sh))` from the DFT sums `dft(s, j) = D_j` of SPAD `s`.
+    fn fill<'r>(
+        &'r mut self,
+        scan: &FixedScan<'_>,
+        laser: Point,
+        mut dft: impl FnMut(usize, usize) -> (i64, i64),
+    ) -> Result<FixedRow<'r>, Error> {
         let fc = &scan.fc;
         let cfg = &fc.cfg;
-        let (ks, nt, j) = (scan.spads.len(), cfg.nt(), cfg.bins());
+        let (ks, j) = (scan.spads.len(), cfg.bins());
         check_len("row buffer", Self::len(fc, ks), self.buf.len())?;
-        check_len("histograms", ks * nt, hists.len())?;
         check_points("laser", &[laser])?;
-        let n = cfg.n_fft().max(1);
         let d1 = scan.laser_leg(&laser);
         let k_lo = cfg.k_lo();
         let too_short = Error::Length {
@@ -554,10 +615,7 @@ impl<'m> FixedRowBuffer<'m> {
         // Not `zip` over `chunks_exact`: its out-of-line `Zip::new` divides by the chunk
         // length, a panicking branch in the no-panic link (see scan.rs).
         for (s, (off, sp)) in offsets.iter_mut().zip(scan.spads).enumerate() {
-            let (Some(h), Some(hg)) = (
-                hists.get(s * nt..(s + 1) * nt),
-                hg_all.get_mut(2 * s * j..2 * (s + 1) * j),
-            ) else {
+            let Some(hg) = hg_all.get_mut(2 * s * j..2 * (s + 1) * j) else {
                 break;
             };
             let x = d1 + scan.sensor_leg(sp) - cfg.t0();
@@ -571,19 +629,7 @@ impl<'m> FixedRowBuffer<'m> {
                 .zip(scan.gate)
                 .enumerate()
             {
-                let step = (k_lo + jj as i64).rem_euclid(n as i64) as usize;
-                let (mut re, mut im, mut q) = (0i64, 0i64, 0usize);
-                for &c in h {
-                    if let Some([wr, wi]) = scan.twiddle.as_chunks::<2>().0.get(q) {
-                        let c = i32::from(c);
-                        re += i64::from(c * i32::from(wr.to_bits()));
-                        im += i64::from(c * i32::from(wi.to_bits()));
-                    }
-                    q += step;
-                    if q >= n {
-                        q -= n;
-                    }
-                }
+                let (re, im) = dft(s, jj);
                 // HG = D·ĝ·p >> (30 + sh), in i128 (see the budget).
                 let g = i128::from(g.to_bits());
                 let (pc, ps) = cis_q15(phi);
@@ -599,6 +645,93 @@ impl<'m> FixedRowBuffer<'m> {
             hg: hg_all,
             offsets,
         })
+    }
+}
+
+/// Caller-owned integer accumulators of one row's **photon events** for the fixed-point path:
+/// the DFT sums `D_j` of every SPAD (`i64` re/im) and a photon count per SPAD, so firmware
+/// without an FPU folds TCSPC events as they arrive and never stores histograms
+/// ([`FixedRowBuffer::load_photons`] then gives the row, bit-identical to the histogram path).
+///
+/// Per photon: `J` integer complex additions (one twiddle each, the index stepped by the
+/// photon's bin). Memory: [`FixedPhotons::len`] `i64`. A SPAD's photons beyond the budget's
+/// `Hmax = 65535·Nt` (what one `u16` histogram can hold), an unknown SPAD or a bin outside
+/// `0..Nt` are dropped and counted ([`FixedPhotons::dropped`]), never an error or a panic.
+#[derive(Debug)]
+pub struct FixedPhotons<'m> {
+    d: &'m mut [i64],
+    dropped: u64,
+}
+
+impl<'m> FixedPhotons<'m> {
+    /// Length in `i64`: `Ks·2J` sums, then `Ks` photon counts.
+    pub const fn len(fc: &FixedConfig, n_spads: usize) -> usize {
+        n_spads * (2 * fc.cfg.bins() + 1)
+    }
+
+    /// Wraps `buf` (length [`FixedPhotons::len`]) and zeroes it: an empty row.
+    ///
+    /// # Errors
+    /// [`Error::Length`] for a wrong length.
+    pub fn new(scan: &FixedScan<'_>, buf: &'m mut [i64]) -> Result<Self, Error> {
+        check_len(
+            "photon sums",
+            Self::len(&scan.fc, scan.spads.len()),
+            buf.len(),
+        )?;
+        buf.fill(0);
+        Ok(Self { d: buf, dropped: 0 })
+    }
+
+    /// Empties the row (all sums, counts and the dropped counter to 0).
+    pub fn reset(&mut self) {
+        self.d.fill(0);
+        self.dropped = 0;
+    }
+
+    /// Photons dropped since the last [`FixedPhotons::reset`].
+    pub const fn dropped(&self) -> u64 {
+        self.dropped
+    }
+
+    /// Folds one photon of SPAD `spad` in time bin `bin` into the row. Infallible.
+    pub fn push(&mut self, scan: &FixedScan<'_>, spad: usize, bin: usize) {
+        let cfg = &scan.fc.cfg;
+        let (j, nt, n) = (cfg.bins(), cfg.nt(), cfg.n_fft().max(1));
+        let ks = scan.spads.len();
+        let Some((sums, counts)) = self.d.split_at_mut_checked(ks.saturating_mul(2 * j)) else {
+            self.dropped += 1;
+            return;
+        };
+        let start = spad.saturating_mul(2 * j);
+        let (Some(d), Some(count)) = (
+            sums.get_mut(start..start.saturating_add(2 * j)),
+            counts.get_mut(spad),
+        ) else {
+            self.dropped += 1;
+            return;
+        };
+        if bin >= nt || *count >= 65535 * nt as i64 {
+            self.dropped += 1;
+            return;
+        }
+        *count += 1;
+        // Twiddle index (k_j·bin) mod N, stepped by `bin` per band bin; the first product in
+        // u64 (it reaches 2⁶⁰).
+        let k0 = cfg.k_lo().rem_euclid(n as i64) as u64;
+        let mut q = ((k0 * bin as u64) % n as u64) as usize;
+        let step = bin % n;
+        let twiddle = scan.twiddle.as_chunks::<2>().0;
+        for pair in d.as_chunks_mut::<2>().0 {
+            if let Some([wr, wi]) = twiddle.get(q) {
+                pair[0] = pair[0].wrapping_add(i64::from(wr.to_bits()));
+                pair[1] = pair[1].wrapping_add(i64::from(wi.to_bits()));
+            }
+            q += step;
+            if q >= n {
+                q -= n;
+            }
+        }
     }
 }
 

@@ -10,8 +10,8 @@ mod scan;
 mod trig;
 
 pub use self::fixed::{
-    CIS_ERR, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedRow, FixedRowBuffer,
-    FixedScan, cis_q15,
+    CIS_ERR, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedPhotons, FixedRow,
+    FixedRowBuffer, FixedScan, cis_q15,
 };
 /// The Q1.15 type of the fixed-point tables (from the `fixed` crate 1.31).
 pub use ::fixed::types::I1F15;

@@ -1,6 +1,7 @@
 //! The fixture scan through the kernel's **fixed-point** path (`vltm_kernel::Fixed*`, for
 //! MCUs without an FPU): Gaussian diagonal and factorised Gaussian column from the `u16`
-//! histograms. Shared word for word by the firmware (bin `vltm-firmware-fixed`) and the host
+//! histograms, and the diagonal again from the same counts fed as photon events
+//! (`FixedPhotons`), which must be bit-identical. Shared word for word by the firmware (bin `vltm-firmware-fixed`) and the host
 //! generator (`gen`, which writes `fixture/expected_fixed.txt`), like `pipeline.rs`.
 //!
 //! The per-bin arithmetic is integer; distances, weights and phase seeds are IEEE `f32`/`f64`
@@ -10,7 +11,8 @@ use crate::fixture::{BINS, N_FFT};
 use crate::fixture::{FOCUS, LASERS, N_LASERS, N_SPADS, N_VOXELS, ROW, SPADS, VOXELS, params};
 use crate::pipeline::Failure;
 use vltm_kernel::{
-    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedRowBuffer, FixedScan, I1F15,
+    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedPhotons, FixedRowBuffer,
+    FixedScan, I1F15,
 };
 
 /// Headroom budget of the fixture: its 16 rows, 4 SPADs, legs ≥ 0.3 m (voxels at z ≥ 0.35 m).
@@ -23,6 +25,8 @@ pub const FIXED_ROW_LEN: usize = N_SPADS * (2 * BINS + 1);
 pub const FIXED_DIAG_LEN: usize = 2 * N_VOXELS;
 /// `FixedColumn::state_len`: `2·Ks·J` `i64`.
 pub const FIXED_COLUMN_LEN: usize = 2 * N_SPADS * BINS;
+/// `FixedPhotons::len`: `Ks·(2J + 1)` `i64`.
+pub const FIXED_PHOTONS_LEN: usize = N_SPADS * (2 * BINS + 1);
 
 /// Caller-owned buffers of the fixed-point pipeline.
 pub struct FixedBuffers<'a> {
@@ -34,6 +38,10 @@ pub struct FixedBuffers<'a> {
     pub diag: &'a mut [i64],
     /// Column state.
     pub column: &'a mut [i64],
+    /// Photon-event sums of one row.
+    pub photons: &'a mut [i64],
+    /// Diagonal accumulators of the photon-event rows.
+    pub diag_photons: &'a mut [i64],
 }
 
 /// Intensities `T = |A|²` of the fixed-point pipeline.
@@ -43,6 +51,10 @@ pub struct FixedResults {
     pub diag: [f64; N_VOXELS],
     /// Gaussian column `T(FOCUS, v)`.
     pub col: [f64; N_VOXELS],
+    /// Gaussian diagonal from photon events (bit-identical to `diag`).
+    pub diag_photons: [f64; N_VOXELS],
+    /// Photon events dropped (none expected).
+    pub dropped: u64,
     /// Rows accumulated by each probe; aliased voxels of the column.
     pub rows: [u32; 2],
     /// Column voxels outside the alias-free range.
@@ -54,6 +66,8 @@ impl FixedResults {
     pub const ZERO: Self = Self {
         diag: [0.0; N_VOXELS],
         col: [0.0; N_VOXELS],
+        diag_photons: [0.0; N_VOXELS],
+        dropped: 0,
         rows: [0; 2],
         aliased: 0,
     };
@@ -80,19 +94,34 @@ pub fn run_fixed(
     let mut rows = FixedRowBuffer::new(&scan, b.row)?;
     let mut diag = FixedDiagonal::new(&VOXELS, b.diag)?;
     let mut col = FixedColumn::new(&scan, FOCUS, b.column)?;
+    let mut photons = FixedPhotons::new(&scan, b.photons)?;
+    let mut diag_p = FixedDiagonal::new(&VOXELS, b.diag_photons)?;
+    let nt = cfg.nt();
     for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
         let row = rows.load(&scan, laser, hists)?;
         diag.push_row(&scan, &row)?;
         col.push_row(&scan, &row)?;
+        // The same counts as photon events, as a TCSPC would deliver them.
+        photons.reset();
+        for (i, &c) in hists.iter().enumerate() {
+            for _ in 0..c {
+                photons.push(&scan, i / nt, i % nt);
+            }
+        }
+        out.dropped += photons.dropped();
+        let row = rows.load_photons(&scan, laser, &photons)?;
+        diag_p.push_row(&scan, &row)?;
     }
     diag.finish(&fc, &mut out.diag)?;
+    diag_p.finish(&fc, &mut out.diag_photons)?;
     out.aliased = col.finish(&scan, &VOXELS, &mut out.col)?;
     out.rows = [diag.rows(), col.rows()];
     Ok(())
 }
 
 /// The fixed-point firmware's own checks (0 = passed): 3 / 4 as `pipeline::verdict` (the
-/// diagonal peaks at P1, the column in the slice at P2), 6 if rows ≠ 16 or voxels aliased.
+/// diagonal peaks at P1, the column in the slice at P2), 5 if the photon-event diagonal is not
+/// bit-identical to the histogram one, 6 if rows ≠ 16, photons were dropped or voxels aliased.
 pub fn verdict_fixed(r: &FixedResults) -> i32 {
     use crate::fixture::{P1_VOXEL, P2_VOXEL, SLICE};
     use crate::pipeline::argmax;
@@ -106,7 +135,14 @@ pub fn verdict_fixed(r: &FixedResults) -> i32 {
     if argmax(&slice) != P2_VOXEL {
         return 4;
     }
-    if r.rows != [N_LASERS as u32; 2] || r.aliased != 0 {
+    if r.diag_photons
+        .iter()
+        .zip(r.diag)
+        .any(|(p, d)| p.to_bits() != d.to_bits())
+    {
+        return 5;
+    }
+    if r.rows != [N_LASERS as u32; 2] || r.aliased != 0 || r.dropped != 0 {
         return 6;
     }
     0

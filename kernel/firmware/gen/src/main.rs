@@ -273,12 +273,15 @@ fn fixed_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results) {
         vec![0i64; FIXED_DIAG_LEN],
         vec![0i64; FIXED_COLUMN_LEN],
     );
+    let (mut ph, mut dp) = (vec![0i64; FIXED_PHOTONS_LEN], vec![0i64; FIXED_DIAG_LEN]);
     let mut f = FixedResults::ZERO;
     let bufs = FixedBuffers {
         tables: &mut tables,
         row: &mut row,
         diag: &mut d,
         column: &mut c,
+        photons: &mut ph,
+        diag_photons: &mut dp,
     };
     run_fixed(scan, bufs, &mut f).expect("fixed pipeline");
     assert_eq!(
@@ -317,8 +320,8 @@ fn fixed_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results) {
     for i in 0..N_VOXELS {
         writeln!(
             txt,
-            "RESULT voxel={i} diag={:e} col={:e}",
-            f.diag[i], f.col[i]
+            "RESULT voxel={i} diag={:e} col={:e} diag_photons={:e}",
+            f.diag[i], f.col[i], f.diag_photons[i]
         )
         .unwrap();
     }

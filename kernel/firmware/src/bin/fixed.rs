@@ -1,5 +1,6 @@
 //! The fixed-point firmware (for the Cortex-M0 without FPU): the fixture through the kernel's
-//! fixed-point path, `RESULT voxel=i diag=… col=…` lines compared by `run-qemu.sh` with
+//! fixed-point path (histograms, and photon events for the diagonal),
+//! `RESULT voxel=i diag=… col=… diag_photons=…` lines compared by `run-qemu.sh` with
 //! `fixture/expected_fixed.txt` (the host's numbers), exit status = `verdict_fixed`.
 #![no_std]
 #![no_main]
@@ -9,8 +10,8 @@ use cortex_m_rt::entry;
 use panic_semihosting as _;
 use semihosting::{println, process};
 use vltm_firmware::fixed_pipeline::{
-    self, FIXED_COLUMN_LEN, FIXED_DIAG_LEN, FIXED_ROW_LEN, FIXED_TABLES_LEN, FixedBuffers,
-    FixedResults,
+    self, FIXED_COLUMN_LEN, FIXED_DIAG_LEN, FIXED_PHOTONS_LEN, FIXED_ROW_LEN, FIXED_TABLES_LEN,
+    FixedBuffers, FixedResults,
 };
 use vltm_firmware::fixture::N_VOXELS;
 use vltm_kernel::I1F15;
@@ -26,6 +27,12 @@ fn main() -> ! {
     ) else {
         process::exit(7)
     };
+    let (Some(photons), Some(diag_photons)) = (
+        singleton!(: [i64; FIXED_PHOTONS_LEN] = [0; FIXED_PHOTONS_LEN]),
+        singleton!(: [i64; FIXED_DIAG_LEN] = [0; FIXED_DIAG_LEN]),
+    ) else {
+        process::exit(7)
+    };
     let Some(scan) = vltm_firmware::scan_data() else {
         process::exit(2)
     };
@@ -34,6 +41,8 @@ fn main() -> ! {
         row,
         diag,
         column,
+        photons,
+        diag_photons,
     };
     if let Err(e) = fixed_pipeline::run_fixed(scan, bufs, out) {
         println!("ERROR {e:?}");
@@ -41,8 +50,8 @@ fn main() -> ! {
     }
     for i in 0..N_VOXELS {
         println!(
-            "RESULT voxel={i} diag={:e} col={:e}",
-            out.diag[i], out.col[i]
+            "RESULT voxel={i} diag={:e} col={:e} diag_photons={:e}",
+            out.diag[i], out.col[i], out.diag_photons[i]
         );
     }
     let verdict = fixed_pipeline::verdict_fixed(out);

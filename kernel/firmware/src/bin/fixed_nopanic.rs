@@ -1,7 +1,8 @@
 //! Link-time proof (as `nopanic.rs`, panic-never) that the kernel's **fixed-point** path cannot
 //! panic: `FixedConfig::try_new`, `FixedScan::new`, `FixedRowBuffer::new`/`load`,
 //! `FixedDiagonal`/`FixedColumn` `new`/`push_row` (including a refused row past the budget)/
-//! `finish`, with inputs through `black_box`. Exit status 0 = every call succeeded, the
+//! `finish`, `FixedPhotons` `new`/`reset`/`push` (with out-of-range events)/`load_photons`,
+//! with inputs through `black_box`. Exit status 0 = every call succeeded, the
 //! diagonal peaks at P1 and the extra row was refused.
 #![no_std]
 #![no_main]
@@ -19,12 +20,12 @@ fn panic(_: &core::panic::PanicInfo<'_>) -> ! {
 }
 use semihosting::process;
 use vltm_firmware::fixed_pipeline::{
-    FIXED_COLUMN_LEN, FIXED_DIAG_LEN, FIXED_ROW_LEN, FIXED_TABLES_LEN, LIMITS,
+    FIXED_COLUMN_LEN, FIXED_DIAG_LEN, FIXED_PHOTONS_LEN, FIXED_ROW_LEN, FIXED_TABLES_LEN, LIMITS,
 };
 use vltm_firmware::fixture::{FOCUS, LASERS, N_VOXELS, P1_VOXEL, ROW, SPADS, VOXELS, params};
 use vltm_firmware::pipeline::argmax;
 use vltm_kernel::{
-    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedRowBuffer, FixedScan, I1F15,
+    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedPhotons, FixedRowBuffer, FixedScan, I1F15,
 };
 
 #[entry]
@@ -44,6 +45,9 @@ fn run() -> i32 {
     };
     let Some(data) = vltm_firmware::scan_data() else {
         return 2;
+    };
+    let Some(pbuf) = singleton!(: [i64; FIXED_PHOTONS_LEN] = [0; FIXED_PHOTONS_LEN]) else {
+        return 7;
     };
     let Ok(cfg) = Config::try_new(&black_box(params())) else {
         return 2;
@@ -77,13 +81,42 @@ fn run() -> i32 {
             return 2;
         }
     }
-    // One row past the budget is refused.
+    // Photon events (the first row's counts, plus events that must be dropped), through
+    // `load_photons`: the band spectra equal the histogram row's.
     let Some(first) = data.get(..row_len) else {
         return 2;
     };
+    let Ok(mut photons) = FixedPhotons::new(&scan, black_box(&mut pbuf[..])) else {
+        return 2;
+    };
+    photons.reset();
+    let nt = black_box(cfg.nt()).max(1);
+    for (i, &c) in first.iter().enumerate() {
+        for _ in 0..c {
+            photons.push(&scan, black_box(i / nt), black_box(i % nt));
+        }
+    }
+    photons.push(&scan, black_box(usize::MAX), black_box(0));
+    photons.push(&scan, black_box(0), black_box(usize::MAX));
+    if photons.dropped() != 2 {
+        return 5;
+    }
+    let mut band = [0i32; 8];
+    {
+        let Ok(prow) = rows.load_photons(&scan, LASERS[0], &photons) else {
+            return 2;
+        };
+        for (b, x) in band.iter_mut().zip(prow.band()) {
+            *b = *x;
+        }
+    }
+    // One row past the budget is refused.
     let Ok(row) = rows.load(&scan, LASERS[0], first) else {
         return 2;
     };
+    if row.band().iter().zip(band).any(|(a, b)| *a != b) {
+        return 5;
+    }
     if diag.push_row(&scan, &row).is_ok() {
         return 6;
     }
