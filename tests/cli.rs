@@ -555,8 +555,8 @@ fn indirect_writes_a_gamma_masked_volume() {
     npy(&f_npy, SHAPE);
 }
 
-/// `demo --out DIR`: the table names the figure and its indirect-light ratio, and the 8 PNG
-/// figures, 8 `.npy` volumes and `summary.txt` (= the table) are written. (~15 s.)
+/// `demo --out DIR`: the table names the figure and its indirect-light ratio, and the 9 PNG
+/// figures, 9 `.npy` volumes and `summary.txt` (= the table) are written. (~15 s.)
 #[test]
 fn demo_writes_figures_volumes_and_summary() {
     let t = TempDir::new("demo");
@@ -581,6 +581,15 @@ fn demo_writes_figures_volumes_and_summary() {
     assert!(
         ratio >= 3.0,
         "demo: gated indirect light at the figure is only {ratio}x the control"
+    );
+    // In-focus indirect light (Eq. 17) peaks on the figure, the surface the panel lights.
+    let eq17 = out
+        .lines()
+        .find(|l| l.starts_with("in-focus indirect (Eq. 17)"))
+        .unwrap_or_else(|| panic!("no Eq. 17 row:\n{out}"));
+    assert!(
+        eq17.contains("figure"),
+        "Eq. 17 does not peak on the figure: {eq17}"
     );
     // Ground truth: the direct image peaks on each object (within about one voxel, 6 cm pitch).
     for obj in ["panel", "figure", "box"] {
@@ -609,7 +618,7 @@ fn demo_writes_figures_volumes_and_summary() {
     let count = |ext: &str| files.iter().filter(|f| f.ends_with(ext)).count();
     assert_eq!(
         (count(".png"), count(".npy")),
-        (8, 8),
+        (9, 9),
         "demo files: {files:?}"
     );
     for f in &files {

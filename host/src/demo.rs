@@ -9,7 +9,7 @@
 use crate::capture::{Capture, RowSource};
 use crate::error::{Error, Result};
 use crate::figure::Figure;
-use crate::ltm::{self, ColumnGate, Exec, Shell, Wave};
+use crate::ltm::{self, ColumnGate, Exec, IndirectOptions, Shell, Wave};
 use crate::sim::{Aperture, Bounces, Cuboid, Patch, Scene, Setup};
 use crate::volume::Volume;
 use std::fmt::Write as _;
@@ -172,6 +172,16 @@ pub fn run(out: &Path) -> Result<String> {
         values: shelled(far),
         seconds: None,
     });
+    // In-focus indirect light (Eqs. 15–17): every a ∈ Γ as a projector focus, summed over
+    // pairs at least r0 = 1.5σ apart; the same Γ for the direct-only control.
+    let opts = IndirectOptions::default();
+    let eq17 = ltm::indirect_over(&mut full, &vol, &gamma, &opts, &wave, exec)?;
+    let eq17_ctrl = ltm::indirect_over(&mut control, &vol, &gamma, &opts, &wave, exec)?;
+    lines.push(Line {
+        name: "in-focus indirect (Eq. 17)",
+        values: eq17.values.clone(),
+        seconds: Some(eq17.seconds),
+    });
 
     // Indirect light on the figure against the direct-only control, same Γ.
     let fig = p32(FIGURE);
@@ -182,6 +192,7 @@ pub fn run(out: &Path) -> Result<String> {
         let c = col(&mut control, ColumnGate::None, Shell::ALL)?;
         on_figure(&ungated.values) / on_figure(&c.values)
     };
+    let ratio_eq17 = on_figure(&eq17.values) / on_figure(&eq17_ctrl.values);
 
     let mut table = String::new();
     let g = full.geometry();
@@ -253,10 +264,12 @@ pub fn run(out: &Path) -> Result<String> {
     let _ = writeln!(
         table,
         "\nindirect light at the figure's centre voxel ({:+.2}, {:+.2}, {:+.2}): T(x_a, x_b) is {ratio:.1}x the direct-only \
-         control with the 4-vertex gate, {ratio_ungated:.2}x without it\ntotal {:.1} s; figures and .npy volumes in {}",
+         control with the 4-vertex gate, {ratio_ungated:.2}x without it; the in-focus indirect light I_i (Eq. 17, \
+         r0 = {:.2} m) there is {ratio_eq17:.1}x the control\ntotal {:.1} s; figures and .npy volumes in {}",
         vol.points[fig_voxel][0],
         vol.points[fig_voxel][1],
         vol.points[fig_voxel][2],
+        eq17.shell.r0,
         t_all.elapsed().as_secs_f64(),
         out.display()
     );
@@ -270,9 +283,10 @@ pub fn run(out: &Path) -> Result<String> {
         "column_higher_order_masked",
         "column_near",
         "column_far",
+        "indirect",
     ]) {
         let [x, y, z] = vol.axes.unwrap_or([[0.0; 2]; 3]);
-        let marks = if stem == "direct" {
+        let marks = if stem == "direct" || stem == "indirect" {
             Vec::new()
         } else {
             vec![(a, "x_a".to_string())]
@@ -280,10 +294,10 @@ pub fn run(out: &Path) -> Result<String> {
         let title = format!(
             "{}: {}",
             l.name,
-            if stem == "direct" {
-                "T(x_v, x_v)"
-            } else {
-                "T(x_a, x_b)"
+            match stem {
+                "direct" => "T(x_v, x_v)",
+                "indirect" => "I_i(x_b) = sum over x_a in Γ of T(x_a, x_b)",
+                _ => "T(x_a, x_b)",
             }
         );
         Figure {
