@@ -56,6 +56,13 @@ fn config(nt: usize) -> Config {
     .unwrap()
 }
 
+/// The exh16 setup (16×16 SPADs, 800 bins of 6 mm, λ = σ = 0.5 m) and one row of counts.
+fn exh16() -> (Config, Vec<Point>, Vec<f32>) {
+    let sp = spads(16);
+    let h = hists(sp.len() * 800, 800);
+    (config(800), sp, h)
+}
+
 /// Deterministic counts: background + returns.
 fn hists(len: usize, nt: usize) -> Vec<f32> {
     let mut x = 0x9E37_79B9_7F4A_7C15u64;
@@ -197,10 +204,8 @@ fn planar_diagonal(c: &mut Criterion) {
 }
 
 fn column_image(c: &mut Criterion) {
-    let cfg = config(800);
-    let sp = spads(16);
+    let (cfg, sp, h) = exh16();
     let (vox, shape) = voxels(16, 1, 24);
-    let h = hists(sp.len() * 800, 800);
     let mut tables = vec![0.0f32; Scan::tables_len(&cfg, sp.len())];
     let scan = Scan::new(&cfg, &sp, &mut tables).unwrap();
     let mut buf = vec![0.0f32; RowBuffer::len(&cfg, sp.len())];
@@ -283,10 +288,8 @@ fn lookup_diagonal(c: &mut Criterion) {
     });
     // The exh16 case of `planar_diagonal` (16×16 SPADs, 16×16×24 voxels at the SPAD pitch):
     // the lookup and the planar path measured on the same row.
-    let cfg = config(800);
-    let sp = spads(16);
+    let (cfg, sp, h) = exh16();
     let (vox, _) = voxels(16, 1, 24);
-    let h = hists(sp.len() * 800, 800);
     let mut tables = vec![0.0f32; Scan::tables_len(&cfg, sp.len())];
     let scan = Scan::new(&cfg, &sp, &mut tables).unwrap();
     let mut buf = vec![0.0f32; RowBuffer::len(&cfg, sp.len())];
@@ -307,9 +310,7 @@ fn lookup_diagonal(c: &mut Criterion) {
 /// G columns imaged over Γ (`G²·Ks` band sums). exh16 setup, G = 64 voxels of a 8×8 patch of
 /// the 16×16 grid at z = 0.8 m.
 fn indirect_gamma(c: &mut Criterion) {
-    let cfg = config(800);
-    let sp = spads(16);
-    let h = hists(sp.len() * 800, 800);
+    let (cfg, sp, h) = exh16();
     let mut tables = vec![0.0f32; Scan::tables_len(&cfg, sp.len())];
     let scan = Scan::new(&cfg, &sp, &mut tables).unwrap();
     let mut buf = vec![0.0f32; RowBuffer::len(&cfg, sp.len())];

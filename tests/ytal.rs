@@ -99,6 +99,25 @@ fn wave(wl: f64) -> Wave {
     }
 }
 
+/// vltm's un-masked two-bounce column `T(a, ·)` over the reference volume, y-tal's wave, and
+/// its count of aliased voxels.
+fn column(src: &mut dyn vltm::capture::RowSource, a: vltm_kernel::Point) -> (Vec<f64>, usize) {
+    let o = ltm::column(
+        src,
+        a,
+        &volume(),
+        ColumnGate::TwoBounce,
+        Shell::ALL,
+        &wave(0.4),
+        Exec::default(),
+    )
+    .unwrap();
+    (
+        o.values.iter().map(|&v| v as f64).collect(),
+        o.report.aliased,
+    )
+}
+
 fn check_direct(name: &str, wl: f64) {
     // The streaming reader, as `vltm direct` uses it (rows read from the file on demand).
     let mut c = vltm::tal::open(&data(name, &format!("{name}.hdf5"))).unwrap();
@@ -151,23 +170,10 @@ fn column_matches_ytal_projector_camera() {
         assert!(
             (a[0] + 0.25).abs() < 1e-6 && (a[1] - 0.15).abs() < 1e-6 && (a[2] - 0.7).abs() < 1e-6
         );
-        let o = ltm::column(
-            &mut c,
-            a,
-            &vol,
-            ColumnGate::TwoBounce,
-            Shell::ALL,
-            &wave(0.4),
-            Exec::default(),
-        )
-        .unwrap();
-        let ours: Vec<f64> = o.values.iter().map(|&v| v as f64).collect();
+        let (ours, aliased) = column(&mut c, a);
         let (theirs, _) = read_c8_intensity(&data(name, "ref_ltmcol_focusA.npy"));
         let r = pearson(&ours, &theirs);
-        println!(
-            "{name}: column Pearson {r:.5}, aliased {}",
-            o.report.aliased
-        );
+        println!("{name}: column Pearson {r:.5}, aliased {aliased}");
         assert!(r >= 0.99, "{name}: column Pearson {r} < 0.99");
     }
 }
@@ -190,17 +196,7 @@ fn indirect_only_column_peaks_at_x_b_like_ytal() {
     let vol = volume();
     let idx = |[i, j, k]: [usize; 3]| (i * 16 + j) * 20 + k;
     let (a, b) = (vol.points[idx([5, 9, 6])], vol.points[idx([11, 6, 12])]);
-    let o = ltm::column(
-        &mut diff,
-        a,
-        &vol,
-        ColumnGate::TwoBounce,
-        Shell::ALL,
-        &wave(0.4),
-        Exec::default(),
-    )
-    .unwrap();
-    let ours: Vec<f64> = o.values.iter().map(|&v| v as f64).collect();
+    let (ours, _) = column(&mut diff, a);
     let (zf, _) = read_c8(&data("two_patches", "ref_ltmcol_focusA.npy"));
     let (zc, _) = read_c8(&data("two_patches_direct_only", "ref_ltmcol_focusA.npy"));
     let theirs: Vec<f64> = zf

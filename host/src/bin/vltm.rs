@@ -348,22 +348,15 @@ fn run(cmd: Command) -> Result<(), Failure> {
             let volume = Volume::parse(&common.volume)?;
             let mut c = common.load(&capture)?;
             let o = ltm::direct(&mut *c, &volume, &common.wave(), common.exec())?;
-            summarize(
+            finish_probe(
+                &common,
+                &capture,
                 "direct",
-                &o.values,
+                &o,
                 &volume,
-                o.seconds,
-                &o.report,
-                &o.config,
-                Some(o.path),
-            );
-            let meta = Provenance {
-                probe: "direct",
-                config: &o.config,
-                focus: None,
-                capture: &capture,
-            };
-            write_outputs(&common, &meta, &o.values, &volume, "direct light", &[])
+                None,
+                "direct light",
+            )
         }
         Command::Column {
             capture,
@@ -387,30 +380,8 @@ fn run(cmd: Command) -> Result<(), Failure> {
             };
             let mut c = common.load(&capture)?;
             let o = ltm::column(&mut *c, a, &volume, g, shell, &common.wave(), common.exec())?;
-            summarize(
-                "column",
-                &o.values,
-                &volume,
-                o.seconds,
-                &o.report,
-                &o.config,
-                Some(o.path),
-            );
             let title = format!("column T(x_a, .), gate {gate:?}");
-            let meta = Provenance {
-                probe: "column",
-                config: &o.config,
-                focus: Some(a),
-                capture: &capture,
-            };
-            write_outputs(
-                &common,
-                &meta,
-                &o.values,
-                &volume,
-                &title,
-                &[(a, "x_a".into())],
-            )
+            finish_probe(&common, &capture, "column", &o, &volume, Some(a), &title)
         }
         Command::Indirect {
             capture,
@@ -615,6 +586,36 @@ fn summarize(
             report.aliased
         );
     }
+}
+
+/// The summary line and the outputs of a `direct` or `column` run; a column's focus is marked
+/// in the figure and recorded in an HDF5 volume.
+fn finish_probe(
+    common: &Common,
+    capture: &Path,
+    probe: &str,
+    o: &ltm::Output,
+    volume: &Volume,
+    focus: Option<Point>,
+    title: &str,
+) -> Result<(), Failure> {
+    summarize(
+        probe,
+        &o.values,
+        volume,
+        o.seconds,
+        &o.report,
+        &o.config,
+        Some(o.path),
+    );
+    let meta = Provenance {
+        probe,
+        config: &o.config,
+        focus,
+        capture,
+    };
+    let marks: Vec<(Point, String)> = focus.map(|a| (a, "x_a".to_string())).into_iter().collect();
+    write_outputs(common, &meta, &o.values, volume, title, &marks)
 }
 
 /// Writes the volume (`--out`: `.npy`, or HDF5 for `.h5`/`.hdf5`) and the figure (`--png`);
