@@ -10,7 +10,7 @@
 //! * `column_image`: imaging a factorised column over 16×16×24 voxels once, kernel vs planar.
 //! * `lookup_diagonal`: one row of the baseband-lookup diagonal on the paper's 1-D setup, and
 //!   on the exh16 case of `planar_diagonal` (the two paths on the same row).
-//! * `indirect_gamma`: in-focus indirect light (Eq. 17) as `ltm::indirect` runs it: per row
+//! * `indirect_gamma`: in-focus indirect light (Eq. 17) as `probe::indirect` runs it: per row
 //!   the `push_row` of 64 factorised columns (one per voxel of Γ), once their imaging over Γ.
 //!
 //! The kernel's band diagonal over the same 16×16×24 voxels is `benches/kernel.rs`
@@ -20,7 +20,7 @@
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use num_complex::{Complex32, Complex64};
 use std::hint::black_box;
-use vltm::fast::{BandDft, Planar};
+use vltm::probe::fast::{BandDft, Planar};
 use vltm_kernel::{Config, Gate, Params, Point, Probe, RowBuffer, Scan, Target};
 
 fn axis(n: usize, lo: f32, pitch: f32) -> impl Iterator<Item = f32> + Clone {
@@ -269,7 +269,7 @@ fn lookup_diagonal(c: &mut Criterion) {
     let mut buf = vec![0.0f32; RowBuffer::len(&cfg, sp.len())];
     let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
     let row = rows.load(&scan, [0.1, -0.2, 0.0], &h).unwrap();
-    let lookup = vltm::fast::Lookup::new(&cfg);
+    let lookup = vltm::probe::fast::Lookup::new(&cfg);
     let mut scratch = lookup.scratch(sp.len());
     let mut acc = vec![Complex64::new(0.0, 0.0); vox.len()];
     eprintln!(
@@ -295,7 +295,7 @@ fn lookup_diagonal(c: &mut Criterion) {
     let mut buf = vec![0.0f32; RowBuffer::len(&cfg, sp.len())];
     let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
     let row = rows.load(&scan, [0.1, 0.0, 0.0], &h).unwrap();
-    let lookup = vltm::fast::Lookup::new(&cfg);
+    let lookup = vltm::probe::fast::Lookup::new(&cfg);
     let mut scratch = lookup.scratch(sp.len());
     let mut acc = vec![Complex64::new(0.0, 0.0); vox.len()];
     g.throughput(Throughput::Elements((vox.len() * sp.len()) as u64));
@@ -305,7 +305,7 @@ fn lookup_diagonal(c: &mut Criterion) {
     g.finish();
 }
 
-/// In-focus indirect light (Eq. 17, §B.3.4) as `ltm::indirect` evaluates it: one factorised
+/// In-focus indirect light (Eq. 17, §B.3.4) as `probe::indirect` evaluates it: one factorised
 /// column per voxel of Γ, so per row `G·Ks·J` (`push_row` of G column probes), then once the
 /// G columns imaged over Γ (`G²·Ks` band sums). exh16 setup, G = 64 voxels of a 8×8 patch of
 /// the 16×16 grid at z = 0.8 m.

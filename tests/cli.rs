@@ -21,8 +21,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::sync::OnceLock;
 
-use vltm::capture;
-use vltm::ltm::{self, Exec, Wave};
+use vltm::io;
+use vltm::probe::{self, Exec, Wave};
 use vltm::volume::Volume;
 
 /// A small volume around the two patches of the fixtures: 13 × 3 × 8 voxels, 10 cm pitch.
@@ -155,7 +155,7 @@ fn fails(cwd: &Path, args: &[&str], code: i32) -> String {
 
 /// Reads a `.npy` volume and checks its shape and that every value is finite; returns it.
 fn npy(path: &Path, shape: [usize; 3]) -> Vec<f32> {
-    let (v, s) = vltm::npy::read_f32(path).unwrap_or_else(|e| panic!("{e}"));
+    let (v, s) = vltm::out::npy::read_f32(path).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(s, shape, "{}: shape", path.display());
     assert!(
         v.iter().all(|x| x.is_finite()),
@@ -254,8 +254,8 @@ fn simulate_writes_the_committed_capture() {
     );
     print!("{out}");
     assert!(out.contains("64 lasers x 8 SPADs x 175 bins"), "{out}");
-    let fresh = capture::open(&out_npz).expect("read the simulated capture");
-    let committed = capture::open(&fixture("two_patches_line")).expect("fixture");
+    let fresh = io::open(&out_npz).expect("read the simulated capture");
+    let committed = io::open(&fixture("two_patches_line")).expect("fixture");
     assert_eq!(fresh.geometry, committed.geometry);
     assert!(
         fresh.data == committed.data,
@@ -264,7 +264,7 @@ fn simulate_writes_the_committed_capture() {
 }
 
 /// `direct` writes the `.npy` and `.png` it is asked for, and its volume equals the library's
-/// `ltm::direct` on the same capture; without `--out`/`--png` it writes `direct.npy` and
+/// `probe::direct` on the same capture; without `--out`/`--png` it writes `direct.npy` and
 /// `direct.png` in the current directory. `--threads 1` and `--swap-roles` run too.
 #[test]
 fn direct_writes_volume_and_figure() {
@@ -290,8 +290,8 @@ fn direct_writes_volume_and_figure() {
     let (w, h) = png(&f_png);
     println!("d.png: {w}x{h}");
     let vol = Volume::parse(SPEC).expect("spec");
-    let lib = ltm::direct(
-        &mut capture::open(Path::new(cap)).expect("fixture"),
+    let lib = probe::direct(
+        &mut io::open(Path::new(cap)).expect("fixture"),
         &vol,
         &Wave::default(),
         Exec::default(),
@@ -356,7 +356,7 @@ fn direct_and_column_write_hdf5_volumes() {
             ok(&t.0, &args);
         }
         let v = npy(&f_npy, SHAPE);
-        let (h, shape) = vltm::h5::read_volume(&f_h5).expect("read the HDF5 volume");
+        let (h, shape) = vltm::out::h5::read_volume(&f_h5).expect("read the HDF5 volume");
         assert_eq!(shape, SHAPE.to_vec(), "{probe}: HDF5 shape");
         assert!(h == v, "{probe}: the HDF5 and .npy volumes differ");
     }
@@ -528,7 +528,7 @@ fn indirect_writes_a_gamma_masked_volume() {
         ],
     );
     let d = npy(&f_dir, SHAPE);
-    let gamma = ltm::gamma_mask(&d, 0.2);
+    let gamma = probe::gamma_mask(&d, 0.2);
     let n = gamma.iter().filter(|&&g| g).count();
     assert!(
         out.contains(&format!("Γ: {n} of {} voxels", d.len())),

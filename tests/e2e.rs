@@ -1,6 +1,6 @@
 //! End-to-end tests of the probes on the committed fixtures (`fixtures/`, see
-//! `fixtures/README.md`), through the library API: `vltm::capture::open`, `vltm::volume::Volume`,
-//! `vltm::ltm` and the simulator.
+//! `fixtures/README.md`), through the library API: `vltm::io::open`, `vltm::volume::Volume`,
+//! `vltm::probe` and the simulator.
 //!
 //! * the fixtures are what their scene files render to (guards stale `.npz` files);
 //! * the diagonal images both patches (2D×2D scan, 1-D SPAD array, single SPAD);
@@ -13,15 +13,15 @@
 
 use std::path::PathBuf;
 
-use vltm::capture::{self, Capture};
+use vltm::io::{self, Capture};
 use vltm::kernel::Point;
-use vltm::ltm::{self, ColumnGate, Exec, IndirectOptions, Shell, Wave};
+use vltm::probe::{self, ColumnGate, Exec, IndirectOptions, Shell, Wave};
 use vltm::sim::{Bounces, Scene};
 use vltm::volume::Volume;
 
-const EXEC: Exec = Exec {
-    progress: false,
-    path: vltm::ltm::Path::Auto,
+const EXEC: Exec<'static> = Exec {
+    progress: None,
+    path: vltm::probe::Path::Auto,
 };
 
 /// The imaged volume: 25 × 5 × 15 voxels, 5 cm pitch in x and z (10 cm in y), with voxels at
@@ -56,7 +56,7 @@ fn scene(stem: &str) -> Scene {
 
 fn fixture(stem: &str) -> Capture {
     let p = capture_path(stem);
-    capture::open(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+    io::open(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
 fn volume() -> Volume {
@@ -73,9 +73,9 @@ fn centre(s: &Scene, name: &str) -> Point {
 /// the 4-vertex gate at B as strongly as the inter-reflection (measured on two_patches:
 /// T(A,B) 0.80× the control), the limitation of DESIGN §B.3.4; σ = λ/2 is the remedy noted
 /// there.
-fn indirect_wave(g: &vltm::capture::Geometry) -> Wave {
+fn indirect_wave(g: &vltm::io::Geometry) -> Wave {
     Wave {
-        sigma: Some(ltm::default_wavelength(g) / 2.0),
+        sigma: Some(probe::default_wavelength(g) / 2.0),
         ..Wave::default()
     }
 }
@@ -182,7 +182,7 @@ fn direct_light_peaks_at_both_patches() {
     let s = scene("two_patches");
     for stem in ["two_patches", "two_patches_line", "two_patches_single"] {
         let mut c = fixture(stem);
-        let d = ltm::direct(&mut c, &vol, &Wave::default(), EXEC).expect("direct");
+        let d = probe::direct(&mut c, &vol, &Wave::default(), EXEC).expect("direct");
         let max = max_of(&d.values);
         assert!(
             max > 0.0 && d.values.iter().all(|v| v.is_finite()),
@@ -236,8 +236,8 @@ fn inter_reflection_raises_the_gated_column_at_b() {
     let s = scene("two_patches");
     let (mut full, mut control) = (fixture("two_patches"), fixture("two_patches_direct"));
     let wave = indirect_wave(&full.geometry);
-    let d = ltm::direct(&mut full, &vol, &wave, EXEC).expect("direct");
-    let gamma = ltm::gamma_mask(&d.values, 0.1);
+    let d = probe::direct(&mut full, &vol, &wave, EXEC).expect("direct");
+    let gamma = probe::gamma_mask(&d.values, 0.1);
     let (ia, ib) = (vol.nearest(centre(&s, "A")), vol.nearest(centre(&s, "B")));
     let n_gamma = gamma.iter().filter(|&&g| g).count();
     assert!(
@@ -248,7 +248,7 @@ fn inter_reflection_raises_the_gated_column_at_b() {
     );
     let a = vol.points[ia];
     let col = |c: &mut Capture| {
-        let o = ltm::column(c, a, &vol, ColumnGate::TwoBounce, Shell::ALL, &wave, EXEC)
+        let o = probe::column(c, a, &vol, ColumnGate::TwoBounce, Shell::ALL, &wave, EXEC)
             .expect("column");
         // Γ-masked value at B (B is in Γ, checked above).
         o.values[ib]
@@ -271,9 +271,10 @@ fn inter_reflection_raises_the_gated_column_at_b() {
     // reported, not asserted. What must hold: the sum over a ∈ Γ includes a = A's voxel, so
     // I_i(B) ≥ T(A, B) (the same factorised column, the other terms are ≥ 0).
     let opts = IndirectOptions::default();
-    let i_full = ltm::indirect_over(&mut full, &vol, &gamma, &opts, &wave, EXEC).expect("indirect");
+    let i_full =
+        probe::indirect_over(&mut full, &vol, &gamma, &opts, &wave, EXEC).expect("indirect");
     let i_ctrl =
-        ltm::indirect_over(&mut control, &vol, &gamma, &opts, &wave, EXEC).expect("indirect");
+        probe::indirect_over(&mut control, &vol, &gamma, &opts, &wave, EXEC).expect("indirect");
     let (f, c) = (i_full.values[ib], i_ctrl.values[ib]);
     println!(
         "in-focus indirect I_i(B) (Eq. 17, Γ as above, r0 = {:.3} m): {f:.4e} vs control {c:.4e}: {:.2}x",
@@ -294,7 +295,7 @@ fn inter_reflection_raises_the_gated_column_at_b() {
     );
 }
 
-/// In-focus indirect light, Eqs. 15–17 end to end (`ltm::indirect`: pass 1 the diagonal and
+/// In-focus indirect light, Eqs. 15–17 end to end (`probe::indirect`: pass 1 the diagonal and
 /// Γ = {I_d > 0.1·max}, pass 2 the Γ-masked sum over pairs ≥ r0 apart), on the test bench of
 /// DESIGN §B.6 rendered in-test: 12×12 lasers × 12×12 SPADs over 1 m, 500 bins of 1 cm,
 /// λ = 0.2 m, σ = 2λ/3 (the defaults of the method), isotropic point patches A, B 0.7 m
@@ -328,7 +329,7 @@ fn in_focus_indirect_light_eq17_finds_the_inter_reflection() {
     };
     let run = |s: &Scene| {
         let mut c = s.render().expect("render");
-        ltm::indirect(&mut c, &vol, &opts, &wave, EXEC).expect("indirect")
+        probe::indirect(&mut c, &vol, &opts, &wave, EXEC).expect("indirect")
     };
     let (full, ctrl) = (run(&bench), run(&control));
     let to_p = |p: [f64; 3]| p.map(|c| c as f32);
@@ -379,8 +380,8 @@ fn gate_removes_out_of_focus_light() {
     let s = scene("two_patches");
     let (mut full, mut control) = (fixture("two_patches"), fixture("two_patches_direct"));
     let wave = indirect_wave(&full.geometry);
-    let d = ltm::direct(&mut full, &vol, &wave, EXEC).expect("direct");
-    let gamma = ltm::gamma_mask(&d.values, 0.1);
+    let d = probe::direct(&mut full, &vol, &wave, EXEC).expect("direct");
+    let gamma = probe::gamma_mask(&d.values, 0.1);
     let sigma = d.config.sigma() as f32;
     let r0 = 1.5 * sigma;
     let (pa, ib) = (centre(&s, "A"), vol.nearest(centre(&s, "B")));
@@ -401,7 +402,7 @@ fn gate_removes_out_of_focus_light() {
     for (label, c) in [("control", &mut control), ("full", &mut full)] {
         let mut f = Vec::new();
         for gate in [ColumnGate::TwoBounce, ColumnGate::None] {
-            let o = ltm::column(c, a, &vol, gate, Shell::ALL, &wave, EXEC).expect("column");
+            let o = probe::column(c, a, &vol, gate, Shell::ALL, &wave, EXEC).expect("column");
             f.push(fraction(&o.values));
             at_b.push(o.values[ib]);
         }
@@ -451,7 +452,7 @@ fn higher_order_gate_picks_up_five_vertex_light() {
     let probe = |c: &mut Capture| {
         let w = Wave::default();
         let t = |c: &mut Capture, g| {
-            ltm::column(c, pa, &vol, g, Shell::ALL, &w, EXEC)
+            probe::column(c, pa, &vol, g, Shell::ALL, &w, EXEC)
                 .expect("column")
                 .values[0]
         };
@@ -497,7 +498,7 @@ fn swap_roles_transposes_the_matrix() {
     let p: Point = [0.05, 0.1, 1.0];
     for stem in ["two_patches", "two_patches_line"] {
         let mut c = fixture(stem);
-        let mut sw = ltm::swap_roles(&c).expect("swap");
+        let mut sw = vltm::io::swap_roles(&c).expect("swap");
         assert_eq!(sw.geometry.lasers, c.geometry.spads);
         assert_eq!(sw.geometry.spads, c.geometry.lasers);
         for gate in [ColumnGate::TwoBounce, ColumnGate::None] {
@@ -508,7 +509,7 @@ fn swap_roles_transposes_the_matrix() {
                 let t = |c: &mut Capture, f: Point, x: Point| {
                     let v = Volume::points(vec![x]).expect("point");
                     // Default λ: twice the coarser pitch of both apertures, the same after a swap.
-                    ltm::column(c, f, &v, gate, Shell::ALL, &Wave::default(), EXEC)
+                    probe::column(c, f, &v, gate, Shell::ALL, &Wave::default(), EXEC)
                         .expect("column")
                         .values[0]
                 };
@@ -553,8 +554,8 @@ fn streamed_scene_equals_rendered_capture() {
     let mut rendered = s.render().expect("render");
     let mut streamed = s.source().expect("source");
     let w = Wave::default();
-    let a = ltm::direct(&mut rendered, &vol, &w, EXEC).expect("direct");
-    let b = ltm::direct(&mut streamed, &vol, &w, EXEC).expect("direct");
+    let a = probe::direct(&mut rendered, &vol, &w, EXEC).expect("direct");
+    let b = probe::direct(&mut streamed, &vol, &w, EXEC).expect("direct");
     let max = max_of(&a.values);
     let diff = a
         .values
@@ -577,7 +578,7 @@ fn streamed_scene_equals_rendered_capture() {
 /// in-memory capture, a streamed `.npz` and a streamed y-tal HDF5 file.
 #[test]
 fn iter_rows_yields_the_scan_in_order() {
-    use vltm::capture::RowSource;
+    use vltm::io::RowSource;
     fn check(src: &mut dyn FnMut() -> Box<dyn RowSource>, what: &str) {
         let a = src();
         let n = a.geometry().lasers.len();
@@ -587,7 +588,7 @@ fn iter_rows_yields_the_scan_in_order() {
         // `iter_rows` needs a sized source: wrap the box.
         struct Boxed(Box<dyn RowSource>);
         impl RowSource for Boxed {
-            fn geometry(&self) -> &vltm::capture::Geometry {
+            fn geometry(&self) -> &vltm::io::Geometry {
                 self.0.geometry()
             }
             fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> vltm::Result<Point> {
@@ -606,26 +607,17 @@ fn iter_rows_yields_the_scan_in_order() {
         assert_eq!(count, n, "{what}");
     }
     let npz = capture_path("two_patches_line");
-    check(
-        &mut || Box::new(capture::open(&npz).expect("npz")),
-        "in memory",
-    );
+    check(&mut || Box::new(io::open(&npz).expect("npz")), "in memory");
     let tmp = std::env::temp_dir().join(format!("vltm-rows-{}.npz", std::process::id()));
-    capture::npz::write_with(&capture::open(&npz).expect("npz"), &tmp, false).expect("write");
+    io::npz::write_with(&io::open(&npz).expect("npz"), &tmp, false).expect("write");
     check(
-        &mut || {
-            Box::new(
-                capture::npz::open_stream(&tmp)
-                    .expect("stream")
-                    .expect("stored"),
-            )
-        },
+        &mut || Box::new(io::npz::open_stream(&tmp).expect("stream").expect("stored")),
         "streamed .npz",
     );
     let _ = std::fs::remove_file(&tmp);
     let h5 = root().join("../shared/data/line/line.hdf5");
     check(
-        &mut || Box::new(vltm::tal::open(&h5).expect("tal")),
+        &mut || Box::new(vltm::io::tal::open(&h5).expect("tal")),
         "y-tal HDF5",
     );
 }
@@ -659,7 +651,7 @@ fn auto_margin_keeps_columns_alias_free() {
             auto_margin,
             ..indirect_wave(&fixture("two_patches").geometry)
         };
-        ltm::column(
+        probe::column(
             &mut fixture("two_patches"),
             a,
             &vol,
@@ -671,7 +663,7 @@ fn auto_margin_keeps_columns_alias_free() {
         .expect("column")
     };
     let (plain, auto) = (run(false), run(true));
-    let far = |o: &ltm::Output| max_of(&o.values[1..]);
+    let far = |o: &probe::Output| max_of(&o.values[1..]);
     println!(
         "far voxels: max {:.3e} without margin ({} aliased, N = {}), {:.3e} with the automatic \
          margin ({} aliased, N = {}); at B {:.4e} vs {:.4e}",

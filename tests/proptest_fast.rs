@@ -1,8 +1,8 @@
-//! Property tests of the host's fast paths (`vltm::ltm::Path`, DESIGN §B.8): the planar FFT
+//! Property tests of the host's fast paths (`vltm::probe::Path`, DESIGN §B.8): the planar FFT
 //! convolution (`host/src/fast/planar.rs`, §B.8.1) for the diagonal and for imaging factorised
 //! columns, and the baseband lookup diagonal (`host/src/fast/lookup.rs`, §B.2.4), against the
 //! `f64` time-domain reference (`reference/mod.rs`) and against the kernel's band sum
-//! (`Path::Band`), through the public API (`ltm::direct`, `ltm::column`) on in-memory
+//! (`Path::Band`), through the public API (`probe::direct`, `probe::column`) on in-memory
 //! captures. Stage 1 of every row goes through `fast::BandDft` (sgemm) on all paths.
 //!
 //! Random scans ([`case`]): laser grid 1–4 × 1–4; SPAD grid nsx × nsy in 1–6 (weighted
@@ -90,10 +90,10 @@ use reference::{Reference, p64};
 use std::cell::RefCell;
 use std::collections::BTreeMap;
 use vltm::Error;
-use vltm::capture::{Capture, Geometry};
-use vltm::fast::{Lookup, Planar};
+use vltm::io::{Capture, Geometry};
 use vltm::kernel::{Config, Legs, Params, Point, Weights};
-use vltm::ltm::{self, ColumnGate, Exec, Output, Path, Shell, Wave};
+use vltm::probe::fast::{Lookup, Planar};
+use vltm::probe::{self, ColumnGate, Exec, Output, Path, Shell, Wave};
 use vltm::volume::Volume;
 
 const SEED: u64 = 0x0fa5_7c0b_ad00_5eed;
@@ -411,9 +411,9 @@ fn tau_span(r: &Reference, kind: Kind, focus: Point, voxels: &[Point]) -> (f64, 
         })
 }
 
-const fn exec(path: Path) -> Exec {
+const fn exec(path: Path) -> Exec<'static> {
     Exec {
-        progress: false,
+        progress: None,
         path,
     }
 }
@@ -429,7 +429,7 @@ impl Scan {
     }
 
     fn direct(&self, path: Path) -> vltm::Result<Output> {
-        ltm::direct(
+        probe::direct(
             &mut self.capture.clone(),
             &self.volume,
             &self.wave,
@@ -438,7 +438,7 @@ impl Scan {
     }
 
     fn column(&self, path: Path) -> vltm::Result<Output> {
-        ltm::column(
+        probe::column(
             &mut self.capture.clone(),
             self.focus,
             &self.volume,
@@ -469,7 +469,7 @@ impl Scan {
             .iter()
             .map(|x| {
                 if self.wave.compensate_laser {
-                    1.0 / ltm::laser_falloff(g, *x)
+                    1.0 / g.laser_falloff(*x)
                 } else {
                     1.0
                 }
@@ -1134,7 +1134,7 @@ fn forced_paths_that_do_not_apply_are_errors() {
     assert!(msg.contains("diagonal only"), "{msg}");
     let column = |gate, path| {
         let mut c = sc.capture.clone();
-        ltm::column(
+        probe::column(
             &mut c,
             sc.focus,
             &sc.volume,

@@ -9,7 +9,7 @@
 use std::path::{Path, PathBuf};
 
 use vltm::Error;
-use vltm::capture::RowSource;
+use vltm::io::RowSource;
 use vltm::sim::{Aperture, Bounces, Cuboid, Noise, Object, Patch, PointScatterer, Scene, Setup};
 
 fn fixture(name: &str) -> PathBuf {

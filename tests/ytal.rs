@@ -14,8 +14,8 @@
 //! a sampled, sum-normalised kernel, in float32.
 
 use std::path::PathBuf;
-use vltm::capture;
-use vltm::ltm::{self, ColumnGate, Exec, Shell, Wave};
+use vltm::io;
+use vltm::probe::{self, ColumnGate, Exec, Shell, Wave};
 use vltm::volume::Volume;
 use vltm_kernel::Weights;
 
@@ -101,8 +101,8 @@ fn wave(wl: f64) -> Wave {
 
 /// vltm's un-masked two-bounce column `T(a, ·)` over the reference volume, y-tal's wave, and
 /// its count of aliased voxels.
-fn column(src: &mut dyn vltm::capture::RowSource, a: vltm_kernel::Point) -> (Vec<f64>, usize) {
-    let o = ltm::column(
+fn column(src: &mut dyn vltm::io::RowSource, a: vltm_kernel::Point) -> (Vec<f64>, usize) {
+    let o = probe::column(
         src,
         a,
         &volume(),
@@ -120,9 +120,9 @@ fn column(src: &mut dyn vltm::capture::RowSource, a: vltm_kernel::Point) -> (Vec
 
 fn check_direct(name: &str, wl: f64) {
     // The streaming reader, as `vltm direct` uses it (rows read from the file on demand).
-    let mut c = vltm::tal::open(&data(name, &format!("{name}.hdf5"))).unwrap();
+    let mut c = vltm::io::tal::open(&data(name, &format!("{name}.hdf5"))).unwrap();
     let vol = volume();
-    let o = ltm::direct(&mut c, &vol, &wave(wl), Exec::default()).unwrap();
+    let o = probe::direct(&mut c, &vol, &wave(wl), Exec::default()).unwrap();
     let ours: Vec<f64> = o.values.iter().map(|&v| v as f64).collect();
     let (theirs, shape) = read_c8_intensity(&data(name, "ref_direct.npy"));
     assert_eq!(shape, vol.shape);
@@ -163,7 +163,7 @@ fn direct_matches_ytal_single() {
 #[test]
 fn column_matches_ytal_projector_camera() {
     for name in ["two_patches", "two_patches_direct_only"] {
-        let mut c = vltm::tal::open(&data(name, &format!("{name}.hdf5"))).unwrap();
+        let mut c = vltm::io::tal::open(&data(name, &format!("{name}.hdf5"))).unwrap();
         let vol = volume();
         // Patch A's centre, voxel [5, 9, 6] of the reference volume.
         let a = vol.points[(5 * 16 + 9) * 20 + 6];
@@ -186,7 +186,7 @@ fn column_matches_ytal_projector_camera() {
 /// (Pearson ≥ 0.99 on the intensities).
 #[test]
 fn indirect_only_column_peaks_at_x_b_like_ytal() {
-    let read = |name: &str| capture::open(&data(name, &format!("{name}.hdf5"))).unwrap();
+    let read = |name: &str| io::open(&data(name, &format!("{name}.hdf5"))).unwrap();
     let (full, ctrl) = (read("two_patches"), read("two_patches_direct_only"));
     assert_eq!(full.geometry, ctrl.geometry);
     let mut diff = full.clone();

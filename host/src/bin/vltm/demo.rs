@@ -6,15 +6,17 @@
 //! indirect light of the LTM column `T(x_a, ·)`. The scene is rendered twice, with all light
 //! paths and with direct light only (the control), and every probe runs on both.
 
-use crate::capture::{Capture, RowSource};
-use crate::error::{Error, Result};
-use crate::figure::Figure;
-use crate::ltm::{self, ColumnGate, Exec, IndirectOptions, Shell, Wave};
-use crate::sim::{Aperture, Bounces, Cuboid, Patch, Scene, Setup};
-use crate::volume::Volume;
+use crate::progress::BARS;
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
+use vltm::exec::Exec;
+use vltm::io::{Capture, RowSource};
+use vltm::out::figure::Figure;
+use vltm::probe::{self, ColumnGate, IndirectOptions, Shell, Wave};
+use vltm::sim::{Aperture, Bounces, Cuboid, Patch, Scene, Setup};
+use vltm::volume::Volume;
+use vltm::{Error, Result};
 use vltm_kernel::Point;
 
 /// Focus of the virtual projector: the panel's centre.
@@ -105,20 +107,21 @@ pub fn run(out: &Path) -> Result<String> {
     };
     // Progress bars go to stderr and are hidden when it is not a terminal.
     let exec = Exec {
-        progress: true,
+        progress: Some(&BARS),
         ..Exec::default()
     };
     let a = p32(PANEL);
     let mut lines = Vec::new();
 
-    let d = ltm::direct(&mut full, &vol, &wave, exec)?;
-    let gamma = ltm::gamma_mask(&d.values, 0.1);
+    let d = probe::direct(&mut full, &vol, &wave, exec)?;
+    let gamma = probe::gamma_mask(&d.values, 0.1);
     lines.push(Line {
         name: "direct (diagonal)",
         values: d.values.clone(),
         seconds: Some(d.seconds),
     });
-    let col = |src: &mut Capture, gate, shell| ltm::column(src, a, &vol, gate, shell, &wave, exec);
+    let col =
+        |src: &mut Capture, gate, shell| probe::column(src, a, &vol, gate, shell, &wave, exec);
     let gated = col(&mut full, ColumnGate::TwoBounce, Shell::ALL)?;
     let ungated = col(&mut full, ColumnGate::None, Shell::ALL)?;
     let higher = col(&mut full, ColumnGate::HigherOrder, Shell::ALL)?;
@@ -175,8 +178,8 @@ pub fn run(out: &Path) -> Result<String> {
     // In-focus indirect light (Eqs. 15–17): every a ∈ Γ as a projector focus, summed over
     // pairs at least r0 = 1.5σ apart; the same Γ for the direct-only control.
     let opts = IndirectOptions::default();
-    let eq17 = ltm::indirect_over(&mut full, &vol, &gamma, &opts, &wave, exec)?;
-    let eq17_ctrl = ltm::indirect_over(&mut control, &vol, &gamma, &opts, &wave, exec)?;
+    let eq17 = probe::indirect_over(&mut full, &vol, &gamma, &opts, &wave, exec)?;
+    let eq17_ctrl = probe::indirect_over(&mut control, &vol, &gamma, &opts, &wave, exec)?;
     lines.push(Line {
         name: "in-focus indirect (Eq. 17)",
         values: eq17.values.clone(),
@@ -310,7 +313,7 @@ pub fn run(out: &Path) -> Result<String> {
             marks,
         }
         .write_png(&out.join(format!("{stem}.png")))?;
-        crate::npy::write_f32(out.join(format!("{stem}.npy")), &l.values, &vol.shape)?;
+        vltm::out::npy::write_f32(out.join(format!("{stem}.npy")), &l.values, &vol.shape)?;
     }
     std::fs::write(out.join("summary.txt"), &table)
         .map_err(|e| Error::io(out.join("summary.txt"), e))?;

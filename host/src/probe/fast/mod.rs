@@ -7,7 +7,7 @@
 //! * [`lookup`]: the gated baseband + lookup diagonal (§B.2.4): one inverse FFT per SPAD and
 //!   row, then a cubic interpolation per (voxel, SPAD), for any geometry (`rustfft`).
 //!
-//! [`crate::ltm`] picks a path per probe ([`crate::ltm::Path`]); every path is checked against
+//! [`crate::probe`] picks a path per probe ([`crate::exec::Path`]); every path is checked against
 //! the float64 reference in `tests/proptest_fast.rs`.
 
 pub mod band;

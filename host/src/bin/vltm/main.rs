@@ -6,11 +6,15 @@ use anyhow::Context;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use vltm::capture::{self, RowSource};
-use vltm::figure::Figure;
-use vltm::h5::Provenance;
-use vltm::ltm::{self, ColumnGate, Exec, IndirectOptions, Shell, Wave};
+use vltm::exec::{Exec, Path as EvalPath};
+use vltm::io::{self, RowSource};
+use vltm::out::figure::Figure;
+use vltm::out::h5::Provenance;
+use vltm::probe::{self, ColumnGate, IndirectOptions, Shell, Wave};
 use vltm::volume::{Volume, parse_point};
+
+mod demo;
+mod progress;
 use vltm_kernel::{Point, Weights};
 
 /// `println!` that ignores a closed stdout (`vltm info CAPTURE | head` must not panic).
@@ -173,14 +177,14 @@ enum PathArg {
 }
 
 impl Common {
-    fn exec(&self) -> Exec {
+    fn exec(&self) -> Exec<'static> {
         Exec {
-            progress: true,
+            progress: Some(&progress::BARS),
             path: match self.path {
-                PathArg::Auto => ltm::Path::Auto,
-                PathArg::Band => ltm::Path::Band,
-                PathArg::Planar => ltm::Path::Planar,
-                PathArg::Lookup => ltm::Path::Lookup,
+                PathArg::Auto => EvalPath::Auto,
+                PathArg::Band => EvalPath::Band,
+                PathArg::Planar => EvalPath::Planar,
+                PathArg::Lookup => EvalPath::Lookup,
             },
         }
     }
@@ -204,35 +208,11 @@ impl Common {
     /// `.npz`, and `--swap-roles` (a transpose), are read into memory.
     fn load(&self, path: &Path) -> vltm::Result<Box<dyn RowSource>> {
         if self.swap_roles {
-            Ok(Box::new(ltm::swap_roles(&capture::open(path)?)?))
-        } else if is_hdf5(path) {
-            Ok(Box::new(vltm::tal::open(path)?))
-        } else if extension(path).as_deref() == Some("ptu") {
-            // Photons binned row by row in one pass over the file (sidecar F.json).
-            Ok(Box::new(vltm::ptu::PtuSource::open(
-                path,
-                path.with_extension("json"),
-            )?))
-        } else if extension(path).as_deref() == Some("npz")
-            && let Some(s) = capture::npz::open_stream(path)?
-        {
-            Ok(Box::new(s))
+            Ok(Box::new(io::swap_roles(&io::open(path)?)?))
         } else {
-            Ok(Box::new(capture::open(path)?))
+            io::open_source(path)
         }
     }
-}
-
-/// The file name's extension, lower case.
-fn extension(path: &Path) -> Option<String> {
-    path.extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase)
-}
-
-/// Whether `path` names a y-tal HDF5 capture (`.hdf5` / `.h5`).
-fn is_hdf5(path: &Path) -> bool {
-    matches!(extension(path).as_deref(), Some("hdf5" | "h5"))
 }
 
 /// An error with its exit code.
@@ -313,7 +293,7 @@ fn main() -> ExitCode {
 fn run(cmd: Command) -> Result<(), Failure> {
     match cmd {
         Command::Demo { out } => {
-            let table = vltm::demo::run(&out)?;
+            let table = demo::run(&out)?;
             let _ = std::io::Write::write_all(&mut std::io::stdout(), table.as_bytes());
             Ok(())
         }
@@ -325,10 +305,13 @@ fn run(cmd: Command) -> Result<(), Failure> {
             uncompressed,
         } => {
             let s = vltm::sim::Scene::load(&scene)?;
-            let c = s.render_with_progress(true)?;
-            capture::npz::write_with(&c, &out, !uncompressed)?;
+            let c = s.render_with(Exec {
+                progress: Some(&progress::BARS),
+                ..Exec::default()
+            })?;
+            io::npz::write_with(&c, &out, !uncompressed)?;
             if let Some(p) = ptu {
-                let w = vltm::ptu::write_t3(&c, &p, &vltm::ptu::T3WriteOptions::default())?;
+                let w = io::ptu::write_t3(&c, &p, &io::ptu::T3WriteOptions::default())?;
                 let side = w.sidecar_path.unwrap_or_else(|| p.with_extension("json"));
                 say!("wrote {} and its sidecar {}", p.display(), side.display());
             }
@@ -347,7 +330,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
         Command::Direct { capture, common } => {
             let volume = Volume::parse(&common.volume)?;
             let mut c = common.load(&capture)?;
-            let o = ltm::direct(&mut *c, &volume, &common.wave(), common.exec())?;
+            let o = probe::direct(&mut *c, &volume, &common.wave(), common.exec())?;
             finish_probe(
                 &common,
                 &capture,
@@ -366,7 +349,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
             common,
         } => {
             let a = parse_point("--focus", &focus)?;
-            ltm::check_focus(a)?;
+            probe::check_focus(a)?;
             let volume = Volume::parse(&common.volume)?;
             let shell = shell
                 .as_deref()
@@ -379,7 +362,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 GateArg::None => ColumnGate::None,
             };
             let mut c = common.load(&capture)?;
-            let o = ltm::column(&mut *c, a, &volume, g, shell, &common.wave(), common.exec())?;
+            let o = probe::column(&mut *c, a, &volume, g, shell, &common.wave(), common.exec())?;
             let title = format!("column T(x_a, .), gate {gate:?}");
             finish_probe(&common, &capture, "column", &o, &volume, Some(a), &title)
         }
@@ -419,7 +402,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 ..Default::default()
             };
             let mut c = common.load(&capture)?;
-            let o = ltm::indirect(&mut *c, &volume, &opts, &common.wave(), common.exec())?;
+            let o = probe::indirect(&mut *c, &volume, &opts, &common.wave(), common.exec())?;
             let n_gamma = o.gamma.iter().filter(|&&g| g).count();
             say!(
                 "Γ: {n_gamma} of {} voxels above ε = {epsilon} of the direct maximum; pairs with {:.3} <= |x_a - x_b| < {:.3} m",
@@ -450,7 +433,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
 }
 
 fn info(path: &Path) -> Result<(), Failure> {
-    let c = capture::open(path)?;
+    let c = io::open(path)?;
     let g = &c.geometry;
     let (kl, ks) = (g.lasers.len(), g.spads_per_row());
     let span = |p: &[Point]| {
@@ -466,8 +449,8 @@ fn info(path: &Path) -> Result<(), Failure> {
         )
     };
     say!("capture      {}", path.display());
-    if is_hdf5(path) {
-        let r = vltm::tal::open(path)?;
+    if io::is_hdf5(path) {
+        let r = io::tal::open(path)?;
         say!(
             "format       y-tal HDF5_TAL, H_format {} (tal value {}), H shape {:?} (time first)",
             r.h_format().tal_name(),
@@ -477,10 +460,9 @@ fn info(path: &Path) -> Result<(), Failure> {
         say!(
             "tal scan     {}",
             match r.scan_type() {
-                vltm::tal::ScanType::Exhaustive =>
-                    "exhaustive (every laser spot x every SPAD spot)",
-                vltm::tal::ScanType::Confocal => "confocal (the SPAD looks at the laser spot)",
-                vltm::tal::ScanType::Single =>
+                io::tal::ScanType::Exhaustive => "exhaustive (every laser spot x every SPAD spot)",
+                io::tal::ScanType::Confocal => "confocal (the SPAD looks at the laser spot)",
+                io::tal::ScanType::Single =>
                     "single (one laser spot, the SPAD grid scanned): shown below by reciprocity \
                      as the SPAD grid's spots as lasers x one SPAD at the laser spot",
             }
@@ -542,7 +524,7 @@ fn info(path: &Path) -> Result<(), Failure> {
     );
     say!(
         "default λ    {:.4} m (twice the aperture pitch)",
-        ltm::default_wavelength(g)
+        probe::default_wavelength(g)
     );
     Ok(())
 }
@@ -554,7 +536,7 @@ fn summarize(
     seconds: f64,
     report: &vltm_kernel::Report,
     cfg: &vltm_kernel::Config,
-    path: Option<ltm::Path>,
+    path: Option<EvalPath>,
 ) {
     let (i, m) =
         v.iter().enumerate().fold(
@@ -594,7 +576,7 @@ fn finish_probe(
     common: &Common,
     capture: &Path,
     probe: &str,
-    o: &ltm::Output,
+    o: &probe::Output,
     volume: &Volume,
     focus: Option<Point>,
     title: &str,
@@ -637,10 +619,10 @@ fn write_outputs(
         (a, b) => (a.clone(), b.clone()),
     };
     if let Some(p) = out {
-        if is_hdf5(&p) {
-            vltm::h5::write_volume(&p, v, volume, meta)
+        if io::is_hdf5(&p) {
+            vltm::out::h5::write_volume(&p, v, volume, meta)
         } else {
-            vltm::npy::write_f32(&p, v, &volume.shape)
+            vltm::out::npy::write_f32(&p, v, &volume.shape)
         }
         .with_context(|| format!("writing {}", p.display()))?;
         say!("wrote {}", p.display());

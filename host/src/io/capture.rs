@@ -1,0 +1,253 @@
+//! The capture model: geometry, time axis and row access.
+//!
+//! A capture holds `H[l][s][n]`: laser spot `l`, SPAD spot `s`, time bin `n` at path length
+//! `t0 + n·Δt` (metres, the point-sample convention of DESIGN §B.0). The kernel is fed one
+//! laser row at a time through [`RowSource`].
+
+use crate::error::{Error, Result};
+use vltm_kernel::Point;
+
+/// Where the lasers and SPADs are and how the time axis is defined.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Geometry {
+    /// Laser spots on the wall (z = 0), C order over `laser_shape`.
+    pub lasers: Vec<Point>,
+    /// Grid shape of the laser spots `[nx, ny]` (`[K, 1]` for a list).
+    pub laser_shape: [usize; 2],
+    /// SPAD spots on the wall, C order over `spad_shape`.
+    pub spads: Vec<Point>,
+    /// Grid shape of the SPAD spots `[nx, ny]` (`[16, 1]` for a 1-D array, `[1, 1]` single).
+    pub spad_shape: [usize; 2],
+    /// Position of the laser device (y-tal `laser_xyz`) (m).
+    pub laser_origin: [f64; 3],
+    /// Position of the sensor device (y-tal `sensor_xyz`) (m).
+    pub sensor_origin: [f64; 3],
+    /// Whether the time axis includes the device legs (y-tal
+    /// `t_accounts_first_and_last_bounces`).
+    pub legs_in_time: bool,
+    /// Confocal capture: row `l` holds one histogram, for a SPAD at the laser spot `l`
+    /// (`spads` is then equal to `lasers`).
+    pub confocal: bool,
+    /// Bins per histogram.
+    pub nt: usize,
+    /// Bin width (m of path).
+    pub dt: f64,
+    /// Path length of bin 0 (m).
+    pub t0: f64,
+}
+
+impl Geometry {
+    /// The physical laser's falloff to spot `x_l`: `cos θ / d²` with `d = |laser_xyz − x_l|`
+    /// and θ the angle to the wall normal (y-tal `compensate_laser_cos_dsqr`).
+    pub fn laser_falloff(&self, x_l: Point) -> f64 {
+        let v: [f64; 3] = core::array::from_fn(|i| self.laser_origin[i] - f64::from(x_l[i]));
+        let d2 = v.iter().map(|c| c * c).sum::<f64>();
+        (v[2].abs() / d2.sqrt()) / d2
+    }
+
+    /// Number of SPAD histograms in each row (1 for confocal captures).
+    pub fn spads_per_row(&self) -> usize {
+        if self.confocal { 1 } else { self.spads.len() }
+    }
+
+    /// Checks shapes and values: grid sizes match, positions finite, Δt > 0, Nt > 0.
+    ///
+    /// # Errors
+    /// [`Error::Format`] naming `what` (the file) and the field.
+    pub fn validate(&self, what: &std::path::Path) -> Result<()> {
+        let shape = |s: [usize; 2]| s[0] * s[1];
+        if self.lasers.is_empty() || shape(self.laser_shape) != self.lasers.len() {
+            return Err(Error::format(
+                what,
+                "laser_grid",
+                format!("{} laser spots", shape(self.laser_shape)),
+                self.lasers.len(),
+            ));
+        }
+        if self.spads.is_empty() || shape(self.spad_shape) != self.spads.len() {
+            return Err(Error::format(
+                what,
+                "sensor_grid",
+                format!("{} SPAD spots", shape(self.spad_shape)),
+                self.spads.len(),
+            ));
+        }
+        if self.confocal && self.spads != self.lasers {
+            return Err(Error::format(
+                what,
+                "sensor_grid",
+                "the laser grid (confocal)",
+                "a different grid",
+            ));
+        }
+        for (name, pts) in [("laser_grid", &self.lasers), ("sensor_grid", &self.spads)] {
+            if let Some(i) = pts.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+                return Err(Error::format(
+                    what,
+                    name,
+                    "finite coordinates",
+                    format!("{:?} at index {i}", pts[i]),
+                ));
+            }
+        }
+        if !(self.dt.is_finite() && self.dt > 0.0) {
+            return Err(Error::format(
+                what,
+                "delta_t",
+                "a finite value > 0",
+                self.dt,
+            ));
+        }
+        if !self.t0.is_finite() {
+            return Err(Error::format(what, "t_start", "a finite value", self.t0));
+        }
+        if self.nt == 0 {
+            return Err(Error::format(what, "H", "at least one time bin", 0));
+        }
+        Ok(())
+    }
+}
+
+/// A source of laser rows: the kernel's input. Implemented by in-memory captures, file
+/// readers that stream by row, and the simulator.
+pub trait RowSource {
+    /// The capture's geometry.
+    fn geometry(&self) -> &Geometry;
+    /// Writes the histograms of laser row `l` into `out` (resized to
+    /// `spads_per_row·Nt`, SPAD-major) and returns the laser spot.
+    ///
+    /// # Errors
+    /// I/O or format errors of the underlying file.
+    fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point>;
+
+    /// The rows in scan order as an iterator of `(laser spot, histograms of all SPADs)`
+    /// (`spads_per_row·Nt` values, SPAD-major), read one at a time: the shape in which the
+    /// kernel takes a scan. Each item owns its histograms; [`RowSource::read_row`] reuses a
+    /// buffer instead (what the high-level probes do).
+    ///
+    /// ```
+    /// use vltm::io::{self, RowSource};
+    /// let mut c = io::open(std::path::Path::new("../fixtures/two_patches_single.npz"))?;
+    /// let per_row = c.geometry.spads_per_row() * c.geometry.nt;
+    /// let mut n = 0;
+    /// for row in c.iter_rows() {
+    ///     let (laser, histograms) = row?;
+    ///     assert_eq!((laser[2], histograms.len()), (0.0, per_row)); // a spot on the wall
+    ///     n += 1;
+    /// }
+    /// assert_eq!(n, 64);
+    /// # Ok::<(), vltm::Error>(())
+    /// ```
+    fn iter_rows(&mut self) -> Rows<'_, Self>
+    where
+        Self: Sized,
+    {
+        Rows { src: self, next: 0 }
+    }
+}
+
+/// Iterator over the rows of a [`RowSource`] ([`RowSource::iter_rows`]).
+#[derive(Debug)]
+pub struct Rows<'a, S: RowSource> {
+    src: &'a mut S,
+    next: usize,
+}
+
+impl<S: RowSource> Iterator for Rows<'_, S> {
+    type Item = Result<(Point, Vec<f32>)>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        let l = self.next;
+        if l >= self.src.geometry().lasers.len() {
+            return None;
+        }
+        self.next += 1;
+        let mut out = Vec::new();
+        Some(self.src.read_row(l, &mut out).map(|p| (p, out)))
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        let n = self.src.geometry().lasers.len().saturating_sub(self.next);
+        (n, Some(n))
+    }
+}
+
+/// A capture held in memory: geometry plus `H` as `f32`, `[Kl][spads_per_row][Nt]`.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Capture {
+    /// Geometry and time axis.
+    pub geometry: Geometry,
+    /// Histograms, laser-major then SPAD then time.
+    pub data: Vec<f32>,
+}
+
+impl Capture {
+    /// Builds a capture, checking that `data` has `Kl·spads_per_row·Nt` values.
+    ///
+    /// # Errors
+    /// [`Error::Format`] for a size mismatch (`what` names the origin).
+    pub fn new(geometry: Geometry, data: Vec<f32>, what: &std::path::Path) -> Result<Self> {
+        geometry.validate(what)?;
+        let want = geometry.lasers.len() * geometry.spads_per_row() * geometry.nt;
+        if data.len() != want {
+            return Err(Error::format(
+                what,
+                "H",
+                format!("{want} values"),
+                data.len(),
+            ));
+        }
+        Ok(Self { geometry, data })
+    }
+
+    /// The histograms of laser row `l`.
+    pub fn row(&self, l: usize) -> &[f32] {
+        let n = self.geometry.spads_per_row() * self.geometry.nt;
+        &self.data[l * n..(l + 1) * n]
+    }
+}
+
+impl RowSource for Capture {
+    fn geometry(&self) -> &Geometry {
+        &self.geometry
+    }
+    fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
+        out.clear();
+        out.extend_from_slice(self.row(l));
+        Ok(self.geometry.lasers[l])
+    }
+}
+
+/// Swaps the roles of lasers and SPADs by reciprocity (DESIGN §B.3.7): the SPAD array becomes
+/// the virtual projector and the laser grid the camera, `T_swap(a, b) = T(b, a)`. Needs the
+/// capture in memory (`Kl·Ks·Nt` values).
+///
+/// # Errors
+/// [`Error::Argument`] for confocal captures (nothing to swap).
+pub fn swap_roles(c: &Capture) -> Result<Capture> {
+    let g = &c.geometry;
+    if g.confocal {
+        return Err(Error::arg(
+            "--swap-roles",
+            "a confocal capture has nothing to swap",
+        ));
+    }
+    let (kl, ks, nt) = (g.lasers.len(), g.spads.len(), g.nt);
+    let mut data = vec![0.0f32; c.data.len()];
+    for l in 0..kl {
+        for s in 0..ks {
+            data[(s * kl + l) * nt..(s * kl + l + 1) * nt]
+                .copy_from_slice(&c.data[(l * ks + s) * nt..(l * ks + s + 1) * nt]);
+        }
+    }
+    let geometry = Geometry {
+        lasers: g.spads.clone(),
+        laser_shape: g.spad_shape,
+        spads: g.lasers.clone(),
+        spad_shape: g.laser_shape,
+        laser_origin: g.sensor_origin,
+        sensor_origin: g.laser_origin,
+        ..g.clone()
+    };
+    Ok(Capture { geometry, data })
+}

@@ -1,0 +1,79 @@
+//! Captures in: the capture model and every reader, opened by file extension.
+//!
+//! | module | owns |
+//! |---|---|
+//! | [`capture`] | [`Geometry`] (spots, time axis, device positions), [`RowSource`] (laser rows on demand), [`Capture`] (H in memory), reciprocity ([`swap_roles`]) |
+//! | [`npz`] | vltm's `.npz` captures: write, read whole, stream a stored archive by row |
+//! | [`tal`] | y-tal / mitransient `HDF5_TAL` captures, streamed by laser row |
+//! | [`ptu`] | PicoQuant PTU T3 photon streams with a JSON sidecar, binned row by row; the T3 writer |
+//!
+//! Readers only yield rows: nothing here imports the probes, the simulator or the outputs.
+
+pub mod capture;
+pub mod npz;
+pub mod ptu;
+pub mod tal;
+
+pub use capture::{Capture, Geometry, RowSource, Rows, swap_roles};
+
+use crate::error::{Error, Result};
+use std::path::Path;
+
+/// The file name's extension, lower case.
+fn extension(path: &Path) -> Option<String> {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase)
+}
+
+/// Opens a capture file by its extension and reads it whole: `.npz` (vltm), `.ptu`
+/// (PicoQuant T3, with its sidecar `<same name>.json` describing rows, SPADs and time axis;
+/// see [`ptu`]), `.hdf5` / `.h5` (y-tal `HDF5_TAL`, [`tal::read_all`]).
+///
+/// # Errors
+/// [`Error::Argument`] for an unknown extension; read errors of the format.
+pub fn open(path: &Path) -> Result<Capture> {
+    match extension(path).as_deref() {
+        Some("npz") => npz::read(path),
+        Some("ptu") => ptu::read_all(path, path.with_extension("json")),
+        Some("hdf5" | "h5") => tal::read_all(path),
+        _ => Err(unknown_format(path)),
+    }
+}
+
+/// Opens a capture file by its extension as a row source, streamed where the format allows:
+/// y-tal HDF5 files, PicoQuant PTU photon streams (binned row by row in one pass over the
+/// records) and stored (uncompressed) `.npz` captures are read row by row (memory O(Ks·Nt));
+/// a compressed `.npz` is read into memory.
+///
+/// # Errors
+/// As [`open`].
+pub fn open_source(path: &Path) -> Result<Box<dyn RowSource>> {
+    match extension(path).as_deref() {
+        Some("hdf5" | "h5") => Ok(Box::new(tal::open(path)?)),
+        Some("ptu") => Ok(Box::new(ptu::PtuSource::open(
+            path,
+            path.with_extension("json"),
+        )?)),
+        Some("npz") => match npz::open_stream(path)? {
+            Some(s) => Ok(Box::new(s)),
+            None => Ok(Box::new(npz::read(path)?)),
+        },
+        _ => Err(unknown_format(path)),
+    }
+}
+
+/// Whether `path` names a y-tal HDF5 capture (`.hdf5` / `.h5`).
+pub fn is_hdf5(path: &Path) -> bool {
+    matches!(extension(path).as_deref(), Some("hdf5" | "h5"))
+}
+
+fn unknown_format(path: &Path) -> Error {
+    Error::arg(
+        "CAPTURE",
+        format!(
+            "{}: unknown capture format (expected .npz, .ptu, .hdf5 or .h5)",
+            path.display()
+        ),
+    )
+}

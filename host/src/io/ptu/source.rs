@@ -1,0 +1,275 @@
+//! Binning the photon stream into laser rows: [`PtuSource`], a [`RowSource`] over a PTU file
+//! and its sidecar, and [`read_all`].
+
+use std::fs::File;
+use std::io::{BufRead, BufReader, Seek, SeekFrom};
+use std::path::{Path, PathBuf};
+
+use vltm_kernel::Point;
+
+use super::decode::*;
+use super::header::*;
+use super::sidecar::*;
+use crate::error::{Error, Result};
+use crate::io::capture::{Capture, Geometry, RowSource};
+
+/// What happened to the records of the current pass over a file ([`PtuSource::counts`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Counts {
+    /// Photons binned into rows that were read.
+    pub binned: u64,
+    /// Photons before the first row marker (dropped).
+    pub before_first_marker: u64,
+    /// Photons of rows passed over to reach a later row (not binned).
+    pub skipped_rows: u64,
+    /// Photons with dtime outside the kept window (dropped).
+    pub outside_window: u64,
+    /// Photons on unmapped channels (dropped, with `"unmapped_channels": "drop"`).
+    pub unmapped: u64,
+    /// Marker records without the row bit (ignored).
+    pub other_markers: u64,
+    /// Overflow records.
+    pub overflow_records: u64,
+    /// Reserved special records (ignored).
+    pub reserved_records: u64,
+}
+
+/// Laser rows binned from a PTU file's photons: a [`RowSource`] (conventions in the module
+/// docs). Rows are read in one streaming pass; an earlier row rewinds and rescans.
+#[derive(Debug)]
+pub struct PtuSource<R = BufReader<File>> {
+    path: PathBuf,
+    header: Header,
+    sidecar: Sidecar,
+    plan: Plan,
+    records: Records<R>,
+    data_start: u64,
+    /// Row markers consumed: the reader is just after the `markers_seen`-th one.
+    markers_seen: usize,
+    /// The reader is past the last row or an error: the next row rewinds.
+    exhausted: bool,
+    counts: Counts,
+    hist: Vec<u32>,
+}
+
+impl PtuSource<BufReader<File>> {
+    /// Opens a PTU file with its sidecar.
+    ///
+    /// # Errors
+    /// [`Error::Io`] if a file cannot be read; header and sidecar errors (module docs).
+    pub fn open(ptu: impl AsRef<Path>, sidecar: impl AsRef<Path>) -> Result<Self> {
+        let (ptu, sidecar_path) = (ptu.as_ref(), sidecar.as_ref());
+        let sidecar = Sidecar::load(sidecar_path)?;
+        let f = File::open(ptu).map_err(|e| Error::io(ptu, e))?;
+        Self::from_reader(BufReader::new(f), ptu, sidecar, sidecar_path)
+    }
+}
+
+impl<R: BufRead + Seek> PtuSource<R> {
+    /// A source over `reader`, positioned at the start of a PTU header. `path` and
+    /// `sidecar_path` name the file and the sidecar in errors.
+    ///
+    /// # Errors
+    /// As [`PtuSource::open`].
+    pub fn from_reader(
+        mut reader: R,
+        path: impl Into<PathBuf>,
+        sidecar: Sidecar,
+        sidecar_path: &Path,
+    ) -> Result<Self> {
+        let path = path.into();
+        let start = reader.stream_position().map_err(|e| Error::io(&path, e))?;
+        let header = Header::read(&mut reader, &path)?;
+        let plan = sidecar.plan(&header, sidecar_path)?;
+        let records = Records::new(reader, &header, path.clone());
+        let hist = vec![0; plan.ks * plan.geometry.nt];
+        Ok(Self {
+            data_start: start + header.data_offset,
+            path,
+            header,
+            sidecar,
+            plan,
+            records,
+            markers_seen: 0,
+            exhausted: false,
+            counts: Counts::default(),
+            hist,
+        })
+    }
+
+    /// The file's header.
+    pub fn header(&self) -> &Header {
+        &self.header
+    }
+
+    /// The sidecar.
+    pub fn sidecar(&self) -> &Sidecar {
+        &self.sidecar
+    }
+
+    /// Laser rows (= laser spots).
+    pub fn rows(&self) -> usize {
+        self.plan.rows
+    }
+
+    /// Counts of the current pass over the file (restart when a row rewinds it).
+    pub fn counts(&self) -> Counts {
+        Counts {
+            overflow_records: self.records.overflow_records(),
+            reserved_records: self.records.reserved_records(),
+            ..self.counts
+        }
+    }
+
+    fn rewind(&mut self) -> Result<()> {
+        self.records
+            .reader
+            .seek(SeekFrom::Start(self.data_start))
+            .map_err(|e| Error::io(&self.path, e))?;
+        self.records.restart();
+        self.markers_seen = 0;
+        self.exhausted = false;
+        self.counts = Counts::default();
+        Ok(())
+    }
+
+    fn too_few_markers(&self) -> Error {
+        Error::format(
+            &self.path,
+            "markers",
+            format!(
+                "{} row markers (marker input {}), one per laser row of the sidecar",
+                self.plan.rows, self.sidecar.row_marker
+            ),
+            format!("{} before the end of the records", self.markers_seen),
+        )
+    }
+
+    fn read_row_counts(&mut self, l: usize) -> Result<()> {
+        if l >= self.plan.rows {
+            return Err(Error::arg(
+                "row",
+                format!("laser row {l} of a {}-row PTU capture", self.plan.rows),
+            ));
+        }
+        if self.exhausted || self.markers_seen > l + 1 {
+            self.rewind()?;
+        }
+        let r = self.bin_row(l);
+        // After an error or the last row the reader is not at a row start: rewind next time.
+        self.exhausted = r.is_err() || l + 1 == self.plan.rows;
+        r
+    }
+
+    /// Bins row `l` from a position at or before its row marker.
+    fn bin_row(&mut self, l: usize) -> Result<()> {
+        let bits = self.plan.row_bits;
+        // Skip to the start of row l.
+        while self.markers_seen <= l {
+            match self.records.next_event()? {
+                None => return Err(self.too_few_markers()),
+                Some(Event::Marker { bits: b, .. }) if b & bits != 0 => self.markers_seen += 1,
+                Some(Event::Marker { .. }) => self.counts.other_markers += 1,
+                Some(Event::Photon { .. }) if self.markers_seen == 0 => {
+                    self.counts.before_first_marker += 1;
+                }
+                Some(Event::Photon { .. }) => self.counts.skipped_rows += 1,
+            }
+        }
+        self.hist.fill(0);
+        let nt = self.plan.geometry.nt;
+        loop {
+            match self.records.next_event()? {
+                None if l + 1 < self.plan.rows => return Err(self.too_few_markers()),
+                None => return Ok(()),
+                Some(Event::Marker { bits: b, .. }) if b & bits != 0 => {
+                    if l + 1 == self.plan.rows {
+                        return Err(Error::format(
+                            &self.path,
+                            "markers",
+                            format!(
+                                "{} row markers (marker input {}), one per laser row of the \
+                                 sidecar",
+                                self.plan.rows, self.sidecar.row_marker
+                            ),
+                            format!(
+                                "more: an extra row marker at record {}",
+                                self.records.records_read() - 1
+                            ),
+                        ));
+                    }
+                    self.markers_seen += 1;
+                    return Ok(());
+                }
+                Some(Event::Marker { .. }) => self.counts.other_markers += 1,
+                Some(Event::Photon { channel, dtime, .. }) => {
+                    let Some(s) = self.plan.spad_of_channel[usize::from(channel) % CHANNELS] else {
+                        if self.plan.unmapped_error {
+                            return Err(Error::format(
+                                &self.path,
+                                "channels",
+                                format!(
+                                    "photons only on the sidecar's channels {:?} (or \
+                                     \"unmapped_channels\": \"drop\")",
+                                    self.sidecar
+                                        .channels
+                                        .clone()
+                                        .unwrap_or_else(|| (0..self.plan.ks as u32).collect())
+                                ),
+                                format!(
+                                    "a photon on channel {channel} at record {}",
+                                    self.records.records_read() - 1
+                                ),
+                            ));
+                        }
+                        self.counts.unmapped += 1;
+                        continue;
+                    };
+                    let k = u64::from(dtime);
+                    if k < self.plan.first || k >= self.plan.end {
+                        self.counts.outside_window += 1;
+                        continue;
+                    }
+                    let n = ((k - self.plan.first) / self.plan.rebin) as usize;
+                    let bin = &mut self.hist[s * nt + n];
+                    *bin = bin.saturating_add(1);
+                    self.counts.binned += 1;
+                }
+            }
+        }
+    }
+}
+
+impl<R: BufRead + Seek> RowSource for PtuSource<R> {
+    fn geometry(&self) -> &Geometry {
+        &self.plan.geometry
+    }
+
+    /// Bins laser row `l` (see the module docs for the streaming order and its costs).
+    fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
+        self.read_row_counts(l)?;
+        out.clear();
+        out.extend(self.hist.iter().map(|&c| c as f32));
+        Ok(self.plan.geometry.lasers[l])
+    }
+}
+
+/// Reads a whole PTU capture: every laser row, in one pass.
+///
+/// # Errors
+/// As [`PtuSource::open`] and [`RowSource::read_row`].
+pub fn read_all(ptu: impl AsRef<Path>, sidecar: impl AsRef<Path>) -> Result<Capture> {
+    let ptu = ptu.as_ref();
+    let mut src = PtuSource::open(ptu, sidecar)?;
+    collect(&mut src, ptu)
+}
+
+pub(super) fn collect<R: BufRead + Seek>(src: &mut PtuSource<R>, path: &Path) -> Result<Capture> {
+    let mut data = Vec::with_capacity(src.rows() * src.hist.len());
+    let mut row = Vec::new();
+    for l in 0..src.rows() {
+        src.read_row(l, &mut row)?;
+        data.extend_from_slice(&row);
+    }
+    Capture::new(src.geometry().clone(), data, path)
+}

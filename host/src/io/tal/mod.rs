@@ -1,0 +1,558 @@
+//! Reader of y-tal / mitransient `HDF5_TAL` captures (`tal render` output), streaming by laser
+//! row.
+//!
+//! # Reading
+//!
+//! [`open`] parses the metadata and returns a [`TalReader`], a [`RowSource`] that reads laser
+//! rows on demand straight from the file, never all of `H`: for `T_Lx_Ly_Sx_Sy` the row of laser
+//! `(ix, iy)` is the hyperslab `H[:, ix, iy, :, :]`, `Nt` strided runs of `Ks` values. Rows are
+//! read a small block at a time, `H[:, ix, iy0..iy0+B, :, :]` with `B` consecutive rows of one
+//! laser line such that the block holds at most [`BLOCK_BYTES`] (256 KiB) or one row, through
+//! the pure-Rust [`hdf5_reader`] crate's `Dataset::read_slice` (for a contiguous dataset: one
+//! positional read per time bin of exactly the `B·Ks` values; for a chunked one: the
+//! overlapping chunks). The block is cached, so rows of the same block cost no I/O, and each
+//! row is transposed to vltm's SPAD-major order `[s][n]`. For the one-histogram-per-point
+//! formats (confocal, single) a row is a single value per time bin, so blocks are what keeps
+//! the number of reads at `Nt` per laser line instead of `Nt` per row. Memory is
+//! O(max(Ks·Nt, [`BLOCK_BYTES`])) whatever the size of `H`. [`read_all`] reads every row into a
+//! [`Capture`] (needed by `--swap-roles` and by [`io::open`](crate::io::open)).
+//!
+//! **Peak memory**, measured with a counting global allocator around streaming every row (the
+//! reader, its metadata, the block, the crate's raw copy of the block during a read, one row):
+//! `two_patches` (the largest shared capture, H = 400×8×8×8×8 f32 = 6.6 MB; 64 rows of
+//! 102 kB, blocks of 2 rows) **0.58 MB** of heap, 3.3 MB maximum resident set of the whole
+//! process (`/usr/bin/time`); `line` 0.55 MB; `single` 0.11 MB. [`read_all`] of `two_patches`
+//! peaks at 7.1 MB of heap (the 6.55 MB capture plus a block). Streaming `two_patches` takes
+//! 10–30 ms. tal writes `H` contiguous and uncompressed (checked with h5py on every shared
+//! capture); a chunked `H` streams too, but the crate keeps up to 64 MiB of decoded chunks in its
+//! cache.
+//!
+//! # Fields
+//!
+//! | dataset | used as |
+//! |---|---|
+//! | `H` (f32 or f64, time axis **first**) | the histograms, laid out by `H_format` |
+//! | `H_format` (tal `HFormat`, integer or enum) | 1 `T_Sx_Sy`, 2 `T_Lx_Ly_Sx_Sy`, 3 `T_Si`, 4 `T_Li_Si`; 0 `UNKNOWN` or any other value is an error, and so is an enum member name that disagrees with this numbering |
+//! | `laser_grid_xyz`, `sensor_grid_xyz` | laser and SPAD spots: `(X, Y, 3)` flattened in C order (`l = ix·Y + iy`, DESIGN §B.0), or `(N, 3)` (shape `[N, 1]`) |
+//! | `laser_grid_format`, `sensor_grid_format` | tal `GridFormat` 1 `N_3`, 2 `X_Y_3`, checked against the grid's rank (optional: the rank decides when absent) |
+//! | `laser_xyz`, `sensor_xyz` | [`Geometry::laser_origin`], [`Geometry::sensor_origin`] (device positions: device legs, `--compensate-laser`) |
+//! | `delta_t` | [`Geometry::dt`] (m of optical path; finite and > 0) |
+//! | `t_start` | [`Geometry::t0`], see *Time axis* |
+//! | `t_accounts_first_and_last_bounces` | [`Geometry::legs_in_time`] |
+//! | `*_grid_normals`, `volume_format`, `scene_info` | not used (the wall is z = 0 with normal +z, DESIGN §B.0) |
+//!
+//! Shapes: `T_Lx_Ly_Sx_Sy` is `(Nt, Lx, Ly, Sx, Sy)` with grids of `Lx·Ly` and `Sx·Sy` points
+//! (an `X_Y_3` grid must be exactly `(Lx, Ly, 3)`, resp. `(Sx, Sy, 3)`); `T_Li_Si` is
+//! `(Nt, Li, Si)`, the grid shapes come from the grids; `T_Sx_Sy` `(Nt, Sx, Sy)` and `T_Si`
+//! `(Nt, Si)` hold one histogram per sensor point.
+//!
+//! # Scan types
+//!
+//! HDF5_TAL files do not store tal's `scan_type` as a dataset (only inside the `scene_info`
+//! YAML, which is not parsed). It is inferred from `H_format` and the grids as tal's
+//! `NLOSCaptureData.is_confocal()` does ([`ScanType`]):
+//!
+//! * `T_Lx_Ly_Sx_Sy`, `T_Li_Si`: **exhaustive**, Kl = the laser grid, Ks = the sensor grid.
+//! * `T_Sx_Sy`, `T_Si` with `laser_grid_xyz` ≈ `sensor_grid_xyz` (numpy `allclose`):
+//!   **confocal**, one histogram per row ([`Geometry::confocal`]).
+//! * `T_Sx_Sy`, `T_Si` with one laser point `x0`: tal **`single`** (one laser spot, the SPAD grid
+//!   scanned). By Helmholtz reciprocity (path reversal keeps the optical length and the
+//!   geometry terms; all BSDFs are Lambertian) it is presented as **Kl = the sensor grid's
+//!   points as lasers × one SPAD at `x0`** (DESIGN §B.3.7: the 2-D aperture must be the
+//!   projector to focus), with the device positions swapped ([`Geometry::laser_origin`] =
+//!   `sensor_xyz`, [`Geometry::sensor_origin`] = `laser_xyz`) so the device legs stay right.
+//!   mitransient multiplies every path by the physical laser's falloff
+//!   `c(x) = cos θ / |laser_xyz − x|²` at its spot `x0` and by nothing on the SPAD side, while a
+//!   laser scan of the swapped setup would carry the falloff at each new laser spot. Row `l` is
+//!   therefore `H[:, l] · c'(S_l) / c(x0)`, with `c'` the falloff from the swapped laser origin
+//!   ([`Geometry::laser_falloff`] of the returned geometry). Then
+//!   `--compensate-laser` (÷ `c'(S_l)`) gives exactly y-tal's `compensate_laser_cos_dsqr` result
+//!   `H / c(x0)` (`../shared/data/single/README.md`; there `c(x0)` = 0.47982 m⁻²).
+//! * `T_Sx_Sy`, `T_Si` with any other laser grid (a paired, non-confocal custom scan): not
+//!   representable by [`Geometry`]; [`Error::Format`] on `laser_grid_xyz`.
+//!
+//! # Time axis
+//!
+//! mitransient's bin `k` accumulates paths with optical length in
+//! `[t_start + k·Δt, t_start + (k+1)·Δt)` (a box filter); vltm's [`Geometry`] holds point
+//! samples at `t0 + n·Δt`. [`TalOptions::bin_centre`] chooses:
+//!
+//! * `false` (**the default**, [`TalOptions::YTAL`]): `t0 = t_start`, the bin start, as y-tal's
+//!   `pf_dev` reads these files (DESIGN §B.7; shared data README: "pf_dev treats bin k as OPL
+//!   t_start + k·delta_t").
+//! * `true` ([`TalOptions::BIN_CENTRE`]): `t0 = t_start + Δt/2`, the centre of the box, the rule
+//!   of DESIGN §B.0 for interval bins and the unbiased choice for the kernel's exact gates.
+//!
+//! The default follows y-tal because the reason to read these files is to compare with y-tal
+//! and with the captures' published references, and a deliberate half-bin offset would show up
+//! there. Comparing vltm's direct and column volumes with y-tal's `ref_direct.npy` /
+//! `ref_ltmcol_focusA.npy` (y-tal's conventions otherwise: weights one, σ = λ, laser falloff
+//! compensated; Pearson correlation of the max-normalised intensities), the bin start
+//! gives Pearson 0.99993 (two_patches), 0.99989 (line), 0.99970 (single), 0.99998 (column) and
+//! the same peak voxel everywhere; the bin centre gives 0.99973, 0.99954, 0.99881, 0.99993 and
+//! moves the two_patches peak one slice deeper (z 0.65 → 0.70 m, both on patch A, which spans
+//! z 0.60–0.80 m). For |·|² intensities a constant shift of every histogram only moves each
+//! gate's envelope by Δt/2 (its carrier phase `e^{iΩΔt/2}` is common to all laser–SPAD pairs
+//! and cancels), so the difference is small whenever σ ≫ Δt. A user who wants the physically
+//! centred samples opens the file with [`TalOptions::BIN_CENTRE`] ([`open_with`],
+//! [`read_all_with`]).
+//!
+//! # Errors and robustness
+//!
+//! Every problem is an [`Error::Format`] naming the file and the dataset (`(file)` when the HDF5
+//! structure itself cannot be parsed): a missing dataset, wrong rank or shape, grids that do not
+//! match `H`, non-numeric types, an unknown `H_format` or grid format, a non-finite or
+//! non-positive `delta_t`, non-finite `t_start` or positions, a contiguous `H` larger than the
+//! file, truncated or corrupt files (the crate's own message is kept). A file that cannot be
+//! opened or read is [`Error::Io`].
+//!
+//! `hdf5_reader` bounds every offset and length it reads with checked arithmetic and reports
+//! errors; it is not documented as panic-free, so this module was fuzzed (no `catch_unwind` is
+//! used in it): [`read_all`] over 65 420 corrupt copies of `single.hdf5` (a truncation every
+//! 97 bytes, each byte of the superblock/header region 0..2048 and of the metadata after `H`
+//! flipped three ways, 3 000 random 4-byte corruptions of those regions) returned an error or
+//! a capture every time, with no panic and no allocation beyond a 4 GB address-space limit;
+//! the same over `line.hdf5` (73 962 copies): no panic either. The unit tests repeat a small
+//! part of it.
+//!
+//! # Writing
+//!
+//! Not provided: `hdf5_reader` is read-only and vltm's outputs are `.npy` volumes. (The unit
+//! tests build format variants with the pure-Rust writer `hdf5-pure`, a dev-dependency.)
+
+use self::fields::*;
+use crate::error::{Error, Result};
+use crate::io::capture::{Capture, Geometry, RowSource};
+use hdf5_reader::{Dataset, Datatype, Hdf5File, SliceInfo, SliceInfoElem};
+use std::path::{Path, PathBuf};
+use vltm_kernel::Point;
+
+/// Element type of `H`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Elem {
+    F32,
+    F64,
+}
+
+/// An open `HDF5_TAL` capture that reads laser rows on demand ([`RowSource`]).
+pub struct TalReader {
+    path: PathBuf,
+    h: Dataset,
+    elem: Elem,
+    dims: Vec<usize>,
+    format: HFormat,
+    scan: ScanType,
+    geometry: Geometry,
+    options: TalOptions,
+    /// `c(x0)` of a single scan (the physical laser's falloff at its one spot), else `None`.
+    single_falloff: Option<f64>,
+    /// The rows read last.
+    block: Block,
+}
+
+impl std::fmt::Debug for TalReader {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TalReader")
+            .field("path", &self.path)
+            .field("dims", &self.dims)
+            .field("format", &self.format)
+            .field("scan", &self.scan)
+            .field("options", &self.options)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Opens an `HDF5_TAL` capture for streaming, with the default [`TalOptions`].
+///
+/// # Errors
+/// [`Error::Io`] if the file cannot be opened, [`Error::Format`] naming the dataset for anything
+/// malformed (module docs, *Errors and robustness*).
+pub fn open(path: &Path) -> Result<TalReader> {
+    open_with(path, TalOptions::default())
+}
+
+/// Opens an `HDF5_TAL` capture for streaming.
+///
+/// # Errors
+/// As [`open`].
+pub fn open_with(path: &Path, options: TalOptions) -> Result<TalReader> {
+    TalReader::new(path, options)
+}
+
+/// Reads a whole `HDF5_TAL` capture into memory, with the default [`TalOptions`].
+///
+/// # Errors
+/// As [`open`], plus read errors of any row.
+pub fn read_all(path: &Path) -> Result<Capture> {
+    read_all_with(path, TalOptions::default())
+}
+
+/// Reads a whole `HDF5_TAL` capture into memory, row by row (peak: the capture plus one row).
+///
+/// # Errors
+/// As [`read_all`].
+pub fn read_all_with(path: &Path, options: TalOptions) -> Result<Capture> {
+    open_with(path, options)?.into_capture()
+}
+
+impl TalReader {
+    fn new(path: &Path, options: TalOptions) -> Result<Self> {
+        let file = Hdf5File::open(path).map_err(|e| h5_error(path, "(file)", e))?;
+        let names = file
+            .root_group()
+            .and_then(|g| g.member_names())
+            .map_err(|e| h5_error(path, "(root group)", e))?
+            .1;
+        let f = Fields {
+            path,
+            file: &file,
+            names: &names,
+        };
+
+        // H: format, rank, element type, size.
+        let h = f.dataset("H")?;
+        let (fmt_value, fmt_name) = f.enum_scalar("H_format")?;
+        let format = HFormat::from_tal(fmt_value).ok_or_else(|| {
+            Error::format(
+                path,
+                "H_format",
+                "a tal HFormat: 1 T_Sx_Sy, 2 T_Lx_Ly_Sx_Sy, 3 T_Si or 4 T_Li_Si",
+                fmt_value,
+            )
+        })?;
+        if let Some(name) = fmt_name.filter(|n| n != format.tal_name()) {
+            return Err(Error::format(
+                path,
+                "H_format",
+                format!("tal's numbering ({fmt_value} = {})", format.tal_name()),
+                format!("{fmt_value} named {name}"),
+            ));
+        }
+        let dims: Vec<usize> = h.shape().iter().map(|&d| usize_of(d)).collect();
+        if dims.len() != format.rank() {
+            return Err(Error::format(
+                path,
+                "H",
+                format!("rank {} for H_format {}", format.rank(), format.tal_name()),
+                format!("shape {dims:?}"),
+            ));
+        }
+        let elem = match h.dtype() {
+            Datatype::FloatingPoint { size: 4, .. } => Elem::F32,
+            Datatype::FloatingPoint { size: 8, .. } => Elem::F64,
+            other => {
+                return Err(Error::format(
+                    path,
+                    "H",
+                    "float32 or float64 values",
+                    format!("{other:?}"),
+                ));
+            }
+        };
+        let elem_bytes: usize = if elem == Elem::F32 { 4 } else { 8 };
+        let h_bytes = dims.iter().try_fold(elem_bytes, |a, &d| a.checked_mul(d));
+        let file_len = std::fs::metadata(path)
+            .map_err(|e| Error::io(path, e))?
+            .len();
+        // A contiguous (or compact) H lies inside the file: refuse a declared size that cannot,
+        // before any buffer is sized from it. Chunked data may be compressed; its chunks are
+        // bounded by the crate's per-chunk limit.
+        if h.chunks().is_none() && h_bytes.is_none_or(|b| b as u64 > file_len) {
+            return Err(Error::format(
+                path,
+                "H",
+                format!("at most {file_len} bytes of data (the file's size)"),
+                format!("shape {dims:?} of {elem_bytes}-byte values"),
+            ));
+        }
+        let nt = dims[0];
+        let lead = &dims[1..];
+
+        // Grids, devices, time axis.
+        let lgrid = f.grid("laser_grid_xyz", "laser_grid_format")?;
+        let sgrid = f.grid("sensor_grid_xyz", "sensor_grid_format")?;
+        let laser_xyz = f.xyz("laser_xyz")?;
+        let sensor_xyz = f.xyz("sensor_xyz")?;
+        let dt = f.float_scalar("delta_t")?;
+        let t_start = f.float_scalar("t_start")?;
+        let legs_in_time = f.enum_scalar("t_accounts_first_and_last_bounces")?.0 != 0;
+
+        let (scan, lasers, laser_shape, spads, spad_shape) = match format {
+            HFormat::TLxLySxSy => {
+                let l = lgrid.fit(path, [lead[0], lead[1]])?;
+                let s = sgrid.fit(path, [lead[2], lead[3]])?;
+                (ScanType::Exhaustive, lgrid.points, l, sgrid.points, s)
+            }
+            HFormat::TLiSi => {
+                let l = lgrid.count(path, lead[0])?;
+                let s = sgrid.count(path, lead[1])?;
+                (ScanType::Exhaustive, lgrid.points, l, sgrid.points, s)
+            }
+            HFormat::TSxSy | HFormat::TSi => {
+                let s = if format == HFormat::TSxSy {
+                    sgrid.fit(path, [lead[0], lead[1]])?
+                } else {
+                    sgrid.count(path, lead[0])?
+                };
+                if allclose(&sgrid.points, &lgrid.points) {
+                    let pts = sgrid.points;
+                    (ScanType::Confocal, pts.clone(), s, pts, s)
+                } else if lgrid.points.len() == 1 {
+                    (ScanType::Single, sgrid.points, s, lgrid.points, [1, 1])
+                } else {
+                    return Err(Error::format(
+                        path,
+                        "laser_grid_xyz",
+                        format!(
+                            "one point (tal scan_type single) or the sensor grid (confocal) for H_format {}",
+                            format.tal_name()
+                        ),
+                        format!(
+                            "{} points that differ from the sensor grid (a paired scan, not supported)",
+                            lgrid.points.len()
+                        ),
+                    ));
+                }
+            }
+        };
+        let single = scan == ScanType::Single;
+        let (laser_origin, sensor_origin) = if single {
+            (sensor_xyz, laser_xyz)
+        } else {
+            (laser_xyz, sensor_xyz)
+        };
+        let geometry = Geometry {
+            lasers,
+            laser_shape,
+            spads,
+            spad_shape,
+            laser_origin,
+            sensor_origin,
+            legs_in_time,
+            confocal: scan == ScanType::Confocal,
+            nt,
+            dt,
+            t0: if options.bin_centre {
+                t_start + 0.5 * dt
+            } else {
+                t_start
+            },
+        };
+        geometry.validate(path)?;
+
+        let single_falloff = if single {
+            let physical = Geometry {
+                laser_origin: laser_xyz,
+                ..geometry.clone()
+            };
+            let c0 = physical.laser_falloff(geometry.spads[0]);
+            if !(c0.is_finite() && c0 > 0.0) {
+                return Err(Error::format(
+                    path,
+                    "laser_xyz",
+                    "a laser off the wall plane (the single-scan reciprocity factor divides by its cos θ / d²)",
+                    format!("{laser_xyz:?}"),
+                ));
+            }
+            let sensor_ok = geometry.lasers.iter().all(|&x| {
+                let c = geometry.laser_falloff(x);
+                c.is_finite() && c > 0.0
+            });
+            if !sensor_ok {
+                return Err(Error::format(
+                    path,
+                    "sensor_xyz",
+                    "a sensor off the wall plane (it is the laser of the reciprocal single scan)",
+                    format!("{sensor_xyz:?}"),
+                ));
+            }
+            Some(c0)
+        } else {
+            None
+        };
+
+        Ok(Self {
+            path: path.to_path_buf(),
+            h,
+            elem,
+            dims,
+            format,
+            scan,
+            geometry,
+            options,
+            single_falloff,
+            block: Block::default(),
+        })
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// tal's `H_format` of the file.
+    pub fn h_format(&self) -> HFormat {
+        self.format
+    }
+
+    /// The scan type inferred from `H_format` and the grids.
+    pub fn scan_type(&self) -> ScanType {
+        self.scan
+    }
+
+    /// The shape of `H` as stored (time first).
+    pub fn h_shape(&self) -> &[usize] {
+        &self.dims
+    }
+
+    /// The options the file was opened with.
+    pub fn options(&self) -> TalOptions {
+        self.options
+    }
+
+    /// Reads every row into a [`Capture`] (peak memory: the capture plus one row).
+    ///
+    /// # Errors
+    /// Read errors of any row; [`Error::Format`] if the capture does not fit in memory.
+    pub fn into_capture(mut self) -> Result<Capture> {
+        let g = self.geometry.clone();
+        let row_len = g.spads_per_row() * g.nt;
+        let mut data: Vec<f32> = Vec::new();
+        let total = g.lasers.len().checked_mul(row_len);
+        if total.is_none_or(|n| data.try_reserve_exact(n).is_err()) {
+            return Err(Error::format(
+                &self.path,
+                "H",
+                "a capture that fits in memory",
+                format!("shape {:?}", self.dims),
+            ));
+        }
+        let mut row = Vec::with_capacity(row_len);
+        for l in 0..g.lasers.len() {
+            self.read_row(l, &mut row)?;
+            data.extend_from_slice(&row);
+        }
+        Capture::new(g, data, &self.path)
+    }
+
+    /// Rows per block: consecutive rows along the last row axis whose hyperslab is read at
+    /// once, within [`BLOCK_BYTES`] (at least one row).
+    fn block_len(&self) -> usize {
+        let g = &self.geometry;
+        let row_bytes = (g.spads_per_row() * g.nt * 4).max(1);
+        let line = self.dims[self.format.row_axes()];
+        (BLOCK_BYTES / row_bytes).clamp(1, line.max(1))
+    }
+
+    /// Reads the block holding row `l` into `self.block`: `H[:, ix, iy0..iy0+B, ...]` (or
+    /// `H[:, l0..l0+B, ...]`), time-major.
+    fn load_block(&mut self, l: usize) -> Result<()> {
+        let all = |n: usize| SliceInfoElem::Slice {
+            start: 0,
+            end: n as u64,
+            step: 1,
+        };
+        let span = |a: usize, b: usize| SliceInfoElem::Slice {
+            start: a as u64,
+            end: b as u64,
+            step: 1,
+        };
+        let r = self.format.row_axes();
+        let line = self.dims[r];
+        let (ix, iy) = (l / line, l % line);
+        let b = self.block_len();
+        let y0 = iy / b * b;
+        let y1 = (y0 + b).min(line);
+        let mut selections = vec![all(self.dims[0])];
+        if r == 2 {
+            selections.push(SliceInfoElem::Index(ix as u64));
+        }
+        selections.push(span(y0, y1));
+        selections.extend(self.dims[1 + r..].iter().map(|&n| all(n)));
+        let sel = SliceInfo { selections };
+        // Free the previous block first: the read holds the raw bytes and the decoded values.
+        self.block = Block::default();
+        let field = |e| h5_error(&self.path, "H", e);
+        let v: Vec<f32> = match self.elem {
+            Elem::F32 => into_vec(self.h.read_slice::<f32>(&sel).map_err(field)?),
+            Elem::F64 => into_vec(self.h.read_slice::<f64>(&sel).map_err(field)?)
+                .into_iter()
+                .map(|x| x as f32)
+                .collect(),
+        };
+        let want = self.geometry.nt * (y1 - y0) * self.geometry.spads_per_row();
+        if v.len() != want {
+            return Err(Error::format(
+                &self.path,
+                "H",
+                format!(
+                    "{want} values in laser rows {}..{}",
+                    l - iy + y0,
+                    l - iy + y1
+                ),
+                v.len(),
+            ));
+        }
+        self.block = Block {
+            first: l - iy + y0,
+            rows: y1 - y0,
+            data: v,
+        };
+        Ok(())
+    }
+}
+
+/// Rows read from `H` at once (module docs, *Reading*): at most this many bytes, or one row.
+pub const BLOCK_BYTES: usize = 1 << 18;
+
+/// The cached hyperslab of consecutive rows `first..first + rows`, time-major:
+/// `data[(n·rows + r)·Ks + s]`.
+#[derive(Default)]
+struct Block {
+    first: usize,
+    rows: usize,
+    data: Vec<f32>,
+}
+
+impl RowSource for TalReader {
+    fn geometry(&self) -> &Geometry {
+        &self.geometry
+    }
+
+    fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
+        let kl = self.geometry.lasers.len();
+        if l >= kl {
+            return Err(Error::arg(
+                "laser row",
+                format!("{l} is out of range: the capture has {kl} rows"),
+            ));
+        }
+        if !(self.block.first..self.block.first + self.block.rows).contains(&l) {
+            self.load_block(l)?;
+        }
+        let (nt, ks) = (self.geometry.nt, self.geometry.spads_per_row());
+        let (r, rows) = (l - self.block.first, self.block.rows);
+        out.clear();
+        out.resize(nt * ks, 0.0);
+        // H is time-major: block[(n·rows + r)·Ks + s] → out[s·Nt + n].
+        for (n, t) in self.block.data.chunks_exact(rows * ks).enumerate() {
+            for (s, &x) in t[r * ks..(r + 1) * ks].iter().enumerate() {
+                out[s * nt + n] = x;
+            }
+        }
+        let x_l = self.geometry.lasers[l];
+        if let Some(c0) = self.single_falloff {
+            let k = self.geometry.laser_falloff(x_l) / c0;
+            out.iter_mut().for_each(|h| *h = (f64::from(*h) * k) as f32);
+        }
+        Ok(x_l)
+    }
+}
+
+mod fields;
+mod format;
+
+pub use format::{HFormat, ScanType, TalOptions};
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,589 @@
+//! Unit tests of the `HDF5_TAL` reader.
+
+use super::*;
+
+/// A capture of `../shared/data` (beside the repository).
+fn shared(capture: &str) -> PathBuf {
+    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"))
+        .join(capture)
+        .join(format!("{capture}.hdf5"))
+}
+
+/// A fresh scratch directory for one test.
+fn scratch(test: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("vltm-tal-{}-{test}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// The format error's field, or a failure message.
+fn format_field(r: Result<impl std::fmt::Debug>) -> String {
+    match r {
+        Err(Error::Format { field, .. }) => field,
+        other => panic!("expected a format error, got {other:?}"),
+    }
+}
+
+const ORIGIN: [f64; 3] = [-0.5, 0.0, 0.25];
+
+#[test]
+fn shared_captures_open_with_the_readme_geometry() {
+    for name in ["two_patches", "two_patches_direct_only"] {
+        let r = open(&shared(name)).unwrap();
+        assert_eq!(r.h_shape(), [400, 8, 8, 8, 8]);
+        assert_eq!(r.h_format(), HFormat::TLxLySxSy);
+        assert_eq!(r.scan_type(), ScanType::Exhaustive);
+        let g = r.geometry();
+        assert_eq!((g.lasers.len(), g.laser_shape), (64, [8, 8]));
+        assert_eq!((g.spads.len(), g.spad_shape), (64, [8, 8]));
+        // Cell centres ±0.1 … ±0.7, first index along +x (`l = ix·8 + iy`).
+        assert_eq!(g.lasers[0], [-0.7, -0.7, 0.0]);
+        assert_eq!(g.lasers[1], [-0.7, -0.5, 0.0]);
+        assert_eq!(g.lasers[8], [-0.5, -0.7, 0.0]);
+        assert_eq!(g.spads[63], [0.7, 0.7, 0.0]);
+        assert_eq!((g.nt, g.dt, g.t0), (400, 0.01, 1.0));
+        assert_eq!((g.laser_origin, g.sensor_origin), (ORIGIN, ORIGIN));
+        assert!(!g.legs_in_time && !g.confocal);
+    }
+
+    let r = open(&shared("line")).unwrap();
+    assert_eq!(r.h_shape(), [400, 12, 12, 12, 1]);
+    assert_eq!(r.scan_type(), ScanType::Exhaustive);
+    let g = r.geometry();
+    assert_eq!((g.lasers.len(), g.laser_shape), (144, [12, 12]));
+    assert_eq!((g.spads.len(), g.spad_shape), (12, [12, 1]));
+    assert!(g.spads.iter().all(|s| s[1] == 0.0 && s[2] == 0.0));
+    assert!((g.spads[0][0] + 0.733_333_3).abs() < 1e-6);
+    assert_eq!((g.nt, g.dt, g.t0), (400, 0.01, 0.9));
+    assert_eq!(g.spads_per_row(), 12);
+
+    // tal `single`: one laser spot, 16×16 SPADs → 16×16 lasers × 1 SPAD at the spot.
+    let r = open(&shared("single")).unwrap();
+    assert_eq!(r.h_shape(), [300, 16, 16]);
+    assert_eq!(r.h_format(), HFormat::TSxSy);
+    assert_eq!(r.scan_type(), ScanType::Single);
+    let g = r.geometry();
+    assert_eq!((g.lasers.len(), g.laser_shape), (256, [16, 16]));
+    assert_eq!(
+        (g.spads.clone(), g.spad_shape),
+        (vec![[0.25, -0.15, 0.0]], [1, 1])
+    );
+    assert_eq!(g.lasers[0], [-0.75, -0.75, 0.0]);
+    assert_eq!(g.lasers[10 * 16 + 6], [0.25, -0.15, 0.0]);
+    assert_eq!((g.nt, g.dt, g.t0), (300, 0.01, 1.5));
+    assert_eq!((g.laser_origin, g.sensor_origin), (ORIGIN, ORIGIN));
+    assert!(!g.confocal && !g.legs_in_time);
+}
+
+#[test]
+fn streamed_rows_equal_read_all_in_any_order() {
+    for name in ["two_patches", "line", "single"] {
+        let c = read_all(&shared(name)).unwrap();
+        let mut r = open(&shared(name)).unwrap();
+        assert_eq!(r.geometry(), &c.geometry);
+        let kl = c.geometry.lasers.len();
+        let mut row = Vec::new();
+        for l in (0..kl).rev().step_by(3).chain([0, kl / 2]) {
+            let x = r.read_row(l, &mut row).unwrap();
+            assert_eq!(x, c.geometry.lasers[l]);
+            assert_eq!(row.as_slice(), c.row(l), "{name}: row {l}");
+        }
+    }
+}
+
+/// Values read with h5py (`f["H"][t, lx, ly, sx, sy]`, float32 bit patterns) and the f64
+/// sums of all of `H` (`H.astype(np.float64).sum()`).
+#[test]
+fn values_match_h5py() {
+    let at = |c: &Capture, l: usize, s: usize, n: usize| c.row(l)[s * c.geometry.nt + n];
+    let c = read_all(&shared("two_patches")).unwrap();
+    // H[150, 3, 5, 2, 6] = 8.838952e-05, H[120, 4, 4, 4, 4] = 8.68398e-05, the maximum
+    // H[167, 1, 4, 1, 4] = 0.0071075666, H[200, 0, 7, 7, 0] = 0.
+    assert_eq!(at(&c, 3 * 8 + 5, 2 * 8 + 6, 150).to_bits(), 951_672_259);
+    assert_eq!(at(&c, 4 * 8 + 4, 4 * 8 + 4, 120).to_bits(), 951_459_267);
+    assert_eq!(at(&c, 8 + 4, 8 + 4, 167).to_bits(), 1_005_119_127);
+    assert_eq!(at(&c, 7, 7 * 8, 200), 0.0);
+    let max = c.data.iter().copied().fold(f32::MIN, f32::max);
+    assert_eq!(max.to_bits(), 1_005_119_127);
+    let sum: f64 = c.data.iter().map(|&h| f64::from(h)).sum();
+    assert!((sum / 12.316_197_417_224_396 - 1.0).abs() < 1e-12, "{sum}");
+
+    let c = read_all(&shared("line")).unwrap();
+    // H[130, 2, 9, 5, 0] = 0.00010940093, H[250, 11, 0, 0, 0] = 4.121247e-09.
+    assert_eq!(at(&c, 2 * 12 + 9, 5, 130).to_bits(), 954_560_045);
+    assert_eq!(at(&c, 11 * 12, 0, 250).to_bits(), 831_363_807);
+    let sum: f64 = c.data.iter().map(|&h| f64::from(h)).sum();
+    assert!((sum / 32.913_522_176_732_46 - 1.0).abs() < 1e-12, "{sum}");
+
+    // single: H[45, 3, 3] = 0.0002095045 times c'(S[3, 3]) / c(x0); c(x0) = 0.47982221114
+    // (numpy, float64), c'(S[3, 3]) = 1.80698418831.
+    let c = read_all(&shared("single")).unwrap();
+    let g = &c.geometry;
+    let raw = f64::from(f32::from_bits(962_309_744));
+    let c0 = 0.479_822_211_140_720_4;
+    let cs = g.laser_falloff(g.lasers[3 * 16 + 3]);
+    assert!((cs - 1.806_984_188_306_343_8).abs() < 1e-9, "{cs}");
+    assert_eq!(at(&c, 3 * 16 + 3, 0, 45), (raw * cs / c0) as f32);
+    // Σ_l Σ_t H[t, l]·c'(S_l)/c(x0) = 1.4848346794 (numpy); after --compensate-laser every
+    // row is H / c(x0): Σ = 0.8313117163, y-tal's compensate_laser_cos_dsqr.
+    let kl = g.lasers.len();
+    let sum: f64 = c.data.iter().map(|&h| f64::from(h)).sum();
+    assert!((sum / 1.484_834_679_407_712_3 - 1.0).abs() < 1e-6, "{sum}");
+    let comp: f64 = (0..kl)
+        .map(|l| c.row(l).iter().map(|&h| f64::from(h)).sum::<f64>() / g.laser_falloff(g.lasers[l]))
+        .sum();
+    assert!(
+        (comp / 0.831_311_716_266_990_7 - 1.0).abs() < 1e-6,
+        "{comp}"
+    );
+}
+
+#[test]
+fn bin_centre_moves_t0_by_half_a_bin_only() {
+    let a = read_all_with(&shared("line"), TalOptions::YTAL).unwrap();
+    let b = read_all_with(&shared("line"), TalOptions::BIN_CENTRE).unwrap();
+    assert_eq!(TalOptions::default(), TalOptions::YTAL);
+    assert!((b.geometry.t0 - 0.905).abs() < 1e-12);
+    assert_eq!(a.data, b.data);
+    assert_eq!(
+        Geometry {
+            t0: a.geometry.t0,
+            ..b.geometry
+        },
+        a.geometry
+    );
+}
+
+#[test]
+fn capture_open_dispatches_hdf5_and_h5() {
+    let a = crate::io::open(&shared("single")).unwrap();
+    let dir = scratch("h5");
+    let p = dir.join("copy.H5");
+    std::fs::copy(shared("single"), &p).unwrap();
+    let b = crate::io::open(&p).unwrap();
+    assert_eq!(a, b);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn bad_row_and_missing_file() {
+    let mut r = open(&shared("single")).unwrap();
+    let mut row = Vec::new();
+    assert!(matches!(
+        r.read_row(256, &mut row),
+        Err(Error::Argument { .. })
+    ));
+    let e = open(Path::new("/nonexistent/x.hdf5")).unwrap_err();
+    assert!(matches!(e, Error::Io { .. }), "{e}");
+    assert!(e.to_string().contains("/nonexistent/x.hdf5"));
+}
+
+/// Truncated and byte-corrupted copies: every outcome is `Ok` or an `Error`, never a panic;
+/// every truncation and a broken signature are errors.
+#[test]
+fn corrupt_files_are_errors_not_panics() {
+    let orig = std::fs::read(shared("single")).unwrap();
+    let n = orig.len();
+    let dir = scratch("corrupt");
+    let p = dir.join("c.hdf5");
+    let attempt = |bytes: &[u8]| -> Result<Capture> {
+        std::fs::write(&p, bytes).unwrap();
+        read_all(&p)
+    };
+    // H's data starts at byte 2048 (h5py), the other datasets and the metadata follow it.
+    for cut in [
+        0,
+        1,
+        7,
+        8,
+        100,
+        512,
+        1000,
+        2047,
+        2048,
+        2049,
+        4096,
+        n / 2,
+        309_248,
+        n - 100,
+        n - 1,
+    ] {
+        let r = attempt(&orig[..cut]);
+        assert!(r.is_err(), "truncated at {cut} of {n}: read");
+        assert!(!r.unwrap_err().to_string().is_empty());
+    }
+    let mut bad = orig.clone();
+    bad[1] ^= 0xFF; // the "\x89HDF" signature
+    let e = attempt(&bad).unwrap_err();
+    assert!(
+        matches!(e, Error::Format { ref field, .. } if field == "(file)"),
+        "{e}"
+    );
+    let mut errors = 0;
+    let positions = (0..2048).step_by(16).chain((309_248..n).step_by(64));
+    for (k, i) in positions.enumerate() {
+        let mut b = orig.clone();
+        b[i] ^= [0xFF, 0x01, 0x80][k % 3];
+        if let Err(e) = attempt(&b) {
+            errors += 1;
+            assert!(e.to_string().contains("c.hdf5"), "{e}");
+        }
+    }
+    assert!(errors > 50, "only {errors} corrupt copies were refused");
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// What a synthetic tal file holds (written with `hdf5-pure`).
+struct Spec {
+    h_shape: Vec<u64>,
+    h_format: i32,
+    /// Write `H_format` as tal's named enum (else a plain int32).
+    enum_names: Option<Vec<(&'static str, i32)>>,
+    h_f64: bool,
+    h_int: bool,
+    chunks: Option<Vec<u64>>,
+    laser_grid: (Vec<f32>, Vec<u64>),
+    sensor_grid: (Vec<f32>, Vec<u64>),
+    laser_grid_format: Option<i32>,
+    laser_xyz: [f32; 3],
+    sensor_xyz: [f32; 3],
+    delta_t: f64,
+    t_start: f64,
+    legs: u8,
+    skip: &'static str,
+}
+
+/// Value of `H` at `(t, a, b, ...)` in C order: `t·10⁴ + (flat index of the rest)`.
+fn pattern(shape: &[u64]) -> Vec<f64> {
+    let rest: u64 = shape[1..].iter().product();
+    (0..shape[0] * rest)
+        .map(|i| ((i / rest) * 10_000 + i % rest) as f64)
+        .collect()
+}
+
+/// `n` grid points `(x_i, y_j, 0)` on a 0.1 m pitch, shape `(nx, ny, 3)` or `(n, 3)`.
+fn grid(nx: u64, ny: u64, n3: bool, dx: f32) -> (Vec<f32>, Vec<u64>) {
+    let mut v = Vec::new();
+    for i in 0..nx {
+        for j in 0..ny {
+            v.extend([0.1 * i as f32 - 0.2 + dx, 0.1 * j as f32 - 0.1, 0.0]);
+        }
+    }
+    let shape = if n3 {
+        vec![nx * ny, 3]
+    } else {
+        vec![nx, ny, 3]
+    };
+    (v, shape)
+}
+
+impl Spec {
+    fn exhaustive() -> Self {
+        Self {
+            h_shape: vec![5, 3, 2, 4, 2],
+            h_format: 2,
+            enum_names: None,
+            h_f64: false,
+            h_int: false,
+            chunks: None,
+            laser_grid: grid(3, 2, false, 0.0),
+            sensor_grid: grid(4, 2, false, 0.0),
+            laser_grid_format: None,
+            laser_xyz: [-0.5, 0.0, 0.25],
+            sensor_xyz: [0.5, 0.125, 0.375],
+            delta_t: 0.02,
+            t_start: 0.5,
+            legs: 1,
+            skip: "",
+        }
+    }
+
+    fn write(&self, path: &Path) {
+        use hdf5_pure::{EnumTypeBuilder, FileBuilder};
+        let mut b = FileBuilder::new();
+        let h = pattern(&self.h_shape);
+        if self.skip != "H" {
+            let d = b.create_dataset("H");
+            if self.h_int {
+                d.with_i32_data(&h.iter().map(|&x| x as i32).collect::<Vec<_>>());
+            } else if self.h_f64 {
+                d.with_f64_data(&h);
+            } else {
+                d.with_f32_data(&h.iter().map(|&x| x as f32).collect::<Vec<_>>());
+            }
+            d.with_shape(&self.h_shape);
+            if let Some(c) = &self.chunks {
+                d.with_chunks(c).with_deflate(4);
+            }
+        }
+        if self.skip != "H_format" {
+            let d = b.create_dataset("H_format");
+            match &self.enum_names {
+                Some(names) => {
+                    let t = names
+                        .iter()
+                        .fold(EnumTypeBuilder::i32_based(), |t, &(n, v)| t.value(n, v))
+                        .build()
+                        .unwrap();
+                    d.with_enum_i32_data(t, &[self.h_format]);
+                }
+                None => {
+                    d.with_i32_data(&[self.h_format]);
+                }
+            }
+            d.with_shape(&[1]);
+        }
+        for (name, (v, shape)) in [
+            ("laser_grid_xyz", &self.laser_grid),
+            ("sensor_grid_xyz", &self.sensor_grid),
+        ] {
+            if self.skip != name {
+                b.create_dataset(name).with_f32_data(v).with_shape(shape);
+            }
+        }
+        if let Some(g) = self.laser_grid_format {
+            b.create_dataset("laser_grid_format")
+                .with_i32_data(&[g])
+                .with_shape(&[1]);
+        }
+        for (name, v) in [
+            ("laser_xyz", self.laser_xyz),
+            ("sensor_xyz", self.sensor_xyz),
+        ] {
+            if self.skip != name {
+                b.create_dataset(name).with_f32_data(&v).with_shape(&[3]);
+            }
+        }
+        for (name, v) in [("delta_t", self.delta_t), ("t_start", self.t_start)] {
+            if self.skip != name {
+                b.create_dataset(name).with_f64_data(&[v]).with_shape(&[]);
+            }
+        }
+        if self.skip != "t_accounts_first_and_last_bounces" {
+            b.create_dataset("t_accounts_first_and_last_bounces")
+                .with_u8_data(&[self.legs])
+                .with_shape(&[]);
+        }
+        b.write(path).unwrap();
+    }
+
+    fn open(&self, dir: &Path, name: &str) -> Result<TalReader> {
+        let p = dir.join(format!("{name}.hdf5"));
+        self.write(&p);
+        open(&p)
+    }
+}
+
+/// Checks every row of `r` against the pattern: row `l`, SPAD `s`, bin `n` holds
+/// `n·10⁴ + index(l, s)` times `scale(l)`.
+fn check_rows(r: &mut TalReader, index: impl Fn(usize, usize) -> usize) {
+    let g = r.geometry().clone();
+    let mut row = Vec::new();
+    for l in 0..g.lasers.len() {
+        assert_eq!(r.read_row(l, &mut row).unwrap(), g.lasers[l]);
+        for s in 0..g.spads_per_row() {
+            for n in 0..g.nt {
+                let want = (n * 10_000 + index(l, s)) as f32;
+                assert_eq!(row[s * g.nt + n], want, "row {l}, SPAD {s}, bin {n}");
+            }
+        }
+    }
+}
+
+#[test]
+fn synthetic_formats_stream_the_right_values() {
+    let dir = scratch("formats");
+    // T_Lx_Ly_Sx_Sy, contiguous f32, and chunked + gzip f64, with the named tal enum.
+    let mut spec = Spec::exhaustive();
+    spec.enum_names = Some(vec![
+        ("UNKNOWN", 0),
+        ("T_Sx_Sy", 1),
+        ("T_Lx_Ly_Sx_Sy", 2),
+        ("T_Si", 3),
+        ("T_Li_Si", 4),
+    ]);
+    for (k, chunks) in [None, Some(vec![2, 1, 2, 4, 2])].into_iter().enumerate() {
+        spec.chunks = chunks;
+        spec.h_f64 = k == 1;
+        let mut r = spec.open(&dir, &format!("exhaustive{k}")).unwrap();
+        let g = r.geometry().clone();
+        assert_eq!((g.laser_shape, g.spad_shape, g.nt), ([3, 2], [4, 2], 5));
+        assert_eq!((g.dt, g.t0, g.legs_in_time), (0.02, 0.5, true));
+        assert_eq!(
+            (g.laser_origin, g.sensor_origin),
+            ([-0.5, 0.0, 0.25], [0.5, 0.125, 0.375])
+        );
+        check_rows(&mut r, |l, s| l * 8 + s);
+    }
+
+    // Rows of 120 kB: blocks of 2 rows (BLOCK_BYTES), lines of 5 end in a partial block;
+    // rows read in a scrambled order.
+    let mut spec = Spec::exhaustive();
+    spec.h_shape = vec![30, 2, 5, 10, 100];
+    spec.laser_grid = grid(2, 5, false, 0.0);
+    spec.sensor_grid = grid(10, 100, false, 0.0);
+    let mut r = spec.open(&dir, "blocks").unwrap();
+    assert_eq!(r.block_len(), 2);
+    let mut row = Vec::new();
+    for l in [9, 0, 4, 5, 3, 8, 1, 2, 7, 6, 6, 9] {
+        r.read_row(l, &mut row).unwrap();
+        for s in [0, 1, 499, 999] {
+            for n in [0, 17, 29] {
+                assert_eq!(row[s * 30 + n], (n * 10_000 + l * 1000 + s) as f32);
+            }
+        }
+    }
+    check_rows(&mut r, |l, s| l * 1000 + s);
+
+    // T_Li_Si with N_3 grids.
+    let mut spec = Spec::exhaustive();
+    spec.h_shape = vec![4, 6, 3];
+    spec.h_format = 4;
+    spec.laser_grid = grid(3, 2, true, 0.0);
+    spec.sensor_grid = grid(3, 1, true, 0.0);
+    spec.laser_grid_format = Some(1);
+    let mut r = spec.open(&dir, "lisi").unwrap();
+    assert_eq!(r.scan_type(), ScanType::Exhaustive);
+    assert_eq!(
+        (r.geometry().laser_shape, r.geometry().spad_shape),
+        ([6, 1], [3, 1])
+    );
+    check_rows(&mut r, |l, s| l * 3 + s);
+
+    // T_Sx_Sy confocal (laser grid = sensor grid) and T_Si confocal.
+    let mut spec = Spec::exhaustive();
+    spec.h_shape = vec![6, 3, 2];
+    spec.h_format = 1;
+    spec.laser_grid = grid(3, 2, false, 0.0);
+    spec.sensor_grid = grid(3, 2, false, 0.0);
+    let mut r = spec.open(&dir, "confocal").unwrap();
+    assert_eq!(r.scan_type(), ScanType::Confocal);
+    assert!(r.geometry().confocal && r.geometry().spads_per_row() == 1);
+    assert_eq!(r.geometry().laser_shape, [3, 2]);
+    check_rows(&mut r, |l, _| l);
+    spec.h_shape = vec![6, 6];
+    spec.h_format = 3;
+    spec.laser_grid = grid(3, 2, true, 0.0);
+    spec.sensor_grid = grid(3, 2, true, 0.0);
+    let mut r = spec.open(&dir, "confocal_si").unwrap();
+    assert_eq!(r.scan_type(), ScanType::Confocal);
+    assert_eq!(r.geometry().laser_shape, [6, 1]);
+    check_rows(&mut r, |l, _| l);
+
+    // T_Si single: one laser point → the sensor points become lasers, with the factor.
+    spec.laser_grid = (vec![0.05, 0.02, 0.0], vec![1, 1, 3]);
+    let mut r = spec.open(&dir, "single_si").unwrap();
+    assert_eq!(r.scan_type(), ScanType::Single);
+    let g = r.geometry().clone();
+    assert_eq!(
+        (g.spads.clone(), g.spad_shape),
+        (vec![[0.05, 0.02, 0.0]], [1, 1])
+    );
+    assert_eq!(
+        (g.laser_origin, g.sensor_origin),
+        ([0.5, 0.125, 0.375], [-0.5, 0.0, 0.25])
+    );
+    let physical = Geometry {
+        laser_origin: [-0.5, 0.0, 0.25],
+        ..g.clone()
+    };
+    let c0 = physical.laser_falloff(g.spads[0]);
+    let mut row = Vec::new();
+    for l in 0..6 {
+        r.read_row(l, &mut row).unwrap();
+        let k = g.laser_falloff(g.lasers[l]) / c0;
+        for (n, &h) in row.iter().enumerate() {
+            assert_eq!(h, (((n * 10_000 + l) as f64) * k) as f32);
+        }
+    }
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn malformed_fields_name_the_field() {
+    let dir = scratch("malformed");
+    let case = |name: &str, edit: &dyn Fn(&mut Spec)| {
+        let mut s = Spec::exhaustive();
+        edit(&mut s);
+        format_field(s.open(&dir, name))
+    };
+    for missing in [
+        "H",
+        "H_format",
+        "laser_grid_xyz",
+        "sensor_grid_xyz",
+        "laser_xyz",
+        "sensor_xyz",
+        "delta_t",
+        "t_start",
+        "t_accounts_first_and_last_bounces",
+    ] {
+        assert_eq!(case(missing, &|s| s.skip = missing), missing);
+    }
+    assert_eq!(case("dt_nan", &|s| s.delta_t = f64::NAN), "delta_t");
+    assert_eq!(case("dt_inf", &|s| s.delta_t = f64::INFINITY), "delta_t");
+    assert_eq!(case("dt_zero", &|s| s.delta_t = 0.0), "delta_t");
+    assert_eq!(case("t0_nan", &|s| s.t_start = f64::NAN), "t_start");
+    assert_eq!(case("fmt_unknown", &|s| s.h_format = 0), "H_format");
+    assert_eq!(case("fmt_7", &|s| s.h_format = 7), "H_format");
+    // An enum whose names disagree with tal's numbering.
+    assert_eq!(
+        case("fmt_names", &|s| s.enum_names =
+            Some(vec![("T_Si", 2), ("T_Lx_Ly_Sx_Sy", 3)])),
+        "H_format"
+    );
+    assert_eq!(case("rank", &|s| s.h_format = 4), "H");
+    assert_eq!(case("int_h", &|s| s.h_int = true), "H");
+    assert_eq!(
+        case("lgrid", &|s| s.laser_grid = grid(2, 3, false, 0.0)),
+        "laser_grid_xyz"
+    );
+    assert_eq!(
+        case("sgrid", &|s| s.sensor_grid = grid(4, 1, false, 0.0)),
+        "sensor_grid_xyz"
+    );
+    assert_eq!(
+        case("grid_rank", &|s| s.laser_grid =
+            (vec![0.0; 18], vec![6, 3, 1])),
+        "laser_grid_xyz"
+    );
+    assert_eq!(
+        case("grid_fmt", &|s| s.laser_grid_format = Some(1)),
+        "laser_grid_format"
+    );
+    // A paired, non-confocal T_Sx_Sy scan (each point its own shifted laser).
+    assert_eq!(
+        case("paired", &|s| {
+            s.h_shape = vec![5, 3, 2];
+            s.h_format = 1;
+            s.sensor_grid = grid(3, 2, false, 0.0);
+            s.laser_grid = grid(3, 2, false, 0.05);
+        }),
+        "laser_grid_xyz"
+    );
+    // The single-scan reciprocity factor needs both devices off the wall plane.
+    let single = |s: &mut Spec| {
+        s.h_shape = vec![5, 3, 2];
+        s.h_format = 1;
+        s.sensor_grid = grid(3, 2, false, 0.0);
+        s.laser_grid = (vec![0.0, 0.0, 0.0], vec![1, 1, 3]);
+    };
+    let laser_in_wall = |s: &mut Spec| {
+        single(s);
+        s.laser_xyz = [-0.5, 0.0, 0.0];
+    };
+    let sensor_in_wall = |s: &mut Spec| {
+        single(s);
+        s.sensor_xyz = [0.5, 0.0, 0.0];
+    };
+    assert_eq!(case("laser_in_wall", &laser_in_wall), "laser_xyz");
+    assert_eq!(case("sensor_in_wall", &sensor_in_wall), "sensor_xyz");
+    let mut s = Spec::exhaustive();
+    single(&mut s);
+    assert_eq!(
+        s.open(&dir, "single_ok").unwrap().scan_type(),
+        ScanType::Single
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}

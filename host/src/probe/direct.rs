@@ -1,0 +1,314 @@
+//! Direct light: the diagonal `T(x_v, x_v)` (Eqs. 11–12) on the cheapest applicable path
+//! (planar FFT convolution, baseband lookup or the kernel's band sum, DESIGN §B.8).
+
+use super::drive::*;
+use super::wave::*;
+use crate::error::{Error, Result};
+use crate::exec::{Exec, Path};
+use crate::io::capture::{Geometry, RowSource};
+use crate::probe::fast::{Lookup, Planar, planar};
+use crate::volume::Volume;
+use num_complex::Complex64;
+use rayon::prelude::*;
+use std::time::Instant;
+use vltm_kernel::{Config, Gate, Point, Probe, Report, Scan, Target};
+
+/// Direct light: the diagonal over `volume` (Eqs. 11–12), on the path chosen by
+/// [`Exec::path`] (the planar FFT convolution when it applies and is cheaper, else the
+/// kernel's band sum).
+///
+/// # Errors
+/// Configuration, read and kernel errors; [`Error::Argument`] (`--path`) when the planar
+/// path is forced and does not apply.
+pub fn direct(
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    wave: &Wave,
+    exec: Exec<'_>,
+) -> Result<Output> {
+    let t = Instant::now();
+    let cfg = wave.config(src.geometry())?;
+    let job = Job {
+        cfg: &cfg,
+        wave,
+        exec,
+    };
+    let g = src.geometry();
+    if g.confocal && exec.path == Path::Lookup {
+        return Err(Error::arg(
+            "--path",
+            "the lookup path does not apply to a confocal capture (use band)",
+        ));
+    }
+    let band_cost = band_flops(g, &cfg, volume.len());
+    let lookup_cost = (!g.confocal).then(|| {
+        let l = Lookup::new(&cfg).grid_len() as f64;
+        let ks = g.spads_per_row() as f64;
+        // One complex inverse FFT per SPAD, then E0 + 16 flops per (voxel, SPAD) (§B.8).
+        ks * 5.0 * l * l.log2() + volume.len() as f64 * ks * 76.0
+    });
+    // Planar competes with the cheaper of band and lookup under `Auto`.
+    let rival = lookup_cost.map_or(band_cost, |l| l.min(band_cost));
+    if let Some(planar) = choose_planar(g, &cfg, volume, exec.path, PlanarUse::Diagonal, rival)? {
+        let (values, report) = direct_planar(src, job, volume, &planar)?;
+        return Ok(Output {
+            values,
+            report,
+            seconds: t.elapsed().as_secs_f64(),
+            config: cfg,
+            path: Path::Planar,
+        });
+    }
+    if exec.path == Path::Lookup
+        || (exec.path == Path::Auto && lookup_cost.is_some_and(|l| l < band_cost))
+    {
+        let (values, report) = direct_lookup(src, job, volume)?;
+        return Ok(Output {
+            values,
+            report,
+            seconds: t.elapsed().as_secs_f64(),
+            config: cfg,
+            path: Path::Lookup,
+        });
+    }
+    let (v, report) = elementwise(
+        src,
+        job,
+        Target::Diagonal,
+        Gate::Gaussian,
+        &volume.points,
+        "direct",
+    )?;
+    Ok(Output {
+        values: v.iter().map(|&x| x as f32).collect(),
+        report,
+        seconds: t.elapsed().as_secs_f64(),
+        config: cfg,
+        path: Path::Band,
+    })
+}
+
+/// What the planar convolution would be used for (its cost differs).
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(super) enum PlanarUse {
+    /// Per row, for the diagonal.
+    Diagonal,
+    /// Once, to image a factorised column.
+    Column,
+}
+
+/// Flops per row of the kernel's band sum over `n_voxels` (DESIGN §B.8: `Kv·Ks·(14J + E0)`).
+pub(super) fn band_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
+    n_voxels as f64 * g.spads_per_row() as f64 * (14.0 * cfg.bins() as f64 + 60.0)
+}
+
+/// The planar convolution for this probe, if [`Exec::path`] allows it, it applies and (for
+/// [`Path::Auto`]) it costs fewer flops than `rival`, the cheapest other path (DESIGN §B.8
+/// cost model, per row for the diagonal, once for a column's imaging).
+pub(super) fn choose_planar(
+    g: &Geometry,
+    cfg: &Config,
+    volume: &Volume,
+    path: Path,
+    usage: PlanarUse,
+    rival: f64,
+) -> Result<Option<Planar>> {
+    if matches!(path, Path::Band | Path::Lookup) {
+        return Ok(None);
+    }
+    let why = if g.confocal {
+        Err("a confocal capture has no SPAD grid".to_string())
+    } else if volume.axes.is_none() {
+        Err("the volume is a point list, not a grid".to_string())
+    } else {
+        Ok(())
+    };
+    let planar = why.and_then(|()| Planar::new(cfg, &g.spads, &volume.points, volume.shape));
+    match (planar, path) {
+        (Err(e), Path::Planar) => Err(Error::arg(
+            "--path",
+            format!("the planar FFT path does not apply: {e}"),
+        )),
+        (Err(_), _) => Ok(None),
+        (Ok(p), Path::Planar) => Ok(Some(p)),
+        (Ok(p), _) => {
+            let (mx, my, slices) = p.shape();
+            let m = (mx * my) as f64;
+            let j = cfg.bins() as f64;
+            // Complex FFTs of M points, 5·M·log₂M (§B.8), pruned inverse ones about half that.
+            let f = 5.0 * m * m.log2();
+            let per_row =
+                j * (f + slices as f64 * (6.0 * m + 0.75 * f)) + volume.len() as f64 * 8.0 * j;
+            // The column images once; its table costs `slices·J` forward FFTs.
+            let planar = match usage {
+                PlanarUse::Diagonal => per_row,
+                PlanarUse::Column => per_row + slices as f64 * j * f,
+            };
+            Ok((planar < rival).then_some(p))
+        }
+    }
+}
+
+/// Voxels that have some (laser, SPAD) path outside the guard interval: the band path zeroes
+/// those paths, the convolution cannot, so these voxels are evaluated on the band path.
+pub(super) fn outside_guard(g: &Geometry, cfg: &Config, voxels: &[Point]) -> Vec<bool> {
+    let (d1, d4) = legs(g, cfg);
+    let (lo, hi) = cfg.guard();
+    let range = |pts: &[Point], legs: &[f64], v: &Point| {
+        pts.iter()
+            .zip(legs)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (p, d)| {
+                let x = dist(*p, *v) as f64 + d;
+                (a.min(x), b.max(x))
+            })
+    };
+    voxels
+        .par_iter()
+        .map(|v| {
+            let (l0, l1) = range(&g.lasers, &d1, v);
+            let (s0, s1) = range(&g.spads, &d4, v);
+            // A margin of 1e-4·σ for the f32 path lengths of the kernel.
+            let m = 1e-4 * cfg.sigma();
+            l0 + s0 - cfg.t0() < lo + m || l1 + s1 - cfg.t0() > hi - m
+        })
+        .collect()
+}
+
+/// The diagonal by the baseband lookup, rows in parallel (one scratch and accumulator per
+/// thread). The lookup applies the guard itself.
+pub(super) fn direct_lookup(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    volume: &Volume,
+) -> Result<(Vec<f32>, Report)> {
+    let cfg = job.cfg;
+    let g = src.geometry().clone();
+    let ks = g.spads.len();
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+    let scan = Scan::new(cfg, &g.spads, &mut tables)?;
+    let lookup = Lookup::new(cfg);
+    let nw = rayon::current_num_threads().max(1);
+    let workers: Vec<_> = (0..nw)
+        .map(|_| {
+            (
+                lookup.scratch(ks),
+                vec![Complex64::new(0.0, 0.0); volume.len()],
+                Report::default(),
+            )
+        })
+        .collect();
+    let pts = &volume.points;
+    let workers = drive_rows(src, job, &scan, "direct", workers, |(s, acc, r), row| {
+        lookup.apply(&scan, row, pts, s, acc);
+        r.rows += 1;
+        r.non_finite += u64::from(row.non_finite());
+        Ok(())
+    })?;
+    let mut acc = vec![Complex64::new(0.0, 0.0); volume.len()];
+    let mut report = Report::default();
+    for (_, a, r) in workers {
+        for (x, y) in acc.iter_mut().zip(&a) {
+            *x += y;
+        }
+        report.rows += r.rows;
+        report.non_finite += r.non_finite;
+    }
+    Ok((acc.iter().map(|a| a.norm_sqr() as f32).collect(), report))
+}
+
+/// Per-thread state of the planar diagonal.
+pub(super) struct DiagWorker<'a> {
+    scratch: planar::Scratch,
+    acc: Vec<Complex64>,
+    fallback: Option<Probe<'a>>,
+    rows: u64,
+    non_finite: u64,
+}
+
+/// The diagonal by the planar FFT convolution, rows in parallel; voxels with paths outside
+/// the guard on the kernel's band path.
+pub(super) fn direct_planar(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    volume: &Volume,
+    planar: &Planar,
+) -> Result<(Vec<f32>, Report)> {
+    let cfg = job.cfg;
+    let g = src.geometry().clone();
+    let skip = outside_guard(&g, cfg, &volume.points);
+    let fb_idx: Vec<usize> = (0..skip.len()).filter(|&i| skip[i]).collect();
+    let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| volume.points[i]).collect();
+    let ks = g.spads.len();
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+    let scan = Scan::new(cfg, &g.spads, &mut tables)?;
+    let nw = rayon::current_num_threads().max(1);
+    let n_state = Probe::state_len(cfg, Target::Diagonal, Gate::Gaussian, fb_pts.len(), ks);
+    let mut states: Vec<Vec<f64>> = (0..nw).map(|_| vec![0.0; n_state]).collect();
+    let mut workers = Vec::with_capacity(nw);
+    for st in &mut states {
+        let fallback = if fb_pts.is_empty() {
+            None
+        } else {
+            Some(Probe::new(
+                &scan,
+                Target::Diagonal,
+                Gate::Gaussian,
+                &fb_pts,
+                st,
+            )?)
+        };
+        workers.push(DiagWorker {
+            scratch: planar.scratch(),
+            acc: vec![Complex64::new(0.0, 0.0); volume.len()],
+            fallback,
+            rows: 0,
+            non_finite: 0,
+        });
+    }
+    let pts = &volume.points;
+    let workers = drive_rows(src, job, &scan, "direct", workers, |w, row| {
+        let laser = row.laser();
+        planar.apply(
+            row.band(),
+            pts,
+            |v| {
+                let d = dist(laser, *v);
+                (d, cfg.weight(d))
+            },
+            &skip,
+            &mut w.scratch,
+            &mut w.acc,
+        );
+        if let Some(p) = &mut w.fallback {
+            p.push_row(&scan, row)?;
+        }
+        w.rows += 1;
+        w.non_finite += u64::from(row.non_finite());
+        Ok(())
+    })?;
+    let mut acc = vec![Complex64::new(0.0, 0.0); volume.len()];
+    let mut report = Report::default();
+    let mut merged: Option<Probe<'_>> = None;
+    for w in workers {
+        for (a, b) in acc.iter_mut().zip(&w.acc) {
+            *a += b;
+        }
+        report.rows += w.rows;
+        report.non_finite += w.non_finite;
+        if let Some(p) = w.fallback {
+            match &mut merged {
+                None => merged = Some(p),
+                Some(m) => m.merge(&p)?,
+            }
+        }
+    }
+    let mut values: Vec<f32> = acc.iter().map(|a| a.norm_sqr() as f32).collect();
+    if let Some(m) = merged {
+        let mut out = vec![0.0f64; fb_pts.len()];
+        m.finish(&scan, &mut out)?;
+        for (&i, v) in fb_idx.iter().zip(out) {
+            values[i] = v as f32;
+        }
+    }
+    Ok((values, report))
+}

@@ -1,0 +1,217 @@
+//! Streaming the rows of a capture through the kernel: stage 1 (band spectra) of every row
+//! once, handed to the probes sequentially ([`drive`]) or to one worker per thread in
+//! parallel ([`drive_rows`]); element-wise probes over voxel chunks ([`elementwise`]).
+//! Memory: `2·threads` rows of histograms and one row buffer per worker, never the capture.
+
+use super::wave::*;
+use crate::error::{Error, Result};
+use crate::exec::{Exec, Pass, chunk_len, row_batch};
+use crate::io::capture::{Geometry, RowSource};
+use crate::probe::fast::BandDft;
+use rayon::prelude::*;
+use std::sync::Mutex;
+use vltm_kernel::{Config, Gate, Point, Probe, Report, Row, RowBuffer, Scan, Target};
+
+/// What every pass needs: the kernel configuration and the user's options.
+#[derive(Clone, Copy)]
+pub(super) struct Job<'a> {
+    pub(super) cfg: &'a Config,
+    pub(super) wave: &'a Wave,
+    pub(super) exec: Exec<'a>,
+}
+
+/// Streams every row of `src` through `push` with the row's spectra (computed once per row).
+pub(super) fn drive(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    label: &str,
+    mut push: impl FnMut(&Scan<'_>, &Row<'_, f32>) -> Result<()>,
+) -> Result<()> {
+    let Job { cfg, wave, exec } = job;
+    let g = src.geometry().clone();
+    check_laser_falloff(&g, wave)?;
+    let dft = BandDft::new(cfg);
+    let mut clean = Vec::new();
+    let ks = g.spads_per_row();
+    let mut tables = if g.confocal {
+        Vec::new()
+    } else {
+        vec![0.0f32; Scan::tables_len(cfg, ks)]
+    };
+    let mut buf = vec![0.0f32; RowBuffer::len(cfg, ks)];
+    let mut hist = Vec::new();
+    let bar = Pass::start(exec, label, g.lasers.len());
+    let fixed: Option<Scan<'_>> = if g.confocal {
+        None
+    } else {
+        Some(Scan::new(cfg, &g.spads, &mut tables)?)
+    };
+    let mut confocal_tables = if g.confocal {
+        vec![0.0f32; Scan::tables_len(cfg, 1)]
+    } else {
+        Vec::new()
+    };
+    for l in 0..g.lasers.len() {
+        let x_l = src.read_row(l, &mut hist)?;
+        if wave.compensate_laser {
+            let k = (1.0 / g.laser_falloff(x_l)) as f32;
+            hist.iter_mut().for_each(|h| *h *= k);
+        }
+        let spad = [x_l];
+        let per_row;
+        let scan = match &fixed {
+            Some(s) => s,
+            None => {
+                per_row = Scan::new(cfg, &spad, &mut confocal_tables)?;
+                &per_row
+            }
+        };
+        let mut rows = RowBuffer::new(scan, &mut buf)?;
+        let row = load_row(&mut rows, scan, &dft, x_l, &hist, &mut clean)?;
+        push(scan, &row)?;
+        bar.advance(1);
+    }
+    Ok(())
+}
+
+/// Stage 1 of one row through the host's matrix product ([`BandDft`]); non-finite samples
+/// are zeroed in a copy (`clean`) for the product and counted by the kernel.
+pub(super) fn load_row<'r>(
+    rows: &'r mut RowBuffer<'_>,
+    scan: &Scan<'_>,
+    dft: &BandDft,
+    x_l: Point,
+    hist: &'r [f32],
+    clean: &mut Vec<f32>,
+) -> Result<Row<'r, f32>> {
+    let data: &[f32] = if hist.iter().all(|x| x.is_finite()) {
+        hist
+    } else {
+        clean.clear();
+        clean.extend(hist.iter().map(|&x| if x.is_finite() { x } else { 0.0 }));
+        clean
+    };
+    Ok(rows.load_with(scan, x_l, hist, |band, ungated| {
+        dft.apply(data, band, ungated);
+    })?)
+}
+
+/// Reads rows in batches and hands each to one of `workers` in parallel (one worker per
+/// thread, each with its own row buffer), so stage 1 and the per-row probe work use every
+/// core. Memory: `2·threads` rows of histograms, never the whole capture.
+pub(super) fn drive_rows<W: Send>(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    scan: &Scan<'_>,
+    label: &str,
+    workers: Vec<W>,
+    work: impl Fn(&mut W, &Row<'_, f32>) -> Result<()> + Sync,
+) -> Result<Vec<W>> {
+    let Job { cfg, wave, exec } = job;
+    let g = src.geometry().clone();
+    check_laser_falloff(&g, wave)?;
+    let ks = g.spads_per_row();
+    let dft = BandDft::new(cfg);
+    // (worker, row buffer, copy of a row with non-finite samples zeroed)
+    type Slot<W> = Mutex<(W, Vec<f32>, Vec<f32>)>;
+    let slots: Vec<Slot<W>> = workers
+        .into_iter()
+        .map(|w| Mutex::new((w, vec![0.0f32; RowBuffer::len(cfg, ks)], Vec::new())))
+        .collect();
+    let n_slots = slots.len().max(1);
+    let bar = Pass::start(exec, label, g.lasers.len());
+    let batch = row_batch();
+    let mut rows: Vec<(Point, Vec<f32>)> = Vec::new();
+    for start in (0..g.lasers.len()).step_by(batch) {
+        let end = (start + batch).min(g.lasers.len());
+        rows.resize_with(end - start, || ([0.0; 3], Vec::new()));
+        for (l, (x, hist)) in (start..end).zip(rows.iter_mut()) {
+            *x = src.read_row(l, hist)?;
+            if wave.compensate_laser {
+                let k = (1.0 / g.laser_falloff(*x)) as f32;
+                hist.iter_mut().for_each(|h| *h *= k);
+            }
+        }
+        rows.par_iter().try_for_each(|(x_l, hist)| {
+            let i = rayon::current_thread_index().unwrap_or(0) % n_slots;
+            let mut slot = slots[i].lock().unwrap_or_else(|e| e.into_inner());
+            let (w, buf, clean) = &mut *slot;
+            let mut rb = RowBuffer::new(scan, buf)?;
+            let row = load_row(&mut rb, scan, &dft, *x_l, hist, clean)?;
+            work(w, &row)
+        })?;
+        bar.advance(end - start);
+    }
+    Ok(slots
+        .into_iter()
+        .map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner()).0)
+        .collect())
+}
+
+pub(super) fn check_laser_falloff(g: &Geometry, wave: &Wave) -> Result<()> {
+    if wave.compensate_laser {
+        let f = g.laser_falloff(g.lasers[0]);
+        if !(f.is_finite() && f > 0.0) {
+            return Err(Error::arg(
+                "--compensate-laser",
+                "laser_xyz lies in the wall plane: cos θ / d² is 0",
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Element-wise probes (diagonal, higher-order column) over voxel chunks in parallel.
+pub(super) fn elementwise(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    target: Target,
+    gate: Gate,
+    voxels: &[Point],
+    label: &str,
+) -> Result<(Vec<f64>, Report)> {
+    let cfg = job.cfg;
+    let ks = src.geometry().spads_per_row();
+    let cl = chunk_len(voxels.len());
+    let chunks: Vec<&[Point]> = voxels.chunks(cl).collect();
+    let mut states: Vec<Vec<f64>> = chunks
+        .iter()
+        .map(|c| vec![0.0; Probe::state_len(cfg, target, gate, c.len(), ks)])
+        .collect();
+    // The probes need a Scan only for validation of sizes; build them on the first row.
+    let mut probes: Vec<Probe<'_>> = Vec::new();
+    let mut state_iter = Some(states.iter_mut());
+    drive(src, job, label, |scan, row| {
+        if let Some(it) = state_iter.take() {
+            probes = chunks
+                .iter()
+                .zip(it)
+                .map(|(c, s)| Probe::new(scan, target, gate, c, s))
+                .collect::<Result<_, _>>()?;
+        }
+        probes
+            .par_iter_mut()
+            .try_for_each(|p| p.push_row(scan, row))?;
+        Ok(())
+    })?;
+    let mut out = vec![0.0f64; voxels.len()];
+    let mut report = Report::default();
+    let g = src.geometry().clone();
+    let ks_pts = if g.confocal {
+        vec![g.lasers[0]]
+    } else {
+        g.spads.clone()
+    };
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+    let scan = Scan::new(cfg, &ks_pts, &mut tables)?;
+    for (p, o) in probes.iter().zip(out.chunks_mut(cl)) {
+        let r = p.finish(&scan, o)?;
+        report = Report {
+            non_finite: report.non_finite.max(r.non_finite),
+            dropped: report.dropped.max(r.dropped),
+            aliased: report.aliased + r.aliased,
+            ..r
+        };
+    }
+    Ok((out, report))
+}

@@ -1,0 +1,27 @@
+//! High-level LTM probes over a capture, streamed row by row through the kernel and
+//! multi-threaded with rayon (DESIGN §A.5, §B.3).
+//!
+//! | call | computes | passes over the data |
+//! |---|---|---|
+//! | [`direct`] | diagonal `T(x_v, x_v)` over a volume (Eqs. 11–12) | 1 |
+//! | [`column()`] | `T(x_a, ·)` with [`ColumnGate`] two-bounce (Eq. 14), higher-order (Eq. 18) or none, optionally restricted to a shell `r0 ≤ |x_a − x_b| < r1` | 1 |
+//! | [`indirect`] | in-focus indirect light (Eqs. 15–17): Γ from the diagonal, then `Σ_{a∈Γ} T(a, b)` over Γ-masked pairs with `r0 ≤ |x_a − x_b| < r1` | 2 |
+//!
+//! Threads: the diagonal and the higher-order column split the voxels into chunks, each with
+//! its own kernel probe, and every row's band spectra (computed once) are pushed into all
+//! chunks in parallel; factorised columns accumulate per row in one probe (cheap) and image
+//! the voxels in parallel at the end; the indirect sum keeps one factorised column per focus
+//! `a ∈ Γ`, pushed in parallel. Memory never grows with the number of laser rows.
+
+mod column;
+mod direct;
+mod drive;
+pub mod fast;
+mod indirect;
+mod wave;
+
+pub use crate::exec::{Exec, Path};
+pub use column::{ColumnGate, Shell, check_focus, column};
+pub use direct::direct;
+pub use indirect::{IndirectOptions, IndirectOutput, gamma_mask, indirect, indirect_over};
+pub use wave::{Output, Wave, default_wavelength};

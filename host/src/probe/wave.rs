@@ -1,0 +1,190 @@
+//! The virtual wave and weighting options every probe shares ([`Wave`]: λ, σ, lens weights,
+//! band, laser compensation, automatic margin), the kernel configuration they give, and a
+//! probe's result ([`Output`]). Lengths are metres of optical path.
+
+use crate::error::Result;
+use crate::exec::Path;
+use crate::io::capture::Geometry;
+use rayon::prelude::*;
+use vltm_kernel::{Config, Legs, Params, Point, Report, Weights};
+
+/// Virtual wave and weighting options shared by every probe (the CLI's common flags).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Wave {
+    /// Virtual wavelength λ (m); `None` = [`default_wavelength`] of the capture.
+    pub wavelength: Option<f64>,
+    /// Gate std σ (m); `None` = 2λ/3.
+    pub sigma: Option<f64>,
+    /// Leg weights: the paper's `1/d` or y-tal's none.
+    pub weights: Weights,
+    /// Band half-width m in units of 1/σ.
+    pub band_half_width: f64,
+    /// Divide each laser row by the physical laser's falloff `cos θ / d²` to its spot.
+    pub compensate_laser: bool,
+    /// For Gaussian-gated columns and in-focus indirect light: widen the virtual DFT period
+    /// ([`Params::margin`]) so that every path time of the probed elements is alias-free,
+    /// i.e. paths outside the capture's window contribute nothing (DESIGN §B.2.2) instead of
+    /// wrapping around (default true). The factorised column cannot zero single paths as the
+    /// diagonal does; this buys the same result with a larger band (`J ∝ N`).
+    pub auto_margin: bool,
+}
+
+impl Default for Wave {
+    fn default() -> Self {
+        Self {
+            wavelength: None,
+            sigma: None,
+            weights: Weights::Inv,
+            band_half_width: 5.0,
+            compensate_laser: false,
+            auto_margin: true,
+        }
+    }
+}
+
+/// Aperture pitch of a grid (the coarser of its two axes; 0 for a single point).
+pub(super) fn pitch(pts: &[Point], shape: [usize; 2]) -> f32 {
+    let d = |a: Point, b: Point| ((0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f32>()).sqrt();
+    let px = if shape[0] > 1 {
+        d(pts[0], pts[shape[1]])
+    } else {
+        0.0
+    };
+    let py = if shape[1] > 1 { d(pts[0], pts[1]) } else { 0.0 };
+    px.max(py)
+}
+
+/// Default virtual wavelength: twice the coarser aperture pitch (the sampling limit of the
+/// virtual lens), and at least 6 time bins (so the band stays below Nyquist).
+pub fn default_wavelength(g: &Geometry) -> f64 {
+    let p = pitch(&g.lasers, g.laser_shape).max(pitch(&g.spads, g.spad_shape)) as f64;
+    (2.0 * p).max(6.0 * g.dt)
+}
+
+impl Wave {
+    /// The kernel configuration for a capture.
+    ///
+    /// # Errors
+    /// [`Error::Config`](crate::Error::Config) naming the rejected parameter.
+    pub fn config(&self, g: &Geometry) -> Result<Config> {
+        let lam = self.wavelength.unwrap_or_else(|| default_wavelength(g));
+        let legs = if g.legs_in_time {
+            Legs::FirstAndLast {
+                laser_origin: g.laser_origin,
+                sensor_origin: g.sensor_origin,
+            }
+        } else {
+            Legs::WallToWall
+        };
+        let p = Params {
+            sigma: self.sigma,
+            band_half_width: self.band_half_width,
+            t0: g.t0,
+            legs,
+            weights: self.weights,
+            ..Params::new(lam, g.nt, g.dt)
+        };
+        Ok(Config::try_new(&p)?)
+    }
+
+    /// The configuration for factorised Gaussian columns focused at `foci` and imaged over
+    /// `voxels`: [`Wave::config`], with [`Params::margin`] widened (under
+    /// [`Wave::auto_margin`]) until every path time `d1 + |x_l − x_a| + |x_a − x_b| +
+    /// |x_b − x_s| + d4 − t0` lies in [`Config::alias_free`].
+    ///
+    /// # Errors
+    /// As [`Wave::config`] (a margin so large that N overflows is a `SizeOverflow`).
+    pub fn column_config(&self, g: &Geometry, foci: &[Point], voxels: &[Point]) -> Result<Config> {
+        let cfg = self.config(g)?;
+        if !self.auto_margin || foci.is_empty() || voxels.is_empty() {
+            return Ok(cfg);
+        }
+        let (d1, d4) = legs(g, &cfg);
+        let span = |pts: &[Point], legs: &[f64], v: &Point| {
+            pts.iter()
+                .zip(legs)
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (p, d)| {
+                    let x = f64::from(dist(*p, *v)) + d;
+                    (a.min(x), b.max(x))
+                })
+        };
+        let proj: Vec<(f64, f64)> = foci.iter().map(|a| span(&g.lasers, &d1, a)).collect();
+        let cam: Vec<(f64, f64)> = voxels.iter().map(|b| span(&g.spads, &d4, b)).collect();
+        let (lo, hi) = foci
+            .par_iter()
+            .zip(&proj)
+            .map(|(a, p)| {
+                voxels.iter().zip(&cam).fold(
+                    (f64::INFINITY, f64::NEG_INFINITY),
+                    |(lo, hi), (b, c)| {
+                        let d_ab = f64::from(dist(*a, *b));
+                        (lo.min(p.0 + d_ab + c.0), hi.max(p.1 + d_ab + c.1))
+                    },
+                )
+            })
+            .reduce(
+                || (f64::INFINITY, f64::NEG_INFINITY),
+                |x, y| (x.0.min(y.0), x.1.max(y.1)),
+            );
+        let (af_lo, af_hi) = cfg.alias_free();
+        // 1e-4·σ for the f32 path lengths of the kernel, as the guard check of the diagonal.
+        let slack = 1e-4 * cfg.sigma();
+        let need = ((af_lo + slack) - (lo - g.t0))
+            .max((hi - g.t0) - (af_hi - slack))
+            .max(0.0);
+        if need == 0.0 {
+            return Ok(cfg);
+        }
+        Ok(Config::try_new(&Params {
+            margin: need,
+            ..*cfg.params()
+        })?)
+    }
+}
+
+/// The device legs `d1_l`, `d4_s` of every laser and SPAD spot (0 without legs in time).
+pub(super) fn legs(g: &Geometry, cfg: &Config) -> (Vec<f64>, Vec<f64>) {
+    let d1 = g
+        .lasers
+        .iter()
+        .map(|l| match cfg.legs() {
+            Legs::WallToWall => 0.0,
+            Legs::FirstAndLast { laser_origin, .. } => dist64(l, &laser_origin),
+        })
+        .collect();
+    let d4 = g
+        .spads
+        .iter()
+        .map(|s| match cfg.legs() {
+            Legs::WallToWall => 0.0,
+            Legs::FirstAndLast { sensor_origin, .. } => dist64(s, &sensor_origin),
+        })
+        .collect();
+    (d1, d4)
+}
+
+/// Result of a probe: intensities per voxel (volume order) and the kernel's counters.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Output {
+    /// `|A|²` per voxel.
+    pub values: Vec<f32>,
+    /// Rows, non-finite samples, aliased voxels.
+    pub report: Report,
+    /// Wall-clock seconds.
+    pub seconds: f64,
+    /// The kernel configuration used (λ, σ, J…).
+    pub config: Config,
+    /// The evaluation path that computed the voxel sums (never [`Path::Auto`]).
+    pub path: Path,
+}
+
+pub(super) fn dist64(a: &Point, b: &[f64; 3]) -> f64 {
+    (0..3)
+        .map(|i| (a[i] as f64 - b[i]).powi(2))
+        .sum::<f64>()
+        .sqrt()
+}
+
+pub(super) fn dist(a: Point, b: Point) -> f32 {
+    ((0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f32>()).sqrt()
+}
