@@ -861,3 +861,161 @@ fn simulate_ptu_round_trip() {
     let err = fails(&t.0, &["direct", &s(&cut), "--volume", SPEC], 1);
     assert!(err.contains("cut.ptu"), "{err}");
 }
+
+// ----- reliability: no file lost, hygiene (issue 14) -----------------------------------------
+
+/// A path as a command-line argument.
+fn s(p: &Path) -> String {
+    p.to_str().expect("utf-8 path").to_string()
+}
+
+/// The files of a directory, sorted.
+fn listing(dir: &Path) -> Vec<String> {
+    let mut v: Vec<String> = std::fs::read_dir(dir)
+        .expect("read dir")
+        .map(|e| e.expect("entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    v.sort();
+    v
+}
+
+/// `--out` naming the input capture is refused before anything is read or written; the
+/// capture is left as it was.
+#[test]
+fn an_output_naming_the_input_is_refused() {
+    let t = TempDir::new("out-is-input");
+    let cap = t.path("c.npz");
+    std::fs::copy(fixture("two_patches"), &cap).expect("copy");
+    let before = std::fs::read(&cap).expect("read");
+    let err = fails(
+        &t.0,
+        &["direct", "c.npz", "--volume", SPEC, "--out", "./c.npz"],
+        2,
+    );
+    assert!(err.contains("is an input"), "{err}");
+    let err = fails(
+        &t.0,
+        &["direct", "c.npz", "--volume", SPEC, "--png", &s(&cap)],
+        2,
+    );
+    assert!(err.contains("--out"), "{err}");
+    assert_eq!(std::fs::read(&cap).expect("read"), before);
+    let scene = root().join("fixtures/scenes/three_points.json");
+    let copy = t.path("scene.json");
+    std::fs::copy(&scene, &copy).expect("copy scene");
+    fails(&t.0, &["simulate", "scene.json", "--out", "scene.json"], 2);
+    assert_eq!(
+        std::fs::read(&copy).expect("read"),
+        std::fs::read(&scene).expect("read")
+    );
+}
+
+/// A volume and its figure are written all or nothing: when the figure cannot be written, the
+/// previous volume file is intact and no partial or temporary file is left.
+#[test]
+fn a_failed_output_keeps_the_previous_file() {
+    let t = TempDir::new("keep-previous");
+    let out = t.path("v.npy");
+    std::fs::write(&out, b"previous").expect("write");
+    let missing = t.path("no-such-dir").join("v.png");
+    let err = fails(
+        &t.0,
+        &[
+            "direct",
+            &s(&fixture("two_patches")),
+            "--volume",
+            SPEC,
+            "--out",
+            &s(&out),
+            "--png",
+            &s(&missing),
+        ],
+        1,
+    );
+    assert!(err.contains("v.png"), "{err}");
+    assert_eq!(std::fs::read(&out).expect("read"), b"previous");
+    assert_eq!(listing(&t.0), ["v.npy"]);
+    // The same command with a writable figure replaces both.
+    let png = t.path("v.png");
+    ok(
+        &t.0,
+        &[
+            "direct",
+            &s(&fixture("two_patches")),
+            "--volume",
+            SPEC,
+            "--out",
+            &s(&out),
+            "--png",
+            &s(&png),
+        ],
+    );
+    npy(&out, SHAPE);
+    assert_eq!(listing(&t.0), ["v.npy", "v.png"]);
+}
+
+/// A capture, its PTU stream and its sidecar are written all or nothing; a full device gives
+/// one clean line (no message of the zip writer glued on).
+#[test]
+fn simulate_outputs_are_all_or_nothing() {
+    let t = TempDir::new("sim-atomic");
+    let scene = root().join("fixtures/scenes/three_points.json");
+    let missing = t.path("no-such-dir").join("c.ptu");
+    fails(
+        &t.0,
+        &[
+            "simulate",
+            &s(&scene),
+            "--out",
+            "c.npz",
+            "--ptu",
+            &s(&missing),
+        ],
+        1,
+    );
+    assert!(listing(&t.0).is_empty(), "{:?}", listing(&t.0));
+    if Path::new("/dev/full").exists() {
+        let err = fails(&t.0, &["simulate", &s(&scene), "--out", "/dev/full"], 1);
+        assert!(err.contains("/dev/full") && !err.contains("drop"), "{err}");
+    }
+}
+
+/// Thread counts beyond 4 per core are refused at parse time, before any thread starts.
+#[test]
+fn absurd_thread_counts_are_refused() {
+    let t = TempDir::new("threads");
+    let start = std::time::Instant::now();
+    let err = fails(
+        &t.0,
+        &["--threads", "100000", "info", &s(&fixture("two_patches"))],
+        2,
+    );
+    assert!(err.contains("--threads"), "{err}");
+    assert!(
+        start.elapsed().as_secs() < 10,
+        "refused only after {:?}",
+        start.elapsed()
+    );
+    ok(
+        &t.0,
+        &["--threads", "1", "info", &s(&fixture("two_patches"))],
+    );
+}
+
+/// Strings from a file (here a JSON key with a terminal escape and a newline) are escaped
+/// before they reach the terminal.
+#[test]
+fn control_bytes_from_files_are_escaped() {
+    let t = TempDir::new("escape");
+    let scene = t.path("bad.json");
+    std::fs::write(&scene, "{\"\\u001b[31mred\\nline\": 1}").expect("write");
+    let o = run_in(&t.0, &["simulate", &s(&scene), "--out", "c.npz"]);
+    assert_eq!(o.status.code(), Some(1), "{}", text(&o.stderr));
+    assert!(
+        !o.stderr.contains(&0x1b),
+        "raw escape byte on stderr: {:?}",
+        text(&o.stderr)
+    );
+    assert_eq!(text(&o.stderr).lines().count(), 1, "{}", text(&o.stderr));
+    assert!(text(&o.stderr).contains("\\u{1b}"), "{}", text(&o.stderr));
+}

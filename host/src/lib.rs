@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
 
 pub mod aperture;
+pub mod atomic;
 pub mod error;
 pub mod exec;
 pub mod io;

@@ -20,7 +20,7 @@ use crate::error::{Error, Result};
 use std::path::Path;
 
 /// The file name's extension, lower case.
-fn extension(path: &Path) -> Option<String> {
+pub fn extension(path: &Path) -> Option<String> {
     path.extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase)

@@ -12,6 +12,7 @@
 //! | `delta_t`, `t_start` | f64 `()` | bin width, time of bin 0 (m) |
 //! | `t_accounts_first_and_last_bounces`, `confocal` | u8 `()` | flags |
 
+use crate::atomic::Transaction;
 use crate::error::{Error, Result};
 use crate::io::capture::{Capture, Geometry, RowSource};
 use ndarray::{Array, ArrayD, IxDyn};
@@ -33,15 +34,35 @@ pub fn write(c: &Capture, path: &Path) -> Result<()> {
 /// # Errors
 /// [`Error::Io`] if the file cannot be written.
 pub fn write_with(c: &Capture, path: &Path, compress: bool) -> Result<()> {
+    let mut t = Transaction::new();
+    stage(&mut t, c, path, compress)?;
+    t.commit()
+}
+
+/// [`write_with`] as one file of a [`Transaction`] (written on its commit, all or nothing with
+/// the transaction's other files).
+///
+/// # Errors
+/// As [`write_with`].
+pub fn stage(t: &mut Transaction, c: &Capture, path: &Path, compress: bool) -> Result<()> {
+    t.stage(path, |file| write_to(c, file, path, compress))
+}
+
+/// Encodes `c` into `file` (`path` names it in errors). The first I/O error is latched: the
+/// zip writer sees success from then on, so it never fails again while dropped, and the error
+/// is returned once the archive is finished.
+fn write_to(c: &Capture, file: &mut File, path: &Path, compress: bool) -> Result<()> {
     let g = &c.geometry;
-    let io = |e: std::io::Error| Error::io(path, e);
-    let npz = |e: ndarray_npy::WriteNpzError| Error::io(path, std::io::Error::other(e.to_string()));
-    let file = File::create(path).map_err(io)?;
-    let mut w = if compress {
-        NpzWriter::new_compressed(file)
-    } else {
-        NpzWriter::new(file)
+    let latch = Latch {
+        inner: file,
+        error: None,
     };
+    let mut w = if compress {
+        NpzWriter::new_compressed(latch)
+    } else {
+        NpzWriter::new(latch)
+    };
+    let npz = |e: ndarray_npy::WriteNpzError| Error::io(path, std::io::Error::other(e.to_string()));
     let [lx, ly] = g.laser_shape;
     let [sx, sy] = g.spad_shape;
     let h_shape: Vec<usize> = if g.confocal {
@@ -72,8 +93,51 @@ pub fn write_with(c: &Capture, path: &Path, compress: bool) -> Result<()> {
     .map_err(npz)?;
     w.add_array("confocal", &ndarray::arr0(u8::from(g.confocal)))
         .map_err(npz)?;
-    w.finish().map_err(npz)?;
+    let latch = w.finish().map_err(npz)?;
+    if let Some(e) = latch.error {
+        return Err(Error::io(path, e));
+    }
     Ok(())
+}
+
+/// A writer that remembers its first error and reports success from then on (see
+/// [`write_to`]).
+struct Latch<'f> {
+    inner: &'f mut File,
+    error: Option<std::io::Error>,
+}
+
+impl std::io::Write for Latch<'_> {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        if self.error.is_none()
+            && let Err(e) = self.inner.write_all(buf)
+        {
+            self.error = Some(e);
+        }
+        Ok(buf.len())
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        if self.error.is_none()
+            && let Err(e) = self.inner.flush()
+        {
+            self.error = Some(e);
+        }
+        Ok(())
+    }
+}
+
+impl std::io::Seek for Latch<'_> {
+    fn seek(&mut self, pos: std::io::SeekFrom) -> std::io::Result<u64> {
+        // Seeks are needed to patch headers; a failed one is latched like a failed write.
+        match self.inner.seek(pos) {
+            Ok(p) => Ok(p),
+            Err(e) => {
+                let p = self.inner.stream_position().unwrap_or(0);
+                self.error.get_or_insert(e);
+                Ok(p)
+            }
+        }
+    }
 }
 
 fn get<T: ReadableElement>(r: &mut NpzReader<File>, path: &Path, key: &str) -> Result<ArrayD<T>> {

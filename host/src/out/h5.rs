@@ -28,6 +28,7 @@ use hdf5_pure::{AttrValue, FileBuilder};
 use hdf5_reader::Hdf5File;
 use vltm_kernel::{Config, Point, Weights};
 
+use crate::atomic::Transaction;
 use crate::error::{Error, Result};
 use crate::volume::Volume;
 
@@ -57,7 +58,22 @@ pub fn write_volume(
     volume: &Volume,
     meta: &Provenance<'_>,
 ) -> Result<()> {
-    let path = path.as_ref();
+    let mut t = Transaction::new();
+    stage_volume(&mut t, path.as_ref(), values, volume, meta)?;
+    t.commit()
+}
+
+/// [`write_volume`] as one file of a [`Transaction`] (written on its commit).
+///
+/// # Errors
+/// As [`write_volume`].
+pub fn stage_volume(
+    t: &mut Transaction,
+    path: &Path,
+    values: &[f32],
+    volume: &Volume,
+    meta: &Provenance<'_>,
+) -> Result<()> {
     if values.len() != volume.len() {
         return Err(Error::arg(
             "values",
@@ -107,7 +123,9 @@ pub fn write_volume(
     let bytes = b
         .finish()
         .map_err(|e| Error::format(path, "(file)", "an encodable HDF5 volume", e))?;
-    std::fs::write(path, bytes).map_err(|e| Error::io(path, e))
+    t.stage(path, |f| {
+        std::io::Write::write_all(f, &bytes).map_err(|e| Error::io(path, e))
+    })
 }
 
 /// Reads the `intensity` dataset of a file written by [`write_volume`]: values in C order and

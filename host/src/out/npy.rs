@@ -8,6 +8,7 @@
 use std::io::Write;
 use std::path::Path;
 
+use crate::atomic::Transaction;
 use crate::error::{Error, Result};
 
 /// The `.npy` magic string.
@@ -24,7 +25,18 @@ const ALIGN: usize = 64;
 /// `data.len()` is not the product of `shape` ([`Error::Argument`] `shape`); the file cannot
 /// be written ([`Error::Io`]).
 pub fn write_f32(path: impl AsRef<Path>, data: &[f32], shape: &[usize]) -> Result<()> {
-    let path = path.as_ref();
+    let mut t = Transaction::new();
+    stage_f32(&mut t, path.as_ref(), data, shape)?;
+    t.commit()
+}
+
+/// [`write_f32`] as one file of a [`Transaction`] (written on its commit, all or nothing with
+/// the transaction's other files).
+///
+/// # Errors
+///
+/// As [`write_f32`].
+pub fn stage_f32(t: &mut Transaction, path: &Path, data: &[f32], shape: &[usize]) -> Result<()> {
     let count = element_count(shape);
     if count != Some(data.len()) {
         return Err(Error::arg(
@@ -42,8 +54,9 @@ pub fn write_f32(path: impl AsRef<Path>, data: &[f32], shape: &[usize]) -> Resul
     for v in data {
         bytes.extend_from_slice(&v.to_le_bytes());
     }
-    let mut file = std::fs::File::create(path).map_err(|e| Error::io(path, e))?;
-    file.write_all(&bytes).map_err(|e| Error::io(path, e))
+    t.stage(path, |f| {
+        f.write_all(&bytes).map_err(|e| Error::io(path, e))
+    })
 }
 
 /// Reads a float32 (`<f4`) or float64 (`<f8`, converted to f32) C-order `.npy` array.

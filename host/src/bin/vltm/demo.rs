@@ -315,7 +315,6 @@ pub fn run(out: &Path) -> Result<String> {
         .write_png(&out.join(format!("{stem}.png")))?;
         vltm::out::npy::write_f32(out.join(format!("{stem}.npy")), &l.values, &vol.shape)?;
     }
-    std::fs::write(out.join("summary.txt"), &table)
-        .map_err(|e| Error::io(out.join("summary.txt"), e))?;
+    vltm::atomic::write_bytes(&out.join("summary.txt"), table.as_bytes())?;
     Ok(table)
 }

@@ -6,6 +6,7 @@ use anyhow::Context;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use vltm::atomic::Transaction;
 use vltm::exec::{Exec, Path as EvalPath};
 use vltm::io::{self, RowSource};
 use vltm::out::figure::Figure;
@@ -207,12 +208,73 @@ impl Common {
     /// uncompressed `.npz` captures are streamed row by row (memory O(Ks·Nt)); compressed
     /// `.npz`, and `--swap-roles` (a transpose), are read into memory.
     fn load(&self, path: &Path) -> vltm::Result<Box<dyn RowSource>> {
+        let mut inputs = vec![path.to_path_buf()];
+        if io::extension(path).as_deref() == Some("ptu") {
+            inputs.push(path.with_extension("json"));
+        }
+        let outputs: Vec<&Path> = self
+            .out
+            .iter()
+            .chain(&self.png)
+            .map(PathBuf::as_path)
+            .collect();
+        refuse_overwriting_inputs(&inputs, &outputs)?;
         if self.swap_roles {
             Ok(Box::new(io::swap_roles(&io::open(path)?)?))
         } else {
             io::open_source(path)
         }
     }
+}
+
+/// Refuses an output path that names one of the command's input files (the capture, its PTU
+/// sidecar, a scene): writing it would destroy the input.
+fn refuse_overwriting_inputs(inputs: &[PathBuf], outputs: &[&Path]) -> vltm::Result<()> {
+    for o in outputs {
+        if let Some(i) = inputs.iter().find(|i| same_file(i, o)) {
+            return Err(vltm::Error::arg(
+                "--out",
+                format!(
+                    "{} is an input of this command ({}): choose another output path",
+                    o.display(),
+                    i.display()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Whether two paths name the same file (after resolving links; for a path that does not
+/// exist yet, its directory is resolved).
+fn same_file(a: &Path, b: &Path) -> bool {
+    let resolve = |p: &Path| {
+        p.canonicalize().ok().or_else(|| {
+            let dir = match p.parent() {
+                Some(d) if !d.as_os_str().is_empty() => d,
+                _ => Path::new("."),
+            };
+            Some(dir.canonicalize().ok()?.join(p.file_name()?))
+        })
+    };
+    match (resolve(a), resolve(b)) {
+        (Some(x), Some(y)) => x == y,
+        _ => a == b,
+    }
+}
+
+/// Escapes control characters (terminal escapes, newlines from a file's strings) so that an
+/// error stays one printable line.
+fn printable(msg: &str) -> String {
+    msg.chars()
+        .map(|c| {
+            if c.is_control() {
+                c.escape_default().to_string()
+            } else {
+                c.to_string()
+            }
+        })
+        .collect()
 }
 
 /// An error with its exit code.
@@ -265,15 +327,24 @@ fn main() -> ExitCode {
             return ExitCode::from(2);
         }
     };
-    if let Some(n) = cli.threads
-        && (n == 0
-            || rayon::ThreadPoolBuilder::new()
-                .num_threads(n)
-                .build_global()
-                .is_err())
-    {
-        eprintln!("vltm: argument `--threads`: expected a positive number of threads, found {n}");
-        return ExitCode::from(2);
+    if let Some(n) = cli.threads {
+        // More threads than 4 per core only add start-up time and memory.
+        let cores = std::thread::available_parallelism().map_or(1, usize::from);
+        let most = 4 * cores;
+        if n == 0 || n > most {
+            eprintln!(
+                "vltm: argument `--threads`: expected 1 to {most} threads (4 per core, {cores} cores), found {n}"
+            );
+            return ExitCode::from(2);
+        }
+        if rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build_global()
+            .is_err()
+        {
+            eprintln!("vltm: argument `--threads`: the thread pool could not be started");
+            return ExitCode::from(1);
+        }
     }
     match run(cli.command) {
         Ok(()) => ExitCode::SUCCESS,
@@ -283,8 +354,7 @@ fn main() -> ExitCode {
                 Some(e) => e.to_string(),
                 None => format!("{:#}", f.err),
             };
-            let msg = msg.replace('\n', " ");
-            eprintln!("vltm: {msg}");
+            eprintln!("vltm: {}", printable(&msg.replace('\n', " ")));
             ExitCode::from(f.code)
         }
     }
@@ -304,15 +374,28 @@ fn run(cmd: Command) -> Result<(), Failure> {
             ptu,
             uncompressed,
         } => {
+            let mut outputs = vec![out.as_path()];
+            let sidecar = ptu.as_ref().map(|p| p.with_extension("json"));
+            outputs.extend(ptu.as_deref());
+            outputs.extend(sidecar.as_deref());
+            refuse_overwriting_inputs(std::slice::from_ref(&scene), &outputs)?;
             let s = vltm::sim::Scene::load(&scene)?;
             let c = s.render_with(Exec {
                 progress: Some(&progress::BARS),
                 ..Exec::default()
             })?;
-            io::npz::write_with(&c, &out, !uncompressed)?;
-            if let Some(p) = ptu {
-                let w = io::ptu::write_t3(&c, &p, &io::ptu::T3WriteOptions::default())?;
-                let side = w.sidecar_path.unwrap_or_else(|| p.with_extension("json"));
+            // The capture, the PTU stream and its sidecar: all or nothing.
+            let mut t = Transaction::new();
+            io::npz::stage(&mut t, &c, &out, !uncompressed)?;
+            let side = match &ptu {
+                Some(p) => {
+                    let w = io::ptu::stage_t3(&mut t, &c, p, &io::ptu::T3WriteOptions::default())?;
+                    w.sidecar_path
+                }
+                None => None,
+            };
+            t.commit()?;
+            if let (Some(p), Some(side)) = (&ptu, side) {
                 say!("wrote {} and its sidecar {}", p.display(), side.display());
             }
             let g = &c.geometry;
@@ -618,15 +701,17 @@ fn write_outputs(
         ),
         (a, b) => (a.clone(), b.clone()),
     };
-    if let Some(p) = out {
-        if io::is_hdf5(&p) {
-            vltm::out::h5::write_volume(&p, v, volume, meta)
+    // The volume and its figure: all or nothing.
+    let mut t = Transaction::new();
+    if let Some(p) = &out {
+        if io::is_hdf5(p) {
+            vltm::out::h5::stage_volume(&mut t, p, v, volume, meta)
         } else {
-            vltm::out::npy::write_f32(&p, v, &volume.shape)
+            vltm::out::npy::stage_f32(&mut t, p, v, &volume.shape)
         }
         .with_context(|| format!("writing {}", p.display()))?;
-        say!("wrote {}", p.display());
     }
+    let mut wrote_png = None;
     if let Some(p) = png {
         match volume.axes {
             Some([x, y, z]) => {
@@ -639,12 +724,16 @@ fn write_outputs(
                     title: title.to_string(),
                     marks: marks.to_vec(),
                 };
-                fig.write_png(&p)
+                fig.stage_png(&mut t, &p)
                     .with_context(|| format!("writing {}", p.display()))?;
-                say!("wrote {}", p.display());
+                wrote_png = Some(p);
             }
             None => eprintln!("vltm: note: no figure for a point list (only for grid volumes)"),
         }
+    }
+    t.commit()?;
+    for p in out.iter().chain(&wrote_png) {
+        say!("wrote {}", p.display());
     }
     Ok(())
 }

@@ -170,7 +170,7 @@ pub use header::{
 };
 pub use sidecar::{Sidecar, Unmapped};
 pub use source::{Counts, PtuSource, read_all};
-pub use write::{T3WriteOptions, T3Written, write_t3, write_t3_to};
+pub use write::{T3WriteOptions, T3Written, stage_t3, write_t3, write_t3_to};
 
 #[cfg(test)]
 mod tests;

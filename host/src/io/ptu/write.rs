@@ -1,7 +1,6 @@
 //! Writing synthetic HydraHarp V2 T3 files and their sidecars from a [`Capture`]
 //! ([`write_t3`], [`write_t3_to`]).
 
-use std::fs::File;
 use std::io::{self, BufWriter, Write};
 use std::path::{Path, PathBuf};
 
@@ -10,6 +9,7 @@ use vltm_kernel::Point;
 use super::header::*;
 use super::sidecar::*;
 use crate::aperture::Aperture;
+use crate::atomic::Transaction;
 use crate::error::{Error, Result};
 use crate::io::capture::Capture;
 
@@ -321,6 +321,23 @@ pub fn write_t3(
     path: impl AsRef<Path>,
     opts: &T3WriteOptions,
 ) -> Result<T3Written> {
+    let mut t = Transaction::new();
+    let written = stage_t3(&mut t, capture, path, opts)?;
+    t.commit()?;
+    Ok(written)
+}
+
+/// [`write_t3`] as two files (the PTU stream and its sidecar) of a [`Transaction`], written
+/// on its commit, all or nothing with the transaction's other files.
+///
+/// # Errors
+/// As [`write_t3`].
+pub fn stage_t3(
+    t: &mut Transaction,
+    capture: &Capture,
+    path: impl AsRef<Path>,
+    opts: &T3WriteOptions,
+) -> Result<T3Written> {
     let path = path.as_ref();
     let sidecar_path = opts
         .sidecar
@@ -335,10 +352,17 @@ pub fn write_t3(
             ),
         ));
     }
-    let f = File::create(path).map_err(|e| Error::io(path, e))?;
-    let mut written = write_t3_to(capture, f, opts, path)?;
-    std::fs::write(&sidecar_path, written.sidecar.to_json() + "\n")
-        .map_err(|e| Error::io(&sidecar_path, e))?;
+    let mut written = None;
+    t.stage(path, |f| {
+        written = Some(write_t3_to(capture, BufWriter::new(f), opts, path)?);
+        Ok(())
+    })?;
+    let mut written = written.ok_or_else(|| Error::arg("--ptu", "nothing written"))?;
+    let json = written.sidecar.to_json() + "\n";
+    t.stage(&sidecar_path, |f| {
+        f.write_all(json.as_bytes())
+            .map_err(|e| Error::io(&sidecar_path, e))
+    })?;
     written.sidecar_path = Some(sidecar_path);
     Ok(written)
 }

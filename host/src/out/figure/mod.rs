@@ -15,6 +15,7 @@ use std::path::Path;
 
 use image::{Rgb, RgbImage};
 
+use crate::atomic::Transaction;
 use crate::error::{Error, Result};
 
 /// Minimum width of a panel in pixels (small volumes are upscaled in whole blocks).
@@ -129,12 +130,26 @@ impl<'a> Figure<'a> {
     ///
     /// An invalid volume ([`Figure::validate`]); the file cannot be written ([`Error::Io`]).
     pub fn write_png(&self, path: &Path) -> Result<()> {
+        let mut t = Transaction::new();
+        self.stage_png(&mut t, path)?;
+        t.commit()
+    }
+
+    /// [`Figure::write_png`] as one file of a [`Transaction`] (written on its commit).
+    ///
+    /// # Errors
+    ///
+    /// As [`Figure::write_png`].
+    pub fn stage_png(&self, t: &mut Transaction, path: &Path) -> Result<()> {
         self.validate()?;
         let mut png = std::io::Cursor::new(Vec::new());
         self.render()
             .write_to(&mut png, image::ImageFormat::Png)
             .map_err(|e| Error::io(path, std::io::Error::other(e)))?;
-        std::fs::write(path, png.into_inner()).map_err(|e| Error::io(path, e))
+        let bytes = png.into_inner();
+        t.stage(path, |f| {
+            std::io::Write::write_all(f, &bytes).map_err(|e| Error::io(path, e))
+        })
     }
 
     /// Renders the figure. An invalid volume (see [`Figure::validate`]) renders as a small
