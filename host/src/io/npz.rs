@@ -227,13 +227,36 @@ fn geometry(r: &mut NpzReader<File>, path: &Path, s: &[usize]) -> Result<Geometr
 /// An uncompressed `.npz` capture (`vltm simulate --uncompressed`, `numpy.savez`) read
 /// **row by row** straight from the file: memory O(Ks·Nt) whatever the number of rows,
 /// and no decoding of the whole `H` before the first row is processed.
+///
+/// Integrity: the archive's CRC-32 of `H` is checked as the rows are read. Rows read in order
+/// (as every probe reads them) are hashed on the way, at no extra I/O; reading the last row
+/// completes the check, and a mismatch is an error on that row, so no pass over the whole
+/// capture ends with corrupted data unnoticed. A pass that skips around is checked by one
+/// extra sequential read of the entry when its last row is requested.
 #[derive(Debug)]
 pub struct Stream {
+    path: std::path::PathBuf,
     geometry: Geometry,
     file: File,
     /// Byte offset of `H[0, …]` in the file.
     start: u64,
     bytes: Vec<u8>,
+    crc: Crc,
+}
+
+/// The CRC-32 check of the stored `H.npy` entry, computed as rows are read (see
+/// [`Stream`]'s [`RowSource::read_row`]).
+#[derive(Debug)]
+struct Crc {
+    /// The entry's first byte (its `.npy` header) and its length in the file.
+    entry: (u64, u64),
+    /// The CRC-32 the archive records for the entry.
+    expected: u32,
+    /// Running hash of the entry's bytes `entry.0 .. hashed_to`.
+    hasher: crc32fast::Hasher,
+    hashed_to: u64,
+    /// Set once the whole entry matched.
+    verified: bool,
 }
 
 /// Opens `path` as a [`Stream`] if its `H` is stored uncompressed as little-endian
@@ -248,8 +271,10 @@ pub fn open_stream(path: &Path) -> Result<Option<Stream>> {
     let f = File::open(path).map_err(io)?;
     let mut z = zip::ZipArchive::new(f)
         .map_err(|e| Error::format(path, "(archive)", "a NumPy .npz archive", e.to_string()))?;
-    let (data_start, len) = match z.by_name("H.npy") {
-        Ok(e) if e.compression() == zip::CompressionMethod::Stored => (e.data_start(), e.size()),
+    let (data_start, len, crc32) = match z.by_name("H.npy") {
+        Ok(e) if e.compression() == zip::CompressionMethod::Stored => {
+            (e.data_start(), e.size(), e.crc32())
+        }
         Ok(_) => return Ok(None),
         Err(e) => return Err(bad("an array H", e.to_string())),
     };
@@ -303,12 +328,63 @@ pub fn open_stream(path: &Path) -> Result<Option<Stream>> {
     let mut r = NpzReader::new(File::open(path).map_err(io)?)
         .map_err(|e| Error::format(path, "(archive)", "a NumPy .npz archive", e.to_string()))?;
     let geometry = geometry(&mut r, path, &shape)?;
+    // Hash the entry's .npy header now; rows are hashed as they are read.
+    let mut hasher = crc32fast::Hasher::new();
+    let mut head = vec![
+        0u8;
+        usize::try_from(start - data_start)
+            .map_err(|_| bad("a small header", String::new()))?
+    ];
+    file.seek(SeekFrom::Start(data_start)).map_err(io)?;
+    file.read_exact(&mut head).map_err(io)?;
+    hasher.update(&head);
     Ok(Some(Stream {
+        path: path.to_path_buf(),
         geometry,
         file,
         start,
         bytes: Vec::new(),
+        crc: Crc {
+            entry: (data_start, len),
+            expected: crc32,
+            hasher,
+            hashed_to: start,
+            verified: false,
+        },
     }))
+}
+
+impl Stream {
+    /// Completes the CRC-32 check of `H` from `hashed_to` to the end of the entry.
+    fn finish_crc(&mut self) -> Result<()> {
+        use std::io::{Read, Seek, SeekFrom};
+        let (first, len) = self.crc.entry;
+        let end = first + len;
+        let io = |e: std::io::Error| Error::io(&self.path, e);
+        self.file
+            .seek(SeekFrom::Start(self.crc.hashed_to))
+            .map_err(io)?;
+        let mut buf = vec![0u8; 1 << 20];
+        let mut left = end.saturating_sub(self.crc.hashed_to);
+        while left > 0 {
+            let k = left.min(buf.len() as u64) as usize;
+            self.file.read_exact(&mut buf[..k]).map_err(io)?;
+            self.crc.hasher.update(&buf[..k]);
+            left -= k as u64;
+        }
+        self.crc.hashed_to = end;
+        let got = self.crc.hasher.clone().finalize();
+        if got != self.crc.expected {
+            return Err(Error::format(
+                &self.path,
+                "H",
+                format!("CRC-32 {:08x} as the archive records", self.crc.expected),
+                format!("{got:08x}: the file is corrupted"),
+            ));
+        }
+        self.crc.verified = true;
+        Ok(())
+    }
 }
 
 impl RowSource for Stream {
@@ -326,11 +402,20 @@ impl RowSource for Stream {
             )
         })?;
         self.bytes.resize(4 * n, 0);
-        let what = std::path::Path::new("H");
+        let offset = self.start + (4 * n * l) as u64;
         self.file
-            .seek(SeekFrom::Start(self.start + (4 * n * l) as u64))
+            .seek(SeekFrom::Start(offset))
             .and_then(|_| self.file.read_exact(&mut self.bytes))
-            .map_err(|e| Error::io(what, e))?;
+            .map_err(|e| Error::io(&self.path, e))?;
+        if !self.crc.verified {
+            if self.crc.hashed_to == offset {
+                self.crc.hasher.update(&self.bytes);
+                self.crc.hashed_to += self.bytes.len() as u64;
+            }
+            if l + 1 == g.lasers.len() {
+                self.finish_crc()?;
+            }
+        }
         out.clear();
         out.extend(
             self.bytes
@@ -400,6 +485,41 @@ mod tests {
         std::fs::write(&t, &bytes[..bytes.len() / 2]).unwrap();
         let e = open_stream(&t).and_then(|s| s.ok_or(crate::Error::arg("x", "none")));
         assert!(e.is_err(), "truncated archive accepted");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    /// A flipped byte inside the stored `H` is caught by the CRC-32, whether the rows are read
+    /// in order or skipping around; the intact file passes both ways, and a second pass too.
+    #[test]
+    fn streamed_rows_are_crc_checked() {
+        let c = read(&fixture()).unwrap();
+        let dir = std::env::temp_dir().join(format!("vltm-crc-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("c.npz");
+        write_with(&c, &p, false).unwrap();
+        let kl = c.geometry.lasers.len();
+        let pass = |path: &Path, order: &[usize]| -> Result<()> {
+            let mut s = open_stream(path)?.expect("stored");
+            let mut row = Vec::new();
+            for &l in order {
+                s.read_row(l, &mut row)?;
+            }
+            Ok(())
+        };
+        let in_order: Vec<usize> = (0..kl).chain(0..kl).collect();
+        let skipping: Vec<usize> = (0..kl).rev().collect();
+        pass(&p, &in_order).unwrap();
+        pass(&p, &skipping).unwrap();
+        let mut bytes = std::fs::read(&p).unwrap();
+        // A byte in the middle of H (H is the first and by far the largest member).
+        let at = bytes.len() / 3;
+        bytes[at] ^= 0x40;
+        let bad = dir.join("bad.npz");
+        std::fs::write(&bad, &bytes).unwrap();
+        for order in [&in_order, &skipping] {
+            let e = pass(&bad, order).unwrap_err().to_string();
+            assert!(e.contains("CRC-32") && e.contains("bad.npz"), "{e}");
+        }
         std::fs::remove_dir_all(&dir).ok();
     }
 }
