@@ -35,6 +35,20 @@ pub enum Error {
         /// What is wrong and what was expected.
         msg: String,
     },
+    /// An allocation would exceed the memory budget (`vltm::budget`).
+    #[error(
+        "{what}: needs {} > {} memory budget (set it with --max-memory)",
+        human(*need),
+        human(u128::from(*budget))
+    )]
+    Memory {
+        /// What the memory is for.
+        what: String,
+        /// Bytes it needs.
+        need: u128,
+        /// The budget in bytes.
+        budget: u64,
+    },
     /// The kernel rejected the wave/gate configuration.
     #[error("kernel configuration: {0}")]
     Config(#[from] vltm_kernel::ConfigError),
@@ -80,3 +94,21 @@ impl Error {
 
 /// Result with the host [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// A byte count for people: `4.0 TB`, `12 GB`, `640 kB`, `17 B` (powers of 1000).
+pub fn human(bytes: u128) -> String {
+    const UNITS: [&str; 7] = ["B", "kB", "MB", "GB", "TB", "PB", "EB"];
+    let mut v = bytes as f64;
+    let mut u = 0;
+    while v >= 1000.0 && u + 1 < UNITS.len() {
+        v /= 1000.0;
+        u += 1;
+    }
+    if u == 0 {
+        format!("{bytes} B")
+    } else if v < 10.0 {
+        format!("{v:.1} {}", UNITS[u])
+    } else {
+        format!("{v:.0} {}", UNITS[u])
+    }
+}

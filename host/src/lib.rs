@@ -2,6 +2,7 @@
 
 pub mod aperture;
 pub mod atomic;
+pub mod budget;
 pub mod error;
 pub mod exec;
 pub mod io;
