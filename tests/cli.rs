@@ -984,17 +984,16 @@ fn simulate_outputs_are_all_or_nothing() {
 #[test]
 fn absurd_thread_counts_are_refused() {
     let t = TempDir::new("threads");
-    let start = std::time::Instant::now();
     let err = fails(
         &t.0,
         &["--threads", "100000", "info", &s(&fixture("two_patches"))],
         2,
     );
-    assert!(err.contains("--threads"), "{err}");
+    // Refused by the argument parser (exit 2, the bound in the message), before any thread
+    // pool exists; no timing is asserted (the machine may be busy).
     assert!(
-        start.elapsed().as_secs() < 10,
-        "refused only after {:?}",
-        start.elapsed()
+        err.contains("--threads") && err.contains("per core"),
+        "{err}"
     );
     ok(
         &t.0,
