@@ -67,6 +67,26 @@ pub fn bytes(count: impl TryInto<u128>, size: u128) -> u128 {
     count.try_into().unwrap_or(u128::MAX).saturating_mul(size)
 }
 
+/// A count for people: exact below a million, else `1.5·10⁹` (`10¹²` for a power of ten).
+pub fn count(n: u128) -> String {
+    if n < 1_000_000 {
+        return n.to_string();
+    }
+    const SUP: [char; 10] = ['⁰', '¹', '²', '³', '⁴', '⁵', '⁶', '⁷', '⁸', '⁹'];
+    let e = n.ilog10();
+    let exp: String = e
+        .to_string()
+        .bytes()
+        .map(|d| SUP[usize::from(d - b'0')])
+        .collect();
+    let m = n as f64 / 10f64.powi(e as i32);
+    if n.is_multiple_of(10u128.pow(e)) && m.round() == 1.0 {
+        format!("10{exp}")
+    } else {
+        format!("{m:.1}·10{exp}")
+    }
+}
+
 /// Parses a size: a number of bytes with an optional unit `k`, `M`, `G`, `T` (powers of
 /// 1024; a trailing `B` or `iB` is accepted), e.g. `12G`, `500MiB`, `1048576`.
 ///
@@ -118,6 +138,9 @@ mod tests {
         assert_eq!(human(4_000_000_000_000), "4.0 TB");
         assert_eq!(human(12_884_901_888), "13 GB");
         assert_eq!(human(17), "17 B");
+        assert_eq!(count(12345), "12345");
+        assert_eq!(count(1_000_000_000_000), "10¹²");
+        assert_eq!(count(1_500_000_000), "1.5·10⁹");
         assert_eq!(bytes(u64::MAX, 4), u128::from(u64::MAX) * 4);
         assert_eq!(bytes(-1i64, 4), u128::MAX);
     }

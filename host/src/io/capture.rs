@@ -101,12 +101,26 @@ impl Geometry {
         if !self.t0.is_finite() {
             return Err(Error::format(what, "t_start", "a finite value", self.t0));
         }
+        // Path lengths are squared and multiplied on the way: keep the time axis at a size
+        // where that stays exact enough and finite (1e9 m of path is 3 s of light).
+        let end = self.t0.abs() + self.dt * self.nt as f64;
+        if end.is_nan() || end > MAX_PATH {
+            return Err(Error::format(
+                what,
+                "delta_t",
+                format!("a time axis within {MAX_PATH:e} m of path (|t_start| + Nt·delta_t)"),
+                format!("{} + {} × {}", self.t0.abs(), self.nt, self.dt),
+            ));
+        }
         if self.nt == 0 {
             return Err(Error::format(what, "H", "at least one time bin", 0));
         }
         Ok(())
     }
 }
+
+/// Longest path length a time axis may reach, `|t0| + Nt·Δt` (m): 1e9 m, 3 s of light.
+pub const MAX_PATH: f64 = 1e9;
 
 /// A source of laser rows: the kernel's input. Implemented by in-memory captures, file
 /// readers that stream by row, and the simulator.

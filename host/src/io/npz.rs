@@ -13,6 +13,7 @@
 //! | `t_accounts_first_and_last_bounces`, `confocal` | u8 `()` | flags |
 
 use crate::atomic::Transaction;
+use crate::budget;
 use crate::error::{Error, Result};
 use crate::io::capture::{Capture, Geometry, RowSource};
 use ndarray::{Array, ArrayD, IxDyn};
@@ -189,6 +190,112 @@ fn xyz(r: &mut NpzReader<File>, path: &Path, key: &str) -> Result<[f64; 3]> {
         .map_err(|_| Error::format(path, key, "3 coordinates", format!("shape {:?}", a.shape())))
 }
 
+/// Largest `.npy` header read (bytes); numpy writes under 4 KiB.
+const MAX_NPY_HEADER: u64 = 1 << 16;
+
+/// The header length and the offset of the header text from the 12 first bytes of a `.npy`
+/// member (magic already checked or not: a wrong version is an error).
+fn npy_prefix(pre: &[u8; 12]) -> std::result::Result<(u64, u64), String> {
+    if &pre[..6] != b"\x93NUMPY" {
+        return Err("no NUMPY magic".into());
+    }
+    match pre[6] {
+        1 => Ok((u64::from(u16::from_le_bytes([pre[8], pre[9]])), 10)),
+        2 | 3 => Ok((
+            u64::from(u32::from_le_bytes([pre[8], pre[9], pre[10], pre[11]])),
+            12,
+        )),
+        v => Err(format!("version {v}")),
+    }
+}
+
+/// The `shape` tuple of a `.npy` header dictionary (spaces removed).
+fn npy_shape(header: &str) -> Option<Vec<usize>> {
+    header
+        .split_once("'shape':(")
+        .and_then(|(_, r)| r.split_once(')'))
+        .and_then(|(t, _)| {
+            t.split(',')
+                .filter(|x| !x.is_empty())
+                .map(|x| x.parse::<usize>().ok())
+                .collect()
+        })
+}
+
+/// Bytes per element of a `.npy` `descr` such as `'<f4'` (1 for anything unrecognised: the
+/// array reader rejects it later).
+fn npy_item_size(header: &str) -> u128 {
+    header
+        .split_once("'descr':'")
+        .and_then(|(_, r)| r.split_once('\''))
+        .and_then(|(d, _)| {
+            d.trim_start_matches(['<', '>', '|', '='])
+                .get(1..)?
+                .parse()
+                .ok()
+        })
+        .unwrap_or(1)
+}
+
+/// Checks every member's `.npy` header before any array is read: the header is at most
+/// 64 KiB and the array its shape claims fits the memory budget (alone, and all members
+/// together). The NumPy reader sizes its buffer from the header, so a header claiming 10¹²
+/// values would otherwise abort the process.
+///
+/// # Errors
+/// [`Error::Format`] for an unreadable archive or header, [`Error::Memory`] naming the
+/// member and the size its header claims.
+fn check_members(path: &Path) -> Result<()> {
+    use std::io::Read;
+    let archive = |e: zip::result::ZipError| {
+        Error::format(path, "(archive)", "a NumPy .npz archive", e.to_string())
+    };
+    let f = File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut z = zip::ZipArchive::new(f).map_err(archive)?;
+    let mut total = 0u128;
+    for i in 0..z.len() {
+        let mut e = z.by_index(i).map_err(archive)?;
+        let name = e.name().trim_end_matches(".npy").to_string();
+        let bad = |expected: &str, found: String| Error::format(path, &name, expected, found);
+        let mut pre = [0u8; 12];
+        if e.read_exact(&mut pre).is_err() {
+            // Too short for a .npy header: the array reader names it if it is needed.
+            continue;
+        }
+        let (hlen, skip) = npy_prefix(&pre).map_err(|m| bad("a .npy array", m))?;
+        if hlen > MAX_NPY_HEADER {
+            return Err(bad("a .npy header under 64 KiB", format!("{hlen} bytes")));
+        }
+        let mut header = pre[skip as usize..].to_vec();
+        header.resize(hlen as usize, 0);
+        let have = (12 - skip).min(hlen) as usize;
+        e.read_exact(&mut header[have..])
+            .map_err(|err| bad("a complete .npy header", err.to_string()))?;
+        let header = String::from_utf8_lossy(&header).replace(' ', "");
+        let Some(shape) = npy_shape(&header) else {
+            return Err(bad("a shape tuple in the .npy header", header));
+        };
+        let n = shape
+            .iter()
+            .try_fold(1u128, |a, &x| a.checked_mul(x as u128))
+            .unwrap_or(u128::MAX);
+        let bytes = n.saturating_mul(npy_item_size(&header));
+        let what = || {
+            format!(
+                "{name} of {} values claimed by {}'s header",
+                budget::count(n),
+                path.display()
+            )
+        };
+        budget::check(what, bytes)?;
+        total = total.saturating_add(bytes);
+    }
+    budget::check(
+        || format!("the arrays claimed by {}'s headers", path.display()),
+        total,
+    )
+}
+
 /// The geometry of an archive whose `H` has shape `s` (checked against the grids).
 fn geometry(r: &mut NpzReader<File>, path: &Path, s: &[usize]) -> Result<Geometry> {
     let (lasers, laser_shape) = grid(r, path, "laser_grid_xyz")?;
@@ -282,18 +389,8 @@ pub fn open_stream(path: &Path) -> Result<Option<Stream>> {
     file.seek(SeekFrom::Start(data_start)).map_err(io)?;
     let mut pre = [0u8; 12];
     file.read_exact(&mut pre).map_err(io)?;
-    if &pre[..6] != b"\x93NUMPY" {
-        return Err(bad("a .npy array", "no NUMPY magic".into()));
-    }
-    let (hlen, skip) = match pre[6] {
-        1 => (u16::from_le_bytes([pre[8], pre[9]]) as u64, 10u64),
-        2 | 3 => (
-            u32::from_le_bytes([pre[8], pre[9], pre[10], pre[11]]) as u64,
-            12,
-        ),
-        v => return Err(bad(".npy version 1-3", format!("version {v}"))),
-    };
-    if hlen > 1 << 16 {
+    let (hlen, skip) = npy_prefix(&pre).map_err(|e| bad(".npy version 1-3", e))?;
+    if hlen > MAX_NPY_HEADER {
         return Err(bad("a .npy header under 64 KiB", format!("{hlen} bytes")));
     }
     file.seek(SeekFrom::Start(data_start + skip)).map_err(io)?;
@@ -303,28 +400,26 @@ pub fn open_stream(path: &Path) -> Result<Option<Stream>> {
     if !header.contains("'descr':'<f4'") || !header.contains("'fortran_order':False") {
         return Ok(None);
     }
-    let shape: Vec<usize> = header
-        .split_once("'shape':(")
-        .and_then(|(_, r)| r.split_once(')'))
-        .map(|(t, _)| {
-            t.split(',')
-                .filter(|x| !x.is_empty())
-                .map(|x| x.parse::<usize>())
-                .collect::<std::result::Result<_, _>>()
-        })
-        .and_then(|r| r.ok())
+    let shape = npy_shape(&header)
         .ok_or_else(|| bad("a shape tuple in the .npy header", header.clone()))?;
     let start = data_start + skip + hlen;
-    let n: u64 = shape.iter().map(|&x| x as u64).product();
-    if start + 4 * n > data_start + len {
+    let need = shape
+        .iter()
+        .try_fold(4u64, |a, &x| a.checked_mul(x as u64))
+        .and_then(|b| b.checked_add(start));
+    if need.is_none_or(|end| end > data_start + len) {
         return Err(bad(
-            &format!("{} bytes of f32 data", 4 * n),
+            &format!(
+                "{} bytes of f32 data",
+                need.map_or("more than 2^64".into(), |e| (e - start).to_string())
+            ),
             format!(
                 "{} bytes (truncated)",
                 (data_start + len).saturating_sub(start)
             ),
         ));
     }
+    check_members(path)?;
     let mut r = NpzReader::new(File::open(path).map_err(io)?)
         .map_err(|e| Error::format(path, "(archive)", "a NumPy .npz archive", e.to_string()))?;
     let geometry = geometry(&mut r, path, &shape)?;
@@ -432,6 +527,7 @@ impl RowSource for Stream {
 /// [`Error::Io`] if unreadable, [`Error::Format`] naming the key for a missing or
 /// malformed field.
 pub fn read(path: &Path) -> Result<Capture> {
+    check_members(path)?;
     let f = File::open(path).map_err(|e| Error::io(path, e))?;
     let mut r = NpzReader::new(f)
         .map_err(|e| Error::format(path, "(archive)", "a NumPy .npz archive", e.to_string()))?;

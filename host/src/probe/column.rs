@@ -5,6 +5,7 @@
 use super::direct::*;
 use super::drive::*;
 use super::wave::*;
+use crate::budget;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path, chunk_len};
 use crate::io::capture::RowSource;
@@ -113,12 +114,23 @@ pub fn column(
         }
         _ => {}
     }
+    if gate != ColumnGate::None {
+        let base = wave.config(src.geometry())?;
+        let after = gate == ColumnGate::HigherOrder;
+        check_window(src.geometry(), &base, Some(&[focus]), &volume.points, after)?;
+    }
     let t = Instant::now();
     let cfg = if gate == ColumnGate::TwoBounce {
         wave.column_config(src.geometry(), &[focus], &volume.points)?
     } else {
         wave.config(src.geometry())?
     };
+    check_memory(
+        src.geometry(),
+        &cfg,
+        budget::bytes(volume.len(), 32),
+        "the column",
+    )?;
     let target = Target::Column(focus);
     let (mut v, report, path) = match gate {
         ColumnGate::HigherOrder => {
@@ -160,8 +172,10 @@ pub fn column(
             *x = 0.0;
         }
     }
+    let values: Vec<f32> = v.iter().map(|&x| x as f32).collect();
+    check_finite(&values, &volume.points, "column")?;
     Ok(Output {
-        values: v.iter().map(|&x| x as f32).collect(),
+        values,
         report,
         seconds: t.elapsed().as_secs_f64(),
         config: cfg,

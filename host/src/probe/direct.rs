@@ -3,6 +3,7 @@
 
 use super::drive::*;
 use super::wave::*;
+use crate::budget;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path};
 use crate::io::capture::{Geometry, RowSource};
@@ -26,8 +27,28 @@ pub fn direct(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<Output> {
-    let t = Instant::now();
     let cfg = wave.config(src.geometry())?;
+    check_window(src.geometry(), &cfg, None, &volume.points, false)?;
+    check_memory(
+        src.geometry(),
+        &cfg,
+        budget::bytes(volume.len(), 32),
+        "direct light",
+    )?;
+    let o = direct_paths(src, volume, wave, exec, cfg)?;
+    check_finite(&o.values, &volume.points, "direct light")?;
+    Ok(o)
+}
+
+/// [`direct`] on the path [`Exec::path`] chooses.
+fn direct_paths(
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    wave: &Wave,
+    exec: Exec<'_>,
+    cfg: Config,
+) -> Result<Output> {
+    let t = Instant::now();
     let job = Job {
         cfg: &cfg,
         wave,

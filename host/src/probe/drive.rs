@@ -4,6 +4,7 @@
 //! Memory: `2·threads` rows of histograms and one row buffer per worker, never the capture.
 
 use super::wave::*;
+use crate::budget;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Pass, chunk_len, row_batch};
 use crate::io::capture::{Geometry, RowSource};
@@ -30,6 +31,7 @@ pub(super) fn drive(
     let Job { cfg, wave, exec } = job;
     let g = src.geometry().clone();
     check_laser_falloff(&g, wave)?;
+    check_memory(&g, cfg, 0, label)?;
     let dft = BandDft::new(cfg);
     let mut clean = Vec::new();
     let ks = g.spads_per_row();
@@ -111,6 +113,7 @@ pub(super) fn drive_rows<W: Send>(
     let g = src.geometry().clone();
     check_laser_falloff(&g, wave)?;
     let ks = g.spads_per_row();
+    check_memory(&g, cfg, 0, label)?;
     let dft = BandDft::new(cfg);
     // (worker, row buffer, copy of a row with non-finite samples zeroed)
     type Slot<W> = Mutex<(W, Vec<f32>, Vec<f32>)>;
@@ -148,6 +151,39 @@ pub(super) fn drive_rows<W: Send>(
         .collect())
 }
 
+/// Checks what a pass over `g` holds at once against the memory budget ([`budget`]): the
+/// kernel's tables (`2N + J + Ks` f32), the band-DFT table (at most
+/// [`fast::band::MAX_TABLE_BYTES`](crate::probe::fast::band::MAX_TABLE_BYTES)), and per thread
+/// a row buffer (`Ks·(2J + 3)` f32) and two rows of histograms, plus `extra` bytes (probe
+/// states, outputs). `what` names the pass.
+///
+/// # Errors
+/// [`Error::Memory`] naming the pass, the DFT sizes and σ.
+pub(super) fn check_memory(g: &Geometry, cfg: &Config, extra: u128, what: &str) -> Result<()> {
+    let threads = rayon::current_num_threads() as u128;
+    let ks = g.spads_per_row();
+    let need = budget::bytes(Scan::tables_len(cfg, ks), 4)
+        .saturating_add(
+            BandDft::table_bytes(cfg).min(crate::probe::fast::band::MAX_TABLE_BYTES as u128),
+        )
+        .saturating_add(budget::bytes(RowBuffer::len(cfg, ks), 4 * threads))
+        .saturating_add(budget::bytes(ks.saturating_mul(g.nt), 8 * threads))
+        .saturating_add(extra);
+    budget::check(
+        || {
+            format!(
+                "{what} with a DFT period of {} bins, a band of {} bins and rows of {} SPADs × {} bins (σ = {} m)",
+                budget::count(cfg.n_fft() as u128),
+                budget::count(cfg.bins() as u128),
+                ks,
+                g.nt,
+                cfg.sigma()
+            )
+        },
+        need,
+    )
+}
+
 pub(super) fn check_laser_falloff(g: &Geometry, wave: &Wave) -> Result<()> {
     if wave.compensate_laser {
         let f = g.laser_falloff(g.lasers[0]);
@@ -173,6 +209,11 @@ pub(super) fn elementwise(
     let cfg = job.cfg;
     let ks = src.geometry().spads_per_row();
     let cl = chunk_len(voxels.len());
+    let states = voxels
+        .chunks(cl)
+        .map(|c| budget::bytes(Probe::state_len(cfg, target, gate, c.len(), ks), 8))
+        .fold(budget::bytes(voxels.len(), 8), u128::saturating_add);
+    check_memory(src.geometry(), cfg, states, label)?;
     let chunks: Vec<&[Point]> = voxels.chunks(cl).collect();
     let mut states: Vec<Vec<f64>> = chunks
         .iter()

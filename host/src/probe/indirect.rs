@@ -157,6 +157,7 @@ pub fn indirect_over(
             values[i] = s as f32;
         }
     }
+    check_finite(&values, &volume.points, "in-focus indirect light")?;
     Ok(IndirectOutput {
         values,
         direct: Vec::new(),

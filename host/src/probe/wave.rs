@@ -142,6 +142,108 @@ impl Wave {
     }
 }
 
+/// Checks that the capture's time window holds some path of the probed elements, so that a
+/// window that misses every path is the same clear error for every probe (instead of an
+/// all-zero image): the path lengths `d1 + |x_l − a| + |a − b| + |b − x_s| + d4` over every
+/// laser `l`, SPAD `s` and voxel `b` (with `a = b` on the diagonal, `foci = None`) must meet
+/// the Gaussian gate's guard interval ([`Config::guard`]); for `after_only` (the higher-order
+/// gate, light arriving later) some path must be no later than the window's end.
+///
+/// # Errors
+/// [`Error::Argument`](crate::Error::Argument) (`--volume`) naming the window and the paths'
+/// span.
+pub(super) fn check_window(
+    g: &Geometry,
+    cfg: &Config,
+    foci: Option<&[Point]>,
+    voxels: &[Point],
+    after_only: bool,
+) -> Result<()> {
+    if voxels.is_empty() {
+        return Ok(());
+    }
+    let (d1, d4) = legs(g, cfg);
+    let span = |pts: &[Point], legs: &[f64], v: &Point| {
+        pts.iter()
+            .zip(legs)
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (p, d)| {
+                let x = f64::from(dist(*p, *v)) + d;
+                (a.min(x), b.max(x))
+            })
+    };
+    let (lo, hi) = cfg.guard();
+    let (lo, hi) = (lo + g.t0, hi + g.t0);
+    let meets = |(a, b): (f64, f64)| {
+        if after_only {
+            a <= hi
+        } else {
+            a <= hi && b >= lo
+        }
+    };
+    let join = |x: (f64, f64), y: (f64, f64)| (x.0.min(y.0), x.1.max(y.1));
+    let empty = (f64::INFINITY, f64::NEG_INFINITY);
+    let all = match foci {
+        None => voxels
+            .par_iter()
+            .map(|v| {
+                let (l, s) = (span(&g.lasers, &d1, v), span(&g.spads, &d4, v));
+                (l.0 + s.0, l.1 + s.1)
+            })
+            .map(|p| (meets(p), p))
+            .reduce(|| (false, empty), |x, y| (x.0 || y.0, join(x.1, y.1))),
+        Some(foci) => foci
+            .par_iter()
+            .map(|a| {
+                let p = span(&g.lasers, &d1, a);
+                voxels.iter().fold((false, empty), |acc, b| {
+                    let c = span(&g.spads, &d4, b);
+                    let d = f64::from(dist(*a, *b));
+                    let q = (p.0 + d + c.0, p.1 + d + c.1);
+                    (acc.0 || meets(q), join(acc.1, q))
+                })
+            })
+            .reduce(|| (false, empty), |x, y| (x.0 || y.0, join(x.1, y.1))),
+    };
+    if all.0 {
+        return Ok(());
+    }
+    Err(crate::error::Error::arg(
+        "--volume",
+        format!(
+            "the capture's time window ({:.4} to {:.4} m of path, gate margins included) contains no path through the probed voxels (their paths span {:.4} to {:.4} m): choose voxels the capture saw, or check its t_start and delta_t",
+            lo, hi, all.1.0, all.1.1
+        ),
+    ))
+}
+
+/// Checks that a probe's intensities are finite: an `f32` output cannot hold intensities
+/// above 3.4e38 (histogram values so large that `|A|²` overflows), and a non-finite value is
+/// never written silently.
+///
+/// # Errors
+/// [`Error::Format`](crate::Error::Format) on `intensity`, naming the first voxel and the
+/// cause.
+pub(super) fn check_finite(values: &[f32], voxels: &[Point], what: &str) -> Result<()> {
+    let Some(i) = values.iter().position(|v| !v.is_finite()) else {
+        return Ok(());
+    };
+    let n = values.iter().filter(|v| !v.is_finite()).count();
+    let p = voxels.get(i).copied().unwrap_or_default();
+    Err(crate::error::Error::format(
+        "(result)",
+        "intensity",
+        format!("finite {what} intensities within the float32 range (< 3.4e38)"),
+        format!(
+            "{} at ({:.3}, {:.3}, {:.3}) m and {} more voxels: the capture's histogram values are too large (|A|² overflows float32); scale H down",
+            values[i],
+            p[0],
+            p[1],
+            p[2],
+            n - 1
+        ),
+    ))
+}
+
 /// The device legs `d1_l`, `d4_s` of every laser and SPAD spot (0 without legs in time).
 pub(super) fn legs(g: &Geometry, cfg: &Config) -> (Vec<f64>, Vec<f64>) {
     let d1 = g

@@ -9,6 +9,7 @@ use vltm_kernel::Point;
 
 use super::objects::*;
 use super::scene::*;
+use crate::budget;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Pass};
 use crate::io::capture::{Capture, Geometry, RowSource};
@@ -21,7 +22,46 @@ impl Scene {
     /// As [`Scene::validate`] (errors name `<scene>`).
     pub fn source(&self) -> Result<SceneSource> {
         self.validate(Path::new(IN_CODE))?;
+        self.check_memory()?;
         Ok(SceneSource::new(self))
+    }
+
+    /// Checks what rendering holds at once against the memory budget: the capture, the
+    /// per-point leg tables to every spot, one row accumulator per thread, and the pulse on the
+    /// bins and on the fine grid.
+    ///
+    /// # Errors
+    /// [`crate::Error::Memory`] naming the sizes.
+    fn check_memory(&self) -> Result<()> {
+        let s = &self.setup;
+        let kl = s.lasers.shape()[0].saturating_mul(s.lasers.shape()[1]);
+        let ks = match (&s.spads, s.confocal) {
+            (_, true) => 1,
+            (Some(a), false) => a.shape()[0].saturating_mul(a.shape()[1]),
+            (None, false) => 0,
+        };
+        let points = self
+            .objects
+            .iter()
+            .fold(0usize, |n, o| n.saturating_add(o.sample_count()));
+        let values = kl.saturating_mul(ks).saturating_mul(s.nt);
+        let threads = rayon::current_num_threads() as u128;
+        let pulse = (6.0 * self.pulse_sigma() / s.dt * (1.0 + FINE as f64)).ceil() as u128;
+        let need = budget::bytes(values, 4)
+            .saturating_add(budget::bytes(points, 16 * (kl as u128 + ks as u128)))
+            .saturating_add(budget::bytes(ks.saturating_mul(s.nt), 8 * threads))
+            .saturating_add(budget::bytes(pulse, 8));
+        budget::check(
+            || {
+                format!(
+                    "rendering {} lasers × {} SPADs × {} bins and {points} surface samples",
+                    budget::count(kl as u128),
+                    budget::count(ks as u128),
+                    budget::count(s.nt as u128),
+                )
+            },
+            need,
+        )
     }
 
     /// Renders the whole capture (rows in parallel), with noise if `noise` is set.

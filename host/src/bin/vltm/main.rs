@@ -40,6 +40,10 @@ struct Cli {
     /// Worker threads (default: all cores).
     #[arg(long, global = true)]
     threads: Option<usize>,
+    /// Memory budget, e.g. 12G or 500M (default: half of the physical memory). Every buffer
+    /// sized from a file, a scene or an argument is checked against it before it is made.
+    #[arg(long, global = true, value_name = "SIZE")]
+    max_memory: Option<String>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -344,6 +348,15 @@ fn main() -> ExitCode {
         {
             eprintln!("vltm: argument `--threads`: the thread pool could not be started");
             return ExitCode::from(1);
+        }
+    }
+    if let Some(m) = &cli.max_memory {
+        match vltm::budget::parse_size(m) {
+            Ok(b) => vltm::budget::set(b),
+            Err(e) => {
+                eprintln!("vltm: {}", printable(&e.to_string()));
+                return ExitCode::from(2);
+            }
         }
     }
     match run(cli.command) {

@@ -10,6 +10,7 @@ use vltm_kernel::Point;
 use super::decode::*;
 use super::header::*;
 use super::sidecar::*;
+use crate::budget;
 use crate::error::{Error, Result};
 use crate::io::capture::{Capture, Geometry, RowSource};
 
@@ -81,8 +82,22 @@ impl<R: BufRead + Seek> PtuSource<R> {
         let start = reader.stream_position().map_err(|e| Error::io(&path, e))?;
         let header = Header::read(&mut reader, &path)?;
         let plan = sidecar.plan(&header, sidecar_path)?;
+        // The row's photon counts and the f32 row handed out, sized by the sidecar.
+        let row = plan.ks.saturating_mul(plan.geometry.nt);
+        budget::check(
+            || {
+                format!(
+                    "a laser row of {} bins ({} SPADs × nt {}) described by {}",
+                    budget::count(row as u128),
+                    plan.ks,
+                    plan.geometry.nt,
+                    sidecar_path.display()
+                )
+            },
+            budget::bytes(row, 8),
+        )?;
         let records = Records::new(reader, &header, path.clone());
-        let hist = vec![0; plan.ks * plan.geometry.nt];
+        let hist = vec![0; row];
         Ok(Self {
             data_start: start + header.data_offset,
             path,
@@ -265,7 +280,18 @@ pub fn read_all(ptu: impl AsRef<Path>, sidecar: impl AsRef<Path>) -> Result<Capt
 }
 
 pub(super) fn collect<R: BufRead + Seek>(src: &mut PtuSource<R>, path: &Path) -> Result<Capture> {
-    let mut data = Vec::with_capacity(src.rows() * src.hist.len());
+    let n = src.rows().saturating_mul(src.hist.len());
+    budget::check(
+        || {
+            format!(
+                "H of {} samples binned from {}",
+                budget::count(n as u128),
+                path.display()
+            )
+        },
+        budget::bytes(n, 4),
+    )?;
+    let mut data = Vec::with_capacity(n);
     let mut row = Vec::new();
     for l in 0..src.rows() {
         src.read_row(l, &mut row)?;

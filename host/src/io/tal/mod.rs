@@ -121,9 +121,10 @@
 //! tests build format variants with the pure-Rust writer `hdf5-pure`, a dev-dependency.)
 
 use self::fields::*;
+use crate::budget;
 use crate::error::{Error, Result};
 use crate::io::capture::{Capture, Geometry, RowSource};
-use hdf5_reader::{Dataset, Datatype, Hdf5File, SliceInfo, SliceInfoElem};
+use hdf5_reader::{Dataset, Datatype, Hdf5File, OpenOptions, SliceInfo, SliceInfoElem};
 use std::path::{Path, PathBuf};
 use vltm_kernel::Point;
 
@@ -197,7 +198,12 @@ pub fn read_all_with(path: &Path, options: TalOptions) -> Result<Capture> {
 
 impl TalReader {
     fn new(path: &Path, options: TalOptions) -> Result<Self> {
-        let file = Hdf5File::open(path).map_err(|e| h5_error(path, "(file)", e))?;
+        // No single read may exceed the memory budget (grids, blocks: the crate refuses it
+        // before allocating).
+        let limit = usize::try_from(budget::get()).unwrap_or(usize::MAX);
+        let file =
+            Hdf5File::open_with_options(path, OpenOptions::default().with_max_read_bytes(limit))
+                .map_err(|e| h5_error(path, "(file)", e))?;
         let names = file
             .root_group()
             .and_then(|g| g.member_names())
@@ -265,6 +271,7 @@ impl TalReader {
                 format!("shape {dims:?} of {elem_bytes}-byte values"),
             ));
         }
+        check_layout(path, &file, &h, h_bytes, file_len)?;
         let nt = dims[0];
         let lead = &dims[1..];
 
@@ -339,6 +346,18 @@ impl TalReader {
             },
         };
         geometry.validate(path)?;
+        // A block of rows, the crate's raw copy of it and the row handed out.
+        let row = geometry.spads_per_row().saturating_mul(nt);
+        budget::check(
+            || {
+                format!(
+                    "a laser row of H ({} samples) read from {}",
+                    budget::count(row as u128),
+                    path.display()
+                )
+            },
+            budget::bytes(row, 8 + 2 * elem_bytes as u128).max(BLOCK_BYTES as u128 * 3),
+        )?;
 
         let single_falloff = if single {
             let physical = Geometry {
@@ -419,6 +438,16 @@ impl TalReader {
         let row_len = g.spads_per_row() * g.nt;
         let mut data: Vec<f32> = Vec::new();
         let total = g.lasers.len().checked_mul(row_len);
+        budget::check(
+            || {
+                format!(
+                    "H of {} samples in {}",
+                    budget::count(total.map_or(u128::MAX, |n| n as u128)),
+                    self.path.display()
+                )
+            },
+            budget::bytes(total.unwrap_or(usize::MAX), 4 + 8),
+        )?;
         if total.is_none_or(|n| data.try_reserve_exact(n).is_err()) {
             return Err(Error::format(
                 &self.path,
@@ -500,6 +529,76 @@ impl TalReader {
         };
         Ok(())
     }
+}
+
+/// Checks where `H`'s data lies: a contiguous layout must lie inside the file and hold at
+/// least `h_bytes` (a size of 0 or an undefined address means the data was never written,
+/// which the reader would silently return as fill values); a compact one must hold
+/// `h_bytes`; a chunked one must have its chunk index written.
+fn check_layout(
+    path: &Path,
+    file: &Hdf5File,
+    h: &Dataset,
+    h_bytes: Option<usize>,
+    file_len: u64,
+) -> Result<()> {
+    use hdf5_reader::messages::{HdfMessage, layout::DataLayout};
+    let header = file
+        .get_or_parse_header(h.address())
+        .map_err(|e| h5_error(path, "H", e))?;
+    let os = u32::from(file.superblock().offset_size.clamp(1, 8));
+    let undefined = |a: u64| a == u64::MAX >> (64 - 8 * os);
+    let bad = |expected: &str, found: String| Error::format(path, "H", expected, found);
+    let need = h_bytes.map_or(u64::MAX, |b| b as u64);
+    for m in &header.messages {
+        let HdfMessage::DataLayout(m) = m else {
+            continue;
+        };
+        match &m.layout {
+            DataLayout::Contiguous { address, size } => {
+                if undefined(*address) || *size == 0 {
+                    return Err(bad(
+                        "a data layout that holds the values",
+                        format!(
+                            "a contiguous layout at address {address:#x} of {size} bytes: no data was written"
+                        ),
+                    ));
+                }
+                if address.checked_add(*size).is_none_or(|end| end > file_len) {
+                    return Err(bad(
+                        &format!("data inside the file ({file_len} bytes)"),
+                        format!("{size} bytes at address {address:#x}: outside the file"),
+                    ));
+                }
+                if *size < need {
+                    return Err(bad(
+                        &format!("{need} bytes of data for its shape"),
+                        format!("a contiguous layout of {size} bytes"),
+                    ));
+                }
+            }
+            DataLayout::Compact { data } if (data.len() as u64) < need => {
+                return Err(bad(
+                    &format!("{need} bytes of data for its shape"),
+                    format!("a compact layout of {} bytes", data.len()),
+                ));
+            }
+            DataLayout::Chunked { address, .. } if undefined(*address) => {
+                return Err(bad(
+                    "written chunks",
+                    "a chunked layout with no chunk written (no data)".to_string(),
+                ));
+            }
+            DataLayout::Chunked { address, .. } if *address >= file_len => {
+                return Err(bad(
+                    &format!("a chunk index inside the file ({file_len} bytes)"),
+                    format!("address {address:#x}: outside the file"),
+                ));
+            }
+            _ => {}
+        }
+    }
+    Ok(())
 }
 
 /// Rows read from `H` at once (module docs, *Reading*): at most this many bytes, or one row.

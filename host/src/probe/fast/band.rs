@@ -14,37 +14,59 @@
 //! blocked order (error ≲ √Nt·2⁻²⁴ of `Σ|H|`, inside the property tests' `ε_f32`).
 //!
 //! Cost per row `2·Ks·Nt·(2J + 2)` flops; memory `(2J + 2)·Nt` f32 for `W`.
+//!
+//! **Large tables.** `W` grows as `J·Nt`, and `J` grows with `Nt` (the band is a fixed share of
+//! the DFT period), so `W` grows as `Nt²`: 100,000 bins would need 13 GB for a 40 kB capture.
+//! Above [`MAX_TABLE_BYTES`] no table is made: each row's sums run over one band bin at a
+//! time, its `Nt` phasors made by a complex recurrence in `f64` (resynchronised on the exact
+//! integer phase every 256 bins, error ≲ 1e-13) and reused for every SPAD; memory O(Nt), the
+//! same flops as the product at the speed of a plain loop.
 
 use ndarray::linalg::general_mat_mul;
 use ndarray::{Array2, ArrayView2, ArrayViewMut2};
 use num_complex::Complex32;
 use vltm_kernel::Config;
 
+/// Largest band-DFT table `W` made (bytes); above it the sums run table-free (module docs).
+pub const MAX_TABLE_BYTES: usize = 256 << 20;
+
 /// The band DFT matrix of a configuration (see the module docs).
 #[derive(Clone, Debug)]
 pub struct BandDft {
     nt: usize,
     bins: usize,
-    /// (2J × Nt): row 2j = cos, row 2j+1 = sin of −2π k_j n/N.
-    w: Array2<f32>,
+    /// The band's first bin `k_lo` and the DFT period N.
+    k_lo: i64,
+    n: i64,
+    /// (2J × Nt): row 2j = cos, row 2j+1 = sin of −2π k_j n/N; `None` above
+    /// [`MAX_TABLE_BYTES`].
+    w: Option<Array2<f32>>,
     /// cos / sin of −Ω nΔt (the un-gated carrier), Nt each.
     carrier: [Vec<f32>; 2],
 }
 
 impl BandDft {
-    /// Builds `W` for `cfg` (cost `2J·Nt` sincos in `f64`, once).
+    /// Bytes of the table `W` for `cfg` (saturating), whether or not it is made.
+    pub fn table_bytes(cfg: &Config) -> u128 {
+        (2 * cfg.bins() as u128).saturating_mul(cfg.nt() as u128) * 4
+    }
+
+    /// Builds `W` for `cfg` (cost `2J·Nt` sincos in `f64`, once), or no table above
+    /// [`MAX_TABLE_BYTES`] (module docs).
     pub fn new(cfg: &Config) -> Self {
         let (nt, bins, n) = (cfg.nt(), cfg.bins(), cfg.n_fft() as i64);
-        let mut w = Array2::<f32>::zeros((2 * bins, nt));
-        for j in 0..bins {
-            let k = (cfg.k_lo() + j as i64).rem_euclid(n);
-            for t in 0..nt {
-                let q = (k * t as i64) % n;
-                let a = -std::f64::consts::TAU * q as f64 / n as f64;
-                w[[2 * j, t]] = a.cos() as f32;
-                w[[2 * j + 1, t]] = a.sin() as f32;
+        let w = (Self::table_bytes(cfg) <= MAX_TABLE_BYTES as u128).then(|| {
+            let mut w = Array2::<f32>::zeros((2 * bins, nt));
+            for j in 0..bins {
+                let k = (cfg.k_lo() + j as i64).rem_euclid(n);
+                for t in 0..nt {
+                    let (c, s) = phasor(k, t as i64, n);
+                    w[[2 * j, t]] = c as f32;
+                    w[[2 * j + 1, t]] = s as f32;
+                }
             }
-        }
+            w
+        });
         let turns = -cfg.dt() / cfg.wavelength();
         let phase = |t: usize| {
             let x = t as f64 * turns;
@@ -57,9 +79,16 @@ impl BandDft {
         Self {
             nt,
             bins,
+            k_lo: cfg.k_lo(),
+            n,
             w,
             carrier,
         }
+    }
+
+    /// Whether the table `W` was made (else the sums run table-free).
+    pub fn has_table(&self) -> bool {
+        self.w.is_some()
     }
 
     /// Number of band bins J.
@@ -80,14 +109,53 @@ impl BandDft {
         if ks == 0 || self.nt == 0 {
             return;
         }
-        let a = ArrayView2::from_shape((ks, self.nt), hists).expect("checked shape");
-        let out: &mut [f32] = bytemuck::cast_slice_mut(band);
-        let mut c = ArrayViewMut2::from_shape((ks, 2 * self.bins), out).expect("checked shape");
-        general_mat_mul(1.0, &a, &self.w.t(), 0.0, &mut c);
+        match &self.w {
+            Some(w) => {
+                let a = ArrayView2::from_shape((ks, self.nt), hists).expect("checked shape");
+                let out: &mut [f32] = bytemuck::cast_slice_mut(band);
+                let mut c =
+                    ArrayViewMut2::from_shape((ks, 2 * self.bins), out).expect("checked shape");
+                general_mat_mul(1.0, &a, &w.t(), 0.0, &mut c);
+            }
+            None => self.apply_without_table(hists, band, ks),
+        }
         for (h, m) in hists.chunks_exact(self.nt).zip(ungated.iter_mut()) {
             *m = Complex32::new(dot(h, &self.carrier[0]), dot(h, &self.carrier[1]));
         }
     }
+}
+
+impl BandDft {
+    /// The band sums one bin at a time, its phasors by recurrence (module docs).
+    fn apply_without_table(&self, hists: &[f32], band: &mut [Complex32], ks: usize) {
+        let mut tw = vec![(0.0f64, 0.0f64); self.nt];
+        for j in 0..self.bins {
+            let k = (self.k_lo + j as i64).rem_euclid(self.n);
+            let step = phasor(k, 1, self.n);
+            let mut z = (1.0, 0.0);
+            for (t, w) in tw.iter_mut().enumerate() {
+                if t % 256 == 0 {
+                    z = phasor(k, t as i64, self.n);
+                }
+                *w = z;
+                z = (z.0 * step.0 - z.1 * step.1, z.0 * step.1 + z.1 * step.0);
+            }
+            for s in 0..ks {
+                let h = &hists[s * self.nt..(s + 1) * self.nt];
+                let (re, im) = h.iter().zip(&tw).fold((0.0f64, 0.0f64), |(a, b), (&x, w)| {
+                    (a + f64::from(x) * w.0, b + f64::from(x) * w.1)
+                });
+                band[s * self.bins + j] = Complex32::new(re as f32, im as f32);
+            }
+        }
+    }
+}
+
+/// `(cos, sin)` of `−2π (k·t mod n)/n`, the phase reduced exactly in integers.
+fn phasor(k: i64, t: i64, n: i64) -> (f64, f64) {
+    let q = (i128::from(k) * i128::from(t)).rem_euclid(i128::from(n));
+    let a = -std::f64::consts::TAU * q as f64 / n as f64;
+    (a.cos(), a.sin())
 }
 
 /// Dot product in eight independent lanes (vectorises).
@@ -142,5 +210,25 @@ mod tests {
             assert!((x - y).norm() <= 2e-6 * scale, "{x} vs {y}");
         }
         assert_eq!(a.offsets(), b.offsets());
+        // The table-free sums give the same spectra.
+        let mut free = BandDft::new(&cfg);
+        free.w = None;
+        let mut b3 = vec![0.0f32; RowBuffer::len(&cfg, spads.len())];
+        let mut r3 = RowBuffer::new(&scan, &mut b3).unwrap();
+        let c = r3
+            .load_with(&scan, laser, &hists, |band, m| free.apply(&hists, band, m))
+            .unwrap();
+        for (x, y) in a.band().iter().zip(c.band()) {
+            assert!((x - y).norm() <= 2e-6 * scale * g0, "{x} vs {y}");
+        }
+        assert!(!free.has_table() && dft.has_table());
+    }
+
+    /// 100,000 bins: no 13 GB table is made.
+    #[test]
+    fn huge_tables_are_not_made() {
+        let cfg = Config::try_new(&Params::new(0.05, 100_000, 0.001)).unwrap();
+        assert!(BandDft::table_bytes(&cfg) > MAX_TABLE_BYTES as u128);
+        assert!(!BandDft::new(&cfg).has_table());
     }
 }
