@@ -17,7 +17,7 @@
 //! | 8 | magic `VLTMPART` |
 //! | 4 | format version, `u32` (1) |
 //! | 4 | header length `h`, `u32` |
-//! | `h` | header: UTF-8 JSON — `capture` (identity), `probe` (kind and parameters), `rows` (row ranges `[a, b)`), `report` (counters), `legs` (per factorised column: projector leg range or null), `n_spads`, `n_points`, `n_acc`, `crc32` (of the bytes that follow), `capture_name` (informational) |
+//! | `h` | header: UTF-8 JSON — `capture` (identity), `probe` (kind and parameters), `rows` (row ranges `[a, b)`), `report` (counters), `legs` (per factorised column: projector leg range or null), `n_spads`, `n_points`, `n_acc`, `crc32` (of the bytes that follow, 8 hex digits), `capture_name` (informational) |
 //! | `12·n_spads` | SPAD spots, `f32` x, y, z (columns and indirect light image with them) |
 //! | `12·n_points` | volume points, `f32` (point lists only; grids are rebuilt from `probe.volume.axes`) |
 //! | `8·n_acc` | the accumulators, `f64` (complex numbers as re, im pairs) |
@@ -157,7 +157,8 @@ struct Head {
     n_spads: usize,
     n_points: usize,
     n_acc: usize,
-    crc32: u32,
+    /// CRC-32 of the bytes after the header, 8 hex digits.
+    crc32: String,
     capture_name: String,
 }
 
@@ -442,7 +443,7 @@ pub fn accumulate(
         n_spads: spads.len(),
         n_points: points.len(),
         n_acc: acc.len(),
-        crc32: 0,
+        crc32: String::new(),
         capture_name: capture_name.into(),
     };
     Ok(Partial {
@@ -501,7 +502,7 @@ impl Partial {
     fn header_json(&self, crc32: u32) -> Vec<u8> {
         // A struct of plain data: serialising it cannot fail.
         serde_json::to_vec(&Head {
-            crc32,
+            crc32: format!("{crc32:08x}"),
             ..self.head.clone()
         })
         .unwrap_or_default()
@@ -579,10 +580,10 @@ impl Partial {
                 format!("{} bytes (truncated or padded)", body.len()),
             ));
         }
-        if crc32fast::hash(body) != head.crc32 {
+        if format!("{:08x}", crc32fast::hash(body)) != head.crc32 {
             return Err(bad(
                 "crc32",
-                &format!("{:08x}", head.crc32),
+                &head.crc32,
                 format!("{:08x} (the state is corrupted)", crc32fast::hash(body)),
             ));
         }
