@@ -463,9 +463,10 @@ fn shell_of(shell: Option<(f32, f32)>) -> PyResult<Option<Shell>> {
 }
 
 /// What a probe call returns: finished arrays, or a partial state.
+#[allow(clippy::large_enum_variant)] // one per call, moved once
 enum Outcome {
     Done(probe::Output, Option<Vec<num_complex::Complex64>>),
-    Part(Partial),
+    Part(Box<Partial>),
 }
 
 /// Runs a probe: `kind` is direct, column or indirect; `rows` makes it partial.
@@ -566,7 +567,7 @@ fn run<'py>(
                     r,
                 )?;
                 if rows.is_some() {
-                    return Ok(Outcome::Part(p));
+                    return Ok(Outcome::Part(Box::new(p)));
                 }
                 let f = p.finish()?;
                 return Ok(Outcome::Done(f.output, f.amplitudes));
@@ -601,7 +602,7 @@ fn run<'py>(
         })
         .map_err(py_err)?;
     match outcome {
-        Outcome::Part(p) => Ok(Py::new(py, NativePartial(p))?.into_any()),
+        Outcome::Part(p) => Ok(Py::new(py, NativePartial(*p))?.into_any()),
         Outcome::Done(out, amps) => {
             let rep = report(py, &out)?;
             let values = out.values.into_pyarray(py);
