@@ -149,6 +149,35 @@ impl<'m> Probe<'m> {
         voxels: &'m [Point],
         state: &'m mut [f64],
     ) -> Result<Self, Error> {
+        let p = Self::resume(
+            scan,
+            target,
+            gate,
+            voxels,
+            state,
+            Report::default(),
+            (f64::INFINITY, f64::NEG_INFINITY),
+        )?;
+        p.state.fill(Complex64::new(0.0, 0.0));
+        Ok(p)
+    }
+
+    /// A probe over accumulators saved from an earlier one: `state` is taken as it is (not
+    /// zeroed), with that probe's counters ([`Probe::report`]) and projector leg range
+    /// ([`Probe::leg_range`]). Lets a host keep a scan's state between processes (a scan
+    /// split by rows, merged and finished elsewhere).
+    ///
+    /// # Errors
+    /// As [`Probe::new`].
+    pub fn resume(
+        scan: &Scan<'_>,
+        target: Target,
+        gate: Gate,
+        voxels: &'m [Point],
+        state: &'m mut [f64],
+        report: Report,
+        leg_range: (f64, f64),
+    ) -> Result<Self, Error> {
         let cfg = scan.config();
         let need = Self::state_len(cfg, target, gate, voxels.len(), scan.spads().len());
         check_len("state", need, state.len())?;
@@ -163,16 +192,27 @@ impl<'m> Probe<'m> {
                 expected: need,
                 found,
             })?;
-        state.fill(Complex64::new(0.0, 0.0));
         Ok(Self {
             target,
             gate,
             voxels,
             state,
-            report: Report::default(),
-            leg_range: (f64::INFINITY, f64::NEG_INFINITY),
+            report,
+            leg_range,
             cfg: *cfg,
         })
+    }
+
+    /// The accumulators as they are (the state given to [`Probe::new`], as complex numbers):
+    /// what a host saves to [resume](Probe::resume) the probe elsewhere.
+    pub fn accumulators(&self) -> &[Complex64] {
+        self.state
+    }
+
+    /// Min / max over the rows so far of the projector leg `d1_l + |x_l − x_a|` (m) of a
+    /// column; `(+∞, −∞)` before the first row and for the diagonal.
+    pub const fn leg_range(&self) -> (f64, f64) {
+        self.leg_range
     }
 
     /// The target.

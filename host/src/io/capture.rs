@@ -134,6 +134,12 @@ pub trait RowSource {
     /// I/O or format errors of the underlying file.
     fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point>;
 
+    /// The laser rows a probe streams from this source: all of them unless the source is a
+    /// [`RowRange`] (a part of a scan split by rows).
+    fn rows(&self) -> std::ops::Range<usize> {
+        0..self.geometry().lasers.len()
+    }
+
     /// The rows in scan order as an iterator of `(laser spot, histograms of all SPADs)`
     /// (`spads_per_row·Nt` values, SPAD-major), read one at a time: the shape in which the
     /// kernel takes a scan. Each item owns its histograms; [`RowSource::read_row`] reuses a
@@ -157,6 +163,63 @@ pub trait RowSource {
         Self: Sized,
     {
         Rows { src: self, next: 0 }
+    }
+}
+
+/// The laser rows `start..end` of another source: probes stream only these rows (a part of a
+/// scan split by rows across processes); the geometry stays the whole capture's, so every
+/// derived parameter (default λ, margins, guards) is the same as for the whole scan.
+pub struct RowRange<'a> {
+    src: &'a mut dyn RowSource,
+    rows: std::ops::Range<usize>,
+}
+
+impl<'a> RowRange<'a> {
+    /// The rows `rows` of `src`.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] (`--rows`) unless `start <= end <= ` the number of laser rows.
+    pub fn new(src: &'a mut dyn RowSource, rows: std::ops::Range<usize>) -> Result<Self> {
+        let n = src.geometry().lasers.len();
+        if rows.start > rows.end || rows.end > n {
+            return Err(Error::arg(
+                "--rows",
+                format!(
+                    "rows {}:{} do not lie in the capture's {n} laser rows (need A <= B <= {n})",
+                    rows.start, rows.end
+                ),
+            ));
+        }
+        Ok(Self { src, rows })
+    }
+}
+
+impl RowSource for RowRange<'_> {
+    fn geometry(&self) -> &Geometry {
+        self.src.geometry()
+    }
+    fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
+        if !self.rows.contains(&l) {
+            return Err(Error::arg(
+                "row",
+                format!(
+                    "row {l} lies outside the rows {}:{} of this part",
+                    self.rows.start, self.rows.end
+                ),
+            ));
+        }
+        self.src.read_row(l, out)
+    }
+    fn rows(&self) -> std::ops::Range<usize> {
+        self.rows.clone()
+    }
+}
+
+impl std::fmt::Debug for RowRange<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RowRange")
+            .field("rows", &self.rows)
+            .finish()
     }
 }
 

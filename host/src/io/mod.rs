@@ -14,7 +14,7 @@ pub mod npz;
 pub mod ptu;
 pub mod tal;
 
-pub use capture::{Capture, Geometry, RowSource, Rows, swap_roles};
+pub use capture::{Capture, Geometry, RowRange, RowSource, Rows, swap_roles};
 
 use crate::error::{Error, Result};
 use std::path::Path;

@@ -9,6 +9,7 @@ use crate::budget;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path, chunk_len};
 use crate::io::capture::RowSource;
+use crate::probe::fast::Planar;
 use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
@@ -98,6 +99,47 @@ pub fn column(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<Output> {
+    let t = Instant::now();
+    let (state, cfg) = column_acc(src, focus, volume, gate, wave, exec)?;
+    let spads = src.geometry().spads.clone();
+    let (values, report, path) = state.finish(&cfg, &spads, focus, volume, shell)?;
+    check_finite(&values, &volume.points, "column")?;
+    Ok(Output {
+        values,
+        report,
+        seconds: t.elapsed().as_secs_f64(),
+        config: cfg,
+        path,
+    })
+}
+
+/// The accumulated state of a column before imaging.
+pub(super) enum ColumnState {
+    /// Element-wise (higher-order gate): the complex accumulator of every voxel.
+    Voxels(Vec<Complex64>, Report),
+    /// A factorised column (two-bounce or un-gated): the kernel probe's state (`f64` pairs),
+    /// its counters and projector leg range, the gate, and the path that images it (the
+    /// planar convolution, when already prepared).
+    Factorised {
+        state: Vec<f64>,
+        report: Report,
+        legs: (f64, f64),
+        gate: Gate,
+        path: Path,
+        planar: Option<Box<Planar>>,
+    },
+}
+
+/// The accumulators of [`column`] over the source's rows ([`RowSource::rows`]), with the
+/// configuration.
+pub(super) fn column_acc(
+    src: &mut dyn RowSource,
+    focus: Point,
+    volume: &Volume,
+    gate: ColumnGate,
+    wave: &Wave,
+    exec: Exec<'_>,
+) -> Result<(ColumnState, vltm_kernel::Config)> {
     check_focus(focus)?;
     match (exec.path, gate) {
         (Path::Lookup, _) => {
@@ -119,7 +161,6 @@ pub fn column(
         let after = gate == ColumnGate::HigherOrder;
         check_window(src.geometry(), &base, Some(&[focus]), &volume.points, after)?;
     }
-    let t = Instant::now();
     let cfg = if gate == ColumnGate::TwoBounce {
         wave.column_config(src.geometry(), &[focus], &volume.points)?
     } else {
@@ -131,22 +172,22 @@ pub fn column(
         budget::bytes(volume.len(), 32),
         "the column",
     )?;
-    let target = Target::Column(focus);
-    let (mut v, report, path) = match gate {
+    let job = Job {
+        cfg: &cfg,
+        wave,
+        exec,
+    };
+    let state = match gate {
         ColumnGate::HigherOrder => {
-            let (v, r) = elementwise(
+            let (acc, r) = elementwise(
                 src,
-                Job {
-                    cfg: &cfg,
-                    wave,
-                    exec,
-                },
-                target,
+                job,
+                Target::Column(focus),
                 Gate::HigherOrder,
                 &volume.points,
                 "column",
             )?;
-            (v, r, Path::Band)
+            ColumnState::Voxels(acc, r)
         }
         ColumnGate::TwoBounce | ColumnGate::None => {
             let kgate = if gate == ColumnGate::None {
@@ -154,59 +195,96 @@ pub fn column(
             } else {
                 Gate::Gaussian
             };
-            single_column(
-                src,
-                Job {
-                    cfg: &cfg,
-                    wave,
-                    exec,
+            let g = src.geometry();
+            if g.confocal {
+                return Err(Error::arg(
+                    "column",
+                    "a confocal capture has no separate camera aperture: columns need a SPAD grid",
+                ));
+            }
+            let planar = if kgate == Gate::Gaussian {
+                let rival = band_flops(g, &cfg, volume.len());
+                choose_planar(g, &cfg, volume, exec.path, PlanarUse::Column, rival)?
+            } else {
+                None
+            };
+            let (state, report, legs) = single_column(src, job, focus, kgate)?;
+            ColumnState::Factorised {
+                state,
+                report,
+                legs,
+                gate: kgate,
+                path: if planar.is_some() {
+                    Path::Planar
+                } else {
+                    Path::Band
                 },
-                focus,
-                kgate,
-                volume,
-            )?
+                planar: planar.map(Box::new),
+            }
         }
     };
-    for (x, p) in v.iter_mut().zip(&volume.points) {
-        if !shell.contains(dist(focus, *p)) {
-            *x = 0.0;
-        }
-    }
-    let values: Vec<f32> = v.iter().map(|&x| x as f32).collect();
-    check_finite(&values, &volume.points, "column")?;
-    Ok(Output {
-        values,
-        report,
-        seconds: t.elapsed().as_secs_f64(),
-        config: cfg,
-        path,
-    })
+    Ok((state, cfg))
 }
 
-/// One factorised column, rows in parallel (one probe per thread, merged), imaged over the
-/// volume by the planar convolution (Gaussian gate, when it applies) or the kernel; with the
-/// path that imaged it.
+impl ColumnState {
+    /// The column's intensities over `volume` (0 outside `shell`), the counters and the
+    /// path that imaged it. `spads` are the capture's SPAD spots.
+    ///
+    /// # Errors
+    /// A planar path that no longer applies; kernel errors.
+    pub(super) fn finish(
+        &self,
+        cfg: &vltm_kernel::Config,
+        spads: &[Point],
+        focus: Point,
+        volume: &Volume,
+        shell: Shell,
+    ) -> Result<(Vec<f32>, Report, Path)> {
+        let (mut v, report, path) = match self {
+            Self::Voxels(acc, r) => (intensities(acc), *r, Path::Band),
+            Self::Factorised {
+                state,
+                report,
+                legs,
+                gate,
+                path,
+                planar,
+            } => {
+                let rebuilt;
+                let planar = match (path, planar) {
+                    (Path::Planar, None) => {
+                        rebuilt = Planar::new(cfg, spads, &volume.points, volume.shape)
+                            .map_err(|e| Error::arg("--path", e))?;
+                        Some(&rebuilt)
+                    }
+                    (_, p) => p.as_deref(),
+                };
+                let mut state = state.clone();
+                let (v, r, p) = image_column(
+                    cfg, spads, focus, *gate, &mut state, *report, *legs, volume, planar,
+                )?;
+                (v.iter().map(|&x| x as f32).collect(), r, p)
+            }
+        };
+        for (x, p) in v.iter_mut().zip(&volume.points) {
+            if !shell.contains(dist(focus, *p)) {
+                *x = 0.0;
+            }
+        }
+        Ok((v, report, path))
+    }
+}
+
+/// One factorised column's accumulators, rows in parallel (one probe per thread, merged):
+/// the probe state, its counters and projector leg range.
 pub(super) fn single_column(
     src: &mut dyn RowSource,
     job: Job<'_>,
     focus: Point,
     gate: Gate,
-    volume: &Volume,
-) -> Result<(Vec<f64>, Report, Path)> {
+) -> Result<(Vec<f64>, Report, (f64, f64))> {
     let cfg = job.cfg;
     let g = src.geometry().clone();
-    if g.confocal {
-        return Err(Error::arg(
-            "column",
-            "a confocal capture has no separate camera aperture: columns need a SPAD grid",
-        ));
-    }
-    let planar = if gate == Gate::Gaussian {
-        let rival = band_flops(&g, cfg, volume.len());
-        choose_planar(&g, cfg, volume, job.exec.path, PlanarUse::Column, rival)?
-    } else {
-        None
-    };
     let ks = g.spads.len();
     let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
     let scan = Scan::new(cfg, &g.spads, &mut tables)?;
@@ -223,11 +301,36 @@ pub(super) fn single_column(
     })?;
     let mut it = probes.into_iter();
     let Some(mut p) = it.next() else {
-        return Ok((vec![0.0; volume.len()], Report::default(), Path::Band));
+        return Ok((
+            vec![0.0; n_state],
+            Report::default(),
+            (f64::INFINITY, f64::NEG_INFINITY),
+        ));
     };
     for q in it {
         p.merge(&q)?;
     }
+    let state = p.accumulators().iter().flat_map(|z| [z.re, z.im]).collect();
+    Ok((state, p.report(), p.leg_range()))
+}
+
+/// Images a factorised column from its state over the volume by the planar convolution
+/// (when given: Gaussian gate over a grid) or the kernel; with the path that imaged it.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn image_column(
+    cfg: &vltm_kernel::Config,
+    spads: &[Point],
+    focus: Point,
+    gate: Gate,
+    state: &mut [f64],
+    report: Report,
+    legs: (f64, f64),
+    volume: &Volume,
+    planar: Option<&Planar>,
+) -> Result<(Vec<f64>, Report, Path)> {
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, spads.len())];
+    let scan = Scan::new(cfg, spads, &mut tables)?;
+    let p = Probe::resume(&scan, Target::Column(focus), gate, &[], state, report, legs)?;
     let voxels = &volume.points;
     if let (Some(planar), Some((u, legs))) = (planar, p.column_spectra()) {
         let u32s: Vec<Complex32> = u
@@ -305,15 +408,24 @@ pub(super) fn column_aliased(
         .count()
 }
 
-/// One factorised column per focus, accumulated in one pass, each imaged over `voxels`.
+/// Factorised columns, one per focus, accumulated in one pass: their states one after
+/// the other (`n_state` each), the counters (the same rows for all) and each column's
+/// projector leg range.
+#[derive(Clone, Debug)]
+pub(super) struct Columns {
+    pub(super) state: Vec<f64>,
+    pub(super) report: Report,
+    pub(super) legs: Vec<(f64, f64)>,
+}
+
+/// One factorised column per focus, accumulated in one pass over the source's rows.
 pub(super) fn factorised_columns(
     src: &mut dyn RowSource,
     job: Job<'_>,
     foci: &[Point],
     gate: Gate,
-    voxels: &[Point],
     label: &str,
-) -> Result<Vec<(Vec<f64>, Report)>> {
+) -> Result<Columns> {
     let cfg = job.cfg;
     let g = src.geometry().clone();
     if g.confocal {
@@ -324,9 +436,9 @@ pub(super) fn factorised_columns(
     }
     let ks = g.spads_per_row();
     let n_state = Probe::state_len(cfg, Target::Column(foci[0]), gate, 0, ks);
-    let mut states: Vec<Vec<f64>> = foci.iter().map(|_| vec![0.0; n_state]).collect();
+    let mut state = vec![0.0f64; n_state * foci.len()];
     let mut probes: Vec<Probe<'_>> = Vec::new();
-    let mut state_iter = Some(states.iter_mut());
+    let mut state_iter = Some(state.chunks_mut(n_state.max(1)));
     drive(src, job, label, |scan, row| {
         if let Some(it) = state_iter.take() {
             probes = foci
@@ -340,26 +452,58 @@ pub(super) fn factorised_columns(
             .try_for_each(|p| p.push_row(scan, row))?;
         Ok(())
     })?;
-    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
-    let scan = Scan::new(cfg, &g.spads, &mut tables)?;
-    let cl = chunk_len(voxels.len());
-    probes
-        .iter()
-        .map(|p| {
-            let mut out = vec![0.0f64; voxels.len()];
-            let reports = voxels
-                .par_chunks(cl)
-                .zip(out.par_chunks_mut(cl))
-                .map(|(v, o)| p.image(&scan, v, o))
-                .collect::<Result<Vec<_>, _>>()?;
-            let aliased = reports.iter().map(|r| r.aliased).sum();
-            Ok((
-                out,
-                Report {
-                    aliased,
-                    ..p.report()
-                },
-            ))
-        })
-        .collect()
+    let report = probes.first().map(Probe::report).unwrap_or_default();
+    let mut legs: Vec<(f64, f64)> = probes.iter().map(Probe::leg_range).collect();
+    legs.resize(foci.len(), (f64::INFINITY, f64::NEG_INFINITY));
+    drop(probes);
+    Ok(Columns {
+        state,
+        report,
+        legs,
+    })
+}
+
+impl Columns {
+    /// Images every column over `voxels` (`spads`: the capture's SPAD spots): per focus the
+    /// intensities and the counters.
+    ///
+    /// # Errors
+    /// Kernel errors (sizes).
+    pub(super) fn image(
+        &mut self,
+        cfg: &vltm_kernel::Config,
+        spads: &[Point],
+        foci: &[Point],
+        gate: Gate,
+        voxels: &[Point],
+    ) -> Result<Vec<(Vec<f64>, Report)>> {
+        let ks = spads.len();
+        let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+        let scan = Scan::new(cfg, spads, &mut tables)?;
+        let n_state = Probe::state_len(cfg, Target::Column(foci[0]), gate, 0, ks);
+        let cl = chunk_len(voxels.len());
+        let report = self.report;
+        self.state
+            .chunks_mut(n_state.max(1))
+            .zip(foci)
+            .zip(&self.legs)
+            .map(|((st, a), legs)| {
+                let p = Probe::resume(&scan, Target::Column(*a), gate, &[], st, report, *legs)?;
+                let mut out = vec![0.0f64; voxels.len()];
+                let reports = voxels
+                    .par_chunks(cl)
+                    .zip(out.par_chunks_mut(cl))
+                    .map(|(v, o)| p.image(&scan, v, o))
+                    .collect::<Result<Vec<_>, _>>()?;
+                let aliased = reports.iter().map(|r| r.aliased).sum();
+                Ok((
+                    out,
+                    Report {
+                        aliased,
+                        ..p.report()
+                    },
+                ))
+            })
+            .collect()
+    }
 }

@@ -27,6 +27,35 @@ pub fn direct(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<Output> {
+    let t = Instant::now();
+    let (a, config) = direct_acc(src, volume, wave, exec)?;
+    let values = intensities(&a.acc);
+    check_finite(&values, &volume.points, "direct light")?;
+    Ok(Output {
+        values,
+        report: a.report,
+        seconds: t.elapsed().as_secs_f64(),
+        config,
+        path: a.path,
+    })
+}
+
+/// Complex accumulators per voxel (`T = |A|²`), the counters and the path that made them.
+#[derive(Clone, Debug)]
+pub(super) struct Amplitudes {
+    pub(super) acc: Vec<Complex64>,
+    pub(super) report: Report,
+    pub(super) path: Path,
+}
+
+/// The accumulators of [`direct`] over the source's rows ([`RowSource::rows`]), with the
+/// configuration.
+pub(super) fn direct_acc(
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    wave: &Wave,
+    exec: Exec<'_>,
+) -> Result<(Amplitudes, Config)> {
     let cfg = wave.config(src.geometry())?;
     check_window(src.geometry(), &cfg, None, &volume.points, false)?;
     check_memory(
@@ -35,20 +64,6 @@ pub fn direct(
         budget::bytes(volume.len(), 32),
         "direct light",
     )?;
-    let o = direct_paths(src, volume, wave, exec, cfg)?;
-    check_finite(&o.values, &volume.points, "direct light")?;
-    Ok(o)
-}
-
-/// [`direct`] on the path [`Exec::path`] chooses.
-fn direct_paths(
-    src: &mut dyn RowSource,
-    volume: &Volume,
-    wave: &Wave,
-    exec: Exec<'_>,
-    cfg: Config,
-) -> Result<Output> {
-    let t = Instant::now();
     let job = Job {
         cfg: &cfg,
         wave,
@@ -70,43 +85,28 @@ fn direct_paths(
     });
     // Planar competes with the cheaper of band and lookup under `Auto`.
     let rival = lookup_cost.map_or(band_cost, |l| l.min(band_cost));
-    if let Some(planar) = choose_planar(g, &cfg, volume, exec.path, PlanarUse::Diagonal, rival)? {
-        let (values, report) = direct_planar(src, job, volume, &planar)?;
-        return Ok(Output {
-            values,
-            report,
-            seconds: t.elapsed().as_secs_f64(),
-            config: cfg,
-            path: Path::Planar,
-        });
-    }
-    if exec.path == Path::Lookup
+    let (acc, report, path) = if let Some(planar) =
+        choose_planar(g, &cfg, volume, exec.path, PlanarUse::Diagonal, rival)?
+    {
+        let (acc, report) = direct_planar(src, job, volume, &planar)?;
+        (acc, report, Path::Planar)
+    } else if exec.path == Path::Lookup
         || (exec.path == Path::Auto && lookup_cost.is_some_and(|l| l < band_cost))
     {
-        let (values, report) = direct_lookup(src, job, volume)?;
-        return Ok(Output {
-            values,
-            report,
-            seconds: t.elapsed().as_secs_f64(),
-            config: cfg,
-            path: Path::Lookup,
-        });
-    }
-    let (v, report) = elementwise(
-        src,
-        job,
-        Target::Diagonal,
-        Gate::Gaussian,
-        &volume.points,
-        "direct",
-    )?;
-    Ok(Output {
-        values: v.iter().map(|&x| x as f32).collect(),
-        report,
-        seconds: t.elapsed().as_secs_f64(),
-        config: cfg,
-        path: Path::Band,
-    })
+        let (acc, report) = direct_lookup(src, job, volume)?;
+        (acc, report, Path::Lookup)
+    } else {
+        let (acc, report) = elementwise(
+            src,
+            job,
+            Target::Diagonal,
+            Gate::Gaussian,
+            &volume.points,
+            "direct",
+        )?;
+        (acc, report, Path::Band)
+    };
+    Ok((Amplitudes { acc, report, path }, cfg))
 }
 
 /// What the planar convolution would be used for (its cost differs).
@@ -195,13 +195,13 @@ pub(super) fn outside_guard(g: &Geometry, cfg: &Config, voxels: &[Point]) -> Vec
         .collect()
 }
 
-/// The diagonal by the baseband lookup, rows in parallel (one scratch and accumulator per
-/// thread). The lookup applies the guard itself.
+/// The diagonal's accumulators by the baseband lookup, rows in parallel (one scratch and
+/// accumulator per thread). The lookup applies the guard itself.
 pub(super) fn direct_lookup(
     src: &mut dyn RowSource,
     job: Job<'_>,
     volume: &Volume,
-) -> Result<(Vec<f32>, Report)> {
+) -> Result<(Vec<Complex64>, Report)> {
     let cfg = job.cfg;
     let g = src.geometry().clone();
     let ks = g.spads.len();
@@ -234,7 +234,7 @@ pub(super) fn direct_lookup(
         report.rows += r.rows;
         report.non_finite += r.non_finite;
     }
-    Ok((acc.iter().map(|a| a.norm_sqr() as f32).collect(), report))
+    Ok((acc, report))
 }
 
 /// Per-thread state of the planar diagonal.
@@ -246,14 +246,14 @@ pub(super) struct DiagWorker<'a> {
     non_finite: u64,
 }
 
-/// The diagonal by the planar FFT convolution, rows in parallel; voxels with paths outside
-/// the guard on the kernel's band path.
+/// The diagonal's accumulators by the planar FFT convolution, rows in parallel; voxels with
+/// paths outside the guard on the kernel's band path.
 pub(super) fn direct_planar(
     src: &mut dyn RowSource,
     job: Job<'_>,
     volume: &Volume,
     planar: &Planar,
-) -> Result<(Vec<f32>, Report)> {
+) -> Result<(Vec<Complex64>, Report)> {
     let cfg = job.cfg;
     let g = src.geometry().clone();
     let skip = outside_guard(&g, cfg, &volume.points);
@@ -323,13 +323,10 @@ pub(super) fn direct_planar(
             }
         }
     }
-    let mut values: Vec<f32> = acc.iter().map(|a| a.norm_sqr() as f32).collect();
     if let Some(m) = merged {
-        let mut out = vec![0.0f64; fb_pts.len()];
-        m.finish(&scan, &mut out)?;
-        for (&i, v) in fb_idx.iter().zip(out) {
-            values[i] = v as f32;
+        for (&i, a) in fb_idx.iter().zip(m.accumulators()) {
+            acc[i] = *a;
         }
     }
-    Ok((values, report))
+    Ok((acc, report))
 }

@@ -1,5 +1,5 @@
-//! Streaming the rows of a capture through the kernel: stage 1 (band spectra) of every row
-//! once, handed to the probes sequentially ([`drive`]) or to one worker per thread in
+//! Streaming the rows of a capture through the kernel ([`RowSource::rows`]: all, or a part of
+//! the scan): stage 1 (band spectra) of every row once, handed to the probes sequentially ([`drive`]) or to one worker per thread in
 //! parallel ([`drive_rows`]); element-wise probes over voxel chunks ([`elementwise`]).
 //! Memory: `2·threads` rows of histograms and one row buffer per worker, never the capture.
 
@@ -9,6 +9,7 @@ use crate::error::{Error, Result};
 use crate::exec::{Exec, Pass, chunk_len, row_batch};
 use crate::io::capture::{Geometry, RowSource};
 use crate::probe::fast::BandDft;
+use num_complex::Complex64;
 use rayon::prelude::*;
 use std::sync::Mutex;
 use vltm_kernel::{Config, Gate, Point, Probe, Report, Row, RowBuffer, Scan, Target};
@@ -42,7 +43,8 @@ pub(super) fn drive(
     };
     let mut buf = vec![0.0f32; RowBuffer::len(cfg, ks)];
     let mut hist = Vec::new();
-    let bar = Pass::start(exec, label, g.lasers.len());
+    let range = src.rows();
+    let bar = Pass::start(exec, label, range.len());
     let fixed: Option<Scan<'_>> = if g.confocal {
         None
     } else {
@@ -53,7 +55,7 @@ pub(super) fn drive(
     } else {
         Vec::new()
     };
-    for l in 0..g.lasers.len() {
+    for l in range {
         let x_l = src.read_row(l, &mut hist)?;
         if wave.compensate_laser {
             let k = (1.0 / g.laser_falloff(x_l)) as f32;
@@ -122,11 +124,12 @@ pub(super) fn drive_rows<W: Send>(
         .map(|w| Mutex::new((w, vec![0.0f32; RowBuffer::len(cfg, ks)], Vec::new())))
         .collect();
     let n_slots = slots.len().max(1);
-    let bar = Pass::start(exec, label, g.lasers.len());
+    let range = src.rows();
+    let bar = Pass::start(exec, label, range.len());
     let batch = row_batch();
     let mut rows: Vec<(Point, Vec<f32>)> = Vec::new();
-    for start in (0..g.lasers.len()).step_by(batch) {
-        let end = (start + batch).min(g.lasers.len());
+    for start in range.clone().step_by(batch) {
+        let end = (start + batch).min(range.end);
         rows.resize_with(end - start, || ([0.0; 3], Vec::new()));
         for (l, (x, hist)) in (start..end).zip(rows.iter_mut()) {
             *x = src.read_row(l, hist)?;
@@ -197,7 +200,8 @@ pub(super) fn check_laser_falloff(g: &Geometry, wave: &Wave) -> Result<()> {
     Ok(())
 }
 
-/// Element-wise probes (diagonal, higher-order column) over voxel chunks in parallel.
+/// Element-wise probes (diagonal, higher-order column) over voxel chunks in parallel: the
+/// complex accumulator of every voxel (volume order; `T = |A|²`) and the counters.
 pub(super) fn elementwise(
     src: &mut dyn RowSource,
     job: Job<'_>,
@@ -205,7 +209,7 @@ pub(super) fn elementwise(
     gate: Gate,
     voxels: &[Point],
     label: &str,
-) -> Result<(Vec<f64>, Report)> {
+) -> Result<(Vec<Complex64>, Report)> {
     let cfg = job.cfg;
     let ks = src.geometry().spads_per_row();
     let cl = chunk_len(voxels.len());
@@ -235,24 +239,18 @@ pub(super) fn elementwise(
             .try_for_each(|p| p.push_row(scan, row))?;
         Ok(())
     })?;
-    let mut out = vec![0.0f64; voxels.len()];
-    let mut report = Report::default();
-    let g = src.geometry().clone();
-    let ks_pts = if g.confocal {
-        vec![g.lasers[0]]
-    } else {
-        g.spads.clone()
-    };
-    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
-    let scan = Scan::new(cfg, &ks_pts, &mut tables)?;
-    for (p, o) in probes.iter().zip(out.chunks_mut(cl)) {
-        let r = p.finish(&scan, o)?;
-        report = Report {
-            non_finite: report.non_finite.max(r.non_finite),
-            dropped: report.dropped.max(r.dropped),
-            aliased: report.aliased + r.aliased,
-            ..r
-        };
+    // Every chunk saw the same rows: one chunk's counters are the pass's.
+    let report = probes.first().map(Probe::report).unwrap_or_default();
+    let mut acc = Vec::with_capacity(voxels.len());
+    for (p, c) in probes.iter().zip(&chunks) {
+        acc.extend(p.accumulators().iter().take(c.len()));
     }
-    Ok((out, report))
+    // No row: zero accumulators.
+    acc.resize(voxels.len(), Complex64::new(0.0, 0.0));
+    Ok((acc, report))
+}
+
+/// Intensities `|A|²` of complex accumulators, as `f32`.
+pub(super) fn intensities(acc: &[Complex64]) -> Vec<f32> {
+    acc.iter().map(|a| a.norm_sqr() as f32).collect()
 }

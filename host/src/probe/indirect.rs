@@ -132,7 +132,7 @@ pub fn indirect_over(
                 ),
             ));
         }
-        let cols = factorised_columns(
+        let mut cols = factorised_columns(
             src,
             Job {
                 cfg: &cfg,
@@ -141,21 +141,10 @@ pub fn indirect_over(
             },
             &pts,
             Gate::Gaussian,
-            &pts,
             "indirect",
         )?;
-        let mut sum = vec![0.0f64; pts.len()];
-        for (ai, (col, r)) in cols.iter().enumerate() {
-            report = *r;
-            for (bi, t) in col.iter().enumerate() {
-                if ai != bi && shell.contains(dist(pts[ai], pts[bi])) {
-                    sum[bi] += t;
-                }
-            }
-        }
-        for (&i, s) in idx.iter().zip(sum) {
-            values[i] = s as f32;
-        }
+        let spads = src.geometry().spads.clone();
+        (values, report) = indirect_sum(&mut cols, &cfg, &spads, &pts, &idx, shell, volume.len())?;
     }
     check_finite(&values, &volume.points, "in-focus indirect light")?;
     Ok(IndirectOutput {
@@ -166,4 +155,37 @@ pub fn indirect_over(
         report,
         seconds: t.elapsed().as_secs_f64(),
     })
+}
+
+/// Pass 2's sum from the accumulated Γ columns: `I_i(b) = Σ_{a∈Γ, a≠b, r0≤|a−b|<r1} T(a, b)`
+/// over the Γ points `pts` (at volume indices `idx`), as a volume of `n` voxels, with the
+/// last column's counters.
+pub(super) fn indirect_sum(
+    cols: &mut Columns,
+    cfg: &vltm_kernel::Config,
+    spads: &[Point],
+    pts: &[Point],
+    idx: &[usize],
+    shell: Shell,
+    n: usize,
+) -> Result<(Vec<f32>, Report)> {
+    let mut values = vec![0.0f32; n];
+    let mut report = Report::default();
+    if pts.is_empty() {
+        return Ok((values, report));
+    }
+    let imaged = cols.image(cfg, spads, pts, Gate::Gaussian, pts)?;
+    let mut sum = vec![0.0f64; pts.len()];
+    for (ai, (col, r)) in imaged.iter().enumerate() {
+        report = *r;
+        for (bi, t) in col.iter().enumerate() {
+            if ai != bi && shell.contains(dist(pts[ai], pts[bi])) {
+                sum[bi] += t;
+            }
+        }
+    }
+    for (&i, s) in idx.iter().zip(sum) {
+        values[i] = s as f32;
+    }
+    Ok((values, report))
 }

@@ -6,6 +6,7 @@
 //! | [`direct`] | diagonal `T(x_v, x_v)` over a volume (Eqs. 11–12) | 1 |
 //! | [`column()`] | `T(x_a, ·)` with [`ColumnGate`] two-bounce (Eq. 14), higher-order (Eq. 18) or none, optionally restricted to a shell `r0 ≤ |x_a − x_b| < r1` | 1 |
 //! | [`indirect`] | in-focus indirect light (Eqs. 15–17): Γ from the diagonal, then `Σ_{a∈Γ} T(a, b)` over Γ-masked pairs with `r0 ≤ |x_a − x_b| < r1` | 2 |
+//! | [`partial::accumulate`] | any of the above over a part of the rows, kept as a [`Partial`] state that merges by addition and finishes elsewhere | 1 |
 //!
 //! Threads: the diagonal and the higher-order column split the voxels into chunks, each with
 //! its own kernel probe, and every row's band spectra (computed once) are pushed into all
@@ -18,10 +19,12 @@ mod direct;
 mod drive;
 pub mod fast;
 mod indirect;
+pub mod partial;
 mod wave;
 
 pub use crate::exec::{Exec, Path};
 pub use column::{ColumnGate, Shell, check_focus, column};
 pub use direct::direct;
 pub use indirect::{IndirectOptions, IndirectOutput, gamma_mask, indirect, indirect_over};
+pub use partial::{Finished, Partial, Task};
 pub use wave::{Output, Wave, default_wavelength};

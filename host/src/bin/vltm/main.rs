@@ -26,6 +26,8 @@ macro_rules! say {
     }};
 }
 
+mod partial;
+
 /// Virtual light transport matrices (LTM) of hidden scenes from non-line-of-sight captures
 /// (Marco et al., ICCV 2021).
 ///
@@ -112,8 +114,28 @@ enum Command {
         /// Keep only pairs with R0 <= |x_a - x_b| < R1 metres (overrides --min-separation).
         #[arg(long, value_name = "R0:R1")]
         shell: Option<String>,
+        /// Γ from this direct-light volume (float32 .npy over the same --volume, e.g. from
+        /// `vltm merge` of direct parts) instead of pass 1; needed with --rows/--partial.
+        #[arg(long, value_name = "D.npy")]
+        direct: Option<PathBuf>,
         #[command(flatten)]
         common: Common,
+    },
+    /// Merge partial states (--partial of direct, column, indirect over row ranges) by
+    /// addition and finish them: the same volume as one pass over all rows.
+    Merge {
+        /// Partial state files; together they must hold every laser row exactly once.
+        #[arg(required = true)]
+        parts: Vec<PathBuf>,
+        /// Output volume: float32 .npy, or HDF5 for a .h5/.hdf5 name.
+        #[arg(long, value_name = "F.npy|F.h5")]
+        out: Option<PathBuf>,
+        /// Output figure (maximum-intensity projections).
+        #[arg(long, value_name = "F.png")]
+        png: Option<PathBuf>,
+        /// Write the merged state (still partial, or complete) instead of finishing it.
+        #[arg(long, value_name = "F")]
+        partial: Option<PathBuf>,
     },
 }
 
@@ -170,6 +192,14 @@ struct Common {
     /// Output figure: front (x-y) and top (x-z) maximum-intensity projections.
     #[arg(long, value_name = "F.png")]
     png: Option<PathBuf>,
+    /// Only the laser rows A..B (B exclusive, 0-based) of the scan: one part of a scan split
+    /// over processes. Needs --partial.
+    #[arg(long, value_name = "A:B")]
+    rows: Option<String>,
+    /// Write the accumulator state to F (binary, see `vltm::probe::partial`) instead of the
+    /// volume; `vltm merge` adds the parts and finishes them.
+    #[arg(long, value_name = "F")]
+    partial: Option<PathBuf>,
 }
 
 /// `--path` values.
@@ -220,6 +250,7 @@ impl Common {
             .out
             .iter()
             .chain(&self.png)
+            .chain(&self.partial)
             .map(PathBuf::as_path)
             .collect();
         refuse_overwriting_inputs(&inputs, &outputs)?;
@@ -423,6 +454,9 @@ fn run(cmd: Command) -> Result<(), Failure> {
             );
             Ok(())
         }
+        Command::Direct { capture, common } if partial::wanted(&common)? => {
+            partial::run(&common, &capture, probe::Task::Direct)
+        }
         Command::Direct { capture, common } => {
             let volume = Volume::parse(&common.volume)?;
             let mut c = common.load(&capture)?;
@@ -457,6 +491,14 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 GateArg::HigherOrder => ColumnGate::HigherOrder,
                 GateArg::None => ColumnGate::None,
             };
+            if partial::wanted(&common)? {
+                let task = probe::Task::Column {
+                    focus: a,
+                    gate: g,
+                    shell,
+                };
+                return partial::run(&common, &capture, task);
+            }
             let mut c = common.load(&capture)?;
             let o = probe::column(&mut *c, a, &volume, g, shell, &common.wave(), common.exec())?;
             let title = format!("column T(x_a, .), gate {gate:?}");
@@ -467,6 +509,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
             epsilon,
             min_separation,
             shell,
+            direct,
             common,
         } => {
             let volume = Volume::parse(&common.volume)?;
@@ -497,35 +540,80 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 shell,
                 ..Default::default()
             };
-            let mut c = common.load(&capture)?;
-            let o = probe::indirect(&mut *c, &volume, &opts, &common.wave(), common.exec())?;
-            let n_gamma = o.gamma.iter().filter(|&&g| g).count();
-            say!(
-                "Γ: {n_gamma} of {} voxels above ε = {epsilon} of the direct maximum; pairs with {:.3} <= |x_a - x_b| < {:.3} m",
-                volume.len(),
-                o.shell.r0,
-                o.shell.r1
-            );
-            let cfg = common.wave().config(c.geometry())?;
-            summarize(
-                "indirect", &o.values, &volume, o.seconds, &o.report, &cfg, None,
-            );
-            let meta = Provenance {
-                probe: "indirect",
-                config: &cfg,
-                focus: None,
-                capture: &capture,
+            let mut c = match &direct {
+                Some(d) => {
+                    let d = partial::read_direct(d, &volume)?;
+                    let gamma = probe::gamma_mask(&d, epsilon);
+                    if partial::wanted(&common)? {
+                        let task = probe::Task::Indirect { gamma, shell };
+                        return partial::run(&common, &capture, task);
+                    }
+                    let mut c = common.load(&capture)?;
+                    let o = probe::indirect_over(
+                        &mut *c,
+                        &volume,
+                        &gamma,
+                        &opts,
+                        &common.wave(),
+                        common.exec(),
+                    )?;
+                    return finish_indirect(&common, &capture, &*c, &volume, epsilon, &o);
+                }
+                None if partial::wanted(&common)? => {
+                    return Err(vltm::Error::arg(
+                        "--partial",
+                        "in-focus indirect light over a part of the rows needs Γ: pass --direct D.npy, the merged direct light over the same volume and options",
+                    )
+                    .into());
+                }
+                None => common.load(&capture)?,
             };
-            write_outputs(
-                &common,
-                &meta,
-                &o.values,
-                &volume,
-                "in-focus indirect light",
-                &[],
-            )
+            let o = probe::indirect(&mut *c, &volume, &opts, &common.wave(), common.exec())?;
+            finish_indirect(&common, &capture, &*c, &volume, epsilon, &o)
         }
+        Command::Merge {
+            parts,
+            out,
+            png,
+            partial,
+        } => partial::merge(&parts, out, png, partial),
     }
+}
+
+/// The Γ line, the summary and the outputs of an `indirect` run.
+fn finish_indirect(
+    common: &Common,
+    capture: &Path,
+    c: &dyn RowSource,
+    volume: &Volume,
+    epsilon: f32,
+    o: &probe::IndirectOutput,
+) -> Result<(), Failure> {
+    let n_gamma = o.gamma.iter().filter(|&&g| g).count();
+    say!(
+        "Γ: {n_gamma} of {} voxels above ε = {epsilon} of the direct maximum; pairs with {:.3} <= |x_a - x_b| < {:.3} m",
+        volume.len(),
+        o.shell.r0,
+        o.shell.r1
+    );
+    let cfg = common.wave().config(c.geometry())?;
+    summarize(
+        "indirect", &o.values, volume, o.seconds, &o.report, &cfg, None,
+    );
+    let meta = Provenance {
+        probe: "indirect",
+        config: &cfg,
+        focus: None,
+        capture,
+    };
+    write_outputs(
+        (&common.out, &common.png),
+        &meta,
+        &o.values,
+        volume,
+        "in-focus indirect light",
+        &[],
+    )
 }
 
 fn info(path: &Path) -> Result<(), Failure> {
@@ -693,13 +781,20 @@ fn finish_probe(
         capture,
     };
     let marks: Vec<(Point, String)> = focus.map(|a| (a, "x_a".to_string())).into_iter().collect();
-    write_outputs(common, &meta, &o.values, volume, title, &marks)
+    write_outputs(
+        (&common.out, &common.png),
+        &meta,
+        &o.values,
+        volume,
+        title,
+        &marks,
+    )
 }
 
 /// Writes the volume (`--out`: `.npy`, or HDF5 for `.h5`/`.hdf5`) and the figure (`--png`);
 /// with neither, `<probe>.npy` and `<probe>.png`.
 fn write_outputs(
-    c: &Common,
+    (c_out, c_png): (&Option<PathBuf>, &Option<PathBuf>),
     meta: &Provenance<'_>,
     v: &[f32],
     volume: &Volume,
@@ -707,7 +802,7 @@ fn write_outputs(
     marks: &[(Point, String)],
 ) -> Result<(), Failure> {
     let stem = meta.probe;
-    let (out, png) = match (&c.out, &c.png) {
+    let (out, png) = match (c_out, c_png) {
         (None, None) => (
             Some(PathBuf::from(format!("{stem}.npy"))),
             Some(PathBuf::from(format!("{stem}.png"))),

@@ -1,0 +1,41 @@
+"""Shared paths for the vltm pytest suite: the repository, the shared y-tal captures
+(`../shared/data` beside the repository) and the `vltm` command line (`VLTM_BIN`, default
+`target/release/vltm`)."""
+
+import os
+import pathlib
+import subprocess
+
+import numpy as np
+import pytest
+
+REPO = pathlib.Path(__file__).resolve().parents[3]
+SHARED = pathlib.Path(os.environ.get("VLTM_SHARED", REPO.parent / "shared")) / "data"
+TWO_PATCHES = SHARED / "two_patches" / "two_patches.hdf5"
+FIXTURE = REPO / "fixtures" / "two_patches.npz"
+GRID = "-0.75:0.75:16,-0.75:0.75:16,0.4:1.35:20"
+FOCUS = (-0.25, 0.15, 0.7)
+
+
+def vltm_bin() -> pathlib.Path:
+    b = pathlib.Path(os.environ.get("VLTM_BIN", REPO / "target" / "release" / "vltm"))
+    if not b.exists():
+        raise RuntimeError(f"the vltm command line is not built: {b} (cargo build --release)")
+    return b
+
+
+def cli(*args: str) -> subprocess.CompletedProcess:
+    return subprocess.run([str(vltm_bin()), *args], capture_output=True, text=True)
+
+
+def cli_volume(tmp: pathlib.Path, *args: str) -> np.ndarray:
+    out = tmp / "cli.npy"
+    r = cli(*args, "--out", str(out), "--png", str(tmp / "cli.png"))
+    assert r.returncode == 0, r.stderr
+    return np.load(out)
+
+
+@pytest.fixture(scope="session")
+def two_patches() -> pathlib.Path:
+    assert TWO_PATCHES.exists(), f"shared capture missing: {TWO_PATCHES}"
+    return TWO_PATCHES

@@ -1,0 +1,147 @@
+"""The Python API against the command line's .npy volumes on the shared captures, arrays in
+(Capture.from_arrays), exceptions on bad input, and partial states split/merged/pickled."""
+
+import pickle
+
+import numpy as np
+import pytest
+
+import vltm
+from conftest import FIXTURE, FOCUS, GRID, cli, cli_volume
+
+
+def close(a: np.ndarray, b: np.ndarray, rel: float = 1e-6) -> None:
+    assert a.shape == b.shape and a.dtype == b.dtype == np.float32
+    assert a.max() > 0
+    err = np.abs(a.astype(np.float64) - b).max() / a.max()
+    assert err <= rel, f"relative difference {err:.3e} > {rel:.0e}"
+
+
+def test_direct_equals_cli(two_patches, tmp_path):
+    want = cli_volume(tmp_path, "direct", str(two_patches), "--volume", GRID)
+    got = vltm.direct(vltm.open(two_patches), GRID)
+    close(want, got)
+    # y-tal's convention: the peak on patch A.
+    i = np.unravel_index(np.argmax(got), got.shape)
+    assert vltm.volume(GRID).points[i][2] == pytest.approx(0.65, abs=0.06)
+
+
+def test_column_and_indirect_equal_cli(two_patches, tmp_path):
+    f = ",".join(map(str, FOCUS))
+    want = cli_volume(tmp_path, "column", str(two_patches), "--volume", GRID, "--focus", f)
+    close(want, vltm.column(str(two_patches), GRID, FOCUS))
+    want = cli_volume(tmp_path, "column", str(two_patches), "--volume", GRID, "--focus", f,
+                      "--gate", "higher-order", "--shell", "0.2:0.9")
+    close(want, vltm.column(two_patches, GRID, FOCUS, gate="higher-order", shell=(0.2, 0.9)))
+    vol = "-0.6:0.6:10,-0.6:0.6:10,0.5:1.2:8"
+    want = cli_volume(tmp_path, "indirect", str(two_patches), "--volume", vol, "--epsilon", "0.2")
+    close(want, vltm.indirect(two_patches, vol, epsilon=0.2))
+
+
+def test_options_and_report(two_patches, tmp_path):
+    want = cli_volume(tmp_path, "direct", str(two_patches), "--volume", GRID, "--wavelength",
+                      "0.3", "--weights", "one", "--path", "band")
+    got, rep = vltm.direct(two_patches, GRID, wavelength=0.3, weights="one", path="band",
+                           report=True)
+    close(want, got)
+    assert rep["rows"] == 64 and rep["path"] == "band" and rep["wavelength"] == 0.3
+
+
+def test_from_arrays_equals_file():
+    z = np.load(FIXTURE)
+    H = np.moveaxis(z["H"], -1, 0)  # y-tal: time first, (nt, Lx, Ly, Sx, Sy)
+    c = vltm.Capture.from_arrays(H, z["laser_grid_xyz"], z["sensor_grid_xyz"],
+                                 float(z["delta_t"]), float(z["t_start"]),
+                                 laser_xyz=z["laser_xyz"], sensor_xyz=z["sensor_xyz"])
+    info = c.info()
+    assert (info["lasers"], info["spads"], info["nt"]) == (64, 64, 175)
+    vol = "-0.5:0.5:8,-0.5:0.5:8,0.5:1.1:6"
+    close(vltm.direct(FIXTURE, vol, path="band"), vltm.direct(c, vol, path="band"))
+    # Points in, points out: an (..., 3) array gives the array's leading shape.
+    pts = vltm.volume(vol).points[2:4, 3:6]
+    got = vltm.direct(c, pts, path="band")
+    assert got.shape == (2, 3, 6)
+    close(vltm.direct(c, vol, path="band")[2:4, 3:6], got)
+
+
+def test_amplitudes(two_patches):
+    I, A = vltm.direct(two_patches, GRID, amplitudes=True)
+    assert A.dtype == np.complex128 and A.shape == I.shape
+    close(I, (np.abs(A) ** 2).astype(np.float32))
+    with pytest.raises(vltm.ArgumentError, match="amplitudes"):
+        vltm.column(two_patches, GRID, FOCUS, amplitudes=True)
+
+
+def test_errors_are_exceptions_with_the_cli_messages(two_patches, tmp_path):
+    with pytest.raises(ValueError) as e:
+        vltm.direct(two_patches, "0:1:4,0:1")
+    r = cli("direct", str(two_patches), "--volume", "0:1:4,0:1")
+    assert r.returncode == 2 and r.stderr.strip() == f"vltm: {e.value}"
+    assert isinstance(e.value, vltm.ArgumentError) and isinstance(e.value, vltm.VltmError)
+    with pytest.raises(OSError) as e:
+        vltm.open(tmp_path / "missing.npz")
+    assert isinstance(e.value, vltm.DataError) and "missing.npz" in str(e.value)
+    bad = tmp_path / "bad.npz"
+    bad.write_bytes(b"not a capture")
+    with pytest.raises(vltm.DataError):
+        vltm.open(bad)
+    with pytest.raises(vltm.ArgumentError, match="focus"):
+        vltm.column(two_patches, GRID, (0.0, 0.0, -1.0))
+    with pytest.raises(vltm.ArgumentError, match="rows"):
+        vltm.direct(two_patches, GRID, rows=slice(10, 70))
+    with pytest.raises(vltm.ArgumentError, match="path"):
+        vltm.direct(two_patches, GRID, path="fast")
+    with pytest.raises(vltm.ArgumentError, match="needs Γ"):
+        vltm.indirect(two_patches, GRID, rows=slice(0, 8))
+    with pytest.raises(vltm.ArgumentError, match="H"):
+        vltm.Capture.from_arrays(np.zeros((10, 3, 3)), np.zeros((2, 3)), np.zeros((2, 3)), 0.01)
+
+
+@pytest.mark.parametrize("kind", ["direct", "column", "higher-order", "indirect"])
+def test_split_merge_equals_one_pass(two_patches, kind):
+    vol = "-0.6:0.6:10,-0.6:0.6:10,0.5:1.2:8"
+    if kind == "direct":
+        run = lambda **kw: vltm.direct(two_patches, vol, **kw)  # noqa: E731
+    elif kind == "column":
+        run = lambda **kw: vltm.column(two_patches, vol, FOCUS, **kw)  # noqa: E731
+    elif kind == "higher-order":
+        run = lambda **kw: vltm.column(two_patches, vol, FOCUS, gate="higher-order", **kw)  # noqa: E731
+    else:
+        d = vltm.direct(two_patches, vol)
+        run = lambda **kw: vltm.indirect(two_patches, vol, direct=d, **kw)  # noqa: E731
+    one = run()
+    parts = [run(rows=slice(a, b)) for a, b in [(40, 64), (0, 13), (13, 40)]]
+    parts = [pickle.loads(pickle.dumps(p)) for p in parts]
+    assert [p.rows for p in parts] == [[range(40, 64)], [range(0, 13)], [range(13, 40)]]
+    merged = vltm.merge(parts)
+    assert merged.complete and merged.rows == [range(0, 64)]
+    close(one, merged.finish())
+    # One part with every row: the same numbers as one pass.
+    close(one, run(rows=slice(None, None)).finish())
+
+
+def test_merge_errors_and_cli_interop(two_patches, tmp_path):
+    vol = "-0.6:0.6:6,-0.6:0.6:6,0.5:1.2:4"
+    a = vltm.direct(two_patches, vol, rows=slice(0, 32))
+    with pytest.raises(vltm.ArgumentError, match="overlap"):
+        vltm.merge([a, vltm.direct(two_patches, vol, rows=slice(20, 64))])
+    with pytest.raises(vltm.ArgumentError, match="missing"):
+        vltm.merge([a]).finish()
+    with pytest.raises(vltm.ArgumentError, match="different probes or parameters"):
+        vltm.merge([a, vltm.direct(two_patches, vol, rows=slice(32, 64), wavelength=0.5)])
+    with pytest.raises(vltm.ArgumentError, match="different captures"):
+        vltm.merge([a, vltm.direct(FIXTURE, vol, rows=slice(32, 64))])
+    with pytest.raises(vltm.DataError, match="crc32"):
+        b = bytearray(a.to_bytes())
+        b[-1] ^= 1
+        vltm.Partial.from_bytes(bytes(b))
+    # A part from the command line merges with a part from Python; `vltm merge` reads both.
+    part = tmp_path / "b.part"
+    r = cli("direct", str(two_patches), "--volume", vol, "--rows", "32:64", "--partial", str(part))
+    assert r.returncode == 0, r.stderr
+    both = vltm.merge([a, vltm.Partial.read(part)]).finish()
+    close(vltm.direct(two_patches, vol), both)
+    a.write(tmp_path / "a.part")
+    r = cli("merge", str(tmp_path / "a.part"), str(part), "--out", str(tmp_path / "m.npy"))
+    assert r.returncode == 0, r.stderr
+    close(both, np.load(tmp_path / "m.npy"))

@@ -1,0 +1,13 @@
+"""vltm's exceptions: one-line messages, the same as the command line prints."""
+
+
+class VltmError(Exception):
+    """Any error of vltm (the message is the library's one-line message)."""
+
+
+class ArgumentError(VltmError, ValueError):
+    """A bad argument: malformed or out of range (the command line's exit code 2)."""
+
+
+class DataError(VltmError, OSError):
+    """Unreadable or malformed input data (the command line's exit code 1)."""

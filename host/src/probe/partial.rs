@@ -1,0 +1,894 @@
+//! Partial accumulators: a probe run over a part of a scan's laser rows keeps its
+//! accumulator state as a [`Partial`] instead of finishing it, so a scan can be split by rows
+//! across processes and machines, the parts [merged](Partial::merge) by addition and the sum
+//! [finished](Partial::finish) into the same volume as one pass (bit-identical where the
+//! summation order is the same, else to float rounding).
+//!
+//! A part records the capture's identity (file size, dimensions, time axis, an FNV-1a hash
+//! of the geometry) and the probe's kind and parameters (the user's wave options, the
+//! resolved kernel configuration, the volume, focus, gate, shell, Γ, evaluation path);
+//! merging parts that differ in any of them, or whose row ranges overlap, is an error, and so
+//! is finishing a state whose rows do not cover the scan.
+//!
+//! # Binary format (version 1, little-endian)
+//!
+//! | bytes | content |
+//! |---|---|
+//! | 8 | magic `VLTMPART` |
+//! | 4 | format version, `u32` (1) |
+//! | 4 | header length `h`, `u32` |
+//! | `h` | header: UTF-8 JSON — `capture` (identity), `probe` (kind and parameters), `rows` (row ranges `[a, b)`), `report` (counters), `legs` (per factorised column: projector leg range or null), `n_spads`, `n_points`, `n_acc`, `crc32` (of the bytes that follow, 8 hex digits), `capture_name` (informational) |
+//! | `12·n_spads` | SPAD spots, `f32` x, y, z (columns and indirect light image with them) |
+//! | `12·n_points` | volume points, `f32` (point lists only; grids are rebuilt from `probe.volume.axes`) |
+//! | `8·n_acc` | the accumulators, `f64` (complex numbers as re, im pairs) |
+//!
+//! State per probe (`f64`): direct light `2·Kv`; higher-order column `2·Kv`; factorised
+//! column (two-bounce) `2J(Ks+1)`, un-gated `2Ks`; in-focus indirect light `|Γ|·2J(Ks+1)`.
+//! Merging is one addition per `f64`; finishing costs what finishing one pass costs (the
+//! imaging of factorised columns). Memory: the state, twice while merging two parts.
+
+use super::column::{
+    ColumnGate, ColumnState, Columns, Shell, check_focus, column_acc, factorised_columns,
+};
+use super::direct::direct_acc;
+use super::drive::{Job, intensities};
+use super::indirect::indirect_sum;
+use super::wave::{Output, Wave};
+use crate::error::{Error, Result};
+use crate::exec::{Exec, Path};
+use crate::io::capture::{Geometry, RowRange, RowSource};
+use crate::volume::Volume;
+use num_complex::Complex64;
+use serde::{Deserialize, Serialize};
+use std::ops::Range;
+use std::time::Instant;
+use vltm_kernel::{Config, Gate, Legs, Params, Point, Report, Weights};
+
+/// The magic bytes that open a partial state.
+pub const MAGIC: &[u8; 8] = b"VLTMPART";
+/// The format version written and read.
+pub const VERSION: u32 = 1;
+
+/// Which probe a partial state accumulates.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Task {
+    /// Direct light (the diagonal, [`super::direct`]).
+    Direct,
+    /// A column ([`super::column()`]).
+    Column {
+        /// Focus `x_a` (m).
+        focus: Point,
+        /// Time gate.
+        gate: ColumnGate,
+        /// Distance shell kept when finished.
+        shell: Shell,
+    },
+    /// Pass 2 of in-focus indirect light ([`super::indirect_over`]) for a given Γ (pass 1,
+    /// the direct light that defines Γ, is a [`Task::Direct`] of its own).
+    Indirect {
+        /// Γ membership per voxel.
+        gamma: Vec<bool>,
+        /// Pair shell (`None`: `r0 = 1.5σ`).
+        shell: Option<Shell>,
+    },
+}
+
+/// The capture's identity: parts of different captures do not merge.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct Identity {
+    file_bytes: u64,
+    lasers: usize,
+    laser_shape: [usize; 2],
+    spads: usize,
+    spad_shape: [usize; 2],
+    nt: usize,
+    dt: f64,
+    t0: f64,
+    confocal: bool,
+    legs_in_time: bool,
+    geometry_fnv64: String,
+}
+
+/// The probe's kind and parameters: parts with other parameters do not merge.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct ProbeHead {
+    kind: String,
+    path: String,
+    wave: WaveHead,
+    config: ConfigHead,
+    volume: VolumeHead,
+    focus: Option<Point>,
+    gate: Option<String>,
+    /// `[r0, r1]`, `r1` null for infinity.
+    shell: Option<(f32, Option<f32>)>,
+    /// Γ as voxel indices (indirect light).
+    gamma: Option<Vec<usize>>,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct WaveHead {
+    wavelength: Option<f64>,
+    sigma: Option<f64>,
+    weights: String,
+    band_half_width: f64,
+    compensate_laser: bool,
+    auto_margin: bool,
+}
+
+/// The resolved kernel parameters ([`Params`]).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct ConfigHead {
+    wavelength: f64,
+    sigma: Option<f64>,
+    band_half_width: f64,
+    gate_support: f64,
+    margin: f64,
+    nt: usize,
+    dt: f64,
+    t0: f64,
+    /// `[laser_origin, sensor_origin]` when the time axis includes the device legs.
+    legs: Option<[[f64; 3]; 2]>,
+    weights: String,
+    d_min: f64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct VolumeHead {
+    shape: [usize; 3],
+    axes: Option<[[f32; 2]; 3]>,
+    points_fnv64: String,
+}
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+struct Counters {
+    rows: u64,
+    non_finite: u64,
+    dropped: u64,
+}
+
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+struct Head {
+    capture: Identity,
+    probe: ProbeHead,
+    rows: Vec<[usize; 2]>,
+    report: Counters,
+    /// Per factorised column: the projector leg range `[min, max]`, null before any row.
+    legs: Vec<Option<[f64; 2]>>,
+    n_spads: usize,
+    n_points: usize,
+    n_acc: usize,
+    /// CRC-32 of the bytes after the header, 8 hex digits.
+    crc32: String,
+    capture_name: String,
+}
+
+/// The accumulator state of a probe over some laser rows of a capture: serialises
+/// ([`Partial::to_bytes`]), merges by addition ([`Partial::merge`]) and finishes into the
+/// probe's volume ([`Partial::finish`]) once its rows cover the scan.
+#[derive(Clone, Debug)]
+pub struct Partial {
+    head: Head,
+    spads: Vec<Point>,
+    points: Vec<Point>,
+    acc: Vec<f64>,
+}
+
+/// FNV-1a, 64 bits.
+fn fnv(bytes: impl IntoIterator<Item = u8>) -> u64 {
+    bytes.into_iter().fold(0xcbf2_9ce4_8422_2325, |h, b| {
+        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
+    })
+}
+
+fn point_bytes(pts: &[Point]) -> impl Iterator<Item = u8> + '_ {
+    pts.iter().flatten().flat_map(|c| c.to_le_bytes())
+}
+
+fn geometry_hash(g: &Geometry) -> String {
+    let mut b: Vec<u8> = point_bytes(&g.lasers)
+        .chain(point_bytes(&g.spads))
+        .collect();
+    for n in g.laser_shape.iter().chain(&g.spad_shape).chain([&g.nt]) {
+        b.extend((*n as u64).to_le_bytes());
+    }
+    for x in g
+        .laser_origin
+        .iter()
+        .chain(&g.sensor_origin)
+        .chain([&g.dt, &g.t0])
+    {
+        b.extend(x.to_le_bytes());
+    }
+    b.extend([u8::from(g.legs_in_time), u8::from(g.confocal)]);
+    format!("{:016x}", fnv(b))
+}
+
+fn weights_name(w: Weights) -> &'static str {
+    match w {
+        Weights::Inv => "inv",
+        Weights::One => "one",
+    }
+}
+
+fn parse_weights(s: &str) -> Result<Weights> {
+    match s {
+        "inv" => Ok(Weights::Inv),
+        "one" => Ok(Weights::One),
+        _ => Err(Error::arg("weights", format!("unknown weights `{s}`"))),
+    }
+}
+
+fn gate_name(g: ColumnGate) -> &'static str {
+    match g {
+        ColumnGate::TwoBounce => "two-bounce",
+        ColumnGate::HigherOrder => "higher-order",
+        ColumnGate::None => "none",
+    }
+}
+
+fn parse_gate(s: &str) -> Option<ColumnGate> {
+    match s {
+        "two-bounce" => Some(ColumnGate::TwoBounce),
+        "higher-order" => Some(ColumnGate::HigherOrder),
+        "none" => Some(ColumnGate::None),
+        _ => None,
+    }
+}
+
+fn parse_path(s: &str) -> Option<Path> {
+    [Path::Band, Path::Planar, Path::Lookup, Path::Auto]
+        .into_iter()
+        .find(|p| p.name() == s)
+}
+
+fn config_head(cfg: &Config) -> ConfigHead {
+    let p = cfg.params();
+    ConfigHead {
+        wavelength: p.wavelength,
+        sigma: p.sigma,
+        band_half_width: p.band_half_width,
+        gate_support: p.gate_support,
+        margin: p.margin,
+        nt: p.nt,
+        dt: p.dt,
+        t0: p.t0,
+        legs: match p.legs {
+            Legs::WallToWall => None,
+            Legs::FirstAndLast {
+                laser_origin,
+                sensor_origin,
+            } => Some([laser_origin, sensor_origin]),
+        },
+        weights: weights_name(p.weights).into(),
+        d_min: p.d_min,
+    }
+}
+
+fn shell_head(s: Shell) -> (f32, Option<f32>) {
+    (s.r0, s.r1.is_finite().then_some(s.r1))
+}
+
+fn shell_of(s: (f32, Option<f32>)) -> Shell {
+    Shell {
+        r0: s.0,
+        r1: s.1.unwrap_or(f32::INFINITY),
+    }
+}
+
+fn leg_head(l: (f64, f64)) -> Option<[f64; 2]> {
+    (l.0 <= l.1).then_some([l.0, l.1])
+}
+
+fn leg_of(l: Option<[f64; 2]>) -> (f64, f64) {
+    l.map_or((f64::INFINITY, f64::NEG_INFINITY), |[a, b]| (a, b))
+}
+
+fn complex(acc: &[f64]) -> Vec<Complex64> {
+    acc.chunks_exact(2)
+        .map(|z| Complex64::new(z[0], z[1]))
+        .collect()
+}
+
+fn flat(acc: &[Complex64]) -> Vec<f64> {
+    acc.iter().flat_map(|z| [z.re, z.im]).collect()
+}
+
+/// Runs `task` over the laser rows `rows` of `src` and returns its accumulator state.
+/// `file_bytes` is the capture file's size (0 for a capture made in memory) and
+/// `capture_name` its name (recorded, not compared). Every parameter is derived from the whole
+/// capture's geometry, exactly as one pass over all rows derives it.
+///
+/// # Errors
+/// [`Error::Argument`] (`--rows`) for rows outside the scan; the probe's own errors.
+#[allow(clippy::too_many_arguments)]
+pub fn accumulate(
+    src: &mut dyn RowSource,
+    file_bytes: u64,
+    capture_name: &str,
+    volume: &Volume,
+    task: &Task,
+    wave: &Wave,
+    exec: Exec<'_>,
+    rows: Range<usize>,
+) -> Result<Partial> {
+    let g = src.geometry().clone();
+    let mut part = RowRange::new(src, rows.clone())?;
+    let mut legs = Vec::new();
+    let mut spads = Vec::new();
+    let (cfg, acc, report, path, focus, gate, shell, gamma) = match task {
+        Task::Direct => {
+            let (a, cfg) = direct_acc(&mut part, volume, wave, exec)?;
+            let acc = flat(&a.acc);
+            (cfg, acc, a.report, a.path, None, None, None, None)
+        }
+        Task::Column { focus, gate, shell } => {
+            let (state, cfg) = column_acc(&mut part, *focus, volume, *gate, wave, exec)?;
+            let (acc, report, path) = match state {
+                ColumnState::Voxels(acc, r) => (flat(&acc), r, Path::Band),
+                ColumnState::Factorised {
+                    state,
+                    report,
+                    legs: l,
+                    path,
+                    ..
+                } => {
+                    legs.push(leg_head(l));
+                    spads.clone_from(&g.spads);
+                    (state, report, path)
+                }
+            };
+            let sh = Some(shell_head(*shell));
+            (cfg, acc, report, path, Some(*focus), Some(*gate), sh, None)
+        }
+        Task::Indirect { gamma, shell } => {
+            if gamma.len() != volume.len() {
+                return Err(Error::arg(
+                    "gamma",
+                    format!("expected {} flags, found {}", volume.len(), gamma.len()),
+                ));
+            }
+            let idx: Vec<usize> = (0..gamma.len()).filter(|&i| gamma[i]).collect();
+            let pts: Vec<Point> = idx.iter().map(|&i| volume.points[i]).collect();
+            let cfg = wave.column_config(&g, &pts, &pts)?;
+            let shell = shell.unwrap_or(Shell {
+                r0: 1.5 * cfg.sigma() as f32,
+                r1: f32::INFINITY,
+            });
+            let cols = if pts.is_empty() {
+                Columns {
+                    state: Vec::new(),
+                    report: Report::default(),
+                    legs: Vec::new(),
+                }
+            } else {
+                let job = Job {
+                    cfg: &cfg,
+                    wave,
+                    exec,
+                };
+                factorised_columns(&mut part, job, &pts, Gate::Gaussian, "indirect")?
+            };
+            legs = cols.legs.iter().copied().map(leg_head).collect();
+            spads.clone_from(&g.spads);
+            let sh = Some(shell_head(shell));
+            (
+                cfg,
+                cols.state,
+                cols.report,
+                Path::Band,
+                None,
+                None,
+                sh,
+                Some(idx),
+            )
+        }
+    };
+    let kind = match task {
+        Task::Direct => "direct",
+        Task::Column { .. } => "column",
+        Task::Indirect { .. } => "indirect",
+    };
+    let points = if volume.axes.is_some() {
+        Vec::new()
+    } else {
+        volume.points.clone()
+    };
+    let head = Head {
+        capture: Identity {
+            file_bytes,
+            lasers: g.lasers.len(),
+            laser_shape: g.laser_shape,
+            spads: g.spads.len(),
+            spad_shape: g.spad_shape,
+            nt: g.nt,
+            dt: g.dt,
+            t0: g.t0,
+            confocal: g.confocal,
+            legs_in_time: g.legs_in_time,
+            geometry_fnv64: geometry_hash(&g),
+        },
+        probe: ProbeHead {
+            kind: kind.into(),
+            path: path.name().into(),
+            wave: WaveHead {
+                wavelength: wave.wavelength,
+                sigma: wave.sigma,
+                weights: weights_name(wave.weights).into(),
+                band_half_width: wave.band_half_width,
+                compensate_laser: wave.compensate_laser,
+                auto_margin: wave.auto_margin,
+            },
+            config: config_head(&cfg),
+            volume: VolumeHead {
+                shape: volume.shape,
+                axes: volume.axes,
+                points_fnv64: format!("{:016x}", fnv(point_bytes(&volume.points))),
+            },
+            focus,
+            gate: gate.map(|g| gate_name(g).into()),
+            shell,
+            gamma,
+        },
+        rows: if rows.is_empty() {
+            Vec::new()
+        } else {
+            vec![[rows.start, rows.end]]
+        },
+        report: Counters {
+            rows: report.rows,
+            non_finite: report.non_finite,
+            dropped: report.dropped,
+        },
+        legs,
+        n_spads: spads.len(),
+        n_points: points.len(),
+        n_acc: acc.len(),
+        crc32: String::new(),
+        capture_name: capture_name.into(),
+    };
+    Ok(Partial {
+        head,
+        spads,
+        points,
+        acc,
+    })
+}
+
+/// The probe's result from a finished [`Partial`].
+#[derive(Clone, Debug)]
+pub struct Finished {
+    /// Intensities, configuration, counters and path (`seconds`: the finishing time).
+    pub output: Output,
+    /// Complex amplitudes per voxel (`T = |A|²`), for direct light and higher-order columns;
+    /// `None` for factorised columns and indirect light (imaged as intensities).
+    pub amplitudes: Option<Vec<Complex64>>,
+    /// The volume the state was accumulated over.
+    pub volume: Volume,
+}
+
+impl Partial {
+    /// The probe's kind: `direct`, `column` or `indirect`.
+    pub fn kind(&self) -> &str {
+        &self.head.probe.kind
+    }
+
+    /// The row ranges `[a, b)` the state holds, in order.
+    pub fn rows(&self) -> Vec<Range<usize>> {
+        self.head.rows.iter().map(|r| r[0]..r[1]).collect()
+    }
+
+    /// Laser rows of the whole scan.
+    pub fn total_rows(&self) -> usize {
+        self.head.capture.lasers
+    }
+
+    /// The capture's name as given when the part was made (informational).
+    pub fn capture_name(&self) -> &str {
+        &self.head.capture_name
+    }
+
+    /// The focus of a column.
+    pub fn focus(&self) -> Option<Point> {
+        self.head.probe.focus
+    }
+
+    /// Size of [`Partial::to_bytes`] without building it (bytes).
+    pub fn byte_len(&self) -> usize {
+        16 + self.header_json(0).len()
+            + 12 * (self.spads.len() + self.points.len())
+            + 8 * self.acc.len()
+    }
+
+    fn header_json(&self, crc32: u32) -> Vec<u8> {
+        // A struct of plain data: serialising it cannot fail.
+        serde_json::to_vec(&Head {
+            crc32: format!("{crc32:08x}"),
+            ..self.head.clone()
+        })
+        .unwrap_or_default()
+    }
+
+    /// The state in the binary format of the module docs.
+    pub fn to_bytes(&self) -> Vec<u8> {
+        let mut body = Vec::with_capacity(12 * (self.spads.len() + self.points.len()));
+        body.extend(point_bytes(&self.spads));
+        body.extend(point_bytes(&self.points));
+        let mut crc = crc32fast::Hasher::new();
+        crc.update(&body);
+        let acc: &[u8] = bytemuck::cast_slice(&self.acc);
+        // The accumulators as little-endian f64 (the byte order of every supported target is
+        // checked at compile time below).
+        const _: () = assert!(cfg!(target_endian = "little"));
+        crc.update(acc);
+        let head = self.header_json(crc.finalize());
+        let mut out = Vec::with_capacity(16 + head.len() + body.len() + acc.len());
+        out.extend_from_slice(MAGIC);
+        out.extend(VERSION.to_le_bytes());
+        out.extend((head.len() as u32).to_le_bytes());
+        out.extend(head);
+        out.extend(body);
+        out.extend_from_slice(acc);
+        out
+    }
+
+    /// Reads a state written by [`Partial::to_bytes`]; `what` names its origin in errors.
+    ///
+    /// # Errors
+    /// [`Error::Format`] for another magic or version, a header that does not parse, a size
+    /// that does not match or a CRC that fails.
+    pub fn from_bytes(bytes: &[u8], what: &std::path::Path) -> Result<Self> {
+        let bad = |field: &str, expected: &str, found: String| {
+            Error::format(what, field, expected, found)
+        };
+        if bytes.len() < 16 || bytes[..8] != MAGIC[..] {
+            return Err(bad(
+                "magic",
+                "a vltm partial state (VLTMPART)",
+                format!("{} bytes of something else", bytes.len()),
+            ));
+        }
+        let word =
+            |i: usize| u32::from_le_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
+        let version = word(8);
+        if version != VERSION {
+            return Err(bad("version", "1", version.to_string()));
+        }
+        let h = word(12) as usize;
+        let rest = &bytes[16..];
+        if rest.len() < h {
+            return Err(bad(
+                "header",
+                &format!("{h} bytes"),
+                format!("{} (truncated)", rest.len()),
+            ));
+        }
+        let head: Head = serde_json::from_slice(&rest[..h])
+            .map_err(|e| bad("header", "the JSON header of format 1", e.to_string()))?;
+        let body = &rest[h..];
+        let want = head
+            .n_spads
+            .checked_add(head.n_points)
+            .and_then(|n| n.checked_mul(12))
+            .and_then(|n| head.n_acc.checked_mul(8).and_then(|a| a.checked_add(n)));
+        if want != Some(body.len()) {
+            return Err(bad(
+                "body",
+                &format!(
+                    "{} SPADs, {} points and {} accumulators",
+                    head.n_spads, head.n_points, head.n_acc
+                ),
+                format!("{} bytes (truncated or padded)", body.len()),
+            ));
+        }
+        if format!("{:08x}", crc32fast::hash(body)) != head.crc32 {
+            return Err(bad(
+                "crc32",
+                &head.crc32,
+                format!("{:08x} (the state is corrupted)", crc32fast::hash(body)),
+            ));
+        }
+        let pts = |b: &[u8]| -> Vec<Point> {
+            b.chunks_exact(12)
+                .map(|p| {
+                    core::array::from_fn(|i| {
+                        f32::from_le_bytes([p[4 * i], p[4 * i + 1], p[4 * i + 2], p[4 * i + 3]])
+                    })
+                })
+                .collect()
+        };
+        let (sp, rest) = body.split_at(12 * head.n_spads);
+        let (pt, acc) = rest.split_at(12 * head.n_points);
+        let acc = acc
+            .chunks_exact(8)
+            .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
+            .collect();
+        let p = Self {
+            spads: pts(sp),
+            points: pts(pt),
+            acc,
+            head,
+        };
+        p.check_rows(what)?;
+        Ok(p)
+    }
+
+    fn check_rows(&self, what: &std::path::Path) -> Result<()> {
+        let n = self.head.capture.lasers;
+        let mut end = 0;
+        for r in &self.head.rows {
+            if r[0] < end || r[0] >= r[1] || r[1] > n {
+                return Err(Error::format(
+                    what,
+                    "rows",
+                    format!("ordered, disjoint ranges within 0:{n}"),
+                    format!("{:?}", self.head.rows),
+                ));
+            }
+            end = r[1];
+        }
+        Ok(())
+    }
+
+    /// Reads a state from a file.
+    ///
+    /// # Errors
+    /// [`Error::Io`] if unreadable; as [`Partial::from_bytes`].
+    pub fn read(path: &std::path::Path) -> Result<Self> {
+        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        Self::from_bytes(&bytes, path)
+    }
+
+    /// Writes the state to a file, all or nothing ([`crate::atomic`]).
+    ///
+    /// # Errors
+    /// [`Error::Io`] if the file cannot be written.
+    pub fn write(&self, path: &std::path::Path) -> Result<()> {
+        crate::atomic::write_bytes(path, &self.to_bytes())
+    }
+
+    /// Adds the parts' accumulators (in the order of their first rows) into one state.
+    /// `names` name the parts in errors (`parts[i]` is `names[i]`).
+    ///
+    /// # Errors
+    /// [`Error::Argument`] (`merge`) for no parts, parts of different captures or with
+    /// different parameters, and overlapping rows.
+    pub fn merge(parts: Vec<Self>, names: &[String]) -> Result<Self> {
+        let name = |i: usize| names.get(i).cloned().unwrap_or_else(|| format!("part {i}"));
+        let mut order: Vec<usize> = (0..parts.len()).collect();
+        order.sort_by_key(|&i| parts[i].head.rows.first().map_or(0, |r| r[0]));
+        let Some(&first) = order.first() else {
+            return Err(Error::arg("merge", "no partial states to merge"));
+        };
+        let a = &parts[first];
+        for &i in &order {
+            let b = &parts[i];
+            let differ = |what: &str| {
+                Err(Error::arg(
+                    "merge",
+                    format!(
+                        "{} and {} {what}: they are not parts of one scan",
+                        name(first),
+                        name(i)
+                    ),
+                ))
+            };
+            if a.head.capture != b.head.capture {
+                return differ("come from different captures");
+            }
+            if a.head.probe != b.head.probe
+                || a.spads != b.spads
+                || a.points != b.points
+                || a.acc.len() != b.acc.len()
+                || a.head.legs.len() != b.head.legs.len()
+            {
+                return differ("have different probes or parameters");
+            }
+        }
+        // Row ranges: disjoint, then coalesced.
+        let mut ranges: Vec<([usize; 2], usize)> = order
+            .iter()
+            .flat_map(|&i| parts[i].head.rows.iter().map(move |r| (*r, i)))
+            .collect();
+        ranges.sort_by_key(|(r, _)| r[0]);
+        for w in ranges.windows(2) {
+            if w[1].0[0] < w[0].0[1] {
+                return Err(Error::arg(
+                    "merge",
+                    format!(
+                        "{} (rows {}:{}) and {} (rows {}:{}) overlap: each row must be in one part",
+                        name(w[0].1),
+                        w[0].0[0],
+                        w[0].0[1],
+                        name(w[1].1),
+                        w[1].0[0],
+                        w[1].0[1]
+                    ),
+                ));
+            }
+        }
+        let mut rows: Vec<[usize; 2]> = Vec::new();
+        for (r, _) in ranges {
+            match rows.last_mut() {
+                Some(last) if last[1] == r[0] => last[1] = r[1],
+                _ => rows.push(r),
+            }
+        }
+        let mut parts = parts;
+        let head = parts[first].head.clone();
+        let mut out = std::mem::replace(
+            &mut parts[first],
+            Self {
+                head,
+                spads: Vec::new(),
+                points: Vec::new(),
+                acc: Vec::new(),
+            },
+        );
+        for &i in order.iter().skip(1) {
+            let b = &parts[i];
+            for (x, y) in out.acc.iter_mut().zip(&b.acc) {
+                *x += y;
+            }
+            let (r, s) = (&mut out.head.report, b.head.report);
+            r.rows += s.rows;
+            r.non_finite += s.non_finite;
+            r.dropped += s.dropped;
+            for (l, m) in out.head.legs.iter_mut().zip(&b.head.legs) {
+                let (x, y) = (leg_of(*l), leg_of(*m));
+                *l = leg_head((x.0.min(y.0), x.1.max(y.1)));
+            }
+        }
+        out.head.rows = rows;
+        Ok(out)
+    }
+
+    /// Whether the state's rows cover the whole scan.
+    pub fn is_complete(&self) -> bool {
+        self.head.rows == [[0, self.head.capture.lasers]]
+            || (self.head.capture.lasers == 0 && self.head.rows.is_empty())
+    }
+
+    /// The probe's volume from the accumulated state, exactly as one pass over all rows
+    /// finishes it.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] (`merge`) when rows are missing; configuration and kernel errors.
+    pub fn finish(&self) -> Result<Finished> {
+        let t = Instant::now();
+        if !self.is_complete() {
+            let mut missing = Vec::new();
+            let mut at = 0;
+            for r in self
+                .head
+                .rows
+                .iter()
+                .chain([&[self.head.capture.lasers; 2]])
+            {
+                if r[0] > at {
+                    missing.push(format!("{at}:{}", r[0]));
+                }
+                at = r[1];
+            }
+            return Err(Error::arg(
+                "merge",
+                format!(
+                    "rows {} of the {} laser rows are missing: merge every part of the scan",
+                    missing.join(", "),
+                    self.head.capture.lasers
+                ),
+            ));
+        }
+        let p = &self.head.probe;
+        let c = &p.config;
+        let cfg = Config::try_new(&Params {
+            wavelength: c.wavelength,
+            sigma: c.sigma,
+            band_half_width: c.band_half_width,
+            gate_support: c.gate_support,
+            margin: c.margin,
+            nt: c.nt,
+            dt: c.dt,
+            t0: c.t0,
+            legs: match c.legs {
+                None => Legs::WallToWall,
+                Some([laser_origin, sensor_origin]) => Legs::FirstAndLast {
+                    laser_origin,
+                    sensor_origin,
+                },
+            },
+            weights: parse_weights(&c.weights)?,
+            d_min: c.d_min,
+        })?;
+        let volume = match p.volume.axes {
+            Some(ax) => Volume::grid(
+                [ax[0][0], ax[1][0], ax[2][0]],
+                [ax[0][1], ax[1][1], ax[2][1]],
+                p.volume.shape,
+            )?,
+            None => Volume::points(self.points.clone())?,
+        };
+        if format!("{:016x}", fnv(point_bytes(&volume.points))) != p.volume.points_fnv64 {
+            return Err(Error::arg(
+                "merge",
+                "the volume rebuilt from the partial state is not the one it was accumulated over",
+            ));
+        }
+        let report = Report {
+            rows: self.head.report.rows,
+            non_finite: self.head.report.non_finite,
+            dropped: self.head.report.dropped,
+            aliased: 0,
+        };
+        let path = parse_path(&p.path).unwrap_or(Path::Band);
+        let shell = p.shell.map_or(Shell::ALL, shell_of);
+        let (values, report, path, amplitudes) = match p.kind.as_str() {
+            "direct" => {
+                let acc = complex(&self.acc);
+                (intensities(&acc), report, path, Some(acc))
+            }
+            "column" => {
+                let focus = p.focus.unwrap_or([0.0, 0.0, 1.0]);
+                check_focus(focus)?;
+                let gate = p.gate.as_deref().and_then(parse_gate);
+                let (state, amplitudes) = match gate {
+                    Some(ColumnGate::HigherOrder) => {
+                        let acc = complex(&self.acc);
+                        (ColumnState::Voxels(acc.clone(), report), Some(acc))
+                    }
+                    Some(g) => (
+                        ColumnState::Factorised {
+                            state: self.acc.clone(),
+                            report,
+                            legs: leg_of(self.head.legs.first().copied().flatten()),
+                            gate: if g == ColumnGate::None {
+                                Gate::None
+                            } else {
+                                Gate::Gaussian
+                            },
+                            path,
+                            planar: None,
+                        },
+                        None,
+                    ),
+                    None => return Err(Error::arg("gate", "unknown gate in the partial state")),
+                };
+                let (v, r, path) = state.finish(&cfg, &self.spads, focus, &volume, shell)?;
+                (v, r, path, amplitudes)
+            }
+            "indirect" => {
+                let idx = p.gamma.clone().unwrap_or_default();
+                let pts: Vec<Point> = idx
+                    .iter()
+                    .filter_map(|&i| volume.points.get(i).copied())
+                    .collect();
+                let mut cols = Columns {
+                    state: self.acc.clone(),
+                    report,
+                    legs: self.head.legs.iter().copied().map(leg_of).collect(),
+                };
+                let (v, r) = indirect_sum(
+                    &mut cols,
+                    &cfg,
+                    &self.spads,
+                    &pts,
+                    &idx,
+                    shell,
+                    volume.len(),
+                )?;
+                (v, r, Path::Band, None)
+            }
+            k => return Err(Error::arg("kind", format!("unknown probe `{k}`"))),
+        };
+        Ok(Finished {
+            output: Output {
+                values,
+                report,
+                seconds: t.elapsed().as_secs_f64(),
+                config: cfg,
+                path,
+            },
+            amplitudes,
+            volume,
+        })
+    }
+}
