@@ -269,3 +269,27 @@ fn bad_files_name_the_file_and_the_variable() {
     ]));
     assert!(e.contains("rect_data") && e.contains("budget"), "{e}");
 }
+
+#[test]
+fn mat_v73_reads_like_v5() {
+    let p =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/mat/stanford_v73.mat");
+    let m = read(&p, &MatOptions::default()).unwrap();
+    assert_eq!(
+        (m.version, m.layout),
+        ("MAT v7.3 (HDF5)", Layout::StanfordConfocal)
+    );
+    let d = tmp("v73");
+    let v5 = read(
+        &write(&d, "s.mat", &file(&stanford_elements(true))),
+        &MatOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(m.capture, v5.capture);
+    assert_eq!(m.variables, ["rect_data 3x2x5 double", "width 1x1 double"]);
+    // Truncated: an error naming the file.
+    let bytes = std::fs::read(&p).unwrap();
+    let t = write(&d, "t.mat", &bytes[..1500]);
+    let e = read(&t, &MatOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("t.mat"), "{e}");
+}

@@ -217,26 +217,19 @@ impl Mat5 {
             let mut tag = [0u8; 8];
             r.read_exact(&mut tag).map_err(|e| Error::io(path, e))?;
             let (ty, size) = (me.u32(&tag[0..4]), u64::from(me.u32(&tag[4..8])));
-            let what = format!("(element at byte {off})");
-            if off + 8 + size > len {
-                return Err(Error::format(
-                    path,
-                    &what,
-                    format!("{size} bytes of data"),
-                    format!("{} bytes left in the file (truncated)", len - off - 8),
-                ));
-            }
+            let what = format!("(variable at byte {off})");
+            let avail = size.min(len - off - 8);
             let header = match ty {
                 MI_COMPRESSED => {
-                    let mut z = ZlibDecoder::new((&mut r).take(size));
+                    let mut z = ZlibDecoder::new((&mut r).take(avail));
                     let mut p = Parser::new(&mut z, big_endian, path, u64::MAX);
-                    p.var = format!("(variable at byte {off})");
-                    p.top_level(false)?
+                    p.var.clone_from(&what);
+                    p.top_level(false)
                 }
                 MI_MATRIX => {
-                    let mut p = Parser::new(&mut r, big_endian, path, size);
-                    p.var = format!("(variable at byte {off})");
-                    p.matrix_body(size, String::new(), false)?
+                    let mut p = Parser::new(&mut r, big_endian, path, avail);
+                    p.var.clone_from(&what);
+                    p.matrix_body(size, String::new(), false)
                 }
                 _ => {
                     return Err(Error::format(
@@ -247,6 +240,17 @@ impl Mat5 {
                     ));
                 }
             };
+            if avail < size {
+                // Name the variable if its header is there.
+                let name = header.as_ref().map_or(what, |h| h.name.clone());
+                return Err(Error::format(
+                    path,
+                    &name,
+                    format!("{size} bytes of data"),
+                    format!("{avail} bytes left in the file (truncated)"),
+                ));
+            }
+            let header = header?;
             me.entries.push(Entry {
                 header,
                 offset: off + 8,
