@@ -28,7 +28,7 @@
 //!   `(i, j)` of `rect_data(i, j, :)` is at `x = -w + 2w·i/(N₁−1)`, `y = -w + 2w·j/(N₂−1)`,
 //!   the authors' axis order (their script permutes `rect_data` to (t, j, i) and displays i
 //!   across, j down). Laser row `l = i·N₂ + j` (C order over `[N₁, N₂]`, DESIGN §B.0);
-//! * the device positions are not recorded; [`aperture::DEFAULT_LASER_ORIGIN`] is used, which
+//! * the device positions are not recorded; [`DEFAULT_LASER_ORIGIN`] is used, which
 //!   only matters for `--compensate-laser` (the legs are not in the time axis).
 //!
 //! **Phasor-field conventions** follow y-tal's converter (`tal/io/format.py`): the file's
@@ -42,7 +42,7 @@
 //! is read whole. Peak: the raw stored bytes, then the values as f32, then the capture as
 //! f32 (the raw bytes freed first): for the 64×64×2048 uint16 captures 16.8 + 33.6 MB, then
 //! 33.6 + 33.6 MB, i.e. about 2 × 4·N₁N₂T bytes. Every allocation is checked against
-//! [`budget::check`](crate::budget::check) before it is made. v7.3 files are read the same
+//! [`budget::check`] before it is made. v7.3 files are read the same
 //! way (raw bytes, values, capture).
 
 pub mod v5;
