@@ -515,9 +515,13 @@ fn run(cmd: Command) -> Result<(), Failure> {
             };
             let mut c = common.load(&capture)?;
             let sigma = common.wave().config(c.geometry())?.sigma();
-            let o = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
-                probe::indirect(rows, &volume, &opts, &common.wave(), common.exec())
-            })?;
+            // The configuration of the rows as the probe sees them (after preprocessing).
+            let (o, cfg) =
+                input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
+                    let cfg = common.wave().config(rows.geometry())?;
+                    let o = probe::indirect(rows, &volume, &opts, &common.wave(), common.exec())?;
+                    Ok((o, cfg))
+                })?;
             let n_gamma = o.gamma.iter().filter(|&&g| g).count();
             say!(
                 "Γ: {n_gamma} of {} voxels above ε = {epsilon} of the direct maximum; pairs with {:.3} <= |x_a - x_b| < {:.3} m",
@@ -525,7 +529,6 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 o.shell.r0,
                 o.shell.r1
             );
-            let cfg = common.wave().config(c.geometry())?;
             summarize(
                 "indirect", &o.values, &volume, o.seconds, &o.report, &cfg, None,
             );
