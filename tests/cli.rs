@@ -1018,3 +1018,143 @@ fn control_bytes_from_files_are_escaped() {
     assert_eq!(text(&o.stderr).lines().count(), 1, "{}", text(&o.stderr));
     assert!(text(&o.stderr).contains("\\u{1b}"), "{}", text(&o.stderr));
 }
+
+/// A MAT v5 file of uncompressed numeric `double` arrays (name, dims, column-major values),
+/// written to the published format.
+fn mat_v5(vars: &[(&str, &[usize], &[f64])]) -> Vec<u8> {
+    fn elem(ty: u32, data: &[u8]) -> Vec<u8> {
+        let mut v = ty.to_le_bytes().to_vec();
+        v.extend_from_slice(&(data.len() as u32).to_le_bytes());
+        v.extend_from_slice(data);
+        v.resize(v.len().div_ceil(8) * 8, 0);
+        v
+    }
+    let mut f = b"MATLAB 5.0 MAT-file, written by tests/cli.rs".to_vec();
+    f.resize(116, b' ');
+    f.extend_from_slice(&[0; 8]);
+    f.extend_from_slice(&0x0100u16.to_le_bytes());
+    f.extend_from_slice(b"IM");
+    for (name, dims, values) in vars {
+        let mut body = elem(6, &[6, 0, 0, 0, 0, 0, 0, 0]);
+        let d: Vec<u8> = dims
+            .iter()
+            .flat_map(|&x| (x as i32).to_le_bytes())
+            .collect();
+        body.extend(elem(5, &d));
+        body.extend(elem(1, name.as_bytes()));
+        let raw: Vec<u8> = values.iter().flat_map(|x| x.to_le_bytes()).collect();
+        body.extend(elem(9, &raw));
+        f.extend(elem(14, &body));
+    }
+    f
+}
+
+/// A Stanford-layout `.mat` (`rect_data` 8×8×200 + `width`): a floor of 2 counts, a wall
+/// return in the first 20 bins, and a hidden point 0.4 m in front of the wall centre
+/// (confocal path 2·|x − p|, bins of 4 ps, t = 0 at the wall); `info`, `direct` with the
+/// preprocessing, and the errors of bad windows, backgrounds and files.
+#[test]
+fn mat_captures_through_the_command_line() {
+    let t = TempDir::new("mat");
+    let (n, nt, w) = (8usize, 1000usize, 0.1f64);
+    let dt = 4e-12 * 299_792_458.0;
+    let mut v = vec![2.0f64; n * n * nt];
+    for j in 0..n {
+        for i in 0..n {
+            let (x, y) = (-w + 2.0 * w * i as f64 / 7.0, -w + 2.0 * w * j as f64 / 7.0);
+            let path = 2.0 * (x * x + y * y + 0.16f64).sqrt();
+            let b = (path / dt).round() as usize;
+            for k in 0..20 {
+                v[i + n * (j + n * k)] += 1000.0;
+            }
+            if b < nt {
+                v[i + n * (j + n * b)] += 50.0;
+            }
+        }
+    }
+    let f = t.path("s.mat");
+    std::fs::write(
+        &f,
+        mat_v5(&[("rect_data", &[n, n, nt], &v), ("width", &[1, 1], &[w])]),
+    )
+    .expect("write");
+    let fs = f.to_str().expect("utf-8");
+    let out = ok(&t.0, &["info", fs]);
+    for want in [
+        "MAT v5",
+        "rect_data 8x8x1000 double",
+        "assumed: 4 ps bins",
+        "t = 0 at the wall",
+        "over [-0.1, 0.1]^2",
+    ] {
+        assert!(out.contains(want), "info should say `{want}`: {out}");
+    }
+    let vol = "-0.1:0.1:5,-0.1:0.1:5,0.3:0.5:11";
+    let out = ok(
+        &t.0,
+        &[
+            "direct",
+            fs,
+            "--volume",
+            vol,
+            "--t-min",
+            "30b",
+            "--rebin",
+            "2",
+            "--background",
+            "auto",
+            "--wavelength",
+            "0.04",
+            "--weights",
+            "one",
+            "--out",
+            "d.npy",
+        ],
+    );
+    assert!(
+        out.contains("background auto") && out.contains("where no return from the volume"),
+        "{out}"
+    );
+    let d = npy(&t.path("d.npy"), [5, 5, 11]);
+    assert!(d.iter().all(|x| x.is_finite()));
+    let best = (0..d.len())
+        .max_by(|&a, &b| d[a].total_cmp(&d[b]))
+        .expect("voxels");
+    // The point at (0, 0, 0.4): centre column, slice 5 of 0.3..0.5.
+    assert_eq!(
+        (best / 11 / 5, best / 11 % 5, best % 11),
+        (2, 2, 5),
+        "{d:?}"
+    );
+    // A window that leaves nothing, a background above every count: errors, exit 2.
+    let line = fails(
+        &t.0,
+        &["direct", fs, "--volume", vol, "--t-min", "1000b"],
+        2,
+    );
+    assert!(line.contains("no bins left"), "{line}");
+    let line = fails(
+        &t.0,
+        &["direct", fs, "--volume", vol, "--background", "1e6"],
+        2,
+    );
+    assert!(line.contains("nothing left to image"), "{line}");
+    // Unknown layout: exit 1, one line listing the variables.
+    let u = t.path("u.mat");
+    std::fs::write(&u, mat_v5(&[("foo", &[2, 3], &[0.0; 6])])).expect("write");
+    let us = u.to_str().expect("utf-8");
+    let line = fails(&t.0, &["info", us], 1);
+    assert!(
+        line.contains(us) && line.contains("foo 2x3 double"),
+        "{line}"
+    );
+    // Truncated: exit 1 naming the file and the variable.
+    let good = std::fs::read(&f).expect("read");
+    let tr = t.path("t.mat");
+    std::fs::write(&tr, &good[..good.len() / 2]).expect("write");
+    let trs = tr.to_str().expect("utf-8");
+    for args in [vec!["info", trs], vec!["direct", trs, "--volume", vol]] {
+        let line = fails(&t.0, &args, 1);
+        assert!(line.contains(trs) && line.contains("rect_data"), "{line}");
+    }
+}

@@ -32,7 +32,7 @@ pub fn get() -> u64 {
     }
 }
 
-/// Half of the physical memory, or [`FALLBACK`].
+/// Half of the physical memory, or 8 GiB where that cannot be read.
 pub fn default_budget() -> u64 {
     physical_memory().map_or(FALLBACK, |m| m / 2)
 }

@@ -5,12 +5,16 @@
 //! | [`capture`] | [`Geometry`] (spots, time axis, device positions), [`RowSource`] (laser rows on demand), [`Capture`] (H in memory), reciprocity ([`swap_roles`]) |
 //! | [`npz`] | vltm's `.npz` captures: write, read whole, stream a stored archive by row |
 //! | [`tal`] | y-tal / mitransient `HDF5_TAL` captures, streamed by laser row |
+//! | [`mat`] | MATLAB `.mat` captures (v5 with zlib elements, v7.3 through HDF5): the Stanford confocal and phasor-field layouts |
+//! | [`prep`] | preprocessing of raw counts as a row wrapper: time window, rebinning, background |
 //! | [`ptu`] | PicoQuant PTU T3 photon streams with a JSON sidecar, binned row by row; the T3 writer |
 //!
 //! Readers only yield rows: nothing here imports the probes, the simulator or the outputs.
 
 pub mod capture;
+pub mod mat;
 pub mod npz;
+pub mod prep;
 pub mod ptu;
 pub mod tal;
 
@@ -28,7 +32,8 @@ pub fn extension(path: &Path) -> Option<String> {
 
 /// Opens a capture file by its extension and reads it whole: `.npz` (vltm), `.ptu`
 /// (PicoQuant T3, with its sidecar `<same name>.json` describing rows, SPADs and time axis;
-/// see [`ptu`]), `.hdf5` / `.h5` (y-tal `HDF5_TAL`, [`tal::read_all`]).
+/// see [`ptu`]), `.hdf5` / `.h5` (y-tal `HDF5_TAL`, [`tal::read_all`]), `.mat` ([`mat::read`]
+/// with the layout's default conventions).
 ///
 /// # Errors
 /// [`Error::Argument`] for an unknown extension; read errors of the format.
@@ -37,6 +42,7 @@ pub fn open(path: &Path) -> Result<Capture> {
         Some("npz") => npz::read(path),
         Some("ptu") => ptu::read_all(path, path.with_extension("json")),
         Some("hdf5" | "h5") => tal::read_all(path),
+        Some("mat") => Ok(mat::read(path, &mat::MatOptions::default())?.capture),
         _ => Err(unknown_format(path)),
     }
 }
@@ -44,7 +50,8 @@ pub fn open(path: &Path) -> Result<Capture> {
 /// Opens a capture file by its extension as a row source, streamed where the format allows:
 /// y-tal HDF5 files, PicoQuant PTU photon streams (binned row by row in one pass over the
 /// records) and stored (uncompressed) `.npz` captures are read row by row (memory O(Ks·Nt));
-/// a compressed `.npz` is read into memory.
+/// a compressed `.npz` and a `.mat` capture ([`mat`], default conventions) are read into
+/// memory.
 ///
 /// # Errors
 /// As [`open`].
@@ -59,6 +66,9 @@ pub fn open_source(path: &Path) -> Result<Box<dyn RowSource>> {
             Some(s) => Ok(Box::new(s)),
             None => Ok(Box::new(npz::read(path)?)),
         },
+        Some("mat") => Ok(Box::new(
+            mat::read(path, &mat::MatOptions::default())?.capture,
+        )),
         _ => Err(unknown_format(path)),
     }
 }
@@ -72,7 +82,7 @@ fn unknown_format(path: &Path) -> Error {
     Error::arg(
         "CAPTURE",
         format!(
-            "{}: unknown capture format (expected .npz, .ptu, .hdf5 or .h5)",
+            "{}: unknown capture format (expected .npz, .ptu, .hdf5, .h5 or .mat)",
             path.display()
         ),
     )

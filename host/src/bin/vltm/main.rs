@@ -15,10 +15,13 @@ use vltm::probe::{self, ColumnGate, IndirectOptions, Shell, Wave};
 use vltm::volume::{Volume, parse_point};
 
 mod demo;
+mod input;
 mod progress;
+use input::Input;
 use vltm_kernel::{Point, Weights};
 
 /// `println!` that ignores a closed stdout (`vltm info CAPTURE | head` must not panic).
+#[macro_export]
 macro_rules! say {
     ($($t:tt)*) => {{
         use std::io::Write as _;
@@ -58,8 +61,13 @@ enum Command {
     },
     /// Print a capture's dimensions, geometry, time axis and counts.
     Info {
-        /// Capture file (.npz).
+        /// Capture file (.npz, .hdf5/.h5, .ptu, .mat).
         capture: PathBuf,
+        /// Plot the summed transient (counts against path length, log scale) to this PNG.
+        #[arg(long, value_name = "F.png")]
+        png: Option<PathBuf>,
+        #[command(flatten)]
+        input: Input,
     },
     /// Render a synthetic capture from a scene file (JSON).
     Simulate {
@@ -200,6 +208,8 @@ struct Common {
     /// volume; `vltm merge` adds the parts and finishes them.
     #[arg(long, value_name = "F")]
     partial: Option<PathBuf>,
+    #[command(flatten)]
+    input: Input,
 }
 
 /// `--path` values.
@@ -255,16 +265,25 @@ impl Common {
             .collect();
         refuse_overwriting_inputs(&inputs, &outputs)?;
         if self.swap_roles {
-            Ok(Box::new(io::swap_roles(&io::open(path)?)?))
+            let mut src = self.input.open(path)?;
+            let g = src.geometry().clone();
+            let mut data = Vec::new();
+            let mut row = Vec::new();
+            for l in 0..g.lasers.len() {
+                src.read_row(l, &mut row)?;
+                data.extend_from_slice(&row);
+            }
+            let c = io::Capture::new(g, data, path)?;
+            Ok(Box::new(io::swap_roles(&c)?))
         } else {
-            io::open_source(path)
+            self.input.open(path)
         }
     }
 }
 
 /// Refuses an output path that names one of the command's input files (the capture, its PTU
 /// sidecar, a scene): writing it would destroy the input.
-fn refuse_overwriting_inputs(inputs: &[PathBuf], outputs: &[&Path]) -> vltm::Result<()> {
+pub(crate) fn refuse_overwriting_inputs(inputs: &[PathBuf], outputs: &[&Path]) -> vltm::Result<()> {
     for o in outputs {
         if let Some(i) = inputs.iter().find(|i| same_file(i, o)) {
             return Err(vltm::Error::arg(
@@ -411,7 +430,11 @@ fn run(cmd: Command) -> Result<(), Failure> {
             let _ = std::io::Write::write_all(&mut std::io::stdout(), table.as_bytes());
             Ok(())
         }
-        Command::Info { capture } => info(&capture),
+        Command::Info {
+            capture,
+            png,
+            input,
+        } => input::info(&capture, &input, png.as_deref()),
         Command::Simulate {
             scene,
             out,
@@ -460,7 +483,10 @@ fn run(cmd: Command) -> Result<(), Failure> {
         Command::Direct { capture, common } => {
             let volume = Volume::parse(&common.volume)?;
             let mut c = common.load(&capture)?;
-            let o = probe::direct(&mut *c, &volume, &common.wave(), common.exec())?;
+            let sigma = common.wave().config(c.geometry())?.sigma();
+            let o = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
+                probe::direct(rows, &volume, &common.wave(), common.exec())
+            })?;
             finish_probe(
                 &common,
                 &capture,
@@ -500,7 +526,10 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 return partial::run(&common, &capture, task);
             }
             let mut c = common.load(&capture)?;
-            let o = probe::column(&mut *c, a, &volume, g, shell, &common.wave(), common.exec())?;
+            let sigma = common.wave().config(c.geometry())?.sigma();
+            let o = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
+                probe::column(rows, a, &volume, g, shell, &common.wave(), common.exec())
+            })?;
             let title = format!("column T(x_a, .), gate {gate:?}");
             finish_probe(&common, &capture, "column", &o, &volume, Some(a), &title)
         }
@@ -549,15 +578,21 @@ fn run(cmd: Command) -> Result<(), Failure> {
                         return partial::run(&common, &capture, task);
                     }
                     let mut c = common.load(&capture)?;
-                    let o = probe::indirect_over(
-                        &mut *c,
-                        &volume,
-                        &gamma,
-                        &opts,
-                        &common.wave(),
-                        common.exec(),
-                    )?;
-                    return finish_indirect(&common, &capture, &*c, &volume, epsilon, &o);
+                    let sigma = common.wave().config(c.geometry())?.sigma();
+                    let (o, cfg) =
+                        input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
+                            let cfg = common.wave().config(rows.geometry())?;
+                            let o = probe::indirect_over(
+                                rows,
+                                &volume,
+                                &gamma,
+                                &opts,
+                                &common.wave(),
+                                common.exec(),
+                            )?;
+                            Ok((o, cfg))
+                        })?;
+                    return finish_indirect(&common, &capture, &cfg, &volume, epsilon, &o);
                 }
                 None if partial::wanted(&common)? => {
                     return Err(vltm::Error::arg(
@@ -568,8 +603,15 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 }
                 None => common.load(&capture)?,
             };
-            let o = probe::indirect(&mut *c, &volume, &opts, &common.wave(), common.exec())?;
-            finish_indirect(&common, &capture, &*c, &volume, epsilon, &o)
+            let sigma = common.wave().config(c.geometry())?.sigma();
+            // The configuration of the rows as the probe sees them (after preprocessing).
+            let (o, cfg) =
+                input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
+                    let cfg = common.wave().config(rows.geometry())?;
+                    let o = probe::indirect(rows, &volume, &opts, &common.wave(), common.exec())?;
+                    Ok((o, cfg))
+                })?;
+            finish_indirect(&common, &capture, &cfg, &volume, epsilon, &o)
         }
         Command::Merge {
             parts,
@@ -584,7 +626,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
 fn finish_indirect(
     common: &Common,
     capture: &Path,
-    c: &dyn RowSource,
+    cfg: &vltm::kernel::Config,
     volume: &Volume,
     epsilon: f32,
     o: &probe::IndirectOutput,
@@ -596,13 +638,10 @@ fn finish_indirect(
         o.shell.r0,
         o.shell.r1
     );
-    let cfg = common.wave().config(c.geometry())?;
-    summarize(
-        "indirect", &o.values, volume, o.seconds, &o.report, &cfg, None,
-    );
+    summarize("indirect", &o.values, volume, o.seconds, &o.report, cfg, None);
     let meta = Provenance {
         probe: "indirect",
-        config: &cfg,
+        config: cfg,
         focus: None,
         capture,
     };
@@ -616,8 +655,8 @@ fn finish_indirect(
     )
 }
 
-fn info(path: &Path) -> Result<(), Failure> {
-    let c = io::open(path)?;
+/// The capture's format (HDF5), geometry, time axis and counts, for `vltm info`.
+fn describe(path: &Path, c: &io::Capture) -> Result<(), Failure> {
     let g = &c.geometry;
     let (kl, ks) = (g.lasers.len(), g.spads_per_row());
     let span = |p: &[Point]| {
@@ -632,7 +671,6 @@ fn info(path: &Path) -> Result<(), Failure> {
             lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]
         )
     };
-    say!("capture      {}", path.display());
     if io::is_hdf5(path) {
         let r = io::tal::open(path)?;
         say!(

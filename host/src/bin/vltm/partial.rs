@@ -15,6 +15,10 @@ pub(crate) fn wanted(c: &Common) -> vltm::Result<bool> {
             "--rows",
             "a part of a scan is written as a partial state: add --partial F (then `vltm merge` the parts)",
         )),
+        (_, Some(_)) if c.input.prep()?.is_some() => Err(vltm::Error::arg(
+            "--partial",
+            "partial states do not record preprocessing yet: run without --t-min/--t-max/--rebin/--background",
+        )),
         (_, p) => Ok(p.is_some()),
     }
 }

@@ -667,6 +667,7 @@ fn format_coord(v: f32, decimals: usize) -> String {
 
 mod canvas;
 mod font;
+pub mod plot;
 
 use canvas::*;
 use font::*;
