@@ -2,14 +2,12 @@
 //!
 //! Exit codes: 0 success, 2 bad arguments, 1 bad or unreadable input data.
 
-use anyhow::Context;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use vltm::atomic::Transaction;
 use vltm::exec::{Exec, Path as EvalPath};
 use vltm::io::{self, RowSource};
-use vltm::out::figure::Figure;
 use vltm::out::h5::Provenance;
 use vltm::probe::{self, ColumnGate, IndirectOptions, Shell, Wave};
 use vltm::volume::{Volume, parse_point};
@@ -25,6 +23,11 @@ macro_rules! say {
         let _ = writeln!(std::io::stdout(), $($t)*);
     }};
 }
+
+mod ltm;
+mod outputs;
+mod split;
+use outputs::write_outputs;
 
 /// Virtual light transport matrices (LTM) of hidden scenes from non-line-of-sight captures
 /// (Marco et al., ICCV 2021).
@@ -74,6 +77,11 @@ enum Command {
     Direct {
         /// Capture file.
         capture: PathBuf,
+        /// Time gate on the 3-vertex time |x_l-x_v|+|x_v-x_s|: gaussian = direct light
+        /// (Eqs. 11-12); none = monochromatic, no gate (paper Fig. 6); higher-order = light
+        /// arriving after it (Eq. 18 on the diagonal: x_v lit, returning to x_v later).
+        #[arg(long, value_enum, default_value_t = DiagGateArg::Gaussian)]
+        gate: DiagGateArg,
         #[command(flatten)]
         common: Common,
     },
@@ -91,6 +99,14 @@ enum Command {
         /// Keep only voxels with R0 <= |x_a - x_b| < R1 metres (near/middle/far light).
         #[arg(long, value_name = "R0:R1")]
         shell: Option<String>,
+        /// Near, middle and far light in one pass: three outputs F.near/F.middle/F.far
+        /// (.npy/.png) for |x_a - x_b| in [0, R1), [R1, R2), [R2, inf).
+        #[arg(long, value_name = "R1,R2", conflicts_with = "shell")]
+        shells: Option<String>,
+        /// Γ-mask the column: zero every voxel whose direct light is not above E·max
+        /// (an extra diagonal pass, as `indirect`).
+        #[arg(long, value_name = "E")]
+        mask_epsilon: Option<f32>,
         #[command(flatten)]
         common: Common,
     },
@@ -108,9 +124,26 @@ enum Command {
         /// Keep only pairs with R0 <= |x_a - x_b| < R1 metres (overrides --min-separation).
         #[arg(long, value_name = "R0:R1")]
         shell: Option<String>,
+        /// Near, middle and far pairs in one pass: three outputs F.near/F.middle/F.far for
+        /// |x_a - x_b| in (0, R1), [R1, R2), [R2, inf) (instead of --shell/--min-separation).
+        #[arg(long, value_name = "R1,R2", conflicts_with_all = ["shell", "min_separation"])]
+        shells: Option<String>,
+        /// Gate of the summed columns: two-bounce (Eq. 14, first-order indirect light),
+        /// higher-order (Eq. 18 with Eq. 17: the paper's ">= 3rd bounce"), none.
+        #[arg(long, value_enum, default_value_t = GateArg::TwoBounce)]
+        gate: GateArg,
         #[command(flatten)]
         common: Common,
     },
+    /// The LTM between two voxel sets as a matrix: complex amplitudes and intensities of
+    /// T(x_a, x_b) (two-bounce gate) for x_a in --from, x_b in --to, written to HDF5.
+    Matrix(ltm::MatrixArgs),
+    /// Relighting: the virtual camera's image i = T·p under an illumination that weights
+    /// several projector foci (one factorised pass; amplitudes add).
+    Relight(ltm::RelightArgs),
+    /// A row T(., x_b) of the LTM (virtual camera focused at x_b, projector over the volume),
+    /// streamed by laser rows without transposing the capture.
+    Row(ltm::RowArgs),
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug)]
@@ -118,6 +151,23 @@ enum GateArg {
     TwoBounce,
     HigherOrder,
     None,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug)]
+enum DiagGateArg {
+    Gaussian,
+    None,
+    HigherOrder,
+}
+
+impl GateArg {
+    fn gate(self) -> ColumnGate {
+        match self {
+            Self::TwoBounce => ColumnGate::TwoBounce,
+            Self::HigherOrder => ColumnGate::HigherOrder,
+            Self::None => ColumnGate::None,
+        }
+    }
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug)]
@@ -362,6 +412,9 @@ fn main() -> ExitCode {
 
 fn run(cmd: Command) -> Result<(), Failure> {
     match cmd {
+        Command::Matrix(a) => ltm::matrix(a),
+        Command::Relight(a) => ltm::relight(a),
+        Command::Row(a) => ltm::row(a),
         Command::Demo { out } => {
             let table = demo::run(&out)?;
             let _ = std::io::Write::write_all(&mut std::io::stdout(), table.as_bytes());
@@ -410,10 +463,19 @@ fn run(cmd: Command) -> Result<(), Failure> {
             );
             Ok(())
         }
-        Command::Direct { capture, common } => {
+        Command::Direct {
+            capture,
+            gate,
+            common,
+        } => {
             let volume = Volume::parse(&common.volume)?;
             let mut c = common.load(&capture)?;
-            let o = probe::direct(&mut *c, &volume, &common.wave(), common.exec())?;
+            let g = match gate {
+                DiagGateArg::Gaussian => ColumnGate::TwoBounce,
+                DiagGateArg::None => ColumnGate::None,
+                DiagGateArg::HigherOrder => ColumnGate::HigherOrder,
+            };
+            let o = probe::diagonal(&mut *c, &volume, g, &common.wave(), common.exec())?;
             finish_probe(
                 &common,
                 &capture,
@@ -429,6 +491,8 @@ fn run(cmd: Command) -> Result<(), Failure> {
             focus,
             gate,
             shell,
+            shells,
+            mask_epsilon,
             common,
         } => {
             let a = parse_point("--focus", &focus)?;
@@ -439,21 +503,48 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 .map(Shell::parse)
                 .transpose()?
                 .unwrap_or(Shell::ALL);
-            let g = match gate {
-                GateArg::TwoBounce => ColumnGate::TwoBounce,
-                GateArg::HigherOrder => ColumnGate::HigherOrder,
-                GateArg::None => ColumnGate::None,
-            };
+            let cuts = shells.as_deref().map(split::parse_shells).transpose()?;
             let mut c = common.load(&capture)?;
-            let o = probe::column(&mut *c, a, &volume, g, shell, &common.wave(), common.exec())?;
+            let mask = match mask_epsilon {
+                Some(e) => Some(split::gamma(
+                    &mut *c,
+                    &volume,
+                    e,
+                    "--mask-epsilon",
+                    &common,
+                )?),
+                None => None,
+            };
+            let mut o = probe::column(
+                &mut *c,
+                a,
+                &volume,
+                gate.gate(),
+                shell,
+                &common.wave(),
+                common.exec(),
+            )?;
+            if let Some(m) = &mask {
+                o.values
+                    .iter_mut()
+                    .zip(m)
+                    .for_each(|(x, &k)| *x *= f32::from(u8::from(k)));
+            }
             let title = format!("column T(x_a, .), gate {gate:?}");
-            finish_probe(&common, &capture, "column", &o, &volume, Some(a), &title)
+            match cuts {
+                Some(cuts) => {
+                    split::column_shells(&common, &capture, &o, &volume, a, &cuts, &title)
+                }
+                None => finish_probe(&common, &capture, "column", &o, &volume, Some(a), &title),
+            }
         }
         Command::Indirect {
             capture,
             epsilon,
             min_separation,
             shell,
+            shells,
+            gate,
             common,
         } => {
             let volume = Volume::parse(&common.volume)?;
@@ -479,38 +570,14 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 )
                 .into());
             }
+            let cuts = shells.as_deref().map(split::parse_shells).transpose()?;
             let opts = IndirectOptions {
                 epsilon,
                 shell,
+                gate: gate.gate(),
                 ..Default::default()
             };
-            let mut c = common.load(&capture)?;
-            let o = probe::indirect(&mut *c, &volume, &opts, &common.wave(), common.exec())?;
-            let n_gamma = o.gamma.iter().filter(|&&g| g).count();
-            say!(
-                "Γ: {n_gamma} of {} voxels above ε = {epsilon} of the direct maximum; pairs with {:.3} <= |x_a - x_b| < {:.3} m",
-                volume.len(),
-                o.shell.r0,
-                o.shell.r1
-            );
-            let cfg = common.wave().config(c.geometry())?;
-            summarize(
-                "indirect", &o.values, &volume, o.seconds, &o.report, &cfg, None,
-            );
-            let meta = Provenance {
-                probe: "indirect",
-                config: &cfg,
-                focus: None,
-                capture: &capture,
-            };
-            write_outputs(
-                &common,
-                &meta,
-                &o.values,
-                &volume,
-                "in-focus indirect light",
-                &[],
-            )
+            split::indirect(&common, &capture, &volume, &opts, cuts)
         }
     }
 }
@@ -681,59 +748,4 @@ fn finish_probe(
     };
     let marks: Vec<(Point, String)> = focus.map(|a| (a, "x_a".to_string())).into_iter().collect();
     write_outputs(common, &meta, &o.values, volume, title, &marks)
-}
-
-/// Writes the volume (`--out`: `.npy`, or HDF5 for `.h5`/`.hdf5`) and the figure (`--png`);
-/// with neither, `<probe>.npy` and `<probe>.png`.
-fn write_outputs(
-    c: &Common,
-    meta: &Provenance<'_>,
-    v: &[f32],
-    volume: &Volume,
-    title: &str,
-    marks: &[(Point, String)],
-) -> Result<(), Failure> {
-    let stem = meta.probe;
-    let (out, png) = match (&c.out, &c.png) {
-        (None, None) => (
-            Some(PathBuf::from(format!("{stem}.npy"))),
-            Some(PathBuf::from(format!("{stem}.png"))),
-        ),
-        (a, b) => (a.clone(), b.clone()),
-    };
-    // The volume and its figure: all or nothing.
-    let mut t = Transaction::new();
-    if let Some(p) = &out {
-        if io::is_hdf5(p) {
-            vltm::out::h5::stage_volume(&mut t, p, v, volume, meta)
-        } else {
-            vltm::out::npy::stage_f32(&mut t, p, v, &volume.shape)
-        }
-        .with_context(|| format!("writing {}", p.display()))?;
-    }
-    let mut wrote_png = None;
-    if let Some(p) = png {
-        match volume.axes {
-            Some([x, y, z]) => {
-                let fig = Figure {
-                    data: v,
-                    shape: volume.shape,
-                    x,
-                    y,
-                    z,
-                    title: title.to_string(),
-                    marks: marks.to_vec(),
-                };
-                fig.stage_png(&mut t, &p)
-                    .with_context(|| format!("writing {}", p.display()))?;
-                wrote_png = Some(p);
-            }
-            None => eprintln!("vltm: note: no figure for a point list (only for grid volumes)"),
-        }
-    }
-    t.commit()?;
-    for p in out.iter().chain(&wrote_png) {
-        say!("wrote {}", p.display());
-    }
-    Ok(())
 }
