@@ -74,7 +74,7 @@ fn gamma_and_direct(
     if n == 0 {
         return Err(vltm::Error::arg(
             arg,
-            "Γ is empty: the direct light is zero on every voxel of --volume (nothing to mask with)",
+            "Γ is empty: the direct light is zero on every voxel of --volume",
         )
         .into());
     }
@@ -160,10 +160,14 @@ pub(crate) fn indirect(
     };
     for sh in &shells {
         say!(
-            "pairs with {:.3} <= |x_a - x_b| < {:.3} m ({:?} gate)",
+            "pairs with {:.3} <= |x_a - x_b| < {:.3} m ({} gate)",
             sh.r0,
             sh.r1,
-            opts.gate
+            match opts.gate {
+                probe::ColumnGate::TwoBounce => "two-bounce",
+                probe::ColumnGate::HigherOrder => "higher-order",
+                probe::ColumnGate::None => "no",
+            }
         );
     }
     let cfg = wave.config(src.geometry())?;
