@@ -1158,3 +1158,465 @@ fn mat_captures_through_the_command_line() {
         assert!(line.contains(trs) && line.contains("rect_data"), "{line}");
     }
 }
+
+/// The largest |x − y| / max|y| over two volumes of the same length.
+fn rel_of_max(x: &[f32], y: &[f32]) -> f64 {
+    assert_eq!(x.len(), y.len());
+    let m = y.iter().fold(0.0f64, |m, &v| m.max(f64::from(v).abs()));
+    assert!(m > 0.0, "reference volume is zero");
+    x.iter()
+        .zip(y)
+        .map(|(&a, &b)| (f64::from(a) - f64::from(b)).abs() / m)
+        .fold(0.0, f64::max)
+}
+
+/// `direct --gate none|higher-order` are the kernel's un-gated and Eq. 18 diagonals (each
+/// checked against the float64 reference in `tests/proptest_kernel.rs`) as the library
+/// computes them; `--gate gaussian` is `direct` itself.
+#[test]
+fn direct_runs_every_gate() {
+    let t = TempDir::new("directgates");
+    let cap = s(&fixture("two_patches"));
+    let vol = Volume::parse(SPEC).expect("spec");
+    let plain = t.path("d.npy");
+    ok(
+        &t.0,
+        &["direct", &cap, "--volume", SPEC, "--out", &s(&plain)],
+    );
+    let d = npy(&plain, SHAPE);
+    for (arg, gate) in [
+        ("gaussian", probe::ColumnGate::TwoBounce),
+        ("none", probe::ColumnGate::None),
+        ("higher-order", probe::ColumnGate::HigherOrder),
+    ] {
+        let f = t.path(&format!("{arg}.npy"));
+        ok(
+            &t.0,
+            &[
+                "direct",
+                &cap,
+                "--volume",
+                SPEC,
+                "--gate",
+                arg,
+                "--out",
+                &s(&f),
+            ],
+        );
+        let v = npy(&f, SHAPE);
+        let mut src = io::open_source(&fixture("two_patches")).expect("fixture");
+        let lib = probe::diagonal(&mut *src, &vol, gate, &Wave::default(), Exec::default())
+            .expect("diagonal");
+        let diff = rel_of_max(&v, &lib.values);
+        let from_gauss = rel_of_max(&v, &d);
+        println!(
+            "direct --gate {arg}: {diff:.1e} from the library, {from_gauss:.2} from the Gaussian diagonal"
+        );
+        assert!(diff <= 1e-6, "--gate {arg}: {diff:.3e}");
+        if arg == "gaussian" {
+            assert_eq!(v, d, "--gate gaussian is plain direct");
+        } else {
+            assert!(
+                from_gauss > 0.05,
+                "--gate {arg} equals the Gaussian diagonal"
+            );
+        }
+    }
+}
+
+/// `column --mask-epsilon E` is the column times Γ (from the direct light, as `indirect`);
+/// `column --shells R1,R2` writes near, middle and far parts that partition the column; an
+/// empty Γ is an error naming `--mask-epsilon`.
+#[test]
+fn column_masks_and_shells_partition() {
+    let t = TempDir::new("maskshells");
+    let cap = s(&fixture("two_patches"));
+    let vol = Volume::parse(SPEC).expect("spec");
+    let (fc, fm, fd, fs) = (
+        t.path("c.npy"),
+        t.path("m.npy"),
+        t.path("d.npy"),
+        t.path("s.npy"),
+    );
+    let col = ["column", &cap, "--focus", FOCUS, "--volume", SPEC];
+    ok(&t.0, &[&col[..], &["--out", &s(&fc)]].concat());
+    ok(
+        &t.0,
+        &[&col[..], &["--mask-epsilon", "0.2", "--out", &s(&fm)]].concat(),
+    );
+    ok(&t.0, &["direct", &cap, "--volume", SPEC, "--out", &s(&fd)]);
+    let (c, m, d) = (npy(&fc, SHAPE), npy(&fm, SHAPE), npy(&fd, SHAPE));
+    let gamma = probe::gamma_mask(&d, 0.2);
+    let n_gamma = gamma.iter().filter(|&&g| g).count();
+    let masked: Vec<f32> = c
+        .iter()
+        .zip(&gamma)
+        .map(|(&x, &g)| if g { x } else { 0.0 })
+        .collect();
+    println!("--mask-epsilon 0.2: Γ has {n_gamma} of {} voxels", c.len());
+    assert!(n_gamma > 0 && n_gamma < c.len());
+    assert_eq!(m, masked, "masked column = column × Γ");
+    // Shells: three outputs, disjoint, summing to the column.
+    ok(
+        &t.0,
+        &[&col[..], &["--shells", "0.3,0.6", "--out", &s(&fs)]].concat(),
+    );
+    let parts: Vec<Vec<f32>> = ["near", "middle", "far"]
+        .iter()
+        .map(|p| npy(&t.path(&format!("s.{p}.npy")), SHAPE))
+        .collect();
+    let a = [-0.45f32, 0.0, 0.8];
+    let bounds = [(0.0, 0.3), (0.3, 0.6), (0.6, f32::INFINITY)];
+    let mut counts = [0usize; 3];
+    for (i, p) in vol.points.iter().enumerate() {
+        let r = ((0..3).map(|k| (p[k] - a[k]).powi(2)).sum::<f32>()).sqrt();
+        let sum: f32 = parts.iter().map(|v| v[i]).sum();
+        assert_eq!(
+            sum, c[i],
+            "voxel {i}: the shells do not add up to the column"
+        );
+        for (k, ((lo, hi), v)) in bounds.iter().zip(&parts).enumerate() {
+            if (*lo..*hi).contains(&r) {
+                assert_eq!(v[i], c[i], "voxel {i} at {r} m belongs to shell {k}");
+                counts[k] += usize::from(v[i] > 0.0);
+            } else {
+                assert_eq!(v[i], 0.0, "voxel {i} at {r} m outside shell {k}");
+            }
+        }
+    }
+    println!("--shells 0.3,0.6: non-zero voxels near/middle/far {counts:?}");
+    assert!(counts.iter().all(|&n| n > 0), "{counts:?}");
+    // Γ empty: a volume far beyond the capture's time window has no direct light.
+    let err = fails(
+        &t.0,
+        &[
+            "column",
+            &cap,
+            "--focus",
+            FOCUS,
+            "--volume",
+            "0:0.1:2,0:0:1,6:7:3",
+            "--mask-epsilon",
+            "0.2",
+            "--out",
+            &s(&t.path("x.npy")),
+        ],
+        2,
+    );
+    assert!(
+        err.contains("--mask-epsilon") && err.contains("Γ is empty"),
+        "{err}"
+    );
+    assert!(!t.path("x.npy").exists());
+}
+
+/// `indirect` writes Γ and I_d beside I_i; `--shells` writes near, middle and far sums that
+/// add up to the sum over every pair; `--gate higher-order` is the Γ-masked sum of Eq. 18
+/// columns (Eq. 17 with Eq. 18) as the column probe computes them; an empty Γ is an error
+/// naming `--epsilon`.
+#[test]
+fn indirect_writes_gamma_direct_shells_and_higher_order() {
+    let t = TempDir::new("indirectplus");
+    let cap = s(&fixture("two_patches"));
+    let vol = Volume::parse(SPEC).expect("spec");
+    let base = ["indirect", &cap, "--volume", SPEC, "--epsilon", "0.3"];
+    let (fi, fs, fh, fd) = (
+        t.path("i.npy"),
+        t.path("s.npy"),
+        t.path("h.npy"),
+        t.path("d.npy"),
+    );
+    ok(
+        &t.0,
+        &[&base[..], &["--shell", "0:inf", "--out", &s(&fi)]].concat(),
+    );
+    ok(&t.0, &["direct", &cap, "--volume", SPEC, "--out", &s(&fd)]);
+    let (all, d) = (npy(&fi, SHAPE), npy(&fd, SHAPE));
+    let g = npy(&t.path("i.gamma.npy"), SHAPE);
+    let id = npy(&t.path("i.direct.npy"), SHAPE);
+    assert_eq!(id, d, "i.direct.npy is the direct light");
+    let gamma = probe::gamma_mask(&d, 0.3);
+    let want: Vec<f32> = gamma.iter().map(|&k| f32::from(u8::from(k))).collect();
+    assert_eq!(g, want, "i.gamma.npy is Γ");
+    let idx: Vec<usize> = (0..gamma.len()).filter(|&i| gamma[i]).collect();
+    println!("Γ: {} voxels", idx.len());
+    ok(
+        &t.0,
+        &[&base[..], &["--shells", "0.15,0.3", "--out", &s(&fs)]].concat(),
+    );
+    let parts: Vec<Vec<f32>> = ["near", "middle", "far"]
+        .iter()
+        .map(|p| npy(&t.path(&format!("s.{p}.npy")), SHAPE))
+        .collect();
+    let sum: Vec<f32> = (0..all.len())
+        .map(|i| parts.iter().map(|v| v[i]).sum())
+        .collect();
+    let diff = rel_of_max(&sum, &all);
+    let shares: Vec<f32> = parts.iter().map(|v| v.iter().sum()).collect();
+    println!("--shells 0.15,0.3: near + middle + far vs all pairs {diff:.1e}; totals {shares:?}");
+    assert!(
+        diff <= 1e-6 && shares.iter().all(|&x| x > 0.0),
+        "{diff:.3e} {shares:?}"
+    );
+    // Higher order: against the Γ-masked sum of the Eq. 18 column probes over Γ.
+    ok(
+        &t.0,
+        &[
+            &base[..],
+            &[
+                "--gate",
+                "higher-order",
+                "--min-separation",
+                "0.3",
+                "--out",
+                &s(&fh),
+            ],
+        ]
+        .concat(),
+    );
+    let h = npy(&fh, SHAPE);
+    let pts: Vec<_> = idx.iter().map(|&i| vol.points[i]).collect();
+    let g_vol = Volume::points(pts.clone()).expect("Γ");
+    let mut want = vec![0.0f64; vol.len()];
+    for a in &pts {
+        let mut src = io::open_source(&fixture("two_patches")).expect("fixture");
+        let col = probe::column(
+            &mut *src,
+            *a,
+            &g_vol,
+            probe::ColumnGate::HigherOrder,
+            probe::Shell {
+                r0: 0.3,
+                r1: f32::INFINITY,
+            },
+            &Wave::default(),
+            Exec::default(),
+        )
+        .expect("higher-order column");
+        for (k, v) in col.values.iter().enumerate() {
+            if pts[k] != *a {
+                want[idx[k]] += f64::from(*v);
+            }
+        }
+    }
+    let want: Vec<f32> = want.iter().map(|&x| x as f32).collect();
+    let diff = rel_of_max(&h, &want);
+    let ratio = h.iter().sum::<f32>() / all.iter().sum::<f32>();
+    println!(
+        "--gate higher-order: {diff:.1e} from the sum of Eq. 18 columns; total {ratio:.2e} of the two-bounce sum"
+    );
+    assert!(diff <= 1e-6, "higher-order indirect: {diff:.3e}");
+    let err = fails(
+        &t.0,
+        &["indirect", &cap, "--volume", "0:0.1:2,0:0:1,6:7:3"],
+        2,
+    );
+    assert!(
+        err.contains("--epsilon") && err.contains("Γ is empty"),
+        "{err}"
+    );
+}
+
+/// `matrix --from gamma --to SPEC` writes re, im, intensity, from_xyz and to_xyz: Γ's
+/// voxels, |A|² = re² + im², each row the column probe at its focus; an output over the
+/// memory budget is an error naming the options; `relight` with a one-hot voxel image is the
+/// column at that voxel and with no non-zero weight an error naming `--pattern`; `row`
+/// equals `column --swap-roles`.
+#[test]
+fn matrix_relight_and_row_through_the_command_line() {
+    let t = TempDir::new("matrix");
+    let cap = s(&fixture("two_patches"));
+    let vol = Volume::parse(SPEC).expect("spec");
+    let fm = t.path("m.h5");
+    let out = ok(
+        &t.0,
+        &[
+            "matrix",
+            &cap,
+            "--from",
+            "gamma",
+            "--to",
+            SPEC,
+            "--volume",
+            SPEC,
+            "--epsilon",
+            "0.3",
+            "--out",
+            &s(&fm),
+        ],
+    );
+    print!("{out}");
+    let read = |name: &str| vltm::out::h5::read_f32_dataset(&fm, name).expect("dataset");
+    let (re, shape) = read("re");
+    let (im, _) = read("im");
+    let (int, _) = read("intensity");
+    let (from, fshape) = read("from_xyz");
+    let (to, tshape) = read("to_xyz");
+    let fd = t.path("d.npy");
+    ok(&t.0, &["direct", &cap, "--volume", SPEC, "--out", &s(&fd)]);
+    let gamma = probe::gamma_mask(&npy(&fd, SHAPE), 0.3);
+    let g_pts: Vec<f32> = vol
+        .points
+        .iter()
+        .zip(&gamma)
+        .filter(|&(_, &k)| k)
+        .flat_map(|(p, _)| *p)
+        .collect();
+    let nf = g_pts.len() / 3;
+    assert_eq!(shape, vec![nf, vol.len()]);
+    assert_eq!((fshape, tshape), (vec![nf, 3], vec![vol.len(), 3]));
+    assert_eq!(from, g_pts, "from_xyz is Γ");
+    assert_eq!(to, vol.points.iter().flatten().copied().collect::<Vec<_>>());
+    for k in 0..int.len() {
+        let i2 = f64::from(re[k]).powi(2) + f64::from(im[k]).powi(2);
+        assert!(
+            (i2 - f64::from(int[k])).abs() <= 1e-6 * i2.max(1e-30),
+            "element {k}"
+        );
+    }
+    let mut worst = 0.0f64;
+    for i in [0, nf / 2, nf - 1] {
+        let a = format!("{},{},{}", from[3 * i], from[3 * i + 1], from[3 * i + 2]);
+        let fc = t.path("c.npy");
+        ok(
+            &t.0,
+            &[
+                "column",
+                &cap,
+                "--focus",
+                &a,
+                "--volume",
+                SPEC,
+                "--path",
+                "band",
+                "--out",
+                &s(&fc),
+            ],
+        );
+        let c = npy(&fc, SHAPE);
+        worst = worst.max(rel_of_max(&int[i * vol.len()..(i + 1) * vol.len()], &c));
+    }
+    println!("matrix rows vs column probes: {worst:.1e} of the column's maximum");
+    assert!(worst <= 1e-6, "{worst:.3e}");
+    // Over the memory budget: named, nothing written.
+    let big = t.path("big.h5");
+    let err = fails(
+        &t.0,
+        &[
+            "matrix",
+            &cap,
+            "--from",
+            "-3:3:300,-3:3:300,1:2:30",
+            "--to",
+            "-3:3:300,-3:3:300,1:2:3",
+            "--out",
+            &s(&big),
+        ],
+        1,
+    );
+    assert!(
+        err.contains("--from") && err.contains("--to") && err.contains("budget"),
+        "{err}"
+    );
+    assert!(!big.exists());
+    let err = fails(
+        &t.0,
+        &[
+            "matrix",
+            &cap,
+            "--from",
+            FOCUS,
+            "--to",
+            FOCUS,
+            "--out",
+            &s(&t.path("m.npy")),
+        ],
+        2,
+    );
+    assert!(err.contains("--out"), "{err}");
+    // Relight with a one-hot voxel image = the column at that voxel.
+    let k = vol.nearest([-0.4, 0.0, 0.8]);
+    let mut img = vec![0.0f32; vol.len()];
+    img[k] = 1.0;
+    let (fp, fr, fc) = (t.path("p.npy"), t.path("r.npy"), t.path("c.npy"));
+    vltm::out::npy::write_f32(&fp, &img, &SHAPE).expect("pattern");
+    ok(
+        &t.0,
+        &[
+            "relight",
+            &cap,
+            "--pattern",
+            &s(&fp),
+            "--volume",
+            SPEC,
+            "--out",
+            &s(&fr),
+        ],
+    );
+    let p = vol.points[k];
+    let a = format!("{},{},{}", p[0], p[1], p[2]);
+    ok(
+        &t.0,
+        &[
+            "column",
+            &cap,
+            "--focus",
+            &a,
+            "--volume",
+            SPEC,
+            "--path",
+            "band",
+            "--out",
+            &s(&fc),
+        ],
+    );
+    let diff = rel_of_max(&npy(&fr, SHAPE), &npy(&fc, SHAPE));
+    println!("relight, one-hot image vs column: {diff:.1e}");
+    assert!(diff <= 1e-6, "{diff:.3e}");
+    vltm::out::npy::write_f32(&fp, &vec![0.0f32; vol.len()], &SHAPE).expect("pattern");
+    for pat in [s(&fp), "-0.4,0,0.8,0".to_string()] {
+        let err = fails(
+            &t.0,
+            &["relight", &cap, "--pattern", &pat, "--volume", SPEC],
+            2,
+        );
+        assert!(
+            err.contains("--pattern") && err.contains("non-zero"),
+            "{err}"
+        );
+    }
+    // A row = the column of the transposed capture.
+    let (fr, fc) = (t.path("row.npy"), t.path("swapped.npy"));
+    ok(
+        &t.0,
+        &[
+            "row",
+            &cap,
+            "--focus",
+            FOCUS,
+            "--volume",
+            SPEC,
+            "--out",
+            &s(&fr),
+        ],
+    );
+    ok(
+        &t.0,
+        &[
+            "column",
+            &cap,
+            "--focus",
+            FOCUS,
+            "--volume",
+            SPEC,
+            "--swap-roles",
+            "--path",
+            "band",
+            "--out",
+            &s(&fc),
+        ],
+    );
+    let diff = rel_of_max(&npy(&fr, SHAPE), &npy(&fc, SHAPE));
+    println!("row vs column --swap-roles: {diff:.1e}");
+    assert!(diff <= 1e-6, "{diff:.3e}");
+}

@@ -19,6 +19,10 @@
 //! import h5py; f = h5py.File("direct.h5"); I = f["intensity"][()]; xyz = f["volume_xyz"][()]
 //! ```
 //!
+//! [`stage_matrix`] writes the LTM between two voxel sets (`vltm matrix`): datasets `re`,
+//! `im`, `intensity` of shape `(n_from, n_to)`, `from_xyz`, `to_xyz`, the same attributes and
+//! the matrix's own (how the sets were given, ε, the DFT size).
+//!
 //! [`read_volume`] reads `intensity` back (with the pure-Rust reader that reads captures).
 //! Memory: the file is assembled in memory (about 16 bytes per voxel) and written at once.
 
@@ -26,6 +30,7 @@ use std::path::Path;
 
 use hdf5_pure::{AttrValue, FileBuilder};
 use hdf5_reader::Hdf5File;
+use vltm_kernel::num_complex::Complex32;
 use vltm_kernel::{Config, Point, Weights};
 
 use crate::atomic::Transaction;
@@ -93,6 +98,17 @@ pub fn stage_volume(
     b.create_dataset("volume_xyz")
         .with_f32_data(&xyz)
         .with_shape(&[shape[0], shape[1], shape[2], 3]);
+    set_provenance(&mut b, meta);
+    let bytes = b
+        .finish()
+        .map_err(|e| Error::format(path, "(file)", "an encodable HDF5 volume", e))?;
+    t.stage(path, |f| {
+        std::io::Write::write_all(f, &bytes).map_err(|e| Error::io(path, e))
+    })
+}
+
+/// The attributes of [`Provenance`] (table in the module docs).
+fn set_provenance(b: &mut FileBuilder, meta: &Provenance<'_>) {
     let cfg = meta.config;
     b.set_attr("probe", AttrValue::String(meta.probe.to_string()));
     b.set_attr("wavelength", AttrValue::F64(cfg.wavelength()));
@@ -120,34 +136,111 @@ pub fn stage_volume(
         "vltm_version",
         AttrValue::String(env!("CARGO_PKG_VERSION").to_string()),
     );
+}
+
+/// LTM elements between two voxel sets, for [`stage_matrix`].
+#[derive(Clone, Debug)]
+pub struct MatrixData<'a> {
+    /// Amplitudes `A(from[i], to[k])` at `i·to.len() + k`.
+    pub amplitudes: &'a [Complex32],
+    /// The projector foci `x_a` (rows).
+    pub from: &'a [Point],
+    /// The imaged voxels `x_b` (columns).
+    pub to: &'a [Point],
+    /// Further attributes: numbers (λ-independent settings such as ε, the DFT size).
+    pub numbers: &'a [(&'a str, f64)],
+    /// Further attributes: strings (how `from` and `to` were given, the gate).
+    pub texts: &'a [(&'a str, String)],
+}
+
+/// Writes a matrix of LTM elements as one file of a [`Transaction`]: datasets `re`, `im`
+/// (f32 amplitudes) and `intensity` (f32 `|A|²`), each of shape `(n_from, n_to)`, `from_xyz`
+/// `(n_from, 3)` and `to_xyz` `(n_to, 3)` in metres, the [`Provenance`] attributes and
+/// `m.numbers`, `m.texts`. Memory: the three `f32` planes and their encoded copy (24 bytes
+/// per element) beside the caller's amplitudes.
+///
+/// # Errors
+/// [`Error::Argument`] (`values`) if the amplitudes are not `n_from × n_to`;
+/// [`Error::Format`] if the HDF5 encoder refuses the data.
+pub fn stage_matrix(
+    t: &mut Transaction,
+    path: &Path,
+    m: &MatrixData<'_>,
+    meta: &Provenance<'_>,
+) -> Result<()> {
+    let (nf, nt) = (m.from.len(), m.to.len());
+    if m.amplitudes.len() != nf * nt {
+        return Err(Error::arg(
+            "values",
+            format!(
+                "expected {nf} x {nt} amplitudes, found {}",
+                m.amplitudes.len()
+            ),
+        ));
+    }
+    let shape = [nf as u64, nt as u64];
+    let mut b = FileBuilder::new();
+    {
+        let re: Vec<f32> = m.amplitudes.iter().map(|z| z.re).collect();
+        b.create_dataset("re").with_f32_data(&re).with_shape(&shape);
+    }
+    {
+        let im: Vec<f32> = m.amplitudes.iter().map(|z| z.im).collect();
+        b.create_dataset("im").with_f32_data(&im).with_shape(&shape);
+    }
+    {
+        let int: Vec<f32> = m
+            .amplitudes
+            .iter()
+            .map(|z| {
+                let (re, im) = (f64::from(z.re), f64::from(z.im));
+                (re * re + im * im) as f32
+            })
+            .collect();
+        b.create_dataset("intensity")
+            .with_f32_data(&int)
+            .with_shape(&shape);
+    }
+    for (name, pts) in [("from_xyz", m.from), ("to_xyz", m.to)] {
+        let xyz: Vec<f32> = pts.iter().flatten().copied().collect();
+        b.create_dataset(name)
+            .with_f32_data(&xyz)
+            .with_shape(&[pts.len() as u64, 3]);
+    }
+    set_provenance(&mut b, meta);
+    for (k, v) in m.numbers {
+        b.set_attr(k, AttrValue::F64(*v));
+    }
+    for (k, v) in m.texts {
+        b.set_attr(k, AttrValue::String(v.clone()));
+    }
     let bytes = b
         .finish()
-        .map_err(|e| Error::format(path, "(file)", "an encodable HDF5 volume", e))?;
+        .map_err(|e| Error::format(path, "(file)", "an encodable HDF5 matrix", e))?;
     t.stage(path, |f| {
         std::io::Write::write_all(f, &bytes).map_err(|e| Error::io(path, e))
     })
 }
 
-/// Reads the `intensity` dataset of a file written by [`write_volume`]: values in C order and
-/// the shape.
+/// Reads an `f32` dataset of a vltm HDF5 file: values in C order and the shape.
 ///
 /// # Errors
-/// [`Error::Io`] / [`Error::Format`] if the file cannot be read, has no f32 `intensity`
-/// dataset, or its size does not match its shape.
-pub fn read_volume(path: impl AsRef<Path>) -> Result<(Vec<f32>, Vec<usize>)> {
+/// [`Error::Io`] / [`Error::Format`] if the file cannot be read, has no such f32 dataset,
+/// or its size does not match its shape.
+pub fn read_f32_dataset(path: impl AsRef<Path>, name: &str) -> Result<(Vec<f32>, Vec<usize>)> {
     let path = path.as_ref();
     let h5 = |field: &str, e: hdf5_reader::error::Error| {
-        Error::format(path, field, "a vltm HDF5 volume", e)
+        Error::format(path, field, "a vltm HDF5 file", e)
     };
     let file = Hdf5File::open(path).map_err(|e| h5("(file)", e))?;
-    let ds = file.dataset("intensity").map_err(|e| h5("intensity", e))?;
+    let ds = file.dataset(name).map_err(|e| h5(name, e))?;
     let shape: Vec<usize> = ds.shape().iter().map(|&d| d as usize).collect();
-    let raw = ds.read_raw_bytes().map_err(|e| h5("intensity", e))?;
+    let raw = ds.read_raw_bytes().map_err(|e| h5(name, e))?;
     let n = shape.iter().product::<usize>();
     if raw.len() != 4 * n {
         return Err(Error::format(
             path,
-            "intensity",
+            name,
             format!("{n} f32 values (shape {shape:?})"),
             format!("{} bytes", raw.len()),
         ));
@@ -157,6 +250,16 @@ pub fn read_volume(path: impl AsRef<Path>) -> Result<(Vec<f32>, Vec<usize>)> {
         .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
         .collect();
     Ok((v, shape))
+}
+
+/// Reads the `intensity` dataset of a file written by [`write_volume`]: values in C order and
+/// the shape.
+///
+/// # Errors
+/// [`Error::Io`] / [`Error::Format`] if the file cannot be read, has no f32 `intensity`
+/// dataset, or its size does not match its shape.
+pub fn read_volume(path: impl AsRef<Path>) -> Result<(Vec<f32>, Vec<usize>)> {
+    read_f32_dataset(path, "intensity")
 }
 
 #[cfg(test)]

@@ -1,6 +1,6 @@
 //! Columns `T(x_a, ·)` (Eqs. 13–14, 18): two-bounce, higher-order or un-gated, optionally cut
 //! to a distance [`Shell`]; the factorised column accumulation shared with the in-focus
-//! indirect sum.
+//! indirect sum; the diagonal under the same three gates ([`diagonal`]).
 
 use super::direct::*;
 use super::drive::*;
@@ -67,6 +67,59 @@ impl Shell {
     pub fn contains(&self, d: f32) -> bool {
         d >= self.r0 && d < self.r1
     }
+}
+
+/// The diagonal under another gate: `none` (the monochromatic phasor, paper Fig. 6: direct
+/// light plus everything else that reaches `x_v`'s focus at any time) or `higher-order`
+/// (Eq. 18's late gate on the 3-vertex time: light that leaves `x_v`'s focus and returns to
+/// it later, i.e. paths `x_l → x_v → … → x_v → x_s`); [`ColumnGate::TwoBounce`] is
+/// [`direct`] itself. Kernel band path, element-wise (`Kv·Ks·E0` per row un-gated,
+/// `Kv·Ks·(E0 + 7R)` higher-order).
+///
+/// # Errors
+/// As [`direct`]; [`Error::Argument`] (`--path`) when a fast path is forced for a gate other
+/// than the Gaussian one.
+pub fn diagonal(
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    gate: ColumnGate,
+    wave: &Wave,
+    exec: Exec<'_>,
+) -> Result<Output> {
+    let kgate = match gate {
+        ColumnGate::TwoBounce => return direct(src, volume, wave, exec),
+        ColumnGate::HigherOrder => Gate::HigherOrder,
+        ColumnGate::None => Gate::None,
+    };
+    if !matches!(exec.path, Path::Auto | Path::Band) {
+        return Err(Error::arg(
+            "--path",
+            "the un-gated and higher-order diagonals are evaluated on the band path only",
+        ));
+    }
+    let t = Instant::now();
+    let cfg = wave.config(src.geometry())?;
+    let (v, report) = elementwise(
+        src,
+        Job {
+            cfg: &cfg,
+            wave,
+            exec,
+        },
+        Target::Diagonal,
+        kgate,
+        &volume.points,
+        "direct",
+    )?;
+    let values = intensities(&v);
+    check_finite(&values, &volume.points, "the diagonal")?;
+    Ok(Output {
+        values,
+        report,
+        seconds: t.elapsed().as_secs_f64(),
+        config: cfg,
+        path: Path::Band,
+    })
 }
 
 /// Checks that a focus point is in front of the wall.

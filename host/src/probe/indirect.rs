@@ -1,5 +1,8 @@
 //! In-focus indirect light (Eqs. 15–17): Γ from the diagonal, then the Γ-masked sum of
-//! factorised columns over pairs in a distance shell.
+//! columns over pairs in a distance shell — factorised two-bounce (Eq. 14) or un-gated
+//! columns, or higher-order columns (Eq. 18: the paper's "≥ 3rd bounce" in focus, element-wise,
+//! `Kb·Ks·(E0 + 7R)` per row and focus) — for one shell or several (near, middle, far) in
+//! the same pass.
 
 use super::column::*;
 use super::direct::*;
@@ -9,8 +12,9 @@ use crate::error::{Error, Result};
 use crate::exec::Exec;
 use crate::io::capture::RowSource;
 use crate::volume::Volume;
+use rayon::prelude::*;
 use std::time::Instant;
-use vltm_kernel::{Gate, Point, Probe, Report, Target};
+use vltm_kernel::{Gate, Point, Probe, Report, Scan, Target};
 
 /// Options of the in-focus indirect sum.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -21,6 +25,9 @@ pub struct IndirectOptions {
     pub shell: Option<Shell>,
     /// Largest accumulator memory accepted (bytes) (default 8 GiB).
     pub max_bytes: usize,
+    /// The gate of the summed columns: two-bounce (Eq. 14, the default: first-order indirect
+    /// light), higher-order (Eq. 18 with Eq. 17: the paper's "≥ 3rd bounce") or none.
+    pub gate: ColumnGate,
 }
 
 impl Default for IndirectOptions {
@@ -29,6 +36,7 @@ impl Default for IndirectOptions {
             epsilon: 0.1,
             shell: None,
             max_bytes: 8 << 30,
+            gate: ColumnGate::TwoBounce,
         }
     }
 }
@@ -103,6 +111,49 @@ pub fn indirect_over(
     exec: Exec<'_>,
 ) -> Result<IndirectOutput> {
     let t = Instant::now();
+    let (mut sums, report, shell) = pair_sums(src, volume, gamma, opts, None, wave, exec)?;
+    let values = sums.pop().unwrap_or_default();
+    check_finite(&values, &volume.points, "in-focus indirect light")?;
+    Ok(IndirectOutput {
+        values,
+        direct: Vec::new(),
+        gamma: gamma.to_vec(),
+        shell,
+        report,
+        seconds: t.elapsed().as_secs_f64(),
+    })
+}
+
+/// Pass 2 of [`indirect`] for several pair shells at once (e.g. near, middle and far): one
+/// pass over the capture, one sum `I(b) = Σ_{a∈Γ, a≠b, |a−b| ∈ shell} T(a, b)` per shell,
+/// in the order of `shells` (`opts.shell` is ignored).
+///
+/// # Errors
+/// As [`indirect_over`].
+pub fn indirect_shells(
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    gamma: &[bool],
+    opts: &IndirectOptions,
+    shells: &[Shell],
+    wave: &Wave,
+    exec: Exec<'_>,
+) -> Result<(Vec<Vec<f32>>, Report)> {
+    let (sums, report, _) = pair_sums(src, volume, gamma, opts, Some(shells), wave, exec)?;
+    Ok((sums, report))
+}
+
+/// The Γ-masked pair sums of pass 2, one per shell (`shells`, or the single shell of `opts`
+/// with its default r0 = 1.5σ), with the counters and the (last) shell.
+fn pair_sums(
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    gamma: &[bool],
+    opts: &IndirectOptions,
+    shells: Option<&[Shell]>,
+    wave: &Wave,
+    exec: Exec<'_>,
+) -> Result<(Vec<Vec<f32>>, Report, Shell)> {
     if gamma.len() != volume.len() {
         return Err(Error::arg(
             "gamma",
@@ -111,17 +162,33 @@ pub fn indirect_over(
     }
     let idx: Vec<usize> = (0..gamma.len()).filter(|&i| gamma[i]).collect();
     let pts: Vec<Point> = idx.iter().map(|&i| volume.points[i]).collect();
-    let cfg = wave.column_config(src.geometry(), &pts, &pts)?;
-    let shell = opts.shell.unwrap_or(Shell {
+    let kgate = match opts.gate {
+        ColumnGate::TwoBounce => Gate::Gaussian,
+        ColumnGate::HigherOrder => Gate::HigherOrder,
+        ColumnGate::None => Gate::None,
+    };
+    let cfg = if kgate == Gate::Gaussian {
+        wave.column_config(src.geometry(), &pts, &pts)?
+    } else {
+        wave.config(src.geometry())?
+    };
+    let default = Shell {
         r0: 1.5 * cfg.sigma() as f32,
         r1: f32::INFINITY,
-    });
-    let mut values = vec![0.0f32; volume.len()];
+    };
+    let one = [opts.shell.unwrap_or(default)];
+    let shells = shells.unwrap_or(&one);
+    let mut values = vec![vec![0.0f32; volume.len()]; shells.len()];
     let mut report = Report::default();
     if !idx.is_empty() {
         let ks = src.geometry().spads_per_row();
-        let bytes = idx.len()
-            * Probe::state_bytes(&cfg, Target::Column([0.0, 0.0, 1.0]), Gate::Gaussian, 0, ks);
+        let n_vox = if kgate == Gate::HigherOrder {
+            idx.len()
+        } else {
+            0
+        };
+        let bytes =
+            idx.len() * Probe::state_bytes(&cfg, Target::Column([0.0, 0.0, 1.0]), kgate, n_vox, ks);
         if bytes > opts.max_bytes {
             return Err(Error::arg(
                 "--epsilon",
@@ -132,29 +199,83 @@ pub fn indirect_over(
                 ),
             ));
         }
-        let mut cols = factorised_columns(
-            src,
-            Job {
-                cfg: &cfg,
-                wave,
-                exec,
-            },
-            &pts,
-            Gate::Gaussian,
-            "indirect",
-        )?;
-        let spads = src.geometry().spads.clone();
-        (values, report) = indirect_sum(&mut cols, &cfg, &spads, &pts, &idx, shell, volume.len())?;
+        let job = Job {
+            cfg: &cfg,
+            wave,
+            exec,
+        };
+        let cols = if kgate == Gate::HigherOrder {
+            higher_order_columns(src, job, &pts, "indirect")?
+        } else {
+            let spads = src.geometry().spads.clone();
+            factorised_columns(src, job, &pts, kgate, "indirect")?
+                .image(&cfg, &spads, &pts, kgate, &pts)?
+        };
+        let mut sums = vec![vec![0.0f64; pts.len()]; shells.len()];
+        for (ai, (col, r)) in cols.iter().enumerate() {
+            report = *r;
+            for (bi, t) in col.iter().enumerate() {
+                let d = dist(pts[ai], pts[bi]);
+                for (sh, sum) in shells.iter().zip(sums.iter_mut()) {
+                    if ai != bi && sh.contains(d) {
+                        sum[bi] += t;
+                    }
+                }
+            }
+        }
+        for (v, sum) in values.iter_mut().zip(sums) {
+            for (&i, s) in idx.iter().zip(sum) {
+                v[i] = s as f32;
+            }
+        }
     }
-    check_finite(&values, &volume.points, "in-focus indirect light")?;
-    Ok(IndirectOutput {
-        values,
-        direct: Vec::new(),
-        gamma: gamma.to_vec(),
-        shell,
-        report,
-        seconds: t.elapsed().as_secs_f64(),
-    })
+    Ok((values, report, shells[shells.len() - 1]))
+}
+
+/// One higher-order column (Eq. 18) per focus, each over `foci` itself, in one pass over the
+/// capture (element-wise kernel probes, pushed in parallel; state `2(K + Nt + 1)` f64 each).
+fn higher_order_columns(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    foci: &[Point],
+    label: &str,
+) -> Result<Vec<(Vec<f64>, Report)>> {
+    let cfg = job.cfg;
+    let ks = src.geometry().spads_per_row();
+    let n_state = Probe::state_len(
+        cfg,
+        Target::Column(foci[0]),
+        Gate::HigherOrder,
+        foci.len(),
+        ks,
+    );
+    let mut states: Vec<Vec<f64>> = foci.iter().map(|_| vec![0.0; n_state]).collect();
+    let mut probes: Vec<Probe<'_>> = Vec::new();
+    let mut state_iter = Some(states.iter_mut());
+    drive(src, job, label, |scan, row| {
+        if let Some(it) = state_iter.take() {
+            probes = foci
+                .iter()
+                .zip(it)
+                .map(|(a, s)| Probe::new(scan, Target::Column(*a), Gate::HigherOrder, foci, s))
+                .collect::<Result<_, _>>()?;
+        }
+        probes
+            .par_iter_mut()
+            .try_for_each(|p| p.push_row(scan, row))?;
+        Ok(())
+    })?;
+    let g = src.geometry().clone();
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+    let scan = Scan::new(cfg, &g.spads, &mut tables)?;
+    probes
+        .par_iter()
+        .map(|p| {
+            let mut out = vec![0.0f64; foci.len()];
+            let r = p.finish(&scan, &mut out)?;
+            Ok((out, r))
+        })
+        .collect()
 }
 
 /// Pass 2's sum from the accumulated Γ columns: `I_i(b) = Σ_{a∈Γ, a≠b, r0≤|a−b|<r1} T(a, b)`

@@ -5,8 +5,13 @@
 //! |---|---|---|
 //! | [`direct`] | diagonal `T(x_v, x_v)` over a volume (Eqs. 11–12) | 1 |
 //! | [`column()`] | `T(x_a, ·)` with [`ColumnGate`] two-bounce (Eq. 14), higher-order (Eq. 18) or none, optionally restricted to a shell `r0 ≤ |x_a − x_b| < r1` | 1 |
-//! | [`indirect`] | in-focus indirect light (Eqs. 15–17): Γ from the diagonal, then `Σ_{a∈Γ} T(a, b)` over Γ-masked pairs with `r0 ≤ |x_a − x_b| < r1` | 2 |
-//! | [`partial::accumulate`] | any of the above over a part of the rows, kept as a [`Partial`] state that merges by addition and finishes elsewhere | 1 |
+//! | [`diagonal`] | the diagonal un-gated (Fig. 6) or under the late gate (Eq. 18) | 1 |
+//! | [`indirect`] | in-focus indirect light (Eqs. 15–17): Γ from the diagonal, then `Σ_{a∈Γ} T(a, b)` over Γ-masked pairs with `r0 ≤ |x_a − x_b| < r1` (two-bounce, higher-order or un-gated columns) | 2 |
+//! | [`indirect_shells`] | pass 2 of [`indirect`] for several shells at once (near, middle, far) | 1 |
+//! | [`matrix()`] | amplitudes `A(x_a, x_b)` for `x_a` in one voxel set, `x_b` in another (two-bounce) | 1 (more if the accumulators exceed the memory budget) |
+//! | [`relight`] | `A_p(b) = Σ_a p_a A(x_a, b)`: the image under a weighted sum of projector foci | 1 (idem) |
+//! | [`row()`] | `T(·, x_b)` streamed by laser rows (reciprocity without a transpose) | 1 |
+//! | [`partial::accumulate`] | direct, column or indirect over a part of the rows, kept as a [`Partial`] state that merges by addition and finishes elsewhere | 1 |
 //!
 //! Threads: the diagonal and the higher-order column split the voxels into chunks, each with
 //! its own kernel probe, and every row's band spectra (computed once) are pushed into all
@@ -19,12 +24,18 @@ mod direct;
 mod drive;
 pub mod fast;
 mod indirect;
+mod matrix;
 pub mod partial;
+mod row;
 mod wave;
 
 pub use crate::exec::{Exec, Path};
-pub use column::{ColumnGate, Shell, check_focus, column};
+pub use column::{ColumnGate, Shell, check_focus, column, diagonal};
 pub use direct::direct;
-pub use indirect::{IndirectOptions, IndirectOutput, gamma_mask, indirect, indirect_over};
+pub use indirect::{
+    IndirectOptions, IndirectOutput, gamma_mask, indirect, indirect_over, indirect_shells,
+};
+pub use matrix::{MATRIX_BYTES_PER_ELEMENT, Matrix, Pattern, Relit, matrix, relight};
 pub use partial::{Finished, Partial, Task};
+pub use row::row;
 pub use wave::{Output, Wave, default_wavelength};

@@ -103,20 +103,20 @@ impl Input {
 /// Runs `f` on `src`, through the preprocessing when one is asked for: prints what it did,
 /// warns when the background removed most histograms, and refuses a result made of empty
 /// histograms only.
-pub fn with_prep<T>(
+pub fn with_prep<T, E: Into<Failure>>(
     input: &Input,
     src: &mut dyn RowSource,
     points: &[Point],
     sigma: f64,
-    f: impl FnOnce(&mut dyn RowSource) -> vltm::Result<T>,
+    f: impl FnOnce(&mut dyn RowSource) -> Result<T, E>,
 ) -> Result<T, Failure> {
     let Some(prep) = input.prep()? else {
-        return Ok(f(src)?);
+        return f(src).map_err(Into::into);
     };
     let src_dt = src.geometry().dt;
     let margin = 3.0 * sigma + src_dt * prep.rebin.max(1) as f64;
     let mut p = Prepared::new(src, prep, Reach::of(points, margin))?;
-    let out = f(&mut p)?;
+    let out = f(&mut p).map_err(Into::into)?;
     say!("preprocessing: {}", p.summary());
     check_stats(&p)?;
     Ok(out)

@@ -2,14 +2,12 @@
 //!
 //! Exit codes: 0 success, 2 bad arguments, 1 bad or unreadable input data.
 
-use anyhow::Context;
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use vltm::atomic::Transaction;
 use vltm::exec::{Exec, Path as EvalPath};
 use vltm::io::{self, RowSource};
-use vltm::out::figure::Figure;
 use vltm::out::h5::Provenance;
 use vltm::probe::{self, ColumnGate, IndirectOptions, Shell, Wave};
 use vltm::volume::{Volume, parse_point};
@@ -29,7 +27,11 @@ macro_rules! say {
     }};
 }
 
+mod ltm;
+mod outputs;
 mod partial;
+mod split;
+use outputs::write_outputs;
 
 /// Virtual light transport matrices (LTM) of hidden scenes from non-line-of-sight captures
 /// (Marco et al., ICCV 2021).
@@ -88,6 +90,11 @@ enum Command {
     Direct {
         /// Capture file.
         capture: PathBuf,
+        /// Time gate on the 3-vertex time |x_l-x_v|+|x_v-x_s|: gaussian = direct light
+        /// (Eqs. 11-12); none = monochromatic, no gate (paper Fig. 6); higher-order = light
+        /// arriving after it (Eq. 18 on the diagonal: x_v lit, returning to x_v later).
+        #[arg(long, value_enum, default_value_t = DiagGateArg::Gaussian)]
+        gate: DiagGateArg,
         #[command(flatten)]
         common: Common,
     },
@@ -105,6 +112,14 @@ enum Command {
         /// Keep only voxels with R0 <= |x_a - x_b| < R1 metres (near/middle/far light).
         #[arg(long, value_name = "R0:R1")]
         shell: Option<String>,
+        /// Near, middle and far light in one pass: three outputs F.near/F.middle/F.far
+        /// (.npy/.png) for |x_a - x_b| in [0, R1), [R1, R2), [R2, inf).
+        #[arg(long, value_name = "R1,R2", conflicts_with = "shell")]
+        shells: Option<String>,
+        /// Γ-mask the column: zero every voxel whose direct light is not above E·max
+        /// (an extra diagonal pass, as `indirect`).
+        #[arg(long, value_name = "E")]
+        mask_epsilon: Option<f32>,
         #[command(flatten)]
         common: Common,
     },
@@ -126,6 +141,14 @@ enum Command {
         /// `vltm merge` of direct parts) instead of pass 1; needed with --rows/--partial.
         #[arg(long, value_name = "D.npy")]
         direct: Option<PathBuf>,
+        /// Near, middle and far pairs in one pass: three outputs F.near/F.middle/F.far for
+        /// |x_a - x_b| in (0, R1), [R1, R2), [R2, inf) (instead of --shell/--min-separation).
+        #[arg(long, value_name = "R1,R2", conflicts_with_all = ["shell", "min_separation"])]
+        shells: Option<String>,
+        /// Gate of the summed columns: two-bounce (Eq. 14, first-order indirect light),
+        /// higher-order (Eq. 18 with Eq. 17: the paper's ">= 3rd bounce"), none.
+        #[arg(long, value_enum, default_value_t = GateArg::TwoBounce)]
+        gate: GateArg,
         #[command(flatten)]
         common: Common,
     },
@@ -145,6 +168,15 @@ enum Command {
         #[arg(long, value_name = "F")]
         partial: Option<PathBuf>,
     },
+    /// The LTM between two voxel sets as a matrix: complex amplitudes and intensities of
+    /// T(x_a, x_b) (two-bounce gate) for x_a in --from, x_b in --to, written to HDF5.
+    Matrix(ltm::MatrixArgs),
+    /// Relighting: the virtual camera's image i = T·p under an illumination that weights
+    /// several projector foci (one factorised pass; amplitudes add).
+    Relight(ltm::RelightArgs),
+    /// A row T(., x_b) of the LTM (virtual camera focused at x_b, projector over the volume),
+    /// streamed by laser rows without transposing the capture.
+    Row(ltm::RowArgs),
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug)]
@@ -152,6 +184,23 @@ enum GateArg {
     TwoBounce,
     HigherOrder,
     None,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+enum DiagGateArg {
+    Gaussian,
+    None,
+    HigherOrder,
+}
+
+impl GateArg {
+    fn gate(self) -> ColumnGate {
+        match self {
+            Self::TwoBounce => ColumnGate::TwoBounce,
+            Self::HigherOrder => ColumnGate::HigherOrder,
+            Self::None => ColumnGate::None,
+        }
+    }
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug)]
@@ -425,6 +474,9 @@ fn main() -> ExitCode {
 
 fn run(cmd: Command) -> Result<(), Failure> {
     match cmd {
+        Command::Matrix(a) => ltm::matrix(a),
+        Command::Relight(a) => ltm::relight(a),
+        Command::Row(a) => ltm::row(a),
         Command::Demo { out } => {
             let table = demo::run(&out)?;
             let _ = std::io::Write::write_all(&mut std::io::stdout(), table.as_bytes());
@@ -477,15 +529,35 @@ fn run(cmd: Command) -> Result<(), Failure> {
             );
             Ok(())
         }
-        Command::Direct { capture, common } if partial::wanted(&common)? => {
+        Command::Direct {
+            capture,
+            gate,
+            common,
+        } if partial::wanted(&common)? => {
+            if gate != DiagGateArg::Gaussian {
+                return Err(vltm::Error::arg(
+                    "--partial",
+                    "partial states hold the Gaussian-gated diagonal (direct light) only",
+                )
+                .into());
+            }
             partial::run(&common, &capture, probe::Task::Direct)
         }
-        Command::Direct { capture, common } => {
+        Command::Direct {
+            capture,
+            gate,
+            common,
+        } => {
             let volume = Volume::parse(&common.volume)?;
             let mut c = common.load(&capture)?;
+            let g = match gate {
+                DiagGateArg::Gaussian => ColumnGate::TwoBounce,
+                DiagGateArg::None => ColumnGate::None,
+                DiagGateArg::HigherOrder => ColumnGate::HigherOrder,
+            };
             let sigma = common.wave().config(c.geometry())?.sigma();
             let o = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
-                probe::direct(rows, &volume, &common.wave(), common.exec())
+                probe::diagonal(rows, &volume, g, &common.wave(), common.exec())
             })?;
             finish_probe(
                 &common,
@@ -502,6 +574,8 @@ fn run(cmd: Command) -> Result<(), Failure> {
             focus,
             gate,
             shell,
+            shells,
+            mask_epsilon,
             common,
         } => {
             let a = parse_point("--focus", &focus)?;
@@ -512,15 +586,18 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 .map(Shell::parse)
                 .transpose()?
                 .unwrap_or(Shell::ALL);
-            let g = match gate {
-                GateArg::TwoBounce => ColumnGate::TwoBounce,
-                GateArg::HigherOrder => ColumnGate::HigherOrder,
-                GateArg::None => ColumnGate::None,
-            };
+            let cuts = shells.as_deref().map(split::parse_shells).transpose()?;
             if partial::wanted(&common)? {
+                if cuts.is_some() || mask_epsilon.is_some() {
+                    return Err(vltm::Error::arg(
+                        "--partial",
+                        "a partial column takes --shell, not --shells or --mask-epsilon (apply them to the merged volume)",
+                    )
+                    .into());
+                }
                 let task = probe::Task::Column {
                     focus: a,
-                    gate: g,
+                    gate: gate.gate(),
                     shell,
                 };
                 return partial::run(&common, &capture, task);
@@ -528,10 +605,34 @@ fn run(cmd: Command) -> Result<(), Failure> {
             let mut c = common.load(&capture)?;
             let sigma = common.wave().config(c.geometry())?.sigma();
             let o = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
-                probe::column(rows, a, &volume, g, shell, &common.wave(), common.exec())
+                let mask = match mask_epsilon {
+                    Some(e) => Some(split::gamma(rows, &volume, e, "--mask-epsilon", &common)?),
+                    None => None,
+                };
+                let mut o = probe::column(
+                    rows,
+                    a,
+                    &volume,
+                    gate.gate(),
+                    shell,
+                    &common.wave(),
+                    common.exec(),
+                )?;
+                if let Some(m) = &mask {
+                    o.values
+                        .iter_mut()
+                        .zip(m)
+                        .for_each(|(x, &k)| *x *= f32::from(u8::from(k)));
+                }
+                Ok::<_, Failure>(o)
             })?;
             let title = format!("column T(x_a, .), gate {gate:?}");
-            finish_probe(&common, &capture, "column", &o, &volume, Some(a), &title)
+            match cuts {
+                Some(cuts) => {
+                    split::column_shells(&common, &capture, &o, &volume, a, &cuts, &title)
+                }
+                None => finish_probe(&common, &capture, "column", &o, &volume, Some(a), &title),
+            }
         }
         Command::Indirect {
             capture,
@@ -539,6 +640,8 @@ fn run(cmd: Command) -> Result<(), Failure> {
             min_separation,
             shell,
             direct,
+            shells,
+            gate,
             common,
         } => {
             let volume = Volume::parse(&common.volume)?;
@@ -564,54 +667,42 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 )
                 .into());
             }
+            let cuts = shells.as_deref().map(split::parse_shells).transpose()?;
             let opts = IndirectOptions {
                 epsilon,
                 shell,
+                gate: gate.gate(),
                 ..Default::default()
             };
-            let mut c = match &direct {
-                Some(d) => {
-                    let d = partial::read_direct(d, &volume)?;
-                    let gamma = probe::gamma_mask(&d, epsilon);
-                    if partial::wanted(&common)? {
-                        let task = probe::Task::Indirect { gamma, shell };
-                        return partial::run(&common, &capture, task);
-                    }
-                    let mut c = common.load(&capture)?;
-                    let sigma = common.wave().config(c.geometry())?.sigma();
-                    let (o, cfg) =
-                        input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
-                            let cfg = common.wave().config(rows.geometry())?;
-                            let o = probe::indirect_over(
-                                rows,
-                                &volume,
-                                &gamma,
-                                &opts,
-                                &common.wave(),
-                                common.exec(),
-                            )?;
-                            Ok((o, cfg))
-                        })?;
-                    return finish_indirect(&common, &capture, &cfg, &volume, epsilon, &o);
-                }
-                None if partial::wanted(&common)? => {
+            let direct = match &direct {
+                Some(d) => Some(partial::read_direct(d, &volume)?),
+                None => None,
+            };
+            if partial::wanted(&common)? {
+                let Some(d) = &direct else {
                     return Err(vltm::Error::arg(
                         "--partial",
                         "in-focus indirect light over a part of the rows needs Γ: pass --direct D.npy, the merged direct light over the same volume and options",
                     )
                     .into());
+                };
+                if cuts.is_some() || opts.gate != ColumnGate::TwoBounce {
+                    return Err(vltm::Error::arg(
+                        "--partial",
+                        "a partial in-focus sum takes the two-bounce gate and one --shell",
+                    )
+                    .into());
                 }
-                None => common.load(&capture)?,
-            };
+                let gamma = probe::gamma_mask(d, epsilon);
+                let task = probe::Task::Indirect { gamma, shell };
+                return partial::run(&common, &capture, task);
+            }
+            let mut c = common.load(&capture)?;
             let sigma = common.wave().config(c.geometry())?.sigma();
-            // The configuration of the rows as the probe sees them (after preprocessing).
-            let (o, cfg) =
-                input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
-                    let cfg = common.wave().config(rows.geometry())?;
-                    let o = probe::indirect(rows, &volume, &opts, &common.wave(), common.exec())?;
-                    Ok((o, cfg))
-                })?;
-            finish_indirect(&common, &capture, &cfg, &volume, epsilon, &o)
+            let run = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
+                split::indirect_run(&common, rows, &volume, &opts, cuts, direct)
+            })?;
+            split::indirect_write(&common, &capture, &volume, &opts, &run)
         }
         Command::Merge {
             parts,
@@ -620,39 +711,6 @@ fn run(cmd: Command) -> Result<(), Failure> {
             partial,
         } => partial::merge(&parts, out, png, partial),
     }
-}
-
-/// The Γ line, the summary and the outputs of an `indirect` run.
-fn finish_indirect(
-    common: &Common,
-    capture: &Path,
-    cfg: &vltm::kernel::Config,
-    volume: &Volume,
-    epsilon: f32,
-    o: &probe::IndirectOutput,
-) -> Result<(), Failure> {
-    let n_gamma = o.gamma.iter().filter(|&&g| g).count();
-    say!(
-        "Γ: {n_gamma} of {} voxels above ε = {epsilon} of the direct maximum; pairs with {:.3} <= |x_a - x_b| < {:.3} m",
-        volume.len(),
-        o.shell.r0,
-        o.shell.r1
-    );
-    summarize("indirect", &o.values, volume, o.seconds, &o.report, cfg, None);
-    let meta = Provenance {
-        probe: "indirect",
-        config: cfg,
-        focus: None,
-        capture,
-    };
-    write_outputs(
-        (&common.out, &common.png),
-        &meta,
-        &o.values,
-        volume,
-        "in-focus indirect light",
-        &[],
-    )
 }
 
 /// The capture's format (HDF5), geometry, time axis and counts, for `vltm info`.
@@ -827,59 +885,4 @@ fn finish_probe(
         title,
         &marks,
     )
-}
-
-/// Writes the volume (`--out`: `.npy`, or HDF5 for `.h5`/`.hdf5`) and the figure (`--png`);
-/// with neither, `<probe>.npy` and `<probe>.png`.
-fn write_outputs(
-    (c_out, c_png): (&Option<PathBuf>, &Option<PathBuf>),
-    meta: &Provenance<'_>,
-    v: &[f32],
-    volume: &Volume,
-    title: &str,
-    marks: &[(Point, String)],
-) -> Result<(), Failure> {
-    let stem = meta.probe;
-    let (out, png) = match (c_out, c_png) {
-        (None, None) => (
-            Some(PathBuf::from(format!("{stem}.npy"))),
-            Some(PathBuf::from(format!("{stem}.png"))),
-        ),
-        (a, b) => (a.clone(), b.clone()),
-    };
-    // The volume and its figure: all or nothing.
-    let mut t = Transaction::new();
-    if let Some(p) = &out {
-        if io::is_hdf5(p) {
-            vltm::out::h5::stage_volume(&mut t, p, v, volume, meta)
-        } else {
-            vltm::out::npy::stage_f32(&mut t, p, v, &volume.shape)
-        }
-        .with_context(|| format!("writing {}", p.display()))?;
-    }
-    let mut wrote_png = None;
-    if let Some(p) = png {
-        match volume.axes {
-            Some([x, y, z]) => {
-                let fig = Figure {
-                    data: v,
-                    shape: volume.shape,
-                    x,
-                    y,
-                    z,
-                    title: title.to_string(),
-                    marks: marks.to_vec(),
-                };
-                fig.stage_png(&mut t, &p)
-                    .with_context(|| format!("writing {}", p.display()))?;
-                wrote_png = Some(p);
-            }
-            None => eprintln!("vltm: note: no figure for a point list (only for grid volumes)"),
-        }
-    }
-    t.commit()?;
-    for p in out.iter().chain(&wrote_png) {
-        say!("wrote {}", p.display());
-    }
-    Ok(())
 }
