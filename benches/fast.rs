@@ -10,6 +10,9 @@
 //! * `column_image`: imaging a factorised column over 16×16×24 voxels once, kernel vs planar.
 //! * `lookup_diagonal`: one row of the baseband-lookup diagonal on the paper's 1-D setup, and
 //!   on the exh16 case of `planar_diagonal` (the two paths on the same row).
+//! * `confocal_diagonal`: the confocal FFT convolution at the issue-12 size (64×64 confocal
+//!   wall points, 2048 bins, λ = σ = 0.04 m): the forward transforms of the wall spectra and
+//!   imaging 64×64×11 and 64×64×41 voxels (whole scan, the global thread pool).
 //! * `indirect_gamma`: in-focus indirect light (Eq. 17) as `probe::indirect` runs it: per row
 //!   the `push_row` of 64 factorised columns (one per voxel of Γ), once their imaging over Γ.
 //!
@@ -20,7 +23,7 @@
 use criterion::{BenchmarkId, Criterion, Throughput, criterion_group, criterion_main};
 use num_complex::{Complex32, Complex64};
 use std::hint::black_box;
-use vltm::probe::fast::{BandDft, Planar};
+use vltm::probe::fast::{BandDft, Confocal, Planar};
 use vltm_kernel::{Config, Gate, Params, Point, Probe, RowBuffer, Scan, Target};
 
 fn axis(n: usize, lo: f32, pitch: f32) -> impl Iterator<Item = f32> + Clone {
@@ -355,9 +358,79 @@ fn indirect_gamma(c: &mut Criterion) {
     g.finish();
 }
 
+/// The confocal FFT convolution (`fast::confocal`) at the issue-12 target size: a 64×64
+/// confocal wall grid over 0.8 m (the Stanford captures' layout), 2048 bins of 1.2 mm,
+/// λ = σ = 0.04 m (J = 116), no lens weights, voxels at the wall pitch over z 0.55–0.75 m:
+/// the forward transforms of the wall spectra, then imaging 11 and 41 slices (threads: the
+/// global pool, as `probe::direct` runs it). Stage 1 of the 4096 rows is `stage1`'s sgemm.
+fn confocal_diagonal(c: &mut Criterion) {
+    let n = 64;
+    let p = 0.8 / (n - 1) as f32;
+    let wall: Vec<Point> = axis(n, -0.4, p)
+        .flat_map(|x| axis(n, -0.4, p).map(move |y| [x, y, 0.0]))
+        .collect();
+    let cfg = Config::try_new(&Params {
+        sigma: Some(0.04),
+        weights: vltm_kernel::Weights::One,
+        ..Params::new(0.04, 2048, 0.0012)
+    })
+    .unwrap();
+    let j = cfg.bins();
+    let spectra_of = |conv: &Confocal| {
+        let mut s = conv.spectra();
+        let h: Vec<Complex32> = (0..j)
+            .map(|k| Complex32::new((k % 7) as f32 - 3.0, (k % 5) as f32 - 2.0))
+            .collect();
+        for l in 0..wall.len() {
+            conv.place(&mut s, l, &h);
+        }
+        s
+    };
+    let mut g = c.benchmark_group("confocal_diagonal");
+    g.sample_size(10);
+    for nz in [11usize, 41] {
+        let vox: Vec<Point> = axis(n, -0.4, p)
+            .flat_map(|x| {
+                axis(n, -0.4, p).flat_map(move |y| {
+                    (0..nz).map(move |k| [x, y, 0.55 + 0.2 * k as f32 / (nz - 1) as f32])
+                })
+            })
+            .collect();
+        let conv = Confocal::new(&cfg, &wall, &vox, [n, n, nz])
+            .unwrap()
+            .with_guard(0.0);
+        let (mx, my, slices) = conv.shape();
+        println!(
+            "confocal 64x64 wall, {nz} slices: J = {j}, FFT {mx}×{my}, {slices} slices, \
+             wall spectra {:.1} MB, {:.2} Gflop",
+            conv.spectra_bytes() as f64 / 1e6,
+            conv.flops() / 1e9
+        );
+        let mut spectra = spectra_of(&conv);
+        if nz == 11 {
+            g.bench_function("forward_64x64_J116", |b| {
+                b.iter(|| {
+                    let mut s = spectra.clone();
+                    conv.forward(black_box(&mut s));
+                    black_box(s[0])
+                });
+            });
+        }
+        conv.forward(&mut spectra);
+        let skip = vec![false; vox.len()];
+        let mut acc = vec![Complex64::new(0.0, 0.0); vox.len()];
+        g.throughput(Throughput::Elements(vox.len() as u64));
+        g.bench_function(BenchmarkId::new("image_64x64", nz), |b| {
+            b.iter(|| conv.image(black_box(&spectra), &skip, &mut acc));
+        });
+    }
+    g.finish();
+}
+
 criterion_group! {
     name = fast;
     config = Criterion::default().warm_up_time(std::time::Duration::from_millis(500));
-    targets = stage1, planar_diagonal, column_image, lookup_diagonal, indirect_gamma
+    targets = stage1, planar_diagonal, column_image, lookup_diagonal, indirect_gamma,
+        confocal_diagonal
 }
 criterion_main!(fast);

@@ -21,8 +21,9 @@
 //! | `planar_diagonal_matches_band` (256) | planar vs band on the voxels inside the guard (`ε_pb·S`), `Path::Auto` vs band (`(ε_pb + ε_interp)·S`); with and without `compensate_laser` |
 //! | `planar_column_matches_band_and_reference` (128) | two-bounce columns: planar and `Auto` vs band on every voxel (`ε_pb·S`), `Lookup` an error, planar and band vs the reference's Eq. 14 element on the alias-free voxels (`ε·S`), equal alias counts matching the geometry |
 //! | `lookup_diagonal_matches_reference_and_band` (96) | the lookup and `Auto` diagonals on irregular SPADs (jitter ≤ 5 cm), tilted SPAD planes and shuffled, jittered point-list volumes: vs the reference `(ε + ε_interp)·S`, vs band `(ε_pb + ε_interp)·S` |
-//! | `forced_paths_that_do_not_apply_are_errors` | `Path::Lookup` on a column or a confocal capture and `Path::Planar` on a higher-order or un-gated column → `Error::Argument` naming `--path`; the paths that apply succeed |
-//! | `planar_path_rejects_non_planar_inputs` | point list, pitch ratio 2/3 or 3/2, one SPAD moved 1 mm, L-shaped or tilted SPADs, confocal: `Path::Planar` → `Error::Argument` naming `--path` and the reason (diagonal and column); `Path::Auto` succeeds and equals `Path::Band` (within `(ε_pb + ε_interp)·S`, as Auto may pick the lookup; bit for bit for confocal captures) |
+//! | `confocal_diagonal_matches_reference_and_band` (96) | confocal captures (the case's SPAD grid as the wall points, laser and SPAD together; a quarter with one point jittered off the lattice): the confocal FFT convolution (`Path::Planar`), band and lookup vs the sum of one-pair references (`ε·S`, lookup `(ε + ε_interp)·S`), the convolution vs band on every voxel (`ε_pb·S`, also under `compensate_laser`), `Auto` vs band (`(ε_pb + ε_interp)·S`); jittered walls: `Path::Planar` an error; coverage of paths outside the guard, legs and r = 3 |
+//! | `forced_paths_that_do_not_apply_are_errors` | `Path::Lookup` on a column and `Path::Planar` on a higher-order or un-gated column → `Error::Argument` naming `--path`; the paths that apply succeed (every diagonal path on a confocal grid) |
+//! | `planar_path_rejects_non_planar_inputs` | point list, pitch ratio 2/3 or 3/2, one SPAD moved 1 mm, L-shaped or tilted SPADs, a confocal wall point moved 1 mm, a confocal point-list volume: `Path::Planar` → `Error::Argument` naming `--path` and the reason (diagonal and, not confocal, column); `Path::Auto` succeeds and equals `Path::Band` (within `(ε_pb + ε_interp)·S`, as Auto may pick the lookup) |
 //! | `tolerances_detect_small_mistakes` | the comparisons fail on small perturbations (below) |
 //! | `spad_order_does_not_matter`, `descending_voxel_axes` | edge cases of the grid detection |
 //!
@@ -92,7 +93,7 @@ use std::collections::BTreeMap;
 use vltm::Error;
 use vltm::io::{Capture, Geometry};
 use vltm::kernel::{Config, Legs, Params, Point, Weights};
-use vltm::probe::fast::{Lookup, Planar};
+use vltm::probe::fast::{Confocal as ConfocalFft, Lookup, Planar};
 use vltm::probe::{self, ColumnGate, Exec, Output, Path, Shell, Wave};
 use vltm::volume::Volume;
 
@@ -962,6 +963,298 @@ fn lookup_diagonal_matches_reference_and_band() {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Property 3b: confocal captures
+// ---------------------------------------------------------------------------------------------
+
+/// A confocal scan: the case's SPAD grid as the wall points (laser and SPAD together), its
+/// voxel grid (pitch = wall pitch / r), optionally one wall point jittered off the lattice
+/// (`jitter`, m: the lookup path). The reference is the sum over rows of one-pair scans.
+#[derive(Clone, Debug)]
+struct Confocal {
+    scan: Scan,
+    /// One reference per row (laser = SPAD = x_l).
+    rows: Vec<Reference>,
+}
+
+impl Case {
+    fn build_confocal(&self, jitter: f32) -> Confocal {
+        let volume = self.volume();
+        let mut wall = wall_grid(self.spad_n, self.spad_origin, self.spad_pitch);
+        if jitter != 0.0 && wall.len() > 1 {
+            let mid = wall.len() / 2;
+            wall[mid][0] += jitter;
+        }
+        let one = |t0: f64, l: usize, h: Vec<f64>| {
+            let r = Reference::new(&self.params(0.0), &wall[l..=l], &wall[l..=l], h);
+            Reference { t0, ..r }
+        };
+        let zero = vec![0.0; self.nt];
+        let (lo, hi) = (0..wall.len())
+            .map(|l| {
+                tau_span(
+                    &one(0.0, l, zero.clone()),
+                    Kind::Diagonal,
+                    [0.0; 3],
+                    &volume.points,
+                )
+            })
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |a, b| {
+                (a.0.min(b.0), a.1.max(b.1))
+            });
+        let dt = self.lambda / self.lambda_over_dt;
+        let window = (self.nt - 1) as f64 * dt;
+        let t0 = if self.cover && window >= hi - lo {
+            lo - self.pos * (window - (hi - lo))
+        } else {
+            lo + self.anchor * (hi - lo) - self.pos * window
+        };
+        let params = self.params(t0);
+        // Histograms: noise, 3-vertex returns of random voxels, spikes (as `histograms`).
+        let mut rng = Rng(self.seed);
+        let nt = self.nt;
+        let mut h: Vec<f64> = (0..wall.len() * nt)
+            .map(|_| self.noise * (2.0 * rng.f() - 1.0))
+            .collect();
+        for _ in 0..=self.returns {
+            let v = p64(volume.points[rng.below(volume.points.len())]);
+            let amp = 0.3 + rng.f();
+            for l in 0..wall.len() {
+                let tau = one(t0, l, zero.clone()).tau(0, 0, &v, &v);
+                let bin = ((tau - t0) / dt).round();
+                if bin >= 0.0 && bin < nt as f64 {
+                    h[l * nt + bin as usize] += amp;
+                }
+            }
+        }
+        for _ in 0..self.spikes {
+            let i = rng.below(wall.len() * nt);
+            h[i] += (0.2 + 0.8 * rng.f()) * if rng.f() < 0.7 { 1.0 } else { -1.0 };
+        }
+        let h: Vec<f64> = h.iter().map(|&x| f64::from(x as f32)).collect();
+        let rows = (0..wall.len())
+            .map(|l| one(t0, l, h[l * nt..(l + 1) * nt].to_vec()))
+            .collect();
+        let (laser_origin, sensor_origin) = self.legs.unwrap_or(([0.0, 0.0, 1.0], [0.0; 3]));
+        let geometry = Geometry {
+            lasers: wall.clone(),
+            laser_shape: self.spad_n,
+            spads: wall,
+            spad_shape: self.spad_n,
+            laser_origin,
+            sensor_origin,
+            legs_in_time: self.legs.is_some(),
+            confocal: true,
+            nt,
+            dt,
+            t0,
+        };
+        let data = h.iter().map(|&x| x as f32).collect();
+        let capture =
+            Capture::new(geometry, data, std::path::Path::new("case")).expect("valid capture");
+        let wave = Wave {
+            wavelength: Some(self.lambda),
+            sigma: params.sigma,
+            weights: params.weights,
+            band_half_width: self.m,
+            compensate_laser: false,
+            auto_margin: false,
+        };
+        Confocal {
+            scan: Scan {
+                capture,
+                volume,
+                focus: [0.0; 3],
+                wave,
+                params,
+                h,
+            },
+            rows,
+        }
+    }
+}
+
+impl Confocal {
+    fn truth(&self) -> Vec<f64> {
+        let g = reference::Gate::Gaussian;
+        let mut a = vec![num_complex::Complex64::new(0.0, 0.0); self.scan.volume.len()];
+        for r in &self.rows {
+            for (x, y) in a.iter_mut().zip(r.diagonal(g, &self.scan.volume.points)) {
+                *x += y;
+            }
+        }
+        a.iter().map(|a| a.norm()).collect()
+    }
+
+    fn scales(&self) -> Vec<f64> {
+        self.scan
+            .volume
+            .points
+            .iter()
+            .map(|v| self.rows.iter().map(|r| r.scale(&p64(*v), &p64(*v))).sum())
+            .collect()
+    }
+
+    /// The tolerances of the module docs, with the confocal convolution's FFT size.
+    fn tol(&self) -> Tol {
+        let sc = &self.scan;
+        let cfg = sc.config();
+        let nu_max = (0..cfg.bins())
+            .map(|j| cfg.nu(j).abs())
+            .fold(cfg.omega(), f64::max);
+        let span = |legs: bool| {
+            self.rows
+                .iter()
+                .map(|r| {
+                    let r = if legs {
+                        r.clone()
+                    } else {
+                        Reference {
+                            legs: None,
+                            ..r.clone()
+                        }
+                    };
+                    tau_span(&r, Kind::Diagonal, [0.0; 3], &sc.volume.points).1
+                })
+                .fold(0.0f64, f64::max)
+        };
+        let j = cfg.bins() as f64;
+        let t0 = sc.capture.geometry.t0;
+        let eps32 = U32 * (nu_max * (span(true).abs() + t0.abs()) + j + cfg.nt() as f64 + 64.0);
+        let g = &sc.capture.geometry;
+        let m_conv = ConfocalFft::new(&cfg, &g.lasers, &sc.volume.points, sc.volume.shape)
+            .map_or(1, |p| p.shape().0 * p.shape().1);
+        let m = m_conv.max(Lookup::new(&cfg).grid_len());
+        let fft = U32 * 8.0 * (m as f64).log2();
+        let tail = (-cfg.params().gate_support.powi(2) / 2.0).exp();
+        let band = reference::erfc(cfg.params().band_half_width / 2f64.sqrt());
+        Tol {
+            reference: eps32 + fft + band + 2.0 * tail,
+            pb: U32 * (nu_max * span(false) + 2.0 * j + 16.0) + fft,
+            interp: INTERP,
+        }
+    }
+}
+
+/// Confocal captures: the confocal FFT convolution (`Path::Planar`), the band path and the
+/// lookup against the sum of one-pair references (`ε·S`, lookup `(ε + ε_interp)·S`), the
+/// convolution against the band path on every voxel (`ε_pb·S`: the guard is applied in the
+/// kernel for wall-to-wall time axes, by band-path voxels with legs in the time axis), and
+/// `Path::Auto` (the convolution, or the lookup / band path for a jittered wall point).
+#[test]
+fn confocal_diagonal_matches_reference_and_band() {
+    let strategy = (case(), prop::bool::weighted(0.25), any::<bool>());
+    let s = property(
+        "confocal diagonal vs reference and band",
+        SEED ^ 5,
+        96,
+        strategy,
+        |(c, jittered, compensate), s| {
+            let jitter = if *jittered { 0.013 } else { 0.0 };
+            let cc = c.build_confocal(jitter);
+            let sc = &cc.scan;
+            let band = sc.direct(Path::Band).expect("band");
+            let lookup = sc
+                .direct(Path::Lookup)
+                .expect("lookup applies to confocal scans");
+            let auto = sc.direct(Path::Auto).expect("auto");
+            let tol = cc.tol();
+            let truth = cc.truth();
+            let scale = cc.scales();
+            let all = vec![true; scale.len()];
+            let b = amplitudes(&band);
+            let br = compare(&band.values, &truth, &scale, tol.reference, &all);
+            let lr = compare(
+                &lookup.values,
+                &truth,
+                &scale,
+                tol.reference + tol.interp,
+                &all,
+            );
+            let lb = compare(&lookup.values, &b, &scale, tol.pb + tol.interp, &all);
+            let ab = compare(&auto.values, &b, &scale, tol.pb + tol.interp, &all);
+            s.max("band/ref err/tol", br.worst);
+            s.max("lookup/ref err/tol", lr.worst);
+            s.max("lookup/band err/tol", lb.worst);
+            s.max("auto/band err/tol", ab.worst);
+            prop_assert!(br.worst <= 1.0, "band vs reference: {br:?}, {tol:?}");
+            prop_assert!(lr.worst <= 1.0, "lookup vs reference: {lr:?}, {tol:?}");
+            prop_assert!(lb.worst <= 1.0, "lookup vs band: {lb:?}, {tol:?}");
+            prop_assert!(ab.worst <= 1.0, "auto vs band: {ab:?}, {tol:?}");
+            let conv = sc.direct(Path::Planar);
+            if *jittered && sc.capture.geometry.lasers.len() > 1 {
+                let msg = path_error(conv, "confocal, jittered");
+                // "not a regular lattice", or for two points "do not fill their lattice".
+                prop_assert!(msg.contains("lattice"), "{}", msg);
+                s.count("jittered wall (lookup or band)", true);
+                return Ok(());
+            }
+            let conv = conv.expect("the convolution applies to a confocal grid");
+            prop_assert_eq!(conv.path, Path::Planar);
+            prop_assert_eq!(conv.report.rows, sc.capture.geometry.lasers.len() as u64);
+            let pr = compare(&conv.values, &truth, &scale, tol.reference, &all);
+            let pb = compare(&conv.values, &b, &scale, tol.pb, &all);
+            s.max("conv/ref err/tol", pr.worst);
+            s.max("conv/band err/tol", pb.worst);
+            s.max("conv/band err/S", pb.rel);
+            s.max("conv/band |ΔI|/max I", pb.int);
+            let outside = sc.outside_confocal(&cc, sc.config().guard());
+            s.count("paths outside the guard", outside);
+            s.count(
+                "paths outside the guard, wall to wall (kernel zeroed)",
+                outside && c.legs.is_none(),
+            );
+            count_shapes(c, s);
+            prop_assert!(pr.worst <= 1.0, "conv vs reference: {pr:?}, {tol:?}");
+            prop_assert!(pb.worst <= 1.0, "conv vs band: {pb:?}, {tol:?}");
+            // With laser compensation (not in the reference): the convolution still equals
+            // the band path.
+            if *compensate {
+                let mut sc2 = sc.clone();
+                sc2.wave.compensate_laser = true;
+                let conv = sc2.direct(Path::Planar).expect("conv");
+                let band = sc2.direct(Path::Band).expect("band");
+                let g = &sc2.capture.geometry;
+                let kmax = g
+                    .lasers
+                    .iter()
+                    .map(|x| 1.0 / g.laser_falloff(*x))
+                    .fold(0.0f64, f64::max);
+                let scale2: Vec<f64> = scale.iter().map(|x| x * kmax).collect();
+                let pb = compare(&conv.values, &amplitudes(&band), &scale2, tol.pb, &all);
+                s.max("conv/band err/tol (compensated)", pb.worst);
+                prop_assert!(pb.worst <= 1.0, "compensated conv vs band: {pb:?}");
+            }
+            Ok(())
+        },
+    );
+    if !coverage_checked() {
+        return;
+    }
+    for k in [
+        "paths outside the guard",
+        "paths outside the guard, wall to wall (kernel zeroed)",
+        "legs in time",
+        "jittered wall (lookup or band)",
+        "r = 3 on an axis with > 1 SPAD and > 1 voxel",
+    ] {
+        assert!(s.get(k) >= 3, "coverage: only {} cases with {k}", s.get(k));
+    }
+}
+
+impl Scan {
+    /// Whether some voxel has a confocal path outside `interval` (clear of the edges).
+    fn outside_confocal(&self, cc: &Confocal, interval: (f64, f64)) -> bool {
+        let m = 1e-3 * self.config().sigma();
+        self.volume.points.iter().any(|v| {
+            cc.rows.iter().any(|r| {
+                let t = r.tau(0, 0, &p64(*v), &p64(*v)) - r.t0;
+                t < interval.0 - m || t > interval.1 + m
+            })
+        })
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Property 4: inputs the planar path does not apply to
 // ---------------------------------------------------------------------------------------------
 
@@ -1078,41 +1371,46 @@ fn planar_path_rejects_non_planar_inputs() {
         p[2] = 0.05 * p[0];
     }
     variants.push(("tilted SPADs", tilted, "not in one plane"));
-    // Confocal: one SPAD at each laser spot.
-    let mut confocal = base.clone();
-    {
-        let g = &mut confocal.capture.geometry;
-        g.spads = g.lasers.clone();
-        g.spad_shape = g.laser_shape;
-        g.confocal = true;
-        confocal.capture.data = (0..g.lasers.len() * g.nt)
-            .map(|i| ((i * 7919) % 101) as f32 / 101.0)
-            .collect();
-    }
-    variants.push(("confocal", confocal, "confocal"));
+    // Confocal, one wall point off its lattice site by 1 mm.
+    let moved = c.build_confocal(1e-3);
+    variants.push((
+        "confocal, point moved",
+        moved.scan.clone(),
+        "not a regular lattice",
+    ));
+    // Confocal on its lattice, voxels as a point list.
+    let mut on_grid = c.build_confocal(0.0);
+    on_grid.scan.volume = Volume::points(on_grid.scan.volume.points.clone()).expect("list");
+    variants.push(("confocal, point list", on_grid.scan.clone(), "point list"));
+    let confocal_of = |name: &str| {
+        if name.contains("moved") {
+            &moved
+        } else {
+            &on_grid
+        }
+    };
 
     for (name, sc, why) in &variants {
         let msg = path_error(sc.direct(Path::Planar), name);
         assert!(msg.contains(why), "{name}: `{msg}` does not say `{why}`");
         let auto = sc.direct(Path::Auto).expect("auto");
         let band = sc.direct(Path::Band).expect("band");
-        if sc.capture.geometry.confocal {
-            // No lookup for confocal captures: Auto is the band path itself.
-            assert_eq!(auto.values, band.values, "{name}: auto = band");
+        // Auto is the band or the lookup path.
+        let (tol, scale) = if sc.capture.geometry.confocal {
+            let cc = confocal_of(name);
+            (cc.tol(), cc.scales())
         } else {
-            // Auto is the band or the lookup path.
-            let tol = sc.tol(Kind::Diagonal);
-            let scale = sc.scales(Kind::Diagonal);
-            let all = vec![true; scale.len()];
-            let a = compare(
-                &auto.values,
-                &amplitudes(&band),
-                &scale,
-                tol.pb + tol.interp,
-                &all,
-            );
-            assert!(a.worst <= 1.0, "{name}: auto vs band {a:?}");
-        }
+            (sc.tol(Kind::Diagonal), sc.scales(Kind::Diagonal))
+        };
+        let all = vec![true; scale.len()];
+        let a = compare(
+            &auto.values,
+            &amplitudes(&band),
+            &scale,
+            tol.pb + tol.interp,
+            &all,
+        );
+        assert!(a.worst <= 1.0, "{name}: auto vs band {a:?}");
         if !sc.capture.geometry.confocal {
             let msg = path_error(sc.column(Path::Planar), name);
             assert!(msg.contains(why), "{name}: `{msg}` does not say `{why}`");
@@ -1124,8 +1422,8 @@ fn planar_path_rejects_non_planar_inputs() {
 }
 
 /// A forced path that does not evaluate the probe is an `Error::Argument` naming `--path`,
-/// never a silent fall-back: lookup for columns and confocal captures, planar for the
-/// higher-order and un-gated columns. On the same (planar) case the forced paths that do
+/// never a silent fall-back: lookup for columns, planar for the higher-order and un-gated
+/// columns. On the same (planar) case the forced paths that do
 /// apply succeed.
 #[test]
 fn forced_paths_that_do_not_apply_are_errors() {
@@ -1155,16 +1453,11 @@ fn forced_paths_that_do_not_apply_are_errors() {
         assert!(sc.direct(path).is_ok(), "{path:?} diagonal");
     }
     assert!(sc.column(Path::Planar).is_ok(), "planar column");
-    let mut confocal = sc.clone();
-    {
-        let g = &mut confocal.capture.geometry;
-        g.spads = g.lasers.clone();
-        g.spad_shape = g.laser_shape;
-        g.confocal = true;
-        confocal.capture.data = vec![0.5; g.lasers.len() * g.nt];
+    // Confocal captures: every diagonal path applies to a wall grid.
+    let confocal = fixed_case().build_confocal(0.0).scan;
+    for path in [Path::Planar, Path::Lookup, Path::Band, Path::Auto] {
+        assert!(confocal.direct(path).is_ok(), "{path:?} confocal diagonal");
     }
-    let msg = path_error(confocal.direct(Path::Lookup), "lookup, confocal");
-    assert!(msg.contains("confocal"), "{msg}");
 }
 
 // ---------------------------------------------------------------------------------------------

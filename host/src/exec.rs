@@ -29,18 +29,19 @@ pub trait Progress: Sync {
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Path {
     /// The cheapest applicable path by the flop model of DESIGN §B.8: for the diagonal the
-    /// least of planar (when the SPADs form a regular grid and the volume is a wall-parallel
-    /// grid whose pitch divides the SPAD pitch), lookup (not confocal) and band; for
-    /// Gaussian-gated columns planar or band.
+    /// least of planar (when the SPADs — for a confocal capture the scanned wall points — form
+    /// a regular grid and the volume is a wall-parallel grid whose pitch divides its pitch),
+    /// lookup and band; for Gaussian-gated columns planar or band.
     #[default]
     Auto,
     /// The kernel's band sum per (voxel, SPAD) (DESIGN §B.2.3): any geometry, every probe.
     Band,
-    /// The planar FFT convolution ([`crate::probe::fast::planar`]) for the diagonal and
-    /// Gaussian-gated columns; an error if it does not apply (another geometry, another gate).
+    /// The planar FFT convolution ([`crate::probe::fast::planar`]; for confocal captures
+    /// [`crate::probe::fast::confocal`]) for the diagonal and Gaussian-gated columns; an
+    /// error if it does not apply (another geometry, another gate).
     Planar,
     /// Diagonal only: the gated baseband + cubic lookup ([`crate::probe::fast::lookup`]), any
-    /// non-confocal geometry; an error for columns and confocal captures.
+    /// geometry (confocal captures included); an error for columns.
     Lookup,
 }
 

@@ -349,7 +349,7 @@ pub(super) fn single_column(
         .iter_mut()
         .map(|st| Probe::new(&scan, target, gate, &[], st))
         .collect::<Result<Vec<_>, _>>()?;
-    let probes = drive_rows(src, job, &scan, "column", probes, |p, row| {
+    let probes = drive_rows(src, job, &scan, "column", probes, |p, _, row| {
         Ok(p.push_row(&scan, row)?)
     })?;
     let mut it = probes.into_iter();

@@ -1,6 +1,7 @@
 //! Direct light: the diagonal `T(x_v, x_v)` (Eqs. 11–12) on the cheapest applicable path
 //! (planar FFT convolution, baseband lookup or the kernel's band sum, DESIGN §B.8).
 
+use super::confocal;
 use super::drive::*;
 use super::wave::*;
 use crate::budget;
@@ -70,14 +71,12 @@ pub(super) fn direct_acc(
         exec,
     };
     let g = src.geometry();
-    if g.confocal && exec.path == Path::Lookup {
-        return Err(Error::arg(
-            "--path",
-            "the lookup path does not apply to a confocal capture (use band)",
-        ));
+    if g.confocal {
+        let (acc, report, path) = direct_confocal(src, job, volume)?;
+        return Ok((Amplitudes { acc, report, path }, cfg));
     }
     let band_cost = band_flops(g, &cfg, volume.len());
-    let lookup_cost = (!g.confocal).then(|| {
+    let lookup_cost = Some({
         let l = Lookup::new(&cfg).grid_len() as f64;
         let ks = g.spads_per_row() as f64;
         // One complex inverse FFT per SPAD, then E0 + 16 flops per (voxel, SPAD) (§B.8).
@@ -109,6 +108,39 @@ pub(super) fn direct_acc(
     Ok((Amplitudes { acc, report, path }, cfg))
 }
 
+/// Direct light of a confocal capture: the confocal convolution on a regular wall grid
+/// with a fitting voxel grid, else the lookup (irregular wall points, point lists) or the
+/// band sum, whichever the flop model finds cheaper (or [`Exec::path`] forces).
+fn direct_confocal(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    volume: &Volume,
+) -> Result<(Vec<Complex64>, Report, Path)> {
+    let g = src.geometry();
+    let cfg = job.cfg;
+    let band = confocal::band_total(g, cfg, volume.len());
+    let lookup = confocal::lookup_flops(g, cfg, volume.len());
+    let conv = confocal::choose(g, cfg, volume, job.exec.path, band.min(lookup))?;
+    let (values, report, path) = if let Some(c) = conv {
+        let (v, r) = confocal::direct_convolution(src, job, volume, c)?;
+        (v, r, Path::Planar)
+    } else if job.exec.path == Path::Lookup || (job.exec.path == Path::Auto && lookup < band) {
+        let (v, r) = direct_lookup(src, job, volume)?;
+        (v, r, Path::Lookup)
+    } else {
+        let (v, r) = elementwise(
+            src,
+            job,
+            Target::Diagonal,
+            Gate::Gaussian,
+            &volume.points,
+            "direct",
+        )?;
+        (v, r, Path::Band)
+    };
+    Ok((values, report, path))
+}
+
 /// What the planar convolution would be used for (its cost differs).
 #[derive(Clone, Copy, PartialEq, Eq)]
 pub(super) enum PlanarUse {
@@ -116,11 +148,6 @@ pub(super) enum PlanarUse {
     Diagonal,
     /// Once, to image a factorised column.
     Column,
-}
-
-/// Flops per row of the kernel's band sum over `n_voxels` (DESIGN §B.8: `Kv·Ks·(14J + E0)`).
-pub(super) fn band_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
-    n_voxels as f64 * g.spads_per_row() as f64 * (14.0 * cfg.bins() as f64 + 60.0)
 }
 
 /// The planar convolution for this probe, if [`Exec::path`] allows it, it applies and (for
@@ -204,9 +231,11 @@ pub(super) fn direct_lookup(
 ) -> Result<(Vec<Complex64>, Report)> {
     let cfg = job.cfg;
     let g = src.geometry().clone();
-    let ks = g.spads.len();
+    let ks = g.spads_per_row();
+    // Confocal captures: `drive_rows` makes one scan per row (this one only sizes things).
+    let spads = if g.confocal { &g.spads[..1] } else { &g.spads };
     let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
-    let scan = Scan::new(cfg, &g.spads, &mut tables)?;
+    let scan = Scan::new(cfg, spads, &mut tables)?;
     let lookup = Lookup::new(cfg);
     let nw = rayon::current_num_threads().max(1);
     let workers: Vec<_> = (0..nw)
@@ -219,12 +248,19 @@ pub(super) fn direct_lookup(
         })
         .collect();
     let pts = &volume.points;
-    let workers = drive_rows(src, job, &scan, "direct", workers, |(s, acc, r), row| {
-        lookup.apply(&scan, row, pts, s, acc);
-        r.rows += 1;
-        r.non_finite += u64::from(row.non_finite());
-        Ok(())
-    })?;
+    let workers = drive_rows(
+        src,
+        job,
+        &scan,
+        "direct",
+        workers,
+        |(s, acc, r), scan, row| {
+            lookup.apply(scan, row, pts, s, acc);
+            r.rows += 1;
+            r.non_finite += u64::from(row.non_finite());
+            Ok(())
+        },
+    )?;
     let mut acc = vec![Complex64::new(0.0, 0.0); volume.len()];
     let mut report = Report::default();
     for (_, a, r) in workers {
@@ -287,7 +323,7 @@ pub(super) fn direct_planar(
         });
     }
     let pts = &volume.points;
-    let workers = drive_rows(src, job, &scan, "direct", workers, |w, row| {
+    let workers = drive_rows(src, job, &scan, "direct", workers, |w, _, row| {
         let laser = row.laser();
         planar.apply(
             row.band(),

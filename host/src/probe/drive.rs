@@ -102,14 +102,16 @@ pub(super) fn load_row<'r>(
 
 /// Reads rows in batches and hands each to one of `workers` in parallel (one worker per
 /// thread, each with its own row buffer), so stage 1 and the per-row probe work use every
-/// core. Memory: `2·threads` rows of histograms, never the whole capture.
+/// core. `work` gets the row's scan: `scan` itself, or for a confocal capture (where `scan`
+/// only sizes the buffers: one SPAD) a scan of the row's own wall point. Memory:
+/// `2·threads` rows of histograms, never the whole capture.
 pub(super) fn drive_rows<W: Send>(
     src: &mut dyn RowSource,
     job: Job<'_>,
     scan: &Scan<'_>,
     label: &str,
     workers: Vec<W>,
-    work: impl Fn(&mut W, &Row<'_, f32>) -> Result<()> + Sync,
+    work: impl Fn(&mut W, &Scan<'_>, &Row<'_, f32>) -> Result<()> + Sync,
 ) -> Result<Vec<W>> {
     let Job { cfg, wave, exec } = job;
     let g = src.geometry().clone();
@@ -117,11 +119,23 @@ pub(super) fn drive_rows<W: Send>(
     let ks = g.spads_per_row();
     check_memory(&g, cfg, 0, label)?;
     let dft = BandDft::new(cfg);
-    // (worker, row buffer, copy of a row with non-finite samples zeroed)
-    type Slot<W> = Mutex<(W, Vec<f32>, Vec<f32>)>;
+    // (worker, row buffer, copy of a row with non-finite samples zeroed, confocal tables)
+    type Slot<W> = Mutex<(W, Vec<f32>, Vec<f32>, Vec<f32>)>;
+    let tables_len = if g.confocal {
+        Scan::tables_len(cfg, 1)
+    } else {
+        0
+    };
     let slots: Vec<Slot<W>> = workers
         .into_iter()
-        .map(|w| Mutex::new((w, vec![0.0f32; RowBuffer::len(cfg, ks)], Vec::new())))
+        .map(|w| {
+            Mutex::new((
+                w,
+                vec![0.0f32; RowBuffer::len(cfg, ks)],
+                Vec::new(),
+                vec![0.0f32; tables_len],
+            ))
+        })
         .collect();
     let n_slots = slots.len().max(1);
     let range = src.rows();
@@ -141,10 +155,18 @@ pub(super) fn drive_rows<W: Send>(
         rows.par_iter().try_for_each(|(x_l, hist)| {
             let i = rayon::current_thread_index().unwrap_or(0) % n_slots;
             let mut slot = slots[i].lock().unwrap_or_else(|e| e.into_inner());
-            let (w, buf, clean) = &mut *slot;
+            let (w, buf, clean, tables) = &mut *slot;
+            let spad = [*x_l];
+            let own;
+            let scan = if g.confocal {
+                own = Scan::new(cfg, &spad, tables)?;
+                &own
+            } else {
+                scan
+            };
             let mut rb = RowBuffer::new(scan, buf)?;
             let row = load_row(&mut rb, scan, &dft, *x_l, hist, clean)?;
-            work(w, &row)
+            work(w, scan, &row)
         })?;
         bar.advance(end - start);
     }
@@ -253,4 +275,9 @@ pub(super) fn elementwise(
 /// Intensities `|A|²` of complex accumulators, as `f32`.
 pub(super) fn intensities(acc: &[Complex64]) -> Vec<f32> {
     acc.iter().map(|a| a.norm_sqr() as f32).collect()
+}
+
+/// Flops per row of the kernel's band sum over `n_voxels` (DESIGN §B.8: `Kv·Ks·(14J + E0)`).
+pub(super) fn band_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
+    n_voxels as f64 * g.spads_per_row() as f64 * (14.0 * cfg.bins() as f64 + 60.0)
 }

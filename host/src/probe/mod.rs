@@ -20,6 +20,7 @@
 //! `a ∈ Γ`, pushed in parallel. Memory never grows with the number of laser rows.
 
 mod column;
+mod confocal;
 mod direct;
 mod drive;
 pub mod fast;

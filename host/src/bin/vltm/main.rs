@@ -237,7 +237,7 @@ struct Common {
     #[arg(long)]
     swap_roles: bool,
     /// Evaluation path: auto (the cheapest that applies), band (the kernel's band sum, any
-    /// geometry), planar (FFT convolution over a SPAD grid; diagonal and two-bounce columns),
+    /// geometry), planar (FFT convolution over a SPAD grid or a confocal wall grid; diagonal and two-bounce columns),
     /// lookup (baseband + cubic interpolation; diagonal only). For indirect it applies to
     /// pass 1 (the diagonal); pass 2 images its Γ columns with the band sum.
     #[arg(long, value_enum, default_value_t = PathArg::Auto)]

@@ -6,26 +6,32 @@
 //! [`open`] parses the metadata and returns a [`TalReader`], a [`RowSource`] that reads laser
 //! rows on demand straight from the file, never all of `H`: for `T_Lx_Ly_Sx_Sy` the row of laser
 //! `(ix, iy)` is the hyperslab `H[:, ix, iy, :, :]`, `Nt` strided runs of `Ks` values. Rows are
-//! read a small block at a time, `H[:, ix, iy0..iy0+B, :, :]` with `B` consecutive rows of one
-//! laser line such that the block holds at most [`BLOCK_BYTES`] (256 KiB) or one row, through
-//! the pure-Rust [`hdf5_reader`] crate's `Dataset::read_slice` (for a contiguous dataset: one
-//! positional read per time bin of exactly the `B·Ks` values; for a chunked one: the
-//! overlapping chunks). The block is cached, so rows of the same block cost no I/O, and each
-//! row is transposed to vltm's SPAD-major order `[s][n]`. For the one-histogram-per-point
-//! formats (confocal, single) a row is a single value per time bin, so blocks are what keeps
-//! the number of reads at `Nt` per laser line instead of `Nt` per row. Memory is
-//! O(max(Ks·Nt, [`BLOCK_BYTES`])) whatever the size of `H`. [`read_all`] reads every row into a
-//! [`Capture`] (needed by `--swap-roles` and by [`io::open`](crate::io::open)).
+//! read in **blocks** of consecutive rows, each one hyperslab through the pure-Rust
+//! [`hdf5_reader`] crate's `Dataset::read_slice`: whole laser lines `H[:, ix0..ix1, :, :, :]`
+//! (as many as fit in [`BLOCK_BYTES`], 8 MiB), or, when one line is larger, at most
+//! [`BLOCK_BYTES`] of one line (at least one row). For a contiguous `H` that is one positional
+//! read per time bin of the block's `B·Ks` values (a 16×16 × 16×16 × 800 capture: 32 blocks,
+//! 25 600 reads of 10 kB, instead of one 1 kB read per (row, bin)); for a chunked one, the
+//! overlapping chunks (decompressed by the crate). A **background reader** thread reads the
+//! blocks in row order, transposes each in memory to vltm's SPAD-major rows `[r][s][n]`
+//! (16 time bins at a time), and hands them over through a bounded queue of one block, so that
+//! reading, decompression and the transpose overlap the probes' work on the rows already
+//! read; [`RowSource::read_row`] then copies one row out of the current block. A row out of
+//! order restarts the reader at its block. For the one-histogram-per-point formats (confocal,
+//! single) a row is a single value per time bin, so blocks are what keeps the number of reads
+//! at `Nt` per block instead of `Nt` per row.
 //!
-//! **Peak memory**, measured with a counting global allocator around streaming every row (the
-//! reader, its metadata, the block, the crate's raw copy of the block during a read, one row):
-//! `two_patches` (the largest shared capture, H = 400×8×8×8×8 f32 = 6.6 MB; 64 rows of
-//! 102 kB, blocks of 2 rows) **0.58 MB** of heap, 3.3 MB maximum resident set of the whole
-//! process (`/usr/bin/time`); `line` 0.55 MB; `single` 0.11 MB. [`read_all`] of `two_patches`
-//! peaks at 7.1 MB of heap (the 6.55 MB capture plus a block). Streaming `two_patches` takes
-//! 10–30 ms. tal writes `H` contiguous and uncompressed (checked with h5py on every shared
-//! capture); a chunked `H` streams too, but the crate keeps up to 64 MiB of decoded chunks in its
-//! cache.
+//! **Memory** is bounded whatever the size of `H`: at most three blocks (the one in use, one
+//! queued, one being read and transposed: `3 ×` [`BLOCK_BYTES`] = 24 MiB, or three rows when
+//! a row is larger), plus the crate's raw copy of the block being read and, for a chunked `H`,
+//! the crate's cache of decoded chunks (up to 64 MiB). [`read_all`] reads every row into a
+//! [`Capture`] (needed by `--swap-roles` and by [`io::open`](crate::io::open)). Measured peak
+//! resident set of `vltm column` on the exh16 capture (210 MB of `f32`): 47 MB contiguous,
+//! 118 MB gzip-chunked (`.npz`: 19 MB); on the small shared captures (two_patches, 6.6 MB)
+//! a block holds the whole `H`.
+//!
+//! tal writes `H` contiguous and uncompressed (checked with h5py on every shared capture); a
+//! chunked `H` streams too.
 //!
 //! # Fields
 //!
@@ -126,6 +132,7 @@ use crate::error::{Error, Result};
 use crate::io::capture::{Capture, Geometry, RowSource};
 use hdf5_reader::{Dataset, Datatype, Hdf5File, OpenOptions, SliceInfo, SliceInfoElem};
 use std::path::{Path, PathBuf};
+use std::sync::mpsc::{Receiver, sync_channel};
 use vltm_kernel::Point;
 
 /// Element type of `H`.
@@ -149,6 +156,8 @@ pub struct TalReader {
     single_falloff: Option<f64>,
     /// The rows read last.
     block: Block,
+    /// The background reader, once rows are read.
+    ahead: Option<ReadAhead>,
 }
 
 impl std::fmt::Debug for TalReader {
@@ -401,6 +410,7 @@ impl TalReader {
             options,
             single_falloff,
             block: Block::default(),
+            ahead: None,
         })
     }
 
@@ -464,43 +474,118 @@ impl TalReader {
         Capture::new(g, data, &self.path)
     }
 
-    /// Rows per block: consecutive rows along the last row axis whose hyperslab is read at
-    /// once, within [`BLOCK_BYTES`] (at least one row).
-    fn block_len(&self) -> usize {
-        let g = &self.geometry;
-        let row_bytes = (g.spads_per_row() * g.nt * 4).max(1);
-        let line = self.dims[self.format.row_axes()];
-        (BLOCK_BYTES / row_bytes).clamp(1, line.max(1))
+    /// The block of consecutive rows holding row `l`: `first..end` (module docs, *Reading*).
+    fn block_range(&self, l: usize) -> (usize, usize) {
+        block_range(&self.dims, self.format, self.geometry.spads_per_row(), l)
     }
 
-    /// Reads the block holding row `l` into `self.block`: `H[:, ix, iy0..iy0+B, ...]` (or
-    /// `H[:, l0..l0+B, ...]`), time-major.
+    /// Makes the block holding row `l` current: from the read-ahead queue when the rows are
+    /// read in order, else by restarting the background reader at that block.
     fn load_block(&mut self, l: usize) -> Result<()> {
-        let all = |n: usize| SliceInfoElem::Slice {
-            start: 0,
-            end: n as u64,
-            step: 1,
+        let (first, _) = self.block_range(l);
+        // Free the previous block first (the queue holds at most one more).
+        self.block = Block::default();
+        if self.ahead.as_ref().is_none_or(|a| a.next != first) {
+            self.ahead = None;
+            self.ahead = Some(ReadAhead::start(self.plan(), first));
+        }
+        let ahead = self.ahead.as_mut().expect("started above");
+        let block = match ahead.rx.recv() {
+            Ok(b) => b,
+            Err(_) => Err(Error::format(
+                &self.path,
+                "H",
+                "a readable dataset",
+                "the background reader stopped",
+            )),
         };
+        let block = match block {
+            Ok(b) => b,
+            Err(e) => {
+                self.ahead = None;
+                return Err(e);
+            }
+        };
+        ahead.next = block.first + block.rows;
+        self.block = block;
+        Ok(())
+    }
+
+    /// What the background reader needs.
+    fn plan(&self) -> Plan {
+        Plan {
+            path: self.path.clone(),
+            h: self.h.clone(),
+            elem: self.elem,
+            dims: self.dims.clone(),
+            format: self.format,
+            ks: self.geometry.spads_per_row(),
+            kl: self.geometry.lasers.len(),
+        }
+    }
+}
+
+/// The block of consecutive rows (flattened row axes) holding row `l`, `first..end`: whole
+/// laser lines when a line fits in [`BLOCK_BYTES`] (as many as fit), else at most
+/// [`BLOCK_BYTES`] of one line (at least one row).
+fn block_range(dims: &[usize], format: HFormat, ks: usize, l: usize) -> (usize, usize) {
+    let nt = dims[0];
+    let row_bytes = (ks * nt * 4).max(1);
+    let fit = (BLOCK_BYTES / row_bytes).max(1);
+    let r = format.row_axes();
+    let kl: usize = dims[1..=r].iter().product();
+    let line = if r == 2 { dims[2].max(1) } else { kl.max(1) };
+    if r == 2 && fit >= line {
+        let b = fit / line * line;
+        let first = l / b * b;
+        (first, (first + b).min(kl))
+    } else {
+        let b = fit.min(line);
+        let (ix, iy) = (l / line, l % line);
+        let y0 = iy / b * b;
+        (ix * line + y0, ix * line + (y0 + b).min(line))
+    }
+}
+
+/// Everything the background reader needs to read blocks on its own.
+struct Plan {
+    path: PathBuf,
+    h: Dataset,
+    elem: Elem,
+    dims: Vec<usize>,
+    format: HFormat,
+    ks: usize,
+    kl: usize,
+}
+
+impl Plan {
+    /// Reads rows `first..end` (one [`block_range`]) as one hyperslab, time-major: for each
+    /// time bin one contiguous run of `(end − first)·Ks` values in a contiguous `H`.
+    fn read(&self, first: usize, end: usize) -> Result<Block> {
         let span = |a: usize, b: usize| SliceInfoElem::Slice {
             start: a as u64,
             end: b as u64,
             step: 1,
         };
         let r = self.format.row_axes();
-        let line = self.dims[r];
-        let (ix, iy) = (l / line, l % line);
-        let b = self.block_len();
-        let y0 = iy / b * b;
-        let y1 = (y0 + b).min(line);
-        let mut selections = vec![all(self.dims[0])];
+        let mut selections = vec![span(0, self.dims[0])];
         if r == 2 {
-            selections.push(SliceInfoElem::Index(ix as u64));
+            let line = self.dims[2].max(1);
+            if first.is_multiple_of(line)
+                && (end.is_multiple_of(line) || end == self.kl)
+                && end - first >= line
+            {
+                selections.push(span(first / line, end.div_ceil(line)));
+                selections.push(span(0, line));
+            } else {
+                selections.push(SliceInfoElem::Index((first / line) as u64));
+                selections.push(span(first % line, first % line + (end - first)));
+            }
+        } else {
+            selections.push(span(first, end));
         }
-        selections.push(span(y0, y1));
-        selections.extend(self.dims[1 + r..].iter().map(|&n| all(n)));
+        selections.extend(self.dims[1 + r..].iter().map(|&n| span(0, n)));
         let sel = SliceInfo { selections };
-        // Free the previous block first: the read holds the raw bytes and the decoded values.
-        self.block = Block::default();
         let field = |e| h5_error(&self.path, "H", e);
         let v: Vec<f32> = match self.elem {
             Elem::F32 => into_vec(self.h.read_slice::<f32>(&sel).map_err(field)?),
@@ -509,25 +594,37 @@ impl TalReader {
                 .map(|x| x as f32)
                 .collect(),
         };
-        let want = self.geometry.nt * (y1 - y0) * self.geometry.spads_per_row();
+        let (nt, rows, ks) = (self.dims[0], end - first, self.ks);
+        let want = nt * rows * ks;
         if v.len() != want {
             return Err(Error::format(
                 &self.path,
                 "H",
-                format!(
-                    "{want} values in laser rows {}..{}",
-                    l - iy + y0,
-                    l - iy + y1
-                ),
+                format!("{want} values in laser rows {first}..{end}"),
                 v.len(),
             ));
         }
-        self.block = Block {
-            first: l - iy + y0,
-            rows: y1 - y0,
-            data: v,
-        };
-        Ok(())
+        // Time-major v[(n·rows + r)·Ks + s] → row-major data[(r·Ks + s)·Nt + n], T time bins
+        // at a time: T source runs read across, one cache line written per SPAD.
+        const T: usize = 16;
+        let mut data = vec![0.0f32; want];
+        for r in 0..rows {
+            let dst = &mut data[r * ks * nt..(r + 1) * ks * nt];
+            for n0 in (0..nt).step_by(T) {
+                let nn = T.min(nt - n0);
+                let src: [&[f32]; T] = std::array::from_fn(|k| {
+                    let n = n0 + k.min(nn - 1);
+                    &v[(n * rows + r) * ks..(n * rows + r + 1) * ks]
+                });
+                for (s, d) in dst.chunks_exact_mut(nt).enumerate() {
+                    for (k, x) in d[n0..n0 + nn].iter_mut().enumerate() {
+                        *x = src[k][s];
+                    }
+                }
+            }
+        }
+        drop(v);
+        Ok(Block { first, rows, data })
     }
 }
 
@@ -601,11 +698,44 @@ fn check_layout(
     Ok(())
 }
 
-/// Rows read from `H` at once (module docs, *Reading*): at most this many bytes, or one row.
-pub const BLOCK_BYTES: usize = 1 << 18;
+/// The background reader: a thread that reads the blocks in row order from a start block
+/// and hands them over through a queue of [`QUEUE`] blocks, so that reading (and the
+/// decompression of a chunked `H`) overlaps the probes' work on the rows already read. It
+/// stops at the last row, at the first error (which it passes on) or when dropped.
+struct ReadAhead {
+    rx: Receiver<Result<Block>>,
+    /// First row of the next block the queue will deliver.
+    next: usize,
+}
 
-/// The cached hyperslab of consecutive rows `first..first + rows`, time-major:
-/// `data[(n·rows + r)·Ks + s]`.
+impl ReadAhead {
+    fn start(plan: Plan, first: usize) -> Self {
+        let (tx, rx) = sync_channel(QUEUE);
+        std::thread::spawn(move || {
+            let mut l = first;
+            while l < plan.kl {
+                let (a, b) = block_range(&plan.dims, plan.format, plan.ks, l);
+                let block = plan.read(a, b);
+                let failed = block.is_err();
+                if tx.send(block).is_err() || failed {
+                    return;
+                }
+                l = b;
+            }
+        });
+        Self { rx, next: first }
+    }
+}
+
+/// Blocks waiting in the read-ahead queue (besides the one in use and the one being read).
+const QUEUE: usize = 1;
+
+/// Rows read from `H` at once (module docs, *Reading*): at most this many bytes (whole laser
+/// lines when a line fits), or one row.
+pub const BLOCK_BYTES: usize = 8 << 20;
+
+/// The cached hyperslab of consecutive rows `first..first + rows`, transposed to vltm's
+/// order: `data[(r·Ks + s)·Nt + n]`.
 #[derive(Default)]
 struct Block {
     first: usize,
@@ -629,16 +759,11 @@ impl RowSource for TalReader {
         if !(self.block.first..self.block.first + self.block.rows).contains(&l) {
             self.load_block(l)?;
         }
-        let (nt, ks) = (self.geometry.nt, self.geometry.spads_per_row());
-        let (r, rows) = (l - self.block.first, self.block.rows);
+        let len = self.geometry.nt * self.geometry.spads_per_row();
+        let r = l - self.block.first;
+        // The background reader transposed the block to rows of SPAD-major histograms.
         out.clear();
-        out.resize(nt * ks, 0.0);
-        // H is time-major: block[(n·rows + r)·Ks + s] → out[s·Nt + n].
-        for (n, t) in self.block.data.chunks_exact(rows * ks).enumerate() {
-            for (s, &x) in t[r * ks..(r + 1) * ks].iter().enumerate() {
-                out[s * nt + n] = x;
-            }
-        }
+        out.extend_from_slice(&self.block.data[r * len..(r + 1) * len]);
         let x_l = self.geometry.lasers[l];
         if let Some(c0) = self.single_falloff {
             let k = self.geometry.laser_falloff(x_l) / c0;

@@ -417,14 +417,27 @@ fn synthetic_formats_stream_the_right_values() {
         check_rows(&mut r, |l, s| l * 8 + s);
     }
 
-    // Rows of 120 kB: blocks of 2 rows (BLOCK_BYTES), lines of 5 end in a partial block;
-    // rows read in a scrambled order.
+    // Rows of 120 kB: both lines of 5 rows in one block (BLOCK_BYTES); rows read in a
+    // scrambled order (each jump restarts the read-ahead).
     let mut spec = Spec::exhaustive();
     spec.h_shape = vec![30, 2, 5, 10, 100];
     spec.laser_grid = grid(2, 5, false, 0.0);
     spec.sensor_grid = grid(10, 100, false, 0.0);
     let mut r = spec.open(&dir, "blocks").unwrap();
-    assert_eq!(r.block_len(), 2);
+    assert_eq!(r.block_range(3), (0, 10));
+    // Rows of 4 MB: two rows per block within a line; lines of 5 end in a partial block.
+    let dims = [1000, 3, 5, 10, 100];
+    let blocks: Vec<_> = (0..15)
+        .map(|l| super::block_range(&dims, HFormat::TLxLySxSy, 1000, l))
+        .collect();
+    assert_eq!(
+        &blocks[..7],
+        &[(0, 2), (0, 2), (2, 4), (2, 4), (4, 5), (5, 7), (5, 7)]
+    );
+    // Rows of 40 kB, lines of 5: whole lines, as many as fit in BLOCK_BYTES.
+    let dims = [100, 300, 5, 10, 10];
+    let b = super::block_range(&dims, HFormat::TLxLySxSy, 100, 7);
+    assert_eq!((b.0 % 5, b.1 - b.0), (0, BLOCK_BYTES / 40_000 / 5 * 5));
     let mut row = Vec::new();
     for l in [9, 0, 4, 5, 3, 8, 1, 2, 7, 6, 6, 9] {
         r.read_row(l, &mut row).unwrap();

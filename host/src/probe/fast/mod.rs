@@ -4,6 +4,8 @@
 //! * [`band`]: stage 1 of a whole laser row as one `sgemm` (`matrixmultiply`).
 //! * [`planar`]: the planar FFT convolution over a SPAD grid and wall-parallel voxel slices
 //!   (`rustfft`), for the diagonal per row and for imaging factorised columns.
+//! * [`confocal`]: the same FFT convolution for confocal scans (laser and SPAD at each wall
+//!   point): per slice one inverse FFT of `Σ_j X̂_j·κ̂_j`, no stored kernel table (`rustfft`).
 //! * [`lookup`]: the gated baseband + lookup diagonal (§B.2.4): one inverse FFT per SPAD and
 //!   row, then a cubic interpolation per (voxel, SPAD), for any geometry (`rustfft`).
 //!
@@ -11,9 +13,11 @@
 //! the float64 reference in `tests/proptest_fast.rs`.
 
 pub mod band;
+pub mod confocal;
 pub mod lookup;
 pub mod planar;
 
 pub use band::BandDft;
+pub use confocal::Confocal;
 pub use lookup::Lookup;
 pub use planar::Planar;

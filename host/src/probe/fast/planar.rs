@@ -155,6 +155,124 @@ fn axis_map(s: &Axis, v: &[f64], tol: f64, name: &str) -> Result<AxisMap, String
     Ok(AxisMap { pitch, phases })
 }
 
+/// One (depth, phase) sub-grid of a wall-parallel voxel grid on a wall lattice: its offsets
+/// from the lattice origin and where its voxels sit in the convolution's output image.
+#[derive(Clone, Debug)]
+pub(super) struct SubGrid {
+    /// Depth below the wall plane (m).
+    pub(super) dz: f64,
+    /// Offset of the sub-grid's first voxel from the lattice origin, x and y (m).
+    pub(super) dx: f64,
+    pub(super) dy: f64,
+    /// Voxels of the sub-grid along x and y.
+    pub(super) cx: usize,
+    pub(super) cy: usize,
+    /// (cell `i'x·My + i'y` of the output image, voxel index).
+    pub(super) outputs: Vec<(u32, u32)>,
+}
+
+/// A regular wall lattice and a wall-parallel voxel grid whose pitch divides it, laid out for
+/// a zero-padded 2-D convolution (shared by [`Planar`] and [`super::confocal`]).
+#[derive(Clone, Debug)]
+pub(super) struct Layout {
+    /// FFT size (powers of two, `≥ n_s + n_v − 1` per axis).
+    pub(super) mx: usize,
+    pub(super) my: usize,
+    /// Wall lattice size.
+    pub(super) nsx: usize,
+    pub(super) nsy: usize,
+    /// Wall lattice pitch x, y (m).
+    pub(super) px: f64,
+    pub(super) py: f64,
+    /// Output rows the inverse y-pass must compute.
+    pub(super) rows_out: usize,
+    /// Cell `ix·My + iy` of each wall point (input order).
+    pub(super) cell: Vec<usize>,
+    /// The (depth, phase) sub-grids, depth-major.
+    pub(super) subgrids: Vec<SubGrid>,
+}
+
+/// Lays out `voxels` (C order over `shape`) against the wall lattice `wall`, or says why
+/// they do not fit (lattice tolerance `tol`, m).
+pub(super) fn layout(
+    wall: &[Point],
+    voxels: &[Point],
+    shape: [usize; 3],
+    tol: f64,
+) -> Result<Layout, String> {
+    let [nx, ny, nz] = shape;
+    if nx * ny * nz != voxels.len() || voxels.is_empty() {
+        return Err("the voxels are not a grid".into());
+    }
+    let g = spad_grid(wall, tol)?;
+    let at = |ix: usize, iy: usize, iz: usize| voxels[(ix * ny + iy) * nz + iz];
+    // The volume must be a product grid: x depends on ix only, y on iy, z on iz.
+    for ix in 0..nx {
+        for iy in 0..ny {
+            for iz in 0..nz {
+                let p = at(ix, iy, iz);
+                let q = [at(ix, 0, 0)[0], at(0, iy, 0)[1], at(0, 0, iz)[2]];
+                if (0..3).any(|c| (p[c] - q[c]).abs() as f64 > tol) {
+                    return Err("the voxels are not a wall-parallel grid".into());
+                }
+            }
+        }
+    }
+    // Descending axes (a SPEC `0.5:-0.5:11`) are walked in ascending order.
+    let rev_x = nx > 1 && at(nx - 1, 0, 0)[0] < at(0, 0, 0)[0];
+    let rev_y = ny > 1 && at(0, ny - 1, 0)[1] < at(0, 0, 0)[1];
+    let ix_of = |i: usize| if rev_x { nx - 1 - i } else { i };
+    let iy_of = |i: usize| if rev_y { ny - 1 - i } else { i };
+    let vx: Vec<f64> = (0..nx).map(|i| at(ix_of(i), 0, 0)[0] as f64).collect();
+    let vy: Vec<f64> = (0..ny).map(|i| at(0, iy_of(i), 0)[1] as f64).collect();
+    let vz: Vec<f64> = (0..nz).map(|i| at(0, 0, i)[2] as f64).collect();
+    for a in [&vx, &vy] {
+        if a.len() > 1 && lattice(a.iter().copied(), tol).is_none_or(|l| l.n != a.len()) {
+            return Err("the voxel axes are not regular".into());
+        }
+    }
+    let mapx = axis_map(&g.x, &vx, tol, "x")?;
+    let mapy = axis_map(&g.y, &vy, tol, "y")?;
+    let nvx = mapx.phases.iter().map(|p| p.1).max().unwrap_or(1);
+    let nvy = mapy.phases.iter().map(|p| p.1).max().unwrap_or(1);
+    let mx = (g.x.n + nvx - 1).next_power_of_two();
+    let my = (g.y.n + nvy - 1).next_power_of_two();
+    let mut subgrids = Vec::new();
+    let (rx, ry) = (mapx.phases.len(), mapy.phases.len());
+    for (iz, &z) in vz.iter().enumerate() {
+        for (fx_, &(dx, cx)) in mapx.phases.iter().enumerate() {
+            for (fy_, &(dy, cy)) in mapy.phases.iter().enumerate() {
+                let mut outputs = Vec::with_capacity(cx * cy);
+                for i in 0..cx {
+                    for j in 0..cy {
+                        let v = (ix_of(i * rx + fx_) * ny + iy_of(j * ry + fy_)) * nz + iz;
+                        outputs.push(((i * my + j) as u32, v as u32));
+                    }
+                }
+                subgrids.push(SubGrid {
+                    dz: z - g.z,
+                    dx,
+                    dy,
+                    cx,
+                    cy,
+                    outputs,
+                });
+            }
+        }
+    }
+    Ok(Layout {
+        mx,
+        my,
+        nsx: g.x.n,
+        nsy: g.y.n,
+        px: mapx.pitch,
+        py: mapy.pitch,
+        rows_out: nvx,
+        cell: g.index.iter().map(|&(i, j)| i * my + j).collect(),
+        subgrids,
+    })
+}
+
 /// One (depth, phase) slice: its `κ̂` and where its voxels sit in the inverse transform.
 #[derive(Clone, Debug)]
 struct Slice {
@@ -203,7 +321,13 @@ impl std::fmt::Debug for Planar {
 }
 
 /// `dst[c·stride + r] = src[r·cols + c]` for r < rows, c < cols.
-fn transpose(src: &[Complex32], rows: usize, cols: usize, dst: &mut [Complex32], stride: usize) {
+pub(super) fn transpose(
+    src: &[Complex32],
+    rows: usize,
+    cols: usize,
+    dst: &mut [Complex32],
+    stride: usize,
+) {
     const B: usize = 8;
     for r0 in (0..rows).step_by(B) {
         for c0 in (0..cols).step_by(B) {
@@ -229,48 +353,12 @@ impl Planar {
         voxels: &[Point],
         shape: [usize; 3],
     ) -> Result<Self, String> {
-        let tol = 1e-5 * cfg.wavelength();
-        let [nx, ny, nz] = shape;
-        if nx * ny * nz != voxels.len() || voxels.is_empty() {
-            return Err("the voxels are not a grid".into());
-        }
-        let g = spad_grid(spads, tol)?;
-        let at = |ix: usize, iy: usize, iz: usize| voxels[(ix * ny + iy) * nz + iz];
-        // The volume must be a product grid: x depends on ix only, y on iy, z on iz.
-        for ix in 0..nx {
-            for iy in 0..ny {
-                for iz in 0..nz {
-                    let p = at(ix, iy, iz);
-                    let q = [at(ix, 0, 0)[0], at(0, iy, 0)[1], at(0, 0, iz)[2]];
-                    if (0..3).any(|c| (p[c] - q[c]).abs() as f64 > tol) {
-                        return Err("the voxels are not a wall-parallel grid".into());
-                    }
-                }
-            }
-        }
-        // Descending axes (a SPEC `0.5:-0.5:11`) are walked in ascending order.
-        let rev_x = nx > 1 && at(nx - 1, 0, 0)[0] < at(0, 0, 0)[0];
-        let rev_y = ny > 1 && at(0, ny - 1, 0)[1] < at(0, 0, 0)[1];
-        let ix_of = |i: usize| if rev_x { nx - 1 - i } else { i };
-        let iy_of = |i: usize| if rev_y { ny - 1 - i } else { i };
-        let vx: Vec<f64> = (0..nx).map(|i| at(ix_of(i), 0, 0)[0] as f64).collect();
-        let vy: Vec<f64> = (0..ny).map(|i| at(0, iy_of(i), 0)[1] as f64).collect();
-        let vz: Vec<f64> = (0..nz).map(|i| at(0, 0, i)[2] as f64).collect();
-        for a in [&vx, &vy] {
-            if a.len() > 1 && lattice(a.iter().copied(), tol).is_none_or(|l| l.n != a.len()) {
-                return Err("the voxel axes are not regular".into());
-            }
-        }
-        let mapx = axis_map(&g.x, &vx, tol, "x")?;
-        let mapy = axis_map(&g.y, &vy, tol, "y")?;
-        let nvx = mapx.phases.iter().map(|p| p.1).max().unwrap_or(1);
-        let nvy = mapy.phases.iter().map(|p| p.1).max().unwrap_or(1);
-        let mx = (g.x.n + nvx - 1).next_power_of_two();
-        let my = (g.y.n + nvy - 1).next_power_of_two();
+        let lay = layout(spads, voxels, shape, 1e-5 * cfg.wavelength())?;
+        let (mx, my) = (lay.mx, lay.my);
         let m = mx * my;
         let bins = cfg.bins();
-        let n_slices = nz * mapx.phases.len() * mapy.phases.len();
-        let bytes = n_slices
+        let n_slices = lay.subgrids.len();
+        n_slices
             .checked_mul(bins)
             .and_then(|x| x.checked_mul(m))
             .and_then(|x| x.checked_mul(8))
@@ -281,38 +369,27 @@ impl Planar {
                     MAX_TABLE_BYTES >> 30
                 )
             })?;
-        let _ = bytes;
         let mut planner = FftPlanner::<f32>::new();
         let fy = planner.plan_fft_forward(my);
         let fx = planner.plan_fft_forward(mx);
         let ix = planner.plan_fft_inverse(mx);
         let iy = planner.plan_fft_inverse(my);
-        let spad_cell = g.index.iter().map(|&(i, j)| i * my + j).collect();
         let span = cfg.span();
         let scale = 1.0 / m as f64;
-        let mut slices = Vec::with_capacity(n_slices);
         let mut khat = vec![Complex32::new(0.0, 0.0); n_slices * bins * m];
-        let mut specs = Vec::with_capacity(n_slices);
-        for (iz, &z) in vz.iter().enumerate() {
-            let dz = z - g.z;
-            for (fx_, &(dx, cx)) in mapx.phases.iter().enumerate() {
-                for (fy_, &(dy, cy)) in mapy.phases.iter().enumerate() {
-                    let rx = mapx.phases.len();
-                    let ry = mapy.phases.len();
-                    let mut outputs = Vec::with_capacity(cx * cy);
-                    for i in 0..cx {
-                        for j in 0..cy {
-                            let v = (ix_of(i * rx + fx_) * ny + iy_of(j * ry + fy_)) * nz + iz;
-                            outputs.push(((i * my + j) as u32, v as u32));
-                        }
-                    }
-                    slices.push(Slice { outputs });
-                    specs.push((dz, dx, dy, cx, cy));
-                }
-            }
-        }
-        let (nsx, nsy) = (g.x.n, g.y.n);
-        let (px, py) = (mapx.pitch, mapy.pitch);
+        let specs: Vec<_> = lay
+            .subgrids
+            .iter()
+            .map(|s| (s.dz, s.dx, s.dy, s.cx, s.cy))
+            .collect();
+        let slices = lay
+            .subgrids
+            .into_iter()
+            .map(|s| Slice { outputs: s.outputs })
+            .collect();
+        let spad_cell = lay.cell;
+        let (nsx, nsy) = (lay.nsx, lay.nsy);
+        let (px, py) = (lay.px, lay.py);
         let mut scratch = vec![
             Complex32::new(0.0, 0.0);
             fy.get_inplace_scratch_len()
@@ -343,7 +420,7 @@ impl Planar {
                 fx.process_with_scratch(out, &mut scratch);
             }
         }
-        let rows_out = nvx;
+        let rows_out = lay.rows_out;
         Ok(Self {
             bins,
             mx,

@@ -1,0 +1,433 @@
+//! The confocal FFT convolution: direct light of a **confocal** capture (each wall point lit
+//! and watched together) on a regular wall grid, over wall-parallel voxel slices.
+//!
+//! Row `l` of a confocal capture is one histogram with laser and SPAD at the same wall point
+//! `x_l`, so the diagonal's hidden path is `τ = 2·|x_l − x_v|` and both lens weights are
+//! `w(|x_l − x_v|)`. For a slice at depth z below the wall and band bin j:
+//!
+//! ```text
+//! A(v) = Σ_j Σ_l HG_l[j] · κ_{j,z}(x_v − x_l),   κ_{j,z}(Δ) = w(d)²·e^{iν_j·2d},   d = √(|Δ|² + z²)
+//! ```
+//!
+//! with `HG_l` the row's band spectrum (gate weights, legs and t0 folded in, as
+//! `vltm_kernel::Row::band`). The kernel depends on the lateral offset only: per (bin,
+//! slice) a 2-D convolution over the wall grid. The sum over j commutes with the
+//! transforms, so per slice `A_z = F⁻¹[Σ_j X̂_j · κ̂_{j,z}]`, `X̂_j = F[HG_·[j]]`:
+//!
+//! * one forward 2-D FFT of the wall image per band bin, shared by every slice
+//!   ([`Confocal::forward`]; pruned: the y-pass skips the all-zero padding rows);
+//! * per slice, J kernel images (their phases by an `f64` recurrence from two seeds per
+//!   offset), each transformed and multiplied into one accumulator, then **one** inverse
+//!   FFT (pruned to the output rows) ([`Confocal::image`]).
+//!
+//! `κ̂` is never stored: memory does not grow with the number of slices. The padding is as in
+//! [`super::planar`] (`Mx × My ≥ (n_w + n_v − 1)` per axis, powers of two), as is the
+//! polyphase split of voxel grids finer than the wall grid by an integer factor per axis
+//! (each phase a sub-grid with its own kernel offsets). Point lists, other pitch ratios and
+//! irregular or tilted wall points do not apply ([`Confocal::new`] says why; the caller uses
+//! the lookup or band path).
+//!
+//! Equality with the band sum: the same band sum up to `f32` FFT rounding, **for paths
+//! inside the guard interval**; the caller evaluates the voxels that have a path outside
+//! [`vltm_kernel::Config::guard`] on the band path, as for the planar path.
+//!
+//! Cost: `J·F(M)/2` (forward) `+ S·J·(F(M) + 12M) + S·F(M)/2` flops (S = slices × phases,
+//! `F(M) = 5M·log₂M`), against the band path's `Kv·K·(14J + 60)` over K rows. Memory: the
+//! spectra `J·M` complex `f32` (shared, [`Confocal::spectra_bytes`]), per worker `3M`
+//! complex `f32` and `~N_off` seeds (`N_off ≤ M` kernel offsets, 40 bytes each), the output.
+
+use super::planar::{Layout, MAX_TABLE_BYTES, SubGrid, layout, transpose};
+use num_complex::{Complex32, Complex64};
+use rayon::prelude::*;
+use rustfft::{Fft, FftPlanner};
+use std::sync::Arc;
+use vltm_kernel::{Config, Point};
+
+/// Precomputed confocal convolution for one (wall grid, voxel grid, configuration).
+pub struct Confocal {
+    cfg: Config,
+    lay: Layout,
+    /// The rows' common leg offset `d1 + d4 − t0` (m), when the guard is applied in the
+    /// kernel ([`Confocal::with_guard`]).
+    guard_offset: Option<f32>,
+    fy: Arc<dyn Fft<f32>>,
+    fx: Arc<dyn Fft<f32>>,
+    ix: Arc<dyn Fft<f32>>,
+    iy: Arc<dyn Fft<f32>>,
+}
+
+impl std::fmt::Debug for Confocal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Confocal")
+            .field("bins", &self.cfg.bins())
+            .field("mx", &self.lay.mx)
+            .field("my", &self.lay.my)
+            .field("slices", &self.lay.subgrids.len())
+            .finish_non_exhaustive()
+    }
+}
+
+/// One worker's state while it sums `Σ_j X̂_j·κ̂_j` over a run of bins of one slice.
+struct BinSum {
+    /// Kernel offsets: (cell, `w²/M·e^{iν_j 2d}` at the next bin, `e^{iΔν 2d}`, 2d).
+    offsets: Vec<(usize, Complex64, Complex64, f64)>,
+    /// The bin the seeds are at (`usize::MAX`: not seeded).
+    next: usize,
+    img: Vec<Complex32>,
+    spec: Vec<Complex32>,
+    sum: Vec<Complex32>,
+    fft: Vec<Complex32>,
+}
+
+impl Confocal {
+    /// Prepares the convolution of the confocal wall points `wall` (the capture's laser
+    /// spots, row order) onto the voxel grid `voxels` (C order over `shape = [nx, ny, nz]`),
+    /// or says why it does not apply. Lattice tolerance `1e-5·λ`.
+    ///
+    /// # Errors
+    /// A one-line reason (irregular wall points, pitch ratio, spectra too large).
+    pub fn new(
+        cfg: &Config,
+        wall: &[Point],
+        voxels: &[Point],
+        shape: [usize; 3],
+    ) -> Result<Self, String> {
+        let lay = layout(wall, voxels, shape, 1e-5 * cfg.wavelength())?;
+        let m = lay.mx * lay.my;
+        cfg.bins()
+            .checked_mul(m)
+            .and_then(|x| x.checked_mul(8))
+            .filter(|&b| b <= MAX_TABLE_BYTES)
+            .ok_or_else(|| {
+                format!(
+                    "its wall spectra would exceed {} GiB",
+                    MAX_TABLE_BYTES >> 30
+                )
+            })?;
+        let mut planner = FftPlanner::<f32>::new();
+        Ok(Self {
+            cfg: *cfg,
+            guard_offset: None,
+            fy: planner.plan_fft_forward(lay.my),
+            fx: planner.plan_fft_forward(lay.mx),
+            ix: planner.plan_fft_inverse(lay.mx),
+            iy: planner.plan_fft_inverse(lay.my),
+            lay,
+        })
+    }
+
+    /// Applies the kernel's guard in the convolution itself: when every row has the same leg
+    /// offset `offset = d1 + d4 − t0` (always so for wall-to-wall time axes), whether a path
+    /// is inside [`Config::guard`] depends on its offset `x_v − x_l` only, so the kernel
+    /// `κ` is set to 0 where `2d + offset` (in `f32`, the kernel's comparison) is outside and
+    /// no voxel needs the band path. Without it, the caller must evaluate the voxels with a
+    /// path outside the guard otherwise.
+    #[must_use]
+    pub fn with_guard(mut self, offset: f32) -> Self {
+        self.guard_offset = Some(offset);
+        self
+    }
+
+    /// FFT size `(Mx, My)` and number of (depth, phase) slices.
+    pub fn shape(&self) -> (usize, usize, usize) {
+        (self.lay.mx, self.lay.my, self.lay.subgrids.len())
+    }
+
+    /// Flops of [`Confocal::forward`] and [`Confocal::image`] (the model of the module docs).
+    pub fn flops(&self) -> f64 {
+        let m = (self.lay.mx * self.lay.my) as f64;
+        let f = 5.0 * m * m.log2();
+        let (j, s) = (self.cfg.bins() as f64, self.lay.subgrids.len() as f64);
+        j * f / 2.0 + s * j * (f + 12.0 * m) + s * f / 2.0
+    }
+
+    /// Length of the spectra buffer: `J·Mx·My` complex values.
+    pub fn spectra_len(&self) -> usize {
+        self.cfg.bins() * self.lay.mx * self.lay.my
+    }
+
+    /// Bytes of the spectra buffer.
+    pub fn spectra_bytes(&self) -> usize {
+        self.spectra_len() * 8
+    }
+
+    /// A zeroed spectra buffer ([`Confocal::spectra_len`]).
+    pub fn spectra(&self) -> Vec<Complex32> {
+        vec![Complex32::new(0.0, 0.0); self.spectra_len()]
+    }
+
+    /// Places row `l`'s band spectrum `hg` (J values, `Row::band`) at its wall point.
+    ///
+    /// # Panics
+    /// If `l` is not a wall point or `hg` is not J long.
+    pub fn place(&self, spectra: &mut [Complex32], l: usize, hg: &[Complex32]) {
+        let m = self.lay.mx * self.lay.my;
+        assert_eq!(hg.len(), self.cfg.bins(), "one band spectrum");
+        let cell = self.lay.cell[l];
+        for (j, h) in hg.iter().enumerate() {
+            spectra[j * m + cell] = *h;
+        }
+    }
+
+    /// Transforms the placed spectra in place, bins in parallel: `[j][ix][iy]` wall images
+    /// become `[j][ky][kx]` spectra.
+    pub fn forward(&self, spectra: &mut [Complex32]) {
+        let (mx, my) = (self.lay.mx, self.lay.my);
+        let m = mx * my;
+        let nsx = self.lay.nsx;
+        let flen = self
+            .fy
+            .get_inplace_scratch_len()
+            .max(self.fx.get_inplace_scratch_len())
+            .max(1);
+        spectra.par_chunks_mut(m).for_each_init(
+            || {
+                (
+                    vec![Complex32::new(0.0, 0.0); m],
+                    vec![Complex32::new(0.0, 0.0); flen],
+                )
+            },
+            |(t, fft), img| {
+                self.fy.process_with_scratch(&mut img[..nsx * my], fft);
+                t.fill(Complex32::new(0.0, 0.0));
+                transpose(&img[..nsx * my], nsx, my, t, mx);
+                self.fx.process_with_scratch(t, fft);
+                img.copy_from_slice(t);
+            },
+        );
+    }
+
+    /// Adds `A(v)` (module docs) to `acc[v]` for every voxel with `skip[v] == false`, from
+    /// spectra made by [`Confocal::forward`]. Slices and runs of bins in parallel.
+    ///
+    /// # Panics
+    /// If `spectra` is not [`Confocal::spectra_len`] long.
+    pub fn image(&self, spectra: &[Complex32], skip: &[bool], acc: &mut [Complex64]) {
+        assert_eq!(spectra.len(), self.spectra_len(), "spectra");
+        let bins = self.cfg.bins();
+        let per = bins.div_ceil(2 * rayon::current_num_threads()).max(8);
+        let parts: Vec<Vec<(u32, Complex64)>> = self
+            .lay
+            .subgrids
+            .par_iter()
+            .map(|sg| {
+                let sum = (0..bins)
+                    .into_par_iter()
+                    .with_min_len(per)
+                    .fold(
+                        || self.bin_sum(),
+                        |mut b, j| {
+                            self.add_bin(sg, spectra, j, &mut b);
+                            b
+                        },
+                    )
+                    .map(|b| b.sum)
+                    .reduce_with(|mut a, b| {
+                        a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
+                        a
+                    })
+                    .unwrap_or_default();
+                self.inverse(sg, sum, skip)
+            })
+            .collect();
+        for (v, a) in parts.into_iter().flatten() {
+            acc[v as usize] += a;
+        }
+    }
+
+    fn bin_sum(&self) -> BinSum {
+        let m = self.lay.mx * self.lay.my;
+        let flen = [&self.fy, &self.fx, &self.ix, &self.iy]
+            .iter()
+            .map(|f| f.get_inplace_scratch_len())
+            .max()
+            .unwrap_or(0)
+            .max(1);
+        let zero = Complex32::new(0.0, 0.0);
+        BinSum {
+            offsets: Vec::new(),
+            next: usize::MAX,
+            img: vec![zero; m],
+            spec: vec![zero; m],
+            sum: vec![zero; m],
+            fft: vec![zero; flen],
+        }
+    }
+
+    /// Seeds the kernel offsets of `sg` at bin `j`: `w(d)²/M·e^{iν_j 2d}` and the step.
+    fn seed(&self, sg: &SubGrid, j: usize, b: &mut BinSum) {
+        let (mx, my) = (self.lay.mx as i64, self.lay.my as i64);
+        let (px, py) = (self.lay.px, self.lay.py);
+        let span = self.cfg.span();
+        let scale = 1.0 / (mx * my) as f64;
+        let k = (self.cfg.k_lo() + j as i64) as f64;
+        let (g_lo, g_hi) = self.cfg.guard();
+        let inside = |d: f64| {
+            self.guard_offset.is_none_or(|off| {
+                let d = d as f32;
+                let rel = d + d + off;
+                rel >= g_lo as f32 && rel <= g_hi as f32
+            })
+        };
+        let cis = |turns: f64| {
+            let a = std::f64::consts::TAU * (turns - turns.round());
+            Complex64::new(a.cos(), a.sin())
+        };
+        b.offsets.clear();
+        for ax in -(self.lay.nsx as i64 - 1)..sg.cx as i64 {
+            for ay in -(self.lay.nsy as i64 - 1)..sg.cy as i64 {
+                let ex = sg.dx + ax as f64 * px;
+                let ey = sg.dy + ay as f64 * py;
+                let d = (ex * ex + ey * ey + sg.dz * sg.dz).sqrt();
+                if !inside(d) {
+                    continue;
+                }
+                let w = self.cfg.weight(d as f32) as f64;
+                let tau = 2.0 * d;
+                let cell = (ax.rem_euclid(mx) * my + ay.rem_euclid(my)) as usize;
+                b.offsets.push((
+                    cell,
+                    cis(k * tau / span) * (w * w * scale),
+                    cis(tau / span),
+                    tau,
+                ));
+            }
+        }
+        b.next = j;
+    }
+
+    /// `sum += X̂_j · κ̂_{j,z}` for slice `sg`.
+    fn add_bin(&self, sg: &SubGrid, spectra: &[Complex32], j: usize, b: &mut BinSum) {
+        let (mx, my) = (self.lay.mx, self.lay.my);
+        let m = mx * my;
+        if b.next != j {
+            self.seed(sg, j, b);
+        }
+        b.img.fill(Complex32::new(0.0, 0.0));
+        for (cell, p, step, _) in &mut b.offsets {
+            b.img[*cell] = Complex32::new(p.re as f32, p.im as f32);
+            *p *= *step;
+        }
+        b.next = j + 1;
+        self.fy.process_with_scratch(&mut b.img, &mut b.fft);
+        transpose(&b.img, mx, my, &mut b.spec, mx);
+        self.fx.process_with_scratch(&mut b.spec, &mut b.fft);
+        let x = &spectra[j * m..(j + 1) * m];
+        for ((s, x), k) in b.sum.iter_mut().zip(x).zip(&b.spec) {
+            *s += x * k;
+        }
+    }
+
+    /// The inverse transform of one slice's sum and its voxels' amplitudes.
+    fn inverse(
+        &self,
+        sg: &SubGrid,
+        mut sum: Vec<Complex32>,
+        skip: &[bool],
+    ) -> Vec<(u32, Complex64)> {
+        let (mx, my) = (self.lay.mx, self.lay.my);
+        let rows = self.lay.rows_out;
+        if sum.is_empty() {
+            return Vec::new();
+        }
+        let flen = self
+            .ix
+            .get_inplace_scratch_len()
+            .max(self.iy.get_inplace_scratch_len())
+            .max(1);
+        let mut fft = vec![Complex32::new(0.0, 0.0); flen];
+        self.ix.process_with_scratch(&mut sum, &mut fft);
+        let mut out = vec![Complex32::new(0.0, 0.0); rows * my];
+        for r in 0..my {
+            for c in 0..rows {
+                out[c * my + r] = sum[r * mx + c];
+            }
+        }
+        self.iy.process_with_scratch(&mut out, &mut fft);
+        sg.outputs
+            .iter()
+            .filter(|(_, v)| !skip.get(*v as usize).copied().unwrap_or(true))
+            .map(|&(cell, v)| {
+                let a = out[cell as usize];
+                (v, Complex64::new(a.re as f64, a.im as f64))
+            })
+            .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use vltm_kernel::Params;
+
+    /// The convolution equals the direct sum `Σ_j Σ_l HG_l[j]·w(d)²·e^{iν_j 2d}` in `f64`
+    /// on a small grid with a half-pitch voxel grid (polyphase) and two slices.
+    #[test]
+    fn equals_the_direct_sum() {
+        let cfg = Config::try_new(&Params {
+            sigma: Some(0.1),
+            ..Params::new(0.1, 120, 0.01)
+        })
+        .unwrap();
+        let wall: Vec<Point> = (0..5)
+            .flat_map(|i| (0..4).map(move |k| [0.1 * i as f32 - 0.2, 0.1 * k as f32, 0.0]))
+            .collect();
+        let (nx, ny, nz) = (9, 7, 2);
+        let voxels: Vec<Point> = (0..nx)
+            .flat_map(|i| {
+                (0..ny).flat_map(move |k| {
+                    (0..nz).map(move |z| {
+                        [
+                            -0.2 + 0.05 * i as f32,
+                            0.05 * k as f32,
+                            0.3 + 0.1 * z as f32,
+                        ]
+                    })
+                })
+            })
+            .collect();
+        let c = Confocal::new(&cfg, &wall, &voxels, [nx, ny, nz]).unwrap();
+        assert_eq!(c.shape().2, 2 * 2 * 2, "two depths × 2×2 phases");
+        let j_n = cfg.bins();
+        let hg: Vec<Complex32> = (0..wall.len() * j_n)
+            .map(|i| {
+                let a = (i * 7919 % 1009) as f32 / 1009.0;
+                Complex32::new(a - 0.5, (i * 31 % 17) as f32 / 17.0 - 0.5)
+            })
+            .collect();
+        let mut spectra = c.spectra();
+        for (l, h) in hg.chunks_exact(j_n).enumerate() {
+            c.place(&mut spectra, l, h);
+        }
+        c.forward(&mut spectra);
+        let mut skip = vec![false; voxels.len()];
+        skip[3] = true;
+        let mut acc = vec![Complex64::new(0.0, 0.0); voxels.len()];
+        c.image(&spectra, &skip, &mut acc);
+        let mut worst = 0.0f64;
+        let mut scale = 0.0f64;
+        for (i, (v, a)) in voxels.iter().zip(&acc).enumerate() {
+            if skip[i] {
+                continue;
+            }
+            let mut s = Complex64::new(0.0, 0.0);
+            for (x, h) in wall.iter().zip(hg.chunks_exact(j_n)) {
+                let d = (0..3)
+                    .map(|i| (f64::from(v[i]) - f64::from(x[i])).powi(2))
+                    .sum::<f64>()
+                    .sqrt();
+                let w = f64::from(cfg.weight(d as f32));
+                for (j, h) in h.iter().enumerate() {
+                    let ph = cfg.nu(j) * 2.0 * d;
+                    s +=
+                        Complex64::new(h.re as f64, h.im as f64) * Complex64::from_polar(w * w, ph);
+                }
+            }
+            scale = scale.max(s.norm());
+            worst = worst.max((s - a).norm());
+        }
+        assert_eq!(acc[3], Complex64::new(0.0, 0.0), "skipped voxel untouched");
+        assert!(scale > 1.0, "a real signal: {scale}");
+        assert!(worst <= 2e-5 * scale, "worst {worst:e} of {scale:e}");
+    }
+}
