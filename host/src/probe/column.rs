@@ -153,7 +153,7 @@ pub fn column(
     exec: Exec<'_>,
 ) -> Result<Output> {
     let t = Instant::now();
-    let (state, cfg) = column_acc(src, focus, volume, gate, wave, exec)?;
+    let (state, cfg) = column_acc(src, focus, volume, gate, wave, exec, false)?;
     let spads = src.geometry().spads.clone();
     let (values, report, path) = state.finish(&cfg, &spads, focus, volume, shell)?;
     check_finite(&values, &volume.points, "column")?;
@@ -184,7 +184,8 @@ pub(super) enum ColumnState {
 }
 
 /// The accumulators of [`column`] over the source's rows ([`RowSource::rows`]), with the
-/// configuration.
+/// configuration. `defer`: leave the choice of the imaging path under [`Path::Auto`] to
+/// [`ColumnState::finish`] (the path is then recorded as `Auto`).
 pub(super) fn column_acc(
     src: &mut dyn RowSource,
     focus: Point,
@@ -192,6 +193,7 @@ pub(super) fn column_acc(
     gate: ColumnGate,
     wave: &Wave,
     exec: Exec<'_>,
+    defer: bool,
 ) -> Result<(ColumnState, vltm_kernel::Config)> {
     check_focus(focus)?;
     match (exec.path, gate) {
@@ -255,9 +257,19 @@ pub(super) fn column_acc(
                     "a confocal capture has no separate camera aperture: columns need a SPAD grid",
                 ));
             }
-            let planar = if kgate == Gate::Gaussian {
+            // Deferred: `finish` decides (building the planar tables costs about as much as
+            // imaging, so parts of a split scan leave it to the merged state).
+            let decide = kgate == Gate::Gaussian && !(defer && exec.path == Path::Auto);
+            let planar = if decide {
                 let rival = band_flops(g, &cfg, volume.len());
-                choose_planar(g, &cfg, volume, exec.path, PlanarUse::Column, rival)?
+                choose_planar(
+                    Some(&g.spads),
+                    &cfg,
+                    volume,
+                    exec.path,
+                    PlanarUse::Column,
+                    rival,
+                )?
             } else {
                 None
             };
@@ -269,8 +281,10 @@ pub(super) fn column_acc(
                 gate: kgate,
                 path: if planar.is_some() {
                     Path::Planar
-                } else {
+                } else if decide || kgate != Gate::Gaussian {
                     Path::Band
+                } else {
+                    Path::Auto
                 },
                 planar: planar.map(Box::new),
             }
@@ -305,10 +319,18 @@ impl ColumnState {
             } => {
                 let rebuilt;
                 let planar = match (path, planar) {
-                    (Path::Planar, None) => {
-                        rebuilt = Planar::new(cfg, spads, &volume.points, volume.shape)
-                            .map_err(|e| Error::arg("--path", e))?;
-                        Some(&rebuilt)
+                    (Path::Planar | Path::Auto, None) if *gate == Gate::Gaussian => {
+                        let rival =
+                            (volume.len() * spads.len()) as f64 * (14.0 * cfg.bins() as f64 + 60.0);
+                        rebuilt = choose_planar(
+                            Some(spads),
+                            cfg,
+                            volume,
+                            *path,
+                            PlanarUse::Column,
+                            rival,
+                        )?;
+                        rebuilt.as_ref()
                     }
                     (_, p) => p.as_deref(),
                 };

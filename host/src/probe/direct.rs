@@ -84,9 +84,14 @@ pub(super) fn direct_acc(
     });
     // Planar competes with the cheaper of band and lookup under `Auto`.
     let rival = lookup_cost.map_or(band_cost, |l| l.min(band_cost));
-    let (acc, report, path) = if let Some(planar) =
-        choose_planar(g, &cfg, volume, exec.path, PlanarUse::Diagonal, rival)?
-    {
+    let (acc, report, path) = if let Some(planar) = choose_planar(
+        (!g.confocal).then_some(&g.spads[..]),
+        &cfg,
+        volume,
+        exec.path,
+        PlanarUse::Diagonal,
+        rival,
+    )? {
         let (acc, report) = direct_planar(src, job, volume, &planar)?;
         (acc, report, Path::Planar)
     } else if exec.path == Path::Lookup
@@ -152,9 +157,10 @@ pub(super) enum PlanarUse {
 
 /// The planar convolution for this probe, if [`Exec::path`] allows it, it applies and (for
 /// [`Path::Auto`]) it costs fewer flops than `rival`, the cheapest other path (DESIGN §B.8
-/// cost model, per row for the diagonal, once for a column's imaging).
+/// cost model, per row for the diagonal, once for a column's imaging). `spads`: the SPAD
+/// spots, `None` for a confocal capture.
 pub(super) fn choose_planar(
-    g: &Geometry,
+    spads: Option<&[Point]>,
     cfg: &Config,
     volume: &Volume,
     path: Path,
@@ -164,14 +170,13 @@ pub(super) fn choose_planar(
     if matches!(path, Path::Band | Path::Lookup) {
         return Ok(None);
     }
-    let why = if g.confocal {
-        Err("a confocal capture has no SPAD grid".to_string())
-    } else if volume.axes.is_none() {
-        Err("the volume is a point list, not a grid".to_string())
-    } else {
-        Ok(())
+    let planar = match spads {
+        None => Err("a confocal capture has no SPAD grid".to_string()),
+        Some(_) if volume.axes.is_none() => {
+            Err("the volume is a point list, not a grid".to_string())
+        }
+        Some(sp) => Planar::new(cfg, sp, &volume.points, volume.shape),
     };
-    let planar = why.and_then(|()| Planar::new(cfg, &g.spads, &volume.points, volume.shape));
     match (planar, path) {
         (Err(e), Path::Planar) => Err(Error::arg(
             "--path",

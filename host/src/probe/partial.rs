@@ -322,7 +322,7 @@ pub fn accumulate(
             (cfg, acc, a.report, a.path, None, None, None, None)
         }
         Task::Column { focus, gate, shell } => {
-            let (state, cfg) = column_acc(&mut part, *focus, volume, *gate, wave, exec)?;
+            let (state, cfg) = column_acc(&mut part, *focus, volume, *gate, wave, exec, true)?;
             let (acc, report, path) = match state {
                 ColumnState::Voxels(acc, r) => (flat(&acc), r, Path::Band),
                 ColumnState::Factorised {
