@@ -564,7 +564,8 @@ fn check_layout(
                         ),
                     ));
                 }
-                if address.checked_add(*size).is_none_or(|end| end > file_len) {
+                // The superblock is at address 0 (at least 48 bytes): data never starts there.
+                if *address < 48 || address.checked_add(*size).is_none_or(|end| end > file_len) {
                     return Err(bad(
                         &format!("data inside the file ({file_len} bytes)"),
                         format!("{size} bytes at address {address:#x}: outside the file"),
