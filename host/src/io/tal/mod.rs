@@ -109,7 +109,10 @@
 //! structure itself cannot be parsed): a missing dataset, wrong rank or shape, grids that do not
 //! match `H`, non-numeric types, an unknown `H_format` or grid format, a non-finite or
 //! non-positive `delta_t`, non-finite `t_start` or positions, a contiguous `H` larger than the
-//! file, truncated or corrupt files (the crate's own message is kept). A file that cannot be
+//! file, a layout of `H` that holds no data or points outside the file (size 0, an undefined
+//! address or address 0, past the end, shorter than the shape; a chunked `H` without a chunk
+//! index: read as fill values, it gave all-zero output), a row or capture over the memory
+//! budget ([`crate::budget`]; every read through the crate is capped at it too), truncated or corrupt files (the crate's own message is kept). A file that cannot be
 //! opened or read is [`Error::Io`].
 //!
 //! `hdf5_reader` bounds every offset and length it reads with checked arithmetic and reports
@@ -661,7 +664,8 @@ fn check_layout(
                         ),
                     ));
                 }
-                if address.checked_add(*size).is_none_or(|end| end > file_len) {
+                // The superblock is at address 0 (at least 48 bytes): data never starts there.
+                if *address < 48 || address.checked_add(*size).is_none_or(|end| end > file_len) {
                     return Err(bad(
                         &format!("data inside the file ({file_len} bytes)"),
                         format!("{size} bytes at address {address:#x}: outside the file"),
