@@ -4,6 +4,7 @@
 use super::column::*;
 use super::direct::*;
 use super::drive::*;
+use super::leak::{DirectModel, LeakCorrected, LeakOptions, cell_radius};
 use super::wave::*;
 use crate::error::{Error, Result};
 use crate::exec::Exec;
@@ -21,6 +22,9 @@ pub struct IndirectOptions {
     pub shell: Option<Shell>,
     /// Largest accumulator memory accepted (bytes) (default 8 GiB).
     pub max_bytes: usize,
+    /// Remove the capture's fitted direct light before the columns (`--leak-correct`,
+    /// [`DirectModel`]); `None` = the paper's Eq. 17 on the capture as it is.
+    pub leak: Option<LeakOptions>,
 }
 
 impl Default for IndirectOptions {
@@ -29,6 +33,7 @@ impl Default for IndirectOptions {
             epsilon: 0.1,
             shell: None,
             max_bytes: 8 << 30,
+            leak: None,
         }
     }
 }
@@ -46,6 +51,9 @@ pub struct IndirectOutput {
     pub shell: Shell,
     /// Counters of pass 2.
     pub report: Report,
+    /// With leak correction: the fraction of the demodulated capture's energy the direct
+    /// model explains ([`DirectModel::explained`]).
+    pub explained: Option<f64>,
     /// Wall-clock seconds for both passes.
     pub seconds: f64,
 }
@@ -118,6 +126,13 @@ pub fn indirect_over(
     });
     let mut values = vec![0.0f32; volume.len()];
     let mut report = Report::default();
+    let mut explained = None;
+    if idx.is_empty() && opts.leak.is_some() {
+        return Err(Error::arg(
+            "--leak-correct",
+            "Γ is empty: no voxel has direct light above ε·max (no direct return in the window for this volume?)",
+        ));
+    }
     if !idx.is_empty() {
         let ks = src.geometry().spads_per_row();
         let bytes = idx.len()
@@ -132,6 +147,26 @@ pub fn indirect_over(
                 ),
             ));
         }
+        let model = match &opts.leak {
+            Some(lo) => Some(DirectModel::fit(
+                src,
+                &pts,
+                cell_radius(volume),
+                wave,
+                lo,
+                exec,
+            )?),
+            None => None,
+        };
+        explained = model.as_ref().map(|m| m.explained);
+        let mut corrected;
+        let src: &mut dyn RowSource = match &model {
+            Some(m) => {
+                corrected = LeakCorrected::new(src, m);
+                &mut corrected
+            }
+            None => src,
+        };
         let cols = factorised_columns(
             src,
             Job {
@@ -163,6 +198,7 @@ pub fn indirect_over(
         gamma: gamma.to_vec(),
         shell,
         report,
+        explained,
         seconds: t.elapsed().as_secs_f64(),
     })
 }

@@ -18,10 +18,12 @@ mod direct;
 mod drive;
 pub mod fast;
 mod indirect;
+mod leak;
 mod wave;
 
 pub use crate::exec::{Exec, Path};
 pub use column::{ColumnGate, Shell, check_focus, column};
 pub use direct::direct;
 pub use indirect::{IndirectOptions, IndirectOutput, gamma_mask, indirect, indirect_over};
+pub use leak::{DirectModel, LeakCorrected, LeakMethod, LeakOptions, cell_radius, fit_over_volume};
 pub use wave::{Output, Wave, default_wavelength};

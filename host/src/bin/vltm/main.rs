@@ -11,7 +11,7 @@ use vltm::exec::{Exec, Path as EvalPath};
 use vltm::io::{self, RowSource};
 use vltm::out::figure::Figure;
 use vltm::out::h5::Provenance;
-use vltm::probe::{self, ColumnGate, IndirectOptions, Shell, Wave};
+use vltm::probe::{self, ColumnGate, IndirectOptions, LeakOptions, Shell, Wave};
 use vltm::volume::{Volume, parse_point};
 
 mod demo;
@@ -91,6 +91,14 @@ enum Command {
         /// Keep only voxels with R0 <= |x_a - x_b| < R1 metres (near/middle/far light).
         #[arg(long, value_name = "R0:R1")]
         shell: Option<String>,
+        /// Remove the capture's direct light before the column: fit a one-bounce model over
+        /// Γ = voxels whose direct light exceeds --leak-epsilon of the maximum, subtract it
+        /// row by row (see README, "Leak-corrected indirect light").
+        #[arg(long)]
+        leak_correct: bool,
+        /// Relative threshold of the voxels the --leak-correct fit places scatterers at.
+        #[arg(long, default_value_t = 0.1, value_name = "E")]
+        leak_epsilon: f32,
         #[command(flatten)]
         common: Common,
     },
@@ -108,6 +116,11 @@ enum Command {
         /// Keep only pairs with R0 <= |x_a - x_b| < R1 metres (overrides --min-separation).
         #[arg(long, value_name = "R0:R1")]
         shell: Option<String>,
+        /// Remove the capture's direct light before the columns: fit a one-bounce model
+        /// over Γ to the capture, subtract it row by row (see README, "Leak-corrected
+        /// indirect light").
+        #[arg(long)]
+        leak_correct: bool,
         #[command(flatten)]
         common: Common,
     },
@@ -429,6 +442,8 @@ fn run(cmd: Command) -> Result<(), Failure> {
             focus,
             gate,
             shell,
+            leak_correct,
+            leak_epsilon,
             common,
         } => {
             let a = parse_point("--focus", &focus)?;
@@ -445,7 +460,26 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 GateArg::None => ColumnGate::None,
             };
             let mut c = common.load(&capture)?;
-            let o = probe::column(&mut *c, a, &volume, g, shell, &common.wave(), common.exec())?;
+            let o = if leak_correct {
+                let model = probe::fit_over_volume(
+                    &mut *c,
+                    &volume,
+                    leak_epsilon,
+                    &common.wave(),
+                    &LeakOptions::default(),
+                    common.exec(),
+                )?;
+                say!(
+                    "leak correction: direct model over {} voxels explains {:.4} of the demodulated capture ({:.2} s)",
+                    model.points().len(),
+                    model.explained,
+                    model.seconds
+                );
+                let mut lc = probe::LeakCorrected::new(&mut *c, &model);
+                probe::column(&mut lc, a, &volume, g, shell, &common.wave(), common.exec())?
+            } else {
+                probe::column(&mut *c, a, &volume, g, shell, &common.wave(), common.exec())?
+            };
             let title = format!("column T(x_a, .), gate {gate:?}");
             finish_probe(&common, &capture, "column", &o, &volume, Some(a), &title)
         }
@@ -454,6 +488,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
             epsilon,
             min_separation,
             shell,
+            leak_correct,
             common,
         } => {
             let volume = Volume::parse(&common.volume)?;
@@ -482,6 +517,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
             let opts = IndirectOptions {
                 epsilon,
                 shell,
+                leak: leak_correct.then(LeakOptions::default),
                 ..Default::default()
             };
             let mut c = common.load(&capture)?;
@@ -493,6 +529,11 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 o.shell.r0,
                 o.shell.r1
             );
+            if let Some(e) = o.explained {
+                say!(
+                    "leak correction: the direct model over Γ explains {e:.4} of the demodulated capture"
+                );
+            }
             let cfg = common.wave().config(c.geometry())?;
             summarize(
                 "indirect", &o.values, &volume, o.seconds, &o.report, &cfg, None,
