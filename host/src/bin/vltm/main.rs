@@ -91,9 +91,10 @@ enum Command {
         /// Keep only voxels with R0 <= |x_a - x_b| < R1 metres (near/middle/far light).
         #[arg(long, value_name = "R0:R1")]
         shell: Option<String>,
-        /// Remove the capture's direct light before the column: fit a one-bounce model over
-        /// Γ = voxels whose direct light exceeds --leak-epsilon of the maximum, subtract it
-        /// row by row (see README, "Leak-corrected indirect light").
+        /// Remove the capture's direct light before the column: zero, per laser/SPAD pair,
+        /// the bins where a 3-vertex return of a voxel of Γ (direct light above
+        /// --leak-epsilon of the maximum) can arrive (see README, "Leak-corrected indirect
+        /// light").
         #[arg(long)]
         leak_correct: bool,
         /// Relative threshold of the voxels the --leak-correct fit places scatterers at.
@@ -116,11 +117,14 @@ enum Command {
         /// Keep only pairs with R0 <= |x_a - x_b| < R1 metres (overrides --min-separation).
         #[arg(long, value_name = "R0:R1")]
         shell: Option<String>,
-        /// Remove the capture's direct light before the columns: fit a one-bounce model
-        /// over Γ to the capture, subtract it row by row (see README, "Leak-corrected
-        /// indirect light").
-        #[arg(long)]
+        /// Remove the capture's direct light before the columns (the default): zero, per
+        /// laser/SPAD pair, the bins where a 3-vertex return of a Γ voxel can arrive (see
+        /// README, "Leak-corrected indirect light").
+        #[arg(long, conflicts_with = "no_leak_correct")]
         leak_correct: bool,
+        /// The paper's Eq. 17 on the capture as it is (no leak correction).
+        #[arg(long)]
+        no_leak_correct: bool,
         #[command(flatten)]
         common: Common,
     },
@@ -470,9 +474,9 @@ fn run(cmd: Command) -> Result<(), Failure> {
                     common.exec(),
                 )?;
                 say!(
-                    "leak correction: direct model over {} voxels explains {:.4} of the demodulated capture ({:.2} s)",
-                    model.points().len(),
+                    "leak correction: {:.4} of the capture's energy was in the 3-vertex windows of Γ's {} voxels and removed ({:.2} s)",
                     model.explained,
+                    model.points().len(),
                     model.seconds
                 );
                 let mut lc = probe::LeakCorrected::new(&mut *c, &model);
@@ -488,7 +492,8 @@ fn run(cmd: Command) -> Result<(), Failure> {
             epsilon,
             min_separation,
             shell,
-            leak_correct,
+            leak_correct: _,
+            no_leak_correct,
             common,
         } => {
             let volume = Volume::parse(&common.volume)?;
@@ -517,7 +522,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
             let opts = IndirectOptions {
                 epsilon,
                 shell,
-                leak: leak_correct.then(LeakOptions::default),
+                leak: (!no_leak_correct).then(LeakOptions::default),
                 ..Default::default()
             };
             let mut c = common.load(&capture)?;
