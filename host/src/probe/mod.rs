@@ -5,7 +5,8 @@
 //! |---|---|---|
 //! | [`direct`] | diagonal `T(x_v, x_v)` over a volume (Eqs. 11–12) | 1 |
 //! | [`column()`] | `T(x_a, ·)` with [`ColumnGate`] two-bounce (Eq. 14), higher-order (Eq. 18) or none, optionally restricted to a shell `r0 ≤ |x_a − x_b| < r1` | 1 |
-//! | [`indirect`] | in-focus indirect light (Eqs. 15–17): Γ from the diagonal, then `Σ_{a∈Γ} T(a, b)` over Γ-masked pairs with `r0 ≤ |x_a − x_b| < r1` | 2 |
+//! | [`indirect`] | in-focus indirect light (Eqs. 15–17): Γ from the diagonal, then `Σ_{a∈Γ} T(a, b)` over Γ-masked pairs with `r0 ≤ |x_a − x_b| < r1` | 2 (+1 with leak correction) |
+//! | [`DirectModel`], [`LeakCorrected`] | the capture's direct light removed before the off-diagonal probes (module `leak`: 3-vertex windows of Γ zeroed, or a one-bounce fit subtracted) | 1 to fit, then streamed |
 //!
 //! Threads: the diagonal and the higher-order column split the voxels into chunks, each with
 //! its own kernel probe, and every row's band spectra (computed once) are pushed into all
