@@ -1040,3 +1040,56 @@ fn control_bytes_from_files_are_escaped() {
     assert_eq!(text(&o.stderr).lines().count(), 1, "{}", text(&o.stderr));
     assert!(text(&o.stderr).contains("\\u{1b}"), "{}", text(&o.stderr));
 }
+
+/// `--leak-correct` (README, "Leak-corrected indirect light"): `indirect` corrects by default
+/// and names the option when there is nothing to correct (a volume whose direct returns all
+/// fall beyond the capture's window: Γ is empty); `column --leak-correct` runs and reports the
+/// energy it removed.
+#[test]
+fn leak_correct_on_the_command_line() {
+    let t = TempDir::new("leak");
+    let cap = fixture("two_patches");
+    let cap = cap.to_str().expect("utf-8");
+    // 3-vertex paths of voxels 4.5–5 m deep exceed the 4.48 m window.
+    let far = "-0.2:0.2:3,-0.2:0.2:3,4.5:5:2";
+    let err = fails(&t.0, &["indirect", cap, "--volume", far], 2);
+    assert!(
+        err.contains("--leak-correct") && err.lines().count() == 1,
+        "{err}"
+    );
+    let out = ok(
+        &t.0,
+        &[
+            "column",
+            cap,
+            "--focus",
+            "-0.45,0,0.8",
+            "--volume",
+            SPEC,
+            "--leak-correct",
+            "--out",
+            t.path("c.npy").to_str().expect("utf-8"),
+        ],
+    );
+    assert!(out.contains("leak correction: "), "{out}");
+    let v = npy(&t.path("c.npy"), SHAPE);
+    assert!(
+        v.iter().any(|&x| x > 0.0),
+        "leak-corrected column is all zero"
+    );
+    let out = ok(
+        &t.0,
+        &[
+            "indirect",
+            cap,
+            "--volume",
+            SPEC,
+            "--out",
+            t.path("i.npy").to_str().expect("utf-8"),
+        ],
+    );
+    assert!(
+        out.contains("leak correction (--no-leak-correct to skip)"),
+        "{out}"
+    );
+}

@@ -536,7 +536,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
             );
             if let Some(e) = o.explained {
                 say!(
-                    "leak correction: the direct model over Γ explains {e:.4} of the demodulated capture"
+                    "leak correction (--no-leak-correct to skip): {e:.4} of the capture's energy was in the 3-vertex windows of Γ and removed"
                 );
             }
             let cfg = common.wave().config(c.geometry())?;
