@@ -202,3 +202,32 @@ pub fn indirect_over(
         seconds: t.elapsed().as_secs_f64(),
     })
 }
+
+/// The fit for a single column (`vltm column --leak-correct`): pass 1 the diagonal over
+/// `volume`, Γ = {I_d > ε·max}, then [`DirectModel::fit`] over Γ. Reads the source twice.
+///
+/// # Errors
+/// ε out of range (`--leak-epsilon`), as [`DirectModel::fit`] (an empty Γ names
+/// `--leak-correct`), configuration and read errors.
+pub fn fit_over_volume(
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    epsilon: f32,
+    wave: &Wave,
+    opts: &LeakOptions,
+    exec: Exec<'_>,
+) -> Result<DirectModel> {
+    if !(0.0..1.0).contains(&epsilon) {
+        return Err(Error::arg(
+            "--leak-epsilon",
+            format!("expected 0 <= E < 1, found {epsilon}"),
+        ));
+    }
+    let d = direct(src, volume, wave, exec)?;
+    let gamma = gamma_mask(&d.values, epsilon);
+    let pts: Vec<Point> = (0..volume.len())
+        .filter(|&i| gamma[i])
+        .map(|i| volume.points[i])
+        .collect();
+    DirectModel::fit(src, &pts, cell_radius(volume), wave, opts, exec)
+}

@@ -56,8 +56,6 @@
 //! per row read, `Ks·V` wavelets of `≈ 8σ_p/Δt` bins. Memory: `8·V·Ks` bytes of voxel–SPAD
 //! tables (fit), `V` complex values per thread, one row per thread; never the capture.
 
-use super::direct::direct;
-use super::indirect::gamma_mask;
 use super::wave::Wave;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Pass, row_batch};
@@ -714,35 +712,6 @@ impl DirectModel {
             }
         });
     }
-}
-
-/// The fit for a single column (`vltm column --leak-correct`): pass 1 the diagonal over
-/// `volume`, Γ = {I_d > ε·max}, then [`DirectModel::fit`] over Γ. Reads the source twice.
-///
-/// # Errors
-/// ε out of range (`--leak-epsilon`), as [`DirectModel::fit`] (an empty Γ names
-/// `--leak-correct`), configuration and read errors.
-pub fn fit_over_volume(
-    src: &mut dyn RowSource,
-    volume: &Volume,
-    epsilon: f32,
-    wave: &Wave,
-    opts: &LeakOptions,
-    exec: Exec<'_>,
-) -> Result<DirectModel> {
-    if !(0.0..1.0).contains(&epsilon) {
-        return Err(Error::arg(
-            "--leak-epsilon",
-            format!("expected 0 <= E < 1, found {epsilon}"),
-        ));
-    }
-    let d = direct(src, volume, wave, exec)?;
-    let gamma = gamma_mask(&d.values, epsilon);
-    let pts: Vec<Point> = (0..volume.len())
-        .filter(|&i| gamma[i])
-        .map(|i| volume.points[i])
-        .collect();
-    DirectModel::fit(src, &pts, cell_radius(volume), wave, opts, exec)
 }
 
 /// A [`RowSource`] that returns `H − H_d`: the capture with the fitted direct light removed,

@@ -25,6 +25,8 @@ mod wave;
 pub use crate::exec::{Exec, Path};
 pub use column::{ColumnGate, Shell, check_focus, column};
 pub use direct::direct;
-pub use indirect::{IndirectOptions, IndirectOutput, gamma_mask, indirect, indirect_over};
-pub use leak::{DirectModel, LeakCorrected, LeakMethod, LeakOptions, cell_radius, fit_over_volume};
+pub use indirect::{
+    IndirectOptions, IndirectOutput, fit_over_volume, gamma_mask, indirect, indirect_over,
+};
+pub use leak::{DirectModel, LeakCorrected, LeakMethod, LeakOptions, cell_radius};
 pub use wave::{Output, Wave, default_wavelength};
