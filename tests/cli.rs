@@ -565,22 +565,43 @@ fn demo_writes_figures_volumes_and_summary() {
     print!("{out}");
     for want in [
         "figure at [0.35, 0.0, 0.8]",
-        "indirect light at the figure's centre voxel",
+        "indirect light on the figure: means over its",
         "direct (diagonal)",
         "column far 0.45-1.20 m, Γ",
     ] {
         assert!(out.contains(want), "demo table lacks `{want}`:\n{out}");
     }
-    // "… T(x_a, x_b) is 17.4x the direct-only control with the 4-vertex gate …"
-    let ratio: f32 = out
-        .split("T(x_a, x_b) is ")
-        .nth(1)
-        .and_then(|s| s.split('x').next())
-        .and_then(|s| s.trim().parse().ok())
-        .unwrap_or_else(|| panic!("no gated ratio in the table:\n{out}"));
+    // Means over the figure's voxels beside the control (README, "Leak-corrected indirect
+    // light"): the last column of each row is the ratio.
+    let ratio = |row: &str| -> f32 {
+        out.lines()
+            .find(|l| l.starts_with(row))
+            .and_then(|l| l.split_whitespace().last())
+            .and_then(|r| r.trim_end_matches('x').parse().ok())
+            .unwrap_or_else(|| panic!("no ratio for `{row}` in the table:\n{out}"))
+    };
+    let (gated, eq17, corrected) = (
+        ratio("column T(x_a, ·), 4-vertex gate"),
+        ratio("in-focus I_i (Eq. 17)"),
+        ratio("in-focus I_i, leak-corrected"),
+    );
     assert!(
-        ratio >= 3.0,
-        "demo: gated indirect light at the figure is only {ratio}x the control"
+        gated >= 1.1 && eq17 < 1.5,
+        "demo: gated column {gated}x (README 1.26x), Eq. 17 {eq17}x (README 0.99x)"
+    );
+    assert!(
+        corrected >= 100.0,
+        "demo: leak-corrected I_i is only {corrected}x the control (README 862x)"
+    );
+    let kept: f32 = out
+        .split("the leak-corrected I_i keeps ")
+        .nth(1)
+        .and_then(|s| s.split_whitespace().next())
+        .and_then(|s| s.parse().ok())
+        .unwrap_or_else(|| panic!("no kept fraction in the table:\n{out}"));
+    assert!(
+        (0.4..=1.2).contains(&kept),
+        "demo: the leak-corrected I_i keeps {kept} of the indirect-only truth (README 0.59)"
     );
     // In-focus indirect light (Eq. 17) peaks on the figure, the surface the panel lights.
     let eq17 = out
@@ -1619,4 +1640,57 @@ fn matrix_relight_and_row_through_the_command_line() {
     let diff = rel_of_max(&npy(&fr, SHAPE), &npy(&fc, SHAPE));
     println!("row vs column --swap-roles: {diff:.1e}");
     assert!(diff <= 1e-6, "{diff:.3e}");
+}
+
+/// `--leak-correct` (README, "Leak-corrected indirect light"): `indirect` corrects by default
+/// and names the option when there is nothing to correct (a volume whose direct returns all
+/// fall beyond the capture's window: Γ is empty); `column --leak-correct` runs and reports the
+/// energy it removed.
+#[test]
+fn leak_correct_on_the_command_line() {
+    let t = TempDir::new("leak");
+    let cap = fixture("two_patches");
+    let cap = cap.to_str().expect("utf-8");
+    // 3-vertex paths of voxels 4.5–5 m deep exceed the 4.48 m window.
+    let far = "-0.2:0.2:3,-0.2:0.2:3,4.5:5:2";
+    let err = fails(&t.0, &["indirect", cap, "--volume", far], 2);
+    assert!(
+        err.contains("--leak-correct") && err.lines().count() == 1,
+        "{err}"
+    );
+    let out = ok(
+        &t.0,
+        &[
+            "column",
+            cap,
+            "--focus",
+            "-0.45,0,0.8",
+            "--volume",
+            SPEC,
+            "--leak-correct",
+            "--out",
+            t.path("c.npy").to_str().expect("utf-8"),
+        ],
+    );
+    assert!(out.contains("leak correction: "), "{out}");
+    let v = npy(&t.path("c.npy"), SHAPE);
+    assert!(
+        v.iter().any(|&x| x > 0.0),
+        "leak-corrected column is all zero"
+    );
+    let out = ok(
+        &t.0,
+        &[
+            "indirect",
+            cap,
+            "--volume",
+            SPEC,
+            "--out",
+            t.path("i.npy").to_str().expect("utf-8"),
+        ],
+    );
+    assert!(
+        out.contains("leak correction (--no-leak-correct to skip)"),
+        "{out}"
+    );
 }

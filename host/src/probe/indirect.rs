@@ -7,6 +7,7 @@
 use super::column::*;
 use super::direct::*;
 use super::drive::*;
+use super::leak::{DirectModel, LeakCorrected, LeakOptions, cell_radius};
 use super::wave::*;
 use crate::error::{Error, Result};
 use crate::exec::Exec;
@@ -28,6 +29,9 @@ pub struct IndirectOptions {
     /// The gate of the summed columns: two-bounce (Eq. 14, the default: first-order indirect
     /// light), higher-order (Eq. 18 with Eq. 17: the paper's "≥ 3rd bounce") or none.
     pub gate: ColumnGate,
+    /// Remove the capture's fitted direct light before the columns (`--leak-correct`,
+    /// [`DirectModel`]); `None` = the paper's Eq. 17 on the capture as it is.
+    pub leak: Option<LeakOptions>,
 }
 
 impl Default for IndirectOptions {
@@ -37,6 +41,7 @@ impl Default for IndirectOptions {
             shell: None,
             max_bytes: 8 << 30,
             gate: ColumnGate::TwoBounce,
+            leak: None,
         }
     }
 }
@@ -54,6 +59,9 @@ pub struct IndirectOutput {
     pub shell: Shell,
     /// Counters of pass 2.
     pub report: Report,
+    /// With leak correction: the fraction of the demodulated capture's energy the direct
+    /// model explains ([`DirectModel::explained`]).
+    pub explained: Option<f64>,
     /// Wall-clock seconds for both passes.
     pub seconds: f64,
 }
@@ -111,7 +119,8 @@ pub fn indirect_over(
     exec: Exec<'_>,
 ) -> Result<IndirectOutput> {
     let t = Instant::now();
-    let (mut sums, report, shell) = pair_sums(src, volume, gamma, opts, None, wave, exec)?;
+    let (mut sums, report, shell, explained) =
+        pair_sums(src, volume, gamma, opts, None, wave, exec)?;
     let values = sums.pop().unwrap_or_default();
     check_finite(&values, &volume.points, "in-focus indirect light")?;
     Ok(IndirectOutput {
@@ -120,6 +129,7 @@ pub fn indirect_over(
         gamma: gamma.to_vec(),
         shell,
         report,
+        explained,
         seconds: t.elapsed().as_secs_f64(),
     })
 }
@@ -139,7 +149,7 @@ pub fn indirect_shells(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<(Vec<Vec<f32>>, Report)> {
-    let (sums, report, _) = pair_sums(src, volume, gamma, opts, Some(shells), wave, exec)?;
+    let (sums, report, _, _) = pair_sums(src, volume, gamma, opts, Some(shells), wave, exec)?;
     Ok((sums, report))
 }
 
@@ -153,7 +163,7 @@ fn pair_sums(
     shells: Option<&[Shell]>,
     wave: &Wave,
     exec: Exec<'_>,
-) -> Result<(Vec<Vec<f32>>, Report, Shell)> {
+) -> Result<(Vec<Vec<f32>>, Report, Shell, Option<f64>)> {
     if gamma.len() != volume.len() {
         return Err(Error::arg(
             "gamma",
@@ -180,6 +190,13 @@ fn pair_sums(
     let shells = shells.unwrap_or(&one);
     let mut values = vec![vec![0.0f32; volume.len()]; shells.len()];
     let mut report = Report::default();
+    let mut explained = None;
+    if idx.is_empty() && opts.leak.is_some() {
+        return Err(Error::arg(
+            "--leak-correct",
+            "Γ is empty: no voxel has direct light above ε·max (no direct return in the window for this volume?)",
+        ));
+    }
     if !idx.is_empty() {
         let ks = src.geometry().spads_per_row();
         let n_vox = if kgate == Gate::HigherOrder {
@@ -199,6 +216,26 @@ fn pair_sums(
                 ),
             ));
         }
+        let model = match &opts.leak {
+            Some(lo) => Some(DirectModel::fit(
+                src,
+                &pts,
+                cell_radius(volume),
+                wave,
+                lo,
+                exec,
+            )?),
+            None => None,
+        };
+        explained = model.as_ref().map(|m| m.explained);
+        let mut corrected;
+        let src: &mut dyn RowSource = match &model {
+            Some(m) => {
+                corrected = LeakCorrected::new(src, m);
+                &mut corrected
+            }
+            None => src,
+        };
         let job = Job {
             cfg: &cfg,
             wave,
@@ -229,7 +266,7 @@ fn pair_sums(
             }
         }
     }
-    Ok((values, report, shells[shells.len() - 1]))
+    Ok((values, report, shells[shells.len() - 1], explained))
 }
 
 /// One higher-order column (Eq. 18) per focus, each over `foci` itself, in one pass over the
@@ -309,4 +346,33 @@ pub(super) fn indirect_sum(
         values[i] = s as f32;
     }
     Ok((values, report))
+}
+
+/// The fit for a single column (`vltm column --leak-correct`): pass 1 the diagonal over
+/// `volume`, Γ = {I_d > ε·max}, then [`DirectModel::fit`] over Γ. Reads the source twice.
+///
+/// # Errors
+/// ε out of range (`--leak-epsilon`), as [`DirectModel::fit`] (an empty Γ names
+/// `--leak-correct`), configuration and read errors.
+pub fn fit_over_volume(
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    epsilon: f32,
+    wave: &Wave,
+    opts: &LeakOptions,
+    exec: Exec<'_>,
+) -> Result<DirectModel> {
+    if !(0.0..1.0).contains(&epsilon) {
+        return Err(Error::arg(
+            "--leak-epsilon",
+            format!("expected 0 <= E < 1, found {epsilon}"),
+        ));
+    }
+    let d = direct(src, volume, wave, exec)?;
+    let gamma = gamma_mask(&d.values, epsilon);
+    let pts: Vec<Point> = (0..volume.len())
+        .filter(|&i| gamma[i])
+        .map(|i| volume.points[i])
+        .collect();
+    DirectModel::fit(src, &pts, cell_radius(volume), wave, opts, exec)
 }

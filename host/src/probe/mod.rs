@@ -12,6 +12,7 @@
 //! | [`relight`] | `A_p(b) = Σ_a p_a A(x_a, b)`: the image under a weighted sum of projector foci | 1 (idem) |
 //! | [`row()`] | `T(·, x_b)` streamed by laser rows (reciprocity without a transpose) | 1 |
 //! | [`partial::accumulate`] | direct, column or indirect over a part of the rows, kept as a [`Partial`] state that merges by addition and finishes elsewhere | 1 |
+//! | [`DirectModel`], [`LeakCorrected`] | the capture's direct light removed before the off-diagonal probes (module `leak`: 3-vertex windows of Γ zeroed, or a one-bounce fit subtracted) | 1 to fit, then streamed |
 //!
 //! Threads: the diagonal and the higher-order column split the voxels into chunks, each with
 //! its own kernel probe, and every row's band spectra (computed once) are pushed into all
@@ -25,6 +26,7 @@ mod direct;
 mod drive;
 pub mod fast;
 mod indirect;
+mod leak;
 mod matrix;
 pub mod partial;
 mod row;
@@ -34,8 +36,10 @@ pub use crate::exec::{Exec, Path};
 pub use column::{ColumnGate, Shell, check_focus, column, diagonal};
 pub use direct::direct;
 pub use indirect::{
-    IndirectOptions, IndirectOutput, gamma_mask, indirect, indirect_over, indirect_shells,
+    IndirectOptions, IndirectOutput, fit_over_volume, gamma_mask, indirect, indirect_over,
+    indirect_shells,
 };
+pub use leak::{DirectModel, LeakCorrected, LeakMethod, LeakOptions, cell_radius};
 pub use matrix::{MATRIX_BYTES_PER_ELEMENT, Matrix, Pattern, Relit, matrix, relight};
 pub use partial::{Finished, Partial, Task};
 pub use row::row;

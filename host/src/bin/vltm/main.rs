@@ -9,7 +9,7 @@ use vltm::atomic::Transaction;
 use vltm::exec::{Exec, Path as EvalPath};
 use vltm::io::{self, RowSource};
 use vltm::out::h5::Provenance;
-use vltm::probe::{self, ColumnGate, IndirectOptions, Shell, Wave};
+use vltm::probe::{self, ColumnGate, IndirectOptions, LeakOptions, Shell, Wave};
 use vltm::volume::{Volume, parse_point};
 
 mod demo;
@@ -120,6 +120,15 @@ enum Command {
         /// (an extra diagonal pass, as `indirect`).
         #[arg(long, value_name = "E")]
         mask_epsilon: Option<f32>,
+        /// Remove the capture's direct light before the column: zero, per laser/SPAD pair,
+        /// the bins where a 3-vertex return of a voxel of Γ (direct light above
+        /// --leak-epsilon of the maximum) can arrive (see README, "Leak-corrected indirect
+        /// light").
+        #[arg(long)]
+        leak_correct: bool,
+        /// Relative threshold of the voxels the --leak-correct fit places scatterers at.
+        #[arg(long, default_value_t = 0.1, value_name = "E")]
+        leak_epsilon: f32,
         #[command(flatten)]
         common: Common,
     },
@@ -149,6 +158,14 @@ enum Command {
         /// higher-order (Eq. 18 with Eq. 17: the paper's ">= 3rd bounce"), none.
         #[arg(long, value_enum, default_value_t = GateArg::TwoBounce)]
         gate: GateArg,
+        /// Remove the capture's direct light before the columns (the default): zero, per
+        /// laser/SPAD pair, the bins where a 3-vertex return of a Γ voxel can arrive (see
+        /// README, "Leak-corrected indirect light").
+        #[arg(long, conflicts_with = "no_leak_correct")]
+        leak_correct: bool,
+        /// The paper's Eq. 17 on the capture as it is (no leak correction).
+        #[arg(long)]
+        no_leak_correct: bool,
         #[command(flatten)]
         common: Common,
     },
@@ -576,6 +593,8 @@ fn run(cmd: Command) -> Result<(), Failure> {
             shell,
             shells,
             mask_epsilon,
+            leak_correct,
+            leak_epsilon,
             common,
         } => {
             let a = parse_point("--focus", &focus)?;
@@ -609,15 +628,28 @@ fn run(cmd: Command) -> Result<(), Failure> {
                     Some(e) => Some(split::gamma(rows, &volume, e, "--mask-epsilon", &common)?),
                     None => None,
                 };
-                let mut o = probe::column(
-                    rows,
-                    a,
-                    &volume,
-                    gate.gate(),
-                    shell,
-                    &common.wave(),
-                    common.exec(),
-                )?;
+                let mut o = if leak_correct {
+                    let model = probe::fit_over_volume(
+                        rows,
+                        &volume,
+                        leak_epsilon,
+                        &common.wave(),
+                        &LeakOptions::default(),
+                        common.exec(),
+                    )?;
+                    say!(
+                        "leak correction: {:.4} of the capture's energy was in the 3-vertex windows of Γ's {} voxels and removed ({:.2} s)",
+                        model.explained,
+                        model.points().len(),
+                        model.seconds
+                    );
+                    let mut lc = probe::LeakCorrected::new(rows, &model);
+                    let g = gate.gate();
+                    probe::column(&mut lc, a, &volume, g, shell, &common.wave(), common.exec())?
+                } else {
+                    let g = gate.gate();
+                    probe::column(rows, a, &volume, g, shell, &common.wave(), common.exec())?
+                };
                 if let Some(m) = &mask {
                     o.values
                         .iter_mut()
@@ -642,6 +674,8 @@ fn run(cmd: Command) -> Result<(), Failure> {
             direct,
             shells,
             gate,
+            leak_correct: _,
+            no_leak_correct,
             common,
         } => {
             let volume = Volume::parse(&common.volume)?;
@@ -672,6 +706,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
                 epsilon,
                 shell,
                 gate: gate.gate(),
+                leak: (!no_leak_correct).then(LeakOptions::default),
                 ..Default::default()
             };
             let direct = match &direct {
@@ -686,6 +721,13 @@ fn run(cmd: Command) -> Result<(), Failure> {
                     )
                     .into());
                 };
+                if opts.leak.is_some() {
+                    return Err(vltm::Error::arg(
+                        "--partial",
+                        "partial states hold the paper's Eq. 17 without leak correction: add --no-leak-correct",
+                    )
+                    .into());
+                }
                 if cuts.is_some() || opts.gate != ColumnGate::TwoBounce {
                     return Err(vltm::Error::arg(
                         "--partial",

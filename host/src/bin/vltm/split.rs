@@ -185,6 +185,11 @@ pub(crate) fn indirect_run(
     let (sums, report, shells): (Vec<Vec<f32>>, _, Vec<Shell>) = match &cuts {
         None => {
             let o = probe::indirect_over(src, volume, &gamma, opts, &wave, c.exec())?;
+            if let Some(e) = o.explained {
+                say!(
+                    "leak correction (--no-leak-correct to skip): {e:.4} of the capture's energy was in the 3-vertex windows of Γ and removed"
+                );
+            }
             (vec![o.values], o.report, vec![o.shell])
         }
         Some(cuts) => {

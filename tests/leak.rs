@@ -1,0 +1,376 @@
+//! Leak-corrected in-focus indirect light (`vltm::probe::DirectModel`, `--leak-correct`)
+//! against the direct-only control, as means over the lit object's voxels (its surface ± one
+//! voxel), on two scenes with the same settings:
+//!
+//! * the shared path-traced `two_patches` / `two_patches_direct_only` (mitransient, tal HDF5,
+//!   8×8 lasers × 8×8 SPADs): patch B, lit by patch A;
+//! * a panel lighting a figure (the demo's scene at 16×16 lasers × 16×16 SPADs), rendered in
+//!   the test by the simulator twice (all paths / direct only).
+//!
+//! Settings, the same on both: λ = twice the aperture pitch (the default), σ = 2λ/3 (default),
+//! the paper's 1/d lens weights, Γ = {I_d > 0.1·max} from the full capture's diagonal, r0 =
+//! 1.5σ (default), the fit's defaults ([`LeakOptions::default`]). The control gets the same
+//! correction (its own fit over the same Γ). Measured values are printed (`--nocapture`).
+
+use std::path::PathBuf;
+use vltm::io::{self, Capture};
+use vltm::kernel::Point;
+use vltm::probe::{self, Exec, IndirectOptions, LeakMethod, LeakOptions, Shell, Wave};
+use vltm::sim::{Aperture, Bounces, Cuboid, Patch, Scene, Setup};
+use vltm::volume::Volume;
+
+const EXEC: Exec<'static> = Exec {
+    progress: None,
+    path: vltm::probe::Path::Auto,
+};
+
+fn shared(capture: &str, file: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data")
+        .join(capture)
+        .join(file)
+}
+
+/// Voxels of an object: the voxels its surface passes through (the nearest voxel of each
+/// of a dense set of surface points), grown by one voxel in every grid direction.
+pub fn object_voxels(vol: &Volume, surface: &[Point]) -> Vec<usize> {
+    let [nx, ny, nz] = vol.shape;
+    let mut on = vec![false; vol.len()];
+    for p in surface {
+        on[vol.nearest(*p)] = true;
+    }
+    let mut grown = on.clone();
+    for i in (0..vol.len()).filter(|&i| on[i]) {
+        let (ix, iy, iz) = (i / (ny * nz), (i / nz) % ny, i % nz);
+        let r = |c: usize, n: usize| c.saturating_sub(1)..=(c + 1).min(n - 1);
+        for jx in r(ix, nx) {
+            for jy in r(iy, ny) {
+                for jz in r(iz, nz) {
+                    grown[(jx * ny + jy) * nz + jz] = true;
+                }
+            }
+        }
+    }
+    (0..vol.len()).filter(|&i| grown[i]).collect()
+}
+
+/// Points on the quadrilateral with corners `c` (in order), `n × n` cell centres.
+fn quad(c: [[f64; 3]; 4], n: usize) -> Vec<Point> {
+    let mut out = Vec::new();
+    for i in 0..n {
+        for j in 0..n {
+            let (u, v) = ((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+            let p: [f64; 3] = core::array::from_fn(|k| {
+                (1.0 - u) * (1.0 - v) * c[0][k]
+                    + u * (1.0 - v) * c[1][k]
+                    + u * v * c[2][k]
+                    + (1.0 - u) * v * c[3][k]
+            });
+            out.push(p.map(|x| x as f32));
+        }
+    }
+    out
+}
+
+/// Patch B of the shared two_patches scene (corners from its `scene.json`).
+fn patch_b() -> Vec<Point> {
+    let path = shared("two_patches", "scene.json");
+    let text = std::fs::read_to_string(&path).unwrap();
+    let j: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let corners = &j["objects"]["patch_B"]["corners"];
+    let c: [[f64; 3]; 4] =
+        core::array::from_fn(|i| core::array::from_fn(|k| corners[i][k].as_f64().unwrap()));
+    quad(c, 40)
+}
+
+fn mean(v: &[f32], idx: &[usize]) -> f64 {
+    idx.iter().map(|&i| f64::from(v[i])).sum::<f64>() / idx.len() as f64
+}
+
+/// Probe settings of one measurement: σ (None = 2λ/3), ε, r0 (None = 1.5σ).
+#[derive(Clone, Copy, Debug)]
+struct Settings {
+    sigma: Option<f64>,
+    epsilon: f32,
+    r0: Option<f32>,
+}
+
+/// vltm's defaults: σ = 2λ/3, ε = 0.1, r0 = 1.5σ.
+const DEFAULTS: Settings = Settings {
+    sigma: None,
+    epsilon: 0.1,
+    r0: None,
+};
+
+/// The paper's: σ such that 99 % of the Gaussian envelope lies within 4λ (±2.576σ = ±2λ),
+/// a small threshold ε = 0.01, no minimum separation (only a ≠ b).
+fn paper(lambda: f64) -> Settings {
+    Settings {
+        sigma: Some(2.0 * lambda / 2.5758),
+        epsilon: 0.01,
+        r0: Some(0.0),
+    }
+}
+
+/// Object-voxel means of I_i on the full capture, the control (same Γ, from the full
+/// capture's diagonal, the same correction) and the indirect-only truth `H − H_control`
+/// (uncorrected).
+struct Means {
+    full: f64,
+    control: f64,
+    truth: f64,
+    gamma: usize,
+}
+
+impl Means {
+    fn ratio(&self) -> f64 {
+        self.full / self.control
+    }
+    /// The corrected full capture's I_i as a fraction of the indirect-only truth.
+    fn kept(&self) -> f64 {
+        self.full / self.truth
+    }
+}
+
+fn measure(
+    full: &mut Capture,
+    control: &mut Capture,
+    vol: &Volume,
+    wave: &Wave,
+    set: Settings,
+    object: &[usize],
+    leak: Option<LeakOptions>,
+) -> Means {
+    let wave = Wave {
+        sigma: set.sigma,
+        ..*wave
+    };
+    let d = probe::direct(full, vol, &wave, EXEC).expect("direct");
+    let gamma = probe::gamma_mask(&d.values, set.epsilon);
+    let opts = IndirectOptions {
+        epsilon: set.epsilon,
+        shell: set.r0.map(|r0| Shell {
+            r0,
+            r1: f32::INFINITY,
+        }),
+        leak,
+        ..IndirectOptions::default()
+    };
+    let f = probe::indirect_over(full, vol, &gamma, &opts, &wave, EXEC).expect("indirect");
+    let c = probe::indirect_over(control, vol, &gamma, &opts, &wave, EXEC).expect("indirect");
+    let mut diff = full.clone();
+    diff.data
+        .iter_mut()
+        .zip(&control.data)
+        .for_each(|(a, b)| *a -= b);
+    let plain = IndirectOptions { leak: None, ..opts };
+    let t = probe::indirect_over(&mut diff, vol, &gamma, &plain, &wave, EXEC).expect("indirect");
+    let m = Means {
+        full: mean(&f.values, object),
+        control: mean(&c.values, object),
+        truth: mean(&t.values, object),
+        gamma: gamma.iter().filter(|&&g| g).count(),
+    };
+    println!(
+        "{set:?}, leak {leak:?}: Γ {} voxels, r0 {:.3} m; I_i mean over the object's {} voxels \
+         {:.4e} vs control {:.4e}: {:.2}x; indirect-only truth {:.4e} (kept {:.2})",
+        m.gamma,
+        f.shell.r0,
+        object.len(),
+        m.full,
+        m.control,
+        m.ratio(),
+        m.truth,
+        m.kept()
+    );
+    m
+}
+
+fn check_corrected(name: &str, m: &Means) {
+    assert!(
+        m.full > 0.0 && m.full >= 2.0 * m.control,
+        "{name}: leak-corrected I_i {:.4e} is not 2x the control {:.4e}",
+        m.full,
+        m.control
+    );
+    assert!(
+        (0.4..=1.2).contains(&m.kept()),
+        "{name}: leak-corrected I_i keeps {:.2} of the indirect-only truth (want 0.4–1.2)",
+        m.kept()
+    );
+}
+
+fn two_patches() -> (Capture, Capture, Volume, Vec<usize>) {
+    let vol = Volume::parse("-0.75:0.75:16,-0.75:0.75:16,0.4:1.35:20").unwrap();
+    let b = object_voxels(&vol, &patch_b());
+    let open = |n: &str| io::open(&shared(n, &format!("{n}.hdf5"))).unwrap();
+    (open("two_patches"), open("two_patches_direct_only"), vol, b)
+}
+
+/// The shared path-traced two_patches (the capture holds the physical laser's falloff, so
+/// `--compensate-laser`): patch B's voxels. README: "Leak-corrected indirect light".
+#[test]
+fn two_patches_leak_corrected_beats_the_control() {
+    let (mut full, mut ctrl, vol, b) = two_patches();
+    let wave = Wave {
+        compensate_laser: true,
+        ..Wave::default()
+    };
+    let plain = measure(&mut full, &mut ctrl, &vol, &wave, DEFAULTS, &b, None);
+    assert!(
+        plain.ratio() < 1.5,
+        "uncorrected Eq. 17 at B: {:.2}x (README: 0.92x)",
+        plain.ratio()
+    );
+    let gated = measure(
+        &mut full,
+        &mut ctrl,
+        &vol,
+        &wave,
+        DEFAULTS,
+        &b,
+        Some(LeakOptions::default()),
+    );
+    check_corrected("two_patches, gate", &gated);
+    // The model fit works here (voxel pitch ≤ λ/4): README 3.8x.
+    let fit = LeakOptions {
+        method: LeakMethod::Fit,
+        ..LeakOptions::default()
+    };
+    let fitted = measure(&mut full, &mut ctrl, &vol, &wave, DEFAULTS, &b, Some(fit));
+    assert!(fitted.ratio() >= 3.0, "fit: {:.2}x", fitted.ratio());
+    // The paper's settings.
+    let lambda = probe::default_wavelength(&full.geometry);
+    let pp = measure(&mut full, &mut ctrl, &vol, &wave, paper(lambda), &b, None);
+    let pc = measure(
+        &mut full,
+        &mut ctrl,
+        &vol,
+        &wave,
+        paper(lambda),
+        &b,
+        Some(LeakOptions::default()),
+    );
+    assert!(
+        pp.ratio() < 1.5,
+        "paper's settings, uncorrected: {:.2}x",
+        pp.ratio()
+    );
+    assert!(
+        pc.full >= 2.0 * pc.control,
+        "paper's settings, corrected: {:.2}x",
+        pc.ratio()
+    );
+}
+
+/// The panel/figure scene of `vltm demo` at 16×16 lasers × 16×16 SPADs.
+fn panel_scene(bounces: Bounces) -> Scene {
+    let grid = || Aperture::grid([16, 16], [1.0, 1.0], [0.0, 0.0]);
+    let mut setup = Setup::new(grid(), grid(), 300, 0.01);
+    setup.t0 = 1.0;
+    let mut panel = Patch::new("panel", [-0.35, 0.0, 0.8], [1.0, 0.0, -1.0], [0.3, 0.3]);
+    panel.samples = 6;
+    let mut figure = Patch::new("figure", [0.35, 0.0, 0.8], [-1.0, 0.0, -1.0], [0.14, 0.34]);
+    figure.samples = 5;
+    let mut distractor = Cuboid::new("box", [0.0, -0.3, 1.1], [0.15, 0.15, 0.15]);
+    distractor.samples = 2;
+    let mut s = Scene::new(setup).with(panel).with(figure).with(distractor);
+    s.bounces = bounces;
+    s.pulse_sigma = Some(0.01);
+    s
+}
+
+fn figure_surface() -> Vec<Point> {
+    let mut f = Patch::new("figure", [0.35, 0.0, 0.8], [-1.0, 0.0, -1.0], [0.14, 0.34]);
+    f.samples = 40;
+    let s = Scene::new(Setup::new(
+        Aperture::grid([1, 1], [0.0, 0.0], [0.0, 0.0]),
+        Aperture::grid([1, 1], [0.0, 0.0], [0.0, 0.0]),
+        1,
+        0.01,
+    ))
+    .with(f);
+    s.sample_points()
+        .iter()
+        .map(|p| p.position.map(|x| x as f32))
+        .collect()
+}
+
+/// The demo's panel/figure scene at 16×16 lasers × 16×16 SPADs (65 536 histograms), rendered
+/// twice: the figure's voxels. README: "Leak-corrected indirect light".
+#[test]
+fn panel_figure_16_leak_corrected_beats_the_control() {
+    let vol = Volume::grid([-0.6, -0.3, 0.5], [0.6, 0.3, 1.22], [21, 11, 13]).unwrap();
+    let fig = object_voxels(&vol, &figure_surface());
+    let mut full = panel_scene(Bounces::All).render().unwrap();
+    let mut ctrl = panel_scene(Bounces::Direct).render().unwrap();
+    let wave = Wave::default();
+    let plain = measure(&mut full, &mut ctrl, &vol, &wave, DEFAULTS, &fig, None);
+    assert!(
+        plain.ratio() < 1.5,
+        "uncorrected: {:.2}x (README 1.01x)",
+        plain.ratio()
+    );
+    let gated = measure(
+        &mut full,
+        &mut ctrl,
+        &vol,
+        &wave,
+        DEFAULTS,
+        &fig,
+        Some(LeakOptions::default()),
+    );
+    check_corrected("panel/figure, gate", &gated);
+    let lambda = probe::default_wavelength(&full.geometry);
+    let pp = measure(&mut full, &mut ctrl, &vol, &wave, paper(lambda), &fig, None);
+    let pc = measure(
+        &mut full,
+        &mut ctrl,
+        &vol,
+        &wave,
+        paper(lambda),
+        &fig,
+        Some(LeakOptions::default()),
+    );
+    assert!(
+        pp.ratio() < 1.5,
+        "paper's settings, uncorrected: {:.2}x",
+        pp.ratio()
+    );
+    assert!(
+        pc.full >= 2.0 * pc.control,
+        "paper's settings, corrected: {:.2}x",
+        pc.ratio()
+    );
+}
+
+/// `--leak-correct` with nothing to correct: an empty Γ, or voxels whose direct returns all
+/// fall outside the capture's window, is an error naming the option, never an all-zero result.
+#[test]
+fn leak_correct_without_direct_returns_is_an_error() {
+    let (mut full, _, vol, _) = two_patches();
+    let wave = Wave {
+        compensate_laser: true,
+        ..Wave::default()
+    };
+    let opts = IndirectOptions {
+        leak: Some(LeakOptions::default()),
+        ..IndirectOptions::default()
+    };
+    let none = vec![false; vol.len()];
+    let e = probe::indirect_over(&mut full, &vol, &none, &opts, &wave, EXEC).unwrap_err();
+    assert!(e.to_string().contains("--leak-correct"), "{e}");
+    // 3-vertex paths of a voxel 4 m deep are longer than the 5 m window.
+    for method in [LeakMethod::Gate, LeakMethod::Fit] {
+        let lo = LeakOptions {
+            method,
+            ..LeakOptions::default()
+        };
+        let e = probe::DirectModel::fit(&mut full, &[[0.0, 0.0, 4.0]], 0.05, &wave, &lo, EXEC)
+            .unwrap_err();
+        assert!(
+            e.to_string().contains("--leak-correct") && e.to_string().contains("window"),
+            "{e}"
+        );
+    }
+}
