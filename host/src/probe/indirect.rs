@@ -153,6 +153,10 @@ pub fn indirect_shells(
     Ok((sums, report))
 }
 
+/// The pair sums of pass 2 (one volume per shell), the counters, the (last) shell and, with
+/// leak correction, the fraction of the capture's energy the direct model explained.
+type PairSums = (Vec<Vec<f32>>, Report, Shell, Option<f64>);
+
 /// The Γ-masked pair sums of pass 2, one per shell (`shells`, or the single shell of `opts`
 /// with its default r0 = 1.5σ), with the counters and the (last) shell.
 fn pair_sums(
@@ -163,7 +167,7 @@ fn pair_sums(
     shells: Option<&[Shell]>,
     wave: &Wave,
     exec: Exec<'_>,
-) -> Result<(Vec<Vec<f32>>, Report, Shell, Option<f64>)> {
+) -> Result<PairSums> {
     if gamma.len() != volume.len() {
         return Err(Error::arg(
             "gamma",
