@@ -448,7 +448,10 @@ def indirect(
     ``epsilon``·max, then ``Σ T(x_a, x_b)`` over pairs of Γ at least ``min_separation``
     apart (default 1.5σ) or within ``shell``. ``direct``: the direct light over the same
     volume (e.g. from :func:`direct` or a merged Dask run) instead of pass 1 — required with
-    ``rows=``. Other arguments as :func:`direct`."""
+    ``rows=``. Other arguments as :func:`direct`. This is the paper's Eq. 17 on the capture
+    as it is: the command line's default leak correction (``vltm indirect``, README
+    "Leak-corrected indirect light") is not applied here; ``vltm indirect --no-leak-correct``
+    gives the same numbers."""
     if shell is None and min_separation is not None:
         if min_separation < 0:
             raise ArgumentError(f"argument `--min-separation`: expected R >= 0, found {min_separation}")
