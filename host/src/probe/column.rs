@@ -389,6 +389,26 @@ pub(super) fn single_column(
     Ok((state, p.report(), p.leg_range()))
 }
 
+/// A column probe imaged over `voxels` in parallel chunks: the intensities and the probe's
+/// counters with the aliased paths of every chunk summed.
+fn image_chunks(p: &Probe<'_>, scan: &Scan<'_>, voxels: &[Point]) -> Result<(Vec<f64>, Report)> {
+    let cl = chunk_len(voxels.len());
+    let mut out = vec![0.0f64; voxels.len()];
+    let reports = voxels
+        .par_chunks(cl)
+        .zip(out.par_chunks_mut(cl))
+        .map(|(v, o)| p.image(scan, v, o))
+        .collect::<Result<Vec<_>, _>>()?;
+    let aliased = reports.iter().map(|r| r.aliased).sum();
+    Ok((
+        out,
+        Report {
+            aliased,
+            ..p.report()
+        },
+    ))
+}
+
 /// Images a factorised column from its state over the volume by the planar convolution
 /// (when given: Gaussian gate over a grid) or the kernel; with the path that imaged it.
 #[allow(clippy::too_many_arguments)]
@@ -435,22 +455,8 @@ pub(super) fn image_column(
             Path::Planar,
         ));
     }
-    let cl = chunk_len(voxels.len());
-    let mut out = vec![0.0f64; voxels.len()];
-    let reports = voxels
-        .par_chunks(cl)
-        .zip(out.par_chunks_mut(cl))
-        .map(|(v, o)| p.image(&scan, v, o))
-        .collect::<Result<Vec<_>, _>>()?;
-    let aliased = reports.iter().map(|r| r.aliased).sum();
-    Ok((
-        out,
-        Report {
-            aliased,
-            ..p.report()
-        },
-        Path::Band,
-    ))
+    let (out, r) = image_chunks(&p, &scan, voxels)?;
+    Ok((out, r, Path::Band))
 }
 
 /// The kernel's alias count of a factorised column (voxels whose path times
@@ -556,7 +562,6 @@ impl Columns {
         let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
         let scan = Scan::new(cfg, spads, &mut tables)?;
         let n_state = Probe::state_len(cfg, Target::Column(foci[0]), gate, 0, ks);
-        let cl = chunk_len(voxels.len());
         let report = self.report;
         self.state
             .chunks_mut(n_state.max(1))
@@ -564,20 +569,7 @@ impl Columns {
             .zip(&self.legs)
             .map(|((st, a), legs)| {
                 let p = Probe::resume(&scan, Target::Column(*a), gate, &[], st, report, *legs)?;
-                let mut out = vec![0.0f64; voxels.len()];
-                let reports = voxels
-                    .par_chunks(cl)
-                    .zip(out.par_chunks_mut(cl))
-                    .map(|(v, o)| p.image(&scan, v, o))
-                    .collect::<Result<Vec<_>, _>>()?;
-                let aliased = reports.iter().map(|r| r.aliased).sum();
-                Ok((
-                    out,
-                    Report {
-                        aliased,
-                        ..p.report()
-                    },
-                ))
+                image_chunks(&p, &scan, voxels)
             })
             .collect()
     }
