@@ -17,9 +17,10 @@
 //! Outputs go to unique temporary directories under `std::env::temp_dir()` (process id + test
 //! name), removed at the end of each test.
 
+mod support;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::sync::OnceLock;
 
 use vltm::io;
 use vltm::probe::{self, Exec, Wave};
@@ -41,50 +42,7 @@ fn fixture(stem: &str) -> PathBuf {
 
 /// The `vltm` binary (see the module documentation).
 fn bin() -> &'static Path {
-    static BIN: OnceLock<PathBuf> = OnceLock::new();
-    BIN.get_or_init(|| {
-        if let Some(p) = std::env::var_os("VLTM_BIN") {
-            return PathBuf::from(p);
-        }
-        let exe = std::env::current_exe().expect("test executable path");
-        // <target>/<profile dir>/deps/cli-<hash>
-        let profile_dir = exe
-            .parent()
-            .and_then(Path::parent)
-            .expect("test executable in <target>/<profile>/deps");
-        let target_dir = profile_dir.parent().expect("target directory");
-        // `cargo test` builds into `debug/` with the `test` profile (opt-level 3 in this
-        // workspace: building the binary with it shares the test build's dependencies and keeps
-        // the demo fast); `cargo test --release` into `release/`; custom profiles into their name.
-        let profile = match profile_dir.file_name().and_then(|n| n.to_str()) {
-            Some("debug") => "test".to_string(),
-            Some(p) => p.to_string(),
-            None => panic!("unexpected test executable path {}", exe.display()),
-        };
-        let out = Command::new(env!("CARGO"))
-            .current_dir(root())
-            .env("CARGO_TARGET_DIR", target_dir)
-            .args([
-                "build",
-                "--quiet",
-                "-p",
-                "vltm",
-                "--bin",
-                "vltm",
-                "--profile",
-            ])
-            .arg(&profile)
-            .output()
-            .expect("run cargo");
-        assert!(
-            out.status.success(),
-            "cargo build -p vltm --profile {profile} failed:\n{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let p = profile_dir.join(format!("vltm{}", std::env::consts::EXE_SUFFIX));
-        assert!(p.is_file(), "no binary at {}", p.display());
-        p
-    })
+    support::vltm_bin()
 }
 
 /// A temporary directory, unique per process and test, removed on drop.

@@ -9,11 +9,12 @@
 //! runs the tests; `VLTM_BIN` overrides it). Regression cases found by fuzzing (`fuzz/`) are at
 //! the end.
 
+mod support;
+
 use std::collections::BTreeMap;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use std::sync::OnceLock;
 use vltm::io::{Capture, RowSource};
 
 fn root() -> PathBuf {
@@ -22,46 +23,7 @@ fn root() -> PathBuf {
 
 /// The `vltm` binary (see `tests/cli.rs`).
 fn bin() -> &'static Path {
-    static BIN: OnceLock<PathBuf> = OnceLock::new();
-    BIN.get_or_init(|| {
-        if let Some(p) = std::env::var_os("VLTM_BIN") {
-            return PathBuf::from(p);
-        }
-        let exe = std::env::current_exe().expect("test executable path");
-        let profile_dir = exe
-            .parent()
-            .and_then(Path::parent)
-            .expect("test executable in <target>/<profile>/deps");
-        let target_dir = profile_dir.parent().expect("target directory");
-        let profile = match profile_dir.file_name().and_then(|n| n.to_str()) {
-            Some("debug") => "test".to_string(),
-            Some(p) => p.to_string(),
-            None => panic!("unexpected test executable path {}", exe.display()),
-        };
-        let out = Command::new(env!("CARGO"))
-            .current_dir(root())
-            .env("CARGO_TARGET_DIR", target_dir)
-            .args([
-                "build",
-                "--quiet",
-                "-p",
-                "vltm",
-                "--bin",
-                "vltm",
-                "--profile",
-            ])
-            .arg(&profile)
-            .output()
-            .expect("run cargo");
-        assert!(
-            out.status.success(),
-            "cargo build failed:\n{}",
-            String::from_utf8_lossy(&out.stderr)
-        );
-        let p = profile_dir.join(format!("vltm{}", std::env::consts::EXE_SUFFIX));
-        assert!(p.is_file(), "no binary at {}", p.display());
-        p
-    })
+    support::vltm_bin()
 }
 
 /// A temporary directory, unique per process and test, removed on drop.

@@ -2,6 +2,9 @@
 //! given order, `finish`. Shared by the test files via `mod support;`.
 #![allow(dead_code)]
 
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::OnceLock;
 use vltm_kernel::{Config, Gate, Point, Probe, Report, RowBuffer, Sample, Scan, Target};
 
 /// A scan for the kernel: apertures and histograms `hists[(l·Ks + s)·Nt + n]`.
@@ -82,4 +85,54 @@ pub fn max_rel_diff(x: &[f64], y: &[f64]) -> f64 {
 /// hide a NaN result from a `worst ≤ tol` assertion.
 pub fn nan_is_inf(err: f64) -> f64 {
     if err.is_nan() { f64::INFINITY } else { err }
+}
+
+/// The `vltm` binary the command-line tests run: `$VLTM_BIN`, or built once per test process
+/// with the cargo, profile and target directory of the running test executable (see the
+/// module documentation of `tests/cli.rs`).
+pub fn vltm_bin() -> &'static Path {
+    static BIN: OnceLock<PathBuf> = OnceLock::new();
+    BIN.get_or_init(|| {
+        if let Some(p) = std::env::var_os("VLTM_BIN") {
+            return PathBuf::from(p);
+        }
+        let exe = std::env::current_exe().expect("test executable path");
+        // <target>/<profile dir>/deps/cli-<hash>
+        let profile_dir = exe
+            .parent()
+            .and_then(Path::parent)
+            .expect("test executable in <target>/<profile>/deps");
+        let target_dir = profile_dir.parent().expect("target directory");
+        // `cargo test` builds into `debug/` with the `test` profile (opt-level 3 in this
+        // workspace: building the binary with it shares the test build's dependencies and keeps
+        // the demo fast); `cargo test --release` into `release/`; custom profiles into their name.
+        let profile = match profile_dir.file_name().and_then(|n| n.to_str()) {
+            Some("debug") => "test".to_string(),
+            Some(p) => p.to_string(),
+            None => panic!("unexpected test executable path {}", exe.display()),
+        };
+        let out = Command::new(env!("CARGO"))
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .env("CARGO_TARGET_DIR", target_dir)
+            .args([
+                "build",
+                "--quiet",
+                "-p",
+                "vltm",
+                "--bin",
+                "vltm",
+                "--profile",
+            ])
+            .arg(&profile)
+            .output()
+            .expect("run cargo");
+        assert!(
+            out.status.success(),
+            "cargo build -p vltm --profile {profile} failed:\n{}",
+            String::from_utf8_lossy(&out.stderr)
+        );
+        let p = profile_dir.join(format!("vltm{}", std::env::consts::EXE_SUFFIX));
+        assert!(p.is_file(), "no binary at {}", p.display());
+        p
+    })
 }
