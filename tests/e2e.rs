@@ -11,11 +11,14 @@
 //!
 //! Measured values are printed in every assertion message (and by `--nocapture`).
 
+mod support;
+
 use std::path::PathBuf;
+use support::{mean_over, scene_object_voxels};
 
 use vltm::io::{self, Capture};
 use vltm::kernel::Point;
-use vltm::probe::{self, ColumnGate, Exec, IndirectOptions, Shell, Wave};
+use vltm::probe::{self, ColumnGate, Exec, IndirectOptions, LeakOptions, Shell, Wave};
 use vltm::sim::{Bounces, Scene};
 use vltm::volume::Volume;
 
@@ -70,9 +73,8 @@ fn centre(s: &Scene, name: &str) -> Point {
 
 /// The wave used for the indirect-light tests: default λ (twice the aperture pitch) and
 /// σ = λ/2 instead of the default 2λ/3. With 2λ/3 the patches' own direct returns leak into
-/// the 4-vertex gate at B as strongly as the inter-reflection (measured on two_patches:
-/// T(A,B) 0.80× the control), the limitation of DESIGN §B.3.4; σ = λ/2 is the remedy noted
-/// there.
+/// the 4-vertex gate at B even more strongly, the limitation of DESIGN §B.3.4; σ = λ/2 is
+/// the remedy noted there (and leak correction, `vltm::probe::leak`, the one vltm uses).
 fn indirect_wave(g: &vltm::io::Geometry) -> Wave {
     Wave {
         sigma: Some(probe::default_wavelength(g) / 2.0),
@@ -227,9 +229,10 @@ fn direct_light_peaks_at_both_patches() {
 // first-order indirect light
 // ---------------------------------------------------------------------------------------------
 
-/// The Γ-masked, 4-vertex-gated column focused at A, at B's voxel, is ≥ 3× higher with the
-/// A → B inter-reflection than in the direct-only control (same Γ, from the full scene's
-/// direct image).
+/// The Γ-masked, 4-vertex-gated column focused at A, averaged over patch B's voxels (its
+/// surface ± one voxel), is higher with the A → B inter-reflection than in the direct-only
+/// control (same Γ, from the full scene's direct image). σ = λ/2. fixtures/README.md states
+/// the measured means.
 #[test]
 fn inter_reflection_raises_the_gated_column_at_b() {
     let vol = volume();
@@ -247,39 +250,62 @@ fn inter_reflection_raises_the_gated_column_at_b() {
         gamma[ib]
     );
     let a = vol.points[ia];
+    let object_b = scene_object_voxels(&s, "B", &vol);
     let col = |c: &mut Capture| {
         let o = probe::column(c, a, &vol, ColumnGate::TwoBounce, Shell::ALL, &wave, EXEC)
             .expect("column");
-        // Γ-masked value at B (B is in Γ, checked above).
-        o.values[ib]
+        let masked: Vec<f32> = o
+            .values
+            .iter()
+            .zip(&gamma)
+            .map(|(&v, &g)| if g { v } else { 0.0 })
+            .collect();
+        (o.values[ib], mean_over(&masked, &object_b))
     };
-    let (t_full, t_ctrl) = (col(&mut full), col(&mut control));
-    let ratio = t_full / t_ctrl;
+    let ((t_full, m_full), (t_ctrl, m_ctrl)) = (col(&mut full), col(&mut control));
+    let ratio = m_full / m_ctrl;
     println!(
-        "Γ: {n_gamma} voxels; T(A,B) gated, Γ-masked: {t_full:.4e} with the inter-reflection, \
-         {t_ctrl:.4e} direct-only control: {ratio:.2}x (σ = {:.4} m)",
+        "Γ: {n_gamma} voxels; T(A,·) gated, Γ-masked, mean over patch B's {} voxels: {m_full:.4e} \
+         with the inter-reflection, {m_ctrl:.4e} direct-only control: {ratio:.2}x (σ = {:.4} m)",
+        object_b.len(),
         d.config.sigma()
     );
     assert!(
-        ratio >= 3.0,
-        "T(A,B) is only {ratio:.2}x the control ({t_full:.4e} vs {t_ctrl:.4e})"
+        (1.04..=1.12).contains(&ratio),
+        "T(A,·) over B is {ratio:.2}x the control ({m_full:.4e} vs {m_ctrl:.4e}); fixtures/README.md: 1.08x"
+    );
+    // The mechanism, at the one voxel of B's centre (a check, not a measure of the object):
+    // the inter-reflection arrives there, where the leak is weakest.
+    assert!(
+        t_full >= 3.0 * t_ctrl,
+        "T(A,B) at B's centre voxel: {t_full:.4e} vs control {t_ctrl:.4e}"
     );
 
-    // Eq. 17 with the same Γ (default r0 = 1.5σ). On this scene the sum over the Γ voxels
-    // around A is dominated by the patches' direct light leaking into the gate at voxels off
-    // the patch centres (DESIGN §B.3.4 caution): measured 0.86x the control, so the ratio is
-    // reported, not asserted. What must hold: the sum over a ∈ Γ includes a = A's voxel, so
-    // I_i(B) ≥ T(A, B) (the same factorised column, the other terms are ≥ 0).
+    // Eq. 17 with the same Γ (default r0 = 1.5σ), without leak correction. On this scene the
+    // sum over the Γ voxels around A is dominated by the patches' direct light leaking into
+    // the gate at voxels off the patch centres (DESIGN §B.3.4 caution): about as high as the
+    // control over B's voxels (fixtures/README.md). Also: the sum over a ∈ Γ includes a = A's
+    // voxel, so I_i(B) ≥ T(A, B) (the same factorised column, the other terms are ≥ 0).
     let opts = IndirectOptions::default();
     let i_full =
         probe::indirect_over(&mut full, &vol, &gamma, &opts, &wave, EXEC).expect("indirect");
     let i_ctrl =
         probe::indirect_over(&mut control, &vol, &gamma, &opts, &wave, EXEC).expect("indirect");
     let (f, c) = (i_full.values[ib], i_ctrl.values[ib]);
+    let (mf, mc) = (
+        mean_over(&i_full.values, &object_b),
+        mean_over(&i_ctrl.values, &object_b),
+    );
     println!(
-        "in-focus indirect I_i(B) (Eq. 17, Γ as above, r0 = {:.3} m): {f:.4e} vs control {c:.4e}: {:.2}x",
+        "in-focus indirect I_i (Eq. 17, Γ as above, r0 = {:.3} m), mean over B's voxels: \
+         {mf:.4e} vs control {mc:.4e}: {:.2}x",
         i_full.shell.r0,
-        f / c
+        mf / mc
+    );
+    assert!(
+        (0.95..=1.05).contains(&(mf / mc)),
+        "Eq. 17 over B: {:.2}x the control (fixtures/README.md: 1.00x)",
+        mf / mc
     );
     assert!(
         f >= t_full && c >= t_ctrl,
@@ -293,14 +319,43 @@ fn inter_reflection_raises_the_gated_column_at_b() {
             .all(|(&v, &g)| g || v == 0.0),
         "I_i is not zero outside Γ"
     );
+    // What `vltm indirect` does by default: vltm's default σ = 2λ/3, Γ at ε = 0.1 of its
+    // diagonal, the capture's direct light removed first (the control: the same correction).
+    let wave = Wave::default();
+    let d = probe::direct(&mut full, &vol, &wave, EXEC).expect("direct");
+    let gamma = probe::gamma_mask(&d.values, 0.1);
+    let opts = IndirectOptions {
+        leak: Some(LeakOptions::default()),
+        ..IndirectOptions::default()
+    };
+    let lf = probe::indirect_over(&mut full, &vol, &gamma, &opts, &wave, EXEC).expect("indirect");
+    let lc =
+        probe::indirect_over(&mut control, &vol, &gamma, &opts, &wave, EXEC).expect("indirect");
+    let (mf, mc) = (
+        mean_over(&lf.values, &object_b),
+        mean_over(&lc.values, &object_b),
+    );
+    println!(
+        "leak-corrected I_i (defaults: σ = {:.4} m, ε = 0.1, r0 = {:.3} m), mean over B's voxels: \
+         {mf:.4e} vs control {mc:.4e}: {:.2}x",
+        d.config.sigma(),
+        lf.shell.r0,
+        mf / mc
+    );
+    assert!(
+        mf > 0.0 && mf >= 2.0 * mc,
+        "leak-corrected I_i over B: {mf:.4e} vs control {mc:.4e} (fixtures/README.md: ≥ 2x, control 0)"
+    );
 }
 
 /// In-focus indirect light, Eqs. 15–17 end to end (`probe::indirect`: pass 1 the diagonal and
 /// Γ = {I_d > 0.1·max}, pass 2 the Γ-masked sum over pairs ≥ r0 apart), on the test bench of
 /// DESIGN §B.6 rendered in-test: 12×12 lasers × 12×12 SPADs over 1 m, 500 bins of 1 cm,
 /// λ = 0.2 m, σ = 2λ/3 (the defaults of the method), isotropic point patches A, B 0.7 m
-/// apart, r0 = 0.3 m. The float64 prototype gives I_i(B) = 7.5× its direct-only control
-/// there; vltm must show the inter-reflection as ≥ 3× at B, and Γ must hold both patches.
+/// apart, r0 = 0.3 m, no leak correction. The float64 prototype gave I_i = 7.5× its
+/// direct-only control at B's single voxel; the README states the mean over B's voxels (its
+/// voxel ± one voxel, 9 voxels of this 25 × 1 × 13 slice) and the same over A's, which this
+/// test asserts within a band. Γ must hold both patches.
 /// (The 8×8 fixtures are too coarse for the unweighted Eq. 17 sum at the default σ: see
 /// fixtures/README.md.)
 #[test]
@@ -339,19 +394,48 @@ fn in_focus_indirect_light_eq17_finds_the_inter_reflection() {
         full.gamma[ia] && full.gamma[ib],
         "Γ ({n_gamma} voxels) must hold A's and B's voxels"
     );
-    let (f, c) = (full.values[ib], ctrl.values[ib]);
+    let (ob, oa) = (
+        scene_object_voxels(&bench, "B", &vol),
+        scene_object_voxels(&bench, "A", &vol),
+    );
+    let (f, c) = (mean_over(&full.values, &ob), mean_over(&ctrl.values, &ob));
     let ratio = f / c;
+    let ra = mean_over(&full.values, &oa) / mean_over(&ctrl.values, &oa);
     println!(
-        "Eq. 17 on the DESIGN §B.6 bench: |Γ| = {n_gamma}, I_i(B) = {f:.4e} with the \
-         inter-reflection, {c:.4e} direct-only: {ratio:.2}x (prototype: 7.5x)"
+        "Eq. 17 on the DESIGN §B.6 bench: |Γ| = {n_gamma}, I_i mean over B's {} voxels = {f:.4e} \
+         with the inter-reflection, {c:.4e} direct-only: {ratio:.2}x; over A's: {ra:.2}x \
+         (single voxel B: {:.2}x; prototype: 7.5x)",
+        ob.len(),
+        full.values[ib] / ctrl.values[ib]
     );
     assert!(
-        ratio >= 3.0,
-        "I_i(B) is only {ratio:.2}x the control ({f:.4e} vs {c:.4e})"
+        (3.0..=3.5).contains(&ratio),
+        "I_i over B is {ratio:.2}x the control ({f:.4e} vs {c:.4e}); README: 3.24x"
     );
     // By symmetry the light from B lands on A as well.
-    let ra = full.values[ia] / ctrl.values[ia];
-    assert!(ra >= 3.0, "I_i(A) is only {ra:.2}x the control");
+    assert!(
+        (3.0..=3.5).contains(&ra),
+        "I_i over A is {ra:.2}x the control; README: 3.24x"
+    );
+    // The default of `vltm indirect`: the capture's direct light removed first.
+    let leak = IndirectOptions {
+        leak: Some(LeakOptions::default()),
+        ..opts
+    };
+    let run = |s: &Scene| {
+        let mut c = s.render().expect("render");
+        probe::indirect_over(&mut c, &vol, &full.gamma, &leak, &wave, EXEC).expect("indirect")
+    };
+    let (lf, lc) = (run(&bench), run(&control));
+    let (mf, mc) = (mean_over(&lf.values, &ob), mean_over(&lc.values, &ob));
+    println!(
+        "leak-corrected, mean over B's voxels: {mf:.4e} vs control {mc:.4e}: {:.2}x",
+        mf / mc
+    );
+    assert!(
+        mf > 0.0 && mf >= 2.0 * mc,
+        "leak-corrected I_i over B: {mf:.4e} vs control {mc:.4e} (README: ≥ 2x, control 0)"
+    );
     // Nothing outside Γ.
     assert!(
         full.values
@@ -372,8 +456,8 @@ fn in_focus_indirect_light_eq17_finds_the_inter_reflection() {
 /// ball around B among Γ voxels ≥ r0 from A" is identically 0 here with and without the gate:
 /// Γ holds only the two patch blobs, and A's lies within r0.)
 ///
-/// At B's voxel itself: without the gate the column is the direct-only control's value
-/// (it is B's direct light), with the gate it is well above it.
+/// Over patch B's voxels (its surface ± one voxel): without the gate the column is about the
+/// direct-only control's value (it is B's direct light), with the gate it is above it.
 #[test]
 fn gate_removes_out_of_focus_light() {
     let vol = volume();
@@ -384,7 +468,7 @@ fn gate_removes_out_of_focus_light() {
     let gamma = probe::gamma_mask(&d.values, 0.1);
     let sigma = d.config.sigma() as f32;
     let r0 = 1.5 * sigma;
-    let (pa, ib) = (centre(&s, "A"), vol.nearest(centre(&s, "B")));
+    let (pa, object_b) = (centre(&s, "A"), scene_object_voxels(&s, "B", &vol));
     let a = vol.points[vol.nearest(pa)];
     let fraction = |v: &[f32]| {
         let (mut far, mut all) = (0.0f64, 0.0f64);
@@ -404,7 +488,7 @@ fn gate_removes_out_of_focus_light() {
         for gate in [ColumnGate::TwoBounce, ColumnGate::None] {
             let o = probe::column(c, a, &vol, gate, Shell::ALL, &wave, EXEC).expect("column");
             f.push(fraction(&o.values));
-            at_b.push(o.values[ib]);
+            at_b.push(mean_over(&o.values, &object_b));
         }
         println!(
             "{label}: out-of-focus fraction (Γ energy ≥ {r0:.3} m from A) gated {:.3e}, no gate {:.3e}",
@@ -420,12 +504,12 @@ fn gate_removes_out_of_focus_light() {
     // at_b = [control gated, control none, full gated, full none]
     let (gated, ungated) = (at_b[2] / at_b[0], at_b[3] / at_b[1]);
     println!(
-        "T(A,B) full / control: gated {gated:.2}x ({:.3e} / {:.3e}), no gate {ungated:.2}x ({:.3e} / {:.3e})",
+        "T(A,·) over patch B's voxels, full / control: gated {gated:.2}x ({:.3e} / {:.3e}), no gate {ungated:.2}x ({:.3e} / {:.3e})",
         at_b[2], at_b[0], at_b[3], at_b[1]
     );
     assert!(
-        ungated < 1.5 && gated >= 3.0,
-        "T(A,B) full/control should be ~1 without the gate (measured {ungated:.2}x) and ≥ 3 with it ({gated:.2}x)"
+        (0.93..=1.03).contains(&ungated) && (1.0..=1.07).contains(&gated) && gated > ungated,
+        "T(A,·) over B, full/control, should be ~1 without the gate (measured {ungated:.2}x) and higher with it ({gated:.2}x; fixtures/README.md: 0.98x and 1.03x)"
     );
 }
 
@@ -433,7 +517,8 @@ fn gate_removes_out_of_focus_light() {
 // higher-order gate
 // ---------------------------------------------------------------------------------------------
 
-/// Eq. 18 (the late gate) at (A, B) on three point scatterers: it picks up the 5-vertex path
+/// Eq. 18 (the late gate) at (A, B) on three point scatterers, averaged over B's voxels (B's
+/// voxel of the tests' grid ± one voxel: 27 voxels at 5 cm × 10 cm × 5 cm): it picks up the 5-vertex path
 /// A → C → B (fixture with up to 5 vertices vs the same scene rendered with up to 4), and it
 /// rejects the 4-vertex A → B path (two-point scene A, B with and without indirect light),
 /// which the 4-vertex gate (Eq. 14) picks up.
@@ -441,7 +526,15 @@ fn gate_removes_out_of_focus_light() {
 fn higher_order_gate_picks_up_five_vertex_light() {
     let s5 = scene("three_points");
     let (pa, pb) = (centre(&s5, "A"), centre(&s5, "B"));
-    let vol = Volume::points(vec![pb]).expect("B");
+    // B's voxel of VOLUME's grid (pitch 0.05, 0.1, 0.05 m) ± one voxel.
+    let vol = Volume::grid(
+        [pb[0] - 0.05, pb[1] - 0.1, pb[2] - 0.05],
+        [pb[0] + 0.05, pb[1] + 0.1, pb[2] + 0.05],
+        [3, 3, 3],
+    )
+    .expect("B ± one voxel");
+    let all: Vec<usize> = (0..vol.len()).collect();
+    let centre_b = vol.nearest(pb);
     let mut s4 = s5.clone();
     s4.max_vertices = 4;
     let mut ab = s5.clone();
@@ -452,35 +545,44 @@ fn higher_order_gate_picks_up_five_vertex_light() {
     let probe = |c: &mut Capture| {
         let w = Wave::default();
         let t = |c: &mut Capture, g| {
-            probe::column(c, pa, &vol, g, Shell::ALL, &w, EXEC)
-                .expect("column")
-                .values[0]
+            let o = probe::column(c, pa, &vol, g, Shell::ALL, &w, EXEC).expect("column");
+            (mean_over(&o.values, &all), o.values[centre_b])
         };
         (t(c, ColumnGate::HigherOrder), t(c, ColumnGate::TwoBounce))
     };
-    let (ho5, _) = probe(&mut fixture("three_points"));
-    let (ho4, _) = probe(&mut s4.render().expect("render"));
-    let (ho_ab, t2_ab) = probe(&mut ab.render().expect("render"));
-    let (ho_ab_d, t2_ab_d) = probe(&mut ab_direct.render().expect("render"));
+    let ((ho5, ho5c), _) = probe(&mut fixture("three_points"));
+    let ((ho4, ho4c), _) = probe(&mut s4.render().expect("render"));
+    let ((ho_ab, ho_abc), (t2_ab, _)) = probe(&mut ab.render().expect("render"));
+    let ((ho_ab_d, ho_ab_dc), (t2_ab_d, _)) = probe(&mut ab_direct.render().expect("render"));
     println!(
-        "T_ho(A,B): A,B,C up to 5 vertices {ho5:.4e}, up to 4 {ho4:.4e} ({:.0}x); \
-         A,B all paths {ho_ab:.4e}, direct only {ho_ab_d:.4e}\n\
-         T_2(A,B): A,B all paths {t2_ab:.4e}, direct only {t2_ab_d:.4e} ({:.2}x)",
+        "T_ho(A,·) mean over B's voxels: A,B,C up to 5 vertices {ho5:.4e}, up to 4 {ho4:.4e} \
+         ({:.2}x); A,B all paths {ho_ab:.4e}, direct only {ho_ab_d:.4e} ({:.3} of the 5-vertex \
+         signal)\nT_2(A,·) mean over B's voxels: A,B all paths {t2_ab:.4e}, direct only \
+         {t2_ab_d:.4e} ({:.2}x)",
         ho5 / ho4,
+        (ho_ab - ho_ab_d).abs() / ho5,
         t2_ab / t2_ab_d
     );
     assert!(
-        ho5 >= 10.0 * ho4,
-        "the 5-vertex path A→C→B should raise T_ho(A,B) ≥ 10x: {ho5:.4e} vs {ho4:.4e}"
+        (5.0..=7.0).contains(&(ho5 / ho4)),
+        "the 5-vertex path A→C→B should raise T_ho over B's voxels ~6x (fixtures/README.md 5.97x): \
+         {ho5:.4e} vs {ho4:.4e}"
     );
     assert!(
-        (ho_ab - ho_ab_d).abs() <= 0.05 * ho5,
-        "the 4-vertex path A→B should barely change T_ho(A,B): {ho_ab_d:.4e} → {ho_ab:.4e} \
-         (the 5-vertex signal is {ho5:.4e})"
+        (ho_ab - ho_ab_d).abs() <= 0.2 * ho5,
+        "the 4-vertex path A→B should stay well below the 5-vertex signal over B's voxels: \
+         {ho_ab_d:.4e} → {ho_ab:.4e} (the 5-vertex signal is {ho5:.4e}; fixtures/README.md 0.16)"
     );
     assert!(
-        t2_ab >= 2.0 * t2_ab_d,
-        "the 4-vertex gate should pick up the A→B path: T_2(A,B) {t2_ab_d:.4e} → {t2_ab:.4e}"
+        (2.4..=2.9).contains(&(t2_ab / t2_ab_d)),
+        "the 4-vertex gate should pick up the A→B path: T_2 over B {t2_ab_d:.4e} → {t2_ab:.4e} \
+         (fixtures/README.md 2.67x)"
+    );
+    // The mechanism at B's centre voxel (a check, not a measure of the object): the late
+    // gate there sees the 5-vertex light and not the 4-vertex path.
+    assert!(
+        ho5c >= 10.0 * ho4c && (ho_abc - ho_ab_dc).abs() <= 0.05 * ho5c,
+        "T_ho at B's centre: {ho5c:.4e} vs {ho4c:.4e}; A,B {ho_ab_dc:.4e} → {ho_abc:.4e}"
     );
 }
 

@@ -136,3 +136,56 @@ pub fn vltm_bin() -> &'static Path {
         p
     })
 }
+
+/// Voxels of an object: the voxels its surface passes through (the nearest voxel of each
+/// of a dense set of surface points), grown by one voxel in every grid direction. Every ratio
+/// the README states is a mean over such a set ("its surface ± one voxel").
+pub fn object_voxels(vol: &vltm::volume::Volume, surface: &[Point]) -> Vec<usize> {
+    let [nx, ny, nz] = vol.shape;
+    let mut on = vec![false; vol.len()];
+    for p in surface {
+        on[vol.nearest(*p)] = true;
+    }
+    let mut grown = on.clone();
+    for i in (0..vol.len()).filter(|&i| on[i]) {
+        let (ix, iy, iz) = (i / (ny * nz), (i / nz) % ny, i % nz);
+        let r = |c: usize, n: usize| c.saturating_sub(1)..=(c + 1).min(n - 1);
+        for jx in r(ix, nx) {
+            for jy in r(iy, ny) {
+                for jz in r(iz, nz) {
+                    grown[(jx * ny + jy) * nz + jz] = true;
+                }
+            }
+        }
+    }
+    (0..vol.len()).filter(|&i| grown[i]).collect()
+}
+
+/// The voxels of object `name` of `scene` in `vol` ([`object_voxels`]), its surface sampled
+/// densely (40 × 40 points per patch or box face; a point scatterer is its one point).
+pub fn scene_object_voxels(
+    scene: &vltm::sim::Scene,
+    name: &str,
+    vol: &vltm::volume::Volume,
+) -> Vec<usize> {
+    let mut o = scene
+        .object(name)
+        .unwrap_or_else(|| panic!("no object {name}"))
+        .clone();
+    match &mut o {
+        vltm::sim::Object::Patch(p) => p.samples = 40,
+        vltm::sim::Object::Box(b) => b.samples = 40,
+        vltm::sim::Object::Point(_) => {}
+    }
+    let pts: Vec<Point> = o
+        .samples(0)
+        .iter()
+        .map(|p| p.position.map(|x| x as f32))
+        .collect();
+    object_voxels(vol, &pts)
+}
+
+/// The mean of `v` over the voxels `idx`.
+pub fn mean_over(v: &[f32], idx: &[usize]) -> f64 {
+    idx.iter().map(|&i| f64::from(v[i])).sum::<f64>() / idx.len() as f64
+}
