@@ -1685,3 +1685,67 @@ fn leak_correct_on_the_command_line() {
         "{out}"
     );
 }
+
+/// A capture with no light at all (the two-patch fixture zeroed): every probe that forms Γ
+/// refuses it with an error naming its option — `indirect` and `matrix ... gamma`
+/// `--epsilon`, `column --mask-epsilon` that option, `column --leak-correct` that one —
+/// never an all-zero result, and writes nothing.
+#[test]
+fn empty_gamma_is_an_error_naming_the_option() {
+    let t = TempDir::new("dark");
+    let mut c = vltm::io::open(&fixture("two_patches")).expect("fixture");
+    c.data.iter_mut().for_each(|x| *x = 0.0);
+    let dark = t.path("dark.npz");
+    vltm::io::npz::write(&c, &dark).expect("write");
+    let (cap, out) = (s(&dark), s(&t.path("o.npy")));
+    let h5 = s(&t.path("m.h5"));
+    let cases: [(Vec<&str>, &str); 4] = [
+        (
+            vec!["indirect", &cap, "--volume", SPEC, "--out", &out],
+            "--epsilon",
+        ),
+        (
+            vec![
+                "matrix", &cap, "--from", "gamma", "--to", "gamma", "--volume", SPEC, "--out", &h5,
+            ],
+            "--epsilon",
+        ),
+        (
+            vec![
+                "column",
+                &cap,
+                "--focus",
+                FOCUS,
+                "--volume",
+                SPEC,
+                "--mask-epsilon",
+                "0.1",
+                "--out",
+                &out,
+            ],
+            "--mask-epsilon",
+        ),
+        (
+            vec![
+                "column",
+                &cap,
+                "--focus",
+                FOCUS,
+                "--volume",
+                SPEC,
+                "--leak-correct",
+                "--out",
+                &out,
+            ],
+            "--leak-correct",
+        ),
+    ];
+    for (args, option) in cases {
+        let err = fails(&t.0, &args, 2);
+        assert!(
+            err.contains(option) && err.lines().count() == 1,
+            "{args:?}: {err}"
+        );
+    }
+    assert!(!t.path("o.npy").exists() && !t.path("m.h5").exists());
+}
