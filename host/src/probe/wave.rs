@@ -182,7 +182,7 @@ pub(super) fn check_window(
     };
     let join = |x: (f64, f64), y: (f64, f64)| (x.0.min(y.0), x.1.max(y.1));
     let empty = (f64::INFINITY, f64::NEG_INFINITY);
-    // The paths through voxel `b` (focused at `a` for columns).
+    // The span of path lengths through voxel `v` (diagonal), or from focus `a` to voxel `b`.
     let diagonal = |v: &Point| {
         let (l, s) = (span(&g.lasers, &d1, v), span(&g.spads, &d4, v));
         (l.0 + s.0, l.1 + s.1)
