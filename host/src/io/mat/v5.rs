@@ -616,3 +616,38 @@ fn numbers<T>(ty: u32, be: bool, raw: &[u8], to: impl Fn(f64) -> T) -> Vec<T> {
         _ => each(raw, be, |w| u64::from_le_bytes(w) as f64, to),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every numeric type decodes to its value in both byte orders.
+    #[test]
+    fn numbers_decode_every_type_in_both_byte_orders() {
+        let cases: [(u32, Vec<u8>, f64); 10] = [
+            (MI_INT8, vec![0xfe], -2.0),
+            (MI_UINT8, vec![0xfe], 254.0),
+            (MI_INT16, (-300i16).to_le_bytes().to_vec(), -300.0),
+            (MI_UINT16, 60_000u16.to_le_bytes().to_vec(), 60_000.0),
+            (MI_INT32, (-70_000i32).to_le_bytes().to_vec(), -70_000.0),
+            (MI_UINT32, 4_000_000_000u32.to_le_bytes().to_vec(), 4e9),
+            (MI_SINGLE, 1.5f32.to_le_bytes().to_vec(), 1.5),
+            (MI_DOUBLE, (-2.25f64).to_le_bytes().to_vec(), -2.25),
+            (MI_INT64, (-5i64).to_le_bytes().to_vec(), -5.0),
+            (MI_UINT64, 7u64.to_le_bytes().to_vec(), 7.0),
+        ];
+        for (ty, le, want) in cases {
+            // Two values each, so that the per-value stride is exercised.
+            let two: Vec<u8> = le.iter().chain(&le).copied().collect();
+            assert_eq!(
+                numbers(ty, false, &two, |x| x),
+                [want, want],
+                "type {ty} LE"
+            );
+            let be: Vec<u8> = le.iter().rev().copied().collect();
+            let two: Vec<u8> = be.iter().chain(&be).copied().collect();
+            assert_eq!(numbers(ty, true, &two, |x| x), [want, want], "type {ty} BE");
+        }
+        assert_eq!(numbers(MI_UINT16, false, &[1, 0, 2], |x| x as f32), [1.0]);
+    }
+}
