@@ -13,10 +13,13 @@ start, vltm at its centre (1.5 source bins later: 0.9 mm of depth). Then `vltm d
 correlation of the max-normalised intensities.
 
     python3 benches/real_compare.py ../shared/data/real/data_resolution_chart_40cm.mat \\
-        --volume=-0.2:0.2:64,-0.2:0.2:64,0.37:0.43:7 [--wl 0.04] [--cpus 2]
+        --volume=-0.2:0.2:64,-0.2:0.2:64,0.35:0.45:11 [--wl 0.04] [--cpus 2] [--repeat 3]
+
+Run it under `nice -n 10` on a shared machine (both programs then run at the same priority).
 """
 import argparse
 import os
+import re
 import subprocess
 import sys
 import tempfile
@@ -78,42 +81,57 @@ def run_ytal(path, wl, vol, cpus, trim=600, k=4):
     return np.abs(res) ** 2, time.perf_counter() - t
 
 
-def run_vltm(exe, path, wl, spec, threads):
+def run_vltm(exe, path, wl, spec, threads, repeat):
+    """Median wall time of `repeat` runs of the whole command (reading the `.mat` included),
+    the evaluation path it reports and its peak resident memory (KB, over the runs)."""
+    import resource
     out = os.path.join(tempfile.mkdtemp(), 'direct.npy')
     cmd = [exe, '--threads', str(threads), 'direct', path, f'--volume={spec}', '--t-min', '600b',
            '--rebin', '4', '--wavelength', str(wl), '--sigma', str(wl), '--weights', 'one',
            '--out', out]
-    t = time.perf_counter()
-    subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-    return np.load(out).astype(np.float64), time.perf_counter() - t
+    times, text = [], ''
+    for _ in range(repeat):
+        t = time.perf_counter()
+        r = subprocess.run(cmd, check=True, capture_output=True, text=True)
+        times.append(time.perf_counter() - t)
+        text = r.stdout + r.stderr
+    m = re.search(r', path (\w+)\)', text)
+    path_used = m.group(1) if m else '?'
+    rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss
+    return np.load(out).astype(np.float64), float(np.median(times)), path_used, rss
 
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     ap.add_argument('capture')
     ap.add_argument('--wl', type=float, default=0.04, help='virtual wavelength = gate sigma [m]')
-    ap.add_argument('--volume', default='-0.2:0.2:64,-0.2:0.2:64,0.37:0.43:7')
+    ap.add_argument('--volume', default='-0.2:0.2:64,-0.2:0.2:64,0.35:0.45:11')
     ap.add_argument('--cpus', type=int, default=2)
+    ap.add_argument('--repeat', type=int, default=3, help='vltm runs (the median is reported)')
     ap.add_argument('--vltm', default=os.path.join(os.path.dirname(__file__), '..', 'target', 'release', 'vltm'))
     a = ap.parse_args()
     if not os.path.exists(a.vltm):
         sys.exit(f'{a.vltm} not found: cargo build --release -p vltm')
     vol = grid(a.volume)
-    mine, t_v = run_vltm(a.vltm, a.capture, a.wl, a.volume, a.cpus)
+    load0 = os.getloadavg()
+    mine, t_v, path_used, rss = run_vltm(a.vltm, a.capture, a.wl, a.volume, a.cpus, a.repeat)
     try:
         theirs, t_y = run_ytal(a.capture, a.wl, vol, a.cpus)
     except ImportError as e:
         print(f'vltm: {t_v:.2f} s (y-tal not available: {e})')
         return
+    load1 = os.getloadavg()
     theirs = theirs.reshape(mine.shape)
     x, y = mine.ravel() / mine.max(), theirs.ravel() / theirs.max()
     r = np.corrcoef(x, y)[0, 1]
     pm, pt = np.unravel_index(np.argmax(x), mine.shape), np.unravel_index(np.argmax(y), mine.shape)
-    print(f'{os.path.basename(a.capture)}: volume {vol.shape[:3]}, {a.cpus} cpus, wl = sigma = {a.wl} m')
+    print(f'{os.path.basename(a.capture)}: volume {a.volume} {vol.shape[:3]}, {a.cpus} cpus, '
+          f'wl = sigma = {a.wl} m, nice {os.nice(0)}, load average {load0[0]:.1f} before, '
+          f'{load1[0]:.1f} after')
     print(f'  y-tal fbp DIRECT_LIGHT  {t_y:8.2f} s')
-    print(f'  vltm direct (band)      {t_v:8.2f} s   ({t_y / t_v:.2f}x)')
+    print(f'  vltm direct ({path_used})  {t_v:8.2f} s   ({t_y / t_v:.1f}x; median of {a.repeat}, '
+          f'max RSS {rss / 1024:.0f} MB)')
     print(f'  Pearson of normalised intensities {r:.5f}; peak voxel vltm {pm}, y-tal {pt}')
-
 
 if __name__ == '__main__':
     main()

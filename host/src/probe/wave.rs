@@ -182,36 +182,45 @@ pub(super) fn check_window(
     };
     let join = |x: (f64, f64), y: (f64, f64)| (x.0.min(y.0), x.1.max(y.1));
     let empty = (f64::INFINITY, f64::NEG_INFINITY);
+    // The span of path lengths through voxel `v` (diagonal), or from focus `a` to voxel `b`.
+    let diagonal = |v: &Point| {
+        let (l, s) = (span(&g.lasers, &d1, v), span(&g.spads, &d4, v));
+        (l.0 + s.0, l.1 + s.1)
+    };
+    let focused = |a: &Point, p: (f64, f64), b: &Point| {
+        let c = span(&g.spads, &d4, b);
+        let d = f64::from(dist(*a, *b));
+        (p.0 + d + c.0, p.1 + d + c.1)
+    };
+    // Stops at the first voxel that meets the window (usually among the first few): the
+    // full span over every voxel is computed only for the error message.
+    let found = match foci {
+        None => voxels.par_iter().any(|v| meets(diagonal(v))),
+        Some(foci) => foci.par_iter().any(|a| {
+            let p = span(&g.lasers, &d1, a);
+            voxels.iter().any(|b| meets(focused(a, p, b)))
+        }),
+    };
+    if found {
+        return Ok(());
+    }
     let all = match foci {
-        None => voxels
-            .par_iter()
-            .map(|v| {
-                let (l, s) = (span(&g.lasers, &d1, v), span(&g.spads, &d4, v));
-                (l.0 + s.0, l.1 + s.1)
-            })
-            .map(|p| (meets(p), p))
-            .reduce(|| (false, empty), |x, y| (x.0 || y.0, join(x.1, y.1))),
+        None => voxels.par_iter().map(diagonal).reduce(|| empty, join),
         Some(foci) => foci
             .par_iter()
             .map(|a| {
                 let p = span(&g.lasers, &d1, a);
-                voxels.iter().fold((false, empty), |acc, b| {
-                    let c = span(&g.spads, &d4, b);
-                    let d = f64::from(dist(*a, *b));
-                    let q = (p.0 + d + c.0, p.1 + d + c.1);
-                    (acc.0 || meets(q), join(acc.1, q))
-                })
+                voxels
+                    .iter()
+                    .fold(empty, |acc, b| join(acc, focused(a, p, b)))
             })
-            .reduce(|| (false, empty), |x, y| (x.0 || y.0, join(x.1, y.1))),
+            .reduce(|| empty, join),
     };
-    if all.0 {
-        return Ok(());
-    }
     Err(crate::error::Error::arg(
         "--volume",
         format!(
             "the capture's time window ({:.4} to {:.4} m of path, gate margins included) contains no path through the probed voxels (their paths span {:.4} to {:.4} m): choose voxels the capture saw, or check its t_start and delta_t",
-            lo, hi, all.1.0, all.1.1
+            lo, hi, all.0, all.1
         ),
     ))
 }
