@@ -27,13 +27,13 @@ const SHAPE: [usize; 3] = [13, 3, 8];
 #[derive(Clone, Copy, Debug)]
 enum Order {
     /// `(ly, lx, sy, sx, bounces, t, colours)`, grids `(X, Y, 3)`.
-    LaserFirst,
+    Rows7,
     /// `(colours, t, bounces, sy, sx, ly, lx)`, grids `(3, Y, X)`.
-    TimeFirst,
+    Time7,
     /// `(sx, sy, bounces, t, colours)` (confocal), grids `(X, Y, 3)`.
-    PointFirst,
+    Rows5,
     /// `(colours, t, bounces, sy, sx)` (confocal), grids `(3, Y, X)`.
-    PointTimeFirst,
+    Time5,
 }
 
 /// Fractions of each sample put in each colour and each bounce (they sum to 1).
@@ -112,10 +112,10 @@ fn write_znlos(c: &Capture, order: Order, path: &Path, skip: &str, bad_shape: bo
     let (nt, [lx, ly], [sx, sy]) = (g.nt, g.laser_shape, g.spad_shape);
     let nb = if bad_shape { 4 } else { 6 };
     let shape: Vec<usize> = match order {
-        Order::LaserFirst => vec![ly, lx, sy, sx, nb, nt, 3],
-        Order::TimeFirst => vec![3, nt, nb, sy, sx, ly, lx],
-        Order::PointFirst => vec![lx, ly, nb, nt, 3],
-        Order::PointTimeFirst => vec![3, nt, nb, ly, lx],
+        Order::Rows7 => vec![ly, lx, sy, sx, nb, nt, 3],
+        Order::Time7 => vec![3, nt, nb, sy, sx, ly, lx],
+        Order::Rows5 => vec![lx, ly, nb, nt, 3],
+        Order::Time5 => vec![3, nt, nb, ly, lx],
     };
     let n: usize = shape.iter().product();
     let mut data = vec![0.0f32; n];
@@ -124,10 +124,10 @@ fn write_znlos(c: &Capture, order: Order, path: &Path, skip: &str, bad_shape: bo
         let k = &idx;
         // (ix, iy, isx, isy, t, colour, bounce) of this element.
         let (ix, iy, isx, isy, t, col, b) = match order {
-            Order::LaserFirst => (k[1], k[0], k[3], k[2], k[5], k[6], k[4]),
-            Order::TimeFirst => (k[6], k[5], k[4], k[3], k[1], k[0], k[2]),
-            Order::PointFirst => (k[0], k[1], 0, 0, k[3], k[4], k[2]),
-            Order::PointTimeFirst => (k[4], k[3], 0, 0, k[1], k[0], k[2]),
+            Order::Rows7 => (k[1], k[0], k[3], k[2], k[5], k[6], k[4]),
+            Order::Time7 => (k[6], k[5], k[4], k[3], k[1], k[0], k[2]),
+            Order::Rows5 => (k[0], k[1], 0, 0, k[3], k[4], k[2]),
+            Order::Time5 => (k[4], k[3], 0, 0, k[1], k[0], k[2]),
         };
         let (l, s) = (ix * ly + iy, isx * sy + isy);
         *x = c.row(l)[s * nt + t] * COLOURS[col] * BOUNCES[b % 6];
@@ -139,11 +139,11 @@ fn write_znlos(c: &Capture, order: Order, path: &Path, skip: &str, bad_shape: bo
             idx[a] = 0;
         }
     }
-    let transposed = matches!(order, Order::TimeFirst | Order::PointTimeFirst);
+    let transposed = matches!(order, Order::Time7 | Order::Time5);
     let grid = |pts: &[vltm_kernel::Point], [nx, ny]: [usize; 2]| -> (Vec<f32>, Vec<usize>) {
         if transposed {
             let mut v = Vec::new();
-            for comp in 0..3 {
+            for comp in [0, 1, 2] {
                 for j in 0..ny {
                     for i in 0..nx {
                         v.push(pts[i * ny + j][comp]);
@@ -261,8 +261,8 @@ fn keep(files: &[&Path]) {
 fn direct_on_znlos_equals_direct_on_the_original() {
     let t = Tmp::new("direct");
     for (confocal, orders) in [
-        (false, [Order::LaserFirst, Order::TimeFirst]),
-        (true, [Order::PointFirst, Order::PointTimeFirst]),
+        (false, [Order::Rows7, Order::Time7]),
+        (true, [Order::Rows5, Order::Time5]),
     ] {
         let kind = if confocal { "confocal" } else { "exhaustive" };
         let c = scene(confocal, true);
@@ -316,8 +316,8 @@ fn info_names_the_layout_and_conventions() {
     let t = Tmp::new("info");
     let c = scene(false, true);
     for (order, mem) in [
-        (Order::LaserFirst, "streamed by row"),
-        (Order::TimeFirst, "read whole on the first row"),
+        (Order::Rows7, "streamed by row"),
+        (Order::Time7, "read whole on the first row"),
     ] {
         let z = t.path("z.hdf5");
         write_znlos(&c, order, &z, "", false);
@@ -354,9 +354,9 @@ fn bad_znlos_files_exit_1_naming_the_dataset() {
     ] {
         let z = t.path(&format!("bad_{skip}{bad_shape}.hdf5"));
         let order = if bad_shape {
-            Order::TimeFirst
+            Order::Time7
         } else {
-            Order::LaserFirst
+            Order::Rows7
         };
         write_znlos(&c, order, &z, skip, bad_shape);
         let zs = z.to_str().expect("utf-8");

@@ -31,10 +31,10 @@
 //!
 //! | [`ZnlosLayout`] | `data` rank, test | file axes | reading |
 //! |---|---|---|---|
-//! | `LaserFirst` | 7, `shape[4] == 6` | `(ly, lx, sy, sx, bounces, t, colours)` | streamed by row |
-//! | `TimeFirst` | 7, else `shape[2] == 6` | `(colours, t, bounces, sy, sx, ly, lx)` | read whole |
-//! | `PointFirst` | 5, `shape[0] == shape[1]` | `(sx, sy, bounces, t, colours)` | streamed by row |
-//! | `PointTimeFirst` | 5, else `shape[3] == shape[4]` | `(colours, t, bounces, sy, sx)` | read whole |
+//! | `Rows7` | 7, `shape[4] == 6` | `(ly, lx, sy, sx, bounces, t, colours)` | streamed by row |
+//! | `Time7` | 7, else `shape[2] == 6` | `(colours, t, bounces, sy, sx, ly, lx)` | read whole |
+//! | `Rows5` | 5, `shape[0] == shape[1]` | `(sx, sy, bounces, t, colours)` | streamed by row |
+//! | `Time5` | 5, else `shape[3] == shape[4]` | `(colours, t, bounces, sy, sx)` | read whole |
 //!
 //! (The 6 is the bounce axis of the Z-NLOS renderer, which stores bounces 2–7 separately.)
 //! Colours and bounces are summed. A 7-axis capture with one laser point (1×1) is y-tal's
@@ -57,9 +57,9 @@
 //!
 //! # Memory and cost
 //!
-//! `LaserFirst` and `PointFirst` hold each row contiguously: a row is one hyperslab read of
+//! `Rows7` and `Rows5` hold each row contiguously: a row is one hyperslab read of
 //! `Ks × bounces × Nt × colours` values (memory: that slab as read, its values, the row; O(row)
-//! whatever the capture's size). `TimeFirst` and `PointTimeFirst` put the row axes last: a row
+//! whatever the capture's size). `Time7` and `Time5` put the row axes last: a row
 //! would be `Nt·bounces·colours·Ks` reads of one value, so on the first row the whole capture
 //! is read in slabs of at most [`super::BLOCK_BYTES`] along the leading axes and summed into an
 //! f32 capture (memory: `4·Kl·Ks·Nt` bytes plus one slab). Both are checked against
@@ -84,48 +84,48 @@ use vltm_kernel::Point;
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ZnlosLayout {
     /// `(ly, lx, sy, sx, bounces, t, colours)`.
-    LaserFirst,
+    Rows7,
     /// `(colours, t, bounces, sy, sx, ly, lx)`.
-    TimeFirst,
+    Time7,
     /// `(sx, sy, bounces, t, colours)`.
-    PointFirst,
+    Rows5,
     /// `(colours, t, bounces, sy, sx)`.
-    PointTimeFirst,
+    Time5,
 }
 
 impl ZnlosLayout {
     /// The axis order, as text.
     pub fn axes(self) -> &'static str {
         match self {
-            Self::LaserFirst => "(ly, lx, sy, sx, bounces, t, colours)",
-            Self::TimeFirst => "(colours, t, bounces, sy, sx, ly, lx)",
-            Self::PointFirst => "(sx, sy, bounces, t, colours)",
-            Self::PointTimeFirst => "(colours, t, bounces, sy, sx)",
+            Self::Rows7 => "(ly, lx, sy, sx, bounces, t, colours)",
+            Self::Time7 => "(colours, t, bounces, sy, sx, ly, lx)",
+            Self::Rows5 => "(sx, sy, bounces, t, colours)",
+            Self::Time5 => "(colours, t, bounces, sy, sx)",
         }
     }
 
     fn roles(self) -> &'static [Axis] {
         use Axis::*;
         match self {
-            Self::LaserFirst => &[Ly, Lx, Sy, Sx, B, T, C],
-            Self::TimeFirst => &[C, T, B, Sy, Sx, Ly, Lx],
-            Self::PointFirst => &[Sx, Sy, B, T, C],
-            Self::PointTimeFirst => &[C, T, B, Sy, Sx],
+            Self::Rows7 => &[Ly, Lx, Sy, Sx, B, T, C],
+            Self::Time7 => &[C, T, B, Sy, Sx, Ly, Lx],
+            Self::Rows5 => &[Sx, Sy, B, T, C],
+            Self::Time5 => &[C, T, B, Sy, Sx],
         }
     }
 
     /// Whether each row is contiguous in the file (streamed), rather than spread over it.
     pub fn streams(self) -> bool {
-        matches!(self, Self::LaserFirst | Self::PointFirst)
+        matches!(self, Self::Rows7 | Self::Rows5)
     }
 
     /// y-tal's test on the shape of `data`.
     fn detect(dims: &[usize]) -> Option<Self> {
         match dims.len() {
-            7 if dims[4] == 6 => Some(Self::LaserFirst),
-            7 if dims[2] == 6 => Some(Self::TimeFirst),
-            5 if dims[0] == dims[1] => Some(Self::PointFirst),
-            5 if dims[3] == dims[4] => Some(Self::PointTimeFirst),
+            7 if dims[4] == 6 => Some(Self::Rows7),
+            7 if dims[2] == 6 => Some(Self::Time7),
+            5 if dims[0] == dims[1] => Some(Self::Rows5),
+            5 if dims[3] == dims[4] => Some(Self::Time5),
             _ => None,
         }
     }
@@ -160,7 +160,7 @@ pub struct ZnlosReader {
     strides: Vec<usize>,
     /// Rows per row-x index (the row grid's second size).
     row_ny: usize,
-    /// The capture, unscaled, once read (`TimeFirst`, `PointTimeFirst`).
+    /// The capture, unscaled, once read (`Time7`, `Time5`).
     whole: Option<Vec<f32>>,
     conventions: Vec<String>,
 }

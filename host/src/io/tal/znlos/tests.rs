@@ -21,10 +21,10 @@ fn value(ix: usize, iy: usize, sx: usize, sy: usize, n: usize, c: usize, b: usiz
 fn data(layout: ZnlosLayout, l: [usize; 2], s: [usize; 2], nt: usize) -> (Vec<f32>, Vec<usize>) {
     let (lx, ly, sx, sy) = (l[0], l[1], s[0], s[1]);
     let shape = match layout {
-        ZnlosLayout::LaserFirst => vec![ly, lx, sy, sx, 6, nt, 3],
-        ZnlosLayout::TimeFirst => vec![3, nt, 6, sy, sx, ly, lx],
-        ZnlosLayout::PointFirst => vec![sx, sy, 6, nt, 3],
-        ZnlosLayout::PointTimeFirst => vec![3, nt, 6, sy, sx],
+        ZnlosLayout::Rows7 => vec![ly, lx, sy, sx, 6, nt, 3],
+        ZnlosLayout::Time7 => vec![3, nt, 6, sy, sx, ly, lx],
+        ZnlosLayout::Rows5 => vec![sx, sy, 6, nt, 3],
+        ZnlosLayout::Time5 => vec![3, nt, 6, sy, sx],
     };
     let n: usize = shape.iter().product();
     let mut v = Vec::with_capacity(n);
@@ -32,20 +32,20 @@ fn data(layout: ZnlosLayout, l: [usize; 2], s: [usize; 2], nt: usize) -> (Vec<f3
     for _ in 0..n {
         let i = |r: &[usize]| r.to_vec();
         let [a, b, c, d, e, f, g] = match layout {
-            ZnlosLayout::LaserFirst => {
+            ZnlosLayout::Rows7 => {
                 // (ly, lx, sy, sx, b, t, c)
                 let k = i(&idx);
                 [k[1], k[0], k[3], k[2], k[5], k[6], k[4]]
             }
-            ZnlosLayout::TimeFirst => {
+            ZnlosLayout::Time7 => {
                 let k = i(&idx);
                 [k[6], k[5], k[4], k[3], k[1], k[0], k[2]]
             }
-            ZnlosLayout::PointFirst => {
+            ZnlosLayout::Rows5 => {
                 let k = i(&idx);
                 [0, 0, k[0], k[1], k[3], k[4], k[2]]
             }
-            ZnlosLayout::PointTimeFirst => {
+            ZnlosLayout::Time5 => {
                 let k = i(&idx);
                 [0, 0, k[4], k[3], k[1], k[0], k[2]]
             }
@@ -106,10 +106,7 @@ fn write(
             .with_f32_data(&v)
             .with_shape(&u(&shape));
     }
-    let lgrid = if matches!(
-        layout,
-        ZnlosLayout::PointFirst | ZnlosLayout::PointTimeFirst
-    ) {
+    let lgrid = if matches!(layout, ZnlosLayout::Rows5 | ZnlosLayout::Time5) {
         grid(s[0], s[1], transposed)
     } else {
         grid(l[0], l[1], transposed)
@@ -144,10 +141,7 @@ fn write(
 fn every_axis_order_gives_the_same_rows() {
     let dir = scratch("orders");
     let (l, s, nt) = ([4, 2], [2, 4], 5);
-    for (layout, tr) in [
-        (ZnlosLayout::LaserFirst, false),
-        (ZnlosLayout::TimeFirst, true),
-    ] {
+    for (layout, tr) in [(ZnlosLayout::Rows7, false), (ZnlosLayout::Time7, true)] {
         let p = dir.join(format!("{layout:?}.hdf5"));
         write(&p, layout, l, s, nt, "", tr);
         let mut r = open(&p).unwrap();
@@ -182,10 +176,7 @@ fn every_axis_order_gives_the_same_rows() {
         }
     }
     // Confocal, both orders.
-    for (layout, tr) in [
-        (ZnlosLayout::PointFirst, true),
-        (ZnlosLayout::PointTimeFirst, false),
-    ] {
+    for (layout, tr) in [(ZnlosLayout::Rows5, true), (ZnlosLayout::Time5, false)] {
         let p = dir.join(format!("{layout:?}.hdf5"));
         write(&p, layout, l, [3, 3], nt, "", tr);
         let mut r = open(&p).unwrap();
@@ -205,7 +196,7 @@ fn every_axis_order_gives_the_same_rows() {
     }
     // One laser point: tal single, by reciprocity.
     let p = dir.join("single.hdf5");
-    write(&p, ZnlosLayout::LaserFirst, [1, 1], s, nt, "", false);
+    write(&p, ZnlosLayout::Rows7, [1, 1], s, nt, "", false);
     let r = open(&p).unwrap();
     assert_eq!(r.scan_type(), ScanType::Single);
     assert_eq!(
@@ -225,7 +216,7 @@ fn bad_files_name_the_dataset() {
         "laserPosition",
     ] {
         let p = dir.join(format!("{skip}.hdf5"));
-        write(&p, ZnlosLayout::LaserFirst, [2, 2], [2, 2], 4, skip, false);
+        write(&p, ZnlosLayout::Rows7, [2, 2], [2, 2], 4, skip, false);
         match open(&p).unwrap_err() {
             Error::Format { field, .. } => assert_eq!(field, skip),
             other => panic!("{skip}: {other:?}"),
@@ -246,10 +237,10 @@ fn bad_files_name_the_dataset() {
         other => panic!("{other:?}"),
     }
     let p = dir.join("grid.hdf5");
-    write(&p, ZnlosLayout::PointFirst, [1, 1], [3, 3], 4, "", false);
+    write(&p, ZnlosLayout::Rows5, [1, 1], [3, 3], 4, "", false);
     // Rewrite with a 2×2 camera grid for a 3×3 data.
     let mut b = hdf5_pure::FileBuilder::new();
-    let (v, shape) = data(ZnlosLayout::PointFirst, [1, 1], [3, 3], 4);
+    let (v, shape) = data(ZnlosLayout::Rows5, [1, 1], [3, 3], 4);
     b.create_dataset("data")
         .with_f32_data(&v)
         .with_shape(&u(&shape));
