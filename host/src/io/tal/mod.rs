@@ -1,5 +1,8 @@
 //! Reader of y-tal / mitransient `HDF5_TAL` captures (`tal render` output), streaming by laser
-//! row.
+//! row. The Zaragoza Z-NLOS layout is read by [`znlos`], through the same geometry
+//! (`tal/scan.rs` builds it from tal's fields); [`detect`] tells the two apart as y-tal does
+//! (a root dataset `data` is Z-NLOS, `H` is `HDF5_TAL`), [`open_any`] and [`read_any`] open
+//! either.
 //!
 //! # Reading
 //!

@@ -1,7 +1,7 @@
 //! Reader of the Zaragoza **Z-NLOS** HDF5 layout (Galindo et al. 2019, the public synthetic
 //! NLOS dataset; y-tal `FileFormat.HDF5_ZNLOS`), mapped onto vltm's [`Geometry`] exactly as
 //! y-tal's converter `__convert_dict_znlos_to_tal` (`tal/io/format.py`, y-tal 0.20.0) maps it
-//! onto tal's fields, which [`super::scan`] then reads as it reads an `HDF5_TAL` file.
+//! onto tal's fields, which the `HDF5_TAL` reader's geometry code (`tal/scan.rs`) then reads.
 //!
 //! # Datasets
 //!
