@@ -198,14 +198,15 @@ fn write_znlos(c: &Capture, order: Order, path: &Path, skip: &str, bad_shape: bo
 }
 
 fn direct(cap: &Path, out: &Path) -> Vec<f32> {
-    ok(&[
-        "direct",
-        cap.to_str().expect("utf-8"),
-        "--volume",
-        SPEC,
-        "--out",
-        out.to_str().expect("utf-8"),
-    ]);
+    probe(&["direct"], cap, out)
+}
+
+/// `vltm CMD… CAP --volume SPEC --out OUT`, the volume read back.
+fn probe(cmd: &[&str], cap: &Path, out: &Path) -> Vec<f32> {
+    let mut args = vec![cmd[0], cap.to_str().expect("utf-8")];
+    args.extend(&cmd[1..]);
+    args.extend(["--volume", SPEC, "--out", out.to_str().expect("utf-8")]);
+    ok(&args);
     let (v, s) = vltm::out::npy::read_f32(out).expect("npy");
     assert_eq!(s, SHAPE);
     v
@@ -254,8 +255,8 @@ fn keep(files: &[&Path]) {
     }
 }
 
-/// Every axis order, exhaustive and confocal: `vltm direct` on the Z-NLOS file equals
-/// `vltm direct` on the original capture; and the legs are compensated: the capture rendered
+/// Every axis order, exhaustive and confocal: `vltm direct` (and `column`, `indirect`,
+/// `direct --swap-roles`) on the Z-NLOS file equals the same on the original capture; and the legs are compensated: the capture rendered
 /// with legs images like the one rendered wall to wall.
 #[test]
 fn direct_on_znlos_equals_direct_on_the_original() {

@@ -271,3 +271,42 @@ fn bad_files_name_the_dataset() {
 fn u(s: &[usize]) -> Vec<u64> {
     s.iter().map(|&d| d as u64).collect()
 }
+
+/// Truncated and corrupted copies of a Z-NLOS file, in a streamed and a read-whole order:
+/// an error or a capture, never a panic; a truncated file is always an error.
+#[test]
+fn corrupt_files_are_errors_not_panics() {
+    let dir = scratch("corrupt");
+    for layout in [ZnlosLayout::Rows7, ZnlosLayout::Time7] {
+        let p = dir.join("orig.hdf5");
+        write(&p, layout, [2, 2], [2, 3], 4, "", false);
+        let orig = std::fs::read(&p).unwrap();
+        let n = orig.len();
+        let c = dir.join("c.hdf5");
+        let attempt = |bytes: &[u8]| -> Result<Capture> {
+            std::fs::write(&c, bytes).unwrap();
+            read_all(&c)
+        };
+        assert!(attempt(&orig).is_ok());
+        for cut in (0..n).step_by(61).chain([n - 1]) {
+            let r = attempt(&orig[..cut]);
+            assert!(r.is_err(), "{layout:?}: truncated at {cut} of {n}: read");
+        }
+        let (mut errors, mut reads) = (0, 0);
+        for i in (0..n).step_by(7) {
+            for flip in [0x01u8, 0x80, 0xFF] {
+                let mut bad = orig.clone();
+                bad[i] ^= flip;
+                match attempt(&bad) {
+                    Ok(_) => reads += 1,
+                    Err(e) => {
+                        assert!(!e.to_string().is_empty());
+                        errors += 1;
+                    }
+                }
+            }
+        }
+        println!("{layout:?}: {errors} errors, {reads} reads of {n}-byte corruptions");
+        assert!(errors > 0);
+    }
+}
