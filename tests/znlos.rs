@@ -288,6 +288,24 @@ fn direct_on_znlos_equals_direct_on_the_original() {
                 dd <= 1e-6,
                 "{kind} {order:?}: samples differ by {dd:e} (relative)"
             );
+            // The other probes (and a capture read whole for --swap-roles); a confocal
+            // capture has no camera aperture for them.
+            let others: &[&[&str]] = if confocal {
+                &[]
+            } else {
+                &[
+                    &["column", "--focus", "-0.45,0,0.8"],
+                    &["indirect", "--epsilon", "0.2", "--min-separation", "0.3"],
+                    &["direct", "--swap-roles"],
+                ]
+            };
+            for cmd in others {
+                let a = probe(cmd, &orig, &t.path("a.npy"));
+                let b = probe(cmd, &z, &t.path("b.npy"));
+                let d = max_rel(&b, &a);
+                println!("{kind} {order:?} {cmd:?}: max |Z-NLOS − original| / max = {d:.2e}");
+                assert!(d <= 1e-5, "{kind} {order:?} {cmd:?}: {d:e}");
+            }
             kept.push(z);
         }
         keep(&kept.iter().map(PathBuf::as_path).collect::<Vec<_>>());

@@ -293,8 +293,8 @@ fn corrupt_files_are_errors_not_panics() {
             assert!(r.is_err(), "{layout:?}: truncated at {cut} of {n}: read");
         }
         let (mut errors, mut reads) = (0, 0);
-        for i in (0..n).step_by(7) {
-            for flip in [0x01u8, 0x80, 0xFF] {
+        for i in (0..n).step_by(13) {
+            for flip in [0x01u8, 0xFF] {
                 let mut bad = orig.clone();
                 bad[i] ^= flip;
                 match attempt(&bad) {
