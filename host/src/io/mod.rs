@@ -4,7 +4,7 @@
 //! |---|---|
 //! | [`capture`] | [`Geometry`] (spots, time axis, device positions), [`RowSource`] (laser rows on demand), [`Capture`] (H in memory), reciprocity ([`swap_roles`]) |
 //! | [`npz`] | vltm's `.npz` captures: write, read whole, stream a stored archive by row |
-//! | [`tal`] | y-tal / mitransient `HDF5_TAL` captures, streamed by laser row |
+//! | [`tal`] | y-tal / mitransient `HDF5_TAL` captures, streamed by laser row; the Zaragoza Z-NLOS layout ([`tal::znlos`]) |
 //! | [`mat`] | MATLAB `.mat` captures (v5 with zlib elements, v7.3 through HDF5): the Stanford confocal and phasor-field layouts |
 //! | [`prep`] | preprocessing of raw counts as a row wrapper: time window, rebinning, background |
 //! | [`ptu`] | PicoQuant PTU T3 photon streams with a JSON sidecar, binned row by row; the T3 writer |
@@ -32,7 +32,7 @@ pub fn extension(path: &Path) -> Option<String> {
 
 /// Opens a capture file by its extension and reads it whole: `.npz` (vltm), `.ptu`
 /// (PicoQuant T3, with its sidecar `<same name>.json` describing rows, SPADs and time axis;
-/// see [`ptu`]), `.hdf5` / `.h5` (y-tal `HDF5_TAL`, [`tal::read_all`]), `.mat` ([`mat::read`]
+/// see [`ptu`]), `.hdf5` / `.h5` (y-tal `HDF5_TAL` or Z-NLOS, [`tal::read_any`]), `.mat` ([`mat::read`]
 /// with the layout's default conventions).
 ///
 /// # Errors
@@ -41,14 +41,15 @@ pub fn open(path: &Path) -> Result<Capture> {
     match extension(path).as_deref() {
         Some("npz") => npz::read(path),
         Some("ptu") => ptu::read_all(path, path.with_extension("json")),
-        Some("hdf5" | "h5") => tal::read_all(path),
+        Some("hdf5" | "h5") => tal::read_any(path),
         Some("mat") => Ok(mat::read(path, &mat::MatOptions::default())?.capture),
         _ => Err(unknown_format(path)),
     }
 }
 
 /// Opens a capture file by its extension as a row source, streamed where the format allows:
-/// y-tal HDF5 files, PicoQuant PTU photon streams (binned row by row in one pass over the
+/// y-tal HDF5 and Z-NLOS files (a Z-NLOS file whose row axes come last is read whole on the
+/// first row, [`tal::znlos`]), PicoQuant PTU photon streams (binned row by row in one pass over the
 /// records) and stored (uncompressed) `.npz` captures are read row by row (memory O(Ks·Nt));
 /// a compressed `.npz` and a `.mat` capture ([`mat`], default conventions) are read into
 /// memory.
@@ -57,7 +58,7 @@ pub fn open(path: &Path) -> Result<Capture> {
 /// As [`open`].
 pub fn open_source(path: &Path) -> Result<Box<dyn RowSource>> {
     match extension(path).as_deref() {
-        Some("hdf5" | "h5") => Ok(Box::new(tal::open(path)?)),
+        Some("hdf5" | "h5") => tal::open_any(path),
         Some("ptu") => Ok(Box::new(ptu::PtuSource::open(
             path,
             path.with_extension("json"),

@@ -231,3 +231,43 @@ fn summed(src: &mut dyn RowSource) -> vltm::Result<Vec<f64>> {
     }
     Ok(sum)
 }
+
+/// The HDF5 layout of a capture for `vltm info`: `H_format` and scan type of an `HDF5_TAL`
+/// file; axis order, scan type and the conventions applied to a Z-NLOS file.
+pub fn describe_hdf5(path: &Path) -> vltm::Result<()> {
+    use io::tal::{Hdf5Layout, ScanType};
+    let scan = |s: ScanType| match s {
+        ScanType::Exhaustive => "exhaustive (every laser spot x every SPAD spot)",
+        ScanType::Confocal => "confocal (the SPAD looks at the laser spot)",
+        ScanType::Single => {
+            "single (one laser spot, the SPAD grid scanned): shown below by reciprocity \
+             as the SPAD grid's spots as lasers x one SPAD at the laser spot"
+        }
+    };
+    match io::tal::detect(path)? {
+        Hdf5Layout::Tal => {
+            let r = io::tal::open(path)?;
+            say!(
+                "format       y-tal HDF5_TAL, H_format {} (tal value {}), H shape {:?} (time first)",
+                r.h_format().tal_name(),
+                r.h_format().tal_value(),
+                r.h_shape()
+            );
+            say!("tal scan     {}", scan(r.scan_type()));
+        }
+        Hdf5Layout::Znlos => {
+            let r = io::tal::znlos::open(path)?;
+            say!(
+                "format       Zaragoza Z-NLOS HDF5 (y-tal HDF5_ZNLOS), data shape {:?}, layout {:?}",
+                r.data_shape(),
+                r.layout()
+            );
+            say!("tal scan     {}", scan(r.scan_type()));
+            say!("conventions (y-tal's Z-NLOS converter, tal/io/format.py):");
+            for line in r.conventions() {
+                say!("  {line}");
+            }
+        }
+    }
+    Ok(())
+}

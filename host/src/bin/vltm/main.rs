@@ -772,23 +772,7 @@ fn describe(path: &Path, c: &io::Capture) -> Result<(), Failure> {
         )
     };
     if io::is_hdf5(path) {
-        let r = io::tal::open(path)?;
-        say!(
-            "format       y-tal HDF5_TAL, H_format {} (tal value {}), H shape {:?} (time first)",
-            r.h_format().tal_name(),
-            r.h_format().tal_value(),
-            r.h_shape()
-        );
-        say!(
-            "tal scan     {}",
-            match r.scan_type() {
-                io::tal::ScanType::Exhaustive => "exhaustive (every laser spot x every SPAD spot)",
-                io::tal::ScanType::Confocal => "confocal (the SPAD looks at the laser spot)",
-                io::tal::ScanType::Single =>
-                    "single (one laser spot, the SPAD grid scanned): shown below by reciprocity \
-                     as the SPAD grid's spots as lasers x one SPAD at the laser spot",
-            }
-        );
+        input::describe_hdf5(path)?;
     }
     say!(
         "scan         {}",

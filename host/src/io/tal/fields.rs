@@ -91,6 +91,8 @@ pub(super) struct Fields<'a> {
     pub(super) path: &'a Path,
     pub(super) file: &'a Hdf5File,
     pub(super) names: &'a [String],
+    /// The layout the file is read as (`HDF5_TAL`, `Z-NLOS`), for errors.
+    pub(super) kind: &'static str,
 }
 
 impl Fields<'_> {
@@ -103,7 +105,7 @@ impl Fields<'_> {
             return Err(Error::format(
                 self.path,
                 name,
-                "a dataset of this name (HDF5_TAL)",
+                format!("a dataset of this name ({})", self.kind),
                 "none",
             ));
         }

@@ -1,5 +1,8 @@
 //! Reader of y-tal / mitransient `HDF5_TAL` captures (`tal render` output), streaming by laser
-//! row.
+//! row. The Zaragoza Z-NLOS layout is read by [`znlos`], through the same geometry
+//! (`tal/scan.rs` builds it from tal's fields); [`detect`] tells the two apart as y-tal does
+//! (a root dataset `data` is Z-NLOS, `H` is `HDF5_TAL`), [`open_any`] and [`read_any`] open
+//! either.
 //!
 //! # Reading
 //!
@@ -208,6 +211,71 @@ pub fn read_all_with(path: &Path, options: TalOptions) -> Result<Capture> {
     open_with(path, options)?.into_capture()
 }
 
+/// The capture layouts of the HDF5 files vltm reads.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Hdf5Layout {
+    /// y-tal / mitransient `HDF5_TAL` (dataset `H`): [`TalReader`].
+    Tal,
+    /// Zaragoza Z-NLOS (dataset `data`): [`znlos::ZnlosReader`].
+    Znlos,
+}
+
+/// Which layout an HDF5 capture holds, decided as y-tal's `detect_dict_format` does: a root
+/// dataset `data` is Z-NLOS, else `H` is `HDF5_TAL`.
+///
+/// # Errors
+/// [`Error::Io`] if the file cannot be opened; [`Error::Format`] on `(layout)` listing the
+/// root datasets when neither is there, or on `(file)` when it is not HDF5.
+pub fn detect(path: &Path) -> Result<Hdf5Layout> {
+    let file = Hdf5File::open(path).map_err(|e| h5_error(path, "(file)", e))?;
+    let names = file
+        .root_group()
+        .and_then(|g| g.member_names())
+        .map_err(|e| h5_error(path, "(root group)", e))?
+        .1;
+    if names.iter().any(|n| n == "data") {
+        Ok(Hdf5Layout::Znlos)
+    } else if names.iter().any(|n| n == "H") {
+        Ok(Hdf5Layout::Tal)
+    } else {
+        Err(Error::format(
+            path,
+            "(layout)",
+            "a y-tal HDF5_TAL capture (dataset H) or a Z-NLOS capture (dataset data)",
+            format!(
+                "root datasets: {}",
+                if names.is_empty() {
+                    "none".to_string()
+                } else {
+                    names.join(", ")
+                }
+            ),
+        ))
+    }
+}
+
+/// Opens an HDF5 capture of either layout ([`detect`]) as a row source, streamed by row.
+///
+/// # Errors
+/// As [`detect`], [`open`] and [`znlos::open`].
+pub fn open_any(path: &Path) -> Result<Box<dyn RowSource>> {
+    Ok(match detect(path)? {
+        Hdf5Layout::Tal => Box::new(open(path)?),
+        Hdf5Layout::Znlos => Box::new(znlos::open(path)?),
+    })
+}
+
+/// Reads an HDF5 capture of either layout ([`detect`]) whole.
+///
+/// # Errors
+/// As [`open_any`].
+pub fn read_any(path: &Path) -> Result<Capture> {
+    match detect(path)? {
+        Hdf5Layout::Tal => read_all(path),
+        Hdf5Layout::Znlos => znlos::read_all(path),
+    }
+}
+
 impl TalReader {
     fn new(path: &Path, options: TalOptions) -> Result<Self> {
         // No single read may exceed the memory budget (grids, blocks: the crate refuses it
@@ -225,6 +293,7 @@ impl TalReader {
             path,
             file: &file,
             names: &names,
+            kind: "HDF5_TAL",
         };
 
         // H: format, rank, element type, size.
@@ -296,68 +365,27 @@ impl TalReader {
         let t_start = f.float_scalar("t_start")?;
         let legs_in_time = f.enum_scalar("t_accounts_first_and_last_bounces")?.0 != 0;
 
-        let (scan, lasers, laser_shape, spads, spad_shape) = match format {
-            HFormat::TLxLySxSy => {
-                let l = lgrid.fit(path, [lead[0], lead[1]])?;
-                let s = sgrid.fit(path, [lead[2], lead[3]])?;
-                (ScanType::Exhaustive, lgrid.points, l, sgrid.points, s)
-            }
-            HFormat::TLiSi => {
-                let l = lgrid.count(path, lead[0])?;
-                let s = sgrid.count(path, lead[1])?;
-                (ScanType::Exhaustive, lgrid.points, l, sgrid.points, s)
-            }
-            HFormat::TSxSy | HFormat::TSi => {
-                let s = if format == HFormat::TSxSy {
-                    sgrid.fit(path, [lead[0], lead[1]])?
-                } else {
-                    sgrid.count(path, lead[0])?
-                };
-                if allclose(&sgrid.points, &lgrid.points) {
-                    let pts = sgrid.points;
-                    (ScanType::Confocal, pts.clone(), s, pts, s)
-                } else if lgrid.points.len() == 1 {
-                    (ScanType::Single, sgrid.points, s, lgrid.points, [1, 1])
-                } else {
-                    return Err(Error::format(
-                        path,
-                        "laser_grid_xyz",
-                        format!(
-                            "one point (tal scan_type single) or the sensor grid (confocal) for H_format {}",
-                            format.tal_name()
-                        ),
-                        format!(
-                            "{} points that differ from the sensor grid (a paired scan, not supported)",
-                            lgrid.points.len()
-                        ),
-                    ));
-                }
-            }
-        };
-        let single = scan == ScanType::Single;
-        let (laser_origin, sensor_origin) = if single {
-            (sensor_xyz, laser_xyz)
-        } else {
-            (laser_xyz, sensor_xyz)
-        };
-        let geometry = Geometry {
-            lasers,
-            laser_shape,
-            spads,
-            spad_shape,
-            laser_origin,
-            sensor_origin,
-            legs_in_time,
-            confocal: scan == ScanType::Confocal,
-            nt,
-            dt,
-            t0: if options.bin_centre {
-                t_start + 0.5 * dt
-            } else {
-                t_start
+        let scan::Scan {
+            scan,
+            geometry,
+            single_falloff,
+        } = scan::build(
+            path,
+            scan::Meta {
+                format,
+                lead: lead.to_vec(),
+                nt,
+                lgrid,
+                sgrid,
+                laser_xyz,
+                sensor_xyz,
+                dt,
+                t_start,
+                legs_in_time,
+                xyz_names: ["laser_xyz", "sensor_xyz"],
             },
-        };
-        geometry.validate(path)?;
+            options,
+        )?;
         // A block of rows, the crate's raw copy of it and the row handed out.
         let row = geometry.spads_per_row().saturating_mul(nt);
         budget::check(
@@ -370,37 +398,6 @@ impl TalReader {
             },
             budget::bytes(row, 8 + 2 * elem_bytes as u128).max(BLOCK_BYTES as u128 * 3),
         )?;
-
-        let single_falloff = if single {
-            let physical = Geometry {
-                laser_origin: laser_xyz,
-                ..geometry.clone()
-            };
-            let c0 = physical.laser_falloff(geometry.spads[0]);
-            if !(c0.is_finite() && c0 > 0.0) {
-                return Err(Error::format(
-                    path,
-                    "laser_xyz",
-                    "a laser off the wall plane (the single-scan reciprocity factor divides by its cos θ / d²)",
-                    format!("{laser_xyz:?}"),
-                ));
-            }
-            let sensor_ok = geometry.lasers.iter().all(|&x| {
-                let c = geometry.laser_falloff(x);
-                c.is_finite() && c > 0.0
-            });
-            if !sensor_ok {
-                return Err(Error::format(
-                    path,
-                    "sensor_xyz",
-                    "a sensor off the wall plane (it is the laser of the reciprocal single scan)",
-                    format!("{sensor_xyz:?}"),
-                ));
-            }
-            Some(c0)
-        } else {
-            None
-        };
 
         Ok(Self {
             path: path.to_path_buf(),
@@ -779,6 +776,8 @@ impl RowSource for TalReader {
 
 mod fields;
 mod format;
+mod scan;
+pub mod znlos;
 
 pub use format::{HFormat, ScanType, TalOptions};
 

@@ -1,0 +1,162 @@
+//! From a capture's `H` axes and grids to vltm's [`Geometry`]: the scan type (exhaustive,
+//! confocal, tal `single` by reciprocity), the device positions and the time axis. Shared by
+//! the `HDF5_TAL` reader and the Z-NLOS reader ([`super::znlos`]), whose files map onto the
+//! same tal fields (y-tal's `tal/io/format.py`).
+
+use super::fields::{Grid, allclose};
+use super::{HFormat, ScanType, TalOptions};
+use crate::error::{Error, Result};
+use crate::io::capture::Geometry;
+use std::path::Path;
+
+/// A capture's description in tal's terms.
+pub(super) struct Meta {
+    /// tal's `H_format`.
+    pub(super) format: HFormat,
+    /// `H`'s axes after time (`[Lx, Ly, Sx, Sy]`, `[Li, Si]`, `[Sx, Sy]` or `[Si]`).
+    pub(super) lead: Vec<usize>,
+    /// Bins per histogram.
+    pub(super) nt: usize,
+    /// `laser_grid_xyz`.
+    pub(super) lgrid: Grid,
+    /// `sensor_grid_xyz`.
+    pub(super) sgrid: Grid,
+    /// `laser_xyz`.
+    pub(super) laser_xyz: [f64; 3],
+    /// `sensor_xyz`.
+    pub(super) sensor_xyz: [f64; 3],
+    /// `delta_t` (m).
+    pub(super) dt: f64,
+    /// `t_start` (m).
+    pub(super) t_start: f64,
+    /// `t_accounts_first_and_last_bounces`.
+    pub(super) legs_in_time: bool,
+    /// The file's names of `laser_xyz` and `sensor_xyz` (for errors).
+    pub(super) xyz_names: [&'static str; 2],
+}
+
+/// The scan a [`Meta`] describes.
+pub(super) struct Scan {
+    pub(super) scan: ScanType,
+    pub(super) geometry: Geometry,
+    /// `c(x0)` of a single scan (the physical laser's falloff at its one spot), else `None`.
+    pub(super) single_falloff: Option<f64>,
+}
+
+/// Builds the geometry (module docs of [`super`], *Scan types* and *Time axis*).
+///
+/// # Errors
+/// [`Error::Format`] naming the grid or position that does not fit.
+pub(super) fn build(path: &Path, m: Meta, options: TalOptions) -> Result<Scan> {
+    let Meta {
+        format,
+        lead,
+        nt,
+        lgrid,
+        sgrid,
+        laser_xyz,
+        sensor_xyz,
+        dt,
+        t_start,
+        legs_in_time,
+        xyz_names,
+    } = m;
+    let (scan, lasers, laser_shape, spads, spad_shape) = match format {
+        HFormat::TLxLySxSy => {
+            let l = lgrid.fit(path, [lead[0], lead[1]])?;
+            let s = sgrid.fit(path, [lead[2], lead[3]])?;
+            (ScanType::Exhaustive, lgrid.points, l, sgrid.points, s)
+        }
+        HFormat::TLiSi => {
+            let l = lgrid.count(path, lead[0])?;
+            let s = sgrid.count(path, lead[1])?;
+            (ScanType::Exhaustive, lgrid.points, l, sgrid.points, s)
+        }
+        HFormat::TSxSy | HFormat::TSi => {
+            let s = if format == HFormat::TSxSy {
+                sgrid.fit(path, [lead[0], lead[1]])?
+            } else {
+                sgrid.count(path, lead[0])?
+            };
+            if allclose(&sgrid.points, &lgrid.points) {
+                let pts = sgrid.points;
+                (ScanType::Confocal, pts.clone(), s, pts, s)
+            } else if lgrid.points.len() == 1 {
+                (ScanType::Single, sgrid.points, s, lgrid.points, [1, 1])
+            } else {
+                return Err(Error::format(
+                    path,
+                    lgrid.field,
+                    format!(
+                        "one point (tal scan_type single) or the sensor grid (confocal) for H_format {}",
+                        format.tal_name()
+                    ),
+                    format!(
+                        "{} points that differ from the sensor grid (a paired scan, not supported)",
+                        lgrid.points.len()
+                    ),
+                ));
+            }
+        }
+    };
+    let single = scan == ScanType::Single;
+    let (laser_origin, sensor_origin) = if single {
+        (sensor_xyz, laser_xyz)
+    } else {
+        (laser_xyz, sensor_xyz)
+    };
+    let geometry = Geometry {
+        lasers,
+        laser_shape,
+        spads,
+        spad_shape,
+        laser_origin,
+        sensor_origin,
+        legs_in_time,
+        confocal: scan == ScanType::Confocal,
+        nt,
+        dt,
+        t0: if options.bin_centre {
+            t_start + 0.5 * dt
+        } else {
+            t_start
+        },
+    };
+    geometry.validate(path)?;
+
+    let single_falloff = if single {
+        let physical = Geometry {
+            laser_origin: laser_xyz,
+            ..geometry.clone()
+        };
+        let c0 = physical.laser_falloff(geometry.spads[0]);
+        if !(c0.is_finite() && c0 > 0.0) {
+            return Err(Error::format(
+                path,
+                xyz_names[0],
+                "a laser off the wall plane (the single-scan reciprocity factor divides by its cos θ / d²)",
+                format!("{laser_xyz:?}"),
+            ));
+        }
+        let sensor_ok = geometry.lasers.iter().all(|&x| {
+            let c = geometry.laser_falloff(x);
+            c.is_finite() && c > 0.0
+        });
+        if !sensor_ok {
+            return Err(Error::format(
+                path,
+                xyz_names[1],
+                "a sensor off the wall plane (it is the laser of the reciprocal single scan)",
+                format!("{sensor_xyz:?}"),
+            ));
+        }
+        Some(c0)
+    } else {
+        None
+    };
+    Ok(Scan {
+        scan,
+        geometry,
+        single_falloff,
+    })
+}

@@ -1,0 +1,738 @@
+//! Reader of the Zaragoza **Z-NLOS** HDF5 layout (Galindo et al. 2019, the public synthetic
+//! NLOS dataset; y-tal `FileFormat.HDF5_ZNLOS`), mapped onto vltm's [`Geometry`] exactly as
+//! y-tal's converter `__convert_dict_znlos_to_tal` (`tal/io/format.py`, y-tal 0.20.0) maps it
+//! onto tal's fields, which the `HDF5_TAL` reader's geometry code (`tal/scan.rs`) then reads.
+//!
+//! # Datasets
+//!
+//! | dataset | used as (tal field) |
+//! |---|---|
+//! | `data` (f32 or f64), 7 or 5 axes, see *Axis order* | `H`: summed over colours and bounces |
+//! | `cameraGridPositions` `(Sx, Sy, 3)`, or `(3, Sy, Sx)` transposed | `sensor_grid_xyz` (X_Y_3) |
+//! | `laserGridPositions` `(Lx, Ly, 3)`, or `(3, Ly, Lx)` transposed | `laser_grid_xyz` (X_Y_3) |
+//! | `cameraPosition`, `laserPosition` (3 values, any shape) | `sensor_xyz`, `laser_xyz` |
+//! | `deltaT` (1 value, m of optical path) | `delta_t` |
+//! | `t0` (1 value, m of optical path) | `t_start` |
+//! | (none) | `t_accounts_first_and_last_bounces` = **true** |
+//! | `cameraGridNormals`, `laserGridNormals`, `hiddenVolume*`, `t`, `isConfocal`, `*GridSize`, `*GridPoints`, `engine` | not used (the wall is z = 0 with normal +z, DESIGN §B.0; the grids and `data` decide the scan) |
+//!
+//! A grid whose first axis has 3 elements is transposed (all axes reversed), as y-tal's
+//! `conv_to_xy3` does; after that it must be `(X, Y, 3)`. One deviation: a grid stored
+//! `(X, Y, 3)` with X = 3 that matches `data`'s axes only as stored is kept (y-tal transposes
+//! it into a wrong grid); when both readings match (`(3, Y, 3)` for X = 3, Y = Y) y-tal's
+//! transpose is followed. (For a 5-axis capture the laser grid is compared with the camera
+//! grid's axes.)
+//!
+//! # Axis order
+//!
+//! y-tal tells the layouts apart by the shape of `data` (`np.moveaxis` in the converter; the
+//! names below are where each axis lands in tal's `(t, lx, ly, sx, sy)`, taken from the
+//! `moveaxis` destinations, which are not always the converter's comments):
+//!
+//! | [`ZnlosLayout`] | `data` rank, test | file axes | reading |
+//! |---|---|---|---|
+//! | `Rows7` | 7, `shape[4] == 6` | `(ly, lx, sy, sx, bounces, t, colours)` | streamed by row |
+//! | `Time7` | 7, else `shape[2] == 6` | `(colours, t, bounces, sy, sx, ly, lx)` | read whole |
+//! | `Rows5` | 5, `shape[0] == shape[1]` | `(sx, sy, bounces, t, colours)` | streamed by row |
+//! | `Time5` | 5, else `shape[3] == shape[4]` | `(colours, t, bounces, sy, sx)` | read whole |
+//!
+//! (The 6 is the bounce axis of the Z-NLOS renderer, which stores bounces 2–7 separately.)
+//! Colours and bounces are summed. A 7-axis capture with one laser point (1×1) is y-tal's
+//! `T_Sx_Sy` after its `np.squeeze`: a tal **single** scan, presented by reciprocity as in
+//! [`super`] (*Scan types*). A 5-axis capture is `T_Sx_Sy`: **confocal** when the two grids
+//! are `allclose`, single when the laser grid is one point. Every other 7-axis capture is
+//! **exhaustive** `T_Lx_Ly_Sx_Sy`; unlike y-tal, vltm does not squeeze other size-1 axes
+//! (y-tal's squeeze turns a 1×1 camera grid into a mislabelled `T_Sx_Sy`; vltm reads it as
+//! Kl lasers × one SPAD).
+//!
+//! # Time axis and legs
+//!
+//! Z-NLOS times are total optical path lengths: they include the first leg (laser device →
+//! laser spot) and the last (SPAD spot → camera device). vltm keeps them as y-tal does
+//! (`t_accounts_first_and_last_bounces = true`: [`Geometry::legs_in_time`]), so the probes
+//! subtract `|laserPosition − x_l| + |x_s − cameraPosition|` from every path time
+//! (`vltm_kernel::Legs::FirstAndLast`), exactly what y-tal's reconstructions do with such a
+//! capture. Bin `k` is at `t0 + k·deltaT` ([`TalOptions::YTAL`], the default) or its centre
+//! ([`TalOptions::BIN_CENTRE`]).
+//!
+//! # Memory and cost
+//!
+//! `Rows7` and `Rows5` hold each row contiguously: a row is one hyperslab read of
+//! `Ks × bounces × Nt × colours` values (memory: that slab as read, its values, the row; O(row)
+//! whatever the capture's size). `Time7` and `Time5` put the row axes last: a row
+//! would be `Nt·bounces·colours·Ks` reads of one value, so on the first row the whole capture
+//! is read in slabs of at most [`super::BLOCK_BYTES`] along the leading axes and summed into an
+//! f32 capture (memory: `4·Kl·Ks·Nt` bytes plus one slab). Both are checked against
+//! [`crate::budget`] when the file is opened, and stated by [`ZnlosReader::conventions`].
+//!
+//! # Errors
+//!
+//! As the `HDF5_TAL` reader: one [`Error::Format`] naming the file and the dataset (a missing
+//! dataset, a shape y-tal's converter does not recognise, grids that do not match `data`,
+//! non-numeric or non-finite values, data outside the file).
+
+use super::fields::{Fields, Grid, h5_error, into_vec, usize_of};
+use super::{BLOCK_BYTES, Elem, HFormat, ScanType, TalOptions, check_layout, scan};
+use crate::budget;
+use crate::error::{Error, Result};
+use crate::io::capture::{Capture, Geometry, RowSource};
+use hdf5_reader::{Dataset, Datatype, Hdf5File, OpenOptions, SliceInfo, SliceInfoElem};
+use std::path::{Path, PathBuf};
+use vltm_kernel::Point;
+
+/// Which of y-tal's four Z-NLOS axis orders `data` has (module docs, *Axis order*).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ZnlosLayout {
+    /// `(ly, lx, sy, sx, bounces, t, colours)`.
+    Rows7,
+    /// `(colours, t, bounces, sy, sx, ly, lx)`.
+    Time7,
+    /// `(sx, sy, bounces, t, colours)`.
+    Rows5,
+    /// `(colours, t, bounces, sy, sx)`.
+    Time5,
+}
+
+impl ZnlosLayout {
+    /// The axis order, as text.
+    pub fn axes(self) -> &'static str {
+        match self {
+            Self::Rows7 => "(ly, lx, sy, sx, bounces, t, colours)",
+            Self::Time7 => "(colours, t, bounces, sy, sx, ly, lx)",
+            Self::Rows5 => "(sx, sy, bounces, t, colours)",
+            Self::Time5 => "(colours, t, bounces, sy, sx)",
+        }
+    }
+
+    fn roles(self) -> &'static [Axis] {
+        use Axis::*;
+        match self {
+            Self::Rows7 => &[Ly, Lx, Sy, Sx, B, T, C],
+            Self::Time7 => &[C, T, B, Sy, Sx, Ly, Lx],
+            Self::Rows5 => &[Sx, Sy, B, T, C],
+            Self::Time5 => &[C, T, B, Sy, Sx],
+        }
+    }
+
+    /// Whether each row is contiguous in the file (streamed), rather than spread over it.
+    pub fn streams(self) -> bool {
+        matches!(self, Self::Rows7 | Self::Rows5)
+    }
+
+    /// y-tal's test on the shape of `data`.
+    fn detect(dims: &[usize]) -> Option<Self> {
+        match dims.len() {
+            7 if dims[4] == 6 => Some(Self::Rows7),
+            7 if dims[2] == 6 => Some(Self::Time7),
+            5 if dims[0] == dims[1] => Some(Self::Rows5),
+            5 if dims[3] == dims[4] => Some(Self::Time5),
+            _ => None,
+        }
+    }
+}
+
+/// What an axis of `data` holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Axis {
+    C,
+    T,
+    B,
+    Lx,
+    Ly,
+    Sx,
+    Sy,
+}
+
+/// An open Z-NLOS capture that reads laser rows on demand ([`RowSource`]).
+pub struct ZnlosReader {
+    path: PathBuf,
+    h: Dataset,
+    elem: Elem,
+    dims: Vec<usize>,
+    layout: ZnlosLayout,
+    scan: ScanType,
+    geometry: Geometry,
+    single_falloff: Option<f64>,
+    /// For each axis of `data`: the row axis it is (0 x, 1 y), if any.
+    row_axis: Vec<Option<usize>>,
+    /// For each axis of `data`: its stride in the capture `[l][s][n]` without the row part
+    /// (0 for colours and bounces, which are summed).
+    strides: Vec<usize>,
+    /// Rows per row-x index (the row grid's second size).
+    row_ny: usize,
+    /// The capture, unscaled, once read (`Time7`, `Time5`).
+    whole: Option<Vec<f32>>,
+    conventions: Vec<String>,
+}
+
+impl std::fmt::Debug for ZnlosReader {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ZnlosReader")
+            .field("path", &self.path)
+            .field("dims", &self.dims)
+            .field("layout", &self.layout)
+            .field("scan", &self.scan)
+            .finish_non_exhaustive()
+    }
+}
+
+/// Opens a Z-NLOS capture, with the default [`TalOptions`].
+///
+/// # Errors
+/// [`Error::Io`] if the file cannot be opened, [`Error::Format`] naming the dataset for
+/// anything malformed, [`Error::Memory`](crate::Error) over the budget.
+pub fn open(path: &Path) -> Result<ZnlosReader> {
+    open_with(path, TalOptions::default())
+}
+
+/// Opens a Z-NLOS capture.
+///
+/// # Errors
+/// As [`open`].
+pub fn open_with(path: &Path, options: TalOptions) -> Result<ZnlosReader> {
+    ZnlosReader::new(path, options)
+}
+
+/// Reads a whole Z-NLOS capture into memory, with the default [`TalOptions`].
+///
+/// # Errors
+/// As [`open`], plus read errors.
+pub fn read_all(path: &Path) -> Result<Capture> {
+    open(path)?.into_capture()
+}
+
+/// A grid as y-tal's `conv_to_xy3` leaves it: transposed when its first axis has 3 elements,
+/// then `(X, Y, 3)`; except that a grid already `(X, Y, 3)` for `data`'s axes `want` and not
+/// `(3, Y, X)` is kept (y-tal would garble it: module docs, *Datasets*).
+fn grid_xy3(f: &Fields<'_>, name: &'static str, want: [usize; 2]) -> Result<Grid> {
+    let (v, shape, _) = f.numbers(name)?;
+    let as_is = shape[..] == [want[0], want[1], 3];
+    let transposed = shape[..] == [3, want[1], want[0]];
+    let (v, shape) = if shape.first() == Some(&3) && shape.len() > 1 && (transposed || !as_is) {
+        // Reverse all axes: new[i₀..i_{k−1}] = old[i_{k−1}..i₀].
+        let rev: Vec<usize> = shape.iter().rev().copied().collect();
+        let old_strides = c_strides(&shape);
+        let mut out = Vec::with_capacity(v.len());
+        let mut idx = vec![0usize; rev.len()];
+        for _ in 0..v.len() {
+            let off: usize = idx
+                .iter()
+                .zip(old_strides.iter().rev())
+                .map(|(i, s)| i * s)
+                .sum();
+            out.push(v[off]);
+            for k in (0..idx.len()).rev() {
+                idx[k] += 1;
+                if idx[k] < rev[k] {
+                    break;
+                }
+                idx[k] = 0;
+            }
+        }
+        (out, rev)
+    } else {
+        (v, shape)
+    };
+    let [nx, ny, 3] = shape[..] else {
+        return Err(Error::format(
+            f.path,
+            name,
+            "a grid of shape (X, Y, 3) or (3, Y, X)",
+            format!("shape {shape:?}"),
+        ));
+    };
+    Ok(Grid {
+        points: v
+            .chunks_exact(3)
+            .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32])
+            .collect(),
+        shape: [nx, ny],
+        xy: true,
+        field: name,
+    })
+}
+
+fn c_strides(dims: &[usize]) -> Vec<usize> {
+    let mut s = vec![1usize; dims.len()];
+    for k in (0..dims.len().saturating_sub(1)).rev() {
+        s[k] = s[k + 1].saturating_mul(dims[k + 1]);
+    }
+    s
+}
+
+impl ZnlosReader {
+    fn new(path: &Path, options: TalOptions) -> Result<Self> {
+        let limit = usize::try_from(budget::get()).unwrap_or(usize::MAX);
+        let file =
+            Hdf5File::open_with_options(path, OpenOptions::default().with_max_read_bytes(limit))
+                .map_err(|e| h5_error(path, "(file)", e))?;
+        let names = file
+            .root_group()
+            .and_then(|g| g.member_names())
+            .map_err(|e| h5_error(path, "(root group)", e))?
+            .1;
+        let f = Fields {
+            path,
+            file: &file,
+            names: &names,
+            kind: "Z-NLOS",
+        };
+        let h = f.dataset("data")?;
+        let dims: Vec<usize> = h.shape().iter().map(|&d| usize_of(d)).collect();
+        let layout = ZnlosLayout::detect(&dims).ok_or_else(|| {
+            Error::format(
+                path,
+                "data",
+                "a Z-NLOS shape y-tal recognises: 7 axes with 6 bounces at axis 4 or 2, or 5 axes with two equal grid axes first or last",
+                format!("shape {dims:?}"),
+            )
+        })?;
+        let elem = match h.dtype() {
+            Datatype::FloatingPoint { size: 4, .. } => Elem::F32,
+            Datatype::FloatingPoint { size: 8, .. } => Elem::F64,
+            other => {
+                return Err(Error::format(
+                    path,
+                    "data",
+                    "float32 or float64 values",
+                    format!("{other:?}"),
+                ));
+            }
+        };
+        let elem_bytes: usize = if elem == Elem::F32 { 4 } else { 8 };
+        let h_bytes = dims.iter().try_fold(elem_bytes, |a, &d| a.checked_mul(d));
+        let file_len = std::fs::metadata(path)
+            .map_err(|e| Error::io(path, e))?
+            .len();
+        if h.chunks().is_none() && h_bytes.is_none_or(|b| b as u64 > file_len) {
+            return Err(Error::format(
+                path,
+                "data",
+                format!("at most {file_len} bytes of data (the file's size)"),
+                format!("shape {dims:?} of {elem_bytes}-byte values"),
+            ));
+        }
+        check_layout(path, &file, &h, h_bytes, file_len).map_err(|e| rename(e, "data"))?;
+        let roles = layout.roles();
+        let size = |a: Axis| roles.iter().position(|&r| r == a).map_or(1, |k| dims[k]);
+        let (nt, lx, ly, sx, sy) = (
+            size(Axis::T),
+            size(Axis::Lx),
+            size(Axis::Ly),
+            size(Axis::Sx),
+            size(Axis::Sy),
+        );
+        let seven = dims.len() == 7;
+        let (format, lead) = if seven && lx * ly != 1 {
+            (HFormat::TLxLySxSy, vec![lx, ly, sx, sy])
+        } else {
+            (HFormat::TSxSy, vec![sx, sy])
+        };
+        let meta = scan::Meta {
+            format,
+            lead,
+            nt,
+            lgrid: grid_xy3(&f, "laserGridPositions", [lx, ly])?,
+            sgrid: grid_xy3(&f, "cameraGridPositions", [sx, sy])?,
+            laser_xyz: f.xyz("laserPosition")?,
+            sensor_xyz: f.xyz("cameraPosition")?,
+            dt: f.float_scalar("deltaT")?,
+            t_start: f.float_scalar("t0")?,
+            legs_in_time: true,
+            xyz_names: ["laserPosition", "cameraPosition"],
+        };
+        let (dt, t_start) = (meta.dt, meta.t_start);
+        let scan::Scan {
+            scan,
+            geometry,
+            single_falloff,
+        } = scan::build(path, meta, options).map_err(znlos_names)?;
+
+        // Rows run over the laser grid (exhaustive) or the camera grid (confocal, single);
+        // each row holds the camera grid (exhaustive) or one histogram.
+        let exhaustive = scan == ScanType::Exhaustive;
+        let (rx, ry) = if exhaustive {
+            (Axis::Lx, Axis::Ly)
+        } else {
+            (Axis::Sx, Axis::Sy)
+        };
+        let ks = geometry.spads_per_row();
+        let row_ny = size(ry);
+        let row_axis: Vec<Option<usize>> = roles
+            .iter()
+            .map(|&a| {
+                if a == rx {
+                    Some(0)
+                } else if a == ry {
+                    Some(1)
+                } else {
+                    None
+                }
+            })
+            .collect();
+        let strides: Vec<usize> = roles
+            .iter()
+            .map(|&a| match a {
+                Axis::T => 1,
+                Axis::Sx if exhaustive => sy * nt,
+                Axis::Sy if exhaustive => nt,
+                _ => 0,
+            })
+            .collect();
+
+        // Memory: a row's slab (as read, as values) and the row; or the whole capture.
+        let row = ks.saturating_mul(nt);
+        let slab = dims.iter().product::<usize>() / geometry.lasers.len().max(1);
+        let (memory, what) = if layout.streams() {
+            (
+                budget::bytes(slab, 2 * elem_bytes as u128 + 4)
+                    .saturating_add(budget::bytes(row, 4)),
+                format!(
+                    "streamed by row: one hyperslab of {} values per row ({} MB as read)",
+                    slab,
+                    fmt_mb(slab * elem_bytes)
+                ),
+            )
+        } else {
+            let total = geometry.lasers.len().saturating_mul(row);
+            (
+                budget::bytes(total, 4).saturating_add(3 * BLOCK_BYTES as u128),
+                format!(
+                    "read whole on the first row (the row axes come last in the file): the capture as f32, {} MB, plus slabs of at most {} MB",
+                    fmt_mb(total * 4),
+                    fmt_mb(BLOCK_BYTES)
+                ),
+            )
+        };
+        budget::check(
+            || {
+                format!(
+                    "Z-NLOS data of shape {dims:?} read from {} ({what})",
+                    path.display()
+                )
+            },
+            memory,
+        )?;
+        let conventions = vec![
+            format!("axis order   {} {} (y-tal's moveaxis)", layout.axes(), {
+                let d: Vec<String> = dims.iter().map(usize::to_string).collect();
+                format!("= {}", d.join(" x "))
+            }),
+            format!(
+                "summed       colours and bounces; tal H_format {} as y-tal converts it",
+                format.tal_name()
+            ),
+            format!(
+                "time axis    deltaT = {dt} m and t0 = {t_start} m of optical path (y-tal delta_t, t_start); bin k at t0 + k deltaT{}",
+                if options.bin_centre {
+                    " + deltaT/2 (bin centre)"
+                } else {
+                    ""
+                }
+            ),
+            "device legs  included in the times (t_accounts_first_and_last_bounces = true): |laserPosition - x_l| + |x_s - cameraPosition| is subtracted from each path by the probes".to_string(),
+            "grids        cameraGridPositions, laserGridPositions as (X, Y, 3) (transposed when stored (3, Y, X)); normals and hiddenVolume* not used".to_string(),
+            format!("memory       {what}"),
+        ];
+        Ok(Self {
+            path: path.to_path_buf(),
+            h,
+            elem,
+            dims,
+            layout,
+            scan,
+            geometry,
+            single_falloff,
+            row_axis,
+            strides,
+            row_ny,
+            whole: None,
+            conventions,
+        })
+    }
+
+    /// The file.
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// The axis order found.
+    pub fn layout(&self) -> ZnlosLayout {
+        self.layout
+    }
+
+    /// The scan type (as y-tal's converted capture has it).
+    pub fn scan_type(&self) -> ScanType {
+        self.scan
+    }
+
+    /// The shape of `data` as stored.
+    pub fn data_shape(&self) -> &[usize] {
+        &self.dims
+    }
+
+    /// One line per convention applied (axis order, sums, time axis, legs, grids, memory).
+    pub fn conventions(&self) -> &[String] {
+        &self.conventions
+    }
+
+    /// Reads every row into a [`Capture`].
+    ///
+    /// # Errors
+    /// Read errors; [`Error::Format`] if the capture does not fit in memory.
+    pub fn into_capture(mut self) -> Result<Capture> {
+        let g = self.geometry.clone();
+        let len = g.spads_per_row() * g.nt;
+        let total = g.lasers.len().checked_mul(len);
+        budget::check(
+            || {
+                format!(
+                    "data of {} samples in {}",
+                    budget::count(total.map_or(u128::MAX, |n| n as u128)),
+                    self.path.display()
+                )
+            },
+            budget::bytes(total.unwrap_or(usize::MAX), 4 + 4),
+        )?;
+        let mut data = Vec::new();
+        if total.is_none_or(|n| data.try_reserve_exact(n).is_err()) {
+            return Err(Error::format(
+                &self.path,
+                "data",
+                "a capture that fits in memory",
+                format!("shape {:?}", self.dims),
+            ));
+        }
+        let mut row = Vec::with_capacity(len);
+        for l in 0..g.lasers.len() {
+            self.read_row(l, &mut row)?;
+            data.extend_from_slice(&row);
+        }
+        Capture::new(g, data, &self.path)
+    }
+
+    /// Reads the hyperslab `sel` of `data` as f32.
+    fn read(&self, sel: Vec<SliceInfoElem>) -> Result<Vec<f32>> {
+        let sel = SliceInfo { selections: sel };
+        let field = |e| h5_error(&self.path, "data", e);
+        Ok(match self.elem {
+            Elem::F32 => into_vec(self.h.read_slice::<f32>(&sel).map_err(field)?),
+            Elem::F64 => into_vec(self.h.read_slice::<f64>(&sel).map_err(field)?)
+                .into_iter()
+                .map(|x| x as f32)
+                .collect(),
+        })
+    }
+
+    /// Row `l` (unscaled) from its contiguous hyperslab.
+    fn stream_row(&self, l: usize, out: &mut [f32]) -> Result<()> {
+        let idx = [l / self.row_ny, l % self.row_ny];
+        let mut sel = Vec::new();
+        let (mut counts, mut strides) = (Vec::new(), Vec::new());
+        for (k, &n) in self.dims.iter().enumerate() {
+            match self.row_axis[k] {
+                Some(r) => sel.push(SliceInfoElem::Index(idx[r] as u64)),
+                None => {
+                    sel.push(span(0, n));
+                    counts.push(n);
+                    strides.push(self.strides[k]);
+                }
+            }
+        }
+        let v = self.read(sel)?;
+        let starts = vec![0; counts.len()];
+        self.scatter(&v, &counts, &starts, &strides, out)
+    }
+
+    /// The whole capture (unscaled), read in slabs along the leading axes.
+    fn read_whole(&self) -> Result<Vec<f32>> {
+        let g = &self.geometry;
+        let len = g.spads_per_row() * g.nt;
+        let mut data = vec![0.0f32; g.lasers.len() * len];
+        // Full strides: the row axes too (row x: Ny·len, row y: len).
+        let strides: Vec<usize> = (0..self.dims.len())
+            .map(|k| match self.row_axis[k] {
+                Some(0) => self.row_ny * len,
+                Some(_) => len,
+                None => self.strides[k],
+            })
+            .collect();
+        // Split at the first axis whose tail fits in a block.
+        let max = (BLOCK_BYTES / 4).max(1);
+        let tails = c_strides(&self.dims);
+        let k = (0..self.dims.len())
+            .find(|&k| tails[k] <= max)
+            .unwrap_or(self.dims.len() - 1);
+        let step = (max / tails[k].max(1)).max(1);
+        let outer: usize = self.dims[..k].iter().product();
+        for o in 0..outer {
+            // The index of the axes before k.
+            let mut rest = o;
+            let mut head = vec![0usize; k];
+            for a in (0..k).rev() {
+                head[a] = rest % self.dims[a];
+                rest /= self.dims[a];
+            }
+            for a0 in (0..self.dims[k]).step_by(step) {
+                let a1 = (a0 + step).min(self.dims[k]);
+                let mut sel = Vec::with_capacity(self.dims.len());
+                let (mut counts, mut starts) = (Vec::new(), Vec::new());
+                for (a, &n) in self.dims.iter().enumerate() {
+                    let (s, e) = if a < k {
+                        (head[a], head[a] + 1)
+                    } else if a == k {
+                        (a0, a1)
+                    } else {
+                        (0, n)
+                    };
+                    sel.push(span(s, e));
+                    counts.push(e - s);
+                    starts.push(s);
+                }
+                let v = self.read(sel)?;
+                self.scatter(&v, &counts, &starts, &strides, &mut data)?;
+            }
+        }
+        Ok(data)
+    }
+
+    /// Adds the C-order values `v` of a hyperslab (`counts` per axis from `starts`) into
+    /// `out[Σ (starts + i)·strides]`.
+    fn scatter(
+        &self,
+        v: &[f32],
+        counts: &[usize],
+        starts: &[usize],
+        strides: &[usize],
+        out: &mut [f32],
+    ) -> Result<()> {
+        let want: usize = counts.iter().product();
+        if v.len() != want {
+            return Err(Error::format(
+                &self.path,
+                "data",
+                format!("{want} values in the hyperslab"),
+                v.len(),
+            ));
+        }
+        let Some(last) = counts.len().checked_sub(1) else {
+            if let (Some(o), Some(&x)) = (out.first_mut(), v.first()) {
+                *o += x;
+            }
+            return Ok(());
+        };
+        let (n_in, s_in) = (counts[last], strides[last]);
+        let mut idx = vec![0usize; last];
+        for run in v.chunks_exact(n_in.max(1)) {
+            let base: usize = (0..last).map(|a| (starts[a] + idx[a]) * strides[a]).sum();
+            let base = base + starts[last] * s_in;
+            for (i, &x) in run.iter().enumerate() {
+                out[base + i * s_in] += x;
+            }
+            for a in (0..last).rev() {
+                idx[a] += 1;
+                if idx[a] < counts[a] {
+                    break;
+                }
+                idx[a] = 0;
+            }
+        }
+        Ok(())
+    }
+}
+
+fn span(a: usize, b: usize) -> SliceInfoElem {
+    SliceInfoElem::Slice {
+        start: a as u64,
+        end: b as u64,
+        step: 1,
+    }
+}
+
+fn fmt_mb(bytes: usize) -> String {
+    format!("{:.1}", bytes as f64 / 1e6)
+}
+
+/// An error of the shared checks, with `H` named as this layout names it.
+fn rename(e: Error, to: &str) -> Error {
+    match e {
+        Error::Format {
+            path,
+            field,
+            expected,
+            found,
+        } if field == "H" => Error::Format {
+            path,
+            field: to.to_string(),
+            expected,
+            found,
+        },
+        other => other,
+    }
+}
+
+/// The geometry's errors name tal's fields: name the Z-NLOS datasets instead.
+fn znlos_names(e: Error) -> Error {
+    match e {
+        Error::Format {
+            path,
+            field,
+            expected,
+            found,
+        } => {
+            let field = match field.as_str() {
+                "laser_grid" | "laser_grid_xyz" => "laserGridPositions",
+                "sensor_grid" | "sensor_grid_xyz" => "cameraGridPositions",
+                "delta_t" => "deltaT",
+                "t_start" => "t0",
+                "H" => "data",
+                other => other,
+            }
+            .to_string();
+            Error::Format {
+                path,
+                field,
+                expected,
+                found,
+            }
+        }
+        other => other,
+    }
+}
+
+impl RowSource for ZnlosReader {
+    fn geometry(&self) -> &Geometry {
+        &self.geometry
+    }
+
+    fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
+        let kl = self.geometry.lasers.len();
+        if l >= kl {
+            return Err(Error::arg(
+                "laser row",
+                format!("{l} is out of range: the capture has {kl} rows"),
+            ));
+        }
+        let len = self.geometry.nt * self.geometry.spads_per_row();
+        out.clear();
+        if self.layout.streams() {
+            out.resize(len, 0.0);
+            self.stream_row(l, out)?;
+        } else {
+            if self.whole.is_none() {
+                self.whole = Some(self.read_whole()?);
+            }
+            let w = self.whole.as_deref().unwrap_or_default();
+            out.extend_from_slice(&w[l * len..(l + 1) * len]);
+        }
+        let x_l = self.geometry.lasers[l];
+        if let Some(c0) = self.single_falloff {
+            let k = self.geometry.laser_falloff(x_l) / c0;
+            out.iter_mut().for_each(|h| *h = (f64::from(*h) * k) as f32);
+        }
+        Ok(x_l)
+    }
+}
+
+#[cfg(test)]
+mod tests;

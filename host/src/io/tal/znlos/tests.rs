@@ -1,0 +1,312 @@
+//! Unit tests of the Z-NLOS reader: every axis order gives the same rows, from files written
+//! to y-tal's description with the pure-Rust writer `hdf5-pure`.
+
+use super::*;
+
+fn scratch(test: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("vltm-znlos-{}-{test}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// The value of laser (ix, iy), SPAD (sx, sy), bin n, colour c, bounce b.
+fn value(ix: usize, iy: usize, sx: usize, sy: usize, n: usize, c: usize, b: usize) -> f32 {
+    (n * 10_000 + ix * 1000 + iy * 100 + sx * 10 + sy) as f32
+        * [0.5, 0.25, 0.25][c]
+        * [0.5, 0.1, 0.1, 0.1, 0.1, 0.1][b]
+}
+
+/// `data` of `layout` for lasers (lx, ly), SPADs (sx, sy), nt bins, 3 colours, 6 bounces.
+fn data(layout: ZnlosLayout, l: [usize; 2], s: [usize; 2], nt: usize) -> (Vec<f32>, Vec<usize>) {
+    let (lx, ly, sx, sy) = (l[0], l[1], s[0], s[1]);
+    let shape = match layout {
+        ZnlosLayout::Rows7 => vec![ly, lx, sy, sx, 6, nt, 3],
+        ZnlosLayout::Time7 => vec![3, nt, 6, sy, sx, ly, lx],
+        ZnlosLayout::Rows5 => vec![sx, sy, 6, nt, 3],
+        ZnlosLayout::Time5 => vec![3, nt, 6, sy, sx],
+    };
+    let n: usize = shape.iter().product();
+    let mut v = Vec::with_capacity(n);
+    let mut idx = vec![0usize; shape.len()];
+    for _ in 0..n {
+        let i = |r: &[usize]| r.to_vec();
+        let [a, b, c, d, e, f, g] = match layout {
+            ZnlosLayout::Rows7 => {
+                // (ly, lx, sy, sx, b, t, c)
+                let k = i(&idx);
+                [k[1], k[0], k[3], k[2], k[5], k[6], k[4]]
+            }
+            ZnlosLayout::Time7 => {
+                let k = i(&idx);
+                [k[6], k[5], k[4], k[3], k[1], k[0], k[2]]
+            }
+            ZnlosLayout::Rows5 => {
+                let k = i(&idx);
+                [0, 0, k[0], k[1], k[3], k[4], k[2]]
+            }
+            ZnlosLayout::Time5 => {
+                let k = i(&idx);
+                [0, 0, k[4], k[3], k[1], k[0], k[2]]
+            }
+        };
+        v.push(value(a, b, c, d, e, f, g));
+        for k in (0..idx.len()).rev() {
+            idx[k] += 1;
+            if idx[k] < shape[k] {
+                break;
+            }
+            idx[k] = 0;
+        }
+    }
+    (v, shape)
+}
+
+fn at(i: usize, j: usize) -> [f32; 3] {
+    [0.1 * i as f32 - 0.3, 0.1 * j as f32 - 0.2, 0.0]
+}
+
+fn grid(nx: usize, ny: usize, transposed: bool) -> (Vec<f32>, Vec<usize>) {
+    if transposed {
+        // (3, Y, X)
+        let mut v = Vec::new();
+        for c in 0..3 {
+            for j in 0..ny {
+                for i in 0..nx {
+                    v.push(at(i, j)[c]);
+                }
+            }
+        }
+        (v, vec![3, ny, nx])
+    } else {
+        let mut v = Vec::new();
+        for i in 0..nx {
+            for j in 0..ny {
+                v.extend(at(i, j));
+            }
+        }
+        (v, vec![nx, ny, 3])
+    }
+}
+
+fn write(
+    path: &Path,
+    layout: ZnlosLayout,
+    l: [usize; 2],
+    s: [usize; 2],
+    nt: usize,
+    skip: &str,
+    transposed: bool,
+) {
+    use hdf5_pure::FileBuilder;
+    let mut b = FileBuilder::new();
+    if skip != "data" {
+        let (v, shape) = data(layout, l, s, nt);
+        b.create_dataset("data")
+            .with_f32_data(&v)
+            .with_shape(&u(&shape));
+    }
+    let lgrid = if matches!(layout, ZnlosLayout::Rows5 | ZnlosLayout::Time5) {
+        grid(s[0], s[1], transposed)
+    } else {
+        grid(l[0], l[1], transposed)
+    };
+    for (name, (v, shape)) in [
+        ("cameraGridPositions", grid(s[0], s[1], transposed)),
+        ("laserGridPositions", lgrid),
+    ] {
+        if skip != name {
+            b.create_dataset(name)
+                .with_f32_data(&v)
+                .with_shape(&u(&shape));
+        }
+    }
+    for (name, v) in [
+        ("cameraPosition", [0.5f32, 0.1, 0.4]),
+        ("laserPosition", [-0.5, 0.0, 0.25]),
+    ] {
+        if skip != name {
+            b.create_dataset(name).with_f32_data(&v).with_shape(&[3, 1]);
+        }
+    }
+    for (name, v) in [("deltaT", 0.01f64), ("t0", 1.25)] {
+        if skip != name {
+            b.create_dataset(name).with_f64_data(&[v]).with_shape(&[1]);
+        }
+    }
+    b.write(path).unwrap();
+}
+
+#[test]
+fn every_axis_order_gives_the_same_rows() {
+    let dir = scratch("orders");
+    let (l, s, nt) = ([4, 2], [2, 4], 5);
+    for (layout, tr) in [(ZnlosLayout::Rows7, false), (ZnlosLayout::Time7, true)] {
+        let p = dir.join(format!("{layout:?}.hdf5"));
+        write(&p, layout, l, s, nt, "", tr);
+        let mut r = open(&p).unwrap();
+        assert_eq!(r.layout(), layout);
+        assert_eq!(r.scan_type(), ScanType::Exhaustive);
+        let g = r.geometry().clone();
+        assert_eq!((g.laser_shape, g.spad_shape), ([4, 2], [2, 4]));
+        assert_eq!(g.lasers[1], at(0, 1));
+        assert_eq!(g.lasers[2 * 2 + 1], at(2, 1));
+        assert_eq!(g.spads[4 + 3], at(1, 3));
+        assert_eq!((g.nt, g.dt, g.t0), (5, 0.01, 1.25));
+        assert!(g.legs_in_time && !g.confocal);
+        assert_eq!(g.laser_origin, [-0.5, 0.0, 0.25]);
+        assert_eq!(g.sensor_origin, [0.5, 0.1f32 as f64, 0.4f32 as f64]);
+        let mut row = Vec::new();
+        for li in [7, 0, 3] {
+            r.read_row(li, &mut row).unwrap();
+            let (ix, iy) = (li / 2, li % 2);
+            for sx in 0..2 {
+                for sy in 0..4 {
+                    for n in 0..nt {
+                        // Σ colours Σ bounces of the pattern = the base value × 1 × 1.
+                        let want = (n * 10_000 + ix * 1000 + iy * 100 + sx * 10 + sy) as f32;
+                        let got = row[(sx * 4 + sy) * nt + n];
+                        assert!(
+                            (got - want).abs() <= 1e-6 * want.max(1.0),
+                            "{layout:?} {li} {sx} {sy} {n}: {got} {want}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+    // Confocal, both orders.
+    for (layout, tr) in [(ZnlosLayout::Rows5, true), (ZnlosLayout::Time5, false)] {
+        let p = dir.join(format!("{layout:?}.hdf5"));
+        write(&p, layout, l, [3, 3], nt, "", tr);
+        let mut r = open(&p).unwrap();
+        assert_eq!((r.layout(), r.scan_type()), (layout, ScanType::Confocal));
+        let mut row = Vec::new();
+        for li in 0..9 {
+            r.read_row(li, &mut row).unwrap();
+            assert_eq!(row.len(), nt);
+            for (n, &got) in row.iter().enumerate() {
+                let want = (n * 10_000 + (li / 3) * 10 + li % 3) as f32;
+                assert!(
+                    (got - want).abs() <= 1e-6 * want.max(1.0),
+                    "{layout:?} {li} {n}"
+                );
+            }
+        }
+    }
+    // One laser point: tal single, by reciprocity.
+    let p = dir.join("single.hdf5");
+    write(&p, ZnlosLayout::Rows7, [1, 1], s, nt, "", false);
+    let r = open(&p).unwrap();
+    assert_eq!(r.scan_type(), ScanType::Single);
+    assert_eq!(
+        (r.geometry().lasers.len(), r.geometry().spads.len()),
+        (8, 1)
+    );
+}
+
+#[test]
+fn bad_files_name_the_dataset() {
+    let dir = scratch("bad");
+    for skip in [
+        "data",
+        "deltaT",
+        "t0",
+        "cameraGridPositions",
+        "laserPosition",
+    ] {
+        let p = dir.join(format!("{skip}.hdf5"));
+        write(&p, ZnlosLayout::Rows7, [2, 2], [2, 2], 4, skip, false);
+        match open(&p).unwrap_err() {
+            Error::Format { field, .. } => assert_eq!(field, skip),
+            other => panic!("{skip}: {other:?}"),
+        }
+    }
+    // Shapes y-tal does not recognise, and grids that do not match.
+    let p = dir.join("shape.hdf5");
+    let mut b = hdf5_pure::FileBuilder::new();
+    b.create_dataset("data")
+        .with_f32_data(&[0.0; 24])
+        .with_shape(&[2, 3, 4]);
+    b.write(&p).unwrap();
+    match open(&p).unwrap_err() {
+        Error::Format { field, found, .. } => assert_eq!(
+            (field.as_str(), found.as_str()),
+            ("data", "shape [2, 3, 4]")
+        ),
+        other => panic!("{other:?}"),
+    }
+    let p = dir.join("grid.hdf5");
+    write(&p, ZnlosLayout::Rows5, [1, 1], [3, 3], 4, "", false);
+    // Rewrite with a 2×2 camera grid for a 3×3 data.
+    let mut b = hdf5_pure::FileBuilder::new();
+    let (v, shape) = data(ZnlosLayout::Rows5, [1, 1], [3, 3], 4);
+    b.create_dataset("data")
+        .with_f32_data(&v)
+        .with_shape(&u(&shape));
+    let (g, gs) = grid(2, 2, false);
+    b.create_dataset("cameraGridPositions")
+        .with_f32_data(&g)
+        .with_shape(&u(&gs));
+    b.create_dataset("laserGridPositions")
+        .with_f32_data(&g)
+        .with_shape(&u(&gs));
+    b.create_dataset("cameraPosition")
+        .with_f32_data(&[0.0, 0.0, 1.0])
+        .with_shape(&[3]);
+    b.create_dataset("laserPosition")
+        .with_f32_data(&[0.0, 0.0, 1.0])
+        .with_shape(&[3]);
+    b.create_dataset("deltaT")
+        .with_f64_data(&[0.01])
+        .with_shape(&[]);
+    b.create_dataset("t0").with_f64_data(&[0.0]).with_shape(&[]);
+    b.write(&p).unwrap();
+    match open(&p).unwrap_err() {
+        Error::Format { field, .. } => assert_eq!(field, "cameraGridPositions"),
+        other => panic!("{other:?}"),
+    }
+}
+
+fn u(s: &[usize]) -> Vec<u64> {
+    s.iter().map(|&d| d as u64).collect()
+}
+
+/// Truncated and corrupted copies of a Z-NLOS file, in a streamed and a read-whole order:
+/// an error or a capture, never a panic; a truncated file is always an error.
+#[test]
+fn corrupt_files_are_errors_not_panics() {
+    let dir = scratch("corrupt");
+    for layout in [ZnlosLayout::Rows7, ZnlosLayout::Time7] {
+        let p = dir.join("orig.hdf5");
+        write(&p, layout, [2, 2], [2, 3], 4, "", false);
+        let orig = std::fs::read(&p).unwrap();
+        let n = orig.len();
+        let c = dir.join("c.hdf5");
+        let attempt = |bytes: &[u8]| -> Result<Capture> {
+            std::fs::write(&c, bytes).unwrap();
+            read_all(&c)
+        };
+        assert!(attempt(&orig).is_ok());
+        for cut in (0..n).step_by(61).chain([n - 1]) {
+            let r = attempt(&orig[..cut]);
+            assert!(r.is_err(), "{layout:?}: truncated at {cut} of {n}: read");
+        }
+        let (mut errors, mut reads) = (0, 0);
+        for i in (0..n).step_by(13) {
+            for flip in [0x01u8, 0xFF] {
+                let mut bad = orig.clone();
+                bad[i] ^= flip;
+                match attempt(&bad) {
+                    Ok(_) => reads += 1,
+                    Err(e) => {
+                        assert!(!e.to_string().is_empty());
+                        errors += 1;
+                    }
+                }
+            }
+        }
+        println!("{layout:?}: {errors} errors, {reads} reads of {n}-byte corruptions");
+        assert!(errors > 0);
+    }
+}
