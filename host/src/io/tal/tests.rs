@@ -425,14 +425,14 @@ fn synthetic_formats_stream_the_right_values() {
     spec.sensor_grid = grid(10, 100, false, 0.0);
     let mut r = spec.open(&dir, "blocks").unwrap();
     assert_eq!(r.block_range(3), (0, 10));
-    // Rows of 4 MB: two rows per block within a line; lines of 5 end in a partial block.
+    // Rows of 4 MB: four rows per block within a line; lines of 5 end in a partial block.
     let dims = [1000, 3, 5, 10, 100];
     let blocks: Vec<_> = (0..15)
         .map(|l| super::block_range(&dims, HFormat::TLxLySxSy, 1000, l))
         .collect();
     assert_eq!(
         &blocks[..7],
-        &[(0, 2), (0, 2), (2, 4), (2, 4), (4, 5), (5, 7), (5, 7)]
+        &[(0, 4), (0, 4), (0, 4), (0, 4), (4, 5), (5, 9), (5, 9)]
     );
     // Rows of 40 kB, lines of 5: whole lines, as many as fit in BLOCK_BYTES.
     let dims = [100, 300, 5, 10, 10];
