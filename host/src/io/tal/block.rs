@@ -278,10 +278,10 @@ fn transpose(
                 let run = &runs[k][s0..s0 + TILE];
                 std::array::from_fn(|j| run[j])
             });
-            for j in 0..TILE {
+            let spads = dst[s0 * nt..(s0 + TILE) * nt].chunks_exact_mut(nt);
+            for (j, d) in spads.enumerate() {
                 let column: [f32; GROUP] = std::array::from_fn(|k| tile[k][j]);
-                let o = (s0 + j) * nt + n0;
-                dst[o..o + GROUP].copy_from_slice(&column);
+                d[n0..n0 + GROUP].copy_from_slice(&column);
             }
         }
         for s in tiled..ks {
