@@ -13,7 +13,7 @@
 //! [`ReadAhead::recycle`], so a pass over the capture allocates about three blocks' worth.
 
 use super::fields::{h5_error, into_vec};
-use super::{BLOCK_BYTES, HFormat};
+use super::format::HFormat;
 use crate::error::{Error, Result};
 use hdf5_reader::{Dataset, SliceInfo, SliceInfoElem};
 use std::io::{Read, Seek, SeekFrom};
@@ -26,6 +26,10 @@ pub(super) enum Elem {
     F32,
     F64,
 }
+
+/// Rows read from `H` at once (module docs of [`io::tal`](super), *Reading*): at most this
+/// many bytes (whole laser lines when a line fits), or one row.
+pub const BLOCK_BYTES: usize = 16 << 20;
 
 /// Time bins staged and transposed at once: two 64-byte cache lines of a row per SPAD.
 pub(super) const GROUP: usize = 32;

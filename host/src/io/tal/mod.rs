@@ -611,10 +611,6 @@ fn check_layout(
     Ok(contiguous)
 }
 
-/// Rows read from `H` at once (module docs, *Reading*): at most this many bytes (whole laser
-/// lines when a line fits), or one row.
-pub const BLOCK_BYTES: usize = 16 << 20;
-
 impl RowSource for TalReader {
     fn geometry(&self) -> &Geometry {
         &self.geometry
@@ -651,6 +647,7 @@ mod block;
 mod fields;
 mod format;
 
+pub use block::BLOCK_BYTES;
 use block::{Block, Elem, Plan, ReadAhead, block_range};
 
 pub use format::{HFormat, ScanType, TalOptions};
