@@ -39,10 +39,13 @@ echo "|---|---|---|---|---|"
 k=0
 base=""
 for f in "$@"; do
-  read -r med lo hi cpu rss < <(awk '{w[NR]=$1; c[NR]=$2+$3; if ($4>m) m=$4}
-    END {n=asort(w); asort(c); printf "%.2f %.2f %.2f %.2f %.1f\n",
-      (n%2 ? w[(n+1)/2] : (w[n/2]+w[n/2+1])/2), w[1], w[n],
-      (n%2 ? c[(n+1)/2] : (c[n/2]+c[n/2+1])/2), m/1024}' "$work/t$k")
+  # median of a sorted column: sorted values on stdin
+  median() { awk '{v[NR]=$1} END {printf "%.2f", (NR%2 ? v[(NR+1)/2] : (v[NR/2]+v[NR/2+1])/2)}'; }
+  med=$(cut -d' ' -f1 "$work/t$k" | sort -g | median)
+  lo=$(cut -d' ' -f1 "$work/t$k" | sort -g | head -1)
+  hi=$(cut -d' ' -f1 "$work/t$k" | sort -g | tail -1)
+  cpu=$(awk '{print $2 + $3}' "$work/t$k" | sort -g | median)
+  rss=$(awk '$4 > m {m = $4} END {printf "%.1f", m / 1024}' "$work/t$k")
   [ -n "$base" ] || base="$med"
   ratio=$(awk -v a="$med" -v b="$base" 'BEGIN {printf "%.2f", a / b}')
   echo "| $(basename "$f") | $med s ($lo–$hi) | $ratio | $cpu s | $rss MB |"
