@@ -9,29 +9,33 @@
 //! [`open`] parses the metadata and returns a [`TalReader`], a [`RowSource`] that reads laser
 //! rows on demand straight from the file, never all of `H`: for `T_Lx_Ly_Sx_Sy` the row of laser
 //! `(ix, iy)` is the hyperslab `H[:, ix, iy, :, :]`, `Nt` strided runs of `Ks` values. Rows are
-//! read in **blocks** of consecutive rows, each one hyperslab through the pure-Rust
-//! [`hdf5_reader`] crate's `Dataset::read_slice`: whole laser lines `H[:, ix0..ix1, :, :, :]`
-//! (as many as fit in [`BLOCK_BYTES`], 8 MiB), or, when one line is larger, at most
-//! [`BLOCK_BYTES`] of one line (at least one row). For a contiguous `H` that is one positional
-//! read per time bin of the block's `B·Ks` values (a 16×16 × 16×16 × 800 capture: 32 blocks,
-//! 25 600 reads of 10 kB, instead of one 1 kB read per (row, bin)); for a chunked one, the
-//! overlapping chunks (decompressed by the crate). A **background reader** thread reads the
-//! blocks in row order, transposes each in memory to vltm's SPAD-major rows `[r][s][n]`
-//! (16 time bins at a time), and hands them over through a bounded queue of one block, so that
-//! reading, decompression and the transpose overlap the probes' work on the rows already
-//! read; [`RowSource::read_row`] then copies one row out of the current block. A row out of
-//! order restarts the reader at its block. For the one-histogram-per-point formats (confocal,
-//! single) a row is a single value per time bin, so blocks are what keeps the number of reads
-//! at `Nt` per block instead of `Nt` per row.
+//! read in **blocks** of consecutive rows (`block`): whole laser lines `H[:, ix0..ix1, :, :, :]`
+//! (as many as fit in [`BLOCK_BYTES`], 16 MiB), or, when one line is larger, at most
+//! [`BLOCK_BYTES`] of one line (at least one row). A contiguous little-endian `H` (what tal
+//! writes) is read with plain positional reads of the file, one per time bin of the block's
+//! `B·Ks` values (one per 32 bins when a block holds every row): a 16×16 × 16×16 × 800
+//! capture takes 16 blocks, 12 800 reads of 16 kB, instead of one 1 kB read per (row, bin).
+//! Anything else (chunked or compressed `H`, big-endian values, a compact layout) goes
+//! through the pure-Rust [`hdf5_reader`] crate's `Dataset::read_slice`, one hyperslab per
+//! block (the crate decompresses the overlapping chunks and keeps them in its chunk cache).
+//! A **background reader** thread reads the blocks in row order, transposes each in memory to
+//! vltm's SPAD-major rows `[r][s][n]` (in tiles of 32 time bins × 16 SPADs, staged in a
+//! buffer that stays in cache), and hands them over through a bounded queue of one block, so
+//! that reading, decompression and the transpose overlap the probes' work on the rows
+//! already read. [`RowSource::read_row`] swaps the row into the caller's buffer (no copy) and
+//! hands the caller's old buffer back to the reader for a later block. A row out of order, or
+//! read a second time, restarts the reader at its block. For the one-histogram-per-point
+//! formats (confocal, single) a row is a single value per time bin, so blocks are what keeps
+//! the number of reads at `Nt` per block instead of `Nt` per row.
 //!
 //! **Memory** is bounded whatever the size of `H`: at most three blocks (the one in use, one
-//! queued, one being read and transposed: `3 ×` [`BLOCK_BYTES`] = 24 MiB, or three rows when
-//! a row is larger), plus the crate's raw copy of the block being read and, for a chunked `H`,
-//! the crate's cache of decoded chunks (up to 64 MiB). [`read_all`] reads every row into a
-//! [`Capture`] (needed by `--swap-roles` and by [`io::open`](crate::io::open)). Measured peak
-//! resident set of `vltm column` on the exh16 capture (210 MB of `f32`): 47 MB contiguous,
-//! 118 MB gzip-chunked (`.npz`: 19 MB); on the small shared captures (two_patches, 6.6 MB)
-//! a block holds the whole `H`.
+//! queued, one being read and transposed: `3 ×` [`BLOCK_BYTES`] = 48 MiB, or three rows when
+//! a row is larger) and a staging buffer of 32 time bins of the block; through the crate, its
+//! copy of the block being read and, for a chunked `H`, its cache of decoded chunks (up to
+//! 64 MiB). [`read_all`] reads every row into a [`Capture`] (needed by `--swap-roles` and by
+//! [`io::open`](crate::io::open)). Peak resident set of `vltm column` on the exh16 capture
+//! (210 MB of `f32`): see the README, *Reading y-tal HDF5*; on the small shared captures
+//! (two_patches, 6.6 MB) a block holds the whole `H`.
 //!
 //! tal writes `H` contiguous and uncompressed (checked with h5py on every shared capture); a
 //! chunked `H` streams too.
@@ -136,17 +140,9 @@ use self::fields::*;
 use crate::budget;
 use crate::error::{Error, Result};
 use crate::io::capture::{Capture, Geometry, RowSource};
-use hdf5_reader::{Dataset, Datatype, Hdf5File, OpenOptions, SliceInfo, SliceInfoElem};
+use hdf5_reader::{ByteOrder, Dataset, Datatype, Hdf5File, OpenOptions};
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{Receiver, sync_channel};
 use vltm_kernel::Point;
-
-/// Element type of `H`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Elem {
-    F32,
-    F64,
-}
 
 /// An open `HDF5_TAL` capture that reads laser rows on demand ([`RowSource`]).
 pub struct TalReader {
@@ -160,6 +156,9 @@ pub struct TalReader {
     options: TalOptions,
     /// `c(x0)` of a single scan (the physical laser's falloff at its one spot), else `None`.
     single_falloff: Option<f64>,
+    /// File address of a contiguous little-endian `H`, read with positional reads; `None`
+    /// reads through the crate.
+    raw: Option<u64>,
     /// The rows read last.
     block: Block,
     /// The background reader, once rows are read.
@@ -352,7 +351,16 @@ impl TalReader {
                 format!("shape {dims:?} of {elem_bytes}-byte values"),
             ));
         }
-        check_layout(path, &file, &h, h_bytes, file_len)?;
+        let contiguous = check_layout(path, &file, &h, h_bytes, file_len)?;
+        // Positional reads of a contiguous little-endian H (module docs, *Reading*); anything
+        // else goes through the crate.
+        let raw = match h.dtype() {
+            Datatype::FloatingPoint {
+                byte_order: ByteOrder::LittleEndian,
+                ..
+            } => contiguous,
+            _ => None,
+        };
         let nt = dims[0];
         let lead = &dims[1..];
 
@@ -409,6 +417,7 @@ impl TalReader {
             geometry,
             options,
             single_falloff,
+            raw,
             block: Block::default(),
             ahead: None,
         })
@@ -506,7 +515,7 @@ impl TalReader {
                 return Err(e);
             }
         };
-        ahead.next = block.first + block.rows;
+        ahead.next = block.first + block.rows.len();
         self.block = block;
         Ok(())
     }
@@ -521,110 +530,8 @@ impl TalReader {
             format: self.format,
             ks: self.geometry.spads_per_row(),
             kl: self.geometry.lasers.len(),
+            raw: self.raw,
         }
-    }
-}
-
-/// The block of consecutive rows (flattened row axes) holding row `l`, `first..end`: whole
-/// laser lines when a line fits in [`BLOCK_BYTES`] (as many as fit), else at most
-/// [`BLOCK_BYTES`] of one line (at least one row).
-fn block_range(dims: &[usize], format: HFormat, ks: usize, l: usize) -> (usize, usize) {
-    let nt = dims[0];
-    let row_bytes = (ks * nt * 4).max(1);
-    let fit = (BLOCK_BYTES / row_bytes).max(1);
-    let r = format.row_axes();
-    let kl: usize = dims[1..=r].iter().product();
-    let line = if r == 2 { dims[2].max(1) } else { kl.max(1) };
-    if r == 2 && fit >= line {
-        let b = fit / line * line;
-        let first = l / b * b;
-        (first, (first + b).min(kl))
-    } else {
-        let b = fit.min(line);
-        let (ix, iy) = (l / line, l % line);
-        let y0 = iy / b * b;
-        (ix * line + y0, ix * line + (y0 + b).min(line))
-    }
-}
-
-/// Everything the background reader needs to read blocks on its own.
-struct Plan {
-    path: PathBuf,
-    h: Dataset,
-    elem: Elem,
-    dims: Vec<usize>,
-    format: HFormat,
-    ks: usize,
-    kl: usize,
-}
-
-impl Plan {
-    /// Reads rows `first..end` (one [`block_range`]) as one hyperslab, time-major: for each
-    /// time bin one contiguous run of `(end − first)·Ks` values in a contiguous `H`.
-    fn read(&self, first: usize, end: usize) -> Result<Block> {
-        let span = |a: usize, b: usize| SliceInfoElem::Slice {
-            start: a as u64,
-            end: b as u64,
-            step: 1,
-        };
-        let r = self.format.row_axes();
-        let mut selections = vec![span(0, self.dims[0])];
-        if r == 2 {
-            let line = self.dims[2].max(1);
-            if first.is_multiple_of(line)
-                && (end.is_multiple_of(line) || end == self.kl)
-                && end - first >= line
-            {
-                selections.push(span(first / line, end.div_ceil(line)));
-                selections.push(span(0, line));
-            } else {
-                selections.push(SliceInfoElem::Index((first / line) as u64));
-                selections.push(span(first % line, first % line + (end - first)));
-            }
-        } else {
-            selections.push(span(first, end));
-        }
-        selections.extend(self.dims[1 + r..].iter().map(|&n| span(0, n)));
-        let sel = SliceInfo { selections };
-        let field = |e| h5_error(&self.path, "H", e);
-        let v: Vec<f32> = match self.elem {
-            Elem::F32 => into_vec(self.h.read_slice::<f32>(&sel).map_err(field)?),
-            Elem::F64 => into_vec(self.h.read_slice::<f64>(&sel).map_err(field)?)
-                .into_iter()
-                .map(|x| x as f32)
-                .collect(),
-        };
-        let (nt, rows, ks) = (self.dims[0], end - first, self.ks);
-        let want = nt * rows * ks;
-        if v.len() != want {
-            return Err(Error::format(
-                &self.path,
-                "H",
-                format!("{want} values in laser rows {first}..{end}"),
-                v.len(),
-            ));
-        }
-        // Time-major v[(n·rows + r)·Ks + s] → row-major data[(r·Ks + s)·Nt + n], T time bins
-        // at a time: T source runs read across, one cache line written per SPAD.
-        const T: usize = 16;
-        let mut data = vec![0.0f32; want];
-        for r in 0..rows {
-            let dst = &mut data[r * ks * nt..(r + 1) * ks * nt];
-            for n0 in (0..nt).step_by(T) {
-                let nn = T.min(nt - n0);
-                let src: [&[f32]; T] = std::array::from_fn(|k| {
-                    let n = n0 + k.min(nn - 1);
-                    &v[(n * rows + r) * ks..(n * rows + r + 1) * ks]
-                });
-                for (s, d) in dst.chunks_exact_mut(nt).enumerate() {
-                    for (k, x) in d[n0..n0 + nn].iter_mut().enumerate() {
-                        *x = src[k][s];
-                    }
-                }
-            }
-        }
-        drop(v);
-        Ok(Block { first, rows, data })
     }
 }
 
@@ -638,7 +545,7 @@ fn check_layout(
     h: &Dataset,
     h_bytes: Option<usize>,
     file_len: u64,
-) -> Result<()> {
+) -> Result<Option<u64>> {
     use hdf5_reader::messages::{HdfMessage, layout::DataLayout};
     let header = file
         .get_or_parse_header(h.address())
@@ -647,6 +554,7 @@ fn check_layout(
     let undefined = |a: u64| a == u64::MAX >> (64 - 8 * os);
     let bad = |expected: &str, found: String| Error::format(path, "H", expected, found);
     let need = h_bytes.map_or(u64::MAX, |b| b as u64);
+    let mut contiguous = None;
     for m in &header.messages {
         let HdfMessage::DataLayout(m) = m else {
             continue;
@@ -674,6 +582,7 @@ fn check_layout(
                         format!("a contiguous layout of {size} bytes"),
                     ));
                 }
+                contiguous = Some(*address);
             }
             DataLayout::Compact { data } if (data.len() as u64) < need => {
                 return Err(bad(
@@ -696,52 +605,7 @@ fn check_layout(
             _ => {}
         }
     }
-    Ok(())
-}
-
-/// The background reader: a thread that reads the blocks in row order from a start block
-/// and hands them over through a queue of [`QUEUE`] blocks, so that reading (and the
-/// decompression of a chunked `H`) overlaps the probes' work on the rows already read. It
-/// stops at the last row, at the first error (which it passes on) or when dropped.
-struct ReadAhead {
-    rx: Receiver<Result<Block>>,
-    /// First row of the next block the queue will deliver.
-    next: usize,
-}
-
-impl ReadAhead {
-    fn start(plan: Plan, first: usize) -> Self {
-        let (tx, rx) = sync_channel(QUEUE);
-        std::thread::spawn(move || {
-            let mut l = first;
-            while l < plan.kl {
-                let (a, b) = block_range(&plan.dims, plan.format, plan.ks, l);
-                let block = plan.read(a, b);
-                let failed = block.is_err();
-                if tx.send(block).is_err() || failed {
-                    return;
-                }
-                l = b;
-            }
-        });
-        Self { rx, next: first }
-    }
-}
-
-/// Blocks waiting in the read-ahead queue (besides the one in use and the one being read).
-const QUEUE: usize = 1;
-
-/// Rows read from `H` at once (module docs, *Reading*): at most this many bytes (whole laser
-/// lines when a line fits), or one row.
-pub const BLOCK_BYTES: usize = 8 << 20;
-
-/// The cached hyperslab of consecutive rows `first..first + rows`, transposed to vltm's
-/// order: `data[(r·Ks + s)·Nt + n]`.
-#[derive(Default)]
-struct Block {
-    first: usize,
-    rows: usize,
-    data: Vec<f32>,
+    Ok(contiguous)
 }
 
 impl RowSource for TalReader {
@@ -757,14 +621,16 @@ impl RowSource for TalReader {
                 format!("{l} is out of range: the capture has {kl} rows"),
             ));
         }
-        if !(self.block.first..self.block.first + self.block.rows).contains(&l) {
+        // A row already handed out (read twice) is read again with its block.
+        if !self.block.holds(l) {
             self.load_block(l)?;
         }
-        let len = self.geometry.nt * self.geometry.spads_per_row();
-        let r = l - self.block.first;
-        // The background reader transposed the block to rows of SPAD-major histograms.
-        out.clear();
-        out.extend_from_slice(&self.block.data[r * len..(r + 1) * len]);
+        // The background reader transposed the block to rows of SPAD-major histograms: the
+        // row is swapped into `out`, whose old buffer goes back to the reader.
+        let old = self.block.take(l, out).unwrap_or_default();
+        if let Some(ahead) = &self.ahead {
+            ahead.recycle(old);
+        }
         let x_l = self.geometry.lasers[l];
         if let Some(c0) = self.single_falloff {
             let k = self.geometry.laser_falloff(x_l) / c0;
@@ -774,10 +640,14 @@ impl RowSource for TalReader {
     }
 }
 
+mod block;
 mod fields;
 mod format;
 mod scan;
 pub mod znlos;
+
+pub use block::BLOCK_BYTES;
+use block::{Block, Elem, Plan, ReadAhead, block_range};
 
 pub use format::{HFormat, ScanType, TalOptions};
 

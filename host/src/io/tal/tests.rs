@@ -425,14 +425,14 @@ fn synthetic_formats_stream_the_right_values() {
     spec.sensor_grid = grid(10, 100, false, 0.0);
     let mut r = spec.open(&dir, "blocks").unwrap();
     assert_eq!(r.block_range(3), (0, 10));
-    // Rows of 4 MB: two rows per block within a line; lines of 5 end in a partial block.
+    // Rows of 4 MB: four rows per block within a line; lines of 5 end in a partial block.
     let dims = [1000, 3, 5, 10, 100];
     let blocks: Vec<_> = (0..15)
         .map(|l| super::block_range(&dims, HFormat::TLxLySxSy, 1000, l))
         .collect();
     assert_eq!(
         &blocks[..7],
-        &[(0, 2), (0, 2), (2, 4), (2, 4), (4, 5), (5, 7), (5, 7)]
+        &[(0, 4), (0, 4), (0, 4), (0, 4), (4, 5), (5, 9), (5, 9)]
     );
     // Rows of 40 kB, lines of 5: whole lines, as many as fit in BLOCK_BYTES.
     let dims = [100, 300, 5, 10, 10];
@@ -599,4 +599,50 @@ fn malformed_fields_name_the_field() {
         ScanType::Single
     );
     let _ = std::fs::remove_dir_all(dir);
+}
+
+/// The same capture as a time-first tal file (contiguous, as tal writes it, and gzip-chunked)
+/// and as an uncompressed `.npz` built independently in vltm's row order: every streamed row
+/// is bit-identical. 27 MB of `H`, so the contiguous file takes two blocks of whole lines read
+/// with one positional read per bin, 33 bins = one whole group of 32 and one partial; 200
+/// SPADs = 12 whole tiles of 16 and 8 left over. Rows are read in order, then a few again out
+/// of order (each restarts the reader).
+#[test]
+fn tal_rows_equal_npz_rows_contiguous_and_chunked() {
+    let dir = scratch("tal_vs_npz");
+    let mut spec = Spec::exhaustive();
+    spec.h_shape = vec![33, 64, 16, 10, 20];
+    spec.laser_grid = grid(64, 16, false, 0.0);
+    spec.sensor_grid = grid(10, 20, false, 0.0);
+    let (nt, kl, ks) = (33, 64 * 16, 200);
+    let contiguous = spec.open(&dir, "contiguous").unwrap();
+    let g = contiguous.geometry().clone();
+    assert_eq!((g.nt, g.lasers.len(), g.spads_per_row()), (nt, kl, ks));
+    assert_eq!(contiguous.block_range(0), (0, 624));
+    assert_eq!(contiguous.block_range(1000), (624, kl));
+    // vltm's order, data[(l·Ks + s)·Nt + n] = H[n, l, s] of `pattern`.
+    let mut data = vec![0.0f32; kl * ks * nt];
+    for (i, x) in data.iter_mut().enumerate() {
+        let (n, ls) = (i % nt, i / nt);
+        *x = (n * 10_000 + ls) as f32;
+    }
+    let npz = dir.join("capture.npz");
+    crate::io::npz::write_with(&Capture::new(g, data, &npz).unwrap(), &npz, false).unwrap();
+    let mut reference = crate::io::npz::open_stream(&npz).unwrap().unwrap();
+    spec.chunks = Some(vec![8, 4, 4, 10, 20]);
+    let chunked = spec.open(&dir, "chunked").unwrap();
+    assert!(chunked.raw.is_none() && contiguous.raw.is_some());
+    let (mut want, mut row) = (Vec::new(), Vec::new());
+    for mut r in [contiguous, chunked] {
+        for l in (0..kl).chain([700, 3, 3, 1023, 0]) {
+            reference.read_row(l, &mut want).unwrap();
+            r.read_row(l, &mut row).unwrap();
+            assert_eq!(row.len(), ks * nt);
+            let same = row
+                .iter()
+                .zip(&want)
+                .all(|(a, b)| a.to_bits() == b.to_bits());
+            assert!(same, "row {l} of {}", r.path().display());
+        }
+    }
 }
