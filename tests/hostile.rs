@@ -692,9 +692,14 @@ fn hdf5_layouts_without_data() {
             &[&f, "`H`"],
         );
     }
-    // A chunked H whose chunk index was never written (address undefined): its layout is
-    // reached (the object header re-sealed) and refused; with its dataspace claiming 10⁹
-    // bins, refused too (it read fill values, or aborted sizing 32 GB).
+}
+
+/// A chunked H whose chunk index was never written (address undefined): its layout is
+/// reached (the object header re-sealed) and refused; with its dataspace claiming 10⁹ bins,
+/// refused too (it read fill values, or aborted sizing 32 GB).
+#[test]
+fn hdf5_chunked_without_chunk_index() {
+    let t = TempDir::new("h5chunk");
     let chunked = t.path("chunked.hdf5");
     write_tal(&chunked, true);
     let (index, _) = h_layout(&chunked);
@@ -804,10 +809,11 @@ fn write_failing_partway_keeps_the_previous_file() {
     );
 }
 
-/// `--threads 100000` is refused at parse time; control bytes of a file are escaped.
+/// `--threads 100000` is refused at parse time (it spent 28 s creating threads, then a worker
+/// panicked).
 #[test]
-fn threads_and_control_bytes() {
-    let t = TempDir::new("hyg");
+fn too_many_threads() {
+    let t = TempDir::new("threads");
     valid_npz(&t, "c.npz", false);
     fails(
         &t,
@@ -815,6 +821,12 @@ fn threads_and_control_bytes() {
         2,
         &["--threads"],
     );
+}
+
+/// Control bytes of a file (a terminal escape in a JSON key) are escaped in the error line.
+#[test]
+fn control_bytes_are_escaped() {
+    let t = TempDir::new("ctl");
     std::fs::write(t.path("bad.json"), "{\"\u{1b}[31mred\n\": 1}").unwrap();
     let line = fails(
         &t,
