@@ -823,10 +823,25 @@ fn too_many_threads() {
     );
 }
 
-/// Control bytes of a file (a terminal escape in a JSON key) are escaped in the error line.
+/// Control bytes of a file are escaped in the error line: a PTU tag ident holding a terminal
+/// escape (it reached stderr as it was), and a JSON key holding one.
 #[test]
 fn control_bytes_are_escaped() {
     let t = TempDir::new("ctl");
+    vltm::io::ptu::write_t3(&capture(), t.path("e.ptu"), &Default::default()).unwrap();
+    let mut b = std::fs::read(t.path("e.ptu")).unwrap();
+    // The first tag after the 8-byte magic and 8-byte version: a 32-byte ident, an i32 index,
+    // a u32 type. An unknown type is an error naming the ident.
+    let mut ident = b"\x1b[31mEVIL\x07".to_vec();
+    ident.resize(32, 0);
+    b[16..48].copy_from_slice(&ident);
+    b[52..56].copy_from_slice(&0xDEAD_BEEFu32.to_le_bytes());
+    std::fs::write(t.path("e.ptu"), &b).unwrap();
+    let line = fails(&t, &["info", "e.ptu"], 1, &["e.ptu", "EVIL"]);
+    assert!(
+        !line.contains('\u{1b}') && !line.contains('\u{7}'),
+        "{line}"
+    );
     std::fs::write(t.path("bad.json"), "{\"\u{1b}[31mred\n\": 1}").unwrap();
     let line = fails(
         &t,
