@@ -160,13 +160,12 @@ fn stanford_layout_reads_compressed_and_plain_with_its_conventions() {
     assert!(m.conventions.iter().any(|c| c.contains("set by --delta-t")));
 }
 
-#[test]
-fn phasor_field_layout_reads_a_struct() {
-    let d = tmp("pf");
+/// struct `dataset` of 3 lasers × 4 bins, data = 0, 1, 2, … (single).
+fn phasor_dataset() -> Vec<u8> {
     let (nt, nl) = (4, 3);
     let data: Vec<f64> = (0..nt * nl).map(|k| k as f64).collect();
     let pos: Vec<f64> = (0..nl).flat_map(|l| [0.1 * l as f64, 0.2, 0.0]).collect();
-    let ds = structure(
+    structure(
         "dataset",
         &[
             ("data", numeric("", &[nt, 1, nl], 7, 7, &data)),
@@ -177,8 +176,13 @@ fn phasor_field_layout_reads_a_struct() {
             ("deltat", numeric("", &[1, 1], 6, 9, &[0.001])),
             ("t0", numeric("", &[1, 1], 6, 9, &[1.5])),
         ],
-    );
-    let p = write(&d, "pf.mat", &file(&[compress(&ds)]));
+    )
+}
+
+#[test]
+fn phasor_field_layout_reads_a_struct() {
+    let d = tmp("pf");
+    let p = write(&d, "pf.mat", &file(&[compress(&phasor_dataset())]));
     let m = read(&p, &MatOptions::default()).unwrap();
     assert_eq!(m.layout, Layout::PhasorField);
     let g = &m.capture.geometry;
@@ -292,4 +296,25 @@ fn mat_v73_reads_like_v5() {
     let t = write(&d, "t.mat", &bytes[..1500]);
     let e = read(&t, &MatOptions::default()).unwrap_err().to_string();
     assert!(e.contains("t.mat"), "{e}");
+}
+
+/// Seeds of the `mat` fuzz target (`fuzz/seeds/mat`): both layouts, compressed and plain, and
+/// the v7.3 fixture. `cargo test --release -p vltm --lib -- --ignored write_mat_fuzz_seeds`.
+#[test]
+#[ignore = "writes fuzz/seeds/mat; run by hand"]
+fn write_mat_fuzz_seeds() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
+    let d = root.join("fuzz/seeds/mat");
+    std::fs::create_dir_all(&d).unwrap();
+    for (name, bytes) in [
+        ("stanford_z.mat", file(&stanford_elements(true))),
+        ("stanford.mat", file(&stanford_elements(false))),
+        ("phasor_z.mat", file(&[compress(&phasor_dataset())])),
+        ("phasor.mat", file(&[phasor_dataset()])),
+    ] {
+        let p = write(&d, name, &bytes);
+        assert!(read(&p, &MatOptions::default()).is_ok(), "{name}");
+    }
+    let v73 = std::fs::read(root.join("fixtures/mat/stanford_v73.mat")).unwrap();
+    write(&d, "stanford_v73.mat", &v73);
 }
