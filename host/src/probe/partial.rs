@@ -33,6 +33,8 @@ use super::column::{
 use super::direct::direct_acc;
 use super::drive::{Job, intensities};
 use super::indirect::indirect_sum;
+use super::leak::{DirectModel, GateEnergy, LeakCorrected, LeakOptions, cell_radius};
+use super::matrix::{Matrix, matrix_acc, matrix_of_columns};
 use super::wave::{Output, Wave};
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path};
@@ -70,6 +72,14 @@ pub enum Task {
         gamma: Vec<bool>,
         /// Pair shell (`None`: `r0 = 1.5σ`).
         shell: Option<Shell>,
+        /// Leak correction ([`super::LeakMethod::Gate`], default options) before the columns:
+        /// the windows of Γ's direct returns zeroed row by row, as one pass does.
+        leak: bool,
+    },
+    /// The two-bounce LTM between the foci `from` and the volume's voxels ([`super::matrix()`]).
+    Matrix {
+        /// Projector foci `x_a` (the matrix's rows, m).
+        from: Vec<Point>,
     },
 }
 
@@ -103,6 +113,9 @@ struct ProbeHead {
     shell: Option<(f32, Option<f32>)>,
     /// Γ as voxel indices (indirect light).
     gamma: Option<Vec<usize>>,
+    /// Leak-corrected (gate method, default options) indirect light.
+    #[serde(default)]
+    leak: bool,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -144,6 +157,11 @@ struct Counters {
     rows: u64,
     non_finite: u64,
     dropped: u64,
+    /// `Σ H²` read and zeroed by the leak gate ([`GateEnergy`]).
+    #[serde(default)]
+    leak_total: f64,
+    #[serde(default)]
+    leak_cut: f64,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -156,6 +174,9 @@ struct Head {
     legs: Vec<Option<[f64; 2]>>,
     n_spads: usize,
     n_points: usize,
+    /// Foci of a matrix (their points follow the volume's).
+    #[serde(default)]
+    n_from: usize,
     n_acc: usize,
     /// CRC-32 of the bytes after the header, 8 hex digits.
     crc32: String,
@@ -170,6 +191,7 @@ pub struct Partial {
     head: Head,
     spads: Vec<Point>,
     points: Vec<Point>,
+    from: Vec<Point>,
     acc: Vec<f64>,
 }
 
@@ -315,6 +337,7 @@ pub fn accumulate(
     let mut part = RowRange::new(src, rows.clone())?;
     let mut legs = Vec::new();
     let mut spads = Vec::new();
+    let mut energy = GateEnergy::default();
     let (cfg, acc, report, path, focus, gate, shell, gamma) = match task {
         Task::Direct => {
             let (a, cfg) = direct_acc(&mut part, volume, wave, exec)?;
@@ -340,7 +363,7 @@ pub fn accumulate(
             let sh = Some(shell_head(*shell));
             (cfg, acc, report, path, Some(*focus), Some(*gate), sh, None)
         }
-        Task::Indirect { gamma, shell } => {
+        Task::Indirect { gamma, shell, leak } => {
             if gamma.len() != volume.len() {
                 return Err(Error::arg(
                     "gamma",
@@ -354,19 +377,34 @@ pub fn accumulate(
                 r0: 1.5 * cfg.sigma() as f32,
                 r1: f32::INFINITY,
             });
-            let cols = if pts.is_empty() {
-                Columns {
+            let job = Job {
+                cfg: &cfg,
+                wave,
+                exec,
+            };
+            let cols = match (pts.is_empty(), leak) {
+                (true, true) => {
+                    return Err(Error::arg(
+                        "--leak-correct",
+                        "Γ is empty: no voxel has direct light above ε·max (no direct return in the window for this volume?)",
+                    ));
+                }
+                (true, false) => Columns {
                     state: Vec::new(),
                     report: Report::default(),
                     legs: Vec::new(),
+                },
+                (false, true) => {
+                    let lo = LeakOptions::default();
+                    let model = DirectModel::gate(&g, &pts, cell_radius(volume), wave, &lo)?;
+                    let mut lc = LeakCorrected::measuring(&mut part, &model);
+                    let c = factorised_columns(&mut lc, job, &pts, Gate::Gaussian, "indirect")?;
+                    energy = lc.energy().unwrap_or_default();
+                    c
                 }
-            } else {
-                let job = Job {
-                    cfg: &cfg,
-                    wave,
-                    exec,
-                };
-                factorised_columns(&mut part, job, &pts, Gate::Gaussian, "indirect")?
+                (false, false) => {
+                    factorised_columns(&mut part, job, &pts, Gate::Gaussian, "indirect")?
+                }
             };
             legs = cols.legs.iter().copied().map(leg_head).collect();
             spads.clone_from(&g.spads);
@@ -382,11 +420,27 @@ pub fn accumulate(
                 Some(idx),
             )
         }
+        Task::Matrix { from } => {
+            let (cols, cfg) = matrix_acc(&mut part, from, &volume.points, wave, exec)?;
+            legs = cols.legs.iter().copied().map(leg_head).collect();
+            spads.clone_from(&g.spads);
+            (
+                cfg,
+                cols.state,
+                cols.report,
+                Path::Band,
+                None,
+                None,
+                None,
+                None,
+            )
+        }
     };
-    let kind = match task {
-        Task::Direct => "direct",
-        Task::Column { .. } => "column",
-        Task::Indirect { .. } => "indirect",
+    let (kind, from, leak) = match task {
+        Task::Direct => ("direct", Vec::new(), false),
+        Task::Column { .. } => ("column", Vec::new(), false),
+        Task::Indirect { leak, .. } => ("indirect", Vec::new(), *leak),
+        Task::Matrix { from } => ("matrix", from.clone(), false),
     };
     let points = if volume.axes.is_some() {
         Vec::new()
@@ -428,6 +482,7 @@ pub fn accumulate(
             gate: gate.map(|g| gate_name(g).into()),
             shell,
             gamma,
+            leak,
         },
         rows: if rows.is_empty() {
             Vec::new()
@@ -438,10 +493,13 @@ pub fn accumulate(
             rows: report.rows,
             non_finite: report.non_finite,
             dropped: report.dropped,
+            leak_total: energy.total,
+            leak_cut: energy.cut,
         },
         legs,
         n_spads: spads.len(),
         n_points: points.len(),
+        n_from: from.len(),
         n_acc: acc.len(),
         crc32: String::new(),
         capture_name: capture_name.into(),
@@ -450,6 +508,7 @@ pub fn accumulate(
         head,
         spads,
         points,
+        from,
         acc,
     })
 }
@@ -459,15 +518,20 @@ pub fn accumulate(
 pub struct Finished {
     /// Intensities, configuration, counters and path (`seconds`: the finishing time).
     pub output: Output,
-    /// Complex amplitudes per voxel (`T = |A|²`), for direct light and higher-order columns;
-    /// `None` for factorised columns and indirect light (imaged as intensities).
+    /// Complex amplitudes per voxel (`T = |A|²`), for direct light and higher-order columns,
+    /// and for two-bounce columns when asked for ([`Partial::finish_with`]); `None` for
+    /// un-gated columns, indirect light (imaged as intensities) and the matrix.
     pub amplitudes: Option<Vec<Complex64>>,
-    /// The volume the state was accumulated over.
+    /// The volume the state was accumulated over (the matrix's `to` voxels).
     pub volume: Volume,
+    /// The matrix (its `output.values` are the intensities, row-major `n_from × n_to`).
+    pub matrix: Option<Matrix>,
+    /// Leak-corrected indirect light: the fraction of the capture's energy the gate removed.
+    pub explained: Option<f64>,
 }
 
 impl Partial {
-    /// The probe's kind: `direct`, `column` or `indirect`.
+    /// The probe's kind: `direct`, `column`, `indirect` or `matrix`.
     pub fn kind(&self) -> &str {
         &self.head.probe.kind
     }
@@ -492,10 +556,15 @@ impl Partial {
         self.head.probe.focus
     }
 
+    /// The foci of a matrix (its rows; empty for other probes).
+    pub fn from_points(&self) -> &[Point] {
+        &self.from
+    }
+
     /// Size of [`Partial::to_bytes`] without building it (bytes).
     pub fn byte_len(&self) -> usize {
         16 + self.header_json(0).len()
-            + 12 * (self.spads.len() + self.points.len())
+            + 12 * (self.spads.len() + self.points.len() + self.from.len())
             + 8 * self.acc.len()
     }
 
@@ -510,9 +579,11 @@ impl Partial {
 
     /// The state in the binary format of the module docs.
     pub fn to_bytes(&self) -> Vec<u8> {
-        let mut body = Vec::with_capacity(12 * (self.spads.len() + self.points.len()));
+        let mut body =
+            Vec::with_capacity(12 * (self.spads.len() + self.points.len() + self.from.len()));
         body.extend(point_bytes(&self.spads));
         body.extend(point_bytes(&self.points));
+        body.extend(point_bytes(&self.from));
         let mut crc = crc32fast::Hasher::new();
         crc.update(&body);
         let acc: &[u8] = bytemuck::cast_slice(&self.acc);
@@ -568,14 +639,15 @@ impl Partial {
         let want = head
             .n_spads
             .checked_add(head.n_points)
+            .and_then(|n| n.checked_add(head.n_from))
             .and_then(|n| n.checked_mul(12))
             .and_then(|n| head.n_acc.checked_mul(8).and_then(|a| a.checked_add(n)));
         if want != Some(body.len()) {
             return Err(bad(
                 "body",
                 &format!(
-                    "{} SPADs, {} points and {} accumulators",
-                    head.n_spads, head.n_points, head.n_acc
+                    "{} SPADs, {} + {} points and {} accumulators",
+                    head.n_spads, head.n_points, head.n_from, head.n_acc
                 ),
                 format!("{} bytes (truncated or padded)", body.len()),
             ));
@@ -597,7 +669,8 @@ impl Partial {
                 .collect()
         };
         let (sp, rest) = body.split_at(12 * head.n_spads);
-        let (pt, acc) = rest.split_at(12 * head.n_points);
+        let (pt, rest) = rest.split_at(12 * head.n_points);
+        let (fr, acc) = rest.split_at(12 * head.n_from);
         let acc = acc
             .chunks_exact(8)
             .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
@@ -605,6 +678,7 @@ impl Partial {
         let p = Self {
             spads: pts(sp),
             points: pts(pt),
+            from: pts(fr),
             acc,
             head,
         };
@@ -678,6 +752,7 @@ impl Partial {
             if a.head.probe != b.head.probe
                 || a.spads != b.spads
                 || a.points != b.points
+                || a.from != b.from
                 || a.acc.len() != b.acc.len()
                 || a.head.legs.len() != b.head.legs.len()
             {
@@ -721,6 +796,7 @@ impl Partial {
                 head,
                 spads: Vec::new(),
                 points: Vec::new(),
+                from: Vec::new(),
                 acc: Vec::new(),
             },
         );
@@ -733,6 +809,8 @@ impl Partial {
             r.rows += s.rows;
             r.non_finite += s.non_finite;
             r.dropped += s.dropped;
+            r.leak_total += s.leak_total;
+            r.leak_cut += s.leak_cut;
             for (l, m) in out.head.legs.iter_mut().zip(&b.head.legs) {
                 let (x, y) = (leg_of(*l), leg_of(*m));
                 *l = leg_head((x.0.min(y.0), x.1.max(y.1)));
@@ -754,6 +832,16 @@ impl Partial {
     /// # Errors
     /// [`Error::Argument`] (`merge`) when rows are missing; configuration and kernel errors.
     pub fn finish(&self) -> Result<Finished> {
+        self.finish_with(false)
+    }
+
+    /// As [`Partial::finish`]; `amplitudes`: also image the complex amplitudes of a
+    /// two-bounce column (beside its intensities: about twice the imaging time).
+    ///
+    /// # Errors
+    /// As [`Partial::finish`]; [`Error::Argument`] (`--leak-correct`) for leak-corrected
+    /// indirect light when the gate removed nothing (as one pass).
+    pub fn finish_with(&self, amplitudes: bool) -> Result<Finished> {
         let t = Instant::now();
         if !self.is_complete() {
             let mut missing = Vec::new();
@@ -821,6 +909,7 @@ impl Partial {
         };
         let path = parse_path(&p.path).unwrap_or(Path::Band);
         let shell = p.shell.map_or(Shell::ALL, shell_of);
+        let mut matrix = None;
         let (values, report, path, amplitudes) = match p.kind.as_str() {
             "direct" => {
                 let acc = complex(&self.acc);
@@ -830,30 +919,26 @@ impl Partial {
                 let focus = p.focus.unwrap_or([0.0, 0.0, 1.0]);
                 check_focus(focus)?;
                 let gate = p.gate.as_deref().and_then(parse_gate);
-                let (state, amplitudes) = match gate {
+                let state = match gate {
                     Some(ColumnGate::HigherOrder) => {
-                        let acc = complex(&self.acc);
-                        (ColumnState::Voxels(acc.clone(), report), Some(acc))
+                        ColumnState::Voxels(complex(&self.acc), report)
                     }
-                    Some(g) => (
-                        ColumnState::Factorised {
-                            state: self.acc.clone(),
-                            report,
-                            legs: leg_of(self.head.legs.first().copied().flatten()),
-                            gate: if g == ColumnGate::None {
-                                Gate::None
-                            } else {
-                                Gate::Gaussian
-                            },
-                            path,
-                            planar: None,
+                    Some(g) => ColumnState::Factorised {
+                        state: self.acc.clone(),
+                        report,
+                        legs: leg_of(self.head.legs.first().copied().flatten()),
+                        gate: if g == ColumnGate::None {
+                            Gate::None
+                        } else {
+                            Gate::Gaussian
                         },
-                        None,
-                    ),
+                        path,
+                        planar: None,
+                    },
                     None => return Err(Error::arg("gate", "unknown gate in the partial state")),
                 };
-                let (v, r, path) = state.finish(&cfg, &self.spads, focus, &volume, shell)?;
-                (v, r, path, amplitudes)
+                let amps = amplitudes || gate == Some(ColumnGate::HigherOrder);
+                state.finish(&cfg, &self.spads, focus, &volume, shell, amps)?
             }
             "indirect" => {
                 let idx = p.gamma.clone().unwrap_or_default();
@@ -877,6 +962,19 @@ impl Partial {
                 )?;
                 (v, r, Path::Band, None)
             }
+            "matrix" => {
+                let mut cols = Columns {
+                    state: self.acc.clone(),
+                    report,
+                    legs: self.head.legs.iter().copied().map(leg_of).collect(),
+                };
+                let m =
+                    matrix_of_columns(&mut cols, &cfg, &self.spads, &self.from, &volume.points)?;
+                let v = m.intensities();
+                let r = m.report;
+                matrix = Some(m);
+                (v, r, Path::Band, None)
+            }
             k => return Err(Error::arg("kind", format!("unknown probe `{k}`"))),
         };
         Ok(Finished {
@@ -889,6 +987,18 @@ impl Partial {
             },
             amplitudes,
             volume,
+            matrix,
+            explained: if p.leak {
+                Some(
+                    GateEnergy {
+                        total: self.head.report.leak_total,
+                        cut: self.head.report.leak_cut,
+                    }
+                    .explained()?,
+                )
+            } else {
+                None
+            },
         })
     }
 }
