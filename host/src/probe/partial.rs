@@ -17,13 +17,18 @@
 //! | 8 | magic `VLTMPART` |
 //! | 4 | format version, `u32` (1) |
 //! | 4 | header length `h`, `u32` |
-//! | `h` | header: UTF-8 JSON — `capture` (identity), `probe` (kind and parameters), `rows` (row ranges `[a, b)`), `report` (counters), `legs` (per factorised column: projector leg range or null), `n_spads`, `n_points`, `n_acc`, `crc32` (of the bytes that follow, 8 hex digits), `capture_name` (informational) |
+//! | `h` | header: UTF-8 JSON — `capture` (identity), `probe` (kind and parameters), `rows` (row ranges `[a, b)`), `report` (counters), `legs` (per factorised column: projector leg range or null), `n_spads`, `n_points`, `n_from`, `n_acc`, `crc32` (of the bytes that follow, 8 hex digits), `capture_name` (informational) |
 //! | `12·n_spads` | SPAD spots, `f32` x, y, z (columns and indirect light image with them) |
 //! | `12·n_points` | volume points, `f32` (point lists only; grids are rebuilt from `probe.volume.axes`) |
+//! | `12·n_from` | the matrix's foci `x_a`, `f32` (`n_from` absent = 0: parts written before it read the same) |
 //! | `8·n_acc` | the accumulators, `f64` (complex numbers as re, im pairs) |
 //!
 //! State per probe (`f64`): direct light `2·Kv`; higher-order column `2·Kv`; factorised
-//! column (two-bounce) `2J(Ks+1)`, un-gated `2Ks`; in-focus indirect light `|Γ|·2J(Ks+1)`.
+//! column (two-bounce) `2J(Ks+1)`, un-gated `2Ks`; in-focus indirect light `|Γ|·2J(Ks+1)`
+//! (leak-corrected or not: the gate corrects each row from Γ and the geometry alone, and the
+//! header sums the energy read and removed, `report.leak_total`/`leak_cut`); the matrix
+//! `n_from·2J(Ks+1)` (one factorised column per focus, imaged over the `to` voxels when
+//! finished).
 //! Merging is one addition per `f64`; finishing costs what finishing one pass costs (the
 //! imaging of factorised columns). Memory: the state, twice while merging two parts.
 
