@@ -1749,3 +1749,102 @@ fn empty_gamma_is_an_error_naming_the_option() {
     }
     assert!(!t.path("o.npy").exists() && !t.path("m.h5").exists());
 }
+
+/// Partial states of the matrix and of leak-corrected indirect light on the command line:
+/// `matrix --rows --partial` parts merged by `vltm merge --out F.h5` give the file of one
+/// `vltm matrix` run; `indirect --direct D --rows --partial` (leak correction by default)
+/// parts merged give `vltm indirect --direct D`; `gamma` with `--partial`, `--rows` without
+/// it and a merged matrix without `--out F.h5` are refused naming the option.
+#[test]
+fn matrix_and_leak_corrected_parts_through_the_command_line() {
+    let t = TempDir::new("matrix-parts");
+    let cap = s(&fixture("two_patches"));
+    let from = "-0.3:0.3:2,-0.1:0.1:2,0.6:0.8:2";
+    let one = t.path("one.h5");
+    let base = ["matrix", cap.as_str(), "--from", from, "--to", SPEC];
+    ok(&t.0, &[&base[..], &["--out", &s(&one)]].concat());
+    let (pa, pb) = (t.path("a.part"), t.path("b.part"));
+    ok(
+        &t.0,
+        &[&base[..], &["--rows", "0:25", "--partial", &s(&pa)]].concat(),
+    );
+    ok(
+        &t.0,
+        &[&base[..], &["--rows", "25:", "--partial", &s(&pb)]].concat(),
+    );
+    let merged = t.path("merged.h5");
+    ok(&t.0, &["merge", &s(&pb), &s(&pa), "--out", &s(&merged)]);
+    for name in ["re", "im", "intensity", "from_xyz", "to_xyz"] {
+        let (x, sx) = vltm::out::h5::read_f32_dataset(&one, name).expect("one");
+        let (y, sy) = vltm::out::h5::read_f32_dataset(&merged, name).expect("merged");
+        assert_eq!(sx, sy, "{name}");
+        let max = x.iter().fold(0.0f32, |m, v| m.max(v.abs()));
+        let worst = x
+            .iter()
+            .zip(&y)
+            .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+        assert!(
+            max > 0.0 && worst <= 1e-6 * max,
+            "{name}: {worst:e} of {max:e}"
+        );
+    }
+    let err = fails(&t.0, &["merge", &s(&pa), &s(&pb)], 2);
+    assert!(err.contains("--out"), "{err}");
+    let err = fails(
+        &t.0,
+        &["merge", &s(&pa), &s(&pb), "--out", &s(&t.path("m.npy"))],
+        2,
+    );
+    assert!(err.contains("--out") && err.contains("HDF5"), "{err}");
+    let err = fails(
+        &t.0,
+        &[
+            "matrix",
+            &cap,
+            "--from",
+            "gamma",
+            "--to",
+            SPEC,
+            "--volume",
+            SPEC,
+            "--partial",
+            &s(&t.path("g.part")),
+        ],
+        2,
+    );
+    assert!(err.contains("--partial") && err.contains("gamma"), "{err}");
+    let err = fails(
+        &t.0,
+        &[&base[..], &["--rows", "0:8", "--out", &s(&one)]].concat(),
+        2,
+    );
+    assert!(err.contains("--rows") && err.contains("--partial"), "{err}");
+    // Leak-corrected indirect light in two parts = one pass with the same Γ.
+    let d = t.path("d.npy");
+    ok(&t.0, &["direct", &cap, "--volume", SPEC, "--out", &s(&d)]);
+    let ind = [
+        "indirect",
+        cap.as_str(),
+        "--volume",
+        SPEC,
+        "--direct",
+        &s(&d),
+    ];
+    let whole = t.path("i.npy");
+    let out = ok(&t.0, &[&ind[..], &["--out", &s(&whole)]].concat());
+    assert!(out.contains("leak correction"), "{out}");
+    let (ia, ib) = (t.path("ia.part"), t.path("ib.part"));
+    ok(
+        &t.0,
+        &[&ind[..], &["--rows", ":40", "--partial", &s(&ia)]].concat(),
+    );
+    ok(
+        &t.0,
+        &[&ind[..], &["--rows", "40:", "--partial", &s(&ib)]].concat(),
+    );
+    let fm = t.path("im.npy");
+    let out = ok(&t.0, &["merge", &s(&ia), &s(&ib), "--out", &s(&fm)]);
+    assert!(out.contains("leak correction"), "{out}");
+    let worst = rel_of_max(&npy(&whole, SHAPE), &npy(&fm, SHAPE));
+    assert!(worst <= 1e-6, "{worst:e}");
+}

@@ -8,7 +8,9 @@
 use std::path::{Path, PathBuf};
 use vltm::exec::{Exec, Path as EvalPath};
 use vltm::io::{self, RowSource};
-use vltm::probe::{self, ColumnGate, IndirectOptions, Partial, Shell, Task, Wave, partial};
+use vltm::probe::{
+    self, ColumnGate, IndirectOptions, LeakOptions, Partial, Shell, Task, Wave, partial,
+};
 use vltm::volume::Volume;
 
 fn root() -> PathBuf {
@@ -78,15 +80,19 @@ fn one_pass(p: &Path, volume: &Volume, task: &Task, path: EvalPath) -> Vec<f32> 
                 .expect("column")
                 .values
         }
-        Task::Indirect { gamma, shell } => {
+        Task::Indirect { gamma, shell, leak } => {
             let opts = IndirectOptions {
                 shell: *shell,
+                leak: leak.then(LeakOptions::default),
                 ..IndirectOptions::default()
             };
             probe::indirect_over(&mut *src, volume, gamma, &opts, &w, exec(path))
                 .expect("indirect")
                 .values
         }
+        Task::Matrix { from } => probe::matrix(&mut *src, from, &volume.points, &w, exec(path))
+            .expect("matrix")
+            .intensities(),
     }
 }
 
@@ -138,11 +144,28 @@ fn tasks(volume: &Volume, p: &Path) -> Vec<(String, Task, EvalPath)> {
         (
             "indirect".into(),
             Task::Indirect {
-                gamma,
+                gamma: gamma.clone(),
                 shell: Some(Shell {
                     r0: 0.2,
                     r1: f32::INFINITY,
                 }),
+                leak: false,
+            },
+            EvalPath::Auto,
+        ),
+        (
+            "indirect leak-corrected".into(),
+            Task::Indirect {
+                gamma,
+                shell: None,
+                leak: true,
+            },
+            EvalPath::Auto,
+        ),
+        (
+            "matrix".into(),
+            Task::Matrix {
+                from: vec![FOCUS, [0.1, -0.2, 0.9], [0.3, 0.3, 0.6]],
             },
             EvalPath::Auto,
         ),
@@ -326,4 +349,108 @@ fn tree_merge_and_files() {
     let back = Partial::read(&f).expect("read");
     assert_eq!(back.to_bytes(), flat.to_bytes());
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// A two-bounce column's complex amplitudes (`finish_with(true)`) square to its intensities
+/// on both imaging paths, are 0 outside the shell, and the un-gated column has none; a
+/// leak-corrected indirect state split in parts measures the removed energy as one pass.
+#[test]
+fn column_amplitudes_and_leak_energy() {
+    let p = fixture();
+    let volume = Volume::parse(GRID).expect("grid");
+    let shell = Shell { r0: 0.2, r1: 0.6 };
+    for path in [EvalPath::Band, EvalPath::Planar] {
+        let task = Task::Column {
+            focus: FOCUS,
+            gate: ColumnGate::TwoBounce,
+            shell,
+        };
+        let mut src = source(&p);
+        let part = partial::accumulate(
+            &mut *src,
+            1,
+            "x",
+            &volume,
+            &task,
+            &Wave::default(),
+            exec(path),
+            0..64,
+        )
+        .expect("part");
+        let f = part.finish_with(true).expect("finish");
+        let a = f.amplitudes.expect("amplitudes of a two-bounce column");
+        let sq: Vec<f32> = a.iter().map(|z| z.norm_sqr() as f32).collect();
+        assert_close(&format!("|A|² {path:?}"), &f.output.values, &sq, 1e-5);
+        let outside = volume
+            .points
+            .iter()
+            .zip(&a)
+            .filter(|(q, _)| {
+                let d = (0..3)
+                    .map(|i| (q[i] - FOCUS[i]).powi(2))
+                    .sum::<f32>()
+                    .sqrt();
+                !shell.contains(d)
+            })
+            .collect::<Vec<_>>();
+        assert!(!outside.is_empty() && outside.iter().all(|(_, z)| z.norm() == 0.0));
+        assert!(part.finish().expect("finish").amplitudes.is_none());
+    }
+    let none = Task::Column {
+        focus: FOCUS,
+        gate: ColumnGate::None,
+        shell: Shell::ALL,
+    };
+    let mut src = source(&p);
+    let part = partial::accumulate(
+        &mut *src,
+        1,
+        "x",
+        &volume,
+        &none,
+        &Wave::default(),
+        Exec::default(),
+        0..64,
+    )
+    .expect("part");
+    assert!(part.finish_with(true).expect("finish").amplitudes.is_none());
+
+    let mut src = source(&p);
+    let d = probe::direct(&mut *src, &volume, &Wave::default(), Exec::default()).expect("direct");
+    let gamma = probe::gamma_mask(&d.values, 0.1);
+    let opts = IndirectOptions {
+        leak: Some(LeakOptions::default()),
+        ..IndirectOptions::default()
+    };
+    let one = probe::indirect_over(
+        &mut *src,
+        &volume,
+        &gamma,
+        &opts,
+        &Wave::default(),
+        Exec::default(),
+    )
+    .expect("indirect");
+    let task = Task::Indirect {
+        gamma,
+        shell: None,
+        leak: true,
+    };
+    let parts: Vec<Partial> = [0..20, 20..64]
+        .into_iter()
+        .map(|r| {
+            let mut src = source(&p);
+            let w = Wave::default();
+            partial::accumulate(&mut *src, 1, "x", &volume, &task, &w, Exec::default(), r)
+                .expect("part")
+        })
+        .collect();
+    let merged = Partial::merge(parts, &["a".into(), "b".into()]).expect("merge");
+    let f = merged.finish().expect("finish");
+    let (e1, e2) = (
+        one.explained.expect("one pass"),
+        f.explained.expect("parts"),
+    );
+    assert!(e1 > 0.0 && (e1 - e2).abs() <= 1e-9 * e1, "{e1} vs {e2}");
+    assert_close("leak-corrected", &one.values, &f.output.values, 1e-6);
 }

@@ -14,7 +14,7 @@ export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$repo/target}"
 rm -rf "$venv"
 "$python" -m venv "$venv"
 "$venv/bin/pip" install -q --upgrade pip
-"$venv/bin/pip" install -q maturin numpy pytest dask distributed
+"$venv/bin/pip" install -q maturin numpy pytest dask distributed h5py
 # The command line, for the tests that compare against its .npy volumes.
 (cd "$repo" && cargo build --release -q -p vltm --bin vltm)
 "$venv/bin/pip" install -q "$here"

@@ -2,6 +2,10 @@
 //! vltm library; argument normalisation, docstrings of the public API and the Dask layer live
 //! in the Python package (`vltm/__init__.py`, `vltm/dask.py`).
 //!
+//! Probes: direct light, columns (with complex amplitudes of two-bounce and higher-order
+//! columns on request), in-focus indirect light (leak-corrected or not) and the matrix
+//! between two voxel sets; each over all rows, or over a row range as a partial state.
+//!
 //! Every call that runs a probe releases the GIL (`Python::detach`) while Rust works; inputs
 //! are copied out of NumPy before, outputs handed to NumPy after. Errors become
 //! `vltm.ArgumentError` (a `ValueError`: bad arguments, the CLI's exit code 2) or
@@ -16,7 +20,9 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use vltm::exec::{Exec, Path as EvalPath};
 use vltm::io::{self, Capture, Geometry, RowSource};
-use vltm::probe::{self, ColumnGate, IndirectOptions, Partial, Shell, Task, Wave, partial};
+use vltm::probe::{
+    self, ColumnGate, IndirectOptions, LeakOptions, Partial, Shell, Task, Wave, partial,
+};
 use vltm::volume::Volume;
 use vltm_kernel::{Point, Weights};
 
@@ -314,7 +320,7 @@ impl NativePartial {
     fn total_rows(&self) -> usize {
         self.0.total_rows()
     }
-    /// `direct`, `column` or `indirect`.
+    /// `direct`, `column`, `indirect` or `matrix`.
     fn kind(&self) -> String {
         self.0.kind().to_string()
     }
@@ -327,27 +333,58 @@ impl NativePartial {
         self.0.byte_len()
     }
     /// Finishes the state: (intensities float32 1-D, amplitudes complex128 1-D or None,
-    /// shape, report dict).
-    #[allow(clippy::type_complexity)]
-    fn finish<'py>(
-        &self,
-        py: Python<'py>,
-    ) -> PyResult<(
-        Bound<'py, PyArray1<f32>>,
-        Option<Bound<'py, PyArray1<num_complex::Complex64>>>,
-        (usize, usize, usize),
-        Bound<'py, PyDict>,
-    )> {
-        let f = py.detach(|| self.0.finish()).map_err(py_err)?;
-        let s = f.volume.shape;
+    /// shape, report dict); `amplitudes`: also image a two-bounce column's amplitudes.
+    /// A matrix state finishes into (intensities float32 1-D, amplitudes complex64 1-D,
+    /// (n_from, n_to), report dict, from points float32 1-D, to points float32 1-D).
+    #[pyo3(signature = (amplitudes=false))]
+    fn finish<'py>(&self, py: Python<'py>, amplitudes: bool) -> PyResult<Bound<'py, PyAny>> {
+        let f = py
+            .detach(|| self.0.finish_with(amplitudes))
+            .map_err(py_err)?;
         let rep = report(py, &f.output)?;
-        Ok((
+        if let Some(e) = f.explained {
+            rep.set_item("explained", e)?;
+        }
+        if let Some(m) = f.matrix {
+            let from = flat_points(self.0.from_points()).into_pyarray(py);
+            let to = flat_points(&f.volume.points).into_pyarray(py);
+            rep.set_item("aliased", m.report.aliased)?;
+            let t = (
+                m.intensities().into_pyarray(py),
+                m.amplitudes.into_pyarray(py),
+                (m.n_from, m.n_to),
+                rep,
+                from,
+                to,
+            );
+            return t.into_pyobject(py).map(|t| t.into_any());
+        }
+        let s = f.volume.shape;
+        let t = (
             f.output.values.into_pyarray(py),
             f.amplitudes.map(|a| a.into_pyarray(py)),
             (s[0], s[1], s[2]),
             rep,
-        ))
+        );
+        t.into_pyobject(py).map(|t| t.into_any())
     }
+}
+
+/// Points as flat `f32` (x, y, z per point).
+fn flat_points(p: &[Point]) -> Vec<f32> {
+    p.iter().flatten().copied().collect()
+}
+
+/// `(n, 3)` float32 points from NumPy.
+fn points_of(a: &PyReadonlyArray2<'_, f32>, what: &str) -> PyResult<Vec<Point>> {
+    let v = a.as_array();
+    if v.shape()[1] != 3 {
+        return Err(arg(
+            what,
+            format!("expected (n, 3) points, found {:?}", v.shape()),
+        ));
+    }
+    Ok(v.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect())
 }
 
 /// Reads a partial state from bytes.
@@ -403,6 +440,22 @@ fn report<'py>(py: Python<'py>, o: &probe::Output) -> PyResult<Bound<'py, PyDict
     d.set_item("sigma", o.config.sigma())?;
     d.set_item("bins", o.config.bins())?;
     d.set_item("path", o.path.name())?;
+    Ok(d)
+}
+
+/// The counters of a matrix as a dict (those of [`report`], and `passes`).
+fn matrix_report<'py>(py: Python<'py>, m: &probe::Matrix) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("rows", m.report.rows)?;
+    d.set_item("non_finite", m.report.non_finite)?;
+    d.set_item("dropped", m.report.dropped)?;
+    d.set_item("aliased", m.report.aliased)?;
+    d.set_item("seconds", m.seconds)?;
+    d.set_item("wavelength", m.config.wavelength())?;
+    d.set_item("sigma", m.config.sigma())?;
+    d.set_item("bins", m.config.bins())?;
+    d.set_item("passes", m.passes)?;
+    d.set_item("path", "band")?;
     Ok(d)
 }
 
@@ -465,15 +518,23 @@ fn shell_of(shell: Option<(f32, f32)>) -> PyResult<Option<Shell>> {
 /// What a probe call returns: finished arrays, or a partial state.
 #[allow(clippy::large_enum_variant)] // one per call, moved once
 enum Outcome {
-    Done(probe::Output, Option<Vec<num_complex::Complex64>>),
+    /// Intensities, amplitudes, and the fraction the leak correction removed.
+    Done(
+        probe::Output,
+        Option<Vec<num_complex::Complex64>>,
+        Option<f64>,
+    ),
+    Matrix(probe::Matrix),
     Part(Box<Partial>),
 }
 
-/// Runs a probe: `kind` is direct, column or indirect; `rows` makes it partial.
+/// Runs a probe: `kind` is direct, column, indirect or matrix (`from_points` × the
+/// volume); `rows` makes it partial.
 #[pyfunction]
 #[pyo3(signature = (capture, volume, kind, *, focus=None, gate="two-bounce", shell=None,
     epsilon=0.1, direct=None, wavelength=None, sigma=None, weights="inv", band=5.0,
-    compensate_laser=false, path="auto", rows=None, amplitudes=false))]
+    compensate_laser=false, path="auto", rows=None, amplitudes=false, leak_correct=false,
+    from_points=None))]
 #[allow(clippy::too_many_arguments)]
 fn run<'py>(
     py: Python<'py>,
@@ -493,6 +554,8 @@ fn run<'py>(
     path: &str,
     rows: Option<(usize, usize)>,
     amplitudes: bool,
+    leak_correct: bool,
+    from_points: Option<PyReadonlyArray2<'py, f32>>,
 ) -> PyResult<Py<PyAny>> {
     let o = opts(wavelength, sigma, weights, band, compensate_laser, path)?;
     let shell = shell_of(shell)?;
@@ -541,6 +604,13 @@ fn run<'py>(
                 None => Vec::new(),
             },
             shell,
+            leak: leak_correct,
+        },
+        "matrix" => Task::Matrix {
+            from: match &from_points {
+                Some(a) => points_of(a, "from_")?,
+                None => return Err(arg("from_", "a matrix needs its foci (from_)")),
+            },
         },
         k => return Err(arg("kind", format!("unknown probe `{k}`"))),
     };
@@ -553,6 +623,10 @@ fn run<'py>(
     let outcome = py
         .detach(|| -> vltm::Result<Outcome> {
             let mut src = cap.source()?;
+            if let (Task::Matrix { from }, None) = (&task, rows) {
+                let m = probe::matrix(&mut *src, from, &vol.points, &o.wave, exec)?;
+                return Ok(Outcome::Matrix(m));
+            }
             if rows.is_some() || amplitudes {
                 let n = src.geometry().lasers.len();
                 let r = rows.map_or(0..n, |(a, b)| a..b);
@@ -569,18 +643,20 @@ fn run<'py>(
                 if rows.is_some() {
                     return Ok(Outcome::Part(Box::new(p)));
                 }
-                let f = p.finish()?;
-                return Ok(Outcome::Done(f.output, f.amplitudes));
+                let f = p.finish_with(true)?;
+                return Ok(Outcome::Done(f.output, f.amplitudes, f.explained));
             }
+            let mut explained = None;
             let out = match &task {
                 Task::Direct => probe::direct(&mut *src, vol, &o.wave, exec)?,
                 Task::Column { focus, gate, shell } => {
                     probe::column(&mut *src, *focus, vol, *gate, *shell, &o.wave, exec)?
                 }
-                Task::Indirect { gamma, shell } => {
+                Task::Indirect { gamma, shell, leak } => {
                     let io = IndirectOptions {
                         epsilon,
                         shell: *shell,
+                        leak: leak.then(LeakOptions::default),
                         ..IndirectOptions::default()
                     };
                     let r = if direct.is_some() {
@@ -589,6 +665,7 @@ fn run<'py>(
                         probe::indirect(&mut *src, vol, &io, &o.wave, exec)?
                     };
                     let config = o.wave.config(src.geometry())?;
+                    explained = r.explained;
                     probe::Output {
                         values: r.values,
                         report: r.report,
@@ -597,14 +674,29 @@ fn run<'py>(
                         path: EvalPath::Band,
                     }
                 }
+                Task::Matrix { .. } => {
+                    return Err(vltm::Error::arg("kind", "a matrix is run above"));
+                }
             };
-            Ok(Outcome::Done(out, None))
+            Ok(Outcome::Done(out, None, explained))
         })
         .map_err(py_err)?;
     match outcome {
         Outcome::Part(p) => Ok(Py::new(py, NativePartial(*p))?.into_any()),
-        Outcome::Done(out, amps) => {
+        Outcome::Matrix(m) => {
+            let rep = matrix_report(py, &m)?;
+            let t = (
+                m.intensities().into_pyarray(py),
+                m.amplitudes.into_pyarray(py),
+                rep,
+            );
+            Ok(t.into_pyobject(py)?.into_any().unbind())
+        }
+        Outcome::Done(out, amps, explained) => {
             let rep = report(py, &out)?;
+            if let Some(e) = explained {
+                rep.set_item("explained", e)?;
+            }
             let values = out.values.into_pyarray(py);
             let amps = amps.map(|a| a.into_pyarray(py));
             Ok((values, amps, rep).into_pyobject(py)?.into_any().unbind())

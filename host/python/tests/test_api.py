@@ -34,10 +34,23 @@ def test_column_and_indirect_equal_cli(two_patches, tmp_path):
                       "--gate", "higher-order", "--shell", "0.2:0.9")
     close(want, vltm.column(two_patches, GRID, FOCUS, gate="higher-order", shell=(0.2, 0.9)))
     vol = "-0.6:0.6:10,-0.6:0.6:10,0.5:1.2:8"
-    # The package computes the paper's Eq. 17 as it is; the CLI's default adds leak correction.
-    want = cli_volume(tmp_path, "indirect", str(two_patches), "--volume", vol, "--epsilon", "0.2",
-                      "--no-leak-correct")
-    close(want, vltm.indirect(two_patches, vol, epsilon=0.2))
+
+
+def test_indirect_equals_cli_with_and_without_leak_correction(two_patches, tmp_path):
+    vol = "-0.6:0.6:10,-0.6:0.6:10,0.5:1.2:8"
+    # Both default to leak correction (the direct-return windows of Γ zeroed).
+    want = cli_volume(tmp_path, "indirect", str(two_patches), "--volume", vol, "--epsilon", "0.2")
+    got, rep = vltm.indirect(two_patches, vol, epsilon=0.2, report=True)
+    close(want, got)
+    assert 0.0 < rep["explained"] < 1.0
+    plain = cli_volume(tmp_path, "indirect", str(two_patches), "--volume", vol, "--epsilon", "0.2",
+                       "--no-leak-correct")
+    close(plain, vltm.indirect(two_patches, vol, epsilon=0.2, leak_correct=False))
+    # The correction changes the result (direct light leaks into Eq. 17 on this scene).
+    assert np.abs(plain - want).max() > 0.01 * plain.max()
+    # Γ given (as with rows=): the same numbers.
+    d = vltm.direct(two_patches, vol)
+    close(want, vltm.indirect(two_patches, vol, epsilon=0.2, direct=d))
 
 
 def test_options_and_report(two_patches, tmp_path):
@@ -66,12 +79,26 @@ def test_from_arrays_equals_file():
     close(vltm.direct(c, vol, path="band")[2:4, 3:6], got)
 
 
-def test_amplitudes(two_patches):
+def test_amplitudes(two_patches, tmp_path):
     I, A = vltm.direct(two_patches, GRID, amplitudes=True)
     assert A.dtype == np.complex128 and A.shape == I.shape
     close(I, (np.abs(A) ** 2).astype(np.float32))
+    # Two-bounce (factorised) columns, on the planar and the band path, and higher-order ones.
+    f = ",".join(map(str, FOCUS))
+    for path in ("auto", "band"):
+        want = cli_volume(tmp_path, "column", str(two_patches), "--volume", GRID, "--focus", f,
+                          "--path", path)
+        I, A = vltm.column(two_patches, GRID, FOCUS, path=path, amplitudes=True)
+        assert A.dtype == np.complex128 and A.shape == I.shape == want.shape
+        close(want, I)
+        close(I, (np.abs(A) ** 2).astype(np.float32), rel=1e-5)
+    I, A = vltm.column(two_patches, GRID, FOCUS, gate="higher-order", shell=(0.2, 0.9),
+                       amplitudes=True)
+    close(I, (np.abs(A) ** 2).astype(np.float32))
+    d = np.linalg.norm(vltm.volume(GRID).points - np.asarray(FOCUS, dtype=np.float32), axis=-1)
+    assert np.all(A[(d < 0.2) | (d >= 0.9)] == 0)
     with pytest.raises(vltm.ArgumentError, match="amplitudes"):
-        vltm.column(two_patches, GRID, FOCUS, amplitudes=True)
+        vltm.column(two_patches, GRID, FOCUS, gate="none", amplitudes=True)
 
 
 def test_errors_are_exceptions_with_the_cli_messages(two_patches, tmp_path):
@@ -99,7 +126,8 @@ def test_errors_are_exceptions_with_the_cli_messages(two_patches, tmp_path):
         vltm.Capture.from_arrays(np.zeros((10, 3, 3)), np.zeros((2, 3)), np.zeros((2, 3)), 0.01)
 
 
-@pytest.mark.parametrize("kind", ["direct", "column", "higher-order", "indirect"])
+@pytest.mark.parametrize("kind", ["direct", "column", "higher-order", "indirect",
+                                  "indirect-plain", "matrix"])
 def test_split_merge_equals_one_pass(two_patches, kind):
     vol = "-0.6:0.6:10,-0.6:0.6:10,0.5:1.2:8"
     if kind == "direct":
@@ -108,10 +136,23 @@ def test_split_merge_equals_one_pass(two_patches, kind):
         run = lambda **kw: vltm.column(two_patches, vol, FOCUS, **kw)  # noqa: E731
     elif kind == "higher-order":
         run = lambda **kw: vltm.column(two_patches, vol, FOCUS, gate="higher-order", **kw)  # noqa: E731
+    elif kind == "matrix":
+        run = lambda **kw: vltm.matrix(two_patches, FOCUS_SET, vol, **kw)  # noqa: E731
     else:
         d = vltm.direct(two_patches, vol)
-        run = lambda **kw: vltm.indirect(two_patches, vol, direct=d, **kw)  # noqa: E731
+        leak = kind == "indirect"
+        run = lambda **kw: vltm.indirect(two_patches, vol, direct=d, leak_correct=leak, **kw)  # noqa: E731
     one = run()
+    if kind == "matrix":
+        parts = [run(rows=slice(a, b)) for a, b in [(40, 64), (0, 13), (13, 40)]]
+        parts = [pickle.loads(pickle.dumps(p)) for p in parts]
+        m = vltm.merge(parts).finish()
+        assert isinstance(m, vltm.MatrixResult) and m.amplitudes.shape == (8, 800)
+        close(one.intensities, m.intensities)
+        scale = np.abs(one.amplitudes).max()
+        assert np.abs(one.amplitudes - m.amplitudes).max() <= 1e-6 * scale
+        assert np.array_equal(one.from_xyz, m.from_xyz) and np.array_equal(one.to_xyz, m.to_xyz)
+        return
     parts = [run(rows=slice(a, b)) for a, b in [(40, 64), (0, 13), (13, 40)]]
     parts = [pickle.loads(pickle.dumps(p)) for p in parts]
     assert [p.rows for p in parts] == [[range(40, 64)], [range(0, 13)], [range(13, 40)]]
@@ -120,6 +161,68 @@ def test_split_merge_equals_one_pass(two_patches, kind):
     close(one, merged.finish())
     # One part with every row: the same numbers as one pass.
     close(one, run(rows=slice(None, None)).finish())
+
+
+FOCUS_SET = "-0.3:0.3:2,-0.3:0.3:2,0.6:0.8:2"
+TO_SET = "-0.6:0.6:10,-0.6:0.6:10,0.5:1.2:8"
+
+
+def test_matrix_equals_cli(two_patches, tmp_path):
+    h5py = __import__("h5py")
+    out = tmp_path / "m.h5"
+    r = cli("matrix", str(two_patches), "--from", FOCUS_SET, "--to", TO_SET, "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    m = vltm.matrix(vltm.open(two_patches), FOCUS_SET, TO_SET)
+    assert m.amplitudes.dtype == np.complex64 and m.intensities.dtype == np.float32
+    assert m.amplitudes.shape == m.intensities.shape == (8, 800)
+    with h5py.File(out, "r") as f:
+        close(f["intensity"][:], m.intensities)
+        scale = np.abs(m.amplitudes).max()
+        assert np.abs(f["re"][:] - m.amplitudes.real).max() <= 1e-6 * scale
+        assert np.abs(f["im"][:] - m.amplitudes.imag).max() <= 1e-6 * scale
+        assert np.array_equal(f["from_xyz"][:], m.from_xyz)
+        assert np.array_equal(f["to_xyz"][:], m.to_xyz)
+    assert m.report["rows"] == 64 and m.report["passes"] == 1
+    # Γ × Γ, as `vltm matrix --from gamma --to gamma --volume V`; arrays in give the same.
+    out = tmp_path / "g.h5"
+    r = cli("matrix", str(two_patches), "--from", "gamma", "--to", "gamma", "--volume", TO_SET,
+            "--epsilon", "0.3", "--out", str(out))
+    assert r.returncode == 0, r.stderr
+    g = vltm.matrix(two_patches, "gamma", "gamma", volume=TO_SET, epsilon=0.3)
+    with h5py.File(out, "r") as f:
+        close(f["intensity"][:], g.intensities)
+        assert np.array_equal(f["from_xyz"][:], g.from_xyz)
+    close(g.intensities, vltm.matrix(two_patches, g.from_xyz, vltm.Volume(g.to_xyz)).intensities)
+    # A part written by the CLI merges with a part from Python.
+    part = tmp_path / "b.part"
+    r = cli("matrix", str(two_patches), "--from", FOCUS_SET, "--to", TO_SET, "--rows", "20:64",
+            "--partial", str(part))
+    assert r.returncode == 0, r.stderr
+    a = vltm.matrix(two_patches, FOCUS_SET, TO_SET, rows=slice(0, 20))
+    assert a.kind == "matrix"
+    close(m.intensities, vltm.merge([a, vltm.Partial.read(part)]).finish().intensities)
+
+
+def test_matrix_errors(two_patches, tmp_path):
+    with pytest.raises(vltm.ArgumentError) as e:
+        vltm.matrix(two_patches, "0:1:4,0:1", TO_SET)
+    r = cli("matrix", str(two_patches), "--from", "0:1:4,0:1", "--to", TO_SET, "--out",
+            str(tmp_path / "x.h5"))
+    assert r.returncode == 2 and r.stderr.strip() == f"vltm: {e.value}"
+    with pytest.raises(vltm.ArgumentError) as e:
+        vltm.matrix(two_patches, "0,0,-1", TO_SET)
+    r = cli("matrix", str(two_patches), "--from", "0,0,-1", "--to", TO_SET, "--out",
+            str(tmp_path / "x.h5"))
+    assert r.returncode == 2 and r.stderr.strip() == f"vltm: {e.value}"
+    with pytest.raises(vltm.ArgumentError, match="needs the volume of Γ"):
+        vltm.matrix(two_patches, "gamma", TO_SET)
+    with pytest.raises(vltm.ArgumentError, match="needs Γ"):
+        vltm.matrix(two_patches, "gamma", TO_SET, volume=TO_SET, rows=slice(0, 8))
+    with pytest.raises(vltm.ArgumentError, match="rows"):
+        vltm.matrix(two_patches, FOCUS_SET, TO_SET, rows=slice(0, 70))
+    with pytest.raises(vltm.ArgumentError, match="different probes or parameters"):
+        vltm.merge([vltm.matrix(two_patches, FOCUS_SET, TO_SET, rows=slice(0, 8)),
+                    vltm.matrix(two_patches, FOCUS_SET, TO_SET, rows=slice(8, 64), wavelength=0.5)])
 
 
 def test_merge_errors_and_cli_interop(two_patches, tmp_path):

@@ -9,6 +9,8 @@ optical path.
 >>> vol = vltm.volume("-0.75:0.75:16,-0.75:0.75:16,0.4:1.35:20")
 >>> I = vltm.direct(cap, vol)                           # float32 (16, 16, 20)
 >>> C = vltm.column(cap, vol, focus=(-0.25, 0.15, 0.7))
+>>> Ii = vltm.indirect(cap, vol)                         # leak-corrected, as `vltm indirect`
+>>> M = vltm.matrix(cap, from_="gamma", to="gamma", volume=vol)  # M.amplitudes: (n_from, n_to)
 >>> part = vltm.direct(cap, vol, rows=slice(0, 32))     # a Partial (accumulator state)
 >>> rest = vltm.direct(cap, vol, rows=slice(32, 64))
 >>> vltm.merge([part, rest]).finish()                   # == vltm.direct(cap, vol)
@@ -22,7 +24,7 @@ from __future__ import annotations
 
 import builtins
 import os
-from typing import Any, Iterable, Optional, Sequence, Tuple, Union
+from typing import Any, Iterable, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -34,6 +36,7 @@ __version__: str = _native.__version__
 __all__ = [
     "ArgumentError",
     "Capture",
+    "MatrixResult",
     "DataError",
     "Partial",
     "Volume",
@@ -42,6 +45,7 @@ __all__ = [
     "direct",
     "gamma_mask",
     "indirect",
+    "matrix",
     "merge",
     "open",
     "set_threads",
@@ -251,7 +255,7 @@ class Partial:
 
     @property
     def kind(self) -> str:
-        """``direct``, ``column`` or ``indirect``."""
+        """``direct``, ``column``, ``indirect`` or ``matrix``."""
         return self._native.kind()
 
     @property
@@ -270,9 +274,12 @@ class Partial:
 
     def finish(self, amplitudes: bool = False, report: bool = False) -> Any:
         """The probe's volume (float32, shaped like the volume). With ``amplitudes=True``
-        also the complex amplitudes ``A`` (``T = |A|²``; direct light and higher-order
-        columns), with ``report=True`` also the counters dict."""
-        values, amps, shape, rep = self._native.finish()
+        also the complex amplitudes ``A`` (``T = |A|²``; direct light, two-bounce and
+        higher-order columns), with ``report=True`` also the counters dict. A ``matrix``
+        state finishes into a :class:`MatrixResult` (``amplitudes``/``report`` ignored)."""
+        if self.kind == "matrix":
+            return _matrix_result(*self._native.finish())
+        values, amps, shape, rep = self._native.finish(amplitudes=bool(amplitudes))
         return _shape_out(values, amps, rep, _out_shape(shape, self._shape), amplitudes, report)
 
     _shape: Optional[Tuple[int, ...]] = None
@@ -327,7 +334,7 @@ def _shape_out(values, amps, rep, shape, amplitudes, report):
     if amplitudes:
         if amps is None:
             raise ArgumentError(
-                "argument `amplitudes`: complex amplitudes exist for direct light and higher-order columns only (factorised columns and indirect light are imaged as intensities)"
+                "argument `amplitudes`: complex amplitudes exist for direct light, two-bounce and higher-order columns only (the un-gated column and indirect light are imaged as intensities)"
             )
         out.append(amps.reshape(shape))
     if report:
@@ -418,7 +425,11 @@ def column(
 ) -> Any:
     """A column ``T(x_a, ·)`` of the LTM for the focus ``x_a`` = ``focus`` (m, z > 0):
     ``gate`` ``"two-bounce"`` (Eq. 14), ``"higher-order"`` (Eq. 18) or ``"none"``; ``shell``
-    ``(r0, r1)`` keeps ``r0 <= |x_a - x_b| < r1``. Other arguments as :func:`direct`."""
+    ``(r0, r1)`` keeps ``r0 <= |x_a - x_b| < r1``. ``amplitudes=True`` also returns the
+    complex amplitudes ``A(x_a, ·)`` (complex128, ``T = |A|²``, 0 outside ``shell``) of
+    two-bounce (imaged beside the intensities: about twice the imaging time) and
+    higher-order columns; the un-gated column has none. Other arguments as
+    :func:`direct`."""
     f = [float(x) for x in focus]
     if len(f) != 3:
         raise ArgumentError(f"argument `focus`: expected (x, y, z), found {focus!r}")
@@ -441,6 +452,7 @@ def indirect(
     band: float = 5.0,
     compensate_laser: bool = False,
     path: str = "auto",
+    leak_correct: bool = True,
     rows: Optional[slice] = None,
     report: bool = False,
 ) -> Any:
@@ -448,10 +460,15 @@ def indirect(
     ``epsilon``·max, then ``Σ T(x_a, x_b)`` over pairs of Γ at least ``min_separation``
     apart (default 1.5σ) or within ``shell``. ``direct``: the direct light over the same
     volume (e.g. from :func:`direct` or a merged Dask run) instead of pass 1 — required with
-    ``rows=``. Other arguments as :func:`direct`. This is the paper's Eq. 17 on the capture
-    as it is: the command line's default leak correction (``vltm indirect``, README
-    "Leak-corrected indirect light") is not applied here; ``vltm indirect --no-leak-correct``
-    gives the same numbers."""
+    ``rows=``. Other arguments as :func:`direct`.
+
+    ``leak_correct=True`` (the default, as ``vltm indirect``): the capture's direct light is
+    removed first — per laser/SPAD pair the bins where a 3-vertex return of a Γ voxel can
+    arrive are zeroed (README "Leak-corrected indirect light"); one more pass over the
+    capture measures the removed energy (``report["explained"]``). It uses the return
+    times only, so each row is corrected on its own and partial states (``rows=``) take it
+    too. ``leak_correct=False``: the paper's Eq. 17 on the capture as it is
+    (``vltm indirect --no-leak-correct``)."""
     if shell is None and min_separation is not None:
         if min_separation < 0:
             raise ArgumentError(f"argument `--min-separation`: expected R >= 0, found {min_separation}")
@@ -459,4 +476,116 @@ def indirect(
     d = None if direct is None else np.asarray(direct, dtype=np.float32).ravel().tolist()
     return _probe("indirect", capture, volume, rows, False, report, epsilon=float(epsilon),
                   shell=None if shell is None else (float(shell[0]), float(shell[1])), direct=d,
+                  leak_correct=bool(leak_correct),
                   **_wave(wavelength, sigma, weights, band, compensate_laser, path))
+
+
+class MatrixResult(NamedTuple):
+    """The two-bounce LTM between two voxel sets (:func:`matrix`): element ``[i, k]`` is
+    ``T(from_xyz[i], to_xyz[k])``, as ``vltm matrix`` writes it (datasets ``re``, ``im``,
+    ``intensity``, ``from_xyz``, ``to_xyz``)."""
+
+    #: Complex amplitudes ``A``, complex64 ``(n_from, n_to)``.
+    amplitudes: np.ndarray
+    #: Intensities ``T = |A|²``, float32 ``(n_from, n_to)``.
+    intensities: np.ndarray
+    #: Projector foci ``x_a`` (the rows), float32 ``(n_from, 3)``, metres.
+    from_xyz: np.ndarray
+    #: Imaged voxels ``x_b`` (the columns), float32 ``(n_to, 3)``, metres.
+    to_xyz: np.ndarray
+    #: Counters and configuration: ``rows``, ``aliased``, ``wavelength``, ``sigma``, ``bins``…
+    report: dict
+
+
+def _matrix_result(values, amps, shape, rep, frm, to) -> MatrixResult:
+    return MatrixResult(amps.reshape(shape), values.reshape(shape), frm.reshape(-1, 3),
+                        to.reshape(-1, 3), rep)
+
+
+def _voxel_set(spec: Any, what: str, gamma: Optional[np.ndarray]) -> np.ndarray:
+    """A voxel set as float32 ``(n, 3)``: a SPEC, a :class:`Volume`, an ``(..., 3)`` array or
+    ``"gamma"`` (Γ's points, given)."""
+    if isinstance(spec, str) and spec.strip() == "gamma":
+        assert gamma is not None
+        return gamma
+    try:
+        v = Volume(spec)
+    except ArgumentError as e:
+        msg = str(e)
+        for old in ("argument `--volume`: ", "argument `volume`: "):
+            if msg.startswith(old):
+                msg = msg[len(old):]
+        raise ArgumentError(f"argument `{what}`: {msg}") from None
+    return np.ascontiguousarray(v.points.reshape(-1, 3), dtype=np.float32)
+
+
+def matrix(
+    capture: Union[Capture, PathLike],
+    from_: Union[str, np.ndarray, Volume],
+    to: Union[str, np.ndarray, Volume],
+    *,
+    volume: Optional[Union[str, np.ndarray, Volume]] = None,
+    epsilon: float = 0.1,
+    direct: Optional[np.ndarray] = None,
+    wavelength: Optional[float] = None,
+    sigma: Optional[float] = None,
+    weights: str = "inv",
+    band: float = 5.0,
+    compensate_laser: bool = False,
+    rows: Optional[slice] = None,
+) -> Any:
+    """The two-bounce LTM (Eq. 14) between two voxel sets as a matrix — the same numbers as
+    ``vltm matrix``: a :class:`MatrixResult` with the complex amplitudes (complex64) and
+    intensities (float32) of shape ``(n_from, n_to)`` and the voxel coordinates.
+
+    ``from_`` (the projector foci, the rows) and ``to`` (the imaged voxels, the columns): a
+    SPEC, a :class:`Volume`, an ``(..., 3)`` array of points (m, z > 0), or ``"gamma"``: Γ of
+    ``volume`` = the voxels whose direct light exceeds ``epsilon``·max, from ``direct`` (the
+    direct light over ``volume``) or else a direct pass first. One pass over the capture
+    (more if the accumulators of all foci exceed the memory budget); cost per laser row
+    ``n_from·Ks·8J`` flops, at the end ``n_from·n_to·Ks·14J``; memory ``16·J·(Ks+1)`` bytes
+    per focus and 44 bytes per element. ``rows=slice(a, b)`` returns a :class:`Partial` (one
+    factorised column per focus; ``gamma`` then needs ``direct``). Wave options as
+    :func:`direct`; the matrix is imaged on the band path."""
+    cap = capture if isinstance(capture, Capture) else open(capture)
+    wave = _wave(wavelength, sigma, weights, band, compensate_laser, "auto")
+    gamma = None
+    if any(isinstance(x, str) and x.strip() == "gamma" for x in (from_, to)):
+        if volume is None:
+            raise ArgumentError("argument `--volume`: `gamma` in --from/--to needs the volume of Γ")
+        if not (0.0 <= float(epsilon) < 1.0):
+            raise ArgumentError(f"argument `--epsilon`: expected 0 <= E < 1, found {epsilon}")
+        vol = Volume(volume)
+        if direct is None:
+            if rows is not None:
+                raise ArgumentError(
+                    "argument `rows`: `gamma` over a part of the rows needs Γ: pass direct=, the finished direct light over volume"
+                )
+            d = globals()["direct"](cap, vol, wavelength=wavelength, sigma=sigma, weights=weights,
+                                    band=band, compensate_laser=compensate_laser)
+        else:
+            d = np.asarray(direct, dtype=np.float32)
+            if d.size != len(vol):
+                raise ArgumentError(
+                    f"argument `direct`: expected {len(vol)} values (the volume's voxels), found {d.size}"
+                )
+        g = gamma_mask(d, float(epsilon)).ravel()
+        gamma = np.ascontiguousarray(vol.points.reshape(-1, 3)[g], dtype=np.float32)
+        if len(gamma) == 0:
+            raise ArgumentError(
+                "argument `--epsilon`: Γ is empty: no voxel of --volume has direct light above ε·max (all zero)"
+            )
+    frm = _voxel_set(from_, "--from", gamma)
+    dst = _voxel_set(to, "--to", gamma)
+    if len(frm) == 0 or len(dst) == 0:
+        raise ArgumentError(
+            f"argument `{'--from' if len(frm) == 0 else '--to'}`: the voxel set is empty"
+        )
+    r = _rows(rows, cap)
+    res = _native.run(cap._native, _native.volume_from_points(dst), "matrix", rows=r,
+                      from_points=frm, **wave)
+    if r is not None:
+        return Partial(res)
+    values, amps, rep = res
+    n = (len(frm), len(dst))
+    return MatrixResult(amps.reshape(n), values.reshape(n), frm, dst, rep)

@@ -24,7 +24,7 @@ import numpy as np
 
 import vltm
 
-__all__ = ["column", "direct", "indirect", "row_ranges"]
+__all__ = ["column", "direct", "indirect", "matrix", "row_ranges"]
 
 
 def row_ranges(n_rows: int, rows_per_task: int) -> List[Tuple[int, int]]:
@@ -41,6 +41,9 @@ def _volume_arg(volume: Union[str, np.ndarray, "vltm.Volume"]) -> Union[str, np.
 
 def _part(path: str, volume: Any, kind: str, a: int, b: int, kw: dict) -> bytes:
     """One task: opens the file, streams rows a..b, returns the state as bytes."""
+    if kind == "matrix":
+        return vltm.matrix(path, kw["from_"], volume, rows=slice(a, b),
+                           **{k: v for k, v in kw.items() if k != "from_"}).to_bytes()
     fn = {"direct": vltm.direct, "column": vltm.column, "indirect": vltm.indirect}[kind]
     return fn(path, volume, rows=slice(a, b), **kw).to_bytes()
 
@@ -68,7 +71,7 @@ def _run(kind: str, path: Union[str, "os.PathLike[str]"], volume: Any, client: A
     if rows_per_task is None:
         workers = max(1, len(client.scheduler_info().get("workers", {})))
         rows_per_task = math.ceil(n / (2 * workers))
-    vol = _volume_arg(volume)
+    vol = volume if kind == "matrix" else _volume_arg(volume)
     part = dask.delayed(_part, pure=True)
     merge = dask.delayed(_merge, pure=True)
     layer = [part(path, vol, kind, a, b, kw, dask_key_name=f"vltm-{kind}-rows-{a}-{b}-{dask.base.tokenize(path, vol, kw)}")
@@ -78,7 +81,8 @@ def _run(kind: str, path: Union[str, "os.PathLike[str]"], volume: Any, client: A
         layer = [merge(layer[i:i + k]) for i in range(0, len(layer), k)]
     state = client.compute(layer[0]).result()
     p = vltm.Partial.from_bytes(state)
-    p._shape = vltm.Volume(volume).shape
+    if kind != "matrix":
+        p._shape = vltm.Volume(volume).shape
     return p
 
 
@@ -104,7 +108,9 @@ def indirect(path: Union[str, "os.PathLike[str]"], volume: Any, *, client: Any =
              direct: Optional[np.ndarray] = None, **options: Any) -> np.ndarray:
     """:func:`vltm.indirect` over a Dask cluster: round 1 the direct light (unless
     ``direct`` is given) to find Γ, round 2 the Γ columns; two passes over the rows, each
-    split into tasks."""
+    split into tasks. ``leak_correct`` (default True, as :func:`vltm.indirect`): every task
+    zeroes the direct-return windows of Γ in its own rows (the gate needs only Γ and the
+    geometry), and the removed energy adds up over the tasks."""
     wave_keys = ("wavelength", "sigma", "weights", "band", "compensate_laser", "path")
     if direct is None:
         wave = {k: v for k, v in options.items() if k in wave_keys}
@@ -112,3 +118,33 @@ def indirect(path: Union[str, "os.PathLike[str]"], volume: Any, *, client: Any =
     d = np.asarray(direct, dtype=np.float32)
     kw = dict(options, epsilon=float(epsilon), direct=d)
     return _run("indirect", path, volume, client, rows_per_task, split_every, kw).finish()
+
+
+def matrix(path: Union[str, "os.PathLike[str]"], from_: Any, to: Any, *, client: Any = None,
+           rows_per_task: Optional[int] = None, split_every: int = 8, volume: Any = None,
+           epsilon: float = 0.1, direct: Optional[np.ndarray] = None,
+           **options: Any) -> "vltm.MatrixResult":
+    """:func:`vltm.matrix` over a Dask cluster: each task accumulates one factorised column
+    per focus of ``from_`` over its rows (state ``16·J·(Ks+1)`` bytes per focus); the
+    states add up and the client images the matrix. ``"gamma"`` in ``from_``/``to``: Γ of
+    ``volume`` from ``direct`` or else a first round of direct light over the cluster.
+    ``options``: the wave options of :func:`vltm.matrix`."""
+    sets = [from_, to]
+    if any(isinstance(x, str) and x.strip() == "gamma" for x in sets):
+        if volume is None:
+            raise vltm.ArgumentError("argument `--volume`: `gamma` in --from/--to needs the volume of Γ")
+        vol = vltm.Volume(volume)
+        if direct is None:
+            wave_keys = ("wavelength", "sigma", "weights", "band", "compensate_laser")
+            wave = {k: v for k, v in options.items() if k in wave_keys}
+            direct = _run("direct", path, vol, client, rows_per_task, split_every, wave).finish()
+        g = vltm.gamma_mask(np.asarray(direct, dtype=np.float32).reshape(vol.shape), epsilon)
+        pts = np.ascontiguousarray(vol.points[g].reshape(-1, 3), dtype=np.float32)
+        if len(pts) == 0:
+            raise vltm.ArgumentError(
+                "argument `--epsilon`: Γ is empty: no voxel of --volume has direct light above ε·max (all zero)"
+            )
+        sets = [pts if isinstance(x, str) and x.strip() == "gamma" else x for x in sets]
+    frm, dst = (vltm._voxel_set(x, w, None) for x, w in zip(sets, ("--from", "--to")))
+    kw = dict(options, from_=frm)
+    return _run("matrix", path, dst, client, rows_per_task, split_every, kw).finish()

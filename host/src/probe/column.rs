@@ -14,7 +14,7 @@ use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
 use std::time::Instant;
-use vltm_kernel::{Gate, Point, Probe, Report, Scan, Target};
+use vltm_kernel::{Gate, Point, Probe, Report, Scan, Target, cis_turns};
 
 /// The time gate of a column (the CLI's `--gate`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -155,7 +155,7 @@ pub fn column(
     let t = Instant::now();
     let (state, cfg) = column_acc(src, focus, volume, gate, wave, exec, false)?;
     let spads = src.geometry().spads.clone();
-    let (values, report, path) = state.finish(&cfg, &spads, focus, volume, shell)?;
+    let (values, report, path, _) = state.finish(&cfg, &spads, focus, volume, shell, false)?;
     check_finite(&values, &volume.points, "column")?;
     Ok(Output {
         values,
@@ -293,9 +293,15 @@ pub(super) fn column_acc(
     Ok((state, cfg))
 }
 
+/// A finished column: intensities (0 outside the shell), counters, the path that imaged it,
+/// and the complex amplitudes when asked for (`T = |A|²`; two-bounce and higher-order gates).
+pub(super) type ColumnImage = (Vec<f32>, Report, Path, Option<Vec<Complex64>>);
+
 impl ColumnState {
     /// The column's intensities over `volume` (0 outside `shell`), the counters and the
-    /// path that imaged it. `spads` are the capture's SPAD spots.
+    /// path that imaged it. `spads` are the capture's SPAD spots. `amps`: also the complex
+    /// amplitudes (0 outside `shell`), for the two-bounce and higher-order gates (`None` for
+    /// the un-gated column, which has no time gate to give a phase reference).
     ///
     /// # Errors
     /// A planar path that no longer applies; kernel errors.
@@ -306,9 +312,10 @@ impl ColumnState {
         focus: Point,
         volume: &Volume,
         shell: Shell,
-    ) -> Result<(Vec<f32>, Report, Path)> {
-        let (mut v, report, path) = match self {
-            Self::Voxels(acc, r) => (intensities(acc), *r, Path::Band),
+        amps: bool,
+    ) -> Result<ColumnImage> {
+        let (mut v, report, path, mut amplitudes) = match self {
+            Self::Voxels(acc, r) => (intensities(acc), *r, Path::Band, amps.then(|| acc.clone())),
             Self::Factorised {
                 state,
                 report,
@@ -335,18 +342,21 @@ impl ColumnState {
                     (_, p) => p.as_deref(),
                 };
                 let mut state = state.clone();
-                let (v, r, p) = image_column(
-                    cfg, spads, focus, *gate, &mut state, *report, *legs, volume, planar,
+                let (v, r, p, a) = image_column(
+                    cfg, spads, focus, *gate, &mut state, *report, *legs, volume, planar, amps,
                 )?;
-                (v.iter().map(|&x| x as f32).collect(), r, p)
+                (v.iter().map(|&x| x as f32).collect(), r, p, a)
             }
         };
-        for (x, p) in v.iter_mut().zip(&volume.points) {
+        for (i, p) in volume.points.iter().enumerate() {
             if !shell.contains(dist(focus, *p)) {
-                *x = 0.0;
+                v[i] = 0.0;
+                if let Some(a) = &mut amplitudes {
+                    a[i] = Complex64::new(0.0, 0.0);
+                }
             }
         }
-        Ok((v, report, path))
+        Ok((v, report, path, amplitudes))
     }
 }
 
@@ -409,8 +419,13 @@ fn image_chunks(p: &Probe<'_>, scan: &Scan<'_>, voxels: &[Point]) -> Result<(Vec
     ))
 }
 
+/// What [`image_column`] returns: intensities, counters, path, amplitudes if asked for.
+type Imaged = (Vec<f64>, Report, Path, Option<Vec<Complex64>>);
+
 /// Images a factorised column from its state over the volume by the planar convolution
-/// (when given: Gaussian gate over a grid) or the kernel; with the path that imaged it.
+/// (when given: Gaussian gate over a grid) or the kernel; with the path that imaged it and,
+/// with `amps` and the Gaussian gate, the complex amplitudes (the planar path's own, or
+/// [`column_amplitudes`] beside the kernel's image).
 #[allow(clippy::too_many_arguments)]
 pub(super) fn image_column(
     cfg: &vltm_kernel::Config,
@@ -422,7 +437,8 @@ pub(super) fn image_column(
     legs: (f64, f64),
     volume: &Volume,
     planar: Option<&Planar>,
-) -> Result<(Vec<f64>, Report, Path)> {
+    amps: bool,
+) -> Result<Imaged> {
     let mut tables = vec![0.0f32; Scan::tables_len(cfg, spads.len())];
     let scan = Scan::new(cfg, spads, &mut tables)?;
     let p = Probe::resume(&scan, Target::Column(focus), gate, &[], state, report, legs)?;
@@ -453,10 +469,56 @@ pub(super) fn image_column(
                 ..p.report()
             },
             Path::Planar,
+            amps.then_some(acc),
         ));
     }
     let (out, r) = image_chunks(&p, &scan, voxels)?;
-    Ok((out, r, Path::Band))
+    let amplitudes = (amps && gate == Gate::Gaussian).then(|| {
+        let cl = chunk_len(voxels.len());
+        let mut a = vec![Complex64::new(0.0, 0.0); voxels.len()];
+        voxels
+            .par_chunks(cl)
+            .zip(a.par_chunks_mut(cl))
+            .for_each(|(v, o)| column_amplitudes(&p, &scan, focus, v, o));
+        a
+    });
+    Ok((out, r, Path::Band, amplitudes))
+}
+
+/// Complex amplitudes of a factorised Gaussian column probe at `voxels`: `out[i] =
+/// A(x_a, voxels[i])`, with exactly the arithmetic of the kernel's `Probe::image` (so that
+/// `|out[i]|²` is its intensity). Nothing is written for probes of other kinds.
+pub(super) fn column_amplitudes(
+    p: &Probe<'_>,
+    scan: &Scan<'_>,
+    focus: Point,
+    voxels: &[Point],
+    out: &mut [Complex64],
+) {
+    let Some((u, _)) = p.column_spectra() else {
+        return;
+    };
+    let cfg = scan.config();
+    let j = cfg.bins().max(1);
+    let span = cfg.span();
+    let (klo, inv) = ((cfg.k_lo() as f64 / span) as f32, (1.0 / span) as f32);
+    for (o, b) in out.iter_mut().zip(voxels) {
+        let d_ab = dist(focus, *b);
+        let mut sum = Complex64::new(0.0, 0.0);
+        for (sp, us) in scan.spads().iter().zip(u.chunks_exact(j)) {
+            let d_bs = dist(*b, *sp);
+            let tau = d_ab + d_bs;
+            let mut ph = cis_turns(klo * tau);
+            let step = cis_turns(inv * tau);
+            let mut z = Complex64::new(0.0, 0.0);
+            for x in us {
+                z += *x * Complex64::new(f64::from(ph.re), f64::from(ph.im));
+                ph *= step;
+            }
+            sum += z * f64::from(cfg.weight(d_bs));
+        }
+        *o = sum;
+    }
 }
 
 /// The kernel's alias count of a factorised column (voxels whose path times

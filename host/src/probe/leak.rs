@@ -435,11 +435,111 @@ fn demodulate(g: &Geometry, basis: &Basis, row: &[f32], out: &mut [Complex64]) -
     out.iter().map(|z| z.norm_sqr()).sum()
 }
 
+/// The energy the gate method removes, summed over rows (any order, any split):
+/// `Σ H²` of the capture and of the zeroed samples.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GateEnergy {
+    /// `Σ H²` over the finite samples read.
+    pub total: f64,
+    /// `Σ H²` over the samples the gate zeroed.
+    pub cut: f64,
+}
+
+impl GateEnergy {
+    /// Adds one row: `raw` as read, `kept` after [`DirectModel::subtract_row`].
+    pub fn add(&mut self, raw: &[f32], kept: &[f32]) {
+        for (a, b) in raw.iter().zip(kept) {
+            let a = f64::from(*a);
+            if a.is_finite() {
+                self.total += a * a;
+                if *b == 0.0 {
+                    self.cut += a * a;
+                }
+            }
+        }
+    }
+
+    /// The fraction removed ([`DirectModel::explained`]).
+    ///
+    /// # Errors
+    /// [`Error::Argument`] (`--leak-correct`) when nothing was removed: the capture holds no
+    /// light at the direct return times.
+    pub fn explained(&self) -> Result<f64> {
+        if self.cut.is_nan() || self.cut <= 0.0 {
+            return Err(Error::arg(
+                "--leak-correct",
+                "the capture holds no light at the direct (3-vertex) return times of Γ's \
+                 voxels: there is no direct light to remove",
+            ));
+        }
+        Ok(self.cut / self.total)
+    }
+}
+
 fn dot(a: &[Complex64], b: &[Complex64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| (x.conj() * y).re).sum()
 }
 
 impl DirectModel {
+    /// The carrier basis and voxel–SPAD tables over `points`, after the checks every method
+    /// shares: `points` not empty, and some 3-vertex return inside the capture's window.
+    fn check(g: &Geometry, points: &[Point], wave: &Wave) -> Result<(Basis, SpadTables)> {
+        if points.is_empty() {
+            return Err(Error::arg(
+                "--leak-correct",
+                "Γ is empty: no voxel to fit the direct light at (lower --epsilon or check --volume)",
+            ));
+        }
+        let basis = Basis::new(g, wave)?;
+        let tab = SpadTables::new(g, points, &basis);
+        let v_n = points.len();
+        let any = (0..g.lasers.len()).into_par_iter().any(|l| {
+            let lrow = laser_legs(g, &basis, points, l);
+            row_spads(g, l).any(|s| {
+                (0..v_n).any(|v| ret_any(g, &basis, &tab, &lrow, points, l, v, s).is_some())
+            })
+        });
+        if !any {
+            return Err(Error::arg(
+                "--leak-correct",
+                format!(
+                    "no direct (3-vertex) return of Γ's {v_n} voxels falls in the capture's window \
+                     [{:.3}, {:.3}] m: there is no direct light to remove",
+                    g.t0,
+                    g.t0 + basis.window
+                ),
+            ));
+        }
+        Ok((basis, tab))
+    }
+
+    /// The gate method's model ([`LeakMethod::Gate`]) without reading the capture: it uses
+    /// the timing of the returns only, so each row is corrected on its own (a part of a scan
+    /// split by rows is corrected exactly as in one pass). [`DirectModel::explained`] is 0
+    /// until measured ([`GateEnergy`]).
+    ///
+    /// # Errors
+    /// As [`DirectModel::fit`] before its pass over the data (empty `points`, no return in
+    /// the window); configuration errors.
+    pub fn gate(
+        g: &Geometry,
+        points: &[Point],
+        cell: f64,
+        wave: &Wave,
+        opts: &LeakOptions,
+    ) -> Result<Self> {
+        let (basis, _) = Self::check(g, points, wave)?;
+        Ok(Self {
+            geometry: g.clone(),
+            points: points.to_vec(),
+            rho: Vec::new(),
+            basis,
+            explained: 0.0,
+            gate: Some(opts.cells * cell + 3.0 * g.dt),
+            seconds: 0.0,
+        })
+    }
+
     /// Fits the model over the voxels `points` (Γ) to the capture `src` (one pass over the
     /// rows), with the carrier and envelope of `wave` on this capture.
     ///
@@ -457,76 +557,28 @@ impl DirectModel {
     ) -> Result<Self> {
         let t = Instant::now();
         let g = src.geometry().clone();
-        if points.is_empty() {
-            return Err(Error::arg(
-                "--leak-correct",
-                "Γ is empty: no voxel to fit the direct light at (lower --epsilon or check --volume)",
-            ));
-        }
-        let basis = Basis::new(&g, wave)?;
-        let tab = SpadTables::new(&g, points, &basis);
-        let pts = points;
-        let v_n = pts.len();
-        let zero = Complex64::new(0.0, 0.0);
-        // Any return inside the window at all?
-        let any = (0..g.lasers.len()).into_par_iter().any(|l| {
-            let lrow = laser_legs(&g, &basis, pts, l);
-            row_spads(&g, l)
-                .any(|s| (0..v_n).any(|v| ret_any(&g, &basis, &tab, &lrow, pts, l, v, s).is_some()))
-        });
-        if !any {
-            return Err(Error::arg(
-                "--leak-correct",
-                format!(
-                    "no direct (3-vertex) return of Γ's {v_n} voxels falls in the capture's window \
-                     [{:.3}, {:.3}] m: there is no direct light to remove",
-                    g.t0,
-                    g.t0 + basis.window
-                ),
-            ));
-        }
         if opts.method == LeakMethod::Gate {
-            let half = opts.cells * cell + 3.0 * g.dt;
-            let mut model = Self {
-                geometry: g.clone(),
-                points: pts.to_vec(),
-                rho: Vec::new(),
-                basis,
-                explained: 0.0,
-                gate: Some(half),
-                seconds: 0.0,
-            };
-            let (mut total, mut cut) = (0.0f64, 0.0f64);
+            let mut model = Self::gate(&g, points, cell, wave, opts)?;
             let bar = Pass::start(exec, "leak gate", g.lasers.len());
             let mut row = Vec::new();
             let mut kept = Vec::new();
+            let mut energy = GateEnergy::default();
             for l in 0..g.lasers.len() {
                 src.read_row(l, &mut row)?;
                 kept.clone_from(&row);
                 model.subtract_row(l, &mut kept);
-                for (a, b) in row.iter().zip(&kept) {
-                    let a = f64::from(*a);
-                    if a.is_finite() {
-                        total += a * a;
-                        if *b == 0.0 {
-                            cut += a * a;
-                        }
-                    }
-                }
+                energy.add(&row, &kept);
                 bar.advance(1);
             }
             drop(bar);
-            if cut.is_nan() || cut <= 0.0 {
-                return Err(Error::arg(
-                    "--leak-correct",
-                    "the capture holds no light at the direct (3-vertex) return times of Γ's \
-                     voxels: there is no direct light to remove",
-                ));
-            }
-            model.explained = cut / total;
+            model.explained = energy.explained()?;
             model.seconds = t.elapsed().as_secs_f64();
             return Ok(model);
         }
+        let (basis, tab) = Self::check(&g, points, wave)?;
+        let pts = points;
+        let v_n = pts.len();
+        let zero = Complex64::new(0.0, 0.0);
         // Pass over the data: rhs = Aᴴ b, energy = ‖b‖².
         let ks = g.spads_per_row();
         let bar = Pass::start(exec, "leak fit", g.lasers.len());
@@ -719,12 +771,33 @@ impl DirectModel {
 pub struct LeakCorrected<'a> {
     src: &'a mut dyn RowSource,
     model: &'a DirectModel,
+    /// The energy removed from the rows read, and a copy of the last raw row (when measuring).
+    energy: Option<(GateEnergy, Vec<f32>)>,
 }
 
 impl<'a> LeakCorrected<'a> {
     /// Wraps `src` with the model fitted to it.
     pub fn new(src: &'a mut dyn RowSource, model: &'a DirectModel) -> Self {
-        Self { src, model }
+        Self {
+            src,
+            model,
+            energy: None,
+        }
+    }
+
+    /// As [`LeakCorrected::new`], also summing the energy the gate removes from the rows
+    /// read ([`LeakCorrected::energy`]; one row copy per read).
+    pub fn measuring(src: &'a mut dyn RowSource, model: &'a DirectModel) -> Self {
+        Self {
+            src,
+            model,
+            energy: Some((GateEnergy::default(), Vec::new())),
+        }
+    }
+
+    /// The energy removed so far (when measuring).
+    pub fn energy(&self) -> Option<GateEnergy> {
+        self.energy.as_ref().map(|(e, _)| *e)
     }
 }
 
@@ -735,7 +808,18 @@ impl RowSource for LeakCorrected<'_> {
 
     fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
         let x = self.src.read_row(l, out)?;
-        self.model.subtract_row(l, out);
+        match &mut self.energy {
+            Some((e, raw)) => {
+                raw.clone_from(out);
+                self.model.subtract_row(l, out);
+                e.add(raw, out);
+            }
+            None => self.model.subtract_row(l, out),
+        }
         Ok(x)
+    }
+
+    fn rows(&self) -> std::ops::Range<usize> {
+        self.src.rows()
     }
 }

@@ -34,7 +34,7 @@
 //! once more); if not even one focus fits, the error names `--from`/`--to` (matrix) or
 //! `--pattern` (relight). Per-thread row buffers: `2·threads` rows of histograms, as every probe.
 
-use super::column::column_aliased;
+use super::column::{Columns, column_aliased, column_amplitudes, factorised_columns};
 use super::drive::*;
 use super::wave::*;
 use crate::budget;
@@ -45,7 +45,7 @@ use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
 use std::time::Instant;
-use vltm_kernel::{Config, Gate, Point, Probe, Report, Scan, Target, cis_turns};
+use vltm_kernel::{Config, Gate, Point, Probe, Report, Scan, Target};
 
 /// Bytes per element of a [`matrix`] held at its peak (amplitudes, and the HDF5 writer's
 /// `re`, `im`, `intensity` and their encoded copy): `8 + 3·4 + 3·4 + 3·4`.
@@ -103,42 +103,6 @@ pub struct Relit {
     pub passes: usize,
 }
 
-/// Complex amplitudes of a factorised Gaussian column probe at `voxels`: `out[i] =
-/// A(x_a, voxels[i])`, with exactly the arithmetic of the kernel's `Probe::image` (so that
-/// `|out[i]|²` is its intensity). Nothing is written for probes of other kinds.
-pub(super) fn column_amplitudes(
-    p: &Probe<'_>,
-    scan: &Scan<'_>,
-    focus: Point,
-    voxels: &[Point],
-    out: &mut [Complex64],
-) {
-    let Some((u, _)) = p.column_spectra() else {
-        return;
-    };
-    let cfg = scan.config();
-    let j = cfg.bins().max(1);
-    let span = cfg.span();
-    let (klo, inv) = ((cfg.k_lo() as f64 / span) as f32, (1.0 / span) as f32);
-    for (o, b) in out.iter_mut().zip(voxels) {
-        let d_ab = dist(focus, *b);
-        let mut sum = Complex64::new(0.0, 0.0);
-        for (sp, us) in scan.spads().iter().zip(u.chunks_exact(j)) {
-            let d_bs = dist(*b, *sp);
-            let tau = d_ab + d_bs;
-            let mut ph = cis_turns(klo * tau);
-            let step = cis_turns(inv * tau);
-            let mut z = Complex64::new(0.0, 0.0);
-            for x in us {
-                z += *x * Complex64::new(f64::from(ph.re), f64::from(ph.im));
-                ph *= step;
-            }
-            sum += z * f64::from(cfg.weight(d_bs));
-        }
-        *o = sum;
-    }
-}
-
 /// Checks a set of foci (non-empty, in front of the wall).
 fn check_set(arg: &str, pts: &[Point]) -> Result<()> {
     if pts.is_empty() {
@@ -180,6 +144,41 @@ fn foci_per_pass(
     Ok(((room / per.max(1)) as usize).clamp(1, n_foci.max(1)))
 }
 
+/// Images the factorised columns `probes` (one per focus of `foci`) over `voxels`, in
+/// parallel over groups of foci and chunks of voxels, handing `sink(i, amplitudes)` every
+/// focus `i` in order (deterministic sums). Returns the aliased elements.
+fn image_foci(
+    probes: &[Probe<'_>],
+    scan: &Scan<'_>,
+    foci: &[Point],
+    voxels: &[Point],
+    mut sink: impl FnMut(usize, Vec<Complex64>),
+) -> usize {
+    let cl = chunk_len(voxels.len());
+    let group = 4 * rayon::current_num_threads().max(1);
+    let mut aliased = 0;
+    for (k, (ps, fs)) in probes.chunks(group).zip(foci.chunks(group)).enumerate() {
+        let imaged: Vec<(Vec<Complex64>, usize)> = ps
+            .par_iter()
+            .zip(fs)
+            .map(|(p, a)| {
+                let mut amp = vec![Complex64::new(0.0, 0.0); voxels.len()];
+                voxels
+                    .par_chunks(cl)
+                    .zip(amp.par_chunks_mut(cl))
+                    .for_each(|(v, o)| column_amplitudes(p, scan, *a, v, o));
+                let legs = p.column_spectra().map_or((0.0, -1.0), |(_, l)| l);
+                (amp, column_aliased(scan, *a, voxels, legs))
+            })
+            .collect();
+        for (i, (amp, al)) in imaged.into_iter().enumerate() {
+            aliased += al;
+            sink(k * group + i, amp);
+        }
+    }
+    aliased
+}
+
 /// One pass: a factorised Gaussian column per focus of `foci`, then `sink(i, amplitudes)`
 /// for every focus `i` in order (imaged in parallel over groups of foci and chunks of
 /// `voxels`). Returns the counters.
@@ -189,7 +188,7 @@ fn amplitude_pass(
     foci: &[Point],
     voxels: &[Point],
     label: &str,
-    mut sink: impl FnMut(usize, Vec<Complex64>),
+    sink: impl FnMut(usize, Vec<Complex64>),
 ) -> Result<Report> {
     let cfg = job.cfg;
     let g = src.geometry().clone();
@@ -219,31 +218,129 @@ fn amplitude_pass(
     })?;
     let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
     let scan = Scan::new(cfg, &g.spads, &mut tables)?;
-    let cl = chunk_len(voxels.len());
-    // Groups of foci imaged in parallel, handed to `sink` in order (deterministic sums).
-    let group = 4 * rayon::current_num_threads().max(1);
-    let mut aliased = 0;
-    for (k, (ps, fs)) in probes.chunks(group).zip(foci.chunks(group)).enumerate() {
-        let imaged: Vec<(Vec<Complex64>, usize)> = ps
-            .par_iter()
-            .zip(fs)
-            .map(|(p, a)| {
-                let mut amp = vec![Complex64::new(0.0, 0.0); voxels.len()];
-                voxels
-                    .par_chunks(cl)
-                    .zip(amp.par_chunks_mut(cl))
-                    .for_each(|(v, o)| column_amplitudes(p, &scan, *a, v, o));
-                let legs = p.column_spectra().map_or((0.0, -1.0), |(_, l)| l);
-                (amp, column_aliased(&scan, *a, voxels, legs))
-            })
-            .collect();
-        for (i, (amp, al)) in imaged.into_iter().enumerate() {
-            aliased += al;
-            sink(k * group + i, amp);
-        }
-    }
+    let aliased = image_foci(&probes, &scan, foci, voxels, sink);
     let rows = probes.first().map(Probe::report).unwrap_or_default();
     Ok(Report { aliased, ..rows })
+}
+
+/// The budget check of a `n_from × n_to` result (shared by [`matrix`] and [`matrix_acc`]).
+fn check_result(nf: usize, nt: usize) -> Result<u128> {
+    let out_bytes = budget::bytes(nf, budget::bytes(nt, MATRIX_BYTES_PER_ELEMENT));
+    budget::check(
+        || {
+            format!(
+                "argument `--from`/`--to`: a {nf} x {nt} matrix ({MATRIX_BYTES_PER_ELEMENT} B per element)"
+            )
+        },
+        out_bytes,
+    )?;
+    Ok(out_bytes)
+}
+
+/// The accumulators of [`matrix`] over the source's rows ([`RowSource::rows`]: a part of a
+/// scan split by rows, `vltm matrix --rows A:B --partial F`): one factorised column per focus
+/// of `from`, all in one pass (a partial state holds them all), with the configuration
+/// [`matrix`] derives (from the whole capture's geometry and both sets).
+///
+/// # Errors
+/// As [`matrix`]; [`Error::Memory`] naming `--from` when the accumulators of all foci do not
+/// fit beside the result.
+pub(super) fn matrix_acc(
+    src: &mut dyn RowSource,
+    from: &[Point],
+    to: &[Point],
+    wave: &Wave,
+    exec: Exec<'_>,
+) -> Result<(Columns, Config)> {
+    check_set("--from", from)?;
+    check_set("--to", to)?;
+    let (nf, nt) = (from.len(), to.len());
+    let out_bytes = check_result(nf, nt)?;
+    if src.geometry().confocal {
+        return Err(Error::arg(
+            "matrix",
+            "a confocal capture has no separate camera aperture: the matrix needs a SPAD grid",
+        ));
+    }
+    let cfg = wave.column_config(src.geometry(), from, to)?;
+    let ks = src.geometry().spads_per_row();
+    let per =
+        Probe::state_bytes(&cfg, Target::Column([0.0, 0.0, 1.0]), Gate::Gaussian, 0, ks) as u128;
+    budget::check(
+        || {
+            format!(
+                "argument `--from`: the accumulators of all {nf} foci (a partial state holds them all) and the matrix"
+            )
+        },
+        out_bytes
+            .saturating_add(imaging_bytes(nt))
+            .saturating_add(per.saturating_mul(nf as u128)),
+    )?;
+    let job = Job {
+        cfg: &cfg,
+        wave,
+        exec,
+    };
+    let cols = factorised_columns(src, job, from, Gate::Gaussian, "matrix")?;
+    Ok((cols, cfg))
+}
+
+/// The matrix from the accumulated columns of [`matrix_acc`] (a merged, complete partial
+/// state), imaged exactly as [`matrix`] images its pass; `spads` are the capture's SPAD spots.
+///
+/// # Errors
+/// Kernel errors (sizes).
+pub(super) fn matrix_of_columns(
+    cols: &mut Columns,
+    cfg: &Config,
+    spads: &[Point],
+    from: &[Point],
+    to: &[Point],
+) -> Result<Matrix> {
+    let t = Instant::now();
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, spads.len())];
+    let scan = Scan::new(cfg, spads, &mut tables)?;
+    let n_state = Probe::state_len(
+        cfg,
+        Target::Column([0.0, 0.0, 1.0]),
+        Gate::Gaussian,
+        0,
+        spads.len(),
+    );
+    let report = cols.report;
+    let probes = cols
+        .state
+        .chunks_mut(n_state.max(1))
+        .zip(from)
+        .zip(&cols.legs)
+        .map(|((st, a), legs)| {
+            Probe::resume(
+                &scan,
+                Target::Column(*a),
+                Gate::Gaussian,
+                &[],
+                st,
+                report,
+                *legs,
+            )
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    let nt = to.len();
+    let mut amplitudes = vec![Complex32::new(0.0, 0.0); from.len() * nt];
+    let aliased = image_foci(&probes, &scan, from, to, |i, amp| {
+        for (o, z) in amplitudes[i * nt..(i + 1) * nt].iter_mut().zip(amp) {
+            *o = Complex32::new(z.re as f32, z.im as f32);
+        }
+    });
+    Ok(Matrix {
+        amplitudes,
+        n_from: from.len(),
+        n_to: nt,
+        report: Report { aliased, ..report },
+        passes: 1,
+        seconds: t.elapsed().as_secs_f64(),
+        config: *cfg,
+    })
 }
 
 /// The two-bounce LTM restricted to `from × to` (amplitudes; see the module docs for the
@@ -265,15 +362,7 @@ pub fn matrix(
     check_set("--to", to)?;
     let t = Instant::now();
     let (nf, nt) = (from.len(), to.len());
-    let out_bytes = budget::bytes(nf, budget::bytes(nt, MATRIX_BYTES_PER_ELEMENT));
-    budget::check(
-        || {
-            format!(
-                "argument `--from`/`--to`: a {nf} x {nt} matrix ({MATRIX_BYTES_PER_ELEMENT} B per element)"
-            )
-        },
-        out_bytes,
-    )?;
+    let out_bytes = check_result(nf, nt)?;
     let cfg = wave.column_config(src.geometry(), from, to)?;
     let ks = src.geometry().spads_per_row();
     let fixed = out_bytes.saturating_add(imaging_bytes(nt));

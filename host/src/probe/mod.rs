@@ -11,7 +11,7 @@
 //! | [`matrix()`] | amplitudes `A(x_a, x_b)` for `x_a` in one voxel set, `x_b` in another (two-bounce) | 1 (more if the accumulators exceed the memory budget) |
 //! | [`relight`] | `A_p(b) = Σ_a p_a A(x_a, b)`: the image under a weighted sum of projector foci | 1 (idem) |
 //! | [`row()`] | `T(·, x_b)` streamed by laser rows (reciprocity without a transpose) | 1 |
-//! | [`partial::accumulate`] | direct, column or indirect over a part of the rows, kept as a [`Partial`] state that merges by addition and finishes elsewhere | 1 |
+//! | [`partial::accumulate`] | direct, column, indirect (optionally leak-corrected) or the matrix over a part of the rows, kept as a [`Partial`] state that merges by addition and finishes elsewhere | 1 |
 //! | [`DirectModel`], [`LeakCorrected`] | the capture's direct light removed before the off-diagonal probes (module `leak`: 3-vertex windows of Γ zeroed, or a one-bounce fit subtracted) | 1 to fit, then streamed |
 //!
 //! Threads: the diagonal and the higher-order column split the voxels into chunks, each with
@@ -39,7 +39,7 @@ pub use indirect::{
     IndirectOptions, IndirectOutput, fit_over_volume, gamma_mask, indirect, indirect_over,
     indirect_shells,
 };
-pub use leak::{DirectModel, LeakCorrected, LeakMethod, LeakOptions, cell_radius};
+pub use leak::{DirectModel, GateEnergy, LeakCorrected, LeakMethod, LeakOptions, cell_radius};
 pub use matrix::{MATRIX_BYTES_PER_ELEMENT, Matrix, Pattern, Relit, matrix, relight};
 pub use partial::{Finished, Partial, Task};
 pub use row::row;

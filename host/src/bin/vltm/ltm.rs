@@ -36,8 +36,16 @@ pub(crate) struct MatrixArgs {
     epsilon: f32,
     /// Output: HDF5 file (datasets re, im, intensity of shape (n_from, n_to), from_xyz,
     /// to_xyz; the parameters as attributes).
-    #[arg(long, value_name = "F.h5")]
-    out: PathBuf,
+    #[arg(long, value_name = "F.h5", required_unless_present = "partial")]
+    out: Option<PathBuf>,
+    /// Only the laser rows A..B (B exclusive, 0-based) of the scan: one part of a scan split
+    /// over processes. Needs --partial.
+    #[arg(long, value_name = "A:B")]
+    rows: Option<String>,
+    /// Write the accumulator state (one factorised column per --from focus) to F instead of
+    /// the matrix; `vltm merge --out F.h5` adds the parts and images the matrix.
+    #[arg(long, value_name = "F", conflicts_with = "out")]
+    partial: Option<PathBuf>,
     #[command(flatten)]
     wave: WaveArgs,
 }
@@ -85,16 +93,36 @@ fn exec() -> probe::Exec<'static> {
     }
 }
 
-/// `vltm matrix`: Γ if asked for, the matrix, the HDF5 file.
+/// Refuses a matrix output that is not HDF5.
+pub(crate) fn check_matrix_out(out: &Path) -> vltm::Result<()> {
+    if io::is_hdf5(out) {
+        return Ok(());
+    }
+    Err(vltm::Error::arg(
+        "--out",
+        format!(
+            "{}: the matrix is written as HDF5 (.h5 or .hdf5)",
+            out.display()
+        ),
+    ))
+}
+
+/// `vltm matrix`: Γ if asked for, the matrix (or a part's state), the HDF5 file.
 pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
-    refuse_overwriting_inputs(std::slice::from_ref(&a.capture), &[a.out.as_path()])?;
-    if !io::is_hdf5(&a.out) {
+    let outputs: Vec<&Path> = a
+        .out
+        .iter()
+        .chain(&a.partial)
+        .map(PathBuf::as_path)
+        .collect();
+    refuse_overwriting_inputs(std::slice::from_ref(&a.capture), &outputs)?;
+    if let Some(out) = &a.out {
+        check_matrix_out(out)?;
+    }
+    if a.rows.is_some() && a.partial.is_none() {
         return Err(vltm::Error::arg(
-            "--out",
-            format!(
-                "{}: the matrix is written as HDF5 (.h5 or .hdf5)",
-                a.out.display()
-            ),
+            "--rows",
+            "a part of a scan is written as a partial state: add --partial F (then `vltm merge` the parts)",
         )
         .into());
     }
@@ -107,6 +135,13 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
     }
     let wave = a.wave.wave();
     let wants_gamma = [&a.from, &a.to].iter().any(|s| s.trim() == "gamma");
+    if wants_gamma && a.partial.is_some() {
+        return Err(vltm::Error::arg(
+            "--partial",
+            "`gamma` needs the direct light of the whole capture: give --from/--to as SPECs or point lists (Γ's points of a merged direct run)",
+        )
+        .into());
+    }
     let mut src = io::open_source(&a.capture)?;
     let gamma: Option<Vec<Point>> = if wants_gamma {
         let spec = a.volume.as_deref().ok_or_else(|| {
@@ -149,7 +184,47 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
     };
     let from = set("--from", &a.from)?;
     let to = set("--to", &a.to)?;
+    if let Some(part) = &a.partial {
+        let volume = Volume::points(to)?;
+        let task = probe::Task::Matrix { from };
+        return crate::partial::run_task(
+            &a.capture,
+            &mut *src,
+            &volume,
+            &task,
+            (&wave, exec()),
+            a.rows.as_deref(),
+            part,
+        );
+    }
     let m = probe::matrix(&mut *src, &from, &to, &wave, exec())?;
+    let texts = [
+        ("from", a.from.trim().to_string()),
+        ("to", a.to.trim().to_string()),
+        ("volume", a.volume.clone().unwrap_or_default()),
+    ];
+    let numbers = [
+        ("epsilon", f64::from(a.epsilon)),
+        (
+            "compensate_laser",
+            f64::from(u8::from(wave.compensate_laser)),
+        ),
+    ];
+    let out = a.out.as_deref().unwrap_or(Path::new("matrix.h5"));
+    write_matrix(&m, &from, &to, &a.capture, out, &numbers, texts)
+}
+
+/// The summary of a matrix and its HDF5 file (all or nothing): `numbers` and `texts` are
+/// attributes beside the configuration's.
+pub(crate) fn write_matrix(
+    m: &probe::Matrix,
+    from: &[Point],
+    to: &[Point],
+    capture: &Path,
+    out: &Path,
+    numbers: &[(&str, f64)],
+    texts: [(&str, String); 3],
+) -> Result<(), Failure> {
     let int = m.intensities();
     let (imax, max) =
         int.iter().enumerate().fold(
@@ -184,23 +259,21 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
         probe: "matrix",
         config: &m.config,
         focus: None,
-        capture: &a.capture,
+        capture,
     };
     let cfg = &m.config;
-    let numbers = [
-        ("epsilon", f64::from(a.epsilon)),
+    let mut all = vec![
         ("n_fft", cfg.n_fft() as f64),
         ("band_bins", cfg.bins() as f64),
         ("margin", cfg.params().margin),
-        (
-            "compensate_laser",
-            f64::from(u8::from(wave.compensate_laser)),
-        ),
     ];
+    all.extend_from_slice(numbers);
+    let numbers = all;
+    let [t0, t1, t2] = texts;
     let texts = [
-        ("from", a.from.trim().to_string()),
-        ("to", a.to.trim().to_string()),
-        ("volume", a.volume.clone().unwrap_or_default()),
+        t0,
+        t1,
+        t2,
         ("gate", "two-bounce".to_string()),
         (
             "layout",
@@ -209,15 +282,15 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
     ];
     let data = MatrixData {
         amplitudes: &m.amplitudes,
-        from: &from,
-        to: &to,
+        from,
+        to,
         numbers: &numbers,
         texts: &texts,
     };
     let mut t = Transaction::new();
-    vltm::out::h5::stage_matrix(&mut t, &a.out, &data, &meta)?;
+    vltm::out::h5::stage_matrix(&mut t, out, &data, &meta)?;
     t.commit()?;
-    say!("wrote {}", a.out.display());
+    say!("wrote {}", out.display());
     Ok(())
 }
 

@@ -169,7 +169,7 @@ enum Command {
         #[command(flatten)]
         common: Common,
     },
-    /// Merge partial states (--partial of direct, column, indirect over row ranges) by
+    /// Merge partial states (--partial of direct, column, indirect, matrix over row ranges) by
     /// addition and finish them: the same volume as one pass over all rows.
     Merge {
         /// Partial state files; together they must hold every laser row exactly once.
@@ -721,13 +721,6 @@ fn run(cmd: Command) -> Result<(), Failure> {
                     )
                     .into());
                 };
-                if opts.leak.is_some() {
-                    return Err(vltm::Error::arg(
-                        "--partial",
-                        "partial states hold the paper's Eq. 17 without leak correction: add --no-leak-correct",
-                    )
-                    .into());
-                }
                 if cuts.is_some() || opts.gate != ColumnGate::TwoBounce {
                     return Err(vltm::Error::arg(
                         "--partial",
@@ -736,7 +729,10 @@ fn run(cmd: Command) -> Result<(), Failure> {
                     .into());
                 }
                 let gamma = probe::gamma_mask(d, epsilon);
-                let task = probe::Task::Indirect { gamma, shell };
+                // The leak gate corrects each row on its own (Γ's return times only): a part
+                // is corrected exactly as one pass corrects those rows.
+                let leak = opts.leak.is_some();
+                let task = probe::Task::Indirect { gamma, shell, leak };
                 return partial::run(&common, &capture, task);
             }
             let mut c = common.load(&capture)?;

@@ -1,11 +1,13 @@
-//! The command line's partial runs: `--rows A:B --partial F` on `direct`, `column` and
-//! `indirect` (the accumulator state of a part of the scan), `vltm merge` (add the parts and
-//! finish them), and reading a direct-light `.npy` for Γ.
+//! The command line's partial runs: `--rows A:B --partial F` on `direct`, `column`,
+//! `indirect` and `matrix` (the accumulator state of a part of the scan), `vltm merge` (add
+//! the parts and finish them: a volume, or the matrix's HDF5 file), and reading a
+//! direct-light `.npy` for Γ.
 
 use super::{Common, Failure, Provenance, summarize, write_outputs};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
-use vltm::probe::{Partial, Task, partial};
+use vltm::io::RowSource;
+use vltm::probe::{Exec, Partial, Task, Wave, partial};
 use vltm::volume::Volume;
 
 /// Whether the probe's run is a partial one (`--partial`); `--rows` without it is refused.
@@ -51,8 +53,34 @@ pub(crate) fn parse_rows(s: &str, n: usize) -> vltm::Result<Range<usize>> {
 pub(crate) fn run(c: &Common, capture: &Path, task: Task) -> Result<(), Failure> {
     let volume = Volume::parse(&c.volume)?;
     let mut src = c.load(capture)?;
+    let Some(out) = &c.partial else {
+        return Ok(());
+    };
+    let wave = c.wave();
+    run_task(
+        capture,
+        &mut *src,
+        &volume,
+        &task,
+        (&wave, c.exec()),
+        c.rows.as_deref(),
+        out,
+    )
+}
+
+/// Runs `task` over the rows `rows` (`A:B`, default all) of `src` (the capture file
+/// `capture`) and writes its state to `out`.
+pub(crate) fn run_task(
+    capture: &Path,
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    task: &Task,
+    (wave, exec): (&Wave, Exec<'_>),
+    rows: Option<&str>,
+    out: &Path,
+) -> Result<(), Failure> {
     let n = src.geometry().lasers.len();
-    let rows = match &c.rows {
+    let rows = match rows {
         Some(r) => parse_rows(r, n)?,
         None => 0..n,
     };
@@ -63,19 +91,7 @@ pub(crate) fn run(c: &Common, capture: &Path, task: Task) -> Result<(), Failure>
         .file_name()
         .map_or_else(String::new, |f| f.to_string_lossy().into_owned());
     let t = std::time::Instant::now();
-    let p = partial::accumulate(
-        &mut *src,
-        bytes,
-        &name,
-        &volume,
-        &task,
-        &c.wave(),
-        c.exec(),
-        rows.clone(),
-    )?;
-    let Some(out) = &c.partial else {
-        return Ok(());
-    };
+    let p = partial::accumulate(src, bytes, &name, volume, task, wave, exec, rows.clone())?;
     p.write(out)?;
     say!(
         "{}: rows {}:{} of {n} in {:.2} s; wrote {} ({} bytes)",
@@ -120,6 +136,34 @@ pub(crate) fn merge(
     let f = merged.finish()?;
     let o = &f.output;
     let kind = merged.kind().to_string();
+    if let Some(m) = &f.matrix {
+        let Some(out) = &out else {
+            return Err(vltm::Error::arg(
+                "--out",
+                "merged matrix parts are written as HDF5: add --out F.h5",
+            )
+            .into());
+        };
+        if png.is_some() {
+            return Err(
+                vltm::Error::arg("--png", "a matrix has no figure: leave out --png").into(),
+            );
+        }
+        crate::ltm::check_matrix_out(out)?;
+        let texts = [
+            ("from", format!("{} points (partial states)", m.n_from)),
+            ("to", format!("{} points (partial states)", m.n_to)),
+            ("volume", String::new()),
+        ];
+        let capture = PathBuf::from(merged.capture_name());
+        let to = &f.volume.points;
+        return crate::ltm::write_matrix(m, merged.from_points(), to, &capture, out, &[], texts);
+    }
+    if let Some(e) = f.explained {
+        say!(
+            "leak correction: {e:.4} of the capture's energy was in the 3-vertex windows of Γ and removed"
+        );
+    }
     summarize(
         &kind,
         &o.values,

@@ -17,13 +17,18 @@
 //! | 8 | magic `VLTMPART` |
 //! | 4 | format version, `u32` (1) |
 //! | 4 | header length `h`, `u32` |
-//! | `h` | header: UTF-8 JSON — `capture` (identity), `probe` (kind and parameters), `rows` (row ranges `[a, b)`), `report` (counters), `legs` (per factorised column: projector leg range or null), `n_spads`, `n_points`, `n_acc`, `crc32` (of the bytes that follow, 8 hex digits), `capture_name` (informational) |
+//! | `h` | header: UTF-8 JSON — `capture` (identity), `probe` (kind and parameters), `rows` (row ranges `[a, b)`), `report` (counters), `legs` (per factorised column: projector leg range or null), `n_spads`, `n_points`, `n_from`, `n_acc`, `crc32` (of the bytes that follow, 8 hex digits), `capture_name` (informational) |
 //! | `12·n_spads` | SPAD spots, `f32` x, y, z (columns and indirect light image with them) |
 //! | `12·n_points` | volume points, `f32` (point lists only; grids are rebuilt from `probe.volume.axes`) |
+//! | `12·n_from` | the matrix's foci `x_a`, `f32` (`n_from` absent = 0: parts written before it read the same) |
 //! | `8·n_acc` | the accumulators, `f64` (complex numbers as re, im pairs) |
 //!
 //! State per probe (`f64`): direct light `2·Kv`; higher-order column `2·Kv`; factorised
-//! column (two-bounce) `2J(Ks+1)`, un-gated `2Ks`; in-focus indirect light `|Γ|·2J(Ks+1)`.
+//! column (two-bounce) `2J(Ks+1)`, un-gated `2Ks`; in-focus indirect light `|Γ|·2J(Ks+1)`
+//! (leak-corrected or not: the gate corrects each row from Γ and the geometry alone, and the
+//! header sums the energy read and removed, `report.leak_total`/`leak_cut`); the matrix
+//! `n_from·2J(Ks+1)` (one factorised column per focus, imaged over the `to` voxels when
+//! finished).
 //! Merging is one addition per `f64`; finishing costs what finishing one pass costs (the
 //! imaging of factorised columns). Memory: the state, twice while merging two parts.
 
@@ -33,16 +38,21 @@ use super::column::{
 use super::direct::direct_acc;
 use super::drive::{Job, intensities};
 use super::indirect::indirect_sum;
+use super::leak::{DirectModel, GateEnergy, LeakCorrected, LeakOptions, cell_radius};
+use super::matrix::{Matrix, matrix_acc, matrix_of_columns};
 use super::wave::{Output, Wave};
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path};
-use crate::io::capture::{Geometry, RowRange, RowSource};
+use crate::io::capture::{RowRange, RowSource};
 use crate::volume::Volume;
 use num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 use std::ops::Range;
 use std::time::Instant;
-use vltm_kernel::{Config, Gate, Legs, Params, Point, Report, Weights};
+use vltm_kernel::{Config, Gate, Legs, Params, Point, Report};
+
+mod names;
+use names::*;
 
 /// The magic bytes that open a partial state.
 pub const MAGIC: &[u8; 8] = b"VLTMPART";
@@ -70,6 +80,14 @@ pub enum Task {
         gamma: Vec<bool>,
         /// Pair shell (`None`: `r0 = 1.5σ`).
         shell: Option<Shell>,
+        /// Leak correction ([`super::LeakMethod::Gate`], default options) before the columns:
+        /// the windows of Γ's direct returns zeroed row by row, as one pass does.
+        leak: bool,
+    },
+    /// The two-bounce LTM between the foci `from` and the volume's voxels ([`super::matrix()`]).
+    Matrix {
+        /// Projector foci `x_a` (the matrix's rows, m).
+        from: Vec<Point>,
     },
 }
 
@@ -103,6 +121,9 @@ struct ProbeHead {
     shell: Option<(f32, Option<f32>)>,
     /// Γ as voxel indices (indirect light).
     gamma: Option<Vec<usize>>,
+    /// Leak-corrected (gate method, default options) indirect light.
+    #[serde(default)]
+    leak: bool,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -144,6 +165,11 @@ struct Counters {
     rows: u64,
     non_finite: u64,
     dropped: u64,
+    /// `Σ H²` read and zeroed by the leak gate ([`GateEnergy`]).
+    #[serde(default)]
+    leak_total: f64,
+    #[serde(default)]
+    leak_cut: f64,
 }
 
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -156,6 +182,9 @@ struct Head {
     legs: Vec<Option<[f64; 2]>>,
     n_spads: usize,
     n_points: usize,
+    /// Foci of a matrix (their points follow the volume's).
+    #[serde(default)]
+    n_from: usize,
     n_acc: usize,
     /// CRC-32 of the bytes after the header, 8 hex digits.
     crc32: String,
@@ -170,75 +199,8 @@ pub struct Partial {
     head: Head,
     spads: Vec<Point>,
     points: Vec<Point>,
+    from: Vec<Point>,
     acc: Vec<f64>,
-}
-
-/// FNV-1a, 64 bits.
-fn fnv(bytes: impl IntoIterator<Item = u8>) -> u64 {
-    bytes.into_iter().fold(0xcbf2_9ce4_8422_2325, |h, b| {
-        (h ^ u64::from(b)).wrapping_mul(0x0000_0100_0000_01b3)
-    })
-}
-
-fn point_bytes(pts: &[Point]) -> impl Iterator<Item = u8> + '_ {
-    pts.iter().flatten().flat_map(|c| c.to_le_bytes())
-}
-
-fn geometry_hash(g: &Geometry) -> String {
-    let mut b: Vec<u8> = point_bytes(&g.lasers)
-        .chain(point_bytes(&g.spads))
-        .collect();
-    for n in g.laser_shape.iter().chain(&g.spad_shape).chain([&g.nt]) {
-        b.extend((*n as u64).to_le_bytes());
-    }
-    for x in g
-        .laser_origin
-        .iter()
-        .chain(&g.sensor_origin)
-        .chain([&g.dt, &g.t0])
-    {
-        b.extend(x.to_le_bytes());
-    }
-    b.extend([u8::from(g.legs_in_time), u8::from(g.confocal)]);
-    format!("{:016x}", fnv(b))
-}
-
-fn weights_name(w: Weights) -> &'static str {
-    match w {
-        Weights::Inv => "inv",
-        Weights::One => "one",
-    }
-}
-
-fn parse_weights(s: &str) -> Result<Weights> {
-    match s {
-        "inv" => Ok(Weights::Inv),
-        "one" => Ok(Weights::One),
-        _ => Err(Error::arg("weights", format!("unknown weights `{s}`"))),
-    }
-}
-
-fn gate_name(g: ColumnGate) -> &'static str {
-    match g {
-        ColumnGate::TwoBounce => "two-bounce",
-        ColumnGate::HigherOrder => "higher-order",
-        ColumnGate::None => "none",
-    }
-}
-
-fn parse_gate(s: &str) -> Option<ColumnGate> {
-    match s {
-        "two-bounce" => Some(ColumnGate::TwoBounce),
-        "higher-order" => Some(ColumnGate::HigherOrder),
-        "none" => Some(ColumnGate::None),
-        _ => None,
-    }
-}
-
-fn parse_path(s: &str) -> Option<Path> {
-    [Path::Band, Path::Planar, Path::Lookup, Path::Auto]
-        .into_iter()
-        .find(|p| p.name() == s)
 }
 
 fn config_head(cfg: &Config) -> ConfigHead {
@@ -264,35 +226,6 @@ fn config_head(cfg: &Config) -> ConfigHead {
     }
 }
 
-fn shell_head(s: Shell) -> (f32, Option<f32>) {
-    (s.r0, s.r1.is_finite().then_some(s.r1))
-}
-
-fn shell_of(s: (f32, Option<f32>)) -> Shell {
-    Shell {
-        r0: s.0,
-        r1: s.1.unwrap_or(f32::INFINITY),
-    }
-}
-
-fn leg_head(l: (f64, f64)) -> Option<[f64; 2]> {
-    (l.0 <= l.1).then_some([l.0, l.1])
-}
-
-fn leg_of(l: Option<[f64; 2]>) -> (f64, f64) {
-    l.map_or((f64::INFINITY, f64::NEG_INFINITY), |[a, b]| (a, b))
-}
-
-fn complex(acc: &[f64]) -> Vec<Complex64> {
-    acc.chunks_exact(2)
-        .map(|z| Complex64::new(z[0], z[1]))
-        .collect()
-}
-
-fn flat(acc: &[Complex64]) -> Vec<f64> {
-    acc.iter().flat_map(|z| [z.re, z.im]).collect()
-}
-
 /// Runs `task` over the laser rows `rows` of `src` and returns its accumulator state.
 /// `file_bytes` is the capture file's size (0 for a capture made in memory) and
 /// `capture_name` its name (recorded, not compared). Every parameter is derived from the whole
@@ -315,6 +248,7 @@ pub fn accumulate(
     let mut part = RowRange::new(src, rows.clone())?;
     let mut legs = Vec::new();
     let mut spads = Vec::new();
+    let mut energy = GateEnergy::default();
     let (cfg, acc, report, path, focus, gate, shell, gamma) = match task {
         Task::Direct => {
             let (a, cfg) = direct_acc(&mut part, volume, wave, exec)?;
@@ -340,7 +274,7 @@ pub fn accumulate(
             let sh = Some(shell_head(*shell));
             (cfg, acc, report, path, Some(*focus), Some(*gate), sh, None)
         }
-        Task::Indirect { gamma, shell } => {
+        Task::Indirect { gamma, shell, leak } => {
             if gamma.len() != volume.len() {
                 return Err(Error::arg(
                     "gamma",
@@ -354,19 +288,34 @@ pub fn accumulate(
                 r0: 1.5 * cfg.sigma() as f32,
                 r1: f32::INFINITY,
             });
-            let cols = if pts.is_empty() {
-                Columns {
+            let job = Job {
+                cfg: &cfg,
+                wave,
+                exec,
+            };
+            let cols = match (pts.is_empty(), leak) {
+                (true, true) => {
+                    return Err(Error::arg(
+                        "--leak-correct",
+                        "Γ is empty: no voxel has direct light above ε·max (no direct return in the window for this volume?)",
+                    ));
+                }
+                (true, false) => Columns {
                     state: Vec::new(),
                     report: Report::default(),
                     legs: Vec::new(),
+                },
+                (false, true) => {
+                    let lo = LeakOptions::default();
+                    let model = DirectModel::gate(&g, &pts, cell_radius(volume), wave, &lo)?;
+                    let mut lc = LeakCorrected::measuring(&mut part, &model);
+                    let c = factorised_columns(&mut lc, job, &pts, Gate::Gaussian, "indirect")?;
+                    energy = lc.energy().unwrap_or_default();
+                    c
                 }
-            } else {
-                let job = Job {
-                    cfg: &cfg,
-                    wave,
-                    exec,
-                };
-                factorised_columns(&mut part, job, &pts, Gate::Gaussian, "indirect")?
+                (false, false) => {
+                    factorised_columns(&mut part, job, &pts, Gate::Gaussian, "indirect")?
+                }
             };
             legs = cols.legs.iter().copied().map(leg_head).collect();
             spads.clone_from(&g.spads);
@@ -382,11 +331,27 @@ pub fn accumulate(
                 Some(idx),
             )
         }
+        Task::Matrix { from } => {
+            let (cols, cfg) = matrix_acc(&mut part, from, &volume.points, wave, exec)?;
+            legs = cols.legs.iter().copied().map(leg_head).collect();
+            spads.clone_from(&g.spads);
+            (
+                cfg,
+                cols.state,
+                cols.report,
+                Path::Band,
+                None,
+                None,
+                None,
+                None,
+            )
+        }
     };
-    let kind = match task {
-        Task::Direct => "direct",
-        Task::Column { .. } => "column",
-        Task::Indirect { .. } => "indirect",
+    let (kind, from, leak) = match task {
+        Task::Direct => ("direct", Vec::new(), false),
+        Task::Column { .. } => ("column", Vec::new(), false),
+        Task::Indirect { leak, .. } => ("indirect", Vec::new(), *leak),
+        Task::Matrix { from } => ("matrix", from.clone(), false),
     };
     let points = if volume.axes.is_some() {
         Vec::new()
@@ -428,6 +393,7 @@ pub fn accumulate(
             gate: gate.map(|g| gate_name(g).into()),
             shell,
             gamma,
+            leak,
         },
         rows: if rows.is_empty() {
             Vec::new()
@@ -438,10 +404,13 @@ pub fn accumulate(
             rows: report.rows,
             non_finite: report.non_finite,
             dropped: report.dropped,
+            leak_total: energy.total,
+            leak_cut: energy.cut,
         },
         legs,
         n_spads: spads.len(),
         n_points: points.len(),
+        n_from: from.len(),
         n_acc: acc.len(),
         crc32: String::new(),
         capture_name: capture_name.into(),
@@ -450,6 +419,7 @@ pub fn accumulate(
         head,
         spads,
         points,
+        from,
         acc,
     })
 }
@@ -459,15 +429,20 @@ pub fn accumulate(
 pub struct Finished {
     /// Intensities, configuration, counters and path (`seconds`: the finishing time).
     pub output: Output,
-    /// Complex amplitudes per voxel (`T = |A|²`), for direct light and higher-order columns;
-    /// `None` for factorised columns and indirect light (imaged as intensities).
+    /// Complex amplitudes per voxel (`T = |A|²`), for direct light and higher-order columns,
+    /// and for two-bounce columns when asked for ([`Partial::finish_with`]); `None` for
+    /// un-gated columns, indirect light (imaged as intensities) and the matrix.
     pub amplitudes: Option<Vec<Complex64>>,
-    /// The volume the state was accumulated over.
+    /// The volume the state was accumulated over (the matrix's `to` voxels).
     pub volume: Volume,
+    /// The matrix (its `output.values` are the intensities, row-major `n_from × n_to`).
+    pub matrix: Option<Matrix>,
+    /// Leak-corrected indirect light: the fraction of the capture's energy the gate removed.
+    pub explained: Option<f64>,
 }
 
 impl Partial {
-    /// The probe's kind: `direct`, `column` or `indirect`.
+    /// The probe's kind: `direct`, `column`, `indirect` or `matrix`.
     pub fn kind(&self) -> &str {
         &self.head.probe.kind
     }
@@ -492,10 +467,15 @@ impl Partial {
         self.head.probe.focus
     }
 
+    /// The foci of a matrix (its rows; empty for other probes).
+    pub fn from_points(&self) -> &[Point] {
+        &self.from
+    }
+
     /// Size of [`Partial::to_bytes`] without building it (bytes).
     pub fn byte_len(&self) -> usize {
         16 + self.header_json(0).len()
-            + 12 * (self.spads.len() + self.points.len())
+            + 12 * (self.spads.len() + self.points.len() + self.from.len())
             + 8 * self.acc.len()
     }
 
@@ -510,9 +490,11 @@ impl Partial {
 
     /// The state in the binary format of the module docs.
     pub fn to_bytes(&self) -> Vec<u8> {
-        let mut body = Vec::with_capacity(12 * (self.spads.len() + self.points.len()));
+        let mut body =
+            Vec::with_capacity(12 * (self.spads.len() + self.points.len() + self.from.len()));
         body.extend(point_bytes(&self.spads));
         body.extend(point_bytes(&self.points));
+        body.extend(point_bytes(&self.from));
         let mut crc = crc32fast::Hasher::new();
         crc.update(&body);
         let acc: &[u8] = bytemuck::cast_slice(&self.acc);
@@ -568,14 +550,15 @@ impl Partial {
         let want = head
             .n_spads
             .checked_add(head.n_points)
+            .and_then(|n| n.checked_add(head.n_from))
             .and_then(|n| n.checked_mul(12))
             .and_then(|n| head.n_acc.checked_mul(8).and_then(|a| a.checked_add(n)));
         if want != Some(body.len()) {
             return Err(bad(
                 "body",
                 &format!(
-                    "{} SPADs, {} points and {} accumulators",
-                    head.n_spads, head.n_points, head.n_acc
+                    "{} SPADs, {} + {} points and {} accumulators",
+                    head.n_spads, head.n_points, head.n_from, head.n_acc
                 ),
                 format!("{} bytes (truncated or padded)", body.len()),
             ));
@@ -597,7 +580,8 @@ impl Partial {
                 .collect()
         };
         let (sp, rest) = body.split_at(12 * head.n_spads);
-        let (pt, acc) = rest.split_at(12 * head.n_points);
+        let (pt, rest) = rest.split_at(12 * head.n_points);
+        let (fr, acc) = rest.split_at(12 * head.n_from);
         let acc = acc
             .chunks_exact(8)
             .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
@@ -605,6 +589,7 @@ impl Partial {
         let p = Self {
             spads: pts(sp),
             points: pts(pt),
+            from: pts(fr),
             acc,
             head,
         };
@@ -678,6 +663,7 @@ impl Partial {
             if a.head.probe != b.head.probe
                 || a.spads != b.spads
                 || a.points != b.points
+                || a.from != b.from
                 || a.acc.len() != b.acc.len()
                 || a.head.legs.len() != b.head.legs.len()
             {
@@ -721,6 +707,7 @@ impl Partial {
                 head,
                 spads: Vec::new(),
                 points: Vec::new(),
+                from: Vec::new(),
                 acc: Vec::new(),
             },
         );
@@ -733,6 +720,8 @@ impl Partial {
             r.rows += s.rows;
             r.non_finite += s.non_finite;
             r.dropped += s.dropped;
+            r.leak_total += s.leak_total;
+            r.leak_cut += s.leak_cut;
             for (l, m) in out.head.legs.iter_mut().zip(&b.head.legs) {
                 let (x, y) = (leg_of(*l), leg_of(*m));
                 *l = leg_head((x.0.min(y.0), x.1.max(y.1)));
@@ -754,6 +743,16 @@ impl Partial {
     /// # Errors
     /// [`Error::Argument`] (`merge`) when rows are missing; configuration and kernel errors.
     pub fn finish(&self) -> Result<Finished> {
+        self.finish_with(false)
+    }
+
+    /// As [`Partial::finish`]; `amplitudes`: also image the complex amplitudes of a
+    /// two-bounce column (beside its intensities: about twice the imaging time).
+    ///
+    /// # Errors
+    /// As [`Partial::finish`]; [`Error::Argument`] (`--leak-correct`) for leak-corrected
+    /// indirect light when the gate removed nothing (as one pass).
+    pub fn finish_with(&self, amplitudes: bool) -> Result<Finished> {
         let t = Instant::now();
         if !self.is_complete() {
             let mut missing = Vec::new();
@@ -821,6 +820,7 @@ impl Partial {
         };
         let path = parse_path(&p.path).unwrap_or(Path::Band);
         let shell = p.shell.map_or(Shell::ALL, shell_of);
+        let mut matrix = None;
         let (values, report, path, amplitudes) = match p.kind.as_str() {
             "direct" => {
                 let acc = complex(&self.acc);
@@ -830,30 +830,26 @@ impl Partial {
                 let focus = p.focus.unwrap_or([0.0, 0.0, 1.0]);
                 check_focus(focus)?;
                 let gate = p.gate.as_deref().and_then(parse_gate);
-                let (state, amplitudes) = match gate {
+                let state = match gate {
                     Some(ColumnGate::HigherOrder) => {
-                        let acc = complex(&self.acc);
-                        (ColumnState::Voxels(acc.clone(), report), Some(acc))
+                        ColumnState::Voxels(complex(&self.acc), report)
                     }
-                    Some(g) => (
-                        ColumnState::Factorised {
-                            state: self.acc.clone(),
-                            report,
-                            legs: leg_of(self.head.legs.first().copied().flatten()),
-                            gate: if g == ColumnGate::None {
-                                Gate::None
-                            } else {
-                                Gate::Gaussian
-                            },
-                            path,
-                            planar: None,
+                    Some(g) => ColumnState::Factorised {
+                        state: self.acc.clone(),
+                        report,
+                        legs: leg_of(self.head.legs.first().copied().flatten()),
+                        gate: if g == ColumnGate::None {
+                            Gate::None
+                        } else {
+                            Gate::Gaussian
                         },
-                        None,
-                    ),
+                        path,
+                        planar: None,
+                    },
                     None => return Err(Error::arg("gate", "unknown gate in the partial state")),
                 };
-                let (v, r, path) = state.finish(&cfg, &self.spads, focus, &volume, shell)?;
-                (v, r, path, amplitudes)
+                let amps = amplitudes || gate == Some(ColumnGate::HigherOrder);
+                state.finish(&cfg, &self.spads, focus, &volume, shell, amps)?
             }
             "indirect" => {
                 let idx = p.gamma.clone().unwrap_or_default();
@@ -877,6 +873,19 @@ impl Partial {
                 )?;
                 (v, r, Path::Band, None)
             }
+            "matrix" => {
+                let mut cols = Columns {
+                    state: self.acc.clone(),
+                    report,
+                    legs: self.head.legs.iter().copied().map(leg_of).collect(),
+                };
+                let m =
+                    matrix_of_columns(&mut cols, &cfg, &self.spads, &self.from, &volume.points)?;
+                let v = m.intensities();
+                let r = m.report;
+                matrix = Some(m);
+                (v, r, Path::Band, None)
+            }
             k => return Err(Error::arg("kind", format!("unknown probe `{k}`"))),
         };
         Ok(Finished {
@@ -889,6 +898,18 @@ impl Partial {
             },
             amplitudes,
             volume,
+            matrix,
+            explained: if p.leak {
+                Some(
+                    GateEnergy {
+                        total: self.head.report.leak_total,
+                        cut: self.head.report.leak_cut,
+                    }
+                    .explained()?,
+                )
+            } else {
+                None
+            },
         })
     }
 }
