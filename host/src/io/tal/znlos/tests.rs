@@ -310,3 +310,23 @@ fn corrupt_files_are_errors_not_panics() {
         assert!(errors > 0);
     }
 }
+
+/// Writes small Z-NLOS files of every axis order to `fuzz/seeds/tal` (the `tal` fuzz target
+/// opens either HDF5 layout). `cargo test --release -p vltm --lib -- --ignored
+/// write_znlos_fuzz_seeds`.
+#[test]
+#[ignore = "writes fuzz/seeds/tal; run by hand"]
+fn write_znlos_fuzz_seeds() {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/seeds/tal");
+    std::fs::create_dir_all(&d).unwrap();
+    for (name, layout) in [
+        ("znlos_rows7.hdf5", ZnlosLayout::Rows7),
+        ("znlos_time7.hdf5", ZnlosLayout::Time7),
+        ("znlos_rows5.hdf5", ZnlosLayout::Rows5),
+        ("znlos_time5.hdf5", ZnlosLayout::Time5),
+    ] {
+        let p = d.join(name);
+        write(&p, layout, [2, 2], [2, 2], 4, "", false);
+        assert!(read_all(&p).is_ok(), "{name}");
+    }
+}
