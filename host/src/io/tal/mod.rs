@@ -226,12 +226,7 @@ pub enum Hdf5Layout {
 /// [`Error::Io`] if the file cannot be opened; [`Error::Format`] on `(layout)` listing the
 /// root datasets when neither is there, or on `(file)` when it is not HDF5.
 pub fn detect(path: &Path) -> Result<Hdf5Layout> {
-    let file = Hdf5File::open(path).map_err(|e| h5_error(path, "(file)", e))?;
-    let names = file
-        .root_group()
-        .and_then(|g| g.member_names())
-        .map_err(|e| h5_error(path, "(root group)", e))?
-        .1;
+    let (_, names) = open_file(path)?;
     if names.iter().any(|n| n == "data") {
         Ok(Hdf5Layout::Znlos)
     } else if names.iter().any(|n| n == "H") {
@@ -275,19 +270,27 @@ pub fn read_any(path: &Path) -> Result<Capture> {
     }
 }
 
+/// Opens an HDF5 capture and lists its root datasets. No single read of the file may exceed
+/// the memory budget (grids, blocks: the crate refuses it before allocating).
+///
+/// # Errors
+/// [`Error::Format`] on `(file)` when it is not HDF5 (or cannot be read), on `(root group)`
+/// when its root group cannot be listed.
+fn open_file(path: &Path) -> Result<(Hdf5File, Vec<String>)> {
+    let limit = usize::try_from(budget::get()).unwrap_or(usize::MAX);
+    let file = Hdf5File::open_with_options(path, OpenOptions::default().with_max_read_bytes(limit))
+        .map_err(|e| h5_error(path, "(file)", e))?;
+    let names = file
+        .root_group()
+        .and_then(|g| g.member_names())
+        .map_err(|e| h5_error(path, "(root group)", e))?
+        .1;
+    Ok((file, names))
+}
+
 impl TalReader {
     fn new(path: &Path, options: TalOptions) -> Result<Self> {
-        // No single read may exceed the memory budget (grids, blocks: the crate refuses it
-        // before allocating).
-        let limit = usize::try_from(budget::get()).unwrap_or(usize::MAX);
-        let file =
-            Hdf5File::open_with_options(path, OpenOptions::default().with_max_read_bytes(limit))
-                .map_err(|e| h5_error(path, "(file)", e))?;
-        let names = file
-            .root_group()
-            .and_then(|g| g.member_names())
-            .map_err(|e| h5_error(path, "(root group)", e))?
-            .1;
+        let (file, names) = open_file(path)?;
         let f = Fields {
             path,
             file: &file,
@@ -323,18 +326,7 @@ impl TalReader {
                 format!("shape {dims:?}"),
             ));
         }
-        let elem = match h.dtype() {
-            Datatype::FloatingPoint { size: 4, .. } => Elem::F32,
-            Datatype::FloatingPoint { size: 8, .. } => Elem::F64,
-            other => {
-                return Err(Error::format(
-                    path,
-                    "H",
-                    "float32 or float64 values",
-                    format!("{other:?}"),
-                ));
-            }
-        };
+        let elem = Elem::of(&h, path, "H")?;
         let elem_bytes: usize = if elem == Elem::F32 { 4 } else { 8 };
         let h_bytes = dims.iter().try_fold(elem_bytes, |a, &d| a.checked_mul(d));
         let file_len = std::fs::metadata(path)

@@ -72,11 +72,11 @@
 //! non-numeric or non-finite values, data outside the file).
 
 use super::fields::{Fields, Grid, h5_error, into_vec, usize_of};
-use super::{BLOCK_BYTES, Elem, HFormat, ScanType, TalOptions, check_layout, scan};
+use super::{BLOCK_BYTES, Elem, HFormat, ScanType, TalOptions, check_layout, open_file, scan};
 use crate::budget;
 use crate::error::{Error, Result};
 use crate::io::capture::{Capture, Geometry, RowSource};
-use hdf5_reader::{Dataset, Datatype, Hdf5File, OpenOptions, SliceInfo, SliceInfoElem};
+use hdf5_reader::{Dataset, SliceInfo, SliceInfoElem};
 use std::path::{Path, PathBuf};
 use vltm_kernel::Point;
 
@@ -262,15 +262,7 @@ fn c_strides(dims: &[usize]) -> Vec<usize> {
 
 impl ZnlosReader {
     fn new(path: &Path, options: TalOptions) -> Result<Self> {
-        let limit = usize::try_from(budget::get()).unwrap_or(usize::MAX);
-        let file =
-            Hdf5File::open_with_options(path, OpenOptions::default().with_max_read_bytes(limit))
-                .map_err(|e| h5_error(path, "(file)", e))?;
-        let names = file
-            .root_group()
-            .and_then(|g| g.member_names())
-            .map_err(|e| h5_error(path, "(root group)", e))?
-            .1;
+        let (file, names) = open_file(path)?;
         let f = Fields {
             path,
             file: &file,
@@ -287,18 +279,7 @@ impl ZnlosReader {
                 format!("shape {dims:?}"),
             )
         })?;
-        let elem = match h.dtype() {
-            Datatype::FloatingPoint { size: 4, .. } => Elem::F32,
-            Datatype::FloatingPoint { size: 8, .. } => Elem::F64,
-            other => {
-                return Err(Error::format(
-                    path,
-                    "data",
-                    "float32 or float64 values",
-                    format!("{other:?}"),
-                ));
-            }
-        };
+        let elem = Elem::of(&h, path, "data")?;
         let elem_bytes: usize = if elem == Elem::F32 { 4 } else { 8 };
         let h_bytes = dims.iter().try_fold(elem_bytes, |a, &d| a.checked_mul(d));
         let file_len = std::fs::metadata(path)
