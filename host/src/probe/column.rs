@@ -580,21 +580,13 @@ pub(super) fn factorised_columns(
     let ks = g.spads_per_row();
     let n_state = Probe::state_len(cfg, Target::Column(foci[0]), gate, 0, ks);
     let mut state = vec![0.0f64; n_state * foci.len()];
-    let mut probes: Vec<Probe<'_>> = Vec::new();
-    let mut state_iter = Some(state.chunks_mut(n_state.max(1)));
-    drive(src, job, label, |scan, row| {
-        if let Some(it) = state_iter.take() {
-            probes = foci
-                .iter()
-                .zip(it)
-                .map(|(a, s)| Probe::new(scan, Target::Column(*a), gate, &[], s))
-                .collect::<Result<_, _>>()?;
-        }
-        probes
-            .par_iter_mut()
-            .try_for_each(|p| p.push_row(scan, row))?;
-        Ok(())
-    })?;
+    let probes = drive_probes(
+        src,
+        job,
+        label,
+        state.chunks_mut(n_state.max(1)),
+        |scan, k, s| Probe::new(scan, Target::Column(foci[k]), gate, &[], s),
+    )?;
     let report = probes.first().map(Probe::report).unwrap_or_default();
     let mut legs: Vec<(f64, f64)> = probes.iter().map(Probe::leg_range).collect();
     legs.resize(foci.len(), (f64::INFINITY, f64::NEG_INFINITY));

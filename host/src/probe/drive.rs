@@ -222,6 +222,34 @@ pub(super) fn check_laser_falloff(g: &Geometry, wave: &Wave) -> Result<()> {
     Ok(())
 }
 
+/// Streams every row of `src` ([`drive`]) through one kernel probe per accumulator state,
+/// the probes pushed in parallel. The probes need a `Scan` only to validate sizes, so they are
+/// made on the first row, by `make(scan, k, state)` for the `k`-th state. Returns the probes
+/// (none when the pass read no row).
+pub(super) fn drive_probes<'m>(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    label: &str,
+    states: impl Iterator<Item = &'m mut [f64]>,
+    make: impl Fn(&Scan<'_>, usize, &'m mut [f64]) -> Result<Probe<'m>, vltm_kernel::Error>,
+) -> Result<Vec<Probe<'m>>> {
+    let mut probes = Vec::new();
+    let mut states = Some(states);
+    drive(src, job, label, |scan, row| {
+        if let Some(it) = states.take() {
+            probes = it
+                .enumerate()
+                .map(|(k, s)| make(scan, k, s))
+                .collect::<Result<_, _>>()?;
+        }
+        probes
+            .par_iter_mut()
+            .try_for_each(|p| p.push_row(scan, row))?;
+        Ok(())
+    })?;
+    Ok(probes)
+}
+
 /// Element-wise probes (diagonal, higher-order column) over voxel chunks in parallel: the
 /// complex accumulator of every voxel (volume order; `T = |A|²`) and the counters.
 pub(super) fn elementwise(
@@ -245,22 +273,13 @@ pub(super) fn elementwise(
         .iter()
         .map(|c| vec![0.0; Probe::state_len(cfg, target, gate, c.len(), ks)])
         .collect();
-    // The probes need a Scan only for validation of sizes; build them on the first row.
-    let mut probes: Vec<Probe<'_>> = Vec::new();
-    let mut state_iter = Some(states.iter_mut());
-    drive(src, job, label, |scan, row| {
-        if let Some(it) = state_iter.take() {
-            probes = chunks
-                .iter()
-                .zip(it)
-                .map(|(c, s)| Probe::new(scan, target, gate, c, s))
-                .collect::<Result<_, _>>()?;
-        }
-        probes
-            .par_iter_mut()
-            .try_for_each(|p| p.push_row(scan, row))?;
-        Ok(())
-    })?;
+    let probes = drive_probes(
+        src,
+        job,
+        label,
+        states.iter_mut().map(Vec::as_mut_slice),
+        |scan, k, s| Probe::new(scan, target, gate, chunks[k], s),
+    )?;
     // Every chunk saw the same rows: one chunk's counters are the pass's.
     let report = probes.first().map(Probe::report).unwrap_or_default();
     let mut acc = Vec::with_capacity(voxels.len());

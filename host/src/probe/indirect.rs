@@ -291,21 +291,13 @@ fn higher_order_columns(
         ks,
     );
     let mut states: Vec<Vec<f64>> = foci.iter().map(|_| vec![0.0; n_state]).collect();
-    let mut probes: Vec<Probe<'_>> = Vec::new();
-    let mut state_iter = Some(states.iter_mut());
-    drive(src, job, label, |scan, row| {
-        if let Some(it) = state_iter.take() {
-            probes = foci
-                .iter()
-                .zip(it)
-                .map(|(a, s)| Probe::new(scan, Target::Column(*a), Gate::HigherOrder, foci, s))
-                .collect::<Result<_, _>>()?;
-        }
-        probes
-            .par_iter_mut()
-            .try_for_each(|p| p.push_row(scan, row))?;
-        Ok(())
-    })?;
+    let probes = drive_probes(
+        src,
+        job,
+        label,
+        states.iter_mut().map(Vec::as_mut_slice),
+        |scan, k, s| Probe::new(scan, Target::Column(foci[k]), Gate::HigherOrder, foci, s),
+    )?;
     let g = src.geometry().clone();
     let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
     let scan = Scan::new(cfg, &g.spads, &mut tables)?;

@@ -201,21 +201,13 @@ fn amplitude_pass(
     let ks = g.spads_per_row();
     let n_state = Probe::state_len(cfg, Target::Column(foci[0]), Gate::Gaussian, 0, ks);
     let mut states: Vec<Vec<f64>> = foci.iter().map(|_| vec![0.0; n_state]).collect();
-    let mut probes: Vec<Probe<'_>> = Vec::new();
-    let mut state_iter = Some(states.iter_mut());
-    drive(src, job, label, |scan, row| {
-        if let Some(it) = state_iter.take() {
-            probes = foci
-                .iter()
-                .zip(it)
-                .map(|(a, s)| Probe::new(scan, Target::Column(*a), Gate::Gaussian, &[], s))
-                .collect::<Result<_, _>>()?;
-        }
-        probes
-            .par_iter_mut()
-            .try_for_each(|p| p.push_row(scan, row))?;
-        Ok(())
-    })?;
+    let probes = drive_probes(
+        src,
+        job,
+        label,
+        states.iter_mut().map(Vec::as_mut_slice),
+        |scan, k, s| Probe::new(scan, Target::Column(foci[k]), Gate::Gaussian, &[], s),
+    )?;
     let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
     let scan = Scan::new(cfg, &g.spads, &mut tables)?;
     let aliased = image_foci(&probes, &scan, foci, voxels, sink);
