@@ -15,7 +15,7 @@
 mod support;
 
 use std::path::PathBuf;
-use support::{mean_over as mean, object_voxels};
+use support::mean_over as mean;
 use vltm::io::{self, Capture};
 use vltm::kernel::Point;
 use vltm::probe::{self, Exec, IndirectOptions, LeakMethod, LeakOptions, Shell, Wave};
@@ -187,7 +187,7 @@ fn check_corrected(name: &str, m: &Means) {
 
 fn two_patches() -> (Capture, Capture, Volume, Vec<usize>) {
     let vol = Volume::parse("-0.75:0.75:16,-0.75:0.75:16,0.4:1.35:20").unwrap();
-    let b = object_voxels(&vol, &patch_b());
+    let b = vol.surface_voxels(&patch_b());
     let open = |n: &str| io::open(&shared(n, &format!("{n}.hdf5"))).unwrap();
     (open("two_patches"), open("two_patches_direct_only"), vol, b)
 }
@@ -296,7 +296,7 @@ fn figure_surface() -> Vec<Point> {
 #[test]
 fn panel_figure_16_leak_corrected_beats_the_control() {
     let vol = Volume::grid([-0.6, -0.3, 0.5], [0.6, 0.3, 1.22], [21, 11, 13]).unwrap();
-    let fig = object_voxels(&vol, &figure_surface());
+    let fig = vol.surface_voxels(&figure_surface());
     let mut full = panel_scene(Bounces::All).render().unwrap();
     let mut ctrl = panel_scene(Bounces::Direct).render().unwrap();
     let wave = Wave::default();

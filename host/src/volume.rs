@@ -192,6 +192,31 @@ impl Volume {
             .unwrap_or(0)
     }
 
+    /// The voxels an object's surface passes through (the nearest voxel of each point of
+    /// `surface`, a dense sampling of it), grown by one voxel in every grid direction, in
+    /// volume order: "its surface ± one voxel", the set every object mean of vltm's figures
+    /// is taken over. Cost: `O(|surface| · len)`.
+    pub fn surface_voxels(&self, surface: &[Point]) -> Vec<usize> {
+        let [nx, ny, nz] = self.shape;
+        let mut on = vec![false; self.len()];
+        for p in surface {
+            on[self.nearest(*p)] = true;
+        }
+        let mut grown = on.clone();
+        for i in (0..self.len()).filter(|&i| on[i]) {
+            let (ix, iy, iz) = (i / (ny * nz), (i / nz) % ny, i % nz);
+            let r = |c: usize, n: usize| c.saturating_sub(1)..=(c + 1).min(n - 1);
+            for jx in r(ix, nx) {
+                for jy in r(iy, ny) {
+                    for jz in r(iz, nz) {
+                        grown[(jx * ny + jy) * nz + jz] = true;
+                    }
+                }
+            }
+        }
+        (0..self.len()).filter(|&i| grown[i]).collect()
+    }
+
     /// Grid pitch along each axis (0 for single-sample axes and point lists).
     pub fn pitch(&self) -> [f32; 3] {
         match self.axes {

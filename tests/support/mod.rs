@@ -137,31 +137,8 @@ pub fn vltm_bin() -> &'static Path {
     })
 }
 
-/// Voxels of an object: the voxels its surface passes through (the nearest voxel of each
-/// of a dense set of surface points), grown by one voxel in every grid direction. Every ratio
-/// the README states is a mean over such a set ("its surface ± one voxel").
-pub fn object_voxels(vol: &vltm::volume::Volume, surface: &[Point]) -> Vec<usize> {
-    let [nx, ny, nz] = vol.shape;
-    let mut on = vec![false; vol.len()];
-    for p in surface {
-        on[vol.nearest(*p)] = true;
-    }
-    let mut grown = on.clone();
-    for i in (0..vol.len()).filter(|&i| on[i]) {
-        let (ix, iy, iz) = (i / (ny * nz), (i / nz) % ny, i % nz);
-        let r = |c: usize, n: usize| c.saturating_sub(1)..=(c + 1).min(n - 1);
-        for jx in r(ix, nx) {
-            for jy in r(iy, ny) {
-                for jz in r(iz, nz) {
-                    grown[(jx * ny + jy) * nz + jz] = true;
-                }
-            }
-        }
-    }
-    (0..vol.len()).filter(|&i| grown[i]).collect()
-}
-
-/// The voxels of object `name` of `scene` in `vol` ([`object_voxels`]), its surface sampled
+/// The voxels of object `name` of `scene` in `vol` (`Volume::surface_voxels`: its surface ±
+/// one voxel, the set every ratio the README states is a mean over), its surface sampled
 /// densely (40 × 40 points per patch or box face; a point scatterer is its one point).
 pub fn scene_object_voxels(
     scene: &vltm::sim::Scene,
@@ -182,7 +159,7 @@ pub fn scene_object_voxels(
         .iter()
         .map(|p| p.position.map(|x| x as f32))
         .collect();
-    object_voxels(vol, &pts)
+    vol.surface_voxels(&pts)
 }
 
 /// The mean of `v` over the voxels `idx`.

@@ -60,24 +60,8 @@ pub fn object_voxels(vol: &Volume, name: &str) -> Result<Vec<usize>> {
             p.samples = 40;
         }
     }
-    let [nx, ny, nz] = vol.shape;
-    let mut on = vec![false; vol.len()];
-    for p in s.sample_points() {
-        on[vol.nearest(p32(p.position))] = true;
-    }
-    let mut grown = on.clone();
-    for i in (0..vol.len()).filter(|&i| on[i]) {
-        let (ix, iy, iz) = (i / (ny * nz), (i / nz) % ny, i % nz);
-        let r = |c: usize, n: usize| c.saturating_sub(1)..=(c + 1).min(n - 1);
-        for jx in r(ix, nx) {
-            for jy in r(iy, ny) {
-                for jz in r(iz, nz) {
-                    grown[(jx * ny + jy) * nz + jz] = true;
-                }
-            }
-        }
-    }
-    let v: Vec<usize> = (0..vol.len()).filter(|&i| grown[i]).collect();
+    let surface: Vec<Point> = s.sample_points().iter().map(|p| p32(p.position)).collect();
+    let v = vol.surface_voxels(&surface);
     if v.is_empty() {
         return Err(Error::arg(
             "demo",
