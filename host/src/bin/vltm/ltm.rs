@@ -71,7 +71,8 @@ pub(crate) struct WaveArgs {
 }
 
 impl WaveArgs {
-    fn wave(&self) -> Wave {
+    /// The probes' wave options.
+    pub(crate) fn wave(&self) -> Wave {
         Wave {
             wavelength: self.wavelength,
             sigma: self.sigma,

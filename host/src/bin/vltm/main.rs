@@ -16,7 +16,7 @@ mod demo;
 mod input;
 mod progress;
 use input::Input;
-use vltm_kernel::{Point, Weights};
+use vltm_kernel::Point;
 
 /// `println!` that ignores a closed stdout (`vltm info CAPTURE | head` must not panic).
 #[macro_export]
@@ -234,21 +234,8 @@ struct Common {
     /// Voxels: "x0:x1:nx,y0:y1:ny,z0:z1:nz" (metres, inclusive end points) or "x,y,z;x,y,z".
     #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
     volume: String,
-    /// Virtual wavelength λ in metres (default: twice the aperture pitch).
-    #[arg(long, value_name = "M")]
-    wavelength: Option<f64>,
-    /// Std of the Gaussian time gate in metres of path (default 2λ/3).
-    #[arg(long, value_name = "M")]
-    sigma: Option<f64>,
-    /// Lens weights per leg: inv = the paper's 1/d, one = none (y-tal).
-    #[arg(long, value_enum, default_value_t = WeightsArg::Inv)]
-    weights: WeightsArg,
-    /// Frequency band half-width in units of 1/σ (truncation error ≈ erfc(m/√2)).
-    #[arg(long, default_value_t = 5.0, value_name = "M")]
-    band: f64,
-    /// Divide each laser row by the physical laser's cos θ / d² falloff to its spot.
-    #[arg(long)]
-    compensate_laser: bool,
+    #[command(flatten)]
+    wave: ltm::WaveArgs,
     /// Use the SPADs as the virtual projector and the lasers as the camera (reciprocity;
     /// 1-D SPAD arrays focus illumination along their axis).
     #[arg(long)]
@@ -301,17 +288,7 @@ impl Common {
     }
 
     fn wave(&self) -> Wave {
-        Wave {
-            wavelength: self.wavelength,
-            sigma: self.sigma,
-            weights: match self.weights {
-                WeightsArg::Inv => Weights::Inv,
-                WeightsArg::One => Weights::One,
-            },
-            band_half_width: self.band,
-            compensate_laser: self.compensate_laser,
-            auto_margin: true,
-        }
+        self.wave.wave()
     }
 
     /// The capture as a row source: y-tal HDF5 files, PicoQuant PTU photon streams and
