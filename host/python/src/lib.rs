@@ -430,30 +430,33 @@ fn gamma_mask(direct: Vec<f32>, epsilon: f32) -> Vec<bool> {
 }
 
 fn report<'py>(py: Python<'py>, o: &probe::Output) -> PyResult<Bound<'py, PyDict>> {
-    let d = PyDict::new(py);
-    d.set_item("rows", o.report.rows)?;
-    d.set_item("non_finite", o.report.non_finite)?;
-    d.set_item("dropped", o.report.dropped)?;
-    d.set_item("aliased", o.report.aliased)?;
-    d.set_item("seconds", o.seconds)?;
-    d.set_item("wavelength", o.config.wavelength())?;
-    d.set_item("sigma", o.config.sigma())?;
-    d.set_item("bins", o.config.bins())?;
+    let d = counters(py, &o.report, o.seconds, &o.config)?;
     d.set_item("path", o.path.name())?;
+    Ok(d)
+}
+
+/// The counters every probe reports, its time and its configuration, as a dict.
+fn counters<'py>(
+    py: Python<'py>,
+    r: &vltm_kernel::Report,
+    seconds: f64,
+    config: &vltm_kernel::Config,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("rows", r.rows)?;
+    d.set_item("non_finite", r.non_finite)?;
+    d.set_item("dropped", r.dropped)?;
+    d.set_item("aliased", r.aliased)?;
+    d.set_item("seconds", seconds)?;
+    d.set_item("wavelength", config.wavelength())?;
+    d.set_item("sigma", config.sigma())?;
+    d.set_item("bins", config.bins())?;
     Ok(d)
 }
 
 /// The counters of a matrix as a dict (those of [`report`], and `passes`).
 fn matrix_report<'py>(py: Python<'py>, m: &probe::Matrix) -> PyResult<Bound<'py, PyDict>> {
-    let d = PyDict::new(py);
-    d.set_item("rows", m.report.rows)?;
-    d.set_item("non_finite", m.report.non_finite)?;
-    d.set_item("dropped", m.report.dropped)?;
-    d.set_item("aliased", m.report.aliased)?;
-    d.set_item("seconds", m.seconds)?;
-    d.set_item("wavelength", m.config.wavelength())?;
-    d.set_item("sigma", m.config.sigma())?;
-    d.set_item("bins", m.config.bins())?;
+    let d = counters(py, &m.report, m.seconds, &m.config)?;
     d.set_item("passes", m.passes)?;
     d.set_item("path", "band")?;
     Ok(d)
