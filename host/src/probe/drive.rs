@@ -1,5 +1,6 @@
 //! Streaming the rows of a capture through the kernel ([`RowSource::rows`]: all, or a part of
-//! the scan): stage 1 (band spectra) of every row once, handed to the probes sequentially ([`drive`]) or to one worker per thread in
+//! the scan): stage 1 (band spectra) of every row once, handed to the probes sequentially ([`drive`];
+//! [`drive_probes`] for one kernel probe per accumulator state, pushed in parallel) or to one worker per thread in
 //! parallel ([`drive_rows`]); element-wise probes over voxel chunks ([`elementwise`]).
 //! Memory: `2·threads` rows of histograms and one row buffer per worker, never the capture.
 
