@@ -111,8 +111,10 @@ def gated_phasors(h, dt, wl, sigma, up):
     nh, nt = h.shape
     n = 1 << int(np.ceil(np.log2(nt + 12 * sigma / dt)))
     k = np.fft.fftfreq(n, 1.0 / n)
-    gate = np.exp(-0.5 * sigma ** 2 * (2 * np.pi * k / (n * dt) - 2 * np.pi / wl) ** 2)
-    keep = gate > 1e-12
+    # The gate's Fourier transform over the bins (sum_n g(n dt) e^{...} ~ sigma sqrt(2 pi) / dt).
+    gate = np.exp(-0.5 * sigma ** 2 * (2 * np.pi * k / (n * dt) - 2 * np.pi / wl) ** 2) \
+        * sigma * np.sqrt(2 * np.pi) / dt
+    keep = gate > 1e-12 * gate.max()
     cols = np.where(k >= 0, k, k + n * up).astype(np.int64)[keep]
     z = np.empty((nh, n * up), np.complex64)
     for i in range(0, nh, 256):
