@@ -16,7 +16,10 @@
 //! Numeric values keep MATLAB's column-major order: element `(i, j, k)` of dims `(a, b, c)` is
 //! at `i + a·(j + b·k)`. Arrays of more than [`F32_ABOVE`] elements are decoded to f32 (the
 //! histograms), smaller ones to f64 (grids, scalars). Complex arrays keep the real part only,
-//! sparse and object arrays are recorded by class with no data.
+//! sparse and object arrays are recorded by class with no data. [`Mat5::read`] reads a
+//! variable whole; [`Mat5::stream_f32`] hands a numeric one over in chunks inflated and
+//! decoded by a background thread (the Stanford captures' `rect_data`, transposed as it
+//! arrives).
 //!
 //! Every size comes from the file and is checked before it is used: a sub-element larger than
 //! its enclosing element is an error, and every allocation is checked against

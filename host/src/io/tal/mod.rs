@@ -26,7 +26,9 @@
 //! hands the caller's old buffer back to the reader for a later block. A row out of order, or
 //! read a second time, restarts the reader at its block. For the one-histogram-per-point
 //! formats (confocal, single) a row is a single value per time bin, so blocks are what keeps
-//! the number of reads at `Nt` per block instead of `Nt` per row.
+//! the number of reads at `Nt` per block instead of `Nt` per row. The background reader is
+//! generic over what it reads (`block::ReadBlocks`: the rows, their blocks, how a block is
+//! read): [`znlos`] reads its blocks through the same thread, queue and recycled buffers.
 //!
 //! **Memory** is bounded whatever the size of `H`: at most three blocks (the one in use, one
 //! queued, one being read and transposed: `3 ×` [`BLOCK_BYTES`] = 48 MiB, or three rows when
