@@ -43,7 +43,7 @@ pub(super) struct Source {
     pub(super) raw: Option<u64>,
     /// Whether the layout is laser-first (`Rows7`, `Rows5`).
     pub(super) streams: bool,
-    /// Rows, SPADs per row, time bins.
+    /// Rows.
     pub(super) kl: usize,
     /// SPADs per row.
     pub(super) ks: usize,
@@ -70,8 +70,8 @@ impl Source {
         self.dims[self.dims.len() - 3..].iter().product()
     }
 
-    /// Values of one `(bounce, bin, colour)` plane (time-first orders): every axis after the
-    /// bounces.
+    /// Values of the plane of one `(colour, bin, bounce)` (time-first orders): every axis
+    /// after the bounces.
     fn plane(&self) -> usize {
         self.dims[3..].iter().product()
     }
@@ -121,8 +121,8 @@ impl Source {
         self.dims.iter().zip(idx).fold(0, |o, (&n, i)| o * n + i)
     }
 
-    /// For each non-row index `k` (C order over the non-row axes among `axes`): the flat
-    /// index of those axes' row/SPAD split, as `(file offset with the row axes at 0, s)`.
+    /// For each index of the non-row axes among `axes` (C order): its file offset (every
+    /// other axis at 0) and the SPAD `s` it is in the row.
     fn spads_of(&self, axes: std::ops::Range<usize>) -> Vec<(usize, usize)> {
         let free: Vec<usize> = axes.filter(|&a| self.row_axis[a].is_none()).collect();
         let count: usize = free.iter().map(|&a| self.dims[a]).product();
