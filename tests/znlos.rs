@@ -107,15 +107,29 @@ fn u(s: &[usize]) -> Vec<u64> {
 /// converter reads; `skip` leaves one out, `bad_shape` writes `data` with 4 bounces (which
 /// y-tal's tests reject for 7 axes; 5 axes are told apart by their grid axes only).
 fn write_znlos(c: &Capture, order: Order, path: &Path, skip: &str, bad_shape: bool) {
+    assert!(c.geometry.legs_in_time, "Z-NLOS times include the legs");
+    write_znlos_colours(c, order, path, skip, bad_shape, &COLOURS);
+}
+
+/// [`write_znlos`] with the fractions `colours` of each sample in each colour (one per
+/// colour), whatever the capture's legs.
+fn write_znlos_colours(
+    c: &Capture,
+    order: Order,
+    path: &Path,
+    skip: &str,
+    bad_shape: bool,
+    colours: &[f32],
+) {
     let g = &c.geometry;
-    assert!(g.legs_in_time, "Z-NLOS times include the legs");
+    let nc = colours.len();
     let (nt, [lx, ly], [sx, sy]) = (g.nt, g.laser_shape, g.spad_shape);
     let nb = if bad_shape { 4 } else { 6 };
     let shape: Vec<usize> = match order {
-        Order::Rows7 => vec![ly, lx, sy, sx, nb, nt, 3],
-        Order::Time7 => vec![3, nt, nb, sy, sx, ly, lx],
-        Order::Rows5 => vec![lx, ly, nb, nt, 3],
-        Order::Time5 => vec![3, nt, nb, ly, lx],
+        Order::Rows7 => vec![ly, lx, sy, sx, nb, nt, nc],
+        Order::Time7 => vec![nc, nt, nb, sy, sx, ly, lx],
+        Order::Rows5 => vec![lx, ly, nb, nt, nc],
+        Order::Time5 => vec![nc, nt, nb, ly, lx],
     };
     let n: usize = shape.iter().product();
     let mut data = vec![0.0f32; n];
@@ -130,7 +144,7 @@ fn write_znlos(c: &Capture, order: Order, path: &Path, skip: &str, bad_shape: bo
             Order::Time5 => (k[4], k[3], 0, 0, k[1], k[0], k[2]),
         };
         let (l, s) = (ix * ly + iy, isx * sy + isy);
-        *x = c.row(l)[s * nt + t] * COLOURS[col] * BOUNCES[b % 6];
+        *x = c.row(l)[s * nt + t] * colours[col] * BOUNCES[b % 6];
         for a in (0..idx.len()).rev() {
             idx[a] += 1;
             if idx[a] < shape[a] {
@@ -391,5 +405,45 @@ fn bad_znlos_files_exit_1_naming_the_dataset() {
             );
             println!("{field}: {}", lines[0]);
         }
+    }
+}
+
+/// Not a test: writes the reading benchmark's Z-NLOS files (README "Reading y-tal HDF5") from
+/// the capture `$VLTM_ZNLOS_BENCH` (an `.npz`, e.g. exh16's): `<stem>_<order>.hdf5` beside it
+/// for the orders of its scan, with `$VLTM_ZNLOS_COLOURS` colours (default 1; 3 makes 18
+/// values per sample) and 6 bounces, each sample split in power-of-two fractions so that the
+/// sums are exact.
+///
+/// ```sh
+/// VLTM_ZNLOS_BENCH=/tmp/exh16.npz cargo test --release --test znlos -- --ignored write_bench
+/// ```
+#[test]
+#[ignore = "writes benchmark files; needs $VLTM_ZNLOS_BENCH"]
+fn write_bench_files() {
+    let Some(src) = std::env::var_os("VLTM_ZNLOS_BENCH") else {
+        panic!("set VLTM_ZNLOS_BENCH to an .npz capture");
+    };
+    let src = PathBuf::from(src);
+    let nc: usize = std::env::var("VLTM_ZNLOS_COLOURS").map_or(1, |v| v.parse().expect("colours"));
+    let colours: Vec<f32> = match nc {
+        1 => vec![1.0],
+        3 => COLOURS.to_vec(),
+        _ => panic!("VLTM_ZNLOS_COLOURS is 1 or 3"),
+    };
+    let c = io::open(&src).expect("capture");
+    let orders = if c.geometry.confocal {
+        [Order::Rows5, Order::Time5]
+    } else {
+        [Order::Rows7, Order::Time7]
+    };
+    let stem = src
+        .file_stem()
+        .expect("name")
+        .to_string_lossy()
+        .into_owned();
+    for order in orders {
+        let z = src.with_file_name(format!("{stem}_c{nc}_{order:?}.hdf5"));
+        write_znlos_colours(&c, order, &z, "", false, &colours);
+        println!("wrote {}", z.display());
     }
 }

@@ -16,7 +16,10 @@
 //! Numeric values keep MATLAB's column-major order: element `(i, j, k)` of dims `(a, b, c)` is
 //! at `i + a·(j + b·k)`. Arrays of more than [`F32_ABOVE`] elements are decoded to f32 (the
 //! histograms), smaller ones to f64 (grids, scalars). Complex arrays keep the real part only,
-//! sparse and object arrays are recorded by class with no data.
+//! sparse and object arrays are recorded by class with no data. [`Mat5::read`] reads a
+//! variable whole; [`Mat5::stream_f32`] hands a numeric one over in chunks inflated and
+//! decoded by a background thread (the Stanford captures' `rect_data`, transposed as it
+//! arrives).
 //!
 //! Every size comes from the file and is checked before it is used: a sub-element larger than
 //! its enclosing element is an error, and every allocation is checked against
@@ -28,9 +31,14 @@ use crate::error::{Error, Result};
 use flate2::read::ZlibDecoder;
 use std::io::{BufReader, Read, Seek, SeekFrom};
 use std::path::Path;
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 
 /// Arrays with more elements than this are decoded to f32, smaller ones to f64.
 pub const F32_ABOVE: usize = 1 << 16;
+
+/// Chunks waiting in the queue of [`Mat5::stream_f32`] (besides the one in use and the one
+/// being decoded).
+pub const STREAM_QUEUE: usize = 2;
 
 const MI_INT8: u32 = 1;
 const MI_UINT8: u32 = 2;
@@ -292,6 +300,93 @@ impl Mat5 {
                 true,
             )
         }
+    }
+
+    /// The header of top-level variable `name` (its value [`Value::Skipped`]), if there is
+    /// one.
+    pub fn header(&self, name: &str) -> Option<&Var> {
+        self.entries
+            .iter()
+            .find(|e| e.header.name == name)
+            .map(|e| &e.header)
+    }
+
+    /// Streams the real part of numeric top-level variable `name` as f32 values in file
+    /// (column-major) order, `chunk` values at a time (the last chunk shorter): a background
+    /// thread inflates and decodes the element while the caller uses the chunks already sent,
+    /// through a queue of [`STREAM_QUEUE`] chunks. Values are converted as [`Mat5::read`]
+    /// converts them (through f64), so they are bit-identical to its. Memory: the queued
+    /// chunks, the one being decoded and its raw bytes, and the inflater's window.
+    ///
+    /// # Errors
+    /// [`Error::Format`] if there is no such variable; errors of the stream (a corrupt or
+    /// truncated element, non-numeric data, a value count that does not match the dims)
+    /// arrive through the receiver, naming the variable, after which it closes.
+    pub fn stream_f32(&self, name: &str, chunk: usize) -> Result<Receiver<Result<Vec<f32>>>> {
+        let e = self
+            .entries
+            .iter()
+            .find(|e| e.header.name == name)
+            .ok_or_else(|| Error::format(&self.path, name, "a variable of this name", "none"))?;
+        let (path, be, name) = (self.path.clone(), self.big_endian, name.to_string());
+        let (offset, size, compressed, count) = (e.offset, e.size, e.compressed, e.header.len());
+        let chunk = chunk.max(1);
+        let (tx, rx) = sync_channel(STREAM_QUEUE);
+        std::thread::spawn(move || {
+            let run = |tx: &SyncSender<Result<Vec<f32>>>| -> Result<()> {
+                let mut f = std::fs::File::open(&path).map_err(|err| Error::io(&path, err))?;
+                f.seek(SeekFrom::Start(offset))
+                    .map_err(|err| Error::io(&path, err))?;
+                let mut r = BufReader::with_capacity(1 << 16, f).take(size);
+                let mut z;
+                let mut p = if compressed {
+                    z = ZlibDecoder::new(r);
+                    let mut p = Parser::new(&mut z, be, &path, u64::MAX);
+                    p.top_level(false)?;
+                    p
+                } else {
+                    let mut p = Parser::new(&mut r, be, &path, size);
+                    p.matrix_body(size, String::new(), false)?;
+                    p
+                };
+                p.var.clone_from(&name);
+                let (ty, n, small) = p.tag()?;
+                let width: usize = match ty {
+                    MI_INT8 | MI_UINT8 | MI_UTF8 => 1,
+                    MI_INT16 | MI_UINT16 => 2,
+                    MI_INT32 | MI_UINT32 | MI_SINGLE => 4,
+                    MI_DOUBLE | MI_INT64 | MI_UINT64 => 8,
+                    _ => return Err(p.err("numeric data", format!("data type {ty}"))),
+                };
+                if n != (count as u64).saturating_mul(width as u64) {
+                    return Err(p.err(
+                        format!("{count} values"),
+                        format!("{n} bytes of {width}-byte values"),
+                    ));
+                }
+                if let Some(s) = small {
+                    let v = numbers(ty, be, &s[..n as usize], |x| x as f32);
+                    let _ = tx.send(Ok(v));
+                    return Ok(());
+                }
+                let mut raw = Vec::new();
+                let mut left = count;
+                while left > 0 {
+                    let k = left.min(chunk);
+                    raw.resize(k * width, 0);
+                    p.bytes(&mut raw)?;
+                    if tx.send(Ok(numbers(ty, be, &raw, |x| x as f32))).is_err() {
+                        return Ok(());
+                    }
+                    left -= k;
+                }
+                Ok(())
+            };
+            if let Err(err) = run(&tx) {
+                let _ = tx.send(Err(err));
+            }
+        });
+        Ok(rx)
     }
 
     fn u32(&self, b: &[u8]) -> u32 {

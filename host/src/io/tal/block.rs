@@ -116,45 +116,63 @@ pub(super) struct Plan {
     pub(super) raw: Option<u64>,
 }
 
+/// What a background reader ([`ReadAhead`]) reads: the rows, how they form blocks, and how
+/// a block is read into row buffers. `HDF5_TAL`'s `H` is one ([`Reader`]), the Z-NLOS reader
+/// another.
+pub(super) trait ReadBlocks: Send + 'static {
+    /// The number of rows.
+    fn rows(&self) -> usize;
+    /// The values of a row.
+    fn row_len(&self) -> usize;
+    /// The block holding row `l`, `first..end`.
+    fn range(&self, l: usize) -> (usize, usize);
+    /// Reads rows `first..first + out.len()` (one [`range`](Self::range)) into `out`, every
+    /// value written (the buffers hold an earlier block's values).
+    fn read(&mut self, first: usize, out: &mut [&mut [f32]]) -> Result<()>;
+}
+
 /// The reader thread's state: the open file (positional path) and its staging buffers.
-struct Reader<'p> {
-    plan: &'p Plan,
+pub(super) struct Reader {
+    plan: Plan,
     file: Option<(std::fs::File, u64)>,
     stage: Vec<f32>,
     stage64: Vec<f64>,
-    free: Receiver<Vec<f32>>,
 }
 
-impl Reader<'_> {
-    /// A row buffer of `len` values: a recycled one when there is one, else a new one.
-    fn row_buffer(&self, len: usize) -> Vec<f32> {
-        while let Ok(mut v) = self.free.try_recv() {
-            if v.capacity() >= len {
-                v.resize(len, 0.0);
-                return v;
-            }
+impl Reader {
+    /// A reader of `plan`'s blocks.
+    pub(super) fn new(plan: Plan) -> Self {
+        Self {
+            plan,
+            file: None,
+            stage: Vec::new(),
+            stage64: Vec::new(),
         }
-        vec![0.0; len]
+    }
+}
+
+impl ReadBlocks for Reader {
+    fn rows(&self) -> usize {
+        self.plan.kl
     }
 
-    /// Reads rows `first..end` (one [`block_range`]).
-    fn read(&mut self, first: usize, end: usize) -> Result<Block> {
-        let (nt, ks, rows) = (self.plan.dims[0], self.plan.ks, end - first);
-        let mut block = Block {
-            first,
-            rows: (0..rows).map(|_| Some(self.row_buffer(ks * nt))).collect(),
-        };
-        let mut out: Vec<&mut [f32]> = block
-            .rows
-            .iter_mut()
-            .map(|r| r.as_deref_mut().unwrap_or_default())
-            .collect();
+    fn row_len(&self) -> usize {
+        self.plan.ks * self.plan.dims[0]
+    }
+
+    fn range(&self, l: usize) -> (usize, usize) {
+        block_range(&self.plan.dims, self.plan.format, self.plan.ks, l)
+    }
+
+    fn read(&mut self, first: usize, out: &mut [&mut [f32]]) -> Result<()> {
+        let (nt, ks, rows) = (self.plan.dims[0], self.plan.ks, out.len());
+        let end = first + rows;
         match self.plan.raw {
             Some(address) => {
                 for n0 in (0..nt).step_by(GROUP) {
                     let nn = GROUP.min(nt - n0);
                     self.read_group(address, first, rows, n0, nn)?;
-                    transpose(&self.stage, rows, ks, nt, n0, nn, &mut out);
+                    transpose(&self.stage, rows, ks, nt, n0, nn, out);
                 }
             }
             None => {
@@ -162,13 +180,15 @@ impl Reader<'_> {
                 for n0 in (0..nt).step_by(GROUP) {
                     let nn = GROUP.min(nt - n0);
                     let src = &v[n0 * rows * ks..(n0 + nn) * rows * ks];
-                    transpose(src, rows, ks, nt, n0, nn, &mut out);
+                    transpose(src, rows, ks, nt, n0, nn, out);
                 }
             }
         }
-        Ok(block)
+        Ok(())
     }
+}
 
+impl Reader {
     /// Reads time bins `n0..n0 + nn` of rows `first..first + rows` of a contiguous `H` at
     /// `address` into `stage[(k·rows + r)·Ks + s]`: one read per bin, or one for all of them
     /// when the rows are every row.
@@ -180,7 +200,7 @@ impl Reader<'_> {
         n0: usize,
         nn: usize,
     ) -> Result<()> {
-        let plan = self.plan;
+        let plan = &self.plan;
         let (ks, kl) = (plan.ks, plan.kl);
         let run = rows * ks;
         let eb: u64 = if plan.elem == Elem::F32 { 4 } else { 8 };
@@ -331,23 +351,37 @@ pub(super) struct ReadAhead {
 
 impl ReadAhead {
     /// Starts the reader at the block holding row `first`.
-    pub(super) fn start(plan: Plan, first: usize) -> Self {
+    pub(super) fn start<R: ReadBlocks>(mut reader: R, first: usize) -> Self {
         let (tx, rx) = sync_channel(QUEUE);
-        let (free, free_rx) = channel();
+        let (free, free_rx) = channel::<Vec<f32>>();
         std::thread::spawn(move || {
-            let mut reader = Reader {
-                plan: &plan,
-                file: None,
-                stage: Vec::new(),
-                stage64: Vec::new(),
-                free: free_rx,
+            let len = reader.row_len();
+            // A row buffer: a recycled one when there is one, else a new one.
+            let buffer = || {
+                while let Ok(mut v) = free_rx.try_recv() {
+                    if v.capacity() >= len {
+                        v.resize(len, 0.0);
+                        return v;
+                    }
+                }
+                vec![0.0; len]
             };
             let mut l = first;
-            while l < plan.kl {
-                let (a, b) = block_range(&plan.dims, plan.format, plan.ks, l);
-                let block = reader.read(a, b);
-                let failed = block.is_err();
-                if tx.send(block).is_err() || failed {
+            while l < reader.rows() {
+                let (a, b) = reader.range(l);
+                let mut block = Block {
+                    first: a,
+                    rows: (a..b).map(|_| Some(buffer())).collect(),
+                };
+                let mut out: Vec<&mut [f32]> = block
+                    .rows
+                    .iter_mut()
+                    .map(|r| r.as_deref_mut().unwrap_or_default())
+                    .collect();
+                let read = reader.read(a, &mut out);
+                drop(out);
+                let failed = read.is_err();
+                if tx.send(read.map(|()| block)).is_err() || failed {
                     return;
                 }
                 l = b;
@@ -366,5 +400,65 @@ impl ReadAhead {
             // The reader may have stopped (last row, error): the buffer is then dropped.
             let _ = self.free.send(buffer);
         }
+    }
+}
+
+/// A row source's end of a background reader: the block in hand and the [`ReadAhead`],
+/// restarted when rows are not read in order.
+#[derive(Default)]
+pub(super) struct Cursor {
+    /// The rows read last.
+    block: Block,
+    /// The background reader, once rows are read.
+    ahead: Option<ReadAhead>,
+}
+
+impl Cursor {
+    /// Swaps row `l` into `out` (no copy; the old buffer of `out` goes back to the reader).
+    /// Its block, whose first row is `first`, comes from the queue when the rows are read in
+    /// order, else from a reader made by `reader` and started at that block; a row read a
+    /// second time is read again with its block. A stopped reader is an error naming `path`
+    /// and `field`.
+    pub(super) fn take<R: ReadBlocks>(
+        &mut self,
+        l: usize,
+        first: usize,
+        out: &mut Vec<f32>,
+        reader: impl FnOnce() -> R,
+        path: &Path,
+        field: &str,
+    ) -> Result<()> {
+        if !self.block.holds(l) {
+            // Free the previous block first (the queue holds at most one more).
+            self.block = Block::default();
+            if self.ahead.as_ref().is_none_or(|a| a.next != first) {
+                self.ahead = None;
+                self.ahead = Some(ReadAhead::start(reader(), first));
+            }
+            let ahead = self.ahead.as_mut().expect("started above");
+            let block = ahead.rx.recv().unwrap_or_else(|_| {
+                Err(Error::format(
+                    path,
+                    field,
+                    "a readable dataset",
+                    "the background reader stopped",
+                ))
+            });
+            match block {
+                Ok(b) => {
+                    ahead.next = b.first + b.rows.len();
+                    self.block = b;
+                }
+                Err(e) => {
+                    self.ahead = None;
+                    return Err(e);
+                }
+            }
+        }
+        let old = self.block.take(l, out).unwrap_or_default();
+        if let Some(ahead) = &self.ahead {
+            ahead.recycle(old);
+        }
+        Ok(())
     }
 }

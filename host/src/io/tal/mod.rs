@@ -26,7 +26,9 @@
 //! hands the caller's old buffer back to the reader for a later block. A row out of order, or
 //! read a second time, restarts the reader at its block. For the one-histogram-per-point
 //! formats (confocal, single) a row is a single value per time bin, so blocks are what keeps
-//! the number of reads at `Nt` per block instead of `Nt` per row.
+//! the number of reads at `Nt` per block instead of `Nt` per row. The background reader is
+//! generic over what it reads (`block::ReadBlocks`: the rows, their blocks, how a block is
+//! read): [`znlos`] reads its blocks through the same thread, queue and recycled buffers.
 //!
 //! **Memory** is bounded whatever the size of `H`: at most three blocks (the one in use, one
 //! queued, one being read and transposed: `3 ×` [`BLOCK_BYTES`] = 48 MiB, or three rows when
@@ -159,10 +161,8 @@ pub struct TalReader {
     /// File address of a contiguous little-endian `H`, read with positional reads; `None`
     /// reads through the crate.
     raw: Option<u64>,
-    /// The rows read last.
-    block: Block,
-    /// The background reader, once rows are read.
-    ahead: Option<ReadAhead>,
+    /// The rows read last and the background reader.
+    rows: Cursor,
 }
 
 impl std::fmt::Debug for TalReader {
@@ -410,8 +410,7 @@ impl TalReader {
             options,
             single_falloff,
             raw,
-            block: Block::default(),
-            ahead: None,
+            rows: Cursor::default(),
         })
     }
 
@@ -478,38 +477,6 @@ impl TalReader {
     /// The block of consecutive rows holding row `l`: `first..end` (module docs, *Reading*).
     fn block_range(&self, l: usize) -> (usize, usize) {
         block_range(&self.dims, self.format, self.geometry.spads_per_row(), l)
-    }
-
-    /// Makes the block holding row `l` current: from the read-ahead queue when the rows are
-    /// read in order, else by restarting the background reader at that block.
-    fn load_block(&mut self, l: usize) -> Result<()> {
-        let (first, _) = self.block_range(l);
-        // Free the previous block first (the queue holds at most one more).
-        self.block = Block::default();
-        if self.ahead.as_ref().is_none_or(|a| a.next != first) {
-            self.ahead = None;
-            self.ahead = Some(ReadAhead::start(self.plan(), first));
-        }
-        let ahead = self.ahead.as_mut().expect("started above");
-        let block = match ahead.rx.recv() {
-            Ok(b) => b,
-            Err(_) => Err(Error::format(
-                &self.path,
-                "H",
-                "a readable dataset",
-                "the background reader stopped",
-            )),
-        };
-        let block = match block {
-            Ok(b) => b,
-            Err(e) => {
-                self.ahead = None;
-                return Err(e);
-            }
-        };
-        ahead.next = block.first + block.rows.len();
-        self.block = block;
-        Ok(())
     }
 
     /// What the background reader needs.
@@ -613,16 +580,12 @@ impl RowSource for TalReader {
                 format!("{l} is out of range: the capture has {kl} rows"),
             ));
         }
-        // A row already handed out (read twice) is read again with its block.
-        if !self.block.holds(l) {
-            self.load_block(l)?;
-        }
         // The background reader transposed the block to rows of SPAD-major histograms: the
         // row is swapped into `out`, whose old buffer goes back to the reader.
-        let old = self.block.take(l, out).unwrap_or_default();
-        if let Some(ahead) = &self.ahead {
-            ahead.recycle(old);
-        }
+        let (first, _) = self.block_range(l);
+        let plan = self.plan();
+        let reader = || Reader::new(plan);
+        self.rows.take(l, first, out, reader, &self.path, "H")?;
         let x_l = self.geometry.lasers[l];
         if let Some(c0) = self.single_falloff {
             let k = self.geometry.laser_falloff(x_l) / c0;
@@ -639,7 +602,7 @@ mod scan;
 pub mod znlos;
 
 pub use block::BLOCK_BYTES;
-use block::{Block, Elem, Plan, ReadAhead, block_range};
+use block::{Cursor, Elem, Plan, Reader, block_range};
 
 pub use format::{HFormat, ScanType, TalOptions};
 

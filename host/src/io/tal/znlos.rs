@@ -31,10 +31,10 @@
 //!
 //! | [`ZnlosLayout`] | `data` rank, test | file axes | reading |
 //! |---|---|---|---|
-//! | `Rows7` | 7, `shape[4] == 6` | `(ly, lx, sy, sx, bounces, t, colours)` | streamed by row |
-//! | `Time7` | 7, else `shape[2] == 6` | `(colours, t, bounces, sy, sx, ly, lx)` | read whole |
-//! | `Rows5` | 5, `shape[0] == shape[1]` | `(sx, sy, bounces, t, colours)` | streamed by row |
-//! | `Time5` | 5, else `shape[3] == shape[4]` | `(colours, t, bounces, sy, sx)` | read whole |
+//! | `Rows7` | 7, `shape[4] == 6` | `(ly, lx, sy, sx, bounces, t, colours)` | streamed by block of rows |
+//! | `Time7` | 7, else `shape[2] == 6` | `(colours, t, bounces, sy, sx, ly, lx)` | read whole, then by block |
+//! | `Rows5` | 5, `shape[0] == shape[1]` | `(sx, sy, bounces, t, colours)` | streamed by block of rows |
+//! | `Time5` | 5, else `shape[3] == shape[4]` | `(colours, t, bounces, sy, sx)` | read whole, then by block |
 //!
 //! (The 6 is the bounce axis of the Z-NLOS renderer, which stores bounces 2–7 separately.)
 //! Colours and bounces are summed. A 7-axis capture with one laser point (1×1) is y-tal's
@@ -57,13 +57,30 @@
 //!
 //! # Memory and cost
 //!
-//! `Rows7` and `Rows5` hold each row contiguously: a row is one hyperslab read of
-//! `Ks × bounces × Nt × colours` values (memory: that slab as read, its values, the row; O(row)
-//! whatever the capture's size). `Time7` and `Time5` put the row axes last: a row
-//! would be `Nt·bounces·colours·Ks` reads of one value, so on the first row the whole capture
-//! is read in slabs of at most [`super::BLOCK_BYTES`] along the leading axes and summed into an
-//! f32 capture (memory: `4·Kl·Ks·Nt` bytes plus one slab). Both are checked against
-//! [`crate::budget`] when the file is opened, and stated by [`ZnlosReader::conventions`].
+//! Rows are read by the `HDF5_TAL` reader's background thread ([`super`], *Reading*): blocks
+//! of consecutive rows are read, summed over colours and bounces and reordered into vltm's
+//! SPAD-major rows ahead of the probes, and handed over through a bounded queue of one block
+//! with recycled row buffers, so that reading and summing overlap the probes' work
+//! (`stream`). A contiguous little-endian `data` is read with positional reads of the file;
+//! anything else (chunked or compressed, big-endian, compact) through the crate's hyperslabs.
+//!
+//! * `Rows7` and `Rows5` hold each histogram as one run of `bounces × Nt × colours` values
+//!   and a row's histograms one after the other: a block is as many rows as fit in
+//!   [`super::BLOCK_BYTES`] of `data` as stored (at least one), read in runs of adjacent
+//!   histograms of at most [`super::BLOCK_BYTES`] (one `Ks·bounces·Nt·colours` hyperslab per
+//!   row through the crate). Memory: three blocks of rows and a staging buffer of at most
+//!   [`super::BLOCK_BYTES`] (one histogram as stored when larger), whatever the capture's size.
+//! * `Time7` and `Time5` put the row axes last: a row would be `Nt·bounces·colours·Ks` reads
+//!   of one value, and no row is complete before the last colour is read. On the first row
+//!   the whole of `data` is read in file order (runs of whole `(sy, sx, ly, lx)` planes of at
+//!   most [`super::BLOCK_BYTES`]; one `(colour, bin)` hyperslab through the crate) and summed
+//!   into a time-major f32 copy of the capture (memory: `4·Kl·Ks·Nt` bytes, an index table
+//!   of `Kl·Ks` entries, the staging buffer and three blocks); the blocks are then cut from
+//!   it in the background.
+//!
+//! Sums are taken in the file's order from 0 on every path, so the rows do not depend on how
+//! they were read. The memory is checked against [`crate::budget`] when the file is opened
+//! and stated by [`ZnlosReader::conventions`]. Measured cost: README, *Reading y-tal HDF5*.
 //!
 //! # Errors
 //!
@@ -71,13 +88,16 @@
 //! dataset, a shape y-tal's converter does not recognise, grids that do not match `data`,
 //! non-numeric or non-finite values, data outside the file).
 
-use super::fields::{Fields, Grid, h5_error, into_vec, usize_of};
-use super::{BLOCK_BYTES, Elem, HFormat, ScanType, TalOptions, check_layout, open_file, scan};
+use super::fields::{Fields, Grid, usize_of};
+use super::{
+    BLOCK_BYTES, Cursor, Elem, HFormat, ScanType, TalOptions, check_layout, open_file, scan,
+};
 use crate::budget;
 use crate::error::{Error, Result};
 use crate::io::capture::{Capture, Geometry, RowSource};
-use hdf5_reader::{Dataset, SliceInfo, SliceInfoElem};
+use hdf5_reader::{ByteOrder, Dataset, Datatype};
 use std::path::{Path, PathBuf};
+use stream::{Blocks, Source};
 use vltm_kernel::Point;
 
 /// Which of y-tal's four Z-NLOS axis orders `data` has (module docs, *Axis order*).
@@ -160,8 +180,12 @@ pub struct ZnlosReader {
     strides: Vec<usize>,
     /// Rows per row-x index (the row grid's second size).
     row_ny: usize,
-    /// The capture, unscaled, once read (`Time7`, `Time5`).
-    whole: Option<Vec<f32>>,
+    /// File address of a contiguous little-endian `data` (positional reads), else `None`.
+    raw: Option<u64>,
+    /// The rows read last and the background reader.
+    rows: Cursor,
+    /// Bytes of `data` read at once ([`super::BLOCK_BYTES`]; smaller in tests).
+    block_bytes: usize,
     conventions: Vec<String>,
 }
 
@@ -293,7 +317,17 @@ impl ZnlosReader {
                 format!("shape {dims:?} of {elem_bytes}-byte values"),
             ));
         }
-        check_layout(path, &file, &h, h_bytes, file_len).map_err(|e| rename(e, "data"))?;
+        let contiguous =
+            check_layout(path, &file, &h, h_bytes, file_len).map_err(|e| rename(e, "data"))?;
+        // Positional reads of a contiguous little-endian `data`; anything else goes through
+        // the crate.
+        let raw = match h.dtype() {
+            Datatype::FloatingPoint {
+                byte_order: ByteOrder::LittleEndian,
+                ..
+            } => contiguous,
+            _ => None,
+        };
         let roles = layout.roles();
         let size = |a: Axis| roles.iter().position(|&r| r == a).map_or(1, |k| dims[k]);
         let (nt, lx, ly, sx, sy) = (
@@ -337,7 +371,6 @@ impl ZnlosReader {
         } else {
             (Axis::Sx, Axis::Sy)
         };
-        let ks = geometry.spads_per_row();
         let row_ny = size(ry);
         let row_axis: Vec<Option<usize>> = roles
             .iter()
@@ -361,28 +394,42 @@ impl ZnlosReader {
             })
             .collect();
 
-        // Memory: a row's slab (as read, as values) and the row; or the whole capture.
-        let row = ks.saturating_mul(nt);
-        let slab = dims.iter().product::<usize>() / geometry.lasers.len().max(1);
-        let (memory, what) = if layout.streams() {
-            (
-                budget::bytes(slab, 2 * elem_bytes as u128 + 4)
-                    .saturating_add(budget::bytes(row, 4)),
-                format!(
-                    "streamed by row: one hyperslab of {} values per row ({} MB as read)",
-                    slab,
-                    fmt_mb(slab * elem_bytes)
-                ),
+        let mut reader = Self {
+            path: path.to_path_buf(),
+            h,
+            elem,
+            dims,
+            layout,
+            scan,
+            geometry,
+            single_falloff,
+            row_axis,
+            strides,
+            row_ny,
+            raw,
+            rows: Cursor::default(),
+            block_bytes: BLOCK_BYTES,
+            conventions: Vec::new(),
+        };
+        let (dims, src) = (&reader.dims, reader.source());
+        let memory = src.memory();
+        let how = if raw.is_some() {
+            "positional reads"
+        } else {
+            "hyperslabs through the crate"
+        };
+        let what = if layout.streams() {
+            format!(
+                "streamed by row, in blocks of {} rows read ({how}) and summed by a background reader; at most {} MB",
+                src.block_rows().min(src.kl),
+                fmt_mb(memory)
             )
         } else {
-            let total = geometry.lasers.len().saturating_mul(row);
-            (
-                budget::bytes(total, 4).saturating_add(3 * BLOCK_BYTES as u128),
-                format!(
-                    "read whole on the first row (the row axes come last in the file): the capture as f32, {} MB, plus slabs of at most {} MB",
-                    fmt_mb(total * 4),
-                    fmt_mb(BLOCK_BYTES)
-                ),
+            format!(
+                "read whole on the first row (the row axes come last in the file; {how}) and summed into the capture as f32 ({} MB), then handed out by blocks of {} rows by a background reader; at most {} MB",
+                fmt_mb((src.kl * src.ks * src.nt * 4) as u128),
+                src.block_rows().min(src.kl),
+                fmt_mb(memory)
             )
         };
         budget::check(
@@ -415,21 +462,27 @@ impl ZnlosReader {
             "grids        cameraGridPositions, laserGridPositions as (X, Y, 3) (transposed when stored (3, Y, X)); normals and hiddenVolume* not used".to_string(),
             format!("memory       {what}"),
         ];
-        Ok(Self {
-            path: path.to_path_buf(),
-            h,
-            elem,
-            dims,
-            layout,
-            scan,
-            geometry,
-            single_falloff,
-            row_axis,
-            strides,
-            row_ny,
-            whole: None,
-            conventions,
-        })
+        reader.conventions = conventions;
+        Ok(reader)
+    }
+
+    /// What the background reader needs.
+    fn source(&self) -> Source {
+        Source {
+            path: self.path.clone(),
+            h: self.h.clone(),
+            elem: self.elem,
+            dims: self.dims.clone(),
+            raw: self.raw,
+            streams: self.layout.streams(),
+            kl: self.geometry.lasers.len(),
+            ks: self.geometry.spads_per_row(),
+            nt: self.geometry.nt,
+            row_axis: self.row_axis.clone(),
+            strides: self.strides.clone(),
+            row_ny: self.row_ny,
+            block_bytes: self.block_bytes,
+        }
     }
 
     /// The file.
@@ -491,146 +544,9 @@ impl ZnlosReader {
         }
         Capture::new(g, data, &self.path)
     }
-
-    /// Reads the hyperslab `sel` of `data` as f32.
-    fn read(&self, sel: Vec<SliceInfoElem>) -> Result<Vec<f32>> {
-        let sel = SliceInfo { selections: sel };
-        let field = |e| h5_error(&self.path, "data", e);
-        Ok(match self.elem {
-            Elem::F32 => into_vec(self.h.read_slice::<f32>(&sel).map_err(field)?),
-            Elem::F64 => into_vec(self.h.read_slice::<f64>(&sel).map_err(field)?)
-                .into_iter()
-                .map(|x| x as f32)
-                .collect(),
-        })
-    }
-
-    /// Row `l` (unscaled) from its contiguous hyperslab.
-    fn stream_row(&self, l: usize, out: &mut [f32]) -> Result<()> {
-        let idx = [l / self.row_ny, l % self.row_ny];
-        let mut sel = Vec::new();
-        let (mut counts, mut strides) = (Vec::new(), Vec::new());
-        for (k, &n) in self.dims.iter().enumerate() {
-            match self.row_axis[k] {
-                Some(r) => sel.push(SliceInfoElem::Index(idx[r] as u64)),
-                None => {
-                    sel.push(span(0, n));
-                    counts.push(n);
-                    strides.push(self.strides[k]);
-                }
-            }
-        }
-        let v = self.read(sel)?;
-        let starts = vec![0; counts.len()];
-        self.scatter(&v, &counts, &starts, &strides, out)
-    }
-
-    /// The whole capture (unscaled), read in slabs along the leading axes.
-    fn read_whole(&self) -> Result<Vec<f32>> {
-        let g = &self.geometry;
-        let len = g.spads_per_row() * g.nt;
-        let mut data = vec![0.0f32; g.lasers.len() * len];
-        // Full strides: the row axes too (row x: Ny·len, row y: len).
-        let strides: Vec<usize> = (0..self.dims.len())
-            .map(|k| match self.row_axis[k] {
-                Some(0) => self.row_ny * len,
-                Some(_) => len,
-                None => self.strides[k],
-            })
-            .collect();
-        // Split at the first axis whose tail fits in a block.
-        let max = (BLOCK_BYTES / 4).max(1);
-        let tails = c_strides(&self.dims);
-        let k = (0..self.dims.len())
-            .find(|&k| tails[k] <= max)
-            .unwrap_or(self.dims.len() - 1);
-        let step = (max / tails[k].max(1)).max(1);
-        let outer: usize = self.dims[..k].iter().product();
-        for o in 0..outer {
-            // The index of the axes before k.
-            let mut rest = o;
-            let mut head = vec![0usize; k];
-            for a in (0..k).rev() {
-                head[a] = rest % self.dims[a];
-                rest /= self.dims[a];
-            }
-            for a0 in (0..self.dims[k]).step_by(step) {
-                let a1 = (a0 + step).min(self.dims[k]);
-                let mut sel = Vec::with_capacity(self.dims.len());
-                let (mut counts, mut starts) = (Vec::new(), Vec::new());
-                for (a, &n) in self.dims.iter().enumerate() {
-                    let (s, e) = if a < k {
-                        (head[a], head[a] + 1)
-                    } else if a == k {
-                        (a0, a1)
-                    } else {
-                        (0, n)
-                    };
-                    sel.push(span(s, e));
-                    counts.push(e - s);
-                    starts.push(s);
-                }
-                let v = self.read(sel)?;
-                self.scatter(&v, &counts, &starts, &strides, &mut data)?;
-            }
-        }
-        Ok(data)
-    }
-
-    /// Adds the C-order values `v` of a hyperslab (`counts` per axis from `starts`) into
-    /// `out[Σ (starts + i)·strides]`.
-    fn scatter(
-        &self,
-        v: &[f32],
-        counts: &[usize],
-        starts: &[usize],
-        strides: &[usize],
-        out: &mut [f32],
-    ) -> Result<()> {
-        let want: usize = counts.iter().product();
-        if v.len() != want {
-            return Err(Error::format(
-                &self.path,
-                "data",
-                format!("{want} values in the hyperslab"),
-                v.len(),
-            ));
-        }
-        let Some(last) = counts.len().checked_sub(1) else {
-            if let (Some(o), Some(&x)) = (out.first_mut(), v.first()) {
-                *o += x;
-            }
-            return Ok(());
-        };
-        let (n_in, s_in) = (counts[last], strides[last]);
-        let mut idx = vec![0usize; last];
-        for run in v.chunks_exact(n_in.max(1)) {
-            let base: usize = (0..last).map(|a| (starts[a] + idx[a]) * strides[a]).sum();
-            let base = base + starts[last] * s_in;
-            for (i, &x) in run.iter().enumerate() {
-                out[base + i * s_in] += x;
-            }
-            for a in (0..last).rev() {
-                idx[a] += 1;
-                if idx[a] < counts[a] {
-                    break;
-                }
-                idx[a] = 0;
-            }
-        }
-        Ok(())
-    }
 }
 
-fn span(a: usize, b: usize) -> SliceInfoElem {
-    SliceInfoElem::Slice {
-        start: a as u64,
-        end: b as u64,
-        step: 1,
-    }
-}
-
-fn fmt_mb(bytes: usize) -> String {
+fn fmt_mb(bytes: u128) -> String {
     format!("{:.1}", bytes as f64 / 1e6)
 }
 
@@ -694,18 +610,13 @@ impl RowSource for ZnlosReader {
                 format!("{l} is out of range: the capture has {kl} rows"),
             ));
         }
-        let len = self.geometry.nt * self.geometry.spads_per_row();
-        out.clear();
-        if self.layout.streams() {
-            out.resize(len, 0.0);
-            self.stream_row(l, out)?;
-        } else {
-            if self.whole.is_none() {
-                self.whole = Some(self.read_whole()?);
-            }
-            let w = self.whole.as_deref().unwrap_or_default();
-            out.extend_from_slice(&w[l * len..(l + 1) * len]);
-        }
+        // The background reader summed the block's colours and bounces into rows of
+        // SPAD-major histograms: the row is swapped into `out`, whose old buffer goes back.
+        let src = self.source();
+        let b = src.block_rows();
+        let reader = || Blocks::new(src);
+        self.rows
+            .take(l, l / b * b, out, reader, &self.path, "data")?;
         let x_l = self.geometry.lasers[l];
         if let Some(c0) = self.single_falloff {
             let k = self.geometry.laser_falloff(x_l) / c0;
@@ -714,6 +625,8 @@ impl RowSource for ZnlosReader {
         Ok(x_l)
     }
 }
+
+mod stream;
 
 #[cfg(test)]
 mod tests;

@@ -205,6 +205,97 @@ fn every_axis_order_gives_the_same_rows() {
     );
 }
 
+/// Every axis order, with sizes that do not divide the blocks: rows read in small blocks (in
+/// order, backwards, and one twice) are bit for bit the rows of one whole read (the file in
+/// one block) and the sums of the pattern over colours and bounces taken in file order.
+#[test]
+fn blocks_of_rows_equal_a_whole_read() {
+    let dir = scratch("blocks");
+    let nt = 37;
+    for (layout, l, s) in [
+        (ZnlosLayout::Rows7, [3, 5], [5, 3]),
+        (ZnlosLayout::Time7, [3, 5], [5, 3]),
+        (ZnlosLayout::Rows5, [1, 1], [5, 5]),
+        (ZnlosLayout::Time5, [1, 1], [5, 5]),
+        (ZnlosLayout::Rows7, [1, 1], [5, 3]),
+        (ZnlosLayout::Time7, [1, 1], [3, 5]),
+    ] {
+        let p = dir.join(format!("{layout:?}.hdf5"));
+        write(&p, layout, l, s, nt, "", false);
+        let whole = read_all(&p).unwrap();
+        let g = whole.geometry.clone();
+        let (kl, ks) = (g.lasers.len(), g.spads_per_row());
+        let exhaustive = l != [1, 1];
+        assert_eq!(
+            (kl, ks),
+            if exhaustive {
+                (15, 15)
+            } else {
+                (s[0] * s[1], 1)
+            }
+        );
+        // The sums in file order: bounces then colours (laser first), colours then bounces
+        // (time first).
+        let want = |li: usize, si: usize, n: usize| -> f32 {
+            let (ix, iy, sx, sy) = if exhaustive {
+                (li / l[1], li % l[1], si / s[1], si % s[1])
+            } else {
+                (0, 0, li / s[1], li % s[1])
+            };
+            let mut acc = 0.0f32;
+            for a in 0..6 * 3 {
+                let (c, b) = if layout.streams() {
+                    (a % 3, a / 3)
+                } else {
+                    (a / 6, a % 6)
+                };
+                acc += value(ix, iy, sx, sy, n, c, b);
+            }
+            acc
+        };
+        // A single scan's rows are scaled by the laser falloff (reciprocity): only the
+        // blocks are compared there.
+        let single = open(&p).unwrap().scan_type() == ScanType::Single;
+        assert_eq!(
+            single,
+            !exhaustive && matches!(layout, ZnlosLayout::Rows7 | ZnlosLayout::Time7)
+        );
+        for li in (0..kl).filter(|_| !single) {
+            for si in 0..ks {
+                for n in 0..nt {
+                    let got = whole.row(li)[si * nt + n];
+                    assert_eq!(
+                        got.to_bits(),
+                        want(li, si, n).to_bits(),
+                        "{layout:?} {li} {si} {n}"
+                    );
+                }
+            }
+        }
+        // Blocks of one row and runs of one histogram or plane (1000 bytes); runs that split
+        // a row (30 000, laser first); blocks that do not divide the rows.
+        let mut uneven = false;
+        for bytes in [1000, 30_000, 100_000] {
+            let mut r = open(&p).unwrap();
+            r.block_bytes = bytes;
+            let b = r.source().block_rows();
+            uneven |= b < kl && kl % b != 0;
+            let order = (0..kl).chain((0..kl).rev()).chain([kl / 2, kl / 2]);
+            let mut row = Vec::new();
+            for li in order {
+                r.read_row(li, &mut row).unwrap();
+                assert!(
+                    row.iter()
+                        .zip(whole.row(li))
+                        .all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "{layout:?} block of {bytes} bytes: row {li}"
+                );
+            }
+        }
+        assert!(uneven, "{layout:?}: no block size leaves a partial block");
+    }
+}
+
 #[test]
 fn bad_files_name_the_dataset() {
     let dir = scratch("bad");
