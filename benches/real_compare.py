@@ -5,9 +5,8 @@ confocal capture (MAT v5, `../shared/data/real/`): same preprocessing, volume, Î
 Optional: needs `pip install y-tal scipy` (never needed to build or test vltm). y-tal cannot
 read the Stanford layout (`rect_data` + `width`), so this script builds its capture by hand
 with the conventions vltm applies by default (4 ps bins, t = 0 at the wall, legs excluded,
-grid over [-width, width]^2 with the first index along x and the second down y, from +width
-to -width), after the authors' preprocessing
-(the first 600 bins dropped, 4 bins summed). The dropped bins are zero-padded back so that
+grid over [-width, width]^2, the first index along x, the second down y from +width to
+-width), after the authors' preprocessing (the first 600 bins dropped, 4 bins summed). The dropped bins are zero-padded back so that
 y-tal's t_start is 0 (as benches/ytal_compare.py does); y-tal samples a summed bin at its
 start, vltm at its centre (1.5 source bins later: 0.9 mm of depth). Then `vltm direct` with
 `--t-min 600b --rebin 4 --weights one`, and both wall times, their ratio and the Pearson
