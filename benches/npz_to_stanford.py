@@ -2,8 +2,10 @@
 """Write a confocal vltm capture (`.npz` from `vltm simulate`) as a Stanford confocal `.mat`
 (`rect_data` uint16 (N, N, T) + `width`), so that benches/real_compare.py can run both programs
 on a rendering whose scene is known. The counts are scaled to a peak of `--peak` and rounded
-(16-bit, as the published captures). The grid must be the Stanford one (N x N points from
--width to +width on both axes, first index along x, z = 0) and the capture must start at t = 0
+(16-bit, as the published captures). The grid must be N x N points from -width to +width on
+both axes, first index along x, second along y, z = 0; the second axis is flipped on writing,
+since Stanford's second index runs down y (from +width to -width, as vltm reads it, README
+"Real data"). The capture must start at t = 0
 with 4 ps bins (`"dt": 0.00119916983` in the scene), else the `.mat` would mean another capture:
 both are checked.
 
@@ -45,7 +47,7 @@ def main():
         sys.exit(f'{a.npz}: needs 4 ps bins ({DT:.11f} m) from t = 0')
     if h.max() <= 0:
         sys.exit(f'{a.npz}: empty capture')
-    q = np.round(h / h.max() * a.peak).astype(np.uint16)
+    q = np.round(h[:, ::-1, :] / h.max() * a.peak).astype(np.uint16)
     scipy.io.savemat(a.mat, {'rect_data': q, 'width': np.array([[w]])}, do_compression=True)
     print(f'wrote {a.mat}: {n1}x{n2}x{h.shape[2]} uint16, width {w} m, peak {a.peak:.0f} counts')
 

@@ -5,11 +5,12 @@ confocal capture (MAT v5, `../shared/data/real/`): same preprocessing, volume, Î
 Optional: needs `pip install y-tal scipy` (never needed to build or test vltm). y-tal cannot
 read the Stanford layout (`rect_data` + `width`), so this script builds its capture by hand
 with the conventions vltm applies by default (4 ps bins, t = 0 at the wall, legs excluded,
-grid over [-width, width]^2 with the first index along x), after the authors' preprocessing
-(the first 600 bins dropped, `--rebin` K = 4 bins summed). The dropped bins are zero-padded
-back so that y-tal's t_start is 0 (as benches/ytal_compare.py does); y-tal samples a summed
-bin at its start, vltm at its centre ((K-1)/2 source bins later). Then `vltm direct` with
-`--t-min 600b --rebin K --weights one`, and both wall times, their ratio and the Pearson
+grid over [-width, width]^2, the first index along x, the second down y from +width to
+-width), after the authors' preprocessing (the first 600 bins dropped, `--rebin` K = 4 bins
+summed). The dropped bins are zero-padded back so that y-tal's t_start is 0 (as
+benches/ytal_compare.py does); y-tal samples a summed bin at its start, vltm at its centre
+((K-1)/2 source bins later). Then `vltm direct` with `--t-min 600b --rebin K --weights one`,
+and both wall times, their ratio and the Pearson
 correlation of the max-normalised intensities.
 
     python3 benches/real_compare.py ../shared/data/real/data_resolution_chart_40cm.mat \\
@@ -64,7 +65,7 @@ def run_ytal(path, wl, vol, cpus, k, trim=600):
     h[:, :, :trim] = 0  # the authors' z_trim, kept as zeros so that t_start = 0
     nt = nt // k * k
     h = h[:, :, :nt].reshape(n1, n2, nt // k, k).sum(-1)
-    xs, ys = np.linspace(-w, w, n1), np.linspace(-w, w, n2)
+    xs, ys = np.linspace(-w, w, n1), np.linspace(w, -w, n2)
     g = np.zeros((n1, n2, 3), np.float32)
     g[..., 0], g[..., 1] = xs[:, None], ys[None, :]
     d = NLOSCaptureData()
@@ -100,7 +101,7 @@ def load_prep(path, trim, k):
     nt = nt // k * k
     h = h[:, :, :nt].reshape(n1 * n2, nt // k, k).sum(-1)
     g = np.zeros((n1, n2, 3))
-    g[..., 0], g[..., 1] = np.linspace(-w, w, n1)[:, None], np.linspace(-w, w, n2)[None, :]
+    g[..., 0], g[..., 1] = np.linspace(-w, w, n1)[:, None], np.linspace(w, -w, n2)[None, :]
     return h, g.reshape(-1, 3), 4e-12 * C
 
 

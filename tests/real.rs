@@ -7,7 +7,8 @@
 //!
 //! Checked, as the maximum over x and y of each depth slice (what README "Real data" states):
 //! * the resolution chart's brightest slice is at 0.39–0.41 m (nominal distance 40 cm), and
-//!   its strongest voxel is in the upper-left bar group (x < 0, y > 0);
+//!   its strongest voxel is in the lower-left bar group (x < 0, y < 0; the second index of
+//!   `rect_data` runs down y, `vltm::io::mat`);
 //! * the exit sign's is at 0.76–0.83 m (tilted: 0.78 m on one side, 0.82 m on the other);
 //! * the strongest voxel is inside the scanned square, away from its edge, and the farthest
 //!   decoy slices are below 0.9 of the brightest.
@@ -121,10 +122,12 @@ fn resolution_chart_is_at_40_cm() {
     ) else {
         return;
     };
-    // In the upper-left group of horizontal bars of the front view (x < 0, y > 0).
+    // In the lower-left group of horizontal bars of the front view (x < 0, y < 0): the
+    // second index of `rect_data` runs down y (before, it ran up and this group was at the
+    // upper left, with the exit sign's letters mirrored relative to the lab).
     assert!(
-        peak[0] < -0.02 && peak[1] > 0.02,
-        "chart: strongest voxel {peak:?} not in the upper-left bar group"
+        peak[0] < -0.02 && peak[1] < -0.02,
+        "chart: strongest voxel {peak:?} not in the lower-left bar group"
     );
 }
 

@@ -25,9 +25,14 @@
 //!   the laser and detector legs are excluded (`t0 = 0`, [`Geometry::legs_in_time`] false;
 //!   `--t-start`);
 //! * the confocal grid spans `[-width, width]²` (`--grid-width` sets the half-width): point
-//!   `(i, j)` of `rect_data(i, j, :)` is at `x = -w + 2w·i/(N₁−1)`, `y = -w + 2w·j/(N₂−1)`,
-//!   the authors' axis order (their script permutes `rect_data` to (t, j, i) and displays i
-//!   across, j down). Laser row `l = i·N₂ + j` (C order over `[N₁, N₂]`, DESIGN §B.0);
+//!   `(i, j)` of `rect_data(i, j, :)` is at `x = -w + 2w·i/(N₁−1)`, `y = +w − 2w·j/(N₂−1)`
+//!   (the second index runs **down**). Laser row `l = i·N₂ + j` (C order over `[N₁, N₂]`,
+//!   DESIGN §B.0). The authors' script displays i across (increasing to the left) and j down;
+//!   the exit sign's letters read upright and unmirrored in that display, i.e. as seen from the
+//!   wall. With `y` down the second index, `(x, y, z)` is right-handed with y up and z into the
+//!   hidden scene, so vltm's front view (x right, y up: seen from behind the scene, looking
+//!   back at the wall) shows the sign mirrored and upright; with `y = +2nd index` it showed
+//!   it turned by 180°, a mirror image of the lab (README "Real data", `tests/real.rs`);
 //! * the device positions are not recorded; [`DEFAULT_LASER_ORIGIN`] is used, which
 //!   only matters for `--compensate-laser` (the legs are not in the time axis).
 //!
@@ -298,7 +303,7 @@ fn stanford(path: &Path, file: &File, o: &MatOptions) -> Result<(Capture, Vec<St
         }
     };
     let lasers: Vec<_> = (0..n1)
-        .flat_map(|i| (0..n2).map(move |j| [coord(i, n1) as f32, coord(j, n2) as f32, 0.0]))
+        .flat_map(|i| (0..n2).map(move |j| [coord(i, n1) as f32, -coord(j, n2) as f32, 0.0]))
         .collect();
     let geometry = Geometry {
         spads: lasers.clone(),
@@ -378,7 +383,9 @@ fn stanford(path: &Path, file: &File, o: &MatOptions) -> Result<(Capture, Vec<St
         ),
         conv(
             "grid",
-            format!("{n1}x{n2} confocal points over [-{w}, {w}]^2 m, x = 1st index, y = 2nd"),
+            format!(
+                "{n1}x{n2} confocal points over [-{w}, {w}]^2 m, x = 1st index (-w to w), y = 2nd (w down to -w)"
+            ),
             w_src,
         ),
         conv("delta_t", format!("{dt} m of path"), dt_src),

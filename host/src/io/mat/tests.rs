@@ -135,10 +135,11 @@ fn stanford_layout_reads_compressed_and_plain_with_its_conventions() {
         assert!(g.confocal && !g.legs_in_time);
         assert_eq!((g.laser_shape, g.nt, g.t0), ([3, 2], 5, 0.0));
         assert!((g.dt - 1.199_169_832e-3).abs() < 1e-12, "{}", g.dt);
-        // Row l = i·2 + j at (-w + w·i, -w + 2w·j), histogram 100 i + 10 j + t.
+        // Row l = i·2 + j at (-w + w·i, w − 2w·j): the second index runs down (y from +w to
+        // −w), so that (x, y, z) is right-handed with y up; histogram 100 i + 10 j + t.
         let l = 2 * 2 + 1;
-        assert_eq!(g.lasers[l], [0.25, 0.25, 0.0]);
-        assert_eq!(g.lasers[0], [-0.25, -0.25, 0.0]);
+        assert_eq!(g.lasers[l], [0.25, -0.25, 0.0]);
+        assert_eq!(g.lasers[0], [-0.25, 0.25, 0.0]);
         assert_eq!(m.capture.row(l), &[210.0, 211.0, 212.0, 213.0, 214.0]);
         assert!(
             m.conventions
