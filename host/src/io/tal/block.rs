@@ -12,12 +12,14 @@
 //! queued, one being filled) plus the staging buffer; row buffers are recycled through
 //! [`ReadAhead::recycle`], so a pass over the capture allocates about three blocks' worth.
 
+use super::chunks::ChunkMap;
 use super::fields::{h5_error, into_vec};
 use super::format::HFormat;
 use crate::error::{Error, Result};
 use hdf5_reader::{Dataset, Datatype, SliceInfo, SliceInfoElem};
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender, channel, sync_channel};
 
 /// Element type of `H`.
@@ -58,24 +60,40 @@ const QUEUE: usize = 1;
 
 /// The block of consecutive rows (flattened row axes) holding row `l`, `first..end`: whole
 /// laser lines when a line fits in [`BLOCK_BYTES`] (as many as fit), else at most
-/// [`BLOCK_BYTES`] of one line (at least one row).
-pub(super) fn block_range(dims: &[usize], format: HFormat, ks: usize, l: usize) -> (usize, usize) {
+/// [`BLOCK_BYTES`] of one line (at least one row). With `band` (rows per band of a chunked
+/// `H` decoded chunk by chunk, whole lines), blocks are cut the same way inside each band.
+pub(super) fn block_range(
+    dims: &[usize],
+    format: HFormat,
+    ks: usize,
+    band: Option<usize>,
+    l: usize,
+) -> (usize, usize) {
     let nt = dims[0];
     let row_bytes = (ks * nt * 4).max(1);
     let fit = (BLOCK_BYTES / row_bytes).max(1);
     let r = format.row_axes();
     let kl: usize = dims[1..=r].iter().product();
-    let line = if r == 2 { dims[2].max(1) } else { kl.max(1) };
-    if r == 2 && fit >= line {
+    let (lo, hi) = match band {
+        Some(b) => {
+            let lo = l / b.max(1) * b.max(1);
+            (lo, (lo + b.max(1)).min(kl))
+        }
+        None => (0, kl),
+    };
+    let (l, n) = (l - lo, hi - lo);
+    let line = if r == 2 { dims[2].max(1) } else { n.max(1) };
+    let (a, b) = if r == 2 && fit >= line {
         let b = fit / line * line;
         let first = l / b * b;
-        (first, (first + b).min(kl))
+        (first, (first + b).min(n))
     } else {
         let b = fit.min(line);
         let (ix, iy) = (l / line, l % line);
         let y0 = iy / b * b;
         (ix * line + y0, ix * line + (y0 + b).min(line))
-    }
+    };
+    (lo + a, lo + b)
 }
 
 /// Rows `first..first + rows.len()` in vltm's order, each `rows[r][s·Nt + n]`; a row handed
@@ -114,6 +132,16 @@ pub(super) struct Plan {
     pub(super) kl: usize,
     /// File address of a contiguous little-endian `H` (positional reads), else `None`.
     pub(super) raw: Option<u64>,
+    /// The chunk index of a chunked `H` read chunk by chunk ([`ChunkMap`]), else `None`.
+    pub(super) chunks: Option<Arc<ChunkMap>>,
+}
+
+impl Plan {
+    /// The block holding row `l` ([`block_range`]).
+    pub(super) fn block_range(&self, l: usize) -> (usize, usize) {
+        let band = self.chunks.as_ref().map(|c| c.band_rows());
+        block_range(&self.dims, self.format, self.ks, band, l)
+    }
 }
 
 /// The reader thread's state: the open file (positional path) and its staging buffers.
@@ -123,6 +151,8 @@ struct Reader<'p> {
     stage: Vec<f32>,
     stage64: Vec<f64>,
     free: Receiver<Vec<f32>>,
+    /// The rows of the chunk band decoded last that are not handed over yet.
+    band: Block,
 }
 
 impl Reader<'_> {
@@ -140,6 +170,23 @@ impl Reader<'_> {
     /// Reads rows `first..end` (one [`block_range`]).
     fn read(&mut self, first: usize, end: usize) -> Result<Block> {
         let (nt, ks, rows) = (self.plan.dims[0], self.plan.ks, end - first);
+        if let Some(chunks) = &self.plan.chunks {
+            if !(first..end).all(|l| self.band.holds(l)) {
+                let b = chunks.band_rows();
+                let (lo, hi) = (first / b * b, (first / b * b + b).min(self.plan.kl));
+                self.band = Block::default();
+                let mut band: Vec<Vec<f32>> = (lo..hi).map(|_| self.row_buffer(ks * nt)).collect();
+                chunks.read_band(&self.plan.path, first / b, &mut band)?;
+                self.band = Block {
+                    first: lo,
+                    rows: band.into_iter().map(Some).collect(),
+                };
+            }
+            let rows = (first..end)
+                .map(|l| self.band.rows[l - self.band.first].take())
+                .collect();
+            return Ok(Block { first, rows });
+        }
         let mut block = Block {
             first,
             rows: (0..rows).map(|_| Some(self.row_buffer(ks * nt))).collect(),
@@ -341,10 +388,11 @@ impl ReadAhead {
                 stage: Vec::new(),
                 stage64: Vec::new(),
                 free: free_rx,
+                band: Block::default(),
             };
             let mut l = first;
             while l < plan.kl {
-                let (a, b) = block_range(&plan.dims, plan.format, plan.ks, l);
+                let (a, b) = plan.block_range(l);
                 let block = reader.read(a, b);
                 let failed = block.is_err();
                 if tx.send(block).is_err() || failed {

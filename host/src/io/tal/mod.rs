@@ -142,6 +142,7 @@ use crate::error::{Error, Result};
 use crate::io::capture::{Capture, Geometry, RowSource};
 use hdf5_reader::{ByteOrder, Dataset, Datatype, Hdf5File, OpenOptions};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use vltm_kernel::Point;
 
 /// An open `HDF5_TAL` capture that reads laser rows on demand ([`RowSource`]).
@@ -159,6 +160,9 @@ pub struct TalReader {
     /// File address of a contiguous little-endian `H`, read with positional reads; `None`
     /// reads through the crate.
     raw: Option<u64>,
+    /// The chunk index of a chunked `H` decoded chunk by chunk; `None` reads through the
+    /// crate (or positionally, `raw`).
+    chunks: Option<Arc<ChunkMap>>,
     /// The rows read last.
     block: Block,
     /// The background reader, once rows are read.
@@ -353,6 +357,10 @@ impl TalReader {
             } => contiguous,
             _ => None,
         };
+        let chunks = match raw {
+            Some(_) => None,
+            None => ChunkMap::new(path, &file, &h, &dims, format, elem, file_len)?.map(Arc::new),
+        };
         let nt = dims[0];
         let lead = &dims[1..];
 
@@ -398,6 +406,22 @@ impl TalReader {
             },
             budget::bytes(row, 8 + 2 * elem_bytes as u128).max(BLOCK_BYTES as u128 * 3),
         )?;
+        // A band of chunks being decoded, two blocks handed over, and each worker's stored
+        // and decoded chunks.
+        if let Some(c) = &chunks {
+            let band = c.band_rows() as u128 * row as u128 * 4;
+            let need =
+                band + 2 * BLOCK_BYTES as u128 + 4 * WORKERS as u128 * c.chunk_bytes() as u128;
+            budget::check(
+                || {
+                    format!(
+                        "a band of chunks of H ({band} bytes) read from {}",
+                        path.display()
+                    )
+                },
+                need,
+            )?;
+        }
 
         Ok(Self {
             path: path.to_path_buf(),
@@ -410,6 +434,7 @@ impl TalReader {
             options,
             single_falloff,
             raw,
+            chunks,
             block: Block::default(),
             ahead: None,
         })
@@ -477,7 +502,14 @@ impl TalReader {
 
     /// The block of consecutive rows holding row `l`: `first..end` (module docs, *Reading*).
     fn block_range(&self, l: usize) -> (usize, usize) {
-        block_range(&self.dims, self.format, self.geometry.spads_per_row(), l)
+        let band = self.chunks.as_ref().map(|c| c.band_rows());
+        block_range(
+            &self.dims,
+            self.format,
+            self.geometry.spads_per_row(),
+            band,
+            l,
+        )
     }
 
     /// Makes the block holding row `l` current: from the read-ahead queue when the rows are
@@ -523,6 +555,7 @@ impl TalReader {
             ks: self.geometry.spads_per_row(),
             kl: self.geometry.lasers.len(),
             raw: self.raw,
+            chunks: self.chunks.clone(),
         }
     }
 }
@@ -633,6 +666,7 @@ impl RowSource for TalReader {
 }
 
 mod block;
+mod chunks;
 mod fields;
 mod format;
 mod scan;
@@ -640,6 +674,7 @@ pub mod znlos;
 
 pub use block::BLOCK_BYTES;
 use block::{Block, Elem, Plan, ReadAhead, block_range};
+use chunks::{ChunkMap, WORKERS};
 
 pub use format::{HFormat, ScanType, TalOptions};
 

@@ -428,7 +428,7 @@ fn synthetic_formats_stream_the_right_values() {
     // Rows of 4 MB: four rows per block within a line; lines of 5 end in a partial block.
     let dims = [1000, 3, 5, 10, 100];
     let blocks: Vec<_> = (0..15)
-        .map(|l| super::block_range(&dims, HFormat::TLxLySxSy, 1000, l))
+        .map(|l| super::block_range(&dims, HFormat::TLxLySxSy, 1000, None, l))
         .collect();
     assert_eq!(
         &blocks[..7],
@@ -436,7 +436,7 @@ fn synthetic_formats_stream_the_right_values() {
     );
     // Rows of 40 kB, lines of 5: whole lines, as many as fit in BLOCK_BYTES.
     let dims = [100, 300, 5, 10, 10];
-    let b = super::block_range(&dims, HFormat::TLxLySxSy, 100, 7);
+    let b = super::block_range(&dims, HFormat::TLxLySxSy, 100, None, 7);
     assert_eq!((b.0 % 5, b.1 - b.0), (0, BLOCK_BYTES / 40_000 / 5 * 5));
     let mut row = Vec::new();
     for l in [9, 0, 4, 5, 3, 8, 1, 2, 7, 6, 6, 9] {
