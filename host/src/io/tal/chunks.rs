@@ -121,13 +121,17 @@ impl ChunkMap {
         }
         let Some(DataLayout::Chunked {
             address,
-            dims: cdims,
             chunk_indexing,
             ..
         }) = layout
         else {
             return Ok(None);
         };
+        // The dataset's chunk shape (a trailing element-size entry of the layout dropped).
+        let Some(cdims) = h.chunks() else {
+            return Ok(None);
+        };
+        let cdims = &cdims[..];
         let rank = dims.len();
         if cdims.len() != rank || cdims.contains(&0) {
             return Ok(None);
@@ -339,6 +343,12 @@ impl ChunkMap {
         self.chunk[1].min(self.dims[1]) * self.dims[2]
     }
 
+    /// Where each chunk's stored bytes lie, `(address, length)`, in C order of the grid.
+    #[cfg(test)]
+    pub(super) fn stored_spans(&self) -> Vec<(u64, usize)> {
+        self.entries.iter().map(|e| (e.address, e.len)).collect()
+    }
+
     /// Bytes of one decoded chunk.
     pub(super) fn chunk_bytes(&self) -> usize {
         self.chunk_bytes
@@ -388,7 +398,10 @@ impl ChunkMap {
     }
 
     /// Decodes the chunks of band `band` with time-chunk index in `times` into `view`
-    /// (`view[r·Ks + s]` holds bins `bin0..` of row `r`, SPAD `s`).
+    /// (`view[r·Ks + s]` holds bins `bin0..` of row `r`, SPAD `s`): for each chunk position
+    /// off the time axis, runs of up to [`STAGE_BYTES`] of consecutive time chunks are decoded
+    /// into a staging buffer and then written out, so that each (row, SPAD) receives one
+    /// contiguous run of bins at a time.
     fn decode(
         &self,
         path: &Path,
@@ -399,113 +412,182 @@ impl ChunkMap {
     ) -> Result<()> {
         let io = |e| Error::io(path, e);
         let mut file = std::fs::File::open(path).map_err(io)?;
-        let mut inflater = libdeflater::Decompressor::new();
-        let mut stored: Vec<u8> = Vec::new();
+        let mut buffers = Buffers {
+            inflater: libdeflater::Decompressor::new(),
+            stored: Vec::new(),
+            mid: Vec::new(),
+            wide: Vec::new(),
+        };
         let words = self.chunk_bytes / 4;
-        let (mut a, mut b) = (vec![0.0f32; words], Vec::new());
-        let mut wide: Vec<f32> = Vec::new();
+        let elems = self.chunk.iter().product::<usize>();
+        let run = (STAGE_BYTES / self.chunk_bytes).clamp(1, times.len().max(1));
+        let mut stage = vec![0.0f32; run * words];
         let [_, _, gb, gc, gd] = self.grid;
-        for gt in times {
-            for (gy, gz, gw) in
-                (0..gb).flat_map(|y| (0..gc).flat_map(move |z| (0..gd).map(move |w| (y, z, w))))
-            {
-                let g = [gt, band, gy, gz, gw];
-                let k = g.iter().zip(&self.grid).fold(0, |k, (&p, &n)| k * n + p);
-                let e = self.entries[k];
-                let bad = |what: String| {
-                    let at: Vec<usize> = (0..5).map(|i| g[i] * self.chunk[i]).collect();
-                    Error::format(
-                        path,
-                        "H",
-                        format!("chunks that decode to {} bytes", self.chunk_bytes),
-                        format!(
-                            "chunk at {at:?} ({} bytes at {:#x}): {what}",
-                            e.len, e.address
-                        ),
-                    )
-                };
-                file.seek(SeekFrom::Start(e.address)).map_err(io)?;
-                let ops: Vec<Filter> = (0..self.filters.len())
-                    .rev()
-                    .filter(|&i| e.mask & (1 << i) == 0)
-                    .map(|i| self.filters[i])
-                    .collect();
-                if ops.is_empty() {
-                    file.read_exact(bytemuck::cast_slice_mut(&mut a))
-                        .map_err(io)?;
-                } else {
-                    stored.resize(e.len, 0);
-                    file.read_exact(&mut stored).map_err(io)?;
-                    for (i, op) in ops.iter().enumerate() {
-                        let (input, output): (&[u8], &mut [f32]) = if i == 0 {
-                            (&stored, &mut a)
-                        } else {
-                            b.resize(words, 0.0);
-                            std::mem::swap(&mut a, &mut b);
-                            (bytemuck::cast_slice(&b), &mut a)
-                        };
-                        let output: &mut [u8] = bytemuck::cast_slice_mut(output);
-                        match op {
-                            Filter::Deflate => {
-                                let n = inflater
-                                    .zlib_decompress(input, output)
-                                    .map_err(|err| bad(format!("deflate: {err}")))?;
-                                if n != output.len() {
-                                    return Err(bad(format!("inflates to {n} bytes")));
-                                }
-                            }
-                            Filter::Shuffle => {
-                                if input.len() != output.len() {
-                                    return Err(bad(format!("{} bytes to unshuffle", input.len())));
-                                }
-                                let es = if self.elem == Elem::F32 { 4 } else { 8 };
-                                unshuffle(input, output, es);
-                            }
+        for gy in 0..gb {
+            for gz in 0..gc {
+                for gw in 0..gd {
+                    for t0 in times.clone().step_by(run) {
+                        let n = run.min(times.end - t0);
+                        for j in 0..n {
+                            let g = [t0 + j, band, gy, gz, gw];
+                            let out = &mut stage[j * words..j * words + elems];
+                            self.load(path, &mut file, &mut buffers, g, out)?;
                         }
+                        let g = [t0, band, gy, gz, gw];
+                        self.scatter(&stage, words, n, g, bin0, &mut view);
                     }
                 }
-                let values: &[f32] =
-                    match self.elem {
-                        Elem::F32 => &a,
-                        Elem::F64 => {
-                            wide.clear();
-                            wide.extend(bytemuck::cast_slice::<f32, u8>(&a).chunks_exact(8).map(
-                                |x| f64::from_le_bytes(x.try_into().expect("8 bytes")) as f32,
-                            ));
-                            &wide
-                        }
-                    };
-                self.scatter(values, [gt, band, gy, gz, gw], bin0, &mut view);
             }
         }
         Ok(())
     }
 
-    /// Writes one decoded chunk (grid position `g`) into `view` (rows of the band, bins from
-    /// `bin0`), clipped to the dataset's extent.
-    fn scatter(&self, values: &[f32], g: [usize; 5], bin0: usize, view: &mut [&mut [f32]]) {
+    /// Reads chunk `g` (grid position) and decodes it into `out` (its values as `f32`).
+    fn load(
+        &self,
+        path: &Path,
+        file: &mut std::fs::File,
+        buffers: &mut Buffers,
+        g: [usize; 5],
+        out: &mut [f32],
+    ) -> Result<()> {
+        let io = |e| Error::io(path, e);
+        let k = g.iter().zip(&self.grid).fold(0, |k, (&p, &n)| k * n + p);
+        let e = self.entries[k];
+        let bad = |what: String| {
+            let at: Vec<usize> = (0..5).map(|i| g[i] * self.chunk[i]).collect();
+            Error::format(
+                path,
+                "H",
+                format!("chunks that decode to {} bytes", self.chunk_bytes),
+                format!(
+                    "chunk at {at:?} (padded axes; {} bytes at {:#x}): {what}",
+                    e.len, e.address
+                ),
+            )
+        };
+        let es = if self.elem == Elem::F32 { 4 } else { 8 };
+        // The pipeline undone: last filter first, skipping those the chunk's mask skips.
+        let ops: Vec<Filter> = (0..self.filters.len())
+            .rev()
+            .filter(|&i| e.mask & (1 << i) == 0)
+            .map(|i| self.filters[i])
+            .collect();
+        let Buffers {
+            inflater,
+            stored,
+            mid,
+            wide,
+        } = buffers;
+        let cb = self.chunk_bytes;
+        let fin: &mut [u8] = match self.elem {
+            Elem::F32 => bytemuck::cast_slice_mut(out),
+            Elem::F64 => {
+                wide.resize(cb, 0);
+                wide
+            }
+        };
+        file.seek(SeekFrom::Start(e.address)).map_err(io)?;
+        if ops.is_empty() {
+            file.read_exact(fin).map_err(io)?;
+        } else {
+            stored.resize(e.len, 0);
+            file.read_exact(stored).map_err(io)?;
+            let mut apply = |op: Filter, input: &[u8], output: &mut [u8]| match op {
+                Filter::Deflate => match inflater.zlib_decompress(input, output) {
+                    Ok(n) if n == output.len() => Ok(()),
+                    Ok(n) => Err(bad(format!("inflates to {n} bytes"))),
+                    Err(err) => Err(bad(format!("deflate: {err}"))),
+                },
+                Filter::Shuffle if input.len() == output.len() => {
+                    unshuffle(input, output, es);
+                    Ok(())
+                }
+                Filter::Shuffle => Err(bad(format!("{} bytes to unshuffle", input.len()))),
+            };
+            if let [op] = ops[..] {
+                apply(op, stored, fin)?;
+            } else {
+                mid.resize(cb, 0);
+                apply(ops[0], stored, mid)?;
+                apply(ops[1], mid, fin)?;
+            }
+        }
+        if self.elem == Elem::F64 {
+            for (x, w) in out.iter_mut().zip(wide.chunks_exact(8)) {
+                *x = f64::from_le_bytes(w.try_into().expect("8 bytes")) as f32;
+            }
+        }
+        Ok(())
+    }
+
+    /// Writes `n` decoded chunks consecutive in time (`stage[j·words..]`, the first at grid
+    /// position `g`) into `view` (rows of the band, bins from `bin0`), clipped to the
+    /// dataset's extent.
+    fn scatter(
+        &self,
+        stage: &[f32],
+        words: usize,
+        n: usize,
+        g: [usize; 5],
+        bin0: usize,
+        view: &mut [&mut [f32]],
+    ) {
         // Chunk C order: element (k, a, b, c, d) at (((k·C1 + a)·C2 + b)·C3 + c)·C4 + d.
-        let [_, c1, c2, c3, c4] = self.chunk;
-        let [_, _, b_len, _, d_len] = self.dims;
+        let [ct, c1, c2, c3, c4] = self.chunk;
+        let [nt, _, b_len, _, d_len] = self.dims;
         let o: [usize; 5] = std::array::from_fn(|i| g[i] * self.chunk[i]);
         let ext: [usize; 5] = std::array::from_fn(|i| self.chunk[i].min(self.dims[i] - o[i]));
         let ks = self.dims[3] * d_len;
         let stride = c1 * c2 * c3 * c4;
-        let t0 = o[0] - bin0;
         let band_a0 = g[1] * c1;
+        let e4 = ext[4];
+        // Bins of chunk j: from (o[0] + j·ct) − bin0, as many as lie before Nt.
+        let bins = |j: usize| (o[0] + j * ct - bin0, ct.min(nt - (o[0] + j * ct)));
         for a in 0..ext[1] {
             for b in 0..ext[2] {
                 let row = (o[1] + a - band_a0) * b_len + o[2] + b;
                 for c in 0..ext[3] {
                     let s0 = (o[3] + c) * d_len + o[4];
                     let base = ((a * c2 + b) * c3 + c) * c4;
-                    for (d, dst) in view[row * ks + s0..row * ks + s0 + ext[4]]
-                        .iter_mut()
-                        .enumerate()
-                    {
-                        let dst = &mut dst[t0..t0 + ext[0]];
-                        for (k, x) in dst.iter_mut().enumerate() {
-                            *x = values[base + d + k * stride];
+                    let dsts = &mut view[row * ks + s0..row * ks + s0 + e4];
+                    // Tiles of TILE_T bins × TILE_S SPADs through registers, chunk after chunk
+                    // along time for the same SPADs; the rest one value at a time.
+                    let whole = e4 / TILE_S * TILE_S;
+                    for d0 in (0..whole).step_by(TILE_S) {
+                        for j in 0..n {
+                            let values = &stage[j * words..(j + 1) * words];
+                            let (t0, et) = bins(j);
+                            for k0 in (0..et).step_by(TILE_T) {
+                                let kk = TILE_T.min(et - k0);
+                                if kk < TILE_T {
+                                    for (d, dst) in dsts[d0..d0 + TILE_S].iter_mut().enumerate() {
+                                        for k in 0..kk {
+                                            dst[t0 + k0 + k] =
+                                                values[base + d0 + d + (k0 + k) * stride];
+                                        }
+                                    }
+                                    continue;
+                                }
+                                let tile: [[f32; TILE_S]; TILE_T] = std::array::from_fn(|k| {
+                                    let i = base + (k0 + k) * stride + d0;
+                                    let run = &values[i..i + TILE_S];
+                                    std::array::from_fn(|j| run[j])
+                                });
+                                for (j, dst) in dsts[d0..d0 + TILE_S].iter_mut().enumerate() {
+                                    let column: [f32; TILE_T] = std::array::from_fn(|k| tile[k][j]);
+                                    dst[t0 + k0..t0 + k0 + TILE_T].copy_from_slice(&column);
+                                }
+                            }
+                        }
+                    }
+                    for (d, dst) in dsts.iter_mut().enumerate().skip(whole) {
+                        for j in 0..n {
+                            let values = &stage[j * words..(j + 1) * words];
+                            let (t0, et) = bins(j);
+                            for (k, x) in dst[t0..t0 + et].iter_mut().enumerate() {
+                                *x = values[base + d + k * stride];
+                            }
                         }
                     }
                 }
@@ -513,6 +595,24 @@ impl ChunkMap {
         }
     }
 }
+
+/// A worker's buffers: the inflater, one chunk's stored bytes, and a decoded chunk's bytes
+/// between two filters (`mid`) or before an `f64` → `f32` conversion (`wide`).
+struct Buffers {
+    inflater: libdeflater::Decompressor,
+    stored: Vec<u8>,
+    mid: Vec<u8>,
+    wide: Vec<u8>,
+}
+
+/// Decoded chunks staged per worker before they are written out (at least one chunk).
+pub const STAGE_BYTES: usize = 1 << 20;
+
+/// Bins per tile of [`ChunkMap::scatter`].
+const TILE_T: usize = 16;
+
+/// SPADs per tile of [`ChunkMap::scatter`].
+const TILE_S: usize = 16;
 
 /// HDF5's shuffle filter undone: byte `j` of element `i` is `input[j·n + i]` (`n` whole
 /// elements of `es` bytes); trailing bytes are copied as they are.
