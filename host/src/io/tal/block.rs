@@ -4,7 +4,8 @@
 //! crate's hyperslab reader otherwise — and transposed from tal's time-first order to vltm's
 //! SPAD-major rows, and the bounded queue that hands the blocks over ([`ReadAhead`]).
 //!
-//! Units: values are `f32` histogram samples as stored (f64 files are rounded to f32). Cost:
+//! Units: values are `f32` histogram samples as stored (f64 files are rounded to f32). A
+//! chunked `H` that `chunks` decodes is read a band at a time (see there). Cost:
 //! a contiguous `H` is read with one positional read per time bin and block (`Nt` reads of
 //! `B·Ks` values, `B` rows per block; one read of [`GROUP`] bins when a block holds every
 //! row), staged [`GROUP`] bins at a time in a buffer of `GROUP·B·Ks` values that stays in
