@@ -14,40 +14,14 @@
 //! [`ReadAhead::recycle`], so a pass over the capture allocates about three blocks' worth.
 
 use super::chunks::ChunkMap;
-use super::fields::{h5_error, into_vec};
+use super::fields::{Elem, h5_error, into_vec};
 use super::format::HFormat;
 use crate::error::{Error, Result};
-use hdf5_reader::{Dataset, Datatype, SliceInfo, SliceInfoElem};
+use hdf5_reader::{Dataset, SliceInfo, SliceInfoElem};
 use std::io::{Read, Seek, SeekFrom};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender, channel, sync_channel};
-
-/// Element type of `H`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Elem {
-    F32,
-    F64,
-}
-
-impl Elem {
-    /// The element type of dataset `field` of `path`.
-    ///
-    /// # Errors
-    /// [`Error::Format`] naming `field` unless it holds float32 or float64 values.
-    pub(super) fn of(h: &Dataset, path: &Path, field: &str) -> Result<Self> {
-        match h.dtype() {
-            Datatype::FloatingPoint { size: 4, .. } => Ok(Self::F32),
-            Datatype::FloatingPoint { size: 8, .. } => Ok(Self::F64),
-            other => Err(Error::format(
-                path,
-                field,
-                "float32 or float64 values",
-                format!("{other:?}"),
-            )),
-        }
-    }
-}
 
 /// Rows read from `H` at once (module docs of [`io::tal`](super), *Reading*): at most this
 /// many bytes (whole laser lines when a line fits), or one row.

@@ -27,8 +27,7 @@
 //! overhead; a chunk that does not inflate to exactly its size is an [`Error::Format`] on `H`
 //! naming the chunk.
 
-use super::block::Elem;
-use super::fields::h5_error;
+use super::fields::{Elem, h5_error};
 use super::format::HFormat;
 use crate::error::{Error, Result};
 use hdf5_reader::messages::HdfMessage;

@@ -692,7 +692,7 @@ mod scan;
 pub mod znlos;
 
 pub use block::BLOCK_BYTES;
-use block::{Block, Elem, Plan, ReadAhead, block_range};
+use block::{Block, Plan, ReadAhead, block_range};
 use chunks::{ChunkMap, WORKERS};
 
 pub use format::{HFormat, ScanType, TalOptions};
