@@ -4,7 +4,8 @@
 //! crate's hyperslab reader otherwise — and transposed from tal's time-first order to vltm's
 //! SPAD-major rows, and the bounded queue that hands the blocks over ([`ReadAhead`]).
 //!
-//! Units: values are `f32` histogram samples as stored (f64 files are rounded to f32). Cost:
+//! Units: values are `f32` histogram samples as stored (f64 files are rounded to f32). A
+//! chunked `H` that `chunks` decodes is read a band at a time (see there). Cost:
 //! a contiguous `H` is read with one positional read per time bin and block (`Nt` reads of
 //! `B·Ks` values, `B` rows per block; one read of [`GROUP`] bins when a block holds every
 //! row), staged [`GROUP`] bins at a time in a buffer of `GROUP·B·Ks` values that stays in
@@ -12,39 +13,15 @@
 //! queued, one being filled) plus the staging buffer; row buffers are recycled through
 //! [`ReadAhead::recycle`], so a pass over the capture allocates about three blocks' worth.
 
-use super::fields::{h5_error, into_vec};
+use super::chunks::ChunkMap;
+use super::fields::{Elem, h5_error, into_vec};
 use super::format::HFormat;
 use crate::error::{Error, Result};
-use hdf5_reader::{Dataset, Datatype, SliceInfo, SliceInfoElem};
+use hdf5_reader::{Dataset, SliceInfo, SliceInfoElem};
 use std::io::{Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use std::sync::mpsc::{Receiver, Sender, channel, sync_channel};
-
-/// Element type of `H`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub(super) enum Elem {
-    F32,
-    F64,
-}
-
-impl Elem {
-    /// The element type of dataset `field` of `path`.
-    ///
-    /// # Errors
-    /// [`Error::Format`] naming `field` unless it holds float32 or float64 values.
-    pub(super) fn of(h: &Dataset, path: &Path, field: &str) -> Result<Self> {
-        match h.dtype() {
-            Datatype::FloatingPoint { size: 4, .. } => Ok(Self::F32),
-            Datatype::FloatingPoint { size: 8, .. } => Ok(Self::F64),
-            other => Err(Error::format(
-                path,
-                field,
-                "float32 or float64 values",
-                format!("{other:?}"),
-            )),
-        }
-    }
-}
 
 /// Rows read from `H` at once (module docs of [`io::tal`](super), *Reading*): at most this
 /// many bytes (whole laser lines when a line fits), or one row.
@@ -58,24 +35,40 @@ const QUEUE: usize = 1;
 
 /// The block of consecutive rows (flattened row axes) holding row `l`, `first..end`: whole
 /// laser lines when a line fits in [`BLOCK_BYTES`] (as many as fit), else at most
-/// [`BLOCK_BYTES`] of one line (at least one row).
-pub(super) fn block_range(dims: &[usize], format: HFormat, ks: usize, l: usize) -> (usize, usize) {
+/// [`BLOCK_BYTES`] of one line (at least one row). With `band` (rows per band of a chunked
+/// `H` decoded chunk by chunk, whole lines), blocks are cut the same way inside each band.
+pub(super) fn block_range(
+    dims: &[usize],
+    format: HFormat,
+    ks: usize,
+    band: Option<usize>,
+    l: usize,
+) -> (usize, usize) {
     let nt = dims[0];
     let row_bytes = (ks * nt * 4).max(1);
     let fit = (BLOCK_BYTES / row_bytes).max(1);
     let r = format.row_axes();
     let kl: usize = dims[1..=r].iter().product();
-    let line = if r == 2 { dims[2].max(1) } else { kl.max(1) };
-    if r == 2 && fit >= line {
+    let (lo, hi) = match band {
+        Some(b) => {
+            let lo = l / b.max(1) * b.max(1);
+            (lo, (lo + b.max(1)).min(kl))
+        }
+        None => (0, kl),
+    };
+    let (l, n) = (l - lo, hi - lo);
+    let line = if r == 2 { dims[2].max(1) } else { n.max(1) };
+    let (a, b) = if r == 2 && fit >= line {
         let b = fit / line * line;
         let first = l / b * b;
-        (first, (first + b).min(kl))
+        (first, (first + b).min(n))
     } else {
         let b = fit.min(line);
         let (ix, iy) = (l / line, l % line);
         let y0 = iy / b * b;
         (ix * line + y0, ix * line + (y0 + b).min(line))
-    }
+    };
+    (lo + a, lo + b)
 }
 
 /// Rows `first..first + rows.len()` in vltm's order, each `rows[r][s·Nt + n]`; a row handed
@@ -114,6 +107,16 @@ pub(super) struct Plan {
     pub(super) kl: usize,
     /// File address of a contiguous little-endian `H` (positional reads), else `None`.
     pub(super) raw: Option<u64>,
+    /// The chunk index of a chunked `H` read chunk by chunk ([`ChunkMap`]), else `None`.
+    pub(super) chunks: Option<Arc<ChunkMap>>,
+}
+
+impl Plan {
+    /// The block holding row `l` ([`block_range`]).
+    pub(super) fn block_range(&self, l: usize) -> (usize, usize) {
+        let band = self.chunks.as_ref().map(|c| c.band_rows());
+        block_range(&self.dims, self.format, self.ks, band, l)
+    }
 }
 
 /// What a background reader ([`ReadAhead`]) reads: the rows, how they form blocks, and how
@@ -137,6 +140,10 @@ pub(super) struct Reader {
     file: Option<(std::fs::File, u64)>,
     stage: Vec<f32>,
     stage64: Vec<f64>,
+    /// The rows of the chunk band decoded last (a chunked `H` read chunk by chunk), from
+    /// row `band_first`; `band` is empty before the first band. Reused for every band.
+    band: Vec<Vec<f32>>,
+    band_first: usize,
 }
 
 impl Reader {
@@ -147,6 +154,8 @@ impl Reader {
             file: None,
             stage: Vec::new(),
             stage64: Vec::new(),
+            band: Vec::new(),
+            band_first: 0,
         }
     }
 }
@@ -161,12 +170,34 @@ impl ReadBlocks for Reader {
     }
 
     fn range(&self, l: usize) -> (usize, usize) {
-        block_range(&self.plan.dims, self.plan.format, self.plan.ks, l)
+        self.plan.block_range(l)
     }
 
     fn read(&mut self, first: usize, out: &mut [&mut [f32]]) -> Result<()> {
         let (nt, ks, rows) = (self.plan.dims[0], self.plan.ks, out.len());
         let end = first + rows;
+        if let Some(chunks) = &self.plan.chunks {
+            // A block lies inside one band (`block_range`): decode the band when it is not
+            // the one held, then copy the block's rows out of it.
+            let held = self.band_first..self.band_first + self.band.len();
+            if !(held.contains(&first) && end <= held.end) {
+                let b = chunks.band_rows().max(1);
+                let (lo, hi) = (first / b * b, (first / b * b + b).min(self.plan.kl));
+                self.band.resize_with(hi - lo, Vec::new);
+                for row in &mut self.band {
+                    row.resize(ks * nt, 0.0);
+                }
+                self.band_first = lo;
+                if let Err(e) = chunks.read_band(&self.plan.path, first / b, &mut self.band) {
+                    self.band.clear();
+                    return Err(e);
+                }
+            }
+            for (dst, src) in out.iter_mut().zip(&self.band[first - self.band_first..]) {
+                dst.copy_from_slice(src);
+            }
+            return Ok(());
+        }
         match self.plan.raw {
             Some(address) => {
                 for n0 in (0..nt).step_by(GROUP) {

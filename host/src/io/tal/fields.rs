@@ -300,3 +300,29 @@ pub(super) fn decode_numbers(raw: &[u8], dtype: &Datatype) -> Option<Vec<f64>> {
         _ => None,
     }
 }
+
+/// Element type of `H`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Elem {
+    F32,
+    F64,
+}
+
+impl Elem {
+    /// The element type of dataset `field` of `path`.
+    ///
+    /// # Errors
+    /// [`Error::Format`] naming `field` unless it holds float32 or float64 values.
+    pub(super) fn of(h: &Dataset, path: &Path, field: &str) -> Result<Self> {
+        match h.dtype() {
+            Datatype::FloatingPoint { size: 4, .. } => Ok(Self::F32),
+            Datatype::FloatingPoint { size: 8, .. } => Ok(Self::F64),
+            other => Err(Error::format(
+                path,
+                field,
+                "float32 or float64 values",
+                format!("{other:?}"),
+            )),
+        }
+    }
+}

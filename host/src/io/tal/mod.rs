@@ -15,9 +15,21 @@
 //! writes) is read with plain positional reads of the file, one per time bin of the block's
 //! `B·Ks` values (one per 32 bins when a block holds every row): a 16×16 × 16×16 × 800
 //! capture takes 16 blocks, 12 800 reads of 16 kB, instead of one 1 kB read per (row, bin).
-//! Anything else (chunked or compressed `H`, big-endian values, a compact layout) goes
-//! through the pure-Rust [`hdf5_reader`] crate's `Dataset::read_slice`, one hyperslab per
-//! block (the crate decompresses the overlapping chunks and keeps them in its chunk cache).
+//! A **chunked** `H` (compressed with deflate, optionally shuffled, little-endian floats,
+//! every chunk written: what h5py writes with `compression="gzip"`) is decoded chunk by
+//! chunk by `tal/chunks.rs`: its chunk index is walked once at open (version 1 B-tree, fixed
+//! or extensible array, version 2 B-tree, single chunk, through `hdf5_reader`'s index
+//! collectors) and every entry checked against the chunk grid and the file's length; the
+//! reader then decodes one **band** at a time, the rows whose laser lies in one chunk along
+//! the first row axis (each chunk read once, with one positional read, inflated with
+//! libdeflate, unshuffled), on two threads (each owns half of the time chunks), writing each
+//! run of decoded chunks straight into the band's SPAD-major rows in tiles of 16 bins × 16
+//! SPADs, and hands the band over in blocks cut as above. The exh16 copy with chunks of
+//! (16, 4, 4, 16, 16) decodes 4 bands of 64 rows (52 MB each), 200 chunks each.
+//! Anything else (other filters such as fletcher32 or szip, missing chunks read as fill
+//! values, a band over 64 MiB, big-endian values, a compact layout) goes through the
+//! pure-Rust [`hdf5_reader`] crate's `Dataset::read_slice`, one hyperslab per block (the
+//! crate decompresses the overlapping chunks and keeps them in its chunk cache).
 //! A **background reader** thread reads the blocks in row order, transposes each in memory to
 //! vltm's SPAD-major rows `[r][s][n]` (in tiles of 32 time bins × 16 SPADs, staged in a
 //! buffer that stays in cache), and hands them over through a bounded queue of one block, so
@@ -32,15 +44,20 @@
 //!
 //! **Memory** is bounded whatever the size of `H`: at most three blocks (the one in use, one
 //! queued, one being read and transposed: `3 ×` [`BLOCK_BYTES`] = 48 MiB, or three rows when
-//! a row is larger) and a staging buffer of 32 time bins of the block; through the crate, its
-//! copy of the block being read and, for a chunked `H`, its cache of decoded chunks (up to
+//! a row is larger) and a staging buffer of 32 time bins of the block; for a chunked `H`
+//! decoded chunk by chunk, the band being decoded (at most 64 MiB) instead of the block being
+//! read, plus per thread one stored chunk, a 1 MiB staging run of decoded chunks and two
+//! decoded-chunk buffers, and the chunk index (24 bytes per chunk), all checked against the
+//! memory budget at open; through the crate, its copy of the block being read and, for a
+//! chunked `H`, its cache of decoded chunks (up to
 //! 64 MiB). [`read_all`] reads every row into a [`Capture`] (needed by `--swap-roles` and by
 //! [`io::open`](crate::io::open)). Peak resident set of `vltm column` on the exh16 capture
 //! (210 MB of `f32`): see the README, *Reading y-tal HDF5*; on the small shared captures
 //! (two_patches, 6.6 MB) a block holds the whole `H`.
 //!
 //! tal writes `H` contiguous and uncompressed (checked with h5py on every shared capture); a
-//! chunked `H` streams too.
+//! chunked `H` streams too. Reading times against the uncompressed `.npz` of the same
+//! capture: README, *Reading y-tal HDF5*.
 //!
 //! # Fields
 //!
@@ -120,7 +137,9 @@
 //! non-positive `delta_t`, non-finite `t_start` or positions, a contiguous `H` larger than the
 //! file, a layout of `H` that holds no data or points outside the file (size 0, an undefined
 //! address or address 0, past the end, shorter than the shape; a chunked `H` without a chunk
-//! index: read as fill values, it gave all-zero output), a row or capture over the memory
+//! index: read as fill values, it gave all-zero output), a chunk index whose entries are off
+//! the chunk grid, repeated, or point outside the file, a chunk that does not inflate to its
+//! size (named by its offsets and address), a row or capture over the memory
 //! budget ([`crate::budget`]; every read through the crate is capped at it too), truncated or corrupt files (the crate's own message is kept). A file that cannot be
 //! opened or read is [`Error::Io`].
 //!
@@ -144,6 +163,7 @@ use crate::error::{Error, Result};
 use crate::io::capture::{Capture, Geometry, RowSource};
 use hdf5_reader::{ByteOrder, Dataset, Datatype, Hdf5File, OpenOptions};
 use std::path::{Path, PathBuf};
+use std::sync::Arc;
 use vltm_kernel::Point;
 
 /// An open `HDF5_TAL` capture that reads laser rows on demand ([`RowSource`]).
@@ -161,6 +181,9 @@ pub struct TalReader {
     /// File address of a contiguous little-endian `H`, read with positional reads; `None`
     /// reads through the crate.
     raw: Option<u64>,
+    /// The chunk index of a chunked `H` decoded chunk by chunk; `None` reads through the
+    /// crate (or positionally, `raw`).
+    chunks: Option<Arc<ChunkMap>>,
     /// The rows read last and the background reader.
     rows: Cursor,
 }
@@ -353,6 +376,10 @@ impl TalReader {
             } => contiguous,
             _ => None,
         };
+        let chunks = match raw {
+            Some(_) => None,
+            None => ChunkMap::new(path, &file, &h, &dims, format, elem, file_len)?.map(Arc::new),
+        };
         let nt = dims[0];
         let lead = &dims[1..];
 
@@ -398,6 +425,22 @@ impl TalReader {
             },
             budget::bytes(row, 8 + 2 * elem_bytes as u128).max(BLOCK_BYTES as u128 * 3),
         )?;
+        // A band of chunks being decoded, two blocks handed over, and each worker's stored
+        // and decoded chunks.
+        if let Some(c) = &chunks {
+            let band = c.band_rows() as u128 * row as u128 * 4;
+            let need =
+                band + 2 * BLOCK_BYTES as u128 + 4 * WORKERS as u128 * c.chunk_bytes() as u128;
+            budget::check(
+                || {
+                    format!(
+                        "a band of chunks of H ({band} bytes) read from {}",
+                        path.display()
+                    )
+                },
+                need,
+            )?;
+        }
 
         Ok(Self {
             path: path.to_path_buf(),
@@ -410,6 +453,7 @@ impl TalReader {
             options,
             single_falloff,
             raw,
+            chunks,
             rows: Cursor::default(),
         })
     }
@@ -476,7 +520,14 @@ impl TalReader {
 
     /// The block of consecutive rows holding row `l`: `first..end` (module docs, *Reading*).
     fn block_range(&self, l: usize) -> (usize, usize) {
-        block_range(&self.dims, self.format, self.geometry.spads_per_row(), l)
+        let band = self.chunks.as_ref().map(|c| c.band_rows());
+        block_range(
+            &self.dims,
+            self.format,
+            self.geometry.spads_per_row(),
+            band,
+            l,
+        )
     }
 
     /// What the background reader needs.
@@ -490,6 +541,7 @@ impl TalReader {
             ks: self.geometry.spads_per_row(),
             kl: self.geometry.lasers.len(),
             raw: self.raw,
+            chunks: self.chunks.clone(),
         }
     }
 }
@@ -596,13 +648,15 @@ impl RowSource for TalReader {
 }
 
 mod block;
+mod chunks;
 mod fields;
 mod format;
 mod scan;
 pub mod znlos;
 
 pub use block::BLOCK_BYTES;
-use block::{Cursor, Elem, Plan, Reader, block_range};
+use block::{Cursor, Plan, Reader, block_range};
+use chunks::{ChunkMap, WORKERS};
 
 pub use format::{HFormat, ScanType, TalOptions};
 

@@ -22,7 +22,8 @@
 //! Sums are taken in the file's order starting from 0, as the reader always did: the rows are
 //! bit-identical whatever the path. Memory: stated by [`Source::memory`].
 
-use super::super::block::{Elem, GROUP, ReadBlocks};
+use super::super::block::{GROUP, ReadBlocks};
+use super::super::fields::Elem;
 use super::super::fields::{h5_error, into_vec};
 use crate::error::{Error, Result};
 use hdf5_reader::{Dataset, SliceInfo, SliceInfoElem};
