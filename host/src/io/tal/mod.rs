@@ -24,7 +24,8 @@
 //! the first row axis (each chunk read once, with one positional read, inflated with
 //! libdeflate, unshuffled), on two threads (each owns half of the time chunks), writing each
 //! run of decoded chunks straight into the band's SPAD-major rows in tiles of 16 bins × 16
-//! SPADs, and hands the band over in blocks cut as above. The exh16 copy with chunks of
+//! SPADs, and keeps the band while its blocks (cut as above, inside the band) are copied out
+//! of it into the background reader's recycled row buffers. The exh16 copy with chunks of
 //! (16, 4, 4, 16, 16) decodes 4 bands of 64 rows (52 MB each), 200 chunks each.
 //! Anything else (other filters such as fletcher32 or szip, missing chunks read as fill
 //! values, a band over 64 MiB, big-endian values, a compact layout) goes through the
@@ -45,8 +46,8 @@
 //! **Memory** is bounded whatever the size of `H`: at most three blocks (the one in use, one
 //! queued, one being read and transposed: `3 ×` [`BLOCK_BYTES`] = 48 MiB, or three rows when
 //! a row is larger) and a staging buffer of 32 time bins of the block; for a chunked `H`
-//! decoded chunk by chunk, the band being decoded (at most 64 MiB) instead of the block being
-//! read, plus per thread one stored chunk, a 1 MiB staging run of decoded chunks and two
+//! decoded chunk by chunk, also the band its blocks are copied from (at most 64 MiB, reused
+//! from band to band), plus per thread one stored chunk, a 1 MiB staging run of decoded chunks and two
 //! decoded-chunk buffers, and the chunk index (24 bytes per chunk), all checked against the
 //! memory budget at open; through the crate, its copy of the block being read and, for a
 //! chunked `H`, its cache of decoded chunks (up to
@@ -425,12 +426,12 @@ impl TalReader {
             },
             budget::bytes(row, 8 + 2 * elem_bytes as u128).max(BLOCK_BYTES as u128 * 3),
         )?;
-        // A band of chunks being decoded, two blocks handed over, and each worker's stored
-        // and decoded chunks.
+        // A band of chunks being decoded, three blocks copied out of it (in use, queued,
+        // being filled), and each worker's stored and decoded chunks.
         if let Some(c) = &chunks {
             let band = c.band_rows() as u128 * row as u128 * 4;
             let need =
-                band + 2 * BLOCK_BYTES as u128 + 4 * WORKERS as u128 * c.chunk_bytes() as u128;
+                band + 3 * BLOCK_BYTES as u128 + 4 * WORKERS as u128 * c.chunk_bytes() as u128;
             budget::check(
                 || {
                     format!(
