@@ -636,9 +636,11 @@ impl RowSource for TalReader {
         // The background reader transposed the block to rows of SPAD-major histograms: the
         // row is swapped into `out`, whose old buffer goes back to the reader.
         let (first, _) = self.block_range(l);
-        let plan = self.plan();
-        let reader = || Reader::new(plan);
-        self.rows.take(l, first, out, reader, &self.path, "H")?;
+        // The plan (clones of the dataset handle and shape) is made only when a reader starts.
+        let mut rows = std::mem::take(&mut self.rows);
+        let taken = rows.take(l, first, out, || Reader::new(self.plan()), &self.path, "H");
+        self.rows = rows;
+        taken?;
         let x_l = self.geometry.lasers[l];
         if let Some(c0) = self.single_falloff {
             let k = self.geometry.laser_falloff(x_l) / c0;
