@@ -28,9 +28,9 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use vltm::exec::Exec;
+use vltm::export::figure::Figure;
 use vltm::io::mat::{self, MatOptions};
 use vltm::io::prep::{Background, Bound, Prep, Prepared};
-use vltm::out::figure::Figure;
 use vltm::probe::{self, Wave};
 use vltm::volume::Volume;
 use vltm_kernel::Weights;

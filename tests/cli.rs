@@ -113,7 +113,7 @@ fn fails(cwd: &Path, args: &[&str], code: i32) -> String {
 
 /// Reads a `.npy` volume and checks its shape and that every value is finite; returns it.
 fn npy(path: &Path, shape: [usize; 3]) -> Vec<f32> {
-    let (v, s) = vltm::out::npy::read_f32(path).unwrap_or_else(|e| panic!("{e}"));
+    let (v, s) = vltm::export::npy::read_f32(path).unwrap_or_else(|e| panic!("{e}"));
     assert_eq!(s, shape, "{}: shape", path.display());
     assert!(
         v.iter().all(|x| x.is_finite()),
@@ -314,7 +314,7 @@ fn direct_and_column_write_hdf5_volumes() {
             ok(&t.0, &args);
         }
         let v = npy(&f_npy, SHAPE);
-        let (h, shape) = vltm::out::h5::read_volume(&f_h5).expect("read the HDF5 volume");
+        let (h, shape) = vltm::export::h5::read_volume(&f_h5).expect("read the HDF5 volume");
         assert_eq!(shape, SHAPE.to_vec(), "{probe}: HDF5 shape");
         assert!(h == v, "{probe}: the HDF5 and .npy volumes differ");
     }
@@ -1457,7 +1457,7 @@ fn matrix_relight_and_row_through_the_command_line() {
         ],
     );
     print!("{out}");
-    let read = |name: &str| vltm::out::h5::read_f32_dataset(&fm, name).expect("dataset");
+    let read = |name: &str| vltm::export::h5::read_f32_dataset(&fm, name).expect("dataset");
     let (re, shape) = read("re");
     let (im, _) = read("im");
     let (int, _) = read("intensity");
@@ -1550,7 +1550,7 @@ fn matrix_relight_and_row_through_the_command_line() {
     let mut img = vec![0.0f32; vol.len()];
     img[k] = 1.0;
     let (fp, fr, fc) = (t.path("p.npy"), t.path("r.npy"), t.path("c.npy"));
-    vltm::out::npy::write_f32(&fp, &img, &SHAPE).expect("pattern");
+    vltm::export::npy::write_f32(&fp, &img, &SHAPE).expect("pattern");
     ok(
         &t.0,
         &[
@@ -1584,7 +1584,7 @@ fn matrix_relight_and_row_through_the_command_line() {
     let diff = rel_of_max(&npy(&fr, SHAPE), &npy(&fc, SHAPE));
     println!("relight, one-hot image vs column: {diff:.1e}");
     assert!(diff <= 1e-6, "{diff:.3e}");
-    vltm::out::npy::write_f32(&fp, &vec![0.0f32; vol.len()], &SHAPE).expect("pattern");
+    vltm::export::npy::write_f32(&fp, &vec![0.0f32; vol.len()], &SHAPE).expect("pattern");
     for pat in [s(&fp), "-0.4,0,0.8,0".to_string()] {
         let err = fails(
             &t.0,
@@ -1775,8 +1775,8 @@ fn matrix_and_leak_corrected_parts_through_the_command_line() {
     let merged = t.path("merged.h5");
     ok(&t.0, &["merge", &s(&pb), &s(&pa), "--out", &s(&merged)]);
     for name in ["re", "im", "intensity", "from_xyz", "to_xyz"] {
-        let (x, sx) = vltm::out::h5::read_f32_dataset(&one, name).expect("one");
-        let (y, sy) = vltm::out::h5::read_f32_dataset(&merged, name).expect("merged");
+        let (x, sx) = vltm::export::h5::read_f32_dataset(&one, name).expect("one");
+        let (y, sy) = vltm::export::h5::read_f32_dataset(&merged, name).expect("merged");
         assert_eq!(sx, sy, "{name}");
         let max = x.iter().fold(0.0f32, |m, v| m.max(v.abs()));
         let worst = x

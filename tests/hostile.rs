@@ -308,7 +308,7 @@ fn many_bins_need_no_quadratic_table() {
             "o.npy",
         ],
     );
-    let (v, _) = vltm::out::npy::read_f32(t.path("o.npy")).unwrap();
+    let (v, _) = vltm::export::npy::read_f32(t.path("o.npy")).unwrap();
     assert!(v.iter().all(|x| x.is_finite()), "{v:?}");
     // The voxel on the pulse's ellipsoid is bright, the one off it dark.
     assert!(v[0] > 100.0 * v[1] && v[0] > 0.0, "{v:?}");
@@ -498,7 +498,7 @@ fn huge_finite_values() {
         &t,
         &["direct", "d.npz", "--volume", VOLUME, "--out", "d.npy"],
     );
-    let (v, _) = vltm::out::npy::read_f32(t.path("d.npy")).unwrap();
+    let (v, _) = vltm::export::npy::read_f32(t.path("d.npy")).unwrap();
     assert!(v.iter().all(|x| x.is_finite()) && v.iter().any(|&x| x > 0.0));
 }
 

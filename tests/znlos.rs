@@ -221,7 +221,7 @@ fn probe(cmd: &[&str], cap: &Path, out: &Path) -> Vec<f32> {
     args.extend(&cmd[1..]);
     args.extend(["--volume", SPEC, "--out", out.to_str().expect("utf-8")]);
     ok(&args);
-    let (v, s) = vltm::out::npy::read_f32(out).expect("npy");
+    let (v, s) = vltm::export::npy::read_f32(out).expect("npy");
     assert_eq!(s, SHAPE);
     v
 }

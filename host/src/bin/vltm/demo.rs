@@ -11,8 +11,8 @@ use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;
 use vltm::exec::Exec;
+use vltm::export::figure::Figure;
 use vltm::io::{Capture, RowSource};
-use vltm::out::figure::Figure;
 use vltm::probe::{self, ColumnGate, IndirectOptions, LeakOptions, Shell, Wave};
 use vltm::sim::{Aperture, Bounces, Cuboid, Object, Patch, Scene, Setup};
 use vltm::volume::Volume;
@@ -401,7 +401,7 @@ pub fn run(out: &Path) -> Result<String> {
             marks,
         }
         .write_png(&out.join(format!("{stem}.png")))?;
-        vltm::out::npy::write_f32(out.join(format!("{stem}.npy")), &l.values, &vol.shape)?;
+        vltm::export::npy::write_f32(out.join(format!("{stem}.npy")), &l.values, &vol.shape)?;
     }
     vltm::atomic::write_bytes(&out.join("summary.txt"), table.as_bytes())?;
     Ok(table)

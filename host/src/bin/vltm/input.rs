@@ -6,9 +6,9 @@ use crate::{Failure, say};
 use clap::Args;
 use std::path::Path;
 use vltm::atomic::Transaction;
+use vltm::export::figure::plot::Transient;
 use vltm::io::prep::{Background, Bound, Prep, Prepared, Reach};
 use vltm::io::{self, RowSource};
-use vltm::out::figure::plot::Transient;
 use vltm_kernel::Point;
 
 /// How to read a capture and preprocess its counts.

@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use clap::Args;
 use vltm::atomic::Transaction;
+use vltm::export::h5::{MatrixData, Provenance};
 use vltm::io;
-use vltm::out::h5::{MatrixData, Provenance};
 use vltm::probe::{self, Pattern, Wave};
 use vltm::volume::{Volume, parse_point};
 use vltm_kernel::{Point, Weights};
@@ -289,7 +289,7 @@ pub(crate) fn write_matrix(
         texts: &texts,
     };
     let mut t = Transaction::new();
-    vltm::out::h5::stage_matrix(&mut t, out, &data, &meta)?;
+    vltm::export::h5::stage_matrix(&mut t, out, &data, &meta)?;
     t.commit()?;
     say!("wrote {}", out.display());
     Ok(())
@@ -314,7 +314,7 @@ pub(crate) fn relight(a: RelightArgs) -> Result<(), Failure> {
     let volume = Volume::parse(&c.volume)?;
     let pattern = if a.pattern.trim().ends_with(".npy") {
         let p = Path::new(a.pattern.trim());
-        let (img, shape) = vltm::out::npy::read_f32(p)?;
+        let (img, shape) = vltm::export::npy::read_f32(p)?;
         if shape.iter().product::<usize>() != volume.len() || shape.len() != 3 {
             return Err(vltm::Error::arg(
                 "--pattern",

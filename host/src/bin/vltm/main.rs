@@ -7,8 +7,8 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use vltm::atomic::Transaction;
 use vltm::exec::{Exec, Path as EvalPath};
+use vltm::export::h5::Provenance;
 use vltm::io::{self, RowSource};
-use vltm::out::h5::Provenance;
 use vltm::probe::{self, ColumnGate, IndirectOptions, LeakOptions, Shell, Wave};
 use vltm::volume::{Volume, parse_point};
 

@@ -7,9 +7,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use vltm::atomic::Transaction;
+use vltm::export::figure::Figure;
+use vltm::export::h5::Provenance;
 use vltm::io;
-use vltm::out::figure::Figure;
-use vltm::out::h5::Provenance;
 use vltm::volume::Volume;
 use vltm_kernel::Point;
 
@@ -84,9 +84,9 @@ pub(crate) fn write_parts(
         let v = part.values;
         if let Some(p) = out.as_deref().map(|p| tagged(p, part.tag)) {
             if io::is_hdf5(&p) {
-                vltm::out::h5::stage_volume(&mut t, &p, v, volume, meta)
+                vltm::export::h5::stage_volume(&mut t, &p, v, volume, meta)
             } else {
-                vltm::out::npy::stage_f32(&mut t, &p, v, &volume.shape)
+                vltm::export::npy::stage_f32(&mut t, &p, v, &volume.shape)
             }
             .with_context(|| format!("writing {}", p.display()))?;
             wrote.push(p);

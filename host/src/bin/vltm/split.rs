@@ -8,8 +8,8 @@
 
 use std::path::Path;
 
+use vltm::export::h5::Provenance;
 use vltm::io::RowSource;
-use vltm::out::h5::Provenance;
 use vltm::probe::{self, IndirectOptions, Shell};
 use vltm::volume::Volume;
 use vltm_kernel::Point;
