@@ -162,7 +162,7 @@ fn fixtures_match_fresh_renders() {
         assert!(
             diff <= 1e-6 * peak,
             "{stem}: committed capture differs from a fresh render by {diff:e} (peak {peak:e}); \
-             re-run `cargo run --release -p vltm -- simulate fixtures/scenes/{stem}.json --out fixtures/{stem}.npz`"
+             re-run `cargo run --release --bin vltm -- simulate fixtures/scenes/{stem}.json --out fixtures/{stem}.npz`"
         );
         assert!(
             bytes <= 1 << 20,
@@ -795,4 +795,96 @@ fn auto_margin_keeps_columns_alias_free() {
     );
     let rel = (auto.values[0] - plain.values[0]).abs() / plain.values[0];
     assert!(rel < 1e-3, "T(A, B) moved by {rel:.2e} with the margin");
+}
+
+/// Every reader refuses a laser row past the scan with the one message of
+/// `io::check_row`: the capture in memory (it panicked), a streamed uncompressed `.npz` and
+/// the simulator's row source.
+#[test]
+fn every_reader_refuses_an_out_of_range_row_alike() {
+    use vltm::io::RowSource;
+    let c = fixture("two_patches");
+    let kl = c.geometry.lasers.len();
+    let want = io::check_row(kl, kl).unwrap_err().to_string();
+    let dir = std::env::temp_dir().join(format!("vltm-e2e-rows-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let npz = dir.join("plain.npz");
+    io::npz::write_with(&c, &npz, false).expect("write npz");
+    let mut sources: Vec<(&str, Box<dyn RowSource>)> = vec![
+        ("in memory", Box::new(c.clone())),
+        ("npz stream", io::open_source(&npz).expect("open npz")),
+        (
+            "simulator",
+            Box::new(scene("two_patches").source().expect("source")),
+        ),
+    ];
+    let mut row = Vec::new();
+    for (name, src) in &mut sources {
+        assert_eq!(src.geometry().lasers.len(), kl, "{name}");
+        src.read_row(kl - 1, &mut row)
+            .unwrap_or_else(|e| panic!("{name}: last row: {e}"));
+        let e = src.read_row(kl, &mut row).expect_err(name);
+        assert_eq!(e.to_string(), want, "{name}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The in-focus indirect sum's counters hold the aliased pairs of every focus of Γ, as the
+/// single columns count them (it kept only the last focus's count).
+#[test]
+fn indirect_counts_the_aliased_pairs_of_every_focus() {
+    let band = Exec {
+        progress: None,
+        path: vltm::probe::Path::Band,
+    };
+    let s = scene("two_patches");
+    // Foci: the patches and voxels 3.2–4 m deep whose 4-vertex paths leave the capture's
+    // window (no margin: the pairs alias).
+    let mut pts = vec![centre(&s, "A"), centre(&s, "B")];
+    for k in 0..3 {
+        pts.push([0.1 * k as f32, 0.0, 3.2 + 0.4 * k as f32]);
+    }
+    let vol = Volume::points(pts).expect("volume");
+    let wave = Wave {
+        auto_margin: false,
+        ..indirect_wave(&fixture("two_patches").geometry)
+    };
+    let gamma = vec![true; vol.len()];
+    let opts = IndirectOptions {
+        shell: Some(Shell::ALL),
+        ..IndirectOptions::default()
+    };
+    let out = probe::indirect_over(
+        &mut fixture("two_patches"),
+        &vol,
+        &gamma,
+        &opts,
+        &wave,
+        band,
+    )
+    .expect("indirect");
+    let per: Vec<usize> = vol
+        .points
+        .iter()
+        .map(|&a| {
+            let c = &mut fixture("two_patches");
+            probe::column(c, a, &vol, ColumnGate::TwoBounce, Shell::ALL, &wave, band)
+                .expect("column")
+                .report
+                .aliased
+        })
+        .collect();
+    println!(
+        "aliased voxels per focus {per:?}, indirect {}",
+        out.report.aliased
+    );
+    assert!(
+        per.iter().filter(|&&n| n > 0).count() >= 2,
+        "the test needs several foci with aliased pairs: {per:?}"
+    );
+    assert_eq!(out.report.aliased, per.iter().sum::<usize>());
+    assert_eq!(
+        out.report.rows,
+        fixture("two_patches").geometry.lasers.len() as u64
+    );
 }

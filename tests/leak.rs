@@ -369,7 +369,7 @@ fn leak_correct_without_direct_returns_is_an_error() {
     };
     let none = vec![false; vol.len()];
     let e = probe::indirect_over(&mut full, &vol, &none, &opts, &wave, EXEC).unwrap_err();
-    assert!(e.to_string().contains("--leak-correct"), "{e}");
+    assert!(e.to_string().contains("argument `leak_correct`"), "{e}");
     // 3-vertex paths of a voxel 4 m deep are longer than the 5 m window.
     for method in [LeakMethod::Gate, LeakMethod::Fit] {
         let lo = LeakOptions {
@@ -379,7 +379,7 @@ fn leak_correct_without_direct_returns_is_an_error() {
         let e = probe::DirectModel::fit(&mut full, &[[0.0, 0.0, 4.0]], 0.05, &wave, &lo, EXEC)
             .unwrap_err();
         assert!(
-            e.to_string().contains("--leak-correct") && e.to_string().contains("window"),
+            e.to_string().contains("argument `leak_correct`") && e.to_string().contains("window"),
             "{e}"
         );
     }
@@ -395,7 +395,7 @@ fn leak_correct_without_direct_returns_is_an_error() {
         let e = probe::DirectModel::fit(&mut dark, &[[0.45, 0.0, 0.8]], 0.05, &wave, &lo, EXEC)
             .unwrap_err();
         assert!(
-            e.to_string().contains("--leak-correct") && e.to_string().contains("no light"),
+            e.to_string().contains("argument `leak_correct`") && e.to_string().contains("no light"),
             "{method:?}: {e}"
         );
     }

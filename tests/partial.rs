@@ -285,7 +285,10 @@ fn mismatched_parts_are_refused() {
         60..65,
     )
     .expect_err("rows beyond the scan");
-    assert!(e.to_string().contains("--rows") && e.is_usage(), "{e}");
+    assert!(
+        e.to_string().contains("argument `rows`") && e.is_usage(),
+        "{e}"
+    );
     // Damaged bytes: a flipped accumulator byte fails the CRC, a cut file the size check,
     // another file the magic.
     let mut bytes = a.to_bytes();

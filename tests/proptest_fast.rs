@@ -1294,11 +1294,11 @@ fn fixed_case() -> Case {
     }
 }
 
-/// The message of an `Error::Argument` naming `--path`.
+/// The message of an `Error::Argument` naming `path`.
 fn path_error(r: vltm::Result<Output>, what: &str) -> String {
     match r {
-        Err(Error::Argument { arg, msg }) if arg == "--path" => msg,
-        Err(e) => panic!("{what}: expected an `--path` argument error, got {e}"),
+        Err(Error::Argument { arg, msg }) if arg == "path" => msg,
+        Err(e) => panic!("{what}: expected a `path` argument error, got {e}"),
         Ok(_) => panic!("{what}: Path::Planar accepted a non-planar input"),
     }
 }

@@ -15,6 +15,17 @@ pub const DEFAULT_LASER_ORIGIN: [f64; 3] = [-0.5, 0.0, 0.25];
 /// Default position of the sensor device (`sensor_origin`) (m): tal's usual `(-0.5, 0, 0.25)`.
 pub const DEFAULT_SENSOR_ORIGIN: [f64; 3] = [-0.5, 0.0, 0.25];
 
+/// [`DEFAULT_LASER_ORIGIN`], the serde default of every JSON form with a `laser_origin`
+/// (a PTU sidecar, a scene's setup).
+pub fn default_laser_origin() -> [f64; 3] {
+    DEFAULT_LASER_ORIGIN
+}
+
+/// [`DEFAULT_SENSOR_ORIGIN`], the serde default of every JSON form with a `sensor_origin`.
+pub fn default_sensor_origin() -> [f64; 3] {
+    DEFAULT_SENSOR_ORIGIN
+}
+
 /// Largest number of spots in a laser or SPAD aperture.
 pub const MAX_SPOTS: usize = 1 << 20;
 

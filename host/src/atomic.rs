@@ -54,7 +54,7 @@ impl Transaction {
     /// then flushed and synced. Nothing is visible at `path` before [`Transaction::commit`].
     ///
     /// # Errors
-    /// [`Error::Argument`] (`--out`) if `path` was already staged or names a directory;
+    /// [`Error::Argument`] (`out`) if `path` was already staged or names a directory;
     /// [`Error::Io`] naming `path` if the temporary file cannot be created or synced; any
     /// error of `write`. On error the temporary file is removed.
     pub fn stage(
@@ -64,14 +64,14 @@ impl Transaction {
     ) -> Result<()> {
         if self.staged.iter().any(|s| s.target == path) {
             return Err(Error::arg(
-                "--out",
+                "out",
                 format!("{} is written twice by one command", path.display()),
             ));
         }
         let meta = fs::metadata(path).ok();
         if meta.as_ref().is_some_and(fs::Metadata::is_dir) {
             return Err(Error::arg(
-                "--out",
+                "out",
                 format!("{} is a directory", path.display()),
             ));
         }

@@ -91,11 +91,11 @@ pub fn count(n: u128) -> String {
 /// 1024; a trailing `B` or `iB` is accepted), e.g. `12G`, `500MiB`, `1048576`.
 ///
 /// # Errors
-/// [`Error::Argument`] (`--max-memory`) for anything else, or a size under 1 MiB.
+/// [`Error::Argument`] (`max_memory`) for anything else, or a size under 1 MiB.
 pub fn parse_size(s: &str) -> Result<u64> {
     let bad = || {
         Error::arg(
-            "--max-memory",
+            "max_memory",
             format!("expected a size such as 12G or 500M, found `{s}`"),
         )
     };
@@ -115,7 +115,7 @@ pub fn parse_size(s: &str) -> Result<u64> {
     let b = v * f64::from(1u32 << (shift / 2)) * f64::from(1u32 << (shift - shift / 2));
     if !(b.is_finite() && b >= f64::from(1u32 << 20) && b < 1.8e19) {
         return Err(Error::arg(
-            "--max-memory",
+            "max_memory",
             format!("expected a size from 1M to 16E bytes, found `{s}`"),
         ));
     }

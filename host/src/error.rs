@@ -1,14 +1,24 @@
-//! The host library's error type: every message names the file or argument, the field and
+//! The host library's error type: every message names the file or parameter, the field and
 //! what was expected.
+//!
+//! # Parameters, not flags
+//!
+//! The library is used from several front ends that spell the same parameter differently:
+//! the command line as a flag (`--max-memory`), Python as a keyword argument
+//! (`max_memory=`). Library messages therefore never name a flag. They name the
+//! *parameter*, in `snake_case`, written `$name` inside message text
+//! (`"raise $epsilon"`); [`Error::Argument`] carries the parameter it is about.
+//! [`Error::render`] writes an error with a front end's own spelling of each parameter
+//! ([`respell`] does the same for any library text, such as the conventions of
+//! [`crate::io::Capture`] readers); `Display` writes the bare name (`epsilon`).
 
 use std::path::PathBuf;
 
 /// Errors of the vltm host library.
-#[derive(Debug, thiserror::Error)]
+#[derive(Debug)]
 #[non_exhaustive]
 pub enum Error {
     /// Reading or writing a file failed.
-    #[error("{}: {err}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
@@ -16,7 +26,6 @@ pub enum Error {
         err: std::io::Error,
     },
     /// A file's content is not what vltm expects.
-    #[error("{}: field `{field}`: expected {expected}, found {found}", path.display())]
     Format {
         /// The file.
         path: PathBuf,
@@ -28,19 +37,16 @@ pub enum Error {
         found: String,
     },
     /// A user argument is malformed or out of range (the CLI exits with code 2).
-    #[error("argument `{arg}`: {msg}")]
     Argument {
-        /// The argument (flag or parameter name).
+        /// The parameter, in `snake_case` (`epsilon`, `max_memory`), never a front end's
+        /// spelling (a flag, a keyword): a front end spells it its own way
+        /// ([`Error::render`]).
         arg: String,
-        /// What is wrong and what was expected.
+        /// What is wrong and what was expected; other parameters it names are written
+        /// `$name`.
         msg: String,
     },
     /// An allocation would exceed the memory budget (`vltm::budget`).
-    #[error(
-        "{what}: needs {} > {} memory budget (set it with --max-memory)",
-        human(*need),
-        human(u128::from(*budget))
-    )]
     Memory {
         /// What the memory is for.
         what: String,
@@ -50,11 +56,9 @@ pub enum Error {
         budget: u64,
     },
     /// The kernel rejected the wave/gate configuration.
-    #[error("kernel configuration: {0}")]
-    Config(#[from] vltm_kernel::ConfigError),
+    Config(vltm_kernel::ConfigError),
     /// The kernel rejected a buffer or a position.
-    #[error("kernel: {0}")]
-    Kernel(#[from] vltm_kernel::Error),
+    Kernel(vltm_kernel::Error),
 }
 
 impl Error {
@@ -72,12 +76,50 @@ impl Error {
             found: found.to_string(),
         }
     }
-    /// An [`Error::Argument`] error.
-    pub fn arg(arg: &str, msg: impl ToString) -> Self {
+    /// An [`Error::Argument`] error about parameter `param` (`snake_case`, no flag
+    /// spelling); other parameters named in `msg` are written `$name`.
+    pub fn arg(param: &str, msg: impl ToString) -> Self {
+        debug_assert!(
+            is_param_name(param),
+            "`{param}` is not a parameter name (snake_case, no flag spelling)"
+        );
         Self::Argument {
-            arg: arg.into(),
+            arg: param.into(),
             msg: msg.to_string(),
         }
+    }
+    /// The message with every parameter spelled by `spell` (given the `snake_case` name):
+    /// the command line passes `|p| format!("--{}", p.replace('_', "-"))`, the Python
+    /// package `|p| format!("{p}=")`. `Display` is `render` with the bare name.
+    ///
+    /// ```
+    /// let e = vltm::Error::arg("epsilon", "Γ is too large; raise $epsilon");
+    /// assert_eq!(e.to_string(), "argument `epsilon`: Γ is too large; raise epsilon");
+    /// let cli = e.render(|p| format!("--{}", p.replace('_', "-")));
+    /// assert_eq!(cli, "argument `--epsilon`: Γ is too large; raise --epsilon");
+    /// ```
+    pub fn render(&self, spell: impl Fn(&str) -> String) -> String {
+        let raw = match self {
+            Self::Io { path, err } => format!("{}: {err}", path.display()),
+            Self::Format {
+                path,
+                field,
+                expected,
+                found,
+            } => format!(
+                "{}: field `{field}`: expected {expected}, found {found}",
+                path.display()
+            ),
+            Self::Argument { arg, msg } => format!("argument `${arg}`: {msg}"),
+            Self::Memory { what, need, budget } => format!(
+                "{what}: needs {} > {} memory budget (set it with $max_memory)",
+                human(*need),
+                human(u128::from(*budget))
+            ),
+            Self::Config(e) => format!("kernel configuration: {e}"),
+            Self::Kernel(e) => format!("kernel: {e}"),
+        };
+        respell(&raw, spell)
     }
     /// An [`Error::Io`] error.
     pub fn io(path: impl Into<PathBuf>, err: std::io::Error) -> Self {
@@ -90,6 +132,77 @@ impl Error {
     pub fn is_usage(&self) -> bool {
         matches!(self, Self::Argument { .. } | Self::Config(_))
     }
+}
+
+impl std::fmt::Display for Error {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.render(str::to_string))
+    }
+}
+
+impl std::error::Error for Error {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Self::Config(e) => Some(e),
+            Self::Kernel(e) => Some(e),
+            _ => None,
+        }
+    }
+}
+
+impl From<vltm_kernel::ConfigError> for Error {
+    fn from(e: vltm_kernel::ConfigError) -> Self {
+        Self::Config(e)
+    }
+}
+
+impl From<vltm_kernel::Error> for Error {
+    fn from(e: vltm_kernel::Error) -> Self {
+        Self::Kernel(e)
+    }
+}
+
+/// Whether `s` is a parameter name: `snake_case` ASCII, starting with a letter.
+fn is_param_name(s: &str) -> bool {
+    s.starts_with(|c: char| c.is_ascii_lowercase())
+        && s.bytes()
+            .all(|b| b.is_ascii_lowercase() || b.is_ascii_digit() || b == b'_')
+}
+
+/// `text` with every parameter marker `$name` (`name` in `snake_case`, after the start, a
+/// space, a backtick, `(`, `/` or `,`) replaced by `spell(name)`; other `$` are kept.
+///
+/// ```
+/// let t = "widen $t_min/$t_max or give $background VALUE (cost: $5)";
+/// let cli = vltm::error::respell(t, |p| format!("--{}", p.replace('_', "-")));
+/// assert_eq!(cli, "widen --t-min/--t-max or give --background VALUE (cost: $5)");
+/// ```
+pub fn respell(text: &str, spell: impl Fn(&str) -> String) -> String {
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    let mut prev: Option<char> = None;
+    while let Some(at) = rest.find('$') {
+        let before = &rest[..at];
+        out.push_str(before);
+        let p = before.chars().next_back().or(prev);
+        let after = &rest[at + 1..];
+        let len = after
+            .find(|c: char| !(c.is_ascii_lowercase() || c.is_ascii_digit() || c == '_'))
+            .unwrap_or(after.len());
+        let name = &after[..len];
+        let opens = matches!(p, None | Some(' ' | '`' | '(' | '/' | ','));
+        if opens && is_param_name(name) {
+            out.push_str(&spell(name));
+            rest = &after[len..];
+            prev = name.chars().next_back();
+        } else {
+            out.push('$');
+            rest = after;
+            prev = Some('$');
+        }
+    }
+    out.push_str(rest);
+    out
 }
 
 /// Result with the host [`Error`].

@@ -42,7 +42,7 @@ impl Volume {
     /// [`Error::Argument`] for zero samples, a non-finite bound, a voxel at z ≤ 0, or more than
     /// [`MAX_VOXELS`] voxels.
     pub fn grid(lo: [f32; 3], hi: [f32; 3], n: [usize; 3]) -> Result<Self> {
-        let arg = "--volume";
+        let arg = "volume";
         if n.contains(&0) {
             return Err(Error::arg(arg, "every axis needs at least 1 sample"));
         }
@@ -99,14 +99,14 @@ impl Volume {
     /// [`Error::Argument`] for an empty list or a point at z ≤ 0.
     pub fn points(points: Vec<Point>) -> Result<Self> {
         if points.is_empty() {
-            return Err(Error::arg("--volume", "the point list is empty"));
+            return Err(Error::arg("volume", "the point list is empty"));
         }
         if let Some(p) = points
             .iter()
             .find(|p| p[2].is_nan() || p[2] <= 0.0 || !p.iter().all(|c| c.is_finite()))
         {
             return Err(Error::arg(
-                "--volume",
+                "volume",
                 format!("voxel {p:?} is not in front of the wall (need finite z > 0)"),
             ));
         }
@@ -128,9 +128,9 @@ impl Volume {
     /// ```
     ///
     /// # Errors
-    /// [`Error::Argument`] (`--volume`) naming the malformed part.
+    /// [`Error::Argument`] (`volume`) naming the malformed part.
     pub fn parse(spec: &str) -> Result<Self> {
-        let arg = "--volume";
+        let arg = "volume";
         if spec.contains(':') {
             let axes: Vec<&str> = spec.split(',').collect();
             if axes.len() != 3 {

@@ -27,9 +27,10 @@ use vltm::volume::Volume;
 use vltm_kernel::{Point, Weights};
 
 /// The Python exception for a library error: `vltm.ArgumentError` or `vltm.DataError`.
+/// Parameters are spelled as keyword arguments (`epsilon=`), not as the command line's flags.
 fn py_err(e: vltm::Error) -> PyErr {
     let usage = e.is_usage();
-    let msg = e.to_string().replace('\n', " ");
+    let msg = e.render(|p| format!("{p}=")).replace('\n', " ");
     Python::attach(|py| {
         let class = if usage { "ArgumentError" } else { "DataError" };
         match py

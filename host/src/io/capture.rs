@@ -178,12 +178,12 @@ impl<'a> RowRange<'a> {
     /// The rows `rows` of `src`.
     ///
     /// # Errors
-    /// [`Error::Argument`] (`--rows`) unless `start <= end <= ` the number of laser rows.
+    /// [`Error::Argument`] (`rows`) unless `start <= end <= ` the number of laser rows.
     pub fn new(src: &'a mut dyn RowSource, rows: std::ops::Range<usize>) -> Result<Self> {
         let n = src.geometry().lasers.len();
         if rows.start > rows.end || rows.end > n {
             return Err(Error::arg(
-                "--rows",
+                "rows",
                 format!(
                     "rows {}:{} do not lie in the capture's {n} laser rows (need A <= B <= {n})",
                     rows.start, rows.end
@@ -284,11 +284,28 @@ impl Capture {
     }
 }
 
+/// Checks a laser row index against a capture of `rows` rows: the one check and the one
+/// message of every [`RowSource::read_row`].
+///
+/// # Errors
+/// [`Error::Argument`] (`row`) for `l >= rows`.
+pub fn check_row(l: usize, rows: usize) -> Result<()> {
+    if l < rows {
+        Ok(())
+    } else {
+        Err(Error::arg(
+            "row",
+            format!("laser row {l} is out of range: the capture has {rows} rows (0..{rows})"),
+        ))
+    }
+}
+
 impl RowSource for Capture {
     fn geometry(&self) -> &Geometry {
         &self.geometry
     }
     fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
+        check_row(l, self.geometry.lasers.len())?;
         out.clear();
         out.extend_from_slice(self.row(l));
         Ok(self.geometry.lasers[l])
@@ -305,7 +322,7 @@ pub fn swap_roles(c: &Capture) -> Result<Capture> {
     let g = &c.geometry;
     if g.confocal {
         return Err(Error::arg(
-            "--swap-roles",
+            "swap_roles",
             "a confocal capture has nothing to swap",
         ));
     }
@@ -327,4 +344,40 @@ pub fn swap_roles(c: &Capture) -> Result<Capture> {
         ..g.clone()
     };
     Ok(Capture { geometry, data })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An out-of-range row is an error with the one message of every reader, not a panic
+    /// (the in-memory capture sliced its data and panicked).
+    #[test]
+    fn read_row_out_of_range_is_an_error() {
+        let lasers = vec![[0.0, 0.0, 0.0], [0.1, 0.0, 0.0]];
+        let g = Geometry {
+            spads: lasers.clone(),
+            lasers,
+            laser_shape: [2, 1],
+            spad_shape: [2, 1],
+            laser_origin: [0.0; 3],
+            sensor_origin: [0.0; 3],
+            legs_in_time: false,
+            confocal: true,
+            nt: 3,
+            dt: 0.01,
+            t0: 0.0,
+        };
+        let mut c = Capture::new(g, vec![1.0; 6], std::path::Path::new("t")).unwrap();
+        let mut row = Vec::new();
+        assert_eq!(c.read_row(1, &mut row).unwrap(), [0.1, 0.0, 0.0]);
+        assert_eq!(row, [1.0; 3]);
+        let e = c.read_row(2, &mut row).unwrap_err();
+        assert_eq!(e.to_string(), check_row(2, 2).unwrap_err().to_string());
+        assert_eq!(
+            e.to_string(),
+            "argument `row`: laser row 2 is out of range: the capture has 2 rows (0..2)"
+        );
+        assert!(check_row(1, 2).is_ok());
+    }
 }

@@ -18,7 +18,7 @@ pub mod prep;
 pub mod ptu;
 pub mod tal;
 
-pub use capture::{Capture, Geometry, RowRange, RowSource, Rows, swap_roles};
+pub use capture::{Capture, Geometry, RowRange, RowSource, Rows, check_row, swap_roles};
 
 use crate::error::{Error, Result};
 use std::path::Path;

@@ -15,7 +15,7 @@
 use crate::atomic::Transaction;
 use crate::budget;
 use crate::error::{Error, Result};
-use crate::io::capture::{Capture, Geometry, RowSource};
+use crate::io::capture::{Capture, Geometry, RowSource, check_row};
 use ndarray::{Array, ArrayD, IxDyn};
 use ndarray_npy::{NpzReader, NpzWriter, ReadableElement};
 use std::fs::File;
@@ -490,12 +490,8 @@ impl RowSource for Stream {
         use std::io::{Read, Seek, SeekFrom};
         let g = &self.geometry;
         let n = g.spads_per_row() * g.nt;
-        let x = *g.lasers.get(l).ok_or_else(|| {
-            Error::arg(
-                "row",
-                format!("row {l} of {} does not exist", g.lasers.len()),
-            )
-        })?;
+        check_row(l, g.lasers.len())?;
+        let x = g.lasers[l];
         self.bytes.resize(4 * n, 0);
         let offset = self.start + (4 * n * l) as u64;
         self.file

@@ -102,7 +102,7 @@ impl Background {
     /// Parses `auto`, `none` or a number of counts per bin (finite, ≥ 0).
     ///
     /// # Errors
-    /// [`Error::Argument`] (`--background`).
+    /// [`Error::Argument`] (`background`).
     pub fn parse(s: &str) -> Result<Self> {
         match s.trim() {
             "auto" => Ok(Self::Auto),
@@ -110,7 +110,7 @@ impl Background {
             v => match v.parse::<f64>() {
                 Ok(b) if b.is_finite() && b >= 0.0 => Ok(Self::Value(b)),
                 _ => Err(Error::arg(
-                    "--background",
+                    "background",
                     format!("expected auto, none or counts per bin >= 0, found `{s}`"),
                 )),
             },
@@ -241,17 +241,15 @@ impl<'a> Prepared<'a> {
         let g = inner.geometry().clone();
         let k = prep.rebin.max(1);
         if prep.rebin == 0 {
-            return Err(Error::arg("--rebin", "expected K >= 1 bins"));
+            return Err(Error::arg("rebin", "expected K >= 1 bins"));
         }
         let n0 = prep.t_min.map_or(0, |b| b.bin(&g));
         let n1 = prep.t_max.map_or(g.nt, |b| b.bin(&g));
         let nt = n1.saturating_sub(n0) / k;
         if nt == 0 {
-            let arg = if n1 > n0 {
-                "--rebin"
-            } else {
-                "--t-min/--t-max"
-            };
+            // The window is empty (`t_min` at or past `t_max`) or narrower than one rebinned
+            // bin (`rebin`).
+            let arg = if n1 > n0 { "rebin" } else { "t_min" };
             return Err(Error::arg(
                 arg,
                 format!(
@@ -262,7 +260,9 @@ impl<'a> Prepared<'a> {
                     g.t0,
                     g.t0 + g.nt as f64 * g.dt,
                     if k > 1 {
-                        format!(", fewer than --rebin {k}")
+                        format!(", fewer than $rebin {k}")
+                    } else if n1 <= n0 {
+                        " ($t_min must lie before $t_max)".to_string()
                     } else {
                         String::new()
                     }
@@ -378,9 +378,9 @@ impl<'a> Prepared<'a> {
                 None => "in the last tenth of the window".into(),
             };
             return Err(Error::arg(
-                "--background",
+                "background",
                 format!(
-                    "auto: only {n} bins of the window (path {:.3}..{:.3} m) lie {where_} for the histogram at {x_l:?}; widen --t-min/--t-max or give --background VALUE",
+                    "auto: only {n} bins of the window (path {:.3}..{:.3} m) lie {where_} for the histogram at {x_l:?}; widen $t_min/$t_max or give $background VALUE",
                     g.t0,
                     g.t0 + (g.nt as f64 - 1.0) * g.dt
                 ),
@@ -514,7 +514,7 @@ mod tests {
                     rebin: 1,
                     ..Prep::default()
                 },
-                "--t-min",
+                "t_min",
             ),
             (
                 Prep {
@@ -523,7 +523,7 @@ mod tests {
                     rebin: 1,
                     ..Prep::default()
                 },
-                "--t-min",
+                "t_min",
             ),
             (
                 Prep {
@@ -531,7 +531,7 @@ mod tests {
                     rebin: 4,
                     ..Prep::default()
                 },
-                "--rebin",
+                "rebin",
             ),
         ] {
             let e = Prepared::new(&mut c, prep, None).unwrap_err().to_string();
@@ -584,20 +584,11 @@ mod tests {
 
     #[test]
     fn bounds_parse() {
-        assert_eq!(Bound::parse("--t-min", "600b").unwrap(), Bound::Bins(600));
-        assert_eq!(
-            Bound::parse("--t-min", "600bins").unwrap(),
-            Bound::Bins(600)
-        );
-        assert_eq!(
-            Bound::parse("--t-min", "0.72m").unwrap(),
-            Bound::Metres(0.72)
-        );
-        assert_eq!(
-            Bound::parse("--t-min", "0.72").unwrap(),
-            Bound::Metres(0.72)
-        );
-        assert!(Bound::parse("--t-min", "x").is_err());
+        assert_eq!(Bound::parse("t_min", "600b").unwrap(), Bound::Bins(600));
+        assert_eq!(Bound::parse("t_min", "600bins").unwrap(), Bound::Bins(600));
+        assert_eq!(Bound::parse("t_min", "0.72m").unwrap(), Bound::Metres(0.72));
+        assert_eq!(Bound::parse("t_min", "0.72").unwrap(), Bound::Metres(0.72));
+        assert!(Bound::parse("t_min", "x").is_err());
         assert!(Background::parse("-1").is_err());
         assert_eq!(Background::parse("auto").unwrap(), Background::Auto);
     }

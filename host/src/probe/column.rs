@@ -46,11 +46,11 @@ impl Shell {
     /// Parses `R0:R1` (metres; `R1` may be `inf`).
     ///
     /// # Errors
-    /// [`Error::Argument`] (`--shell`) unless `0 ≤ R0 < R1`.
+    /// [`Error::Argument`] (`shell`) unless `0 ≤ R0 < R1`.
     pub fn parse(s: &str) -> Result<Self> {
         let bad = || {
             Error::arg(
-                "--shell",
+                "shell",
                 format!("expected R0:R1 with 0 <= R0 < R1 in metres, found `{s}`"),
             )
         };
@@ -67,6 +67,57 @@ impl Shell {
     pub fn contains(&self, d: f32) -> bool {
         d >= self.r0 && d < self.r1
     }
+
+    /// The names of the three shells of [`Shell::cuts`], in order.
+    pub const CUT_NAMES: [&'static str; 3] = ["near", "middle", "far"];
+
+    /// Near `[0, r1)`, middle `[r1, r2)` and far `[r2, ∞)`.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] (`shells`) unless `0 < r1 < r2 < ∞`.
+    pub fn cuts(r1: f32, r2: f32) -> Result<[Self; 3]> {
+        if !(r1 > 0.0 && r2 > r1 && r2.is_finite()) {
+            return Err(Error::arg(
+                "shells",
+                format!("expected 0 < R1 < R2 in metres, found {r1}, {r2}"),
+            ));
+        }
+        Ok([
+            Self { r0: 0.0, r1 },
+            Self { r0: r1, r1: r2 },
+            Self {
+                r0: r2,
+                r1: f32::INFINITY,
+            },
+        ])
+    }
+
+    /// Parses `R1,R2` (metres, `0 < R1 < R2`) into [`Shell::cuts`].
+    ///
+    /// # Errors
+    /// [`Error::Argument`] (`shells`) for anything else.
+    pub fn parse_cuts(s: &str) -> Result<[Self; 3]> {
+        let bad = || {
+            Error::arg(
+                "shells",
+                format!("expected R1,R2 with 0 < R1 < R2 in metres, found `{s}`"),
+            )
+        };
+        let (a, b) = s.split_once(',').ok_or_else(bad)?;
+        let r1: f32 = a.trim().parse().map_err(|_| bad())?;
+        let r2: f32 = b.trim().parse().map_err(|_| bad())?;
+        Self::cuts(r1, r2).map_err(|_| bad())
+    }
+
+    /// `values` over `points` with every voxel outside the shell around `a` set to 0 (one
+    /// shell of a column `T(x_a, ·)`).
+    pub fn cut(&self, a: Point, values: &[f32], points: &[Point]) -> Vec<f32> {
+        values
+            .iter()
+            .zip(points)
+            .map(|(&x, p)| if self.contains(dist(a, *p)) { x } else { 0.0 })
+            .collect()
+    }
 }
 
 /// The diagonal under another gate: `none` (the monochromatic phasor, paper Fig. 6: direct
@@ -77,7 +128,7 @@ impl Shell {
 /// `Kv·Ks·(E0 + 7R)` higher-order).
 ///
 /// # Errors
-/// As [`direct`]; [`Error::Argument`] (`--path`) when a fast path is forced for a gate other
+/// As [`direct`]; [`Error::Argument`] (`path`) when a fast path is forced for a gate other
 /// than the Gaussian one.
 pub fn diagonal(
     src: &mut dyn RowSource,
@@ -93,7 +144,7 @@ pub fn diagonal(
     };
     if !matches!(exec.path, Path::Auto | Path::Band) {
         return Err(Error::arg(
-            "--path",
+            "path",
             "the un-gated and higher-order diagonals are evaluated on the band path only",
         ));
     }
@@ -125,13 +176,13 @@ pub fn diagonal(
 /// Checks that a focus point is in front of the wall.
 ///
 /// # Errors
-/// [`Error::Argument`] (`--focus`) for z ≤ 0 or non-finite coordinates.
+/// [`Error::Argument`] (`focus`) for z ≤ 0 or non-finite coordinates.
 pub fn check_focus(a: Point) -> Result<()> {
     if a.iter().all(|c| c.is_finite()) && a[2] > 0.0 {
         Ok(())
     } else {
         Err(Error::arg(
-            "--focus",
+            "focus",
             format!("{a:?} is on or behind the wall (need z > 0)"),
         ))
     }
@@ -199,13 +250,13 @@ pub(super) fn column_acc(
     match (exec.path, gate) {
         (Path::Lookup, _) => {
             return Err(Error::arg(
-                "--path",
+                "path",
                 "the lookup path evaluates the diagonal only (use auto, band or planar for columns)",
             ));
         }
         (Path::Planar, ColumnGate::HigherOrder | ColumnGate::None) => {
             return Err(Error::arg(
-                "--path",
+                "path",
                 "the planar path images Gaussian-gated (two-bounce) columns only (use auto or band)",
             ));
         }

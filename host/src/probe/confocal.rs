@@ -42,7 +42,7 @@ pub(super) fn lookup_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
 /// [`Path::Auto`]) it costs fewer flops than `rival` (the cheapest other path, whole scan).
 ///
 /// # Errors
-/// [`Error::Argument`] (`--path`) when the planar path is forced and does not apply.
+/// [`Error::Argument`] (`path`) when the planar path is forced and does not apply.
 pub(super) fn choose(
     g: &Geometry,
     cfg: &Config,
@@ -60,7 +60,7 @@ pub(super) fn choose(
     };
     match (conv, path) {
         (Err(e), Path::Planar) => Err(Error::arg(
-            "--path",
+            "path",
             format!("the planar FFT path does not apply: {e}"),
         )),
         (Err(_), _) => Ok(None),

@@ -20,7 +20,7 @@ use vltm_kernel::{Config, Gate, Point, Probe, Report, Scan, Target};
 /// kernel's band sum).
 ///
 /// # Errors
-/// Configuration, read and kernel errors; [`Error::Argument`] (`--path`) when the planar
+/// Configuration, read and kernel errors; [`Error::Argument`] (`path`) when the planar
 /// path is forced and does not apply.
 pub fn direct(
     src: &mut dyn RowSource,
@@ -179,7 +179,7 @@ pub(super) fn choose_planar(
     };
     match (planar, path) {
         (Err(e), Path::Planar) => Err(Error::arg(
-            "--path",
+            "path",
             format!("the planar FFT path does not apply: {e}"),
         )),
         (Err(_), _) => Ok(None),

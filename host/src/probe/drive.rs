@@ -215,7 +215,7 @@ pub(super) fn check_laser_falloff(g: &Geometry, wave: &Wave) -> Result<()> {
         let f = g.laser_falloff(g.lasers[0]);
         if !(f.is_finite() && f > 0.0) {
             return Err(Error::arg(
-                "--compensate-laser",
+                "compensate_laser",
                 "laser_xyz lies in the wall plane: cos θ / d² is 0",
             ));
         }

@@ -5,8 +5,8 @@
 //! the same pass.
 
 use super::column::*;
-use super::direct::*;
 use super::drive::*;
+use super::gamma::Gamma;
 use super::leak::{DirectModel, LeakCorrected, LeakOptions, cell_radius};
 use super::wave::*;
 use crate::error::{Error, Result};
@@ -15,7 +15,7 @@ use crate::io::capture::RowSource;
 use crate::volume::Volume;
 use rayon::prelude::*;
 use std::time::Instant;
-use vltm_kernel::{Gate, Point, Probe, Report, Scan, Target};
+use vltm_kernel::{Config, Gate, Point, Probe, Report, Scan, Target};
 
 /// Options of the in-focus indirect sum.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -57,23 +57,16 @@ pub struct IndirectOutput {
     pub gamma: Vec<bool>,
     /// The pair shell used.
     pub shell: Shell,
-    /// Counters of pass 2.
+    /// Counters of pass 2: its rows and samples, and the aliased pairs of every focus.
     pub report: Report,
+    /// The configuration pass 2 ran on (the two-bounce gate's column configuration, whose
+    /// band and DFT length cover every Γ pair; pass 1's diagonal may differ).
+    pub config: Config,
     /// With leak correction: the fraction of the demodulated capture's energy the direct
     /// model explains ([`DirectModel::explained`]).
     pub explained: Option<f64>,
     /// Wall-clock seconds for both passes.
     pub seconds: f64,
-}
-
-/// Γ = {v : I_d(v) > ε·max I_d} (Eq. 15 with a relative threshold); empty if the maximum is
-/// not positive or not finite.
-pub fn gamma_mask(direct: &[f32], epsilon: f32) -> Vec<bool> {
-    let max = direct.iter().copied().fold(0.0f32, f32::max);
-    direct
-        .iter()
-        .map(|&v| max.is_finite() && max > 0.0 && v > epsilon * max)
-        .collect()
 }
 
 /// In-focus indirect light (Eqs. 15–17): pass 1 the diagonal, Γ = {I_d > ε·max}, pass 2
@@ -89,16 +82,9 @@ pub fn indirect(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<IndirectOutput> {
-    if !(opts.epsilon >= 0.0 && opts.epsilon < 1.0) {
-        return Err(Error::arg(
-            "--epsilon",
-            format!("expected 0 <= E < 1, found {}", opts.epsilon),
-        ));
-    }
     let t = Instant::now();
-    let d = direct(src, volume, wave, exec)?;
-    let gamma = gamma_mask(&d.values, opts.epsilon);
-    let mut out = indirect_over(src, volume, &gamma, opts, wave, exec)?;
+    let (gamma, d) = Gamma::measure(src, volume, opts.epsilon, "epsilon", wave, exec)?;
+    let mut out = indirect_over(src, volume, &gamma.mask, opts, wave, exec)?;
     out.direct = d.values;
     out.seconds = t.elapsed().as_secs_f64();
     Ok(out)
@@ -119,17 +105,17 @@ pub fn indirect_over(
     exec: Exec<'_>,
 ) -> Result<IndirectOutput> {
     let t = Instant::now();
-    let (mut sums, report, shell, explained) =
-        pair_sums(src, volume, gamma, opts, None, wave, exec)?;
-    let values = sums.pop().unwrap_or_default();
+    let mut p = pair_sums(src, volume, gamma, opts, None, wave, exec)?;
+    let values = p.sums.pop().unwrap_or_default();
     check_finite(&values, &volume.points, "in-focus indirect light")?;
     Ok(IndirectOutput {
         values,
         direct: Vec::new(),
         gamma: gamma.to_vec(),
-        shell,
-        report,
-        explained,
+        shell: p.shell,
+        report: p.report,
+        config: p.config,
+        explained: p.explained,
         seconds: t.elapsed().as_secs_f64(),
     })
 }
@@ -148,14 +134,24 @@ pub fn indirect_shells(
     shells: &[Shell],
     wave: &Wave,
     exec: Exec<'_>,
-) -> Result<(Vec<Vec<f32>>, Report)> {
-    let (sums, report, _, _) = pair_sums(src, volume, gamma, opts, Some(shells), wave, exec)?;
-    Ok((sums, report))
+) -> Result<PairSums> {
+    pair_sums(src, volume, gamma, opts, Some(shells), wave, exec)
 }
 
-/// The pair sums of pass 2 (one volume per shell), the counters, the (last) shell and, with
-/// leak correction, the fraction of the capture's energy the direct model explained.
-type PairSums = (Vec<Vec<f32>>, Report, Shell, Option<f64>);
+/// What pass 2 of the in-focus indirect sum computed.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PairSums {
+    /// The pair sums, one volume per shell.
+    pub sums: Vec<Vec<f32>>,
+    /// Counters of the pass: its rows and samples, and the aliased pairs of every focus.
+    pub report: Report,
+    /// The (last) shell.
+    pub shell: Shell,
+    /// With leak correction: the fraction of the capture's energy the direct model explained.
+    pub explained: Option<f64>,
+    /// The configuration the pass ran on.
+    pub config: Config,
+}
 
 /// The Γ-masked pair sums of pass 2, one per shell (`shells`, or the single shell of `opts`
 /// with its default r0 = 1.5σ), with the counters and the (last) shell.
@@ -197,7 +193,7 @@ fn pair_sums(
     let mut explained = None;
     if idx.is_empty() && opts.leak.is_some() {
         return Err(Error::arg(
-            "--leak-correct",
+            "leak_correct",
             "Γ is empty: no voxel has direct light above ε·max (no direct return in the window for this volume?)",
         ));
     }
@@ -212,9 +208,9 @@ fn pair_sums(
             idx.len() * Probe::state_bytes(&cfg, Target::Column([0.0, 0.0, 1.0]), kgate, n_vox, ks);
         if bytes > opts.max_bytes {
             return Err(Error::arg(
-                "--epsilon",
+                "epsilon",
                 format!(
-                    "Γ has {} voxels and needs {:.1} GB of accumulators; raise --epsilon",
+                    "Γ has {} voxels and needs {:.1} GB of accumulators; raise $epsilon",
                     idx.len(),
                     bytes as f64 / 1e9
                 ),
@@ -253,8 +249,8 @@ fn pair_sums(
                 .image(&cfg, &spads, &pts, kgate, &pts)?
         };
         let mut sums = vec![vec![0.0f64; pts.len()]; shells.len()];
-        for (ai, (col, r)) in cols.iter().enumerate() {
-            report = *r;
+        report = summed_reports(&cols);
+        for (ai, (col, _)) in cols.iter().enumerate() {
             for (bi, t) in col.iter().enumerate() {
                 let d = dist(pts[ai], pts[bi]);
                 for (sh, sum) in shells.iter().zip(sums.iter_mut()) {
@@ -270,7 +266,21 @@ fn pair_sums(
             }
         }
     }
-    Ok((values, report, shells[shells.len() - 1], explained))
+    Ok(PairSums {
+        sums: values,
+        report,
+        shell: shells[shells.len() - 1],
+        explained,
+        config: cfg,
+    })
+}
+
+/// The counters of a pass that imaged one column per focus: the rows and samples of the pass
+/// (the same for every focus) and the aliased pairs of all foci together.
+fn summed_reports(cols: &[(Vec<f64>, Report)]) -> Report {
+    let aliased = cols.iter().map(|(_, r)| r.aliased).sum();
+    cols.last()
+        .map_or_else(Report::default, |(_, r)| Report { aliased, ..*r })
 }
 
 /// One higher-order column (Eq. 18) per focus, each over `foci` itself, in one pass over the
@@ -313,7 +323,7 @@ fn higher_order_columns(
 
 /// Pass 2's sum from the accumulated Γ columns: `I_i(b) = Σ_{a∈Γ, a≠b, r0≤|a−b|<r1} T(a, b)`
 /// over the Γ points `pts` (at volume indices `idx`), as a volume of `n` voxels, with the
-/// last column's counters.
+/// counters of all columns (aliased pairs summed over the foci).
 pub(super) fn indirect_sum(
     cols: &mut Columns,
     cfg: &vltm_kernel::Config,
@@ -330,8 +340,8 @@ pub(super) fn indirect_sum(
     }
     let imaged = cols.image(cfg, spads, pts, Gate::Gaussian, pts)?;
     let mut sum = vec![0.0f64; pts.len()];
-    for (ai, (col, r)) in imaged.iter().enumerate() {
-        report = *r;
+    report = summed_reports(&imaged);
+    for (ai, (col, _)) in imaged.iter().enumerate() {
         for (bi, t) in col.iter().enumerate() {
             if ai != bi && shell.contains(dist(pts[ai], pts[bi])) {
                 sum[bi] += t;
@@ -358,17 +368,7 @@ pub fn fit_over_volume(
     opts: &LeakOptions,
     exec: Exec<'_>,
 ) -> Result<DirectModel> {
-    if !(0.0..1.0).contains(&epsilon) {
-        return Err(Error::arg(
-            "--leak-epsilon",
-            format!("expected 0 <= E < 1, found {epsilon}"),
-        ));
-    }
-    let d = direct(src, volume, wave, exec)?;
-    let gamma = gamma_mask(&d.values, epsilon);
-    let pts: Vec<Point> = (0..volume.len())
-        .filter(|&i| gamma[i])
-        .map(|i| volume.points[i])
-        .collect();
+    let (gamma, _) = Gamma::measure(src, volume, epsilon, "leak_epsilon", wave, exec)?;
+    let pts = gamma.points(volume);
     DirectModel::fit(src, &pts, cell_radius(volume), wave, opts, exec)
 }

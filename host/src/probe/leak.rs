@@ -462,12 +462,12 @@ impl GateEnergy {
     /// The fraction removed ([`DirectModel::explained`]).
     ///
     /// # Errors
-    /// [`Error::Argument`] (`--leak-correct`) when nothing was removed: the capture holds no
+    /// [`Error::Argument`] (`leak_correct`) when nothing was removed: the capture holds no
     /// light at the direct return times.
     pub fn explained(&self) -> Result<f64> {
         if self.cut.is_nan() || self.cut <= 0.0 {
             return Err(Error::arg(
-                "--leak-correct",
+                "leak_correct",
                 "the capture holds no light at the direct (3-vertex) return times of Γ's \
                  voxels: there is no direct light to remove",
             ));
@@ -486,8 +486,8 @@ impl DirectModel {
     fn check(g: &Geometry, points: &[Point], wave: &Wave) -> Result<(Basis, SpadTables)> {
         if points.is_empty() {
             return Err(Error::arg(
-                "--leak-correct",
-                "Γ is empty: no voxel to fit the direct light at (lower --epsilon or check --volume)",
+                "leak_correct",
+                "Γ is empty: no voxel to fit the direct light at (lower $epsilon or check $volume)",
             ));
         }
         let basis = Basis::new(g, wave)?;
@@ -501,7 +501,7 @@ impl DirectModel {
         });
         if !any {
             return Err(Error::arg(
-                "--leak-correct",
+                "leak_correct",
                 format!(
                     "no direct (3-vertex) return of Γ's {v_n} voxels falls in the capture's window \
                      [{:.3}, {:.3}] m: there is no direct light to remove",
@@ -544,7 +544,7 @@ impl DirectModel {
     /// rows), with the carrier and envelope of `wave` on this capture.
     ///
     /// # Errors
-    /// [`Error::Argument`] (`--leak-correct`) when `points` is empty, when no 3-vertex return
+    /// [`Error::Argument`] (`leak_correct`) when `points` is empty, when no 3-vertex return
     /// of any point falls in the capture's window, or when the capture holds no light at those
     /// returns; configuration and read errors.
     pub fn fit(
@@ -625,7 +625,7 @@ impl DirectModel {
         project(&mut rhs);
         if energy.is_nan() || energy <= 0.0 || rhs.iter().all(|z| *z == zero) {
             return Err(Error::arg(
-                "--leak-correct",
+                "leak_correct",
                 "the capture holds no light at the direct (3-vertex) return times of Γ's voxels: \
                  there is no direct light to remove",
             ));

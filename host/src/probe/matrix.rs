@@ -221,7 +221,7 @@ fn check_result(nf: usize, nt: usize) -> Result<u128> {
     budget::check(
         || {
             format!(
-                "argument `--from`/`--to`: a {nf} x {nt} matrix ({MATRIX_BYTES_PER_ELEMENT} B per element)"
+                "argument `$from`/`$to`: a {nf} x {nt} matrix ({MATRIX_BYTES_PER_ELEMENT} B per element)"
             )
         },
         out_bytes,
@@ -244,8 +244,8 @@ pub(super) fn matrix_acc(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<(Columns, Config)> {
-    check_set("--from", from)?;
-    check_set("--to", to)?;
+    check_set("from", from)?;
+    check_set("to", to)?;
     let (nf, nt) = (from.len(), to.len());
     let out_bytes = check_result(nf, nt)?;
     if src.geometry().confocal {
@@ -261,7 +261,7 @@ pub(super) fn matrix_acc(
     budget::check(
         || {
             format!(
-                "argument `--from`: the accumulators of all {nf} foci (a partial state holds them all) and the matrix"
+                "argument `$from`: the accumulators of all {nf} foci (a partial state holds them all) and the matrix"
             )
         },
         out_bytes
@@ -340,7 +340,7 @@ pub(super) fn matrix_of_columns(
 /// accumulators of all `from` foci do not fit the memory budget).
 ///
 /// # Errors
-/// [`Error::Argument`] (`--from`/`--to`) for an empty set or a point on or behind the wall;
+/// [`Error::Argument`] (`from`/`to`) for an empty set or a point on or behind the wall;
 /// [`Error::Memory`] naming `--from`/`--to` when the result does not fit the budget;
 /// configuration, read and kernel errors.
 pub fn matrix(
@@ -350,15 +350,15 @@ pub fn matrix(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<Matrix> {
-    check_set("--from", from)?;
-    check_set("--to", to)?;
+    check_set("from", from)?;
+    check_set("to", to)?;
     let t = Instant::now();
     let (nf, nt) = (from.len(), to.len());
     let out_bytes = check_result(nf, nt)?;
     let cfg = wave.column_config(src.geometry(), from, to)?;
     let ks = src.geometry().spads_per_row();
     let fixed = out_bytes.saturating_add(imaging_bytes(nt));
-    let per_pass = foci_per_pass(&cfg, ks, nf, fixed, "--from", "the matrix")?;
+    let per_pass = foci_per_pass(&cfg, ks, nf, fixed, "from", "the matrix")?;
     let mut amplitudes = vec![Complex32::new(0.0, 0.0); nf * nt];
     let mut report = Report::default();
     let mut passes = 0;
@@ -410,24 +410,24 @@ impl Pattern {
     /// A pattern from points and weights; points with weight 0 are dropped.
     ///
     /// # Errors
-    /// [`Error::Argument`] (`--pattern`) when no weight is non-zero, a weight is not finite,
+    /// [`Error::Argument`] (`pattern`) when no weight is non-zero, a weight is not finite,
     /// or a point is on or behind the wall.
     pub fn new(points: &[(Point, f64)]) -> Result<Self> {
         if let Some((p, w)) = points.iter().find(|(_, w)| !w.is_finite()) {
             return Err(Error::arg(
-                "--pattern",
+                "pattern",
                 format!("the weight of {p:?} is {w}, not a finite number"),
             ));
         }
         let kept: Vec<&(Point, f64)> = points.iter().filter(|(_, w)| *w != 0.0).collect();
         if kept.is_empty() {
             return Err(Error::arg(
-                "--pattern",
+                "pattern",
                 "no focus has a non-zero weight: the illumination would be dark",
             ));
         }
         let foci: Vec<Point> = kept.iter().map(|(p, _)| *p).collect();
-        check_set("--pattern", &foci)?;
+        check_set("pattern", &foci)?;
         Ok(Self {
             foci,
             weights: kept.iter().map(|(_, w)| *w).collect(),
@@ -437,7 +437,7 @@ impl Pattern {
     /// Parses `x,y,z,w;x,y,z,w;…` (metres, weights) — a weight may be left out (1).
     ///
     /// # Errors
-    /// [`Error::Argument`] (`--pattern`) for malformed entries and as [`Pattern::new`].
+    /// [`Error::Argument`] (`pattern`) for malformed entries and as [`Pattern::new`].
     pub fn parse(s: &str) -> Result<Self> {
         let mut pts = Vec::new();
         for item in s.split(';').map(str::trim).filter(|i| !i.is_empty()) {
@@ -447,7 +447,7 @@ impl Pattern {
                 .collect::<std::result::Result<_, _>>()
                 .map_err(|_| {
                     Error::arg(
-                        "--pattern",
+                        "pattern",
                         format!("expected x,y,z,w numbers separated by `;`, found `{item}`"),
                     )
                 })?;
@@ -456,7 +456,7 @@ impl Pattern {
                 [x, y, z, w] => ([x as f32, y as f32, z as f32], w),
                 _ => {
                     return Err(Error::arg(
-                        "--pattern",
+                        "pattern",
                         format!("expected x,y,z or x,y,z,w, found `{item}`"),
                     ));
                 }
@@ -469,12 +469,12 @@ impl Pattern {
     /// A voxel image over `volume` (one weight per voxel, volume order) as a pattern.
     ///
     /// # Errors
-    /// [`Error::Argument`] (`--pattern`) when the image does not have one value per voxel,
+    /// [`Error::Argument`] (`pattern`) when the image does not have one value per voxel,
     /// and as [`Pattern::new`].
     pub fn from_image(volume: &Volume, image: &[f32]) -> Result<Self> {
         if image.len() != volume.len() {
             return Err(Error::arg(
-                "--pattern",
+                "pattern",
                 format!(
                     "the image has {} values, the volume {} voxels (shape {:?})",
                     image.len(),
@@ -517,7 +517,7 @@ pub fn relight(
         ks,
         pattern.foci.len(),
         fixed,
-        "--pattern",
+        "pattern",
         "the relit image",
     )?;
     let mut acc = vec![Complex64::new(0.0, 0.0); nb];

@@ -7,6 +7,7 @@
 //! | [`column()`] | `T(x_a, ·)` with [`ColumnGate`] two-bounce (Eq. 14), higher-order (Eq. 18) or none, optionally restricted to a shell `r0 ≤ |x_a − x_b| < r1` | 1 |
 //! | [`diagonal`] | the diagonal un-gated (Fig. 6) or under the late gate (Eq. 18) | 1 |
 //! | [`indirect`] | in-focus indirect light (Eqs. 15–17): Γ from the diagonal, then `Σ_{a∈Γ} T(a, b)` over Γ-masked pairs with `r0 ≤ |x_a − x_b| < r1` (two-bounce, higher-order or un-gated columns) | 2 |
+//! | [`Gamma`] | Γ = {I_d > ε·max I_d}: ε checked once, from a diagonal pass or a given direct-light volume | 1 or 0 |
 //! | [`indirect_shells`] | pass 2 of [`indirect`] for several shells at once (near, middle, far) | 1 |
 //! | [`matrix()`] | amplitudes `A(x_a, x_b)` for `x_a` in one voxel set, `x_b` in another (two-bounce) | 1 (more if the accumulators exceed the memory budget) |
 //! | [`relight`] | `A_p(b) = Σ_a p_a A(x_a, b)`: the image under a weighted sum of projector foci | 1 (idem) |
@@ -25,6 +26,7 @@ mod confocal;
 mod direct;
 mod drive;
 pub mod fast;
+mod gamma;
 mod indirect;
 mod leak;
 mod matrix;
@@ -35,8 +37,9 @@ mod wave;
 pub use crate::exec::{Exec, Path};
 pub use column::{ColumnGate, Shell, check_focus, column, diagonal};
 pub use direct::direct;
+pub use gamma::{Gamma, gamma_mask};
 pub use indirect::{
-    IndirectOptions, IndirectOutput, fit_over_volume, gamma_mask, indirect, indirect_over,
+    IndirectOptions, IndirectOutput, PairSums, fit_over_volume, indirect, indirect_over,
     indirect_shells,
 };
 pub use leak::{DirectModel, GateEnergy, LeakCorrected, LeakMethod, LeakOptions, cell_radius};

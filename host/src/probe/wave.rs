@@ -150,7 +150,7 @@ impl Wave {
 /// gate, light arriving later) some path must be no later than the window's end.
 ///
 /// # Errors
-/// [`Error::Argument`](crate::Error::Argument) (`--volume`) naming the window and the paths'
+/// [`Error::Argument`](crate::Error::Argument) (`volume`) naming the window and the paths'
 /// span.
 pub(super) fn check_window(
     g: &Geometry,
@@ -217,7 +217,7 @@ pub(super) fn check_window(
             .reduce(|| empty, join),
     };
     Err(crate::error::Error::arg(
-        "--volume",
+        "volume",
         format!(
             "the capture's time window ({:.4} to {:.4} m of path, gate margins included) contains no path through the probed voxels (their paths span {:.4} to {:.4} m): choose voxels the capture saw, or check its t_start and delta_t",
             lo, hi, all.0, all.1

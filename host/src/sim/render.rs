@@ -10,9 +10,9 @@ use vltm_kernel::Point;
 use super::objects::*;
 use super::scene::*;
 use crate::budget;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::exec::{Exec, Pass};
-use crate::io::capture::{Capture, Geometry, RowSource};
+use crate::io::capture::{Capture, Geometry, RowSource, check_row};
 
 impl Scene {
     /// Validates the scene and precomputes what rendering rows needs (per-point distances and
@@ -143,13 +143,7 @@ impl RowSource for SceneSource {
     }
 
     fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
-        let kl = self.geometry.lasers.len();
-        if l >= kl {
-            return Err(Error::arg(
-                "row",
-                format!("laser row {l} is out of range 0..{kl}"),
-            ));
-        }
+        check_row(l, self.geometry.lasers.len())?;
         out.clear();
         out.resize(self.geometry.spads_per_row() * self.geometry.nt, 0.0);
         self.tables.row(l, &mut self.scratch, out);

@@ -65,12 +65,6 @@ pub(super) fn default_max_vertices() -> usize {
 pub(super) fn default_true() -> bool {
     true
 }
-pub(super) fn default_laser_origin() -> [f64; 3] {
-    DEFAULT_LASER_ORIGIN
-}
-pub(super) fn default_sensor_origin() -> [f64; 3] {
-    DEFAULT_SENSOR_ORIGIN
-}
 
 /// Which light paths a render includes.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
@@ -105,10 +99,10 @@ pub struct Setup {
     #[serde(default)]
     pub t0: f64,
     /// Laser device position (m) (y-tal `laser_xyz`).
-    #[serde(default = "default_laser_origin")]
+    #[serde(default = "crate::aperture::default_laser_origin")]
     pub laser_origin: [f64; 3],
     /// Sensor device position (m) (y-tal `sensor_xyz`).
-    #[serde(default = "default_sensor_origin")]
+    #[serde(default = "crate::aperture::default_sensor_origin")]
     pub sensor_origin: [f64; 3],
     /// Whether path times include the device legs `d1`, `d4`.
     #[serde(default)]

@@ -64,7 +64,7 @@ impl Transient<'_> {
         let n = self.counts.len();
         if pos.is_empty() || !(self.t0.is_finite() && self.dt.is_finite() && self.dt > 0.0) {
             return Err(Error::arg(
-                "--png",
+                "png",
                 "the transient has no positive count to plot on a log scale",
             ));
         }

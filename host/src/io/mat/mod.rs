@@ -252,7 +252,7 @@ fn stanford(path: &Path, file: &File, o: &MatOptions) -> Result<(Capture, Vec<St
     let wv = file.read("width")?;
     let width = scalar(path, &wv, "width")?;
     let (w, w_src) = match o.grid_width {
-        Some(g) => (g, "set by --grid-width"),
+        Some(g) => (g, "set by $grid_width"),
         None => (width, "the file's `width`"),
     };
     if !(w.is_finite() && w >= 0.0) {
@@ -282,11 +282,11 @@ fn stanford(path: &Path, file: &File, o: &MatOptions) -> Result<(Capture, Vec<St
         return Err(non_numeric(path, &data));
     }
     let (dt, dt_src) = match o.delta_t {
-        Some(d) => (d, "set by --delta-t"),
+        Some(d) => (d, "set by $delta_t"),
         None => (STANFORD_DT, "assumed: 4 ps bins, the authors' convention"),
     };
     let (t0, t0_src) = match o.t_start {
-        Some(t) => (t, "set by --t-start"),
+        Some(t) => (t, "set by $t_start"),
         None => (0.0, "assumed: t = 0 at the wall, pre-rectified data"),
     };
     let kl = n1 * n2;
@@ -398,7 +398,7 @@ fn stanford(path: &Path, file: &File, o: &MatOptions) -> Result<(Capture, Vec<St
         conv(
             "devices",
             format!("{DEFAULT_LASER_ORIGIN:?} m"),
-            "not recorded: vltm's default, used only by --compensate-laser",
+            "not recorded: vltm's default, used only by $compensate_laser",
         ),
     ];
     Ok((capture, conventions))
@@ -474,19 +474,19 @@ fn phasor_field(path: &Path, file: &File, o: &MatOptions) -> Result<(Capture, Ve
     let laser_origin = xyz("laserOrigin")?;
     let sensor_origin = xyz("cameraOrigin")?;
     let (dt, dt_src) = match o.delta_t {
-        Some(d) => (d, "set by --delta-t"),
+        Some(d) => (d, "set by $delta_t"),
         None => (
             scalar(path, field("deltat")?, "dataset.deltat")?,
             "the file's deltat",
         ),
     };
     let (t0, t0_src) = match o.t_start {
-        Some(t) => (t, "set by --t-start"),
+        Some(t) => (t, "set by $t_start"),
         None => (scalar(path, field("t0")?, "dataset.t0")?, "the file's t0"),
     };
     if o.grid_width.is_some() {
         return Err(Error::arg(
-            "--grid-width",
+            "grid_width",
             "only for the Stanford confocal layout (this file stores its positions)",
         ));
     }

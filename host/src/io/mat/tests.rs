@@ -158,7 +158,7 @@ fn stanford_layout_reads_compressed_and_plain_with_its_conventions() {
     let m = read(&p, &o).unwrap();
     let g = &m.capture.geometry;
     assert_eq!((g.dt, g.t0, g.lasers[0][0]), (0.002, 0.5, -1.0));
-    assert!(m.conventions.iter().any(|c| c.contains("set by --delta-t")));
+    assert!(m.conventions.iter().any(|c| c.contains("set by $delta_t")));
 }
 
 /// struct `dataset` of 3 lasers × 4 bins, data = 0, 1, 2, … (single).

@@ -7,7 +7,7 @@ use serde::{Deserialize, Serialize};
 use vltm_kernel::Point;
 
 use super::header::*;
-use crate::aperture::{Aperture, DEFAULT_LASER_ORIGIN, DEFAULT_SENSOR_ORIGIN};
+use crate::aperture::Aperture;
 use crate::error::{Error, Result};
 use crate::io::capture::Geometry;
 
@@ -27,12 +27,6 @@ pub(super) fn default_marker() -> u32 {
 }
 pub(super) fn default_rebin() -> u32 {
     1
-}
-pub(super) fn default_laser_origin() -> [f64; 3] {
-    DEFAULT_LASER_ORIGIN
-}
-pub(super) fn default_sensor_origin() -> [f64; 3] {
-    DEFAULT_SENSOR_ORIGIN
 }
 
 /// The scan description that goes with a PTU file (a JSON file; format in the module docs).
@@ -73,10 +67,10 @@ pub struct Sidecar {
     #[serde(default)]
     pub first_dtime: u32,
     /// Laser device position (m).
-    #[serde(default = "default_laser_origin")]
+    #[serde(default = "crate::aperture::default_laser_origin")]
     pub laser_origin: [f64; 3],
     /// Sensor device position (m).
-    #[serde(default = "default_sensor_origin")]
+    #[serde(default = "crate::aperture::default_sensor_origin")]
     pub sensor_origin: [f64; 3],
     /// Whether path lengths include the device legs.
     #[serde(default)]

@@ -12,7 +12,7 @@ use super::header::*;
 use super::sidecar::*;
 use crate::budget;
 use crate::error::{Error, Result};
-use crate::io::capture::{Capture, Geometry, RowSource};
+use crate::io::capture::{Capture, Geometry, RowSource, check_row};
 
 /// What happened to the records of the current pass over a file ([`PtuSource::counts`]).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -161,12 +161,7 @@ impl<R: BufRead + Seek> PtuSource<R> {
     }
 
     fn read_row_counts(&mut self, l: usize) -> Result<()> {
-        if l >= self.plan.rows {
-            return Err(Error::arg(
-                "row",
-                format!("laser row {l} of a {}-row PTU capture", self.plan.rows),
-            ));
-        }
+        check_row(l, self.plan.rows)?;
         if self.exhausted || self.markers_seen > l + 1 {
             self.rewind()?;
         }

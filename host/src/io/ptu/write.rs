@@ -357,7 +357,7 @@ pub fn stage_t3(
         written = Some(write_t3_to(capture, BufWriter::new(f), opts, path)?);
         Ok(())
     })?;
-    let mut written = written.ok_or_else(|| Error::arg("--ptu", "nothing written"))?;
+    let mut written = written.ok_or_else(|| Error::arg("ptu", "nothing written"))?;
     let json = written.sidecar.to_json() + "\n";
     t.stage(&sidecar_path, |f| {
         f.write_all(json.as_bytes())

@@ -161,7 +161,7 @@
 use self::fields::*;
 use crate::budget;
 use crate::error::{Error, Result};
-use crate::io::capture::{Capture, Geometry, RowSource};
+use crate::io::capture::{Capture, Geometry, RowSource, check_row};
 use hdf5_reader::{ByteOrder, Dataset, Datatype, Hdf5File, OpenOptions};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -232,6 +232,50 @@ pub fn read_all(path: &Path) -> Result<Capture> {
 /// As [`read_all`].
 pub fn read_all_with(path: &Path, options: TalOptions) -> Result<Capture> {
     open_with(path, options)?.into_capture()
+}
+
+/// Reads every row of an HDF5 capture's reader into a [`Capture`] (peak: the capture plus
+/// one row), its size checked against the memory budget first (`scratch` bytes per sample on
+/// top of the f32 result): the one `into_capture` of both layouts.
+///
+/// # Errors
+/// [`Error::Memory`](crate::Error) over the budget; [`Error::Format`] on `dataset` (of shape
+/// `dims`) if the capture does not fit in memory; read errors.
+pub(crate) fn read_whole(
+    src: &mut dyn RowSource,
+    path: &Path,
+    dataset: &str,
+    dims: &[usize],
+    scratch: u128,
+) -> Result<Capture> {
+    let g = src.geometry().clone();
+    let row_len = g.spads_per_row() * g.nt;
+    let total = g.lasers.len().checked_mul(row_len);
+    budget::check(
+        || {
+            format!(
+                "{dataset} of {} samples in {}",
+                budget::count(total.map_or(u128::MAX, |n| n as u128)),
+                path.display()
+            )
+        },
+        budget::bytes(total.unwrap_or(usize::MAX), 4 + scratch),
+    )?;
+    let mut data: Vec<f32> = Vec::new();
+    if total.is_none_or(|n| data.try_reserve_exact(n).is_err()) {
+        return Err(Error::format(
+            path,
+            dataset,
+            "a capture that fits in memory",
+            format!("shape {dims:?}"),
+        ));
+    }
+    let mut row = Vec::with_capacity(row_len);
+    for l in 0..g.lasers.len() {
+        src.read_row(l, &mut row)?;
+        data.extend_from_slice(&row);
+    }
+    Capture::new(g, data, path)
 }
 
 /// The capture layouts of the HDF5 files vltm reads.
@@ -489,34 +533,8 @@ impl TalReader {
     /// # Errors
     /// Read errors of any row; [`Error::Format`] if the capture does not fit in memory.
     pub fn into_capture(mut self) -> Result<Capture> {
-        let g = self.geometry.clone();
-        let row_len = g.spads_per_row() * g.nt;
-        let mut data: Vec<f32> = Vec::new();
-        let total = g.lasers.len().checked_mul(row_len);
-        budget::check(
-            || {
-                format!(
-                    "H of {} samples in {}",
-                    budget::count(total.map_or(u128::MAX, |n| n as u128)),
-                    self.path.display()
-                )
-            },
-            budget::bytes(total.unwrap_or(usize::MAX), 4 + 8),
-        )?;
-        if total.is_none_or(|n| data.try_reserve_exact(n).is_err()) {
-            return Err(Error::format(
-                &self.path,
-                "H",
-                "a capture that fits in memory",
-                format!("shape {:?}", self.dims),
-            ));
-        }
-        let mut row = Vec::with_capacity(row_len);
-        for l in 0..g.lasers.len() {
-            self.read_row(l, &mut row)?;
-            data.extend_from_slice(&row);
-        }
-        Capture::new(g, data, &self.path)
+        let (path, dims) = (self.path.clone(), self.dims.clone());
+        read_whole(&mut self, &path, "H", &dims, 8)
     }
 
     /// The block of consecutive rows holding row `l`: `first..end` (module docs, *Reading*).
@@ -626,13 +644,7 @@ impl RowSource for TalReader {
     }
 
     fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
-        let kl = self.geometry.lasers.len();
-        if l >= kl {
-            return Err(Error::arg(
-                "laser row",
-                format!("{l} is out of range: the capture has {kl} rows"),
-            ));
-        }
+        check_row(l, self.geometry.lasers.len())?;
         // The background reader transposed the block to rows of SPAD-major histograms: the
         // row is swapped into `out`, whose old buffer goes back to the reader.
         let (first, _) = self.block_range(l);

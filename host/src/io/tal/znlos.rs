@@ -94,7 +94,7 @@ use super::{
 };
 use crate::budget;
 use crate::error::{Error, Result};
-use crate::io::capture::{Capture, Geometry, RowSource};
+use crate::io::capture::{Capture, Geometry, RowSource, check_row};
 use hdf5_reader::{ByteOrder, Dataset, Datatype};
 use std::path::{Path, PathBuf};
 use stream::{Blocks, Source};
@@ -515,34 +515,8 @@ impl ZnlosReader {
     /// # Errors
     /// Read errors; [`Error::Format`] if the capture does not fit in memory.
     pub fn into_capture(mut self) -> Result<Capture> {
-        let g = self.geometry.clone();
-        let len = g.spads_per_row() * g.nt;
-        let total = g.lasers.len().checked_mul(len);
-        budget::check(
-            || {
-                format!(
-                    "data of {} samples in {}",
-                    budget::count(total.map_or(u128::MAX, |n| n as u128)),
-                    self.path.display()
-                )
-            },
-            budget::bytes(total.unwrap_or(usize::MAX), 4 + 4),
-        )?;
-        let mut data = Vec::new();
-        if total.is_none_or(|n| data.try_reserve_exact(n).is_err()) {
-            return Err(Error::format(
-                &self.path,
-                "data",
-                "a capture that fits in memory",
-                format!("shape {:?}", self.dims),
-            ));
-        }
-        let mut row = Vec::with_capacity(len);
-        for l in 0..g.lasers.len() {
-            self.read_row(l, &mut row)?;
-            data.extend_from_slice(&row);
-        }
-        Capture::new(g, data, &self.path)
+        let (path, dims) = (self.path.clone(), self.dims.clone());
+        super::read_whole(&mut self, &path, "data", &dims, 4)
     }
 }
 
@@ -603,13 +577,7 @@ impl RowSource for ZnlosReader {
     }
 
     fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
-        let kl = self.geometry.lasers.len();
-        if l >= kl {
-            return Err(Error::arg(
-                "laser row",
-                format!("{l} is out of range: the capture has {kl} rows"),
-            ));
-        }
+        check_row(l, self.geometry.lasers.len())?;
         // The background reader summed the block's colours and bounces into rows of
         // SPAD-major histograms: the row is swapped into `out`, whose old buffer goes back.
         let src = self.source();

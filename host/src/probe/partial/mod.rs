@@ -232,7 +232,7 @@ fn config_head(cfg: &Config) -> ConfigHead {
 /// capture's geometry, exactly as one pass over all rows derives it.
 ///
 /// # Errors
-/// [`Error::Argument`] (`--rows`) for rows outside the scan; the probe's own errors.
+/// [`Error::Argument`] (`rows`) for rows outside the scan; the probe's own errors.
 #[allow(clippy::too_many_arguments)]
 pub fn accumulate(
     src: &mut dyn RowSource,
@@ -296,7 +296,7 @@ pub fn accumulate(
             let cols = match (pts.is_empty(), leak) {
                 (true, true) => {
                     return Err(Error::arg(
-                        "--leak-correct",
+                        "leak_correct",
                         "Γ is empty: no voxel has direct light above ε·max (no direct return in the window for this volume?)",
                     ));
                 }
@@ -750,7 +750,7 @@ impl Partial {
     /// two-bounce column (beside its intensities: about twice the imaging time).
     ///
     /// # Errors
-    /// As [`Partial::finish`]; [`Error::Argument`] (`--leak-correct`) for leak-corrected
+    /// As [`Partial::finish`]; [`Error::Argument`] (`leak_correct`) for leak-corrected
     /// indirect light when the gate removed nothing (as one pass).
     pub fn finish_with(&self, amplitudes: bool) -> Result<Finished> {
         let t = Instant::now();
