@@ -16,7 +16,7 @@ cd "$(dirname "$0")/.."
 command -v /usr/bin/time >/dev/null || { echo "reading.sh needs /usr/bin/time (apt-get install time)" >&2; exit 2; }
 runs=7
 if [ $# -ge 4 ] && [[ "${!#}" =~ ^[0-9]+$ ]]; then runs="${!#}"; set -- "${@:1:$(($# - 1))}"; fi
-cargo build -q --release -p vltm --bin vltm
+cargo build -q --release -p vltm-cli --bin vltm
 vltm="${CARGO_TARGET_DIR:-$PWD/target}/release/vltm"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT

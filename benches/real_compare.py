@@ -192,7 +192,7 @@ def main():
     ap.add_argument('--vltm', default=os.path.join(os.path.dirname(__file__), '..', 'target', 'release', 'vltm'))
     a = ap.parse_args()
     if not os.path.exists(a.vltm):
-        sys.exit(f'{a.vltm} not found: cargo build --release -p vltm')
+        sys.exit(f'{a.vltm} not found: cargo build --release -p vltm-cli')
     if a.rebin < 1 or 600 % a.rebin:
         sys.exit('--rebin must divide the 600 dropped bins')
     vol = grid(a.volume)

@@ -20,7 +20,7 @@ threads="${1:-$(nproc)}"
 for tool in jq /usr/bin/time; do
   command -v "$tool" >/dev/null || { echo "scaling.sh needs $tool (apt-get install jq time)" >&2; exit 2; }
 done
-cargo build -q --release -p vltm --bin vltm
+cargo build -q --release -p vltm-cli --bin vltm
 vltm="${CARGO_TARGET_DIR:-$PWD/target}/release/vltm"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT

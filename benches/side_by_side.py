@@ -278,7 +278,7 @@ def main():
         if p not in PROBES:
             sys.exit(f'side_by_side: unknown probe {p!r} (one of {", ".join(PROBES)})')
     if not os.path.exists(a.vltm):
-        sys.exit(f'side_by_side: {a.vltm} not found: cargo build --release -p vltm (or --vltm PATH)')
+        sys.exit(f'side_by_side: {a.vltm} not found: cargo build --release -p vltm-cli (or --vltm PATH)')
     os.makedirs(a.out_dir, exist_ok=True)
 
     capture = a.capture

@@ -70,7 +70,7 @@ def main():
     ap.add_argument('--vltm', default=os.path.join(os.path.dirname(__file__), '..', 'target', 'release', 'vltm'))
     a = ap.parse_args()
     if not os.path.exists(a.vltm):
-        sys.exit(f'{a.vltm} not found: cargo build --release -p vltm')
+        sys.exit(f'{a.vltm} not found: cargo build --release -p vltm-cli')
     vol = grid(a.volume)
     mine, t_v = run_vltm(a.vltm, a.capture, a.wl, a.volume, a.cpus)
     try:

@@ -4,7 +4,7 @@
 //!
 //! **Which binary.** Cargo sets `CARGO_BIN_EXE_vltm` only for the tests of the package that owns
 //! the binary (`host/`), not for this root package. So [`bin`] runs
-//! `cargo build -p vltm --bin vltm` once per test process (a `OnceLock`), with the cargo that
+//! `cargo build -p vltm-cli --bin vltm` once per test process (a `OnceLock`), with the cargo that
 //! runs the tests (`$CARGO`), the profile and the target directory of this test executable
 //! (`<target>/<dir>/deps/cli-<hash>` → `<target>/<dir>/vltm`; `debug/` → `--profile test`,
 //! `release/` → `--profile release`), and uses the resulting path. That always tests the

@@ -16,7 +16,7 @@ rm -rf "$venv"
 "$venv/bin/pip" install -q --upgrade pip
 "$venv/bin/pip" install -q maturin numpy pytest dask distributed h5py
 # The command line, for the tests that compare against its .npy volumes.
-(cd "$repo" && cargo build --release -q -p vltm --bin vltm)
+(cd "$repo" && cargo build --release -q -p vltm-cli --bin vltm)
 "$venv/bin/pip" install -q "$here"
 export VLTM_BIN="$CARGO_TARGET_DIR/release/vltm"
 cd "$repo"

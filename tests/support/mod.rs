@@ -118,7 +118,7 @@ pub fn vltm_bin() -> &'static Path {
                 "build",
                 "--quiet",
                 "-p",
-                "vltm",
+                "vltm-cli",
                 "--bin",
                 "vltm",
                 "--profile",
@@ -128,7 +128,7 @@ pub fn vltm_bin() -> &'static Path {
             .expect("run cargo");
         assert!(
             out.status.success(),
-            "cargo build -p vltm --profile {profile} failed:\n{}",
+            "cargo build -p vltm-cli --bin vltm --profile {profile} failed:\n{}",
             String::from_utf8_lossy(&out.stderr)
         );
         let p = profile_dir.join(format!("vltm{}", std::env::consts::EXE_SUFFIX));

@@ -104,6 +104,12 @@ fn nearest(scene: &Scene, p: Point) -> (String, f32) {
 /// One result row of the table.
 struct Line {
     name: &'static str,
+    /// The output files' name: `<stem>.png`, `<stem>.npy`.
+    stem: &'static str,
+    /// What the figure shows, after the name in its title.
+    shows: &'static str,
+    /// Whether the figure marks the focus x_a (a column).
+    marked: bool,
     values: Vec<f32>,
     /// Time of the probe run; `None` for a row derived from the row above it (a mask or a
     /// shell applied to the same column).
@@ -139,6 +145,9 @@ pub fn run(out: &Path) -> Result<String> {
     let gamma = probe::gamma_mask(&d.values, 0.1);
     lines.push(Line {
         name: "direct (diagonal)",
+        stem: "direct",
+        shows: "T(x_v, x_v)",
+        marked: false,
         values: d.values.clone(),
         seconds: Some(d.seconds),
     });
@@ -164,36 +173,57 @@ pub fn run(out: &Path) -> Result<String> {
     };
     lines.push(Line {
         name: "column, gated",
+        stem: "column_gated",
+        shows: "T(x_a, x_b)",
+        marked: true,
         values: gated.values.clone(),
         seconds: Some(gated.seconds),
     });
     lines.push(Line {
         name: "column, gated, Γ-masked",
+        stem: "column_gated_masked",
+        shows: "T(x_a, x_b)",
+        marked: true,
         values: mask(&gated.values),
         seconds: None,
     });
     lines.push(Line {
         name: "column, no gate",
+        stem: "column_ungated",
+        shows: "T(x_a, x_b)",
+        marked: true,
         values: ungated.values.clone(),
         seconds: Some(ungated.seconds),
     });
     lines.push(Line {
         name: "column, no gate, Γ-masked",
+        stem: "column_ungated_masked",
+        shows: "T(x_a, x_b)",
+        marked: true,
         values: mask(&ungated.values),
         seconds: None,
     });
     lines.push(Line {
         name: "column, higher-order, Γ-masked",
+        stem: "column_higher_order_masked",
+        shows: "T(x_a, x_b)",
+        marked: true,
         values: mask(&higher.values),
         seconds: Some(higher.seconds),
     });
     lines.push(Line {
         name: "column near 0.15-0.45 m, Γ",
+        stem: "column_near",
+        shows: "T(x_a, x_b)",
+        marked: true,
         values: shelled(near),
         seconds: None,
     });
     lines.push(Line {
         name: "column far 0.45-1.20 m, Γ",
+        stem: "column_far",
+        shows: "T(x_a, x_b)",
+        marked: true,
         values: shelled(far),
         seconds: None,
     });
@@ -213,11 +243,17 @@ pub fn run(out: &Path) -> Result<String> {
     let lc_ctrl = probe::indirect_over(&mut control, &vol, &gamma, &leak_opts, &wave, exec)?;
     lines.push(Line {
         name: "in-focus indirect (leak-corr.)",
+        stem: "indirect",
+        shows: "I_i(x_b) after removing the direct returns of Γ (default)",
+        marked: false,
         values: lc.values.clone(),
         seconds: Some(lc.seconds),
     });
     lines.push(Line {
         name: "in-focus indirect (Eq. 17)",
+        stem: "indirect_eq17",
+        shows: "I_i(x_b) = sum over x_a in Γ of T(x_a, x_b)",
+        marked: false,
         values: eq17.values.clone(),
         seconds: Some(eq17.seconds),
     });
@@ -363,46 +399,84 @@ pub fn run(out: &Path) -> Result<String> {
         out.display()
     );
 
-    for (l, stem) in lines.iter().zip([
-        "direct",
-        "column_gated",
-        "column_gated_masked",
-        "column_ungated",
-        "column_ungated_masked",
-        "column_higher_order_masked",
-        "column_near",
-        "column_far",
-        "indirect",
-        "indirect_eq17",
-    ]) {
-        let [x, y, z] = vol.axes.unwrap_or([[0.0; 2]; 3]);
-        let marks = if stem == "direct" || stem.starts_with("indirect") {
-            Vec::new()
-        } else {
+    write_lines(out, &lines, &vol, a)?;
+    vltm::atomic::write_bytes(&out.join("summary.txt"), table.as_bytes())?;
+    Ok(table)
+}
+
+/// Each result's figure and `.npy` volume in `out`, named by its own [`Line::stem`].
+fn write_lines(out: &Path, lines: &[Line], vol: &Volume, a: Point) -> Result<()> {
+    let [x, y, z] = vol.axes.unwrap_or([[0.0; 2]; 3]);
+    for l in lines {
+        let marks = if l.marked {
             vec![(a, "x_a".to_string())]
+        } else {
+            Vec::new()
         };
-        let title = format!(
-            "{}: {}",
-            l.name,
-            match stem {
-                "direct" => "T(x_v, x_v)",
-                "indirect" => "I_i(x_b) after removing the direct returns of Γ (default)",
-                "indirect_eq17" => "I_i(x_b) = sum over x_a in Γ of T(x_a, x_b)",
-                _ => "T(x_a, x_b)",
-            }
-        );
         Figure {
             data: &l.values,
             shape: vol.shape,
             x,
             y,
             z,
-            title,
+            title: format!("{}: {}", l.name, l.shows),
             marks,
         }
-        .write_png(&out.join(format!("{stem}.png")))?;
-        vltm::export::npy::write_f32(out.join(format!("{stem}.npy")), &l.values, &vol.shape)?;
+        .write_png(&out.join(format!("{}.png", l.stem)))?;
+        vltm::export::npy::write_f32(out.join(format!("{}.npy", l.stem)), &l.values, &vol.shape)?;
     }
-    vltm::atomic::write_bytes(&out.join("summary.txt"), table.as_bytes())?;
-    Ok(table)
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every result is written under its own name, however many there are and in whatever
+    /// order (the files were once paired with a fixed list of ten names by position, which
+    /// dropped or mislabelled any result added or moved).
+    #[test]
+    fn every_line_is_written_under_its_own_name() {
+        let vol = Volume::parse("-0.1:0.1:3,-0.1:0.1:3,0.5:0.7:3").unwrap();
+        let line = |stem: &'static str, v: f32| Line {
+            name: stem,
+            stem,
+            shows: "test",
+            marked: stem.starts_with('c'),
+            values: vec![v; vol.len()],
+            seconds: None,
+        };
+        // Eleven results, in an order no fixed list knows.
+        let stems = [
+            "indirect_eq17",
+            "direct",
+            "c1",
+            "c2",
+            "c3",
+            "c4",
+            "c5",
+            "c6",
+            "c7",
+            "c8",
+            "extra",
+        ];
+        let lines: Vec<Line> = stems
+            .iter()
+            .enumerate()
+            .map(|(i, s)| line(s, i as f32 + 1.0))
+            .collect();
+        let dir = std::env::temp_dir().join(format!("vltm-demo-lines-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        write_lines(&dir, &lines, &vol, [0.0, 0.0, 0.6]).unwrap();
+        for (i, s) in stems.iter().enumerate() {
+            let (v, shape) = vltm::export::npy::read_f32(dir.join(format!("{s}.npy"))).unwrap();
+            assert_eq!(shape, vol.shape.to_vec(), "{s}");
+            assert!(
+                v.iter().all(|&x| x == i as f32 + 1.0),
+                "{s}.npy holds another result"
+            );
+            assert!(dir.join(format!("{s}.png")).is_file(), "{s}.png");
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

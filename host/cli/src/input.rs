@@ -2,7 +2,9 @@
 //! `--t-start`, `--grid-width`, for `.mat` captures), the preprocessing of raw counts
 //! (`--t-min`, `--t-max`, `--rebin`, `--background`, [`vltm::io::prep`]), and `vltm info`.
 
-use crate::{Failure, say};
+use crate::args::refuse_overwriting_inputs;
+use crate::console::{Failure, say};
+use crate::summary::describe;
 use clap::Args;
 use std::path::Path;
 use vltm::atomic::Transaction;
@@ -54,12 +56,12 @@ impl Input {
             t_min: self
                 .t_min
                 .as_deref()
-                .map(|s| Bound::parse("--t-min", s))
+                .map(|s| Bound::parse("t_min", s))
                 .transpose()?,
             t_max: self
                 .t_max
                 .as_deref()
-                .map(|s| Bound::parse("--t-max", s))
+                .map(|s| Bound::parse("t_max", s))
                 .transpose()?,
             rebin: self.rebin,
             background: self
@@ -85,9 +87,9 @@ impl Input {
 
     fn refuse_overrides(&self) -> vltm::Result<()> {
         for (set, arg) in [
-            (self.delta_t.is_some(), "--delta-t"),
-            (self.t_start.is_some(), "--t-start"),
-            (self.grid_width.is_some(), "--grid-width"),
+            (self.delta_t.is_some(), "delta_t"),
+            (self.t_start.is_some(), "t_start"),
+            (self.grid_width.is_some(), "grid_width"),
         ] {
             if set {
                 return Err(vltm::Error::arg(
@@ -126,7 +128,7 @@ fn check_stats(p: &Prepared<'_>) -> Result<(), Failure> {
     let s = &p.stats;
     if s.histograms > 0 && s.empty == s.histograms {
         return Err(vltm::Error::arg(
-            "--background",
+            "background",
             format!(
                 "the background removed every count of all {} histograms: nothing left to image (lower it or use auto)",
                 s.histograms
@@ -147,7 +149,7 @@ fn check_stats(p: &Prepared<'_>) -> Result<(), Failure> {
 /// and with `--png` the summed transient.
 pub fn info(path: &Path, input: &Input, png: Option<&Path>) -> Result<(), Failure> {
     if let Some(p) = png {
-        crate::refuse_overwriting_inputs(&[path.to_path_buf()], &[p])?;
+        refuse_overwriting_inputs(&[path.to_path_buf()], &[p])?;
     }
     let mut c = if io::extension(path).as_deref() == Some("mat") {
         let m = io::mat::read(path, &input.mat_options())?;
@@ -164,7 +166,7 @@ pub fn info(path: &Path, input: &Input, png: Option<&Path>) -> Result<(), Failur
         say!("capture      {}", path.display());
         io::open(path)?
     };
-    crate::describe(path, &c)?;
+    describe(path, &c)?;
     let prep = input.prep()?;
     let (g, sum) = match prep {
         Some(p) => {

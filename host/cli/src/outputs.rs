@@ -1,19 +1,20 @@
 //! Writing a probe's outputs: one volume and its figure, or several parts of one run (the
 //! near, middle and far shells; Γ and `I_d` beside `I_i`) named `F.<part>.npy` /
 //! `F.<part>.png` after `--out F.npy` / `--png F.png`, all in one transaction (all or
-//! nothing).
+//! nothing); a matrix and its summary as HDF5.
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use vltm::atomic::Transaction;
 use vltm::export::figure::Figure;
-use vltm::export::h5::Provenance;
+use vltm::export::h5::{MatrixData, Provenance};
 use vltm::io;
+use vltm::probe;
 use vltm::volume::Volume;
 use vltm_kernel::Point;
 
-use crate::Failure;
+use crate::console::{Failure, say};
 
 /// One output volume of a run: its name part (`None` for the main output), values, title.
 pub(crate) struct Part<'a> {
@@ -118,5 +119,99 @@ pub(crate) fn write_parts(
     for p in &wrote {
         say!("wrote {}", p.display());
     }
+    Ok(())
+}
+
+/// Refuses a matrix output that is not HDF5.
+pub(crate) fn check_matrix_out(out: &Path) -> vltm::Result<()> {
+    if io::is_hdf5(out) {
+        return Ok(());
+    }
+    Err(vltm::Error::arg(
+        "out",
+        format!(
+            "{}: the matrix is written as HDF5 (.h5 or .hdf5)",
+            out.display()
+        ),
+    ))
+}
+
+/// The summary of a matrix and its HDF5 file (all or nothing): `numbers` and `texts` are
+/// attributes beside the configuration's.
+pub(crate) fn write_matrix(
+    m: &probe::Matrix,
+    from: &[Point],
+    to: &[Point],
+    capture: &Path,
+    out: &Path,
+    numbers: &[(&str, f64)],
+    texts: [(&str, String); 3],
+) -> Result<(), Failure> {
+    let int = m.intensities();
+    let (imax, max) =
+        int.iter().enumerate().fold(
+            (0, f32::NEG_INFINITY),
+            |b, (i, &x)| if x > b.1 { (i, x) } else { b },
+        );
+    let (fa, tb) = (from[imax / m.n_to], to[imax % m.n_to]);
+    say!(
+        "matrix: {} x {} elements, {} rows x {} pass(es) in {:.2} s (λ = {:.4} m, σ = {:.4} m, J = {}); largest {max:.4e} at x_a = ({:.3}, {:.3}, {:.3}), x_b = ({:.3}, {:.3}, {:.3}) m",
+        m.n_from,
+        m.n_to,
+        m.report.rows,
+        m.passes,
+        m.seconds,
+        m.config.wavelength(),
+        m.config.sigma(),
+        m.config.bins(),
+        fa[0],
+        fa[1],
+        fa[2],
+        tb[0],
+        tb[1],
+        tb[2]
+    );
+    if m.report.aliased > 0 {
+        eprintln!(
+            "vltm: warning: {} elements have path lengths outside the capture's alias-free window",
+            m.report.aliased
+        );
+    }
+    let meta = Provenance {
+        probe: "matrix",
+        config: &m.config,
+        focus: None,
+        capture,
+    };
+    let cfg = &m.config;
+    let mut all = vec![
+        ("n_fft", cfg.n_fft() as f64),
+        ("band_bins", cfg.bins() as f64),
+        ("margin", cfg.params().margin),
+    ];
+    all.extend_from_slice(numbers);
+    let numbers = all;
+    let [t0, t1, t2] = texts;
+    let texts = [
+        t0,
+        t1,
+        t2,
+        ("gate", "two-bounce".to_string()),
+        (
+            "layout",
+            "re, im, intensity: f32 (n_from, n_to), element [i, k] = T(from_xyz[i], to_xyz[k]), intensity = re^2 + im^2".to_string(),
+        ),
+    ];
+    let data = MatrixData {
+        amplitudes: &m.amplitudes,
+        from,
+        to,
+        numbers: &numbers,
+        texts: &texts,
+    };
+    let mut t = Transaction::new();
+    vltm::export::h5::stage_matrix(&mut t, out, &data, &meta)?;
+    t.commit()?;
+    say!("wrote {}", out.display());
     Ok(())
 }

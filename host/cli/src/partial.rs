@@ -3,9 +3,13 @@
 //! the parts and finish them: a volume, or the matrix's HDF5 file), and reading a
 //! direct-light `.npy` for Γ.
 
-use super::{Common, Failure, Provenance, summarize, write_outputs};
+use crate::args::{Common, refuse_overwriting_inputs};
+use crate::console::{Failure, say};
+use crate::outputs::{check_matrix_out, write_matrix, write_outputs};
+use crate::summary::summarize;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
+use vltm::export::h5::Provenance;
 use vltm::io::RowSource;
 use vltm::probe::{Exec, Partial, Task, Wave, partial};
 use vltm::volume::Volume;
@@ -14,12 +18,12 @@ use vltm::volume::Volume;
 pub(crate) fn wanted(c: &Common) -> vltm::Result<bool> {
     match (&c.rows, &c.partial) {
         (Some(_), None) => Err(vltm::Error::arg(
-            "--rows",
-            "a part of a scan is written as a partial state: add --partial F (then `vltm merge` the parts)",
+            "rows",
+            "a part of a scan is written as a partial state: add $partial F (then `vltm merge` the parts)",
         )),
         (_, Some(_)) if c.input.prep()?.is_some() => Err(vltm::Error::arg(
-            "--partial",
-            "partial states do not record preprocessing yet: run without --t-min/--t-max/--rebin/--background",
+            "partial",
+            "partial states do not record preprocessing yet: run without $t_min/$t_max/$rebin/$background",
         )),
         (_, p) => Ok(p.is_some()),
     }
@@ -29,7 +33,7 @@ pub(crate) fn wanted(c: &Common) -> vltm::Result<bool> {
 pub(crate) fn parse_rows(s: &str, n: usize) -> vltm::Result<Range<usize>> {
     let bad = || {
         vltm::Error::arg(
-            "--rows",
+            "rows",
             format!("expected A:B with 0 <= A <= B <= {n} (laser rows, B exclusive), found `{s}`"),
         )
     };
@@ -119,7 +123,7 @@ pub(crate) fn merge(
         .chain(&state)
         .map(PathBuf::as_path)
         .collect();
-    super::refuse_overwriting_inputs(parts, &outputs)?;
+    refuse_overwriting_inputs(parts, &outputs)?;
     let names: Vec<String> = parts.iter().map(|p| p.display().to_string()).collect();
     let read = parts
         .iter()
@@ -139,17 +143,15 @@ pub(crate) fn merge(
     if let Some(m) = &f.matrix {
         let Some(out) = &out else {
             return Err(vltm::Error::arg(
-                "--out",
-                "merged matrix parts are written as HDF5: add --out F.h5",
+                "out",
+                "merged matrix parts are written as HDF5: add $out F.h5",
             )
             .into());
         };
         if png.is_some() {
-            return Err(
-                vltm::Error::arg("--png", "a matrix has no figure: leave out --png").into(),
-            );
+            return Err(vltm::Error::arg("png", "a matrix has no figure: leave out $png").into());
         }
-        crate::ltm::check_matrix_out(out)?;
+        check_matrix_out(out)?;
         let texts = [
             ("from", format!("{} points (partial states)", m.n_from)),
             ("to", format!("{} points (partial states)", m.n_to)),
@@ -157,7 +159,7 @@ pub(crate) fn merge(
         ];
         let capture = PathBuf::from(merged.capture_name());
         let to = &f.volume.points;
-        return crate::ltm::write_matrix(m, merged.from_points(), to, &capture, out, &[], texts);
+        return write_matrix(m, merged.from_points(), to, &capture, out, &[], texts);
     }
     if let Some(e) = f.explained {
         say!(
@@ -208,7 +210,7 @@ pub(crate) fn read_direct(path: &Path, volume: &Volume) -> vltm::Result<Vec<f32>
         return Err(vltm::Error::format(
             path,
             "shape",
-            format!("{} values, the voxels of --volume", volume.len()),
+            format!("{} values, the voxels of $volume", volume.len()),
             format!("{:?}", a.shape()),
         ));
     }

@@ -10,93 +10,37 @@ use std::path::Path;
 
 use vltm::export::h5::Provenance;
 use vltm::io::RowSource;
-use vltm::probe::{self, IndirectOptions, Shell};
+use vltm::probe::{self, Gamma, IndirectOptions, Shell};
 use vltm::volume::Volume;
 use vltm_kernel::Point;
 
+use crate::args::Common;
+use crate::console::{Failure, say};
 use crate::outputs::{Part, write_parts};
-use crate::{Common, Failure, summarize};
+use crate::summary::summarize;
 
-/// Parses `--shells R1,R2` (metres, 0 < R1 < R2) into near `[0, R1)`, middle `[R1, R2)` and
-/// far `[R2, ∞)`.
-pub(crate) fn parse_shells(s: &str) -> vltm::Result<[Shell; 3]> {
-    let bad = || {
-        vltm::Error::arg(
-            "--shells",
-            format!("expected R1,R2 with 0 < R1 < R2 in metres, found `{s}`"),
-        )
-    };
-    let (a, b) = s.split_once(',').ok_or_else(bad)?;
-    let r1: f32 = a.trim().parse().map_err(|_| bad())?;
-    let r2: f32 = b.trim().parse().map_err(|_| bad())?;
-    if !(r1 > 0.0 && r2 > r1 && r2.is_finite()) {
-        return Err(bad());
-    }
-    Ok([
-        Shell { r0: 0.0, r1 },
-        Shell { r0: r1, r1: r2 },
-        Shell {
-            r0: r2,
-            r1: f32::INFINITY,
-        },
-    ])
-}
-
-/// The names of the three shells.
-const SHELL_TAGS: [&str; 3] = ["near", "middle", "far"];
-
-/// Γ = {v : I_d(v) > ε·max} over `volume` (a diagonal pass over `src`); an error naming
-/// `arg` when ε is out of range or Γ is empty.
+/// Γ over `volume` from a diagonal pass over `src` at `epsilon` (`param` names it); an
+/// empty Γ is an error.
 pub(crate) fn gamma(
     src: &mut dyn RowSource,
     volume: &Volume,
     epsilon: f32,
-    arg: &str,
+    param: &str,
     c: &Common,
-) -> Result<Vec<bool>, Failure> {
-    Ok(gamma_and_direct(src, volume, epsilon, arg, c)?.0)
+) -> Result<(Gamma, Vec<f32>), Failure> {
+    let (g, d) = Gamma::measure(src, volume, epsilon, param, &c.wave(), c.exec())?;
+    Ok((announce(g.non_empty(param)?, volume), d.values))
 }
 
-/// [`gamma`] and the direct light it was taken from.
-fn gamma_and_direct(
-    src: &mut dyn RowSource,
-    volume: &Volume,
-    epsilon: f32,
-    arg: &str,
-    c: &Common,
-) -> Result<(Vec<bool>, Vec<f32>), Failure> {
-    if !(0.0..1.0).contains(&epsilon) {
-        return Err(vltm::Error::arg(arg, format!("expected 0 <= E < 1, found {epsilon}")).into());
-    }
-    let d = probe::direct(src, volume, &c.wave(), c.exec())?;
-    Ok((gamma_of(&d.values, volume, epsilon, arg)?, d.values))
-}
-
-/// Γ of a direct-light volume at `epsilon` (of its maximum); an empty Γ is an error naming
-/// `arg`.
-fn gamma_of(
-    direct: &[f32],
-    volume: &Volume,
-    epsilon: f32,
-    arg: &str,
-) -> Result<Vec<bool>, Failure> {
-    if !(0.0..1.0).contains(&epsilon) {
-        return Err(vltm::Error::arg(arg, format!("expected 0 <= E < 1, found {epsilon}")).into());
-    }
-    let g = probe::gamma_mask(direct, epsilon);
-    let n = g.iter().filter(|&&k| k).count();
-    if n == 0 {
-        return Err(vltm::Error::arg(
-            arg,
-            "Γ is empty: the direct light is zero on every voxel of --volume",
-        )
-        .into());
-    }
+/// Prints Γ's size.
+fn announce(g: Gamma, volume: &Volume) -> Gamma {
     say!(
-        "Γ: {n} of {} voxels above ε = {epsilon} of the direct maximum",
-        volume.len()
+        "Γ: {} of {} voxels above ε = {} of the direct maximum",
+        g.count(),
+        volume.len(),
+        g.epsilon
     );
-    Ok(g)
+    g
 }
 
 /// A column cut into its near, middle and far shells around the focus `a`, written as three
@@ -121,17 +65,11 @@ pub(crate) fn column_shells(
     );
     let cut: Vec<Vec<f32>> = cuts
         .iter()
-        .map(|sh| {
-            o.values
-                .iter()
-                .zip(&volume.points)
-                .map(|(&x, p)| if sh.contains(dist(a, *p)) { x } else { 0.0 })
-                .collect()
-        })
+        .map(|sh| sh.cut(a, &o.values, &volume.points))
         .collect();
     let parts: Vec<Part<'_>> = cut
         .iter()
-        .zip(SHELL_TAGS)
+        .zip(Shell::CUT_NAMES)
         .zip(cuts)
         .map(|((v, tag), sh)| Part {
             tag: Some(tag),
@@ -178,11 +116,18 @@ pub(crate) fn indirect_run(
 ) -> Result<IndirectRun, Failure> {
     let t = std::time::Instant::now();
     let (gamma, direct) = match direct {
-        Some(d) => (gamma_of(&d, volume, opts.epsilon, "--epsilon")?, d),
-        None => gamma_and_direct(src, volume, opts.epsilon, "--epsilon", c)?,
+        Some(d) => {
+            let g = Gamma::of(&d, opts.epsilon, "epsilon")?.non_empty("epsilon")?;
+            (announce(g, volume).mask, d)
+        }
+        None => {
+            let (g, d) = gamma(src, volume, opts.epsilon, "epsilon", c)?;
+            (g.mask, d)
+        }
     };
     let wave = c.wave();
-    let (sums, report, shells): (Vec<Vec<f32>>, _, Vec<Shell>) = match &cuts {
+    // The summary and the provenance record the configuration pass 2 ran on.
+    let (sums, report, shells, cfg): (Vec<Vec<f32>>, _, Vec<Shell>, _) = match &cuts {
         None => {
             let o = probe::indirect_over(src, volume, &gamma, opts, &wave, c.exec())?;
             if let Some(e) = o.explained {
@@ -190,14 +135,13 @@ pub(crate) fn indirect_run(
                     "leak correction (--no-leak-correct to skip): {e:.4} of the capture's energy was in the 3-vertex windows of Γ and removed"
                 );
             }
-            (vec![o.values], o.report, vec![o.shell])
+            (vec![o.values], o.report, vec![o.shell], o.config)
         }
         Some(cuts) => {
-            let (s, r) = probe::indirect_shells(src, volume, &gamma, opts, cuts, &wave, c.exec())?;
-            (s, r, cuts.to_vec())
+            let p = probe::indirect_shells(src, volume, &gamma, opts, cuts, &wave, c.exec())?;
+            (p.sums, p.report, cuts.to_vec(), p.config)
         }
     };
-    let cfg = wave.config(src.geometry())?;
     Ok(IndirectRun {
         gamma,
         direct,
@@ -258,7 +202,7 @@ pub(crate) fn indirect_write(
         }]
     } else {
         sums.iter()
-            .zip(SHELL_TAGS)
+            .zip(Shell::CUT_NAMES)
             .zip(shells)
             .map(|((v, tag), sh)| Part {
                 tag: Some(tag),
@@ -278,8 +222,4 @@ pub(crate) fn indirect_write(
         title: "direct light I_d (pass 1)".to_string(),
     });
     write_parts((&c.out, &c.png), &meta, &parts, volume, &[])
-}
-
-fn dist(a: Point, b: Point) -> f32 {
-    ((0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f32>()).sqrt()
 }

@@ -1,0 +1,436 @@
+//! The command line's arguments (clap): the commands, the options every probe shares
+//! ([`Common`]), the wave options and the matrix commands' arguments. Parsing only; the
+//! commands run in `commands` and `ltm`.
+
+use clap::{Args, Parser, Subcommand, ValueEnum};
+use std::path::{Path, PathBuf};
+use vltm::exec::{Exec, Path as EvalPath};
+use vltm::io::{self, RowSource};
+use vltm::probe::{ColumnGate, Wave};
+use vltm_kernel::Weights;
+
+use crate::input::Input;
+use crate::progress;
+
+/// Virtual light transport matrices (LTM) of hidden scenes from non-line-of-sight captures
+/// (Marco et al., ICCV 2021).
+///
+/// Terms: the relay wall is the plane z = 0, the hidden scene is at z > 0, all lengths are
+/// metres of optical path. The virtual projector focuses light at x_a, the virtual camera
+/// images x_b; T(x_a, x_b) is the light that goes from x_a to x_b.
+#[derive(Parser, Debug)]
+#[command(name = "vltm", version, propagate_version = true)]
+pub(crate) struct Cli {
+    #[command(subcommand)]
+    pub(crate) command: Command,
+    /// Worker threads (default: all cores).
+    #[arg(long, global = true)]
+    pub(crate) threads: Option<usize>,
+    /// Memory budget, e.g. 12G or 500M (default: half of the physical memory). Every buffer
+    /// sized from a file, a scene or an argument is checked against it before it is made.
+    #[arg(long, global = true, value_name = "SIZE")]
+    pub(crate) max_memory: Option<String>,
+}
+
+#[derive(Subcommand, Debug)]
+pub(crate) enum Command {
+    /// Built-in scene → figures and a summary table (no input files needed).
+    Demo {
+        /// Output directory.
+        #[arg(long, default_value = "vltm-demo")]
+        out: PathBuf,
+    },
+    /// Print a capture's dimensions, geometry, time axis and counts.
+    Info {
+        /// Capture file (.npz, .hdf5/.h5, .ptu, .mat).
+        capture: PathBuf,
+        /// Plot the summed transient (counts against path length, log scale) to this PNG.
+        #[arg(long, value_name = "F.png")]
+        png: Option<PathBuf>,
+        #[command(flatten)]
+        input: Input,
+    },
+    /// Render a synthetic capture from a scene file (JSON).
+    Simulate {
+        /// Scene file.
+        scene: PathBuf,
+        /// Output capture (.npz).
+        #[arg(long)]
+        out: PathBuf,
+        /// Also write the capture as a synthetic PicoQuant T3 photon stream (HydraHarp V2)
+        /// with its sidecar F.json (counts rounded to whole photons).
+        #[arg(long, value_name = "F.ptu")]
+        ptu: Option<PathBuf>,
+        /// Store H uncompressed in the .npz (larger file, much faster to read).
+        #[arg(long)]
+        uncompressed: bool,
+    },
+    /// Direct light: the LTM diagonal T(x_v, x_v) over a volume (3-vertex gate).
+    Direct {
+        /// Capture file.
+        capture: PathBuf,
+        /// Time gate on the 3-vertex time |x_l-x_v|+|x_v-x_s|: gaussian = direct light
+        /// (Eqs. 11-12); none = monochromatic, no gate (paper Fig. 6); higher-order = light
+        /// arriving after it (Eq. 18 on the diagonal: x_v lit, returning to x_v later).
+        #[arg(long, value_enum, default_value_t = DiagGateArg::Gaussian)]
+        gate: DiagGateArg,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// First-order (or higher-order) indirect light from a focus point: the LTM column T(x_a, ·).
+    Column {
+        /// Capture file.
+        capture: PathBuf,
+        /// Focus x_a of the virtual projector, "X,Y,Z" in metres (z > 0).
+        #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+        focus: String,
+        /// Time gate: two-bounce = 4-vertex gate at |x_l-x_a|+|x_a-x_b|+|x_b-x_s| (Eq. 14);
+        /// higher-order = light arriving after that (Eq. 18); none = monochromatic, no gate.
+        #[arg(long, value_enum, default_value_t = GateArg::TwoBounce)]
+        gate: GateArg,
+        /// Keep only voxels with R0 <= |x_a - x_b| < R1 metres (near/middle/far light).
+        #[arg(long, value_name = "R0:R1")]
+        shell: Option<String>,
+        /// Near, middle and far light in one pass: three outputs F.near/F.middle/F.far
+        /// (.npy/.png) for |x_a - x_b| in [0, R1), [R1, R2), [R2, inf).
+        #[arg(long, value_name = "R1,R2", conflicts_with = "shell")]
+        shells: Option<String>,
+        /// Γ-mask the column: zero every voxel whose direct light is not above E·max
+        /// (an extra diagonal pass, as `indirect`).
+        #[arg(long, value_name = "E")]
+        mask_epsilon: Option<f32>,
+        /// Remove the capture's direct light before the column: zero, per laser/SPAD pair,
+        /// the bins where a 3-vertex return of a voxel of Γ (direct light above
+        /// --leak-epsilon of the maximum) can arrive (see README, "Leak-corrected indirect
+        /// light").
+        #[arg(long)]
+        leak_correct: bool,
+        /// Relative threshold of the voxels the --leak-correct fit places scatterers at.
+        #[arg(long, default_value_t = 0.1, value_name = "E")]
+        leak_epsilon: f32,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// In-focus indirect light: Γ = voxels whose direct light exceeds ε·max, then the sum of
+    /// T(x_a, x_b) over pairs in Γ at least --min-separation apart (Eqs. 15-17).
+    Indirect {
+        /// Capture file.
+        capture: PathBuf,
+        /// Relative threshold ε of the Γ mask (0 <= ε < 1).
+        #[arg(long, default_value_t = 0.1)]
+        epsilon: f32,
+        /// Minimum |x_a - x_b| of a pair in metres (default 1.5 σ).
+        #[arg(long, value_name = "R")]
+        min_separation: Option<f32>,
+        /// Keep only pairs with R0 <= |x_a - x_b| < R1 metres (overrides --min-separation).
+        #[arg(long, value_name = "R0:R1")]
+        shell: Option<String>,
+        /// Γ from this direct-light volume (float32 .npy over the same --volume, e.g. from
+        /// `vltm merge` of direct parts) instead of pass 1; needed with --rows/--partial.
+        #[arg(long, value_name = "D.npy")]
+        direct: Option<PathBuf>,
+        /// Near, middle and far pairs in one pass: three outputs F.near/F.middle/F.far for
+        /// |x_a - x_b| in (0, R1), [R1, R2), [R2, inf) (instead of --shell/--min-separation).
+        #[arg(long, value_name = "R1,R2", conflicts_with_all = ["shell", "min_separation"])]
+        shells: Option<String>,
+        /// Gate of the summed columns: two-bounce (Eq. 14, first-order indirect light),
+        /// higher-order (Eq. 18 with Eq. 17: the paper's ">= 3rd bounce"), none.
+        #[arg(long, value_enum, default_value_t = GateArg::TwoBounce)]
+        gate: GateArg,
+        /// Remove the capture's direct light before the columns (the default): zero, per
+        /// laser/SPAD pair, the bins where a 3-vertex return of a Γ voxel can arrive (see
+        /// README, "Leak-corrected indirect light").
+        #[arg(long, conflicts_with = "no_leak_correct")]
+        leak_correct: bool,
+        /// The paper's Eq. 17 on the capture as it is (no leak correction).
+        #[arg(long)]
+        no_leak_correct: bool,
+        #[command(flatten)]
+        common: Common,
+    },
+    /// Merge partial states (--partial of direct, column, indirect, matrix over row ranges) by
+    /// addition and finish them: the same volume as one pass over all rows.
+    Merge {
+        /// Partial state files; together they must hold every laser row exactly once.
+        #[arg(required = true)]
+        parts: Vec<PathBuf>,
+        /// Output volume: float32 .npy, or HDF5 for a .h5/.hdf5 name.
+        #[arg(long, value_name = "F.npy|F.h5")]
+        out: Option<PathBuf>,
+        /// Output figure (maximum-intensity projections).
+        #[arg(long, value_name = "F.png")]
+        png: Option<PathBuf>,
+        /// Write the merged state (still partial, or complete) instead of finishing it.
+        #[arg(long, value_name = "F")]
+        partial: Option<PathBuf>,
+    },
+    /// The LTM between two voxel sets as a matrix: complex amplitudes and intensities of
+    /// T(x_a, x_b) (two-bounce gate) for x_a in --from, x_b in --to, written to HDF5.
+    Matrix(MatrixArgs),
+    /// Relighting: the virtual camera's image i = T·p under an illumination that weights
+    /// several projector foci (one factorised pass; amplitudes add).
+    Relight(RelightArgs),
+    /// A row T(., x_b) of the LTM (virtual camera focused at x_b, projector over the volume),
+    /// streamed by laser rows without transposing the capture.
+    Row(RowArgs),
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub(crate) enum GateArg {
+    TwoBounce,
+    HigherOrder,
+    None,
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum DiagGateArg {
+    Gaussian,
+    None,
+    HigherOrder,
+}
+
+impl GateArg {
+    pub(crate) fn gate(self) -> ColumnGate {
+        match self {
+            Self::TwoBounce => ColumnGate::TwoBounce,
+            Self::HigherOrder => ColumnGate::HigherOrder,
+            Self::None => ColumnGate::None,
+        }
+    }
+}
+
+#[derive(ValueEnum, Clone, Copy, Debug)]
+pub(crate) enum WeightsArg {
+    /// The paper's 1/d per leg of the virtual lenses.
+    Inv,
+    /// No weights (y-tal's default).
+    One,
+}
+
+/// Options shared by every probe.
+#[derive(Args, Debug)]
+pub(crate) struct Common {
+    /// Voxels: "x0:x1:nx,y0:y1:ny,z0:z1:nz" (metres, inclusive end points) or "x,y,z;x,y,z".
+    #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
+    pub(crate) volume: String,
+    #[command(flatten)]
+    pub(crate) wave: WaveArgs,
+    /// Use the SPADs as the virtual projector and the lasers as the camera (reciprocity;
+    /// 1-D SPAD arrays focus illumination along their axis).
+    #[arg(long)]
+    pub(crate) swap_roles: bool,
+    /// Evaluation path: auto (the cheapest that applies), band (the kernel's band sum, any
+    /// geometry), planar (FFT convolution over a SPAD grid or a confocal wall grid; diagonal and two-bounce columns),
+    /// lookup (baseband + cubic interpolation; diagonal only). For indirect it applies to
+    /// pass 1 (the diagonal); pass 2 images its Γ columns with the band sum.
+    #[arg(long, value_enum, default_value_t = PathArg::Auto)]
+    pub(crate) path: PathArg,
+    /// Output volume: float32 .npy of shape (nx, ny, nz), or HDF5 for a .h5/.hdf5 name
+    /// (datasets `intensity` and `volume_xyz`, the parameters as attributes).
+    #[arg(long, value_name = "F.npy|F.h5")]
+    pub(crate) out: Option<PathBuf>,
+    /// Output figure: front (x-y) and top (x-z) maximum-intensity projections.
+    #[arg(long, value_name = "F.png")]
+    pub(crate) png: Option<PathBuf>,
+    /// Only the laser rows A..B (B exclusive, 0-based) of the scan: one part of a scan split
+    /// over processes. Needs --partial.
+    #[arg(long, value_name = "A:B")]
+    pub(crate) rows: Option<String>,
+    /// Write the accumulator state to F (binary, see `vltm::probe::partial`) instead of the
+    /// volume; `vltm merge` adds the parts and finishes them.
+    #[arg(long, value_name = "F")]
+    pub(crate) partial: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) input: Input,
+}
+
+/// `--path` values.
+#[derive(Clone, Copy, Debug, ValueEnum)]
+pub(crate) enum PathArg {
+    Auto,
+    Band,
+    Planar,
+    Lookup,
+}
+
+impl Common {
+    pub(crate) fn exec(&self) -> Exec<'static> {
+        Exec {
+            progress: Some(&progress::BARS),
+            path: match self.path {
+                PathArg::Auto => EvalPath::Auto,
+                PathArg::Band => EvalPath::Band,
+                PathArg::Planar => EvalPath::Planar,
+                PathArg::Lookup => EvalPath::Lookup,
+            },
+        }
+    }
+
+    pub(crate) fn wave(&self) -> Wave {
+        self.wave.wave()
+    }
+
+    /// The capture as a row source: y-tal HDF5 files, PicoQuant PTU photon streams and
+    /// uncompressed `.npz` captures are streamed row by row (memory O(Ks·Nt)); compressed
+    /// `.npz`, and `--swap-roles` (a transpose), are read into memory.
+    pub(crate) fn load(&self, path: &Path) -> vltm::Result<Box<dyn RowSource>> {
+        let mut inputs = vec![path.to_path_buf()];
+        if io::extension(path).as_deref() == Some("ptu") {
+            inputs.push(path.with_extension("json"));
+        }
+        let outputs: Vec<&Path> = self
+            .out
+            .iter()
+            .chain(&self.png)
+            .chain(&self.partial)
+            .map(PathBuf::as_path)
+            .collect();
+        refuse_overwriting_inputs(&inputs, &outputs)?;
+        if self.swap_roles {
+            let mut src = self.input.open(path)?;
+            let g = src.geometry().clone();
+            let mut data = Vec::new();
+            let mut row = Vec::new();
+            for l in 0..g.lasers.len() {
+                src.read_row(l, &mut row)?;
+                data.extend_from_slice(&row);
+            }
+            let c = io::Capture::new(g, data, path)?;
+            Ok(Box::new(io::swap_roles(&c)?))
+        } else {
+            self.input.open(path)
+        }
+    }
+}
+
+/// Refuses an output path that names one of the command's input files (the capture, its PTU
+/// sidecar, a scene): writing it would destroy the input.
+pub(crate) fn refuse_overwriting_inputs(inputs: &[PathBuf], outputs: &[&Path]) -> vltm::Result<()> {
+    for o in outputs {
+        if let Some(i) = inputs.iter().find(|i| same_file(i, o)) {
+            return Err(vltm::Error::arg(
+                "out",
+                format!(
+                    "{} is an input of this command ({}): choose another output path",
+                    o.display(),
+                    i.display()
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Whether two paths name the same file (after resolving links; for a path that does not
+/// exist yet, its directory is resolved).
+fn same_file(a: &Path, b: &Path) -> bool {
+    let resolve = |p: &Path| {
+        p.canonicalize().ok().or_else(|| {
+            let dir = match p.parent() {
+                Some(d) if !d.as_os_str().is_empty() => d,
+                _ => Path::new("."),
+            };
+            Some(dir.canonicalize().ok()?.join(p.file_name()?))
+        })
+    };
+    match (resolve(a), resolve(b)) {
+        (Some(x), Some(y)) => x == y,
+        _ => a == b,
+    }
+}
+
+/// `vltm matrix`.
+#[derive(Args, Debug)]
+pub(crate) struct MatrixArgs {
+    /// Capture file.
+    pub(crate) capture: PathBuf,
+    /// Projector foci x_a (the matrix's rows): a SPEC ("x0:x1:nx,y0:y1:ny,z0:z1:nz" or
+    /// "x,y,z;x,y,z") or `gamma` (Γ of --volume).
+    #[arg(long, value_name = "SPEC|gamma", allow_hyphen_values = true)]
+    pub(crate) from: String,
+    /// Imaged voxels x_b (the matrix's columns): a SPEC or `gamma`.
+    #[arg(long, value_name = "SPEC|gamma", allow_hyphen_values = true)]
+    pub(crate) to: String,
+    /// The volume whose Γ = {x : direct(x) > ε·max} `gamma` stands for (as `vltm indirect`).
+    #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
+    pub(crate) volume: Option<String>,
+    /// Relative threshold ε of Γ (0 <= ε < 1).
+    #[arg(long, default_value_t = 0.1)]
+    pub(crate) epsilon: f32,
+    /// Output: HDF5 file (datasets re, im, intensity of shape (n_from, n_to), from_xyz,
+    /// to_xyz; the parameters as attributes).
+    #[arg(long, value_name = "F.h5", required_unless_present = "partial")]
+    pub(crate) out: Option<PathBuf>,
+    /// Only the laser rows A..B (B exclusive, 0-based) of the scan: one part of a scan split
+    /// over processes. Needs --partial.
+    #[arg(long, value_name = "A:B")]
+    pub(crate) rows: Option<String>,
+    /// Write the accumulator state (one factorised column per --from focus) to F instead of
+    /// the matrix; `vltm merge --out F.h5` adds the parts and images the matrix.
+    #[arg(long, value_name = "F", conflicts_with = "out")]
+    pub(crate) partial: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) wave: WaveArgs,
+}
+
+/// The virtual wave options (as for every probe).
+#[derive(Args, Debug)]
+pub(crate) struct WaveArgs {
+    /// Virtual wavelength λ in metres (default: twice the aperture pitch).
+    #[arg(long, value_name = "M")]
+    pub(crate) wavelength: Option<f64>,
+    /// Std of the Gaussian time gate in metres of path (default 2λ/3).
+    #[arg(long, value_name = "M")]
+    pub(crate) sigma: Option<f64>,
+    /// Lens weights per leg: inv = the paper's 1/d, one = none (y-tal).
+    #[arg(long, value_enum, default_value_t = WeightsArg::Inv)]
+    pub(crate) weights: WeightsArg,
+    /// Frequency band half-width in units of 1/σ (truncation error ≈ erfc(m/√2)).
+    #[arg(long, default_value_t = 5.0, value_name = "M")]
+    pub(crate) band: f64,
+    /// Divide each laser row by the physical laser's cos θ / d² falloff to its spot.
+    #[arg(long)]
+    pub(crate) compensate_laser: bool,
+}
+
+impl WaveArgs {
+    /// The probes' wave options.
+    pub(crate) fn wave(&self) -> Wave {
+        Wave {
+            wavelength: self.wavelength,
+            sigma: self.sigma,
+            weights: match self.weights {
+                WeightsArg::Inv => Weights::Inv,
+                WeightsArg::One => Weights::One,
+            },
+            band_half_width: self.band,
+            compensate_laser: self.compensate_laser,
+            auto_margin: true,
+        }
+    }
+}
+
+/// `vltm relight`.
+#[derive(Args, Debug)]
+pub(crate) struct RelightArgs {
+    /// Capture file.
+    pub(crate) capture: PathBuf,
+    /// The illumination: weighted foci "x,y,z,w;x,y,z,w" (metres; w = 1 if left out), or a
+    /// float32 .npy voxel image of the volume's shape (its voxels are the foci).
+    #[arg(long, value_name = "x,y,z,w;...|F.npy", allow_hyphen_values = true)]
+    pub(crate) pattern: String,
+    #[command(flatten)]
+    pub(crate) common: Common,
+}
+
+/// `vltm row`.
+#[derive(Args, Debug)]
+pub(crate) struct RowArgs {
+    /// Capture file.
+    pub(crate) capture: PathBuf,
+    /// Focus x_b of the virtual camera, "X,Y,Z" in metres (z > 0).
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    pub(crate) focus: String,
+    #[command(flatten)]
+    pub(crate) common: Common,
+}

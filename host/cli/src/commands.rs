@@ -1,0 +1,280 @@
+//! The commands that run a probe over a capture or write one: `demo`, `info`, `simulate`,
+//! `direct`, `column`, `indirect`, `merge`; the matrix commands are in `ltm`.
+
+use vltm::atomic::Transaction;
+use vltm::exec::Exec;
+use vltm::io;
+use vltm::probe::{self, ColumnGate, Gamma, IndirectOptions, LeakOptions, Shell};
+use vltm::volume::{Volume, parse_point};
+
+use crate::args::{Command, DiagGateArg, refuse_overwriting_inputs};
+use crate::console::{Failure, say};
+use crate::summary::{Label, finish};
+use crate::{demo, input, ltm, partial, progress, split};
+
+/// Runs one command.
+pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
+    match cmd {
+        Command::Matrix(a) => ltm::matrix(a),
+        Command::Relight(a) => ltm::relight(a),
+        Command::Row(a) => ltm::row(a),
+        Command::Demo { out } => {
+            let table = demo::run(&out)?;
+            let _ = std::io::Write::write_all(&mut std::io::stdout(), table.as_bytes());
+            Ok(())
+        }
+        Command::Info {
+            capture,
+            png,
+            input,
+        } => input::info(&capture, &input, png.as_deref()),
+        Command::Simulate {
+            scene,
+            out,
+            ptu,
+            uncompressed,
+        } => {
+            let mut outputs = vec![out.as_path()];
+            let sidecar = ptu.as_ref().map(|p| p.with_extension("json"));
+            outputs.extend(ptu.as_deref());
+            outputs.extend(sidecar.as_deref());
+            refuse_overwriting_inputs(std::slice::from_ref(&scene), &outputs)?;
+            let s = vltm::sim::Scene::load(&scene)?;
+            let c = s.render_with(Exec {
+                progress: Some(&progress::BARS),
+                ..Exec::default()
+            })?;
+            // The capture, the PTU stream and its sidecar: all or nothing.
+            let mut t = Transaction::new();
+            io::npz::stage(&mut t, &c, &out, !uncompressed)?;
+            let side = match &ptu {
+                Some(p) => {
+                    let w = io::ptu::stage_t3(&mut t, &c, p, &io::ptu::T3WriteOptions::default())?;
+                    w.sidecar_path
+                }
+                None => None,
+            };
+            t.commit()?;
+            if let (Some(p), Some(side)) = (&ptu, side) {
+                say!("wrote {} and its sidecar {}", p.display(), side.display());
+            }
+            let g = &c.geometry;
+            say!(
+                "wrote {}: {} lasers x {} SPADs x {} bins (dt {} m, t0 {} m)",
+                out.display(),
+                g.lasers.len(),
+                g.spads_per_row(),
+                g.nt,
+                g.dt,
+                g.t0
+            );
+            Ok(())
+        }
+        Command::Direct {
+            capture,
+            gate,
+            common,
+        } if partial::wanted(&common)? => {
+            if gate != DiagGateArg::Gaussian {
+                return Err(vltm::Error::arg(
+                    "partial",
+                    "partial states hold the Gaussian-gated diagonal (direct light) only",
+                )
+                .into());
+            }
+            partial::run(&common, &capture, probe::Task::Direct)
+        }
+        Command::Direct {
+            capture,
+            gate,
+            common,
+        } => {
+            let volume = Volume::parse(&common.volume)?;
+            let mut c = common.load(&capture)?;
+            let g = match gate {
+                DiagGateArg::Gaussian => ColumnGate::TwoBounce,
+                DiagGateArg::None => ColumnGate::None,
+                DiagGateArg::HigherOrder => ColumnGate::HigherOrder,
+            };
+            let sigma = common.wave().config(c.geometry())?.sigma();
+            let o = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
+                probe::diagonal(rows, &volume, g, &common.wave(), common.exec())
+            })?;
+            let label = Label {
+                probe: "direct",
+                title: "direct light".to_string(),
+                focus: None,
+                marks: Vec::new(),
+            };
+            finish(&common, &capture, &o, &volume, label)
+        }
+        Command::Column {
+            capture,
+            focus,
+            gate,
+            shell,
+            shells,
+            mask_epsilon,
+            leak_correct,
+            leak_epsilon,
+            common,
+        } => {
+            let a = parse_point("focus", &focus)?;
+            probe::check_focus(a)?;
+            let volume = Volume::parse(&common.volume)?;
+            let shell = shell
+                .as_deref()
+                .map(Shell::parse)
+                .transpose()?
+                .unwrap_or(Shell::ALL);
+            let cuts = shells.as_deref().map(Shell::parse_cuts).transpose()?;
+            if partial::wanted(&common)? {
+                if cuts.is_some() || mask_epsilon.is_some() {
+                    return Err(vltm::Error::arg(
+                        "partial",
+                        "a partial column takes $shell, not $shells or $mask_epsilon (apply them to the merged volume)",
+                    )
+                    .into());
+                }
+                let task = probe::Task::Column {
+                    focus: a,
+                    gate: gate.gate(),
+                    shell,
+                };
+                return partial::run(&common, &capture, task);
+            }
+            let mut c = common.load(&capture)?;
+            let sigma = common.wave().config(c.geometry())?.sigma();
+            let o = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
+                let mask = match mask_epsilon {
+                    Some(e) => Some(
+                        split::gamma(rows, &volume, e, "mask_epsilon", &common)?
+                            .0
+                            .mask,
+                    ),
+                    None => None,
+                };
+                let mut o = if leak_correct {
+                    let model = probe::fit_over_volume(
+                        rows,
+                        &volume,
+                        leak_epsilon,
+                        &common.wave(),
+                        &LeakOptions::default(),
+                        common.exec(),
+                    )?;
+                    say!(
+                        "leak correction: {:.4} of the capture's energy was in the 3-vertex windows of Γ's {} voxels and removed ({:.2} s)",
+                        model.explained,
+                        model.points().len(),
+                        model.seconds
+                    );
+                    let mut lc = probe::LeakCorrected::new(rows, &model);
+                    let g = gate.gate();
+                    probe::column(&mut lc, a, &volume, g, shell, &common.wave(), common.exec())?
+                } else {
+                    let g = gate.gate();
+                    probe::column(rows, a, &volume, g, shell, &common.wave(), common.exec())?
+                };
+                if let Some(m) = &mask {
+                    o.values
+                        .iter_mut()
+                        .zip(m)
+                        .for_each(|(x, &k)| *x *= f32::from(u8::from(k)));
+                }
+                Ok::<_, Failure>(o)
+            })?;
+            let title = format!("column T(x_a, .), gate {gate:?}");
+            match cuts {
+                Some(cuts) => {
+                    split::column_shells(&common, &capture, &o, &volume, a, &cuts, &title)
+                }
+                None => {
+                    let label = Label {
+                        probe: "column",
+                        title,
+                        focus: Some(a),
+                        marks: Vec::new(),
+                    };
+                    finish(&common, &capture, &o, &volume, label)
+                }
+            }
+        }
+        Command::Indirect {
+            capture,
+            epsilon,
+            min_separation,
+            shell,
+            direct,
+            shells,
+            gate,
+            leak_correct: _,
+            no_leak_correct,
+            common,
+        } => {
+            let volume = Volume::parse(&common.volume)?;
+            let shell = match (shell, min_separation) {
+                (Some(s), _) => Some(Shell::parse(&s)?),
+                (None, Some(r)) if r >= 0.0 => Some(Shell {
+                    r0: r,
+                    r1: f32::INFINITY,
+                }),
+                (None, Some(r)) => {
+                    return Err(vltm::Error::arg(
+                        "min_separation",
+                        format!("expected R >= 0, found {r}"),
+                    )
+                    .into());
+                }
+                (None, None) => None,
+            };
+            Gamma::check_epsilon(epsilon, "epsilon")?;
+            let cuts = shells.as_deref().map(Shell::parse_cuts).transpose()?;
+            let opts = IndirectOptions {
+                epsilon,
+                shell,
+                gate: gate.gate(),
+                leak: (!no_leak_correct).then(LeakOptions::default),
+                ..Default::default()
+            };
+            let direct = match &direct {
+                Some(d) => Some(partial::read_direct(d, &volume)?),
+                None => None,
+            };
+            if partial::wanted(&common)? {
+                let Some(d) = &direct else {
+                    return Err(vltm::Error::arg(
+                        "partial",
+                        "in-focus indirect light over a part of the rows needs Γ: pass $direct D.npy, the merged direct light over the same volume and options",
+                    )
+                    .into());
+                };
+                if cuts.is_some() || opts.gate != ColumnGate::TwoBounce {
+                    return Err(vltm::Error::arg(
+                        "partial",
+                        "a partial in-focus sum takes the two-bounce gate and one $shell",
+                    )
+                    .into());
+                }
+                let gamma = Gamma::of(d, epsilon, "epsilon")?.mask;
+                // The leak gate corrects each row on its own (Γ's return times only): a part
+                // is corrected exactly as one pass corrects those rows.
+                let leak = opts.leak.is_some();
+                let task = probe::Task::Indirect { gamma, shell, leak };
+                return partial::run(&common, &capture, task);
+            }
+            let mut c = common.load(&capture)?;
+            let sigma = common.wave().config(c.geometry())?.sigma();
+            let run = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
+                split::indirect_run(&common, rows, &volume, &opts, cuts, direct)
+            })?;
+            split::indirect_write(&common, &capture, &volume, &opts, &run)
+        }
+        Command::Merge {
+            parts,
+            out,
+            png,
+            partial,
+        } => partial::merge(&parts, out, png, partial),
+    }
+}
