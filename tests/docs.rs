@@ -18,7 +18,7 @@
 //! Python, other programs) belong in ```` ```sh ```` blocks, which are not run.
 //!
 //! The commands of one page run in order in one scratch directory laid out like a checkout:
-//! `<tmp>/repo/{fixtures,benches,docs,examples}` link to the repository's, and `<tmp>/shared`
+//! `<tmp>/repo/{fixtures,benches,docs,examples,kernel}` link to the repository's, and `<tmp>/shared`
 //! to the `shared/` folder beside the repository (`$VLTM_SHARED_DIR` overrides where that is),
 //! so `fixtures/…` and `../shared/data/…` resolve as in the documentation, and what a command
 //! writes stays in the scratch directory. A page whose examples read `../shared/` is skipped
@@ -301,12 +301,15 @@ fn examples(text: &str) -> Result<Vec<Example>, String> {
     let mut in_console = false;
     let mut in_other = false;
     let mut pending: Option<(usize, String)> = None;
-    for (i, line) in text.lines().enumerate() {
+    // The fence's indentation (a block inside a list item), removed from its lines.
+    let mut indent = 0;
+    for (i, raw) in text.lines().enumerate() {
         let n = i + 1;
-        let t = line.trim();
+        let t = raw.trim();
         if !in_console && !in_other {
             if t.starts_with("```") {
                 let info = t.trim_start_matches('`').trim();
+                indent = raw.len() - raw.trim_start().len();
                 if info.split([' ', ',']).next() == Some("console") {
                     in_console = true;
                 } else {
@@ -326,6 +329,8 @@ fn examples(text: &str) -> Result<Vec<Example>, String> {
         if in_other {
             continue;
         }
+        let blank = raw.len() - raw.trim_start().len();
+        let line = &raw[blank.min(indent)..];
         if let Some((start, mut cmd)) = pending.take() {
             let (part, more) = continued(line);
             cmd.push(' ');
@@ -485,10 +490,13 @@ fn the_matcher_has_teeth() {
     );
     assert!(split_words("vltm info x > y").is_err());
     let ex = examples(
-        "```console\n$ vltm info a \\\n    --png b.png\nline [..]\n...\n? 2\n```\n```sh\n$ rm -rf /\n```\n",
+        "```console\n$ vltm info a \\\n    --png b.png\nline [..]\n...\n? 2\n```\n```sh\n$ rm -rf /\n```\n\
+         * item\n\n  ```console\n  $ vltm info c\n    two\n  ```\n",
     )
     .unwrap();
-    assert_eq!(ex.len(), 1);
+    assert_eq!(ex.len(), 2);
+    assert_eq!(ex[1].args, ["info", "c"]);
+    assert_eq!(ex[1].expected, ["  two"]);
     assert_eq!(ex[0].args, ["info", "a", "--png", "b.png"]);
     assert_eq!(ex[0].expected, ["line [..]", "..."]);
     assert_eq!(ex[0].status, Status::Code(2));
@@ -512,7 +520,7 @@ impl Scratch {
         let _ = std::fs::remove_dir_all(&base);
         let repo = base.join("repo");
         std::fs::create_dir_all(&repo).expect("scratch dir");
-        for d in ["fixtures", "benches", "docs", "examples"] {
+        for d in ["fixtures", "benches", "docs", "examples", "kernel"] {
             symlink(&root().join(d), &repo.join(d));
         }
         if let Some(s) = shared_dir() {
