@@ -4,8 +4,8 @@
 on a rendering whose scene is known. The counts are scaled to a peak of `--peak` and rounded
 (16-bit, as the published captures). The grid must be N x N points from -width to +width on
 both axes, first index along x, second along y, z = 0; the second axis is flipped on writing,
-since Stanford's second index runs down y (from +width to -width, as vltm reads it, README
-"Real data"). The capture must start at t = 0
+since Stanford's second index runs down y (from +width to -width, as vltm reads it,
+docs/real-data.md). The capture must start at t = 0
 with 4 ps bins (`"dt": 0.00119916983` in the scene), else the `.mat` would mean another capture:
 both are checked.
 

@@ -1,4 +1,4 @@
-"""Python call overhead and Dask scale-out of vltm (README "Python and scale-out").
+"""Python call overhead and Dask scale-out of vltm (docs/python.md, docs/performance.md).
 
   target/release/vltm simulate benches/scenes/exh16.json --uncompressed --out /tmp/exh16.npz
   python benches/python_scale.py [--vltm target/release/vltm] [--exh16 /tmp/exh16.npz]

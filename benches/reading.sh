@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Reading speed (issue 12 item 6, README "Reading y-tal HDF5"): wall time of one `vltm column`
+# Reading speed (docs/performance.md, "Reading y-tal HDF5"): wall time of one `vltm column`
 # on the same capture stored three ways, the variants interleaved in one loop so that they
 # share the machine's load, medians and ranges over RUNS runs, plus CPU (user + sys) and peak
 # resident memory. Needs /usr/bin/time (Debian: time); no Python.

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# How vltm's time and memory grow with laser rows, SPADs, voxels and bins (issue 6, README
+# How vltm's time and memory grow with laser rows, SPADs, voxels and bins (docs/performance.md,
 # "Scaling"). Renders variants of benches/scenes/exh16.json with `vltm simulate
 # --uncompressed` (streamed row by row by `vltm direct` / `vltm column`), then runs each probe
 # once per variant under /usr/bin/time and prints a Markdown table: wall time, peak resident

@@ -1,5 +1,5 @@
 //! The exit sign of the Stanford confocal captures (`../shared/data/real/data_exit_sign.mat`)
-//! imaged on its own tilted plane, where its letters are legible (README "Real data").
+//! imaged on its own tilted plane, where its letters are legible (docs/real-data.md).
 //!
 //! ```sh
 //! cargo run --release --example exit_sign -- ../shared/data/real/data_exit_sign.mat docs/real-exit-sign.png
@@ -21,9 +21,9 @@
 //!    steps (7.6 cm): the sign's brightness falls by half from its centre to its edges, which
 //!    hides 2 cm strokes on a linear colour scale. The title says so.
 //!
-//! The figure is vltm's front view (x right, y up: the hidden scene seen from behind, looking
-//! back at the wall), so the sign's face, turned to the wall, reads mirrored. It is written
-//! all or nothing; the plane and the timing go to stderr.
+//! The figure is vltm's front view, drawn as a camera on the relay wall looking in sees the
+//! scene (x increasing to the left, y up), so the sign's face, turned to the wall, reads EXIT.
+//! It is written all or nothing; the plane and the timing go to stderr.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

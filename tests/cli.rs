@@ -513,7 +513,7 @@ fn indirect_writes_a_gamma_masked_volume() {
     npy(&f_npy, SHAPE);
 }
 
-/// `demo --out DIR`: the table names the figure and its indirect-light ratios (the README's,
+/// `demo --out DIR`: the table names the figure and its indirect-light ratios (docs/concepts.md's,
 /// asserted within bands), and the 10 PNG figures, 10 `.npy` volumes and `summary.txt` (= the table) are written. (~15 s.)
 #[test]
 fn demo_writes_figures_volumes_and_summary() {
@@ -529,8 +529,8 @@ fn demo_writes_figures_volumes_and_summary() {
     ] {
         assert!(out.contains(want), "demo table lacks `{want}`:\n{out}");
     }
-    // Means over the figure's voxels beside the control (README, "Leak-corrected indirect
-    // light"): the last column of each row is the ratio.
+    // Means over the figure's voxels beside the control (docs/indirect-light.md): the last
+    // column of each row is the ratio.
     let ratio = |row: &str| -> f32 {
         out.lines()
             .find(|l| l.starts_with(row))
@@ -544,19 +544,19 @@ fn demo_writes_figures_volumes_and_summary() {
         ratio("in-focus I_i (Eq. 17)"),
         ratio("in-focus I_i, leak-corrected"),
     );
-    // The README's numbers, each within a band that a change of the probes would leave.
+    // The documented numbers (docs/concepts.md), each within a band that a change of the probes would leave.
     let within = |x: f32, want: f32, tol: f32| (x - want).abs() <= tol * want;
     assert!(
         within(gated, 1.26, 0.05) && within(ungated, 1.40, 0.05),
-        "demo: gated column {gated}x (README 1.26x), no gate {ungated}x (README 1.40x)"
+        "demo: gated column {gated}x (documented 1.26x), no gate {ungated}x (documented 1.40x)"
     );
     assert!(
         within(eq17, 0.99, 0.05),
-        "demo: Eq. 17 {eq17}x the control (README 0.99x)"
+        "demo: Eq. 17 {eq17}x the control (documented 0.99x)"
     );
     assert!(
         within(corrected, 862.0, 0.2),
-        "demo: leak-corrected I_i is {corrected}x the control (README 862x)"
+        "demo: leak-corrected I_i is {corrected}x the control (documented 862x)"
     );
     let kept: f32 = out
         .split("the leak-corrected I_i keeps ")
@@ -566,7 +566,7 @@ fn demo_writes_figures_volumes_and_summary() {
         .unwrap_or_else(|| panic!("no kept fraction in the table:\n{out}"));
     assert!(
         within(kept, 0.59, 0.1),
-        "demo: the leak-corrected I_i keeps {kept} of the indirect-only truth (README 0.59)"
+        "demo: the leak-corrected I_i keeps {kept} of the indirect-only truth (documented 0.59)"
     );
     // The panel is lit back by the figure: its voxels' leak-corrected I_i against the control.
     let panel: f32 = out
@@ -580,7 +580,7 @@ fn demo_writes_figures_volumes_and_summary() {
         .unwrap_or_else(|| panic!("no panel ratio in the table:\n{out}"));
     assert!(
         within(panel, 1212.0, 0.2),
-        "demo: leak-corrected I_i on the panel is {panel}x the control (README 1212x)"
+        "demo: leak-corrected I_i on the panel is {panel}x the control (documented 1212x)"
     );
     // In-focus indirect light peaks on a surface the other lights: Eq. 17 as is on the figure
     // (the panel's light on it, and the figure's own leak), the leak-corrected I_i (the
@@ -1632,7 +1632,7 @@ fn matrix_relight_and_row_through_the_command_line() {
     assert!(diff <= 1e-6, "{diff:.3e}");
 }
 
-/// `--leak-correct` (README, "Leak-corrected indirect light"): `indirect` corrects by default;
+/// `--leak-correct` (docs/indirect-light.md, "Leak-corrected indirect light"): `indirect` corrects by default;
 /// a volume whose direct returns all fall beyond the capture's window is refused with the
 /// window error; `column --leak-correct` runs and reports the energy it removed.
 #[test]

@@ -353,7 +353,7 @@ fn inter_reflection_raises_the_gated_column_at_b() {
 /// DESIGN §B.6 rendered in-test: 12×12 lasers × 12×12 SPADs over 1 m, 500 bins of 1 cm,
 /// λ = 0.2 m, σ = 2λ/3 (the defaults of the method), isotropic point patches A, B 0.7 m
 /// apart, r0 = 0.3 m, no leak correction. The float64 prototype gave I_i = 7.5× its
-/// direct-only control at B's single voxel; the README states the mean over B's voxels (its
+/// direct-only control at B's single voxel; docs/reliability.md states the mean over B's voxels (its
 /// voxel ± one voxel, 9 voxels of this 25 × 1 × 13 slice) and the same over A's, which this
 /// test asserts within a band. Γ must hold both patches.
 /// (The 8×8 fixtures are too coarse for the unweighted Eq. 17 sum at the default σ: see
@@ -410,12 +410,12 @@ fn in_focus_indirect_light_eq17_finds_the_inter_reflection() {
     );
     assert!(
         (3.0..=3.5).contains(&ratio),
-        "I_i over B is {ratio:.2}x the control ({f:.4e} vs {c:.4e}); README: 3.24x"
+        "I_i over B is {ratio:.2}x the control ({f:.4e} vs {c:.4e}); documented: 3.24x"
     );
     // By symmetry the light from B lands on A as well.
     assert!(
         (3.0..=3.5).contains(&ra),
-        "I_i over A is {ra:.2}x the control; README: 3.24x"
+        "I_i over A is {ra:.2}x the control; documented: 3.24x"
     );
     // The default of `vltm indirect`: the capture's direct light removed first.
     let leak = IndirectOptions {
@@ -434,7 +434,7 @@ fn in_focus_indirect_light_eq17_finds_the_inter_reflection() {
     );
     assert!(
         mf > 0.0 && mf >= 2.0 * mc,
-        "leak-corrected I_i over B: {mf:.4e} vs control {mc:.4e} (README: ≥ 2x, control 0)"
+        "leak-corrected I_i over B: {mf:.4e} vs control {mc:.4e} (documented: ≥ 2x, control 0)"
     );
     // Nothing outside Γ.
     assert!(

@@ -162,11 +162,11 @@ fn measure(
     m
 }
 
-/// `x` within `tol` (relative) of the README's value `want`.
+/// `x` within `tol` (relative) of the documented value `want` (docs/indirect-light.md).
 fn near(what: &str, x: f64, want: f64, tol: f64) {
     assert!(
         (x - want).abs() <= tol * want.abs(),
-        "{what}: measured {x:.3}, README {want} (±{:.0} %)",
+        "{what}: measured {x:.3}, documented {want} (±{:.0} %)",
         100.0 * tol
     );
 }
@@ -193,7 +193,7 @@ fn two_patches() -> (Capture, Capture, Volume, Vec<usize>) {
 }
 
 /// The shared path-traced two_patches (the capture holds the physical laser's falloff, so
-/// `--compensate-laser`): patch B's voxels. README: "Leak-corrected indirect light".
+/// `--compensate-laser`): patch B's voxels. docs/indirect-light.md.
 #[test]
 fn two_patches_leak_corrected_beats_the_control() {
     let (mut full, mut ctrl, vol, b) = two_patches();
@@ -203,7 +203,7 @@ fn two_patches_leak_corrected_beats_the_control() {
     };
     let plain = measure(&mut full, &mut ctrl, &vol, &wave, DEFAULTS, &b, None);
     near("two_patches, Eq. 17 vs control", plain.ratio(), 0.92, 0.05);
-    // Uncorrected, I_i is direct light: ~100x the indirect-only truth (README).
+    // Uncorrected, I_i is direct light: ~100x the indirect-only truth (docs/indirect-light.md).
     near("two_patches, Eq. 17 / truth", plain.kept(), 103.0, 0.1);
     let gated = measure(
         &mut full,
@@ -216,7 +216,7 @@ fn two_patches_leak_corrected_beats_the_control() {
     );
     check_corrected("two_patches, gate", &gated);
     near("two_patches, gate, kept", gated.kept(), 0.56, 0.1);
-    // The model fit works here (voxel pitch ≤ λ/4): README 3.79x.
+    // The model fit works here (voxel pitch ≤ λ/4): documented 3.79x.
     let fit = LeakOptions {
         method: LeakMethod::Fit,
         ..LeakOptions::default()
@@ -253,7 +253,7 @@ fn two_patches_leak_corrected_beats_the_control() {
         "paper's settings, corrected: {:.2}x",
         pc.ratio()
     );
-    // The paper's settings keep less of the indirect light than vltm's defaults (README).
+    // The paper's settings keep less of the indirect light than vltm's defaults (docs/indirect-light.md).
     near("two_patches, paper's, kept", pc.kept(), 0.10, 0.3);
     assert!(pc.kept() < gated.kept());
 }
@@ -292,7 +292,7 @@ fn figure_surface() -> Vec<Point> {
 }
 
 /// The demo's panel/figure scene at 16×16 lasers × 16×16 SPADs (65 536 histograms), rendered
-/// twice: the figure's voxels. README: "Leak-corrected indirect light".
+/// twice: the figure's voxels. docs/indirect-light.md.
 #[test]
 fn panel_figure_16_leak_corrected_beats_the_control() {
     let vol = Volume::grid([-0.6, -0.3, 0.5], [0.6, 0.3, 1.22], [21, 11, 13]).unwrap();
@@ -315,7 +315,7 @@ fn panel_figure_16_leak_corrected_beats_the_control() {
     check_corrected("panel/figure, gate", &gated);
     near("panel/figure, gate vs control", gated.ratio(), 313.0, 0.2);
     near("panel/figure, gate, kept", gated.kept(), 0.53, 0.1);
-    // The model fit does not separate here: the 6 cm voxels are 0.45λ (README 1.01x).
+    // The model fit does not separate here: the 6 cm voxels are 0.45λ (documented 1.01x).
     let fit = LeakOptions {
         method: LeakMethod::Fit,
         ..LeakOptions::default()

@@ -5,7 +5,7 @@
 //! setting), on the confocal FFT path (auto): a 64×64 grid over the scanned square and depth
 //! slices 1–2 cm apart around the expected depth, so that slices on both sides are decoys.
 //!
-//! Checked, as the maximum over x and y of each depth slice (what README "Real data" states):
+//! Checked, as the maximum over x and y of each depth slice (what docs/real-data.md states):
 //! * the resolution chart's brightest slice is at 0.39–0.41 m (nominal distance 40 cm), and
 //!   its strongest voxel is in the lower-left bar group (x < 0, y < 0; the second index of
 //!   `rect_data` runs down y, `vltm::io::mat`);

@@ -408,7 +408,7 @@ fn bad_znlos_files_exit_1_naming_the_dataset() {
     }
 }
 
-/// Not a test: writes the reading benchmark's Z-NLOS files (README "Reading y-tal HDF5") from
+/// Not a test: writes the reading benchmark's Z-NLOS files (docs/performance.md, "Reading Z-NLOS HDF5") from
 /// the capture `$VLTM_ZNLOS_BENCH` (an `.npz`, e.g. exh16's): `<stem>_<order>.hdf5` beside it
 /// for the orders of its scan, with `$VLTM_ZNLOS_COLOURS` colours (default 1; 3 makes 18
 /// values per sample) and 6 bounces, each sample split in power-of-two fractions so that the

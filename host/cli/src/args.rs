@@ -101,8 +101,8 @@ pub(crate) enum Command {
         mask_epsilon: Option<f32>,
         /// Remove the capture's direct light before the column: zero, per laser/SPAD pair,
         /// the bins where a 3-vertex return of a voxel of Γ (direct light above
-        /// --leak-epsilon of the maximum) can arrive (see README, "Leak-corrected indirect
-        /// light").
+        /// --leak-epsilon of the maximum) can arrive (see
+        /// docs/indirect-light.md).
         #[arg(long)]
         leak_correct: bool,
         /// Relative threshold of the voxels the --leak-correct fit places scatterers at.
@@ -139,7 +139,7 @@ pub(crate) enum Command {
         gate: GateArg,
         /// Remove the capture's direct light before the columns (the default): zero, per
         /// laser/SPAD pair, the bins where a 3-vertex return of a Γ voxel can arrive (see
-        /// README, "Leak-corrected indirect light").
+        /// docs/indirect-light.md).
         #[arg(long, conflicts_with = "no_leak_correct")]
         leak_correct: bool,
         /// The paper's Eq. 17 on the capture as it is (no leak correction).

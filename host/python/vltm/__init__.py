@@ -464,7 +464,7 @@ def indirect(
 
     ``leak_correct=True`` (the default, as ``vltm indirect``): the capture's direct light is
     removed first — per laser/SPAD pair the bins where a 3-vertex return of a Γ voxel can
-    arrive are zeroed (README "Leak-corrected indirect light"); one more pass over the
+    arrive are zeroed (docs/indirect-light.md); one more pass over the
     capture measures the removed energy (``report["explained"]``). It uses the return
     times only, so each row is corrected on its own and partial states (``rows=``) take it
     too. ``leak_correct=False``: the paper's Eq. 17 on the capture as it is

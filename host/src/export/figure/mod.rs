@@ -1,14 +1,24 @@
 //! Maximum-intensity-projection (MIP) figures of voxel volumes, as PNG.
 //!
-//! A [`Figure`] shows a volume `(nx, ny, nz)` the way the NLOS literature shows results: a
-//! title, the FRONT view (x to the right, y up; maximum over z) and the TOP view (x to the
-//! right, depth z increasing DOWNWARD, i.e. away from the relay wall at the top; maximum over
-//! y), side by side with frames, ticks and tick labels in metres, and a vertical colour bar.
-//! Both panels share one linear scale from 0 to the volume's maximum, mapped through the
-//! perceptual `inferno` colormap. Small volumes are upscaled with nearest-neighbour blocks
-//! (each panel at least [`PANEL_MIN_W`] pixels wide); very large ones are max-pooled.
+//! A [`Figure`] shows a volume `(nx, ny, nz)` as a person standing at the relay wall sees the
+//! hidden scene, looking in: a title, the FRONT view (maximum over z) drawn as a camera on the
+//! wall looking into the scene would see it, and the TOP view (maximum over y) seen from above
+//! with the wall at the bottom and depth z increasing upward, away from the wall. In vltm's
+//! right-handed frame (x, y on the wall, y up, z > 0 into the hidden scene) that viewer has
+//! **x increasing to the left**, so both panels draw x reversed, and their x axes say so
+//! (`x [m], increasing <-`; the tick labels decrease from left to right). A sign that faces
+//! the wall therefore reads correctly, not mirrored. Only the drawing is mirrored: the
+//! volumes, their axes and their files keep vltm's frame. Both views share the horizontal x
+//! direction, so a voxel's column is at the same place in the two panels.
+//!
+//! Frames, ticks and tick labels are in metres, with a vertical colour bar. Both panels share
+//! one linear scale from 0 to the volume's maximum, mapped through the perceptual `inferno`
+//! colormap. Small volumes are upscaled with nearest-neighbour blocks (each panel at least
+//! [`PANEL_MIN_W`] pixels wide); very large ones are max-pooled.
 //!
 //! Text uses an embedded 5×7 bitmap font drawn at 2× scale: no system fonts, no font crates.
+//! Cost: one pass over the volume for the projections, then one pass over the pixels; memory:
+//! the two projections and the RGB image.
 
 use std::ops::Range;
 use std::path::Path;
@@ -46,6 +56,13 @@ const MAX_TITLE_LINES: usize = 4;
 const ERROR_RED: Rgb<u8> = Rgb([180, 0, 0]);
 /// Marks: a cyan that stands out against every inferno colour.
 const MARK: Rgb<u8> = Rgb([0, 230, 255]);
+
+/// Subtitle of the front panel.
+const FRONT_TITLE: &str = "front view from the wall";
+/// Subtitle of the top panel.
+const TOP_TITLE: &str = "top view, wall at bottom";
+/// Label of both panels' horizontal axis: x grows to the left (the view from the wall).
+const X_LABEL: &str = "x [m], increasing <-";
 
 /// A maximum-intensity-projection figure of a voxel volume.
 ///
@@ -286,14 +303,8 @@ impl Layout {
         let ax = Axis::new(nx, fig.x, block, PANEL_MIN_W, PANEL_MAX_W);
         let ay = Axis::new(ny, fig.y, block, PANEL_MIN_H, PANEL_MAX_H);
         let az = Axis::new(nz, fig.z, block, PANEL_MIN_H, PANEL_MAX_H);
-        let mut front = Panel::new(
-            "front view (max over z)",
-            ax.clone(),
-            ay,
-            false,
-            ["x [m]", "y [m]"],
-        );
-        let mut top = Panel::new("top view (max over y)", ax, az, true, ["x [m]", "z [m]"]);
+        let mut front = Panel::new(FRONT_TITLE, ax.clone(), ay, [X_LABEL, "y [m]"]);
+        let mut top = Panel::new(TOP_TITLE, ax, az, [X_LABEL, "z [m]"]);
 
         front.rect.x = MARGIN + front.gutter();
         top.rect.x = front.rect.right() + PANEL_GAP + top.gutter();
@@ -397,14 +408,13 @@ impl Axis {
     }
 }
 
-/// An image panel with its two axes. The horizontal coordinate increases to the right; the
-/// vertical one increases downward if `v_down`, else upward.
+/// An image panel with its two axes. The horizontal coordinate (x) increases to the LEFT and
+/// the vertical one (y or z) upward: the view from the wall (module documentation).
 struct Panel {
     subtitle: &'static str,
     rect: Rect,
     h: Axis,
     v: Axis,
-    v_down: bool,
     labels: [&'static str; 2],
     h_ticks: Vec<(f32, String)>,
     v_ticks: Vec<(f32, String)>,
@@ -415,7 +425,6 @@ impl Panel {
         subtitle: &'static str,
         h: Axis,
         v: Axis,
-        v_down: bool,
         labels: [&'static str; 2],
     ) -> Self {
         let rect = Rect::new(0, 0, h.len as i32, v.len as i32);
@@ -426,7 +435,6 @@ impl Panel {
             rect,
             h,
             v,
-            v_down,
             labels,
             h_ticks,
             v_ticks,
@@ -446,16 +454,11 @@ impl Panel {
         GLYPH_H + LABEL_GAP + self.v_tick_label_w() + TICK_GAP + TICK + 1
     }
 
-    /// Screen pixel (continuous) of the coordinates `(hc, vc)`.
+    /// Screen pixel (continuous) of the coordinates `(hc, vc)`: both axes are counted from
+    /// the panel's right and bottom edges (x grows to the left, the vertical one upward).
     fn screen(&self, hc: f32, vc: f32) -> (f32, f32) {
-        let x = self.rect.x as f32 + self.h.offset(hc);
-        let v = self.v.offset(vc);
-        let y = self.rect.y as f32
-            + if self.v_down {
-                v
-            } else {
-                self.v.len as f32 - v
-            };
+        let x = self.rect.x as f32 + self.h.len as f32 - self.h.offset(hc);
+        let y = self.rect.y as f32 + self.v.len as f32 - self.v.offset(vc);
         (x, y)
     }
 
@@ -467,13 +470,11 @@ impl Panel {
         vmax: f32,
         value: impl Fn(usize, usize) -> f32,
     ) {
-        let columns: Vec<Range<usize>> = (0..self.h.len).map(|d| self.h.voxels(d)).collect();
+        let columns: Vec<Range<usize>> = (0..self.h.len)
+            .map(|col| self.h.voxels(self.h.len - 1 - col))
+            .collect();
         for row in 0..self.v.len {
-            let rows = self.v.voxels(if self.v_down {
-                row
-            } else {
-                self.v.len - 1 - row
-            });
+            let rows = self.v.voxels(self.v.len - 1 - row);
             for (col, cols) in columns.iter().enumerate() {
                 let v = cols
                     .clone()

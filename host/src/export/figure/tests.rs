@@ -48,12 +48,13 @@ fn bright_voxel_appears_at_its_place_in_both_panels() {
         img.dimensions(),
         (layout.width as u32, layout.height as u32)
     );
-    // Each voxel is a 32×32 block (320 / nx); front rows go up, top rows go down.
+    // Each voxel is a 32×32 block (320 / nx); columns go to the left (x increasing to the
+    // left: the view from the wall), front rows and top rows go up (z away from the wall).
     let block = 32;
     assert_eq!((layout.front.rect.w, layout.front.rect.h), (320, 8 * 32));
     assert_eq!((layout.top.rect.w, layout.top.rect.h), (320, 6 * 32));
-    let front = block_of(&layout.front, ix, 8 - 1 - iy, block);
-    let top = block_of(&layout.top, ix, iz, block);
+    let front = block_of(&layout.front, 10 - 1 - ix, 8 - 1 - iy, block);
+    let top = block_of(&layout.top, 10 - 1 - ix, 6 - 1 - iz, block);
     let hot = pixels_of(&img, top_colour(), layout.cbar);
     assert_eq!(hot.len(), 2 * block * block, "exactly the two blocks");
     assert!(
@@ -75,31 +76,92 @@ fn bright_voxel_appears_at_its_place_in_both_panels() {
         zero
     );
     // The NaN voxel is drawn as 0, the dimmer one at 2/7 of the scale.
-    let dim = block_of(&layout.front, 8, 8 - 1 - 1, block);
+    let dim = block_of(&layout.front, 10 - 1 - 8, 8 - 1 - 1, block);
     let expect = Rgb(colorous::INFERNO
         .eval_rational((255.0f32 * 2.0 / 7.0).round() as usize, 256)
         .into_array());
     assert_eq!(*img.get_pixel(dim.x as u32 + 5, dim.y as u32 + 5), expect);
-    let nan = block_of(&layout.front, 8, 8 - 1 - 2, block);
+    let nan = block_of(&layout.front, 10 - 1 - 8, 8 - 1 - 2, block);
     assert_eq!(*img.get_pixel(nan.x as u32 + 5, nan.y as u32 + 5), zero);
 }
 
 #[test]
-fn decreasing_coordinates_are_drawn_increasing() {
+fn decreasing_coordinates_are_drawn_in_the_same_direction() {
     let mut data = vec![0.0f32; 16 * 4 * 4];
-    data[0] = 1.0; // ix = 0 is x = +0.5, the right edge
+    // ix = 0 is x = +0.5: the largest x, drawn at the LEFT edge (x grows to the left);
+    // iy = 0 is y = 0, the bottom; iz = 0 is z = 0.5, nearest the wall: the top view's bottom.
+    data[0] = 1.0;
     let fig = Figure::new(&data, [16, 4, 4], [0.5, -0.5], [0.0, 0.3], [0.5, 0.8]);
     let img = fig.render();
     let layout = Layout::new(&fig, 1.0);
     let hot = pixels_of(&img, top_colour(), layout.cbar);
-    let front = block_of(&layout.front, 15, 3, 20);
+    let front = block_of(&layout.front, 0, 3, 20);
+    let top = block_of(&layout.top, 0, 3, 20);
+    assert_eq!(hot.len(), 2 * 20 * 20);
     assert!(
-        !hot.is_empty()
-            && hot
-                .iter()
-                .all(|&(x, y)| front.contains(x, y)
-                    || block_of(&layout.top, 15, 0, 20).contains(x, y))
+        hot.iter()
+            .all(|&(x, y)| front.contains(x, y) || top.contains(x, y))
     );
+}
+
+/// A sign facing the wall, drawn into a volume as a person at the wall reads it (their right
+/// is −x), must come out of the front view reading the same, not mirrored: the front panel,
+/// sampled once per voxel block, equals the glyph, and differs from its mirror image.
+#[test]
+fn a_sign_facing_the_wall_reads_as_seen_from_the_wall() {
+    // 'R' is not mirror-symmetric: its mirror image differs from it.
+    let rows = glyph('R');
+    let (nx, ny, nz) = (5, 7, 2);
+    let on = |col: usize, row: usize| rows[row] >> (4 - col) & 1 == 1;
+    assert!((0..7).any(|r| (0..5).any(|c| on(c, r) != on(4 - c, r))));
+    let mut data = vec![0.0f32; nx * ny * nz];
+    for ix in 0..nx {
+        for iy in 0..ny {
+            // Seen from the wall: column 0 (the viewer's left) is the largest x; row 0 (top)
+            // the largest y.
+            if on(nx - 1 - ix, ny - 1 - iy) {
+                data[(ix * ny + iy) * nz + 1] = 1.0;
+            }
+        }
+    }
+    let fig = Figure::new(&data, [nx, ny, nz], [-0.2, 0.2], [-0.3, 0.3], [0.7, 0.8]);
+    let img = fig.render();
+    let layout = Layout::new(&fig, 1.0);
+    let block = layout.front.rect.w as usize / nx;
+    let drawn = |col: usize, row: usize| {
+        let r = block_of(&layout.front, col, row, block);
+        *img.get_pixel((r.x + r.w / 2) as u32, (r.y + r.h / 2) as u32) == top_colour()
+    };
+    let mut mirrored = false;
+    for row in 0..ny {
+        for col in 0..nx {
+            assert_eq!(drawn(col, row), on(col, row), "pixel ({col}, {row}) of the R");
+            mirrored |= drawn(col, row) != on(nx - 1 - col, row);
+        }
+    }
+    assert!(mirrored, "the glyph is not told from its mirror image");
+    // The tick labels say so: x decreases from left to right, y and z increase upward.
+    for (panel, v) in [(&layout.front, 0.0), (&layout.top, 0.75)] {
+        let xs: Vec<(f32, f32)> = panel
+            .h_ticks
+            .iter()
+            .map(|(c, _)| (panel.screen(*c, v).0, *c))
+            .collect();
+        assert!(xs.len() >= 2, "{xs:?}");
+        for w in xs.windows(2) {
+            assert!(w[0].1 < w[1].1 && w[0].0 > w[1].0, "x ticks {xs:?}");
+        }
+        let ys: Vec<(f32, f32)> = panel
+            .v_ticks
+            .iter()
+            .map(|(c, _)| (panel.screen(0.0, *c).1, *c))
+            .collect();
+        for w in ys.windows(2) {
+            assert!(w[0].1 < w[1].1 && w[0].0 > w[1].0, "vertical ticks {ys:?}");
+        }
+    }
+    assert_eq!(layout.front.labels[0], X_LABEL);
+    assert_eq!(layout.top.labels[0], X_LABEL);
 }
 
 #[test]

@@ -30,9 +30,9 @@
 //!   DESIGN §B.0). The authors' script displays i across (increasing to the left) and j down;
 //!   the exit sign's letters read upright and unmirrored in that display, i.e. as seen from the
 //!   wall. With `y` down the second index, `(x, y, z)` is right-handed with y up and z into the
-//!   hidden scene, so vltm's front view (x right, y up: seen from behind the scene, looking
-//!   back at the wall) shows the sign mirrored and upright; with `y = +2nd index` it showed
-//!   it turned by 180°, a mirror image of the lab (README "Real data", `tests/real.rs`);
+//!   hidden scene, and vltm's figures, drawn as seen from the wall (x increasing to the left,
+//!   y up; `out::figure`), show the sign upright and reading EXIT; with `y = +2nd index` it
+//!   was turned by 180°, a mirror image of the lab (docs/real-data.md, `tests/real.rs`);
 //! * the device positions are not recorded; [`DEFAULT_LASER_ORIGIN`] is used, which
 //!   only matters for `--compensate-laser` (the legs are not in the time axis).
 //!
@@ -50,7 +50,7 @@
 //! already decoded into the capture's rows (a blocked transpose, one cache line of a row per
 //! wall point). Peak: the capture as f32 (4·N₁N₂T bytes, 33.6 MB for the 64×64×2048
 //! captures) plus four chunks of 16·N₁N₂ values (about 1 MB), instead of the raw bytes, all
-//! values and the capture at once. Measured on the Stanford captures (README, *Real data*):
+//! values and the capture at once. Measured on the Stanford captures (docs/performance.md, *Reading the `.mat`*):
 //! reading was 42 % of the CPU time of a `vltm direct`; the overlap cut the peak resident
 //! set by 12 MB (`direct`) and 30 MB (`info`). Every allocation is checked against
 //! [`budget::check`] before it is made. v7.3 files and the phasor-field layout are read

@@ -53,12 +53,12 @@
 //! chunked `H`, its cache of decoded chunks (up to
 //! 64 MiB). [`read_all`] reads every row into a [`Capture`] (needed by `--swap-roles` and by
 //! [`io::open`](crate::io::open)). Peak resident set of `vltm column` on the exh16 capture
-//! (210 MB of `f32`): see the README, *Reading y-tal HDF5*; on the small shared captures
+//! (210 MB of `f32`): see docs/performance.md, *Reading y-tal HDF5*; on the small shared captures
 //! (two_patches, 6.6 MB) a block holds the whole `H`.
 //!
 //! tal writes `H` contiguous and uncompressed (checked with h5py on every shared capture); a
 //! chunked `H` streams too. Reading times against the uncompressed `.npz` of the same
-//! capture: README, *Reading y-tal HDF5*.
+//! capture: docs/performance.md, *Reading y-tal HDF5*.
 //!
 //! # Fields
 //!

@@ -80,7 +80,7 @@
 //!
 //! Sums are taken in the file's order from 0 on every path, so the rows do not depend on how
 //! they were read. The memory is checked against [`crate::budget`] when the file is opened
-//! and stated by [`ZnlosReader::conventions`]. Measured cost: README, *Reading y-tal HDF5*.
+//! and stated by [`ZnlosReader::conventions`]. Measured cost: docs/performance.md, *Reading Z-NLOS HDF5*.
 //!
 //! # Errors
 //!
