@@ -16,21 +16,10 @@
 
 use crate::config::{Config, Legs, Point};
 use crate::error::{Error, check_len, check_points};
+use crate::geometry::dist64;
+use crate::phase::{TwiddleStep, cis_turns_f64};
 use crate::sample::Sample;
-use crate::trig::cis_turns_f64;
 use num_complex::Complex32;
-
-/// Euclidean distance in `f32` (correctly rounded `sqrtf`).
-#[inline]
-pub(crate) fn dist(a: &Point, b: &Point) -> f32 {
-    let (x, y, z) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
-    libm::sqrtf(x * x + y * y + z * z)
-}
-
-fn dist64(a: &Point, b: &[f64; 3]) -> f64 {
-    let (x, y, z) = (a[0] as f64 - b[0], a[1] as f64 - b[1], a[2] as f64 - b[2]);
-    libm::sqrt(x * x + y * y + z * z)
-}
 
 /// Casts a caller's `f32` buffer to complex numbers (always succeeds for even lengths:
 /// `Complex32` has the alignment of `f32`).
@@ -162,18 +151,14 @@ impl<'t> Scan<'t> {
             let xs = xs.get(..block.len()).unwrap_or(&[]);
             let base = (b * BLOCK) as u64;
             for (j, o) in out.iter_mut().enumerate() {
-                let step = (k_lo + j as i64).rem_euclid(n as i64) as usize;
-                let mut q = ((step as u64 * base) % n as u64) as usize;
+                let mut q = TwiddleStep::new(k_lo + j as i64, base, n);
                 let (mut re, mut im) = (o.re, o.im);
                 for &v in xs {
-                    if let Some(w) = self.twiddle.get(q) {
+                    if let Some(w) = self.twiddle.get(q.index()) {
                         re += v * w.re;
                         im += v * w.im;
                     }
-                    q += step;
-                    if q >= n {
-                        q -= n;
-                    }
+                    q.advance();
                 }
                 *o = Complex32::new(re, im);
             }
@@ -510,19 +495,14 @@ impl<'m> RowBuffer<'m> {
             self.dropped += 1;
             return;
         }
-        // Twiddle index (k_j·bin) mod N, stepping by bin per band bin (all < N ≤ 2³⁰); the
-        // first product is taken in u64 (it reaches 2⁶⁰, past a 32-bit usize).
-        let k0 = cfg.k_lo().rem_euclid(n as i64) as u64;
-        let mut q = ((k0 * bin as u64) % n as u64) as usize;
-        let step = bin % n;
+        // Twiddle index (k_j·bin) mod N, stepping by bin per band bin: the accumulator of
+        // frequency `bin` at sample k_lo.
+        let mut q = TwiddleStep::new(bin as i64, cfg.k_lo().rem_euclid(n as i64) as u64, n);
         for v in hg.iter_mut() {
-            if let Some(w) = scan.twiddle.get(q) {
+            if let Some(w) = scan.twiddle.get(q.index()) {
                 *v += *w;
             }
-            q += step;
-            if q >= n {
-                q -= n;
-            }
+            q.advance();
         }
         *mono += cis_turns_f64(bin as f64 * -cfg.dt() / cfg.wavelength());
     }
