@@ -342,12 +342,24 @@ impl Scene {
 
     /// Runs the kernel configured by `kernel` and compares with the reference `truth`.
     fn compare(&self, kernel: &Params, truth: &Reference, target: Target, gate: Gate) -> Outcome {
+        self.compare_state(kernel, truth, target, gate, false)
+    }
+
+    /// As `compare`; `f32_state` runs the column through `ColumnF32` instead of `Probe`.
+    fn compare_state(
+        &self,
+        kernel: &Params,
+        truth: &Reference,
+        target: Target,
+        gate: Gate,
+        f32_state: bool,
+    ) -> Outcome {
         if self.counts {
             let hists: Vec<u16> = self.h.iter().map(|&x| x as u16).collect();
-            self.compare_with(&hists, kernel, truth, target, gate)
+            self.compare_with(&hists, kernel, truth, target, gate, f32_state)
         } else {
             let hists: Vec<f32> = self.h.iter().map(|&x| x as f32).collect();
-            self.compare_with(&hists, kernel, truth, target, gate)
+            self.compare_with(&hists, kernel, truth, target, gate, f32_state)
         }
     }
 
@@ -358,6 +370,7 @@ impl Scene {
         truth: &Reference,
         target: Target,
         gate: Gate,
+        f32_state: bool,
     ) -> Outcome {
         let cfg = Config::try_new(kernel).expect("valid by construction");
         let data = Data {
@@ -365,14 +378,19 @@ impl Scene {
             spads: &self.spads,
             hists,
         };
-        let (t_k, report) = run(
-            &cfg,
-            data,
-            target,
-            gate,
-            &self.voxels,
-            &all_rows(self.lasers.len()),
-        );
+        let (t_k, report) = match (target, f32_state) {
+            (Target::Column(a), true) => {
+                support::run_column_f32(&cfg, data, a, &self.voxels, &all_rows(self.lasers.len()))
+            }
+            _ => run(
+                &cfg,
+                data,
+                target,
+                gate,
+                &self.voxels,
+                &all_rows(self.lasers.len()),
+            ),
+        };
         let ref_gate = match gate {
             Gate::Gaussian => reference::Gate::Gaussian,
             Gate::HigherOrder => reference::Gate::HigherOrder,
@@ -394,7 +412,11 @@ impl Scene {
                     .collect(),
             ),
         };
-        let eps32 = eps_f32(&cfg, truth, target, &self.voxels);
+        let mut eps32 = eps_f32(&cfg, truth, target, &self.voxels);
+        if f32_state {
+            // ColumnF32 (module docs): Kahan state, f32 band and SPAD sums in `finish`.
+            eps32 += U32 * (2 * cfg.bins() + self.spads.len() + 8) as f64;
+        }
         let tail = (-cfg.params().gate_support.powi(2) / 2.0).exp();
         let eps = eps32
             + match gate {
@@ -409,7 +431,7 @@ impl Scene {
         } else {
             "diagonal"
         };
-        let probe = format!("{kind}/{gate:?}");
+        let probe = format!("{kind}/{gate:?}{}", if f32_state { "/f32" } else { "" });
         let mut out = Outcome {
             probe,
             worst: 0.0,
@@ -434,10 +456,14 @@ impl Scene {
     /// All six probes under `p` against the reference under `p`.
     fn outcomes(&self, p: &Params) -> Vec<Outcome> {
         let truth = self.reference(p);
-        support::all_probes(self.focus)
+        let mut v: Vec<Outcome> = support::all_probes(self.focus)
             .iter()
             .map(|&(t, g)| self.compare(&self.params_for(*p, t, g), &truth, t, g))
-            .collect()
+            .collect();
+        // The f32-state column (ColumnF32) against the same reference.
+        let (t, g) = (Target::Column(self.focus), Gate::Gaussian);
+        v.push(self.compare_state(&self.params_for(*p, t, g), &truth, t, g, true));
+        v
     }
 }
 

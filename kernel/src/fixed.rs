@@ -98,7 +98,8 @@
 
 use crate::config::{Config, Legs, Point, Weights};
 use crate::error::{ConfigError, Error, check_len, check_points};
-use crate::scan::dist;
+use crate::geometry::{alias_window, dist, dist64 as dist_f64, leaves_window, widen};
+use crate::phase::TwiddleStep;
 use ::fixed::types::I1F15;
 
 /// Bits of the cos/sin table index (1024 intervals over one turn).
@@ -471,15 +472,6 @@ impl<'t> FixedScan<'t> {
     }
 }
 
-fn dist_f64(a: &Point, b: &[f64; 3]) -> f64 {
-    let (x, y, z) = (
-        f64::from(a[0]) - b[0],
-        f64::from(a[1]) - b[1],
-        f64::from(a[2]) - b[2],
-    );
-    libm::sqrt(x * x + y * y + z * z)
-}
-
 /// Caller-owned `i32` buffer for one row's band spectra: `Ks·(2J + 1)` (`HG` as re/im
 /// pairs, then the leg offsets `x_s` as `f32` bits).
 #[derive(Debug)]
@@ -548,18 +540,15 @@ impl<'m> FixedRowBuffer<'m> {
         let twiddle = scan.twiddle.as_chunks::<2>().0;
         self.fill(scan, laser, |s, jj| {
             let h = hists.get(s * nt..(s + 1) * nt).unwrap_or(&[]);
-            let step = (k_lo + jj as i64).rem_euclid(n as i64) as usize;
-            let (mut re, mut im, mut q) = (0i64, 0i64, 0usize);
+            let mut q = TwiddleStep::new(k_lo + jj as i64, 0, n);
+            let (mut re, mut im) = (0i64, 0i64);
             for &c in h {
-                if let Some([wr, wi]) = twiddle.get(q) {
+                if let Some([wr, wi]) = twiddle.get(q.index()) {
                     let c = i32::from(c);
                     re += i64::from(c * i32::from(wr.to_bits()));
                     im += i64::from(c * i32::from(wi.to_bits()));
                 }
-                q += step;
-                if q >= n {
-                    q -= n;
-                }
+                q.advance();
             }
             (re, im)
         })
@@ -718,19 +707,14 @@ impl<'m> FixedPhotons<'m> {
         *count += 1;
         // Twiddle index (k_j·bin) mod N, stepped by `bin` per band bin; the first product in
         // u64 (it reaches 2⁶⁰).
-        let k0 = cfg.k_lo().rem_euclid(n as i64) as u64;
-        let mut q = ((k0 * bin as u64) % n as u64) as usize;
-        let step = bin % n;
+        let mut q = TwiddleStep::new(bin as i64, cfg.k_lo().rem_euclid(n as i64) as u64, n);
         let twiddle = scan.twiddle.as_chunks::<2>().0;
         for pair in d.as_chunks_mut::<2>().0 {
-            if let Some([wr, wi]) = twiddle.get(q) {
+            if let Some([wr, wi]) = twiddle.get(q.index()) {
                 pair[0] = pair[0].wrapping_add(i64::from(wr.to_bits()));
                 pair[1] = pair[1].wrapping_add(i64::from(wi.to_bits()));
             }
-            q += step;
-            if q >= n {
-                q -= n;
-            }
+            q.advance();
         }
     }
 }
@@ -905,7 +889,7 @@ impl<'m> FixedColumn<'m> {
         }
         let d_la = dist(&row.laser, &self.focus);
         let leg = scan.laser_leg(&row.laser) + f64::from(d_la);
-        self.leg_range = (self.leg_range.0.min(leg), self.leg_range.1.max(leg));
+        self.leg_range = widen(self.leg_range, leg);
         let w = fc.weight(d_la);
         let step = phase_step(f64::from(d_la), fc.two32_per_span);
         let phi0 = (fc.cfg.k_lo() as i32 as u32).wrapping_mul(step);
@@ -961,7 +945,7 @@ impl<'m> FixedColumn<'m> {
         let cfg = &fc.cfg;
         let j = cfg.bins();
         let lsb = fc.column_lsb() / 32768.0;
-        let (af_lo, af_hi) = cfg.alias_free();
+        let window = alias_window(cfg);
         let mut aliased = 0;
         for (o, b) in out.iter_mut().zip(voxels) {
             let d_ab = dist(&self.focus, b);
@@ -974,7 +958,7 @@ impl<'m> FixedColumn<'m> {
                 let d_bs = dist(b, sp);
                 let tau = d_ab + d_bs;
                 let t = f64::from(tau) + scan.sensor_leg(sp);
-                (lo, hi) = (lo.min(t), hi.max(t));
+                (lo, hi) = widen((lo, hi), t);
                 let step = phase_step(f64::from(tau), fc.two32_per_span);
                 let mut phi = (cfg.k_lo() as i32 as u32).wrapping_mul(step);
                 let (mut zr, mut zi) = (0i128, 0i128);
@@ -990,11 +974,7 @@ impl<'m> FixedColumn<'m> {
                 re += zr as f64 * w;
                 im += zi as f64 * w;
             }
-            let (rl, rh) = (
-                self.leg_range.0 + lo - cfg.t0(),
-                self.leg_range.1 + hi - cfg.t0(),
-            );
-            if self.leg_range.0 <= self.leg_range.1 && (rl < af_lo || rh > af_hi) {
+            if leaves_window(window, self.leg_range, (lo, hi)) {
                 aliased += 1;
             }
             *o = re * re + im * im;

@@ -1,13 +1,15 @@
 #![doc = include_str!("../README.md")]
 #![no_std]
 
+mod column32;
 mod config;
 mod error;
 mod fixed;
+pub mod geometry;
+pub mod phase;
 mod probe;
 mod sample;
 mod scan;
-mod trig;
 
 pub use self::fixed::{
     CIS_ERR, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedPhotons, FixedRow,
@@ -15,10 +17,11 @@ pub use self::fixed::{
 };
 /// The Q1.15 type of the fixed-point tables (from the `fixed` crate 1.31).
 pub use ::fixed::types::I1F15;
+pub use column32::ColumnF32;
 pub use config::{Config, Legs, Params, Point, Weights};
 pub use error::{ConfigError, Error};
 pub use num_complex;
+pub use phase::{cis_turns, cis_turns_f64};
 pub use probe::{Gate, Probe, Report, Target};
 pub use sample::Sample;
 pub use scan::{Row, RowBuffer, Scan};
-pub use trig::{cis_turns, cis_turns_f64};

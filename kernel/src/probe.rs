@@ -29,9 +29,10 @@
 
 use crate::config::{Config, Point};
 use crate::error::{Error, check_len, check_points};
+use crate::geometry::{alias_window, dist, leaves_window, widen};
+use crate::phase::{cis_turns, cis_turns_f64};
 use crate::sample::Sample;
-use crate::scan::{Row, Scan, dist};
-use crate::trig::cis_turns;
+use crate::scan::{Row, Scan};
 use num_complex::{Complex32, Complex64};
 
 /// Which elements of the light transport matrix a probe accumulates.
@@ -245,9 +246,15 @@ impl<'m> Probe<'m> {
     /// Infallible on data values and panic-free.
     ///
     /// # Errors
-    /// [`Error::Length`] if `row` was loaded for a scan of another size (checked once).
+    /// [`Error::Incompatible`] if `scan` has another configuration than the probe's (as
+    /// [`Probe::merge`]); [`Error::Length`] if `row` was loaded for a scan of another size
+    /// (checked once). Nothing is changed then.
     pub fn push_row<T: Sample>(&mut self, scan: &Scan<'_>, row: &Row<'_, T>) -> Result<(), Error> {
         let cfg = scan.config();
+        if *cfg != self.cfg {
+            // As `merge`: a scan of another configuration has other frequencies and legs.
+            return Err(Error::Incompatible("scan of another configuration"));
+        }
         let ks = scan.spads().len();
         check_len("row spectra", ks * cfg.bins(), row.band().len())?;
         // A row made for another time axis has spectra of other frequencies.
@@ -414,16 +421,11 @@ fn c64(z: Complex32) -> Complex64 {
     Complex64::new(z.re as f64, z.im as f64)
 }
 
-#[inline]
-fn widen(r: (f64, f64), x: f64) -> (f64, f64) {
-    (r.0.min(x), r.1.max(x))
-}
-
 /// `Σ_j hg[j]·e^{iν_j τ}` with `e^{iν_j τ}` by recurrence from two seeds (DESIGN §B.2.3),
 /// in four interleaved chains (`p_{j+4} = p_j·step⁴`) so that the complex multiplies do not
 /// wait on each other; the phase error still grows as ≈ (J/4)·6e-8.
 #[inline]
-fn band_sum(hg: &[Complex32], tau: f32, klo_per_span: f32, inv_span: f32) -> Complex32 {
+pub(crate) fn band_sum(hg: &[Complex32], tau: f32, klo_per_span: f32, inv_span: f32) -> Complex32 {
     let step = cis_turns(inv_span * tau);
     let p0 = cis_turns(klo_per_span * tau);
     let step2 = step * step;
@@ -444,7 +446,7 @@ fn band_sum(hg: &[Complex32], tau: f32, klo_per_span: f32, inv_span: f32) -> Com
 }
 
 /// Band constants in `f32`: (k_lo/(NΔt), 1/(NΔt)); phases in turns are `k·τ/(NΔt)`.
-fn band_consts(cfg: &Config) -> (f32, f32) {
+pub(crate) fn band_consts(cfg: &Config) -> (f32, f32) {
     let span = cfg.span();
     ((cfg.k_lo() as f64 / span) as f32, (1.0 / span) as f32)
 }
@@ -542,7 +544,7 @@ fn column_band_finish(
     let cfg = scan.config();
     let j = cfg.bins().max(1);
     let (klo, inv) = band_consts(cfg);
-    let (af_lo, af_hi) = cfg.alias_free();
+    let window = alias_window(cfg);
     let u = state.split_at(state.len().saturating_sub(cfg.bins())).0;
     let mut aliased = 0;
     for (o, b) in out.iter_mut().zip(voxels) {
@@ -557,7 +559,7 @@ fn column_band_finish(
         {
             let d_bs = dist(b, sp);
             let tau = d_ab + d_bs;
-            (lo, hi) = widen(widen((lo, hi), (tau + d4) as f64), (tau + d4) as f64);
+            (lo, hi) = widen((lo, hi), f64::from(tau + d4));
             let mut p = cis_turns(klo * tau);
             let step = cis_turns(inv * tau);
             let mut z = Complex64::new(0.0, 0.0);
@@ -567,9 +569,7 @@ fn column_band_finish(
             }
             sum += z * cfg.weight(d_bs) as f64;
         }
-        let rel_lo = leg_range.0 + lo - cfg.t0();
-        let rel_hi = leg_range.1 + hi - cfg.t0();
-        if leg_range.0 <= leg_range.1 && (rel_lo < af_lo || rel_hi > af_hi) {
+        if leaves_window(window, leg_range, (lo, hi)) {
             aliased += 1;
         }
         *o = sum.norm_sqr();
@@ -597,7 +597,7 @@ fn higher_order<T: Sample>(
     let laser = row.laser();
     let d1 = scan.laser_leg(&laser);
     let turns_per_bin = -dt / lam;
-    let step = c64(crate::trig::cis_turns_f64(turns_per_bin));
+    let step = c64(cis_turns_f64(turns_per_bin));
     for ((h, sp), d4) in row
         .histograms()
         .chunks_exact(nt.max(1))
@@ -611,7 +611,7 @@ fn higher_order<T: Sample>(
         let mut next = Complex64::new(0.0, 0.0);
         for (c, block) in h.chunks(64).enumerate().rev() {
             let base = c * 64;
-            let mut ph = c64(crate::trig::cis_turns_f64(
+            let mut ph = c64(cis_turns_f64(
                 (base + block.len() - 1) as f64 * turns_per_bin,
             ));
             let inv_step = step.conj();
@@ -647,7 +647,7 @@ fn higher_order<T: Sample>(
                 g *= ratio;
                 ratio *= q;
             }
-            let z = c64(crate::trig::cis_turns_f64(tau_rel / lam)) * (head - corr);
+            let z = c64(cis_turns_f64(tau_rel / lam)) * (head - corr);
             *a_acc += z * (cfg.weight(d_la as f32) * cfg.weight(d_bs as f32)) as f64;
         }
     }

@@ -5,7 +5,7 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;
-use vltm_kernel::{Config, Gate, Point, Probe, Report, RowBuffer, Sample, Scan, Target};
+use vltm_kernel::{ColumnF32, Config, Gate, Point, Probe, Report, RowBuffer, Sample, Scan, Target};
 
 /// A scan for the kernel: apertures and histograms `hists[(l·Ks + s)·Nt + n]`.
 #[derive(Clone, Copy, Debug)]
@@ -56,6 +56,33 @@ pub fn run<T: Sample>(
     let mut out = vec![0.0f64; voxels.len()];
     let report = probe.finish(&scan, &mut out).expect("finish");
     (out, report)
+}
+
+/// Streams the rows `order` of `data` through a [`ColumnF32`] (factorised Gaussian column,
+/// `f32` Kahan state) focused at `focus` and returns `(T, report)` as `f64`.
+pub fn run_column_f32<T: Sample>(
+    cfg: &Config,
+    data: Data<'_, T>,
+    focus: Point,
+    voxels: &[Point],
+    order: &[usize],
+) -> (Vec<f64>, Report) {
+    let ks = data.spads.len();
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+    let scan = Scan::new(cfg, data.spads, &mut tables).expect("scan");
+    let mut state = vec![0.0f32; ColumnF32::state_len(cfg, ks)];
+    let mut col = ColumnF32::new(&scan, focus, &mut state).expect("column");
+    let mut buf = vec![0.0f32; RowBuffer::len(cfg, ks)];
+    let mut rows = RowBuffer::new(&scan, &mut buf).expect("row buffer");
+    for &l in order {
+        let row = rows
+            .load(&scan, data.lasers[l], data.row(cfg.nt(), l))
+            .expect("load");
+        col.push_row(&scan, &row).expect("push_row");
+    }
+    let mut out = vec![0.0f32; voxels.len()];
+    let report = col.finish(&scan, voxels, &mut out).expect("finish");
+    (out.into_iter().map(f64::from).collect(), report)
 }
 
 /// Every (target kind, gate) combination the kernel offers, for a column focus `focus`.

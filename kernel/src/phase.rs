@@ -10,6 +10,10 @@
 //!   The error of the *phase argument* itself (an `f32` product `t = ν·τ/2π`) dominates for
 //!   large `t`: ≈ 6e-8·|t| turns.
 //!
+//! * Twiddle stepping ([`TwiddleStep`]): the integer phase accumulator `q = (k·n) mod N` into a
+//!   table of `e^{−2πiq/N}`, stepped by `k mod N` per sample: exact (no drift with n), shared by
+//!   the float and the fixed-point band DFTs and the photon paths.
+//!
 //! micromath is not used here: its `sin`/`cos` are 1.1e-3 off (STYLE.md); `libm`'s `sincosf`
 //! reduces in `f64`, which is soft-float on a Cortex-M4F. `libm`'s f64 functions are used only
 //! for one-off setup (tables, seeds).
@@ -55,9 +59,72 @@ pub fn cis_turns_f64(t: f64) -> Complex32 {
     cis_turns((t - libm::rint(t)) as f32)
 }
 
+/// Integer phase accumulator over a table of `N` twiddles `e^{−2πiq/N}`: the index
+/// `q = (k·n) mod N` of sample `n`, stepped by `k mod N` (all `< N ≤ 2³⁰`, no overflow).
+///
+/// ```
+/// use vltm_kernel::phase::TwiddleStep;
+/// let mut t = TwiddleStep::new(-3, 2, 10); // k = −3, from n = 2, N = 10
+/// let q: Vec<usize> = (0..4).map(|_| { let q = t.index(); t.advance(); q }).collect();
+/// assert_eq!(q, [4, 1, 8, 5]); // (−3·n) mod 10 for n = 2, 3, 4, 5
+/// ```
+#[derive(Clone, Copy, Debug)]
+pub struct TwiddleStep {
+    q: usize,
+    step: usize,
+    n: usize,
+}
+
+impl TwiddleStep {
+    /// The accumulator of frequency `k` at sample `start` for a table of `n` entries
+    /// (`n = 0` is read as 1). The first product is taken in `u64` (it reaches 2⁶⁰).
+    #[inline]
+    pub fn new(k: i64, start: u64, n: usize) -> Self {
+        let n = n.max(1);
+        let step = k.rem_euclid(n as i64) as u64;
+        let q = ((step * (start % n as u64)) % n as u64) as usize;
+        Self {
+            q,
+            step: step as usize,
+            n,
+        }
+    }
+    /// The current table index `(k·n) mod N`.
+    #[inline(always)]
+    pub const fn index(&self) -> usize {
+        self.q
+    }
+    /// Next sample: `q ← (q + k) mod N` (one add, one compare).
+    #[inline(always)]
+    pub fn advance(&mut self) {
+        self.q += self.step;
+        if self.q >= self.n {
+            self.q -= self.n;
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn twiddle_step_is_k_n_mod_n() {
+        for (k, start, n) in [
+            (5i64, 0u64, 7usize),
+            (-11, 3, 289),
+            (140, 254, 289),
+            (0, 9, 4),
+            (1 << 29, (1 << 40) + 3, (1 << 30) - 1),
+        ] {
+            let mut t = TwiddleStep::new(k, start, n);
+            for i in 0..50u64 {
+                let want = (i128::from(k) * i128::from(start + i)).rem_euclid(n as i128) as usize;
+                assert_eq!(t.index(), want, "k={k} n={}", start + i);
+                t.advance();
+            }
+        }
+    }
 
     #[test]
     fn cis_accuracy() {

@@ -1,0 +1,247 @@
+//! The factorised Gaussian column `T(x_a, ·)` (DESIGN §B.3.2) with **`f32` state and no
+//! `f64` arithmetic**, for FPUs without double precision (Cortex-M4F, FPv4-SP), where every
+//! `f64` operation of [`Probe`](crate::Probe)'s accumulators is a soft-float call.
+//!
+//! Same maths and conventions as the factorised column of [`Probe`](crate::Probe) (module
+//! docs of [`crate::probe`]): per row `U[s][j] += w(d_la)·e^{iν_j d_la}·HG_ls[j]`, and at the
+//! end `A(b) = Σ_s w(d_bs)·Σ_j e^{iν_j(d_ab + d_bs)}·U[s][j]`, `T = |A|²`.
+//!
+//! # Error bound
+//!
+//! The state is summed over the R rows of a scan, the one place where `f32` loses accuracy
+//! with the scan's length: a plain `f32` sum errs by up to `(R − 1)·u·Σ_l |t_l|` (`u = 2⁻²⁴`;
+//! 576 rows: 3.4e-5). Each component of `U` is therefore a **Kahan-compensated** sum (a sum
+//! and its running compensation, 4 `f32` per complex value): its error is
+//! `≤ 2u·Σ_l |t_l| + O(R·u²)·Σ_l |t_l|`, independent of R (Higham, *Accuracy and Stability of
+//! Numerical Algorithms*, §4.3). Each row's term `t_l = HG·p` adds `≈ 2√2·u` (one complex
+//! product) and its phase `p_j` the recurrence's `≈ J·u` (two `cis_turns` seeds, `p *= step`).
+//! `finish` sums J band terms and Ks SPADs in `f32` with the same phase recurrence as the
+//! diagonal: `(J + Ks)·u` of the element's scale. In all, relative to the element's scale
+//! `S(a, b) = Σ_l Σ_s w_l w_s Σ_n |H_ls[n]|`:
+//! `|A_f32 − A_f64| ≲ u·(2J + Ks + 8)·S` on top of the band path's own `f32` errors (the
+//! phase arguments `≈ 2π·u·Φ`, Φ the largest phase in turns) — checked against the `f64`
+//! time-domain reference by `tests/proptest_kernel.rs` (`column_f32`).
+//!
+//! # Cost and memory
+//!
+//! State: [`ColumnF32::state_len`] = `4·Ks·J + 2J` `f32` (the same bytes as the `f64`
+//! [`Probe`](crate::Probe) column's `2J(Ks + 1)` `f64`). Per row: `Ks·J` complex
+//! multiply-adds into compensated sums (≈ 26 instructions each on the M4F; 0.1 M per row
+//! for the paper's 28 SPADs and J = 137). `finish`: `Kb·Ks·J` band terms.
+
+use crate::config::{Config, Legs, Point};
+use crate::error::{Error, check_len, check_points};
+use crate::geometry::{alias_window, dist, leaves_window, widen};
+use crate::phase::cis_turns;
+use crate::probe::{Report, band_consts, band_sum};
+use crate::sample::Sample;
+use crate::scan::{Row, Scan, as_complex};
+use num_complex::Complex32;
+
+/// Factorised Gaussian column with `f32` Kahan-compensated state (see the module docs).
+///
+/// ```
+/// use vltm_kernel::{ColumnF32, Config, Params, RowBuffer, Scan};
+/// let cfg = Config::try_new(&Params::new(0.2, 128, 0.01)).unwrap();
+/// let spads = [[0.0f32, 0.0, 0.0]];
+/// let mut tables = vec![0.0; Scan::tables_len(&cfg, 1)];
+/// let scan = Scan::new(&cfg, &spads, &mut tables).unwrap();
+/// let mut state = vec![0.0f32; ColumnF32::state_len(&cfg, 1)];
+/// let mut col = ColumnF32::new(&scan, [0.0, 0.0, 0.3], &mut state).unwrap();
+/// let mut buf = vec![0.0; RowBuffer::len(&cfg, 1)];
+/// let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
+/// let mut h = [0u16; 128];
+/// h[100] = 50; // a return at 1.00 m: laser → x_a (0.3 m) → x_b = (0, 0, 0.5) (0.2 m) → SPAD (0.5 m)
+/// let row = rows.load(&scan, [0.0, 0.0, 0.0], &h).unwrap();
+/// col.push_row(&scan, &row).unwrap();
+/// let voxels = [[0.0f32, 0.0, 0.5], [0.0, 0.0, 0.8]]; // paths of 1.0 m and 1.6 m
+/// let mut out = [0.0f32; 2];
+/// col.finish(&scan, &voxels, &mut out).unwrap();
+/// assert!(out[0] > 10.0 * out[1]);
+/// ```
+#[derive(Debug)]
+pub struct ColumnF32<'m> {
+    focus: Point,
+    /// `U` sums (`Ks·J`), then their compensations (`Ks·J`), then the row's phases (`J`).
+    sums: &'m mut [Complex32],
+    comps: &'m mut [Complex32],
+    phase: &'m mut [Complex32],
+    report: Report,
+    /// Min / max over rows of the projector leg `d1_l + |x_l − x_a|` (m).
+    leg_range: (f32, f32),
+    cfg: Config,
+    n_spads: usize,
+}
+
+/// One compensated addition `s + x` (Kahan): `c` carries what `s` could not hold. Rust does
+/// not reassociate floating-point operations, so the compensation survives optimisation.
+#[inline(always)]
+fn kahan(s: &mut f32, c: &mut f32, x: f32) {
+    let y = x - *c;
+    let t = *s + y;
+    *c = (t - *s) - y;
+    *s = t;
+}
+
+impl<'m> ColumnF32<'m> {
+    /// Length in `f32` of the state: `4·Ks·J + 2J`.
+    pub const fn state_len(cfg: &Config, n_spads: usize) -> usize {
+        n_spads
+            .saturating_mul(4)
+            .saturating_add(2)
+            .saturating_mul(cfg.bins())
+    }
+
+    /// A zeroed column for the focus `focus` with its state in `state`.
+    ///
+    /// # Errors
+    /// [`Error::Length`] if `state` does not have [`ColumnF32::state_len`] elements;
+    /// [`Error::NonFinite`] for a non-finite focus.
+    pub fn new(scan: &Scan<'_>, focus: Point, state: &'m mut [f32]) -> Result<Self, Error> {
+        let cfg = scan.config();
+        let ks = scan.spads().len();
+        let need = Self::state_len(cfg, ks);
+        check_len("state", need, state.len())?;
+        check_points("focus", &[focus])?;
+        state.fill(0.0);
+        let too_short = Error::Length {
+            what: "state",
+            expected: need,
+            found: state.len(),
+        };
+        let n = 2 * ks * cfg.bins();
+        let (sums, rest) = state.split_at_mut_checked(n).ok_or(too_short)?;
+        let (comps, phase) = rest.split_at_mut_checked(n).ok_or(too_short)?;
+        Ok(Self {
+            focus,
+            sums: as_complex("state", sums)?,
+            comps: as_complex("state", comps)?,
+            phase: as_complex("state", phase)?,
+            report: Report::default(),
+            leg_range: (f32::INFINITY, f32::NEG_INFINITY),
+            cfg: *cfg,
+            n_spads: ks,
+        })
+    }
+
+    /// The focus `x_a`.
+    pub const fn focus(&self) -> Point {
+        self.focus
+    }
+    /// Counters so far (`aliased` is computed by [`ColumnF32::finish`]).
+    pub const fn report(&self) -> Report {
+        self.report
+    }
+    /// The compensated sums `U[s·J + j]` (without their compensations, which are below
+    /// half an ulp of each sum).
+    pub fn spectra(&self) -> &[Complex32] {
+        self.sums
+    }
+
+    /// Adds one laser row: `Ks·J` complex multiply-adds into the compensated sums, two phase
+    /// seeds and one weight; no `f64`. Infallible on data values and panic-free.
+    ///
+    /// # Errors
+    /// [`Error::Incompatible`] if `scan` has another configuration or SPAD count than the one
+    /// the column was made for; [`Error::Length`] if `row` was loaded for a scan of another
+    /// size. Nothing is changed then.
+    pub fn push_row<T: Sample>(&mut self, scan: &Scan<'_>, row: &Row<'_, T>) -> Result<(), Error> {
+        let cfg = scan.config();
+        if *cfg != self.cfg || scan.spads().len() != self.n_spads {
+            return Err(Error::Incompatible("scan of another configuration"));
+        }
+        let j = cfg.bins().max(1);
+        check_len("row spectra", self.sums.len(), row.band().len())?;
+        check_len("row histograms", cfg.nt(), row.nt())?;
+        let laser = row.laser();
+        let d_la = dist(&laser, &self.focus);
+        let d1 = match cfg.legs() {
+            Legs::WallToWall => 0.0,
+            Legs::FirstAndLast { laser_origin, .. } => dist(
+                &laser,
+                &[
+                    laser_origin[0] as f32,
+                    laser_origin[1] as f32,
+                    laser_origin[2] as f32,
+                ],
+            ),
+        };
+        let leg = d1 + d_la;
+        self.leg_range = widen(self.leg_range, leg);
+        let (klo, inv) = band_consts(cfg);
+        let mut p = cis_turns(klo * d_la) * cfg.weight(d_la);
+        let step = cis_turns(inv * d_la);
+        for ph in self.phase.iter_mut() {
+            *ph = p;
+            p *= step;
+        }
+        for ((us, cs), hg) in self
+            .sums
+            .chunks_exact_mut(j)
+            .zip(self.comps.chunks_exact_mut(j))
+            .zip(row.band().chunks_exact(j))
+        {
+            for (((u, c), h), ph) in us
+                .iter_mut()
+                .zip(cs.iter_mut())
+                .zip(hg)
+                .zip(self.phase.iter())
+            {
+                let t = *h * *ph;
+                kahan(&mut u.re, &mut c.re, t.re);
+                kahan(&mut u.im, &mut c.im, t.im);
+            }
+        }
+        self.report.rows += 1;
+        self.report.non_finite += u64::from(row.non_finite());
+        self.report.dropped += u64::from(row.dropped());
+        Ok(())
+    }
+
+    /// Images `voxels`: `out[i] = T(x_a, voxels[i]) = |A|²`, all in `f32`; returns the
+    /// counters with [`Report::aliased`] (voxels whose path times left
+    /// [`Config::alias_free`]). Does not change the state. Cost `Kb·Ks·J` band terms.
+    ///
+    /// # Errors
+    /// [`Error::Incompatible`] for a scan of another configuration; [`Error::Length`] if
+    /// `out.len() ≠ voxels.len()`; [`Error::NonFinite`] for a non-finite voxel.
+    pub fn finish(
+        &self,
+        scan: &Scan<'_>,
+        voxels: &[Point],
+        out: &mut [f32],
+    ) -> Result<Report, Error> {
+        let cfg = scan.config();
+        if *cfg != self.cfg || scan.spads().len() != self.n_spads {
+            return Err(Error::Incompatible("scan of another configuration"));
+        }
+        check_len("out", voxels.len(), out.len())?;
+        check_points("voxels", voxels)?;
+        let j = cfg.bins().max(1);
+        let (klo, inv) = band_consts(cfg);
+        let (w_lo, w_hi) = alias_window(cfg);
+        let window = (w_lo as f32, w_hi as f32);
+        let mut report = self.report;
+        for (o, b) in out.iter_mut().zip(voxels) {
+            let d_ab = dist(&self.focus, b);
+            let mut sum = Complex32::new(0.0, 0.0);
+            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for ((sp, us), d4) in scan
+                .spads()
+                .iter()
+                .zip(self.sums.chunks_exact(j))
+                .zip(scan.sensor_legs())
+            {
+                let d_bs = dist(b, sp);
+                let tau = d_ab + d_bs;
+                (lo, hi) = widen((lo, hi), tau + d4);
+                sum += band_sum(us, tau, klo, inv) * cfg.weight(d_bs);
+            }
+            if leaves_window(window, self.leg_range, (lo, hi)) {
+                report.aliased += 1;
+            }
+            *o = sum.norm_sqr();
+        }
+        Ok(report)
+    }
+}
