@@ -4,6 +4,7 @@
 mod config;
 mod error;
 mod fixed;
+mod lookup;
 mod probe;
 mod sample;
 mod scan;
@@ -17,8 +18,9 @@ pub use self::fixed::{
 pub use ::fixed::types::I1F15;
 pub use config::{Config, Legs, Params, Point, Weights};
 pub use error::{ConfigError, Error};
+pub use lookup::{Lookup, LookupGrid, LookupParams, LookupProbe, lagrange4};
 pub use num_complex;
 pub use probe::{Gate, Probe, Report, Target};
 pub use sample::Sample;
 pub use scan::{Row, RowBuffer, Scan};
-pub use trig::{cis_turns, cis_turns_f64};
+pub use trig::{cis_small_turns, cis_turns, cis_turns_f64};
