@@ -52,7 +52,10 @@ use proptest::prelude::*;
 use proptest::test_runner::{FileFailurePersistence, RngAlgorithm, RngSeed};
 use reference::{Reference, p64};
 use support::{Data, all_rows, run};
-use vltm_kernel::{Config, Gate, Legs, Params, Point, Report, Sample, Target, Weights};
+use vltm_kernel::{
+    Config, Gate, Legs, Lookup, LookupGrid, LookupParams, LookupProbe, Params, Point, Report,
+    RowBuffer, Sample, Scan, Target, Weights,
+};
 
 const SEED: u64 = 0x7a11_5eed_0f1b_7e00;
 const U32: f64 = f32::EPSILON as f64 / 2.0;
@@ -453,6 +456,109 @@ impl Scene {
         out
     }
 
+    /// The lookup path (diagonal or column) with interpolation tolerance `tol` under
+    /// `kernel`, against the Gaussian reference `truth`. Tolerance: the band path's
+    /// `erfc(m/√2) + 2e^{−c_g²/2}`, plus the grid's derived bound `η`
+    /// ([`LookupGrid::bound`]), plus [`eps_lookup`].
+    fn compare_lookup(
+        &self,
+        kernel: &Params,
+        truth: &Reference,
+        target: Target,
+        tol: f64,
+    ) -> Outcome {
+        if self.counts {
+            let hists: Vec<u16> = self.h.iter().map(|&x| x as u16).collect();
+            self.compare_lookup_with(&hists, kernel, truth, target, tol)
+        } else {
+            let hists: Vec<f32> = self.h.iter().map(|&x| x as f32).collect();
+            self.compare_lookup_with(&hists, kernel, truth, target, tol)
+        }
+    }
+
+    fn compare_lookup_with<T: Sample>(
+        &self,
+        hists: &[T],
+        kernel: &Params,
+        truth: &Reference,
+        target: Target,
+        tol: f64,
+    ) -> Outcome {
+        let cfg = Config::try_new(kernel).expect("valid by construction");
+        let grid = LookupGrid::try_new(
+            &cfg,
+            &LookupParams {
+                tolerance: tol,
+                grid_len: None,
+            },
+        )
+        .expect("a grid for every tolerance");
+        let (t_k, report) = run_lookup(
+            &cfg,
+            &grid,
+            &self.lasers,
+            &self.spads,
+            hists,
+            target,
+            &self.voxels,
+        );
+        let (amps, scales): (Vec<Complex64>, Vec<f64>) = match target {
+            Target::Diagonal => (
+                truth.diagonal(reference::Gate::Gaussian, &self.voxels),
+                self.voxels
+                    .iter()
+                    .map(|v| truth.scale(&p64(*v), &p64(*v)))
+                    .collect(),
+            ),
+            Target::Column(a) => (
+                truth.column(reference::Gate::Gaussian, a, &self.voxels),
+                self.voxels
+                    .iter()
+                    .map(|b| truth.scale(&p64(a), &p64(*b)))
+                    .collect(),
+            ),
+        };
+        let eps32 = eps_lookup(&cfg, &grid, truth, target, &self.voxels);
+        let tail = (-cfg.params().gate_support.powi(2) / 2.0).exp();
+        let eps = eps32
+            + reference::erfc(cfg.params().band_half_width / 2f64.sqrt())
+            + 2.0 * tail
+            + grid.bound();
+        let kind = if let Target::Column(_) = target {
+            "lookup column"
+        } else {
+            "lookup diagonal"
+        };
+        let mut out = Outcome {
+            probe: format!("{kind} (L = {}, η = {:.1e})", grid.len(), grid.bound()),
+            worst: 0.0,
+            worst_rel: 0.0,
+            signal: 0.0,
+            eps32,
+            report,
+        };
+        for ((tk, a), s) in t_k.iter().zip(&amps).zip(&scales) {
+            let err = support::nan_is_inf((tk.sqrt() - a.norm()).abs());
+            if *s > 0.0 {
+                out.worst = out.worst.max(err / (eps * s));
+                out.worst_rel = out.worst_rel.max(err / s);
+                out.signal = out.signal.max(a.norm() / s);
+            } else if err > 0.0 {
+                out.worst = f64::INFINITY;
+            }
+        }
+        out
+    }
+
+    /// Both lookup probes under `p` with tolerance `tol`.
+    fn lookup_outcomes(&self, p: &Params, tol: f64) -> Vec<Outcome> {
+        let truth = self.reference(p);
+        [Target::Diagonal, Target::Column(self.focus)]
+            .iter()
+            .map(|&t| self.compare_lookup(p, &truth, t, tol))
+            .collect()
+    }
+
     /// All six probes under `p` against the reference under `p`.
     fn outcomes(&self, p: &Params) -> Vec<Outcome> {
         let truth = self.reference(p);
@@ -478,6 +584,68 @@ fn eps_f32(cfg: &Config, r: &Reference, target: Target, voxels: &[Point]) -> f64
     U32 * (2.0 * std::f64::consts::PI * turns + cfg.bins() as f64 + cfg.nt() as f64 + 64.0)
 }
 
+/// Streams every row through a [`LookupProbe`] and returns `(T, report)`.
+fn run_lookup<T: Sample>(
+    cfg: &Config,
+    grid: &LookupGrid,
+    lasers: &[Point],
+    spads: &[Point],
+    hists: &[T],
+    target: Target,
+    voxels: &[Point],
+) -> (Vec<f64>, Report) {
+    let ks = spads.len();
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+    let scan = Scan::new(cfg, spads, &mut tables).expect("scan");
+    let mut lt = vec![0.0f32; Lookup::tables_len(grid)];
+    let lookup = Lookup::new(grid, &mut lt).expect("lookup tables");
+    let mut state = vec![0.0f64; LookupProbe::state_len(voxels.len())];
+    let mut scratch = vec![0.0f32; LookupProbe::scratch_len(grid, voxels.len())];
+    let mut probe =
+        LookupProbe::new(&scan, &lookup, target, voxels, &mut state, &mut scratch).expect("probe");
+    let mut buf = vec![0.0f32; RowBuffer::len(cfg, ks)];
+    let mut rows = RowBuffer::new(&scan, &mut buf).expect("row buffer");
+    let len = ks * cfg.nt();
+    for (l, laser) in lasers.iter().enumerate() {
+        let row = rows
+            .load(&scan, *laser, &hists[l * len..(l + 1) * len])
+            .expect("load");
+        probe.push_row(&scan, &lookup, &row).expect("push_row");
+    }
+    let mut out = vec![0.0f64; voxels.len()];
+    let report = probe.finish(&mut out).expect("finish");
+    (out, report)
+}
+
+/// The lookup path's `f32` model: the band path's phase term twice (the `f32` path time and
+/// the `f32` grid position `τ/δ` each carry a relative `u`), the band recurrences'
+/// `J + Nt + 64` of the band spectra, and `4·log₂L` for the inverse FFT's stage sums.
+fn eps_lookup(
+    cfg: &Config,
+    grid: &LookupGrid,
+    r: &Reference,
+    target: Target,
+    voxels: &[Point],
+) -> f64 {
+    let nu_max = (0..cfg.bins())
+        .map(|j| cfg.nu(j).abs())
+        .fold(cfg.omega(), f64::max);
+    let (_, tau_max) = tau_span(r, target, voxels);
+    let turns = nu_max * (tau_max.abs() + r.t0.abs()) / (2.0 * std::f64::consts::PI);
+    let log_l = grid.len().trailing_zeros() as f64;
+    U32 * (4.0 * std::f64::consts::PI * turns
+        + cfg.bins() as f64
+        + cfg.nt() as f64
+        + 64.0
+        + 4.0 * log_l)
+}
+
+/// The lookup tolerance a case is run with: 1e-6 … 1e-3 by its seed (so the strategy, and
+/// therefore the band path's cases, are unchanged).
+fn lookup_tolerance(case: &Case) -> f64 {
+    [1e-6, 1e-5, 1e-4, 1e-3][(case.seed % 4) as usize]
+}
+
 fn check(case: &Case) -> Result<(), TestCaseError> {
     let (scene, p) = case.prepare();
     for o in scene.outcomes(&p) {
@@ -495,6 +663,16 @@ fn check(case: &Case) -> Result<(), TestCaseError> {
             "{}: margin chosen to avoid aliasing",
             o.probe
         );
+    }
+    for o in scene.lookup_outcomes(&p, lookup_tolerance(case)) {
+        prop_assert!(
+            o.worst <= 1.0,
+            "{}: error {:.3}× the tolerance ({o:?})",
+            o.probe,
+            o.worst
+        );
+        prop_assert_eq!(o.report.rows, case.lasers.len() as u64);
+        prop_assert_eq!(o.report.non_finite, 0);
     }
     Ok(())
 }
@@ -794,6 +972,50 @@ fn tolerance_detects_small_mistakes() {
     }
 }
 
+/// The lookup path's tolerance has teeth: a path-time error of half a grid step (t0 off by
+/// `δ/2`, a carrier phase error of `Ω·δ/2`) fails it by > 3× on the diagonal and the column,
+/// at every tolerance, while the correct configuration passes.
+#[test]
+fn lookup_tolerance_detects_half_step_error() {
+    let p = Params {
+        t0: 1.0,
+        ..Params::new(0.1, 300, 0.01)
+    };
+    let sc = scene(
+        &p,
+        vec![[0.1, 0.0, 0.8], [-0.2, 0.1, 0.6], [0.3, -0.3, 1.0]],
+        [0.0, 0.0, 0.7],
+        false,
+        7,
+        0.01,
+    );
+    let truth = sc.reference(&p);
+    let cfg = Config::try_new(&p).unwrap();
+    for tol in [1e-6, 1e-5, 1e-4, 1e-3] {
+        for o in sc.lookup_outcomes(&p, tol) {
+            println!("{}: correct, err/tol {:.3}", o.probe, o.worst);
+            assert!(o.worst <= 1.0, "{o:?}");
+        }
+        let grid = LookupGrid::try_new(
+            &cfg,
+            &LookupParams {
+                tolerance: tol,
+                grid_len: None,
+            },
+        )
+        .unwrap();
+        let half_step = Params {
+            t0: p.t0 + grid.step() / 2.0,
+            ..p
+        };
+        for t in [Target::Diagonal, Target::Column(sc.focus)] {
+            let o = sc.compare_lookup(&half_step, &truth, t, tol);
+            println!("{}: half a grid step off, err/tol {:.3}", o.probe, o.worst);
+            assert!(o.worst > 3.0, "{}: mistake not detected ({o:?})", o.probe);
+        }
+    }
+}
+
 /// Prints the distribution of `error / tolerance` over many random cases (how the tolerance
 /// was calibrated) and asserts the property on all of them:
 /// `CALIBRATE_CASES=2000 cargo test --release --test proptest_kernel -- --ignored --nocapture`
@@ -814,7 +1036,11 @@ fn calibrate() {
     for _ in 0..cases {
         let case = case().new_tree(&mut runner).expect("tree").current();
         let (scene, p) = case.prepare();
-        for o in scene.outcomes(&p) {
+        let lookups = scene.lookup_outcomes(&p, lookup_tolerance(&case));
+        for mut o in scene.outcomes(&p).into_iter().chain(lookups) {
+            if let Some(i) = o.probe.find(" (L") {
+                o.probe.truncate(i);
+            }
             assert!(o.worst <= 1.0, "{}: {o:?} in {case:?}", o.probe);
             let e = stats.entry(o.probe.clone()).or_default();
             let f32_part = if o.probe.ends_with("Gaussian") && case.m < 5.5 {

@@ -34,6 +34,11 @@ pub enum ConfigError {
     BandCrossesNyquist,
     /// A derived size (DFT length, band, table length) does not fit the index types.
     SizeOverflow(&'static str),
+    /// The parameter (a lookup grid length) must be a power of two.
+    NotPowerOfTwo(&'static str),
+    /// The parameter makes a lookup grid too coarse: its interpolation error bound exceeds
+    /// the tolerance, or it has fewer points than band bins or than 8 per carrier wavelength.
+    TooCoarse(&'static str),
 }
 
 impl fmt::Display for ConfigError {
@@ -49,6 +54,12 @@ impl fmt::Display for ConfigError {
                  `wavelength` (need dt*(1/wavelength + m/(2*pi*sigma)) < 1/2)",
             ),
             Self::SizeOverflow(p) => write!(f, "derived size `{p}` overflows"),
+            Self::NotPowerOfTwo(p) => write!(f, "parameter `{p}` must be a power of two"),
+            Self::TooCoarse(p) => write!(
+                f,
+                "parameter `{p}` gives a grid too coarse for the tolerance \
+                 (or fewer points than band bins, or than 8 per wavelength)"
+            ),
         }
     }
 }

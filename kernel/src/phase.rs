@@ -33,7 +33,31 @@ pub fn cis_turns(t: f32) -> Complex32 {
     let r = t - libm::rintf(t);
     let q4 = libm::rintf(4.0 * r);
     let f = r - 0.25 * q4;
-    let x = TAU * f;
+    let Complex32 { re: c, im: s } = cis_small_turns(f);
+    // q4 ∈ {−2, −1, 0, 1, 2}; rotate by q4 quarter turns. (`as i32` saturates; NaN → 0.)
+    match (q4 as i32) & 3 {
+        0 => Complex32::new(c, s),
+        1 => Complex32::new(-s, c),
+        2 => Complex32::new(-c, -s),
+        _ => Complex32::new(s, -c),
+    }
+}
+
+/// `e^{i2πt}` for a **small** phase `|t| ≤ 1/8` turn: the polynomials of [`cis_turns`]
+/// (Taylor series of sin to x⁹ and cos to x¹⁰ on `|x| = 2π|t| ≤ π/4`, truncation < 2e-9)
+/// without its range reduction, so no `rint` and no quadrant branch: for phases known to be
+/// small, such as the sub-sample carrier of the lookup path ([`crate::LookupProbe`]).
+/// Same bits as [`cis_turns`] on `|t| ≤ 1/8`; outside that range the error grows as the
+/// first omitted Taylor term (`(2πt)¹¹/11!`: 2.6e-6 at `t = 1/4`).
+///
+/// ```
+/// let c = vltm_kernel::cis_small_turns(0.125);
+/// assert!((c.re - 0.70710677).abs() < 1e-7 && (c.im - 0.70710677).abs() < 1e-7);
+/// assert_eq!(c, vltm_kernel::cis_turns(0.125));
+/// ```
+#[inline(always)]
+pub fn cis_small_turns(t: f32) -> Complex32 {
+    let x = TAU * t;
     let x2 = x * x;
     let s = x
         * (1.0
@@ -43,13 +67,7 @@ pub fn cis_turns(t: f32) -> Complex32 {
         + x2 * (-0.5
             + x2 * (1.0 / 24.0
                 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40_320.0 + x2 * (-1.0 / 3_628_800.0)))));
-    // q4 ∈ {−2, −1, 0, 1, 2}; rotate by q4 quarter turns. (`as i32` saturates; NaN → 0.)
-    match (q4 as i32) & 3 {
-        0 => Complex32::new(c, s),
-        1 => Complex32::new(-s, c),
-        2 => Complex32::new(-c, -s),
-        _ => Complex32::new(s, -c),
-    }
+    Complex32::new(c, s)
 }
 
 /// `e^{i2πt}` for a phase in turns given in `f64`: reduced in `f64` (exact), evaluated in

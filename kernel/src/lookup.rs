@@ -1,0 +1,620 @@
+//! The **lookup path**: the Gaussian-gated diagonal and column with an O(1) cost per
+//! (voxel, SPAD) pair instead of the band path's `J`-term sum (DESIGN §B.2.4).
+//!
+//! Per laser row and per SPAD, the gated, filtered signal `Z_s(τ)` is synthesised **once** on
+//! a fine time grid from the row's band spectrum `HG_s[j]` ([`Row::band`], gate weights and
+//! legs folded in), demodulated (baseband); each voxel then reads its value at its exact path
+//! time by cubic interpolation, and the carrier is restored analytically.
+//!
+//! # Units and conventions
+//!
+//! Metres of optical path throughout (c ≡ 1); `τ` is the hidden path only (`d_lv + d_vs` on
+//! the diagonal, `d_la + d_ab + d_bs` on a column), the legs `x_s = d1 + d4_s − t0` being
+//! folded into `HG_s` as in the band path. Sign convention A (module docs of [`Probe`](crate::Probe)):
+//! `Z_s(τ) = Σ_j HG_s[j]·e^{iν_j τ}`, `ν_j = 2π(k_lo + j)/span`, `span = NΔt`.
+//!
+//! # Method
+//!
+//! With `k_d = round(span/λ)` (the band centre), a grid of `L` points (a power of two,
+//! `L ≥ J`) of step `δ = span/L` and `θ = k_d/L` (carrier turns per grid step):
+//!
+//! ```text
+//! Y_s[n] = Σ_j HG_s[j]·e^{2πi (k_lo + j − k_d) n/L}          (one inverse FFT of length L)
+//!        = e^{−2πi k_d τ_n/span}·Z_s(τ_n),   τ_n = n·δ        (exact at the nodes)
+//! Z_s(τ) ≈ C[i]·e^{2πi θ t}·Σ_{q=−1..2} ℓ_q(t)·Y_s[i + q],   i + t = τ/δ, 0 ≤ t < 1
+//! ```
+//!
+//! `ℓ_q` are the 4-point cubic Lagrange weights ([`lagrange4`]) on the nodes −1, 0, 1, 2,
+//! `C[i] = e^{2πi k_d i/L}` a table made once in `f64` (exact integer phase `k_d·i mod L`), and
+//! `e^{2πiθt}` (`|θt| ≤ 1/8` turn) the small-phase polynomial [`cis_small_turns`]. `Y_s` and
+//! `C` are `L`-periodic (the band sum is `span`-periodic), so indices wrap with `& (L − 1)`.
+//! The pair adds `w(d_vs)·Z_s(τ)` to its voxel's row sum (`Complex32`) when `τ + x_s` lies in
+//! the guard interval [`Config::guard`] (the same `f32` test as the band diagonal); once per
+//! row the sum times the lead weight (`w(d_lv)`, or `w(d_la)` on a column) is added to the
+//! `Complex64` accumulator. A column is imaged pair by pair like the diagonal (not
+//! factorised), so every path gets the guard and nothing aliases.
+//!
+//! # Error bound
+//!
+//! The cubic Lagrange remainder (Hermite–Genocchi, valid for complex functions) at
+//! `t ∈ [0, 1)` is `|Y(τ) − p(τ)| ≤ δ⁴·max|Y⁽⁴⁾|·|(t+1)t(t−1)(t−2)|/4! ≤ (3/128)·δ⁴·max|Y⁽⁴⁾|`
+//! (`max_{[0,1]} |(t+1)t(t−1)(t−2)| = 9/16` at `t = ½`). The baseband's fourth derivative is
+//! `Y⁽⁴⁾ = Σ_j (ν_j − Ω_d)⁴·HG_s[j]·e^{i(ν_j − Ω_d)τ}` with `Ω_d = 2πk_d/span`, and
+//! `|HG_s[j]| ≤ Ĝ_j·‖h_s‖₁` (`‖h_s‖₁ = Σ_n |H_s[n]|`, counts), so per pair
+//!
+//! ```text
+//! |Z_lookup(τ) − Z_band(τ)| ≤ η·‖h_s‖₁,   η = (3/128)·δ⁴·M₄,   M₄ = Σ_j Ĝ_j·(ν_j − Ω_d)⁴  (m⁻⁴)
+//! ```
+//!
+//! [`LookupGrid::bound`] is `η` (dimensionless, per count of `‖h_s‖₁`). For the Gaussian gate
+//! `M₄ ≈ 3/σ⁴·(1 + 2(εσ)² + (εσ)⁴/3)` (the gate spectrum's fourth moment, `ε = Ω − Ω_d`,
+//! `|ε| ≤ π/span`), so `η ≈ (9/128)·(δ/σ)⁴`: the grid step in units of σ (itself `2λ/3` by
+//! default, and the bandwidth `≈ 1/σ`) sets the error; the carrier frequency sets no error
+//! term because the carrier is restored analytically, it only requires `θ ≤ 1/8` (a grid
+//! of at least 8 points per carrier wavelength λ) for [`cis_small_turns`]. Summed over the
+//! scan, an element's amplitude error is `≤ η·S(a, b)` with `S = Σ_l Σ_s w_l w_s ‖h_ls‖₁`,
+//! the scale of the band path's tolerance (`tests/proptest_kernel.rs`): the lookup path's
+//! tolerance is the band path's plus `η`, plus `f32` rounding (the FFT: `≈ u·log₂L` per
+//! stage sum; the grid position `τ/δ`: a relative `u`, i.e. a carrier phase error of
+//! `2π·u·k_dτ/span` rad, the same order as the band path's `f32` phase).
+//!
+//! Example (the paper's setup: λ = 0.13 m, σ = 8.67 cm, Δt = 2.55 cm, Nt = 255: N = 289,
+//! span = 7.37 m, J = 137, k_d = 57): `L = 512` (δ = 1.44 cm = σ/6.0) gives η = 5.5e-5;
+//! `L = 1024` (δ = σ/12) gives η = 3.4e-6 (the default tolerance 1e-5 picks 1024).
+//!
+//! # Cost and memory
+//!
+//! Per row: `Ks` inverse FFTs of length `L` (`(L/2)·log₂L` butterflies each; the band is
+//! placed directly in bit-reversed order, so there is no permutation pass), then `Kv·Ks`
+//! pairs of O(1) work (a distance, the guard test, four Lagrange weights, four complex
+//! loads, one table carrier, one small-phase polynomial, one weight), against the band
+//! path's `Kv·Ks·14J` flops. Memory, all caller-owned: shared tables `3L` `f32`
+//! ([`Lookup::tables_len`]: twiddles and carrier); per probe the state `2Kv` `f64` (as the band
+//! diagonal's) and the scratch `2(L + 3) + 3Kv` `f32` ([`LookupProbe::scratch_len`]: the
+//! SPAD's grid, the voxels' row sums and lead distances). SPAD-outer: one grid in memory at a
+//! time. No allocation, no panic on data; configuration checked once.
+
+use crate::config::{Config, Point};
+use crate::error::{ConfigError, Error, check_len, check_points};
+use crate::probe::{Report, Target};
+use crate::sample::Sample;
+use crate::scan::{Row, Scan, as_complex, dist};
+use crate::trig::cis_small_turns;
+use num_complex::{Complex32, Complex64};
+
+/// Largest grid accepted (`2²⁴` points: tables and `f32` grid positions stay exact).
+const MAX_LEN: usize = 1 << 24;
+
+/// Extra grid entries past `L` (the 4-point stencil reads up to 3 past its start).
+const EXTRA: usize = 3;
+
+/// The 4-point cubic Lagrange weights at `t ∈ [0, 1)` for the nodes −1, 0, 1, 2:
+/// `p(t) = Σ_q w[q]·y[q − 1]`. Exact for cubics; `Σ_q w[q] = 1`.
+///
+/// ```
+/// let w = vltm_kernel::lagrange4(0.5);
+/// assert_eq!(w, [-0.0625, 0.5625, 0.5625, -0.0625]);
+/// ```
+#[inline(always)]
+pub fn lagrange4(t: f32) -> [f32; 4] {
+    let (tp, tm, t2) = (t + 1.0, t - 1.0, t - 2.0);
+    let a = t * tm;
+    let b = tp * t2;
+    [
+        a * t2 * (-1.0 / 6.0),
+        b * tm * 0.5,
+        b * t * -0.5,
+        a * tp * (1.0 / 6.0),
+    ]
+}
+
+/// What the lookup path must achieve, validated by [`LookupGrid::try_new`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LookupParams {
+    /// Largest interpolation error `η` per count of `‖h_s‖₁` (module docs; > 0, default 1e-5).
+    pub tolerance: f64,
+    /// Grid length `L` (a power of two); `None` = the smallest that meets `tolerance`.
+    pub grid_len: Option<usize>,
+}
+
+impl LookupParams {
+    /// Tolerance 1e-5, grid chosen from it.
+    pub const fn new() -> Self {
+        Self {
+            tolerance: 1e-5,
+            grid_len: None,
+        }
+    }
+}
+
+impl Default for LookupParams {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// The validated grid of the lookup path for one [`Config`]: `Copy`, no tables.
+///
+/// ```
+/// use vltm_kernel::{Config, LookupGrid, LookupParams, Params};
+/// let cfg = Config::try_new(&Params::new(0.13, 255, 0.0255)).unwrap();
+/// let g = LookupGrid::try_new(&cfg, &LookupParams::new()).unwrap();
+/// assert_eq!(g.len(), 1024);
+/// assert!(g.bound() < 1e-5);
+/// let coarse = LookupParams { grid_len: Some(512), ..LookupParams::new() };
+/// assert!(LookupGrid::try_new(&cfg, &coarse).is_err()); // η = 5.5e-5 > 1e-5
+/// ```
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct LookupGrid {
+    cfg: Config,
+    len: usize,
+    /// log₂ L.
+    bits: u32,
+    /// Carrier bin k_d.
+    k_d: i64,
+    /// `(k_lo − k_d) mod L`: grid bin of band bin 0.
+    first: usize,
+    /// η.
+    bound: f64,
+}
+
+/// `η(L) = (3/128)·(span/L)⁴·Σ_j Ĝ_j (ν_j − Ω_d)⁴`.
+fn eta(cfg: &Config, len: usize, k_d: i64) -> f64 {
+    let span = cfg.span();
+    let dnu = cfg.dnu();
+    let mut m4 = 0.0;
+    for j in 0..cfg.bins() {
+        let d = (cfg.k_lo() + j as i64 - k_d) as f64 * dnu;
+        m4 += cfg.gate_weight(j) * d * d * d * d;
+    }
+    let delta = span / len as f64;
+    3.0 / 128.0 * delta * delta * delta * delta * m4
+}
+
+impl LookupGrid {
+    /// Validates `p` for `cfg` and derives the grid.
+    ///
+    /// # Errors
+    /// [`ConfigError`] naming the parameter: `tolerance` not finite or ≤ 0;
+    /// `grid_len` not a power of two ([`ConfigError::NotPowerOfTwo`]), or too coarse
+    /// ([`ConfigError::TooCoarse`]: fewer points than band bins `J`, fewer than 8 per carrier
+    /// wavelength, or an error bound `η` above `tolerance`); a grid over 2²⁴ points
+    /// ([`ConfigError::SizeOverflow`]).
+    pub fn try_new(cfg: &Config, p: &LookupParams) -> Result<Self, ConfigError> {
+        let tol = p.tolerance;
+        if !tol.is_finite() {
+            return Err(ConfigError::NotFinite("tolerance"));
+        }
+        if tol <= 0.0 {
+            return Err(ConfigError::NotPositive("tolerance"));
+        }
+        let k_d = libm::round(cfg.span() / cfg.wavelength()) as i64;
+        // At least J points (distinct bins) and 8 per carrier turn (θ ≤ 1/8).
+        let floor = cfg.bins().max(8 * k_d.unsigned_abs() as usize).max(2);
+        let len = match p.grid_len {
+            Some(l) => {
+                if !l.is_power_of_two() {
+                    return Err(ConfigError::NotPowerOfTwo("grid_len"));
+                }
+                if l > MAX_LEN {
+                    return Err(ConfigError::SizeOverflow("grid_len"));
+                }
+                if l < floor || eta(cfg, l, k_d) > tol {
+                    return Err(ConfigError::TooCoarse("grid_len"));
+                }
+                l
+            }
+            None => {
+                let mut l = floor.next_power_of_two();
+                while eta(cfg, l, k_d) > tol {
+                    if l >= MAX_LEN {
+                        return Err(ConfigError::SizeOverflow("grid_len"));
+                    }
+                    l *= 2;
+                }
+                if l > MAX_LEN {
+                    return Err(ConfigError::SizeOverflow("grid_len"));
+                }
+                l
+            }
+        };
+        Ok(Self {
+            cfg: *cfg,
+            len,
+            bits: len.trailing_zeros(),
+            k_d,
+            first: (cfg.k_lo() - k_d).rem_euclid(len as i64) as usize,
+            bound: eta(cfg, len, k_d),
+        })
+    }
+
+    /// The configuration the grid was made for.
+    pub const fn config(&self) -> &Config {
+        &self.cfg
+    }
+    /// Grid length `L` (a power of two).
+    #[allow(clippy::len_without_is_empty)]
+    pub const fn len(&self) -> usize {
+        self.len
+    }
+    /// Grid step `δ = NΔt/L` (m).
+    pub fn step(&self) -> f64 {
+        self.cfg.span() / self.len as f64
+    }
+    /// Carrier bin `k_d = round(NΔt/λ)` (the demodulation frequency is `2πk_d/(NΔt)`).
+    pub const fn carrier_bin(&self) -> i64 {
+        self.k_d
+    }
+    /// The interpolation error bound `η` (per count of `‖h_s‖₁`, see the module docs).
+    pub const fn bound(&self) -> f64 {
+        self.bound
+    }
+}
+
+/// The lookup path's tables for one [`LookupGrid`], in caller memory: the FFT twiddles
+/// (`L − 1` used, stage by stage) and the carrier `C[i] = e^{2πi k_d i/L}`.
+#[derive(Debug)]
+pub struct Lookup<'t> {
+    grid: LookupGrid,
+    twiddle: &'t [Complex32],
+    carrier: &'t [Complex32],
+}
+
+impl<'t> Lookup<'t> {
+    /// Length in `f32` of the tables: `4L` (`L` complex twiddles, `L` complex carriers).
+    pub const fn tables_len(grid: &LookupGrid) -> usize {
+        4 * grid.len
+    }
+
+    /// Builds the tables into `tables` (once, `f64` `libm`, rounded to `f32`).
+    ///
+    /// # Errors
+    /// [`Error::Length`] if `tables` does not have [`Lookup::tables_len`] elements.
+    pub fn new(grid: &LookupGrid, tables: &'t mut [f32]) -> Result<Self, Error> {
+        let l = grid.len;
+        check_len("lookup tables", Self::tables_len(grid), tables.len())?;
+        let found = tables.len();
+        let all = as_complex("lookup tables", tables)?;
+        let Some((tw, car)) = all.split_at_mut_checked(l) else {
+            return Err(Error::Length {
+                what: "lookup tables",
+                expected: 4 * l,
+                found,
+            });
+        };
+        // Stage with half-size h uses e^{+2πi k/(2h)}, k < h, at entries h − 1 .. 2h − 1.
+        let mut h = 1;
+        while h < l {
+            for (k, w) in tw.iter_mut().skip(h - 1).take(h).enumerate() {
+                let a = core::f64::consts::PI * k as f64 / h as f64;
+                *w = Complex32::new(libm::cos(a) as f32, libm::sin(a) as f32);
+            }
+            h *= 2;
+        }
+        if let Some(last) = tw.last_mut() {
+            *last = Complex32::new(0.0, 0.0);
+        }
+        let step = grid.k_d.rem_euclid(l as i64) as u64;
+        for (i, c) in car.iter_mut().enumerate() {
+            let q = (step * i as u64) % l as u64;
+            let a = core::f64::consts::TAU * q as f64 / l as f64;
+            *c = Complex32::new(libm::cos(a) as f32, libm::sin(a) as f32);
+        }
+        Ok(Self {
+            grid: *grid,
+            twiddle: tw,
+            carrier: car,
+        })
+    }
+
+    /// The grid.
+    pub const fn grid(&self) -> &LookupGrid {
+        &self.grid
+    }
+
+    /// One SPAD's baseband grid `Y[n]` (`n < L`, then `EXTRA` wrapped copies) from its band
+    /// spectrum `hg` (J values): the band placed in bit-reversed order, then the radix-2
+    /// decimation-in-time stages of an inverse FFT.
+    fn synthesise(&self, hg: &[Complex32], y: &mut [Complex32]) {
+        let l = self.grid.len;
+        let shift = usize::BITS - self.grid.bits;
+        let mask = l - 1;
+        y.fill(Complex32::new(0.0, 0.0));
+        let mut k = self.grid.first;
+        for h in hg {
+            // `shift` ≥ 1 (L ≤ 2²⁴); reverse_bits of k < L over log₂L bits.
+            let r = k.reverse_bits().checked_shr(shift).unwrap_or(0);
+            if let Some(v) = y.get_mut(r) {
+                *v = *h;
+            }
+            k = (k + 1) & mask;
+        }
+        let (grid, extra) = y.split_at_mut(l.min(y.len()));
+        let mut h = 1;
+        while h < l {
+            let Some(tw) = self.twiddle.get(h - 1..2 * h - 1) else {
+                break;
+            };
+            for block in grid.chunks_exact_mut(2 * h) {
+                let (a, b) = block.split_at_mut(h);
+                for ((a, b), w) in a.iter_mut().zip(b.iter_mut()).zip(tw) {
+                    let t = *b * *w;
+                    *b = *a - t;
+                    *a += t;
+                }
+            }
+            h *= 2;
+        }
+        for (e, g) in extra.iter_mut().zip(grid.iter()) {
+            *e = *g;
+        }
+    }
+}
+
+/// A Gaussian-gated diagonal or column on the lookup path: the [`Probe`](crate::Probe) of
+/// [`Target`] × [`Gate::Gaussian`](crate::Gate::Gaussian) with an O(1) cost per pair (module
+/// docs). Same accumulators (`2Kv` `f64`, complex per voxel), merge and `finish` as the band
+/// diagonal; the result equals the band path's within [`LookupGrid::bound`].
+///
+/// ```
+/// use vltm_kernel::{Config, Lookup, LookupGrid, LookupParams, LookupProbe, Params, RowBuffer, Scan, Target};
+/// let cfg = Config::try_new(&Params::new(0.2, 128, 0.01)).unwrap();
+/// let spads = [[0.0f32, 0.0, 0.0]];
+/// let voxels = [[0.0f32, 0.0, 0.5], [0.0, 0.0, 0.8]];
+/// let mut tables = vec![0.0; Scan::tables_len(&cfg, 1)];
+/// let scan = Scan::new(&cfg, &spads, &mut tables).unwrap();
+/// let grid = LookupGrid::try_new(&cfg, &LookupParams::new()).unwrap();
+/// let mut lt = vec![0.0; Lookup::tables_len(&grid)];
+/// let lookup = Lookup::new(&grid, &mut lt).unwrap();
+/// let mut state = vec![0.0; LookupProbe::state_len(2)];
+/// let mut scratch = vec![0.0; LookupProbe::scratch_len(&grid, 2)];
+/// let mut diag =
+///     LookupProbe::new(&scan, &lookup, Target::Diagonal, &voxels, &mut state, &mut scratch)
+///         .unwrap();
+/// let mut buf = vec![0.0; RowBuffer::len(&cfg, 1)];
+/// let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
+/// let mut h = [0u16; 128];
+/// h[100] = 50; // a return at path length 1.00 m = 2 × 0.5 m
+/// let row = rows.load(&scan, [0.0, 0.0, 0.0], &h).unwrap();
+/// diag.push_row(&scan, &lookup, &row).unwrap();
+/// let mut out = [0.0f64; 2];
+/// diag.finish(&mut out).unwrap();
+/// assert!(out[0] > 10.0 * out[1]);
+/// ```
+#[derive(Debug)]
+pub struct LookupProbe<'m> {
+    target: Target,
+    voxels: &'m [Point],
+    acc: &'m mut [Complex64],
+    /// One SPAD's grid, `L + EXTRA`.
+    grid_buf: &'m mut [Complex32],
+    /// Per voxel: this row's sum over the SPADs.
+    sums: &'m mut [Complex32],
+    /// Per voxel: the lead distance (`d_lv`, or `d_la + d_ab`).
+    lead: &'m mut [f32],
+    report: Report,
+    grid: LookupGrid,
+}
+
+impl<'m> LookupProbe<'m> {
+    /// Length in `f64` of the state: `2Kv` (as the band diagonal's [`Probe::state_len`]).
+    pub const fn state_len(n_voxels: usize) -> usize {
+        n_voxels.saturating_mul(2)
+    }
+
+    /// Length in `f32` of the scratch: `2(L + 3) + 3Kv`.
+    pub const fn scratch_len(grid: &LookupGrid, n_voxels: usize) -> usize {
+        (2 * (grid.len + EXTRA)).saturating_add(n_voxels.saturating_mul(3))
+    }
+
+    /// A zeroed probe over `voxels`.
+    ///
+    /// # Errors
+    /// [`Error::Length`] if `state` or `scratch` does not have [`Self::state_len`] /
+    /// [`Self::scratch_len`] elements; [`Error::Incompatible`] if `lookup` was made for
+    /// another configuration than `scan`; [`Error::NonFinite`] for a non-finite voxel or focus.
+    pub fn new(
+        scan: &Scan<'_>,
+        lookup: &Lookup<'_>,
+        target: Target,
+        voxels: &'m [Point],
+        state: &'m mut [f64],
+        scratch: &'m mut [f32],
+    ) -> Result<Self, Error> {
+        let grid = lookup.grid;
+        if grid.cfg != *scan.config() {
+            return Err(Error::Incompatible("lookup grid of another configuration"));
+        }
+        let kv = voxels.len();
+        check_len("state", Self::state_len(kv), state.len())?;
+        check_len("scratch", Self::scratch_len(&grid, kv), scratch.len())?;
+        check_points("voxels", voxels)?;
+        if let Target::Column(a) = target {
+            check_points("focus", &[a])?;
+        }
+        let found = state.len();
+        let acc: &mut [Complex64] =
+            bytemuck::try_cast_slice_mut(state).map_err(|_| Error::Length {
+                what: "state",
+                expected: 2 * kv,
+                found,
+            })?;
+        let short = Error::Length {
+            what: "scratch",
+            expected: Self::scratch_len(&grid, kv),
+            found: scratch.len(),
+        };
+        let (g, rest) = scratch
+            .split_at_mut_checked(2 * (grid.len + EXTRA))
+            .ok_or(short)?;
+        let (sums, lead) = rest.split_at_mut_checked(2 * kv).ok_or(short)?;
+        acc.fill(Complex64::new(0.0, 0.0));
+        Ok(Self {
+            target,
+            voxels,
+            acc,
+            grid_buf: as_complex("scratch", g)?,
+            sums: as_complex("scratch", sums)?,
+            lead,
+            report: Report::default(),
+            grid,
+        })
+    }
+
+    /// The target.
+    pub const fn target(&self) -> Target {
+        self.target
+    }
+    /// The voxel list.
+    pub const fn voxels(&self) -> &'m [Point] {
+        self.voxels
+    }
+    /// Counters so far (`aliased` is always 0: every path gets the guard).
+    pub const fn report(&self) -> Report {
+        self.report
+    }
+    /// The complex amplitudes accumulated so far, one per voxel.
+    pub fn accumulators(&self) -> &[Complex64] {
+        self.acc
+    }
+    /// Zeroes the accumulators and counters.
+    pub fn reset(&mut self) {
+        self.acc.fill(Complex64::new(0.0, 0.0));
+        self.report = Report::default();
+    }
+
+    /// Adds one laser row: `Ks` grid syntheses, then `Kv·Ks` O(1) lookups. Infallible on
+    /// data values and panic-free.
+    ///
+    /// # Errors
+    /// [`Error::Incompatible`] if `lookup` or `scan` is not the probe's configuration;
+    /// [`Error::Length`] if `row` was loaded for a scan of another size. Nothing is
+    /// changed then.
+    pub fn push_row<T: Sample>(
+        &mut self,
+        scan: &Scan<'_>,
+        lookup: &Lookup<'_>,
+        row: &Row<'_, T>,
+    ) -> Result<(), Error> {
+        let cfg = scan.config();
+        if lookup.grid != self.grid || *cfg != self.grid.cfg {
+            return Err(Error::Incompatible("lookup grid of another configuration"));
+        }
+        let ks = scan.spads().len();
+        let j = cfg.bins().max(1);
+        check_len("row spectra", ks * cfg.bins(), row.band().len())?;
+        check_len("row histograms", ks * cfg.nt(), ks * row.nt())?;
+        check_len("row offsets", ks, row.offsets().len())?;
+        let laser = row.laser();
+        let w_lead = match self.target {
+            Target::Diagonal => {
+                for (d, v) in self.lead.iter_mut().zip(self.voxels) {
+                    *d = dist(&laser, v);
+                }
+                None
+            }
+            Target::Column(a) => {
+                let d_la = dist(&laser, &a);
+                for (d, v) in self.lead.iter_mut().zip(self.voxels) {
+                    *d = d_la + dist(&a, v);
+                }
+                Some(cfg.weight(d_la))
+            }
+        };
+        self.sums.fill(Complex32::new(0.0, 0.0));
+        let (g_lo, g_hi) = cfg.guard();
+        let (g_lo, g_hi) = (g_lo as f32, g_hi as f32);
+        let per_m = (self.grid.len as f64 / cfg.span()) as f32;
+        let theta = (self.grid.k_d as f64 / self.grid.len as f64) as f32;
+        let mask = self.grid.len - 1;
+        for ((sp, hg), off) in scan
+            .spads()
+            .iter()
+            .zip(row.band().chunks_exact(j))
+            .zip(row.offsets())
+        {
+            lookup.synthesise(hg, self.grid_buf);
+            let y: &[Complex32] = self.grid_buf;
+            for ((v, d_lead), sum) in self
+                .voxels
+                .iter()
+                .zip(self.lead.iter())
+                .zip(self.sums.iter_mut())
+            {
+                let d_vs = dist(v, sp);
+                let tau = *d_lead + d_vs;
+                let rel = tau + off;
+                if !(rel >= g_lo && rel <= g_hi) {
+                    continue;
+                }
+                // τ ≥ 0: the cast floors (and saturates at u32::MAX, masked below).
+                let x = tau * per_m;
+                let i = x as u32 as usize;
+                let t = x - i as f32;
+                let start = i.wrapping_sub(1) & mask;
+                let (Some(q), Some(c)) = (
+                    y.get(start..).and_then(|q| q.first_chunk::<4>()),
+                    lookup.carrier.get(i & mask),
+                ) else {
+                    continue;
+                };
+                let w = lagrange4(t);
+                let base = q[0] * w[0] + q[1] * w[1] + q[2] * w[2] + q[3] * w[3];
+                *sum += base * (*c * cis_small_turns(theta * t)) * cfg.weight(d_vs);
+            }
+        }
+        for ((a, s), d) in self
+            .acc
+            .iter_mut()
+            .zip(self.sums.iter())
+            .zip(self.lead.iter())
+        {
+            let w = match w_lead {
+                Some(w) => w,
+                None => cfg.weight(*d),
+            };
+            *a += c64(*s * w);
+        }
+        self.report.rows += 1;
+        self.report.non_finite += u64::from(row.non_finite());
+        self.report.dropped += u64::from(row.dropped());
+        Ok(())
+    }
+
+    /// Adds another lookup probe's accumulators (same grid, target and voxels).
+    ///
+    /// # Errors
+    /// [`Error::Incompatible`] if the probes differ; nothing is changed then.
+    pub fn merge(&mut self, other: &LookupProbe<'_>) -> Result<(), Error> {
+        if self.target != other.target || self.voxels != other.voxels || self.grid != other.grid {
+            return Err(Error::Incompatible("different target, voxels or grid"));
+        }
+        for (a, b) in self.acc.iter_mut().zip(other.acc.iter()) {
+            *a += *b;
+        }
+        self.report.rows += other.report.rows;
+        self.report.non_finite += other.report.non_finite;
+        self.report.dropped += other.report.dropped;
+        Ok(())
+    }
+
+    /// Writes the intensities `T = |A|²` into `out` (length = voxels) and returns the
+    /// counters. Does not change the accumulators.
+    ///
+    /// # Errors
+    /// [`Error::Length`] if `out` has the wrong length.
+    pub fn finish(&self, out: &mut [f64]) -> Result<Report, Error> {
+        check_len("out", self.voxels.len(), out.len())?;
+        for (o, a) in out.iter_mut().zip(self.acc.iter()) {
+            *o = a.norm_sqr();
+        }
+        Ok(self.report)
+    }
+}
+
+#[inline]
+fn c64(z: Complex32) -> Complex64 {
+    Complex64::new(z.re as f64, z.im as f64)
+}
