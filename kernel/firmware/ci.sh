@@ -41,6 +41,8 @@ elf() { echo "$tdir/$1/release/$2"; }
 
 fmt_check() { cargo fmt --check && (cd gen && cargo fmt --check); }
 step "rustfmt (firmware, gen)" fmt_check
+gen_tests() { (cd gen && cargo test -q --release); }
+step "gen unit tests (state templates)" gen_tests
 
 fixture_up_to_date() { # the host simulator renders fixture/scene.json, gen runs the kernel
   local out; out=$(mktemp -d)
@@ -49,6 +51,11 @@ fixture_up_to_date() { # the host simulator renders fixture/scene.json, gen runs
     echo "fixture/ is stale (the simulator's or the host kernel's numbers changed): regenerate" \
          "with 'bash kernel/firmware/fixture/regenerate.sh' and review the diff"
     diff "$out/expected.txt" fixture/expected.txt | head -20; rm -rf "$out"; return 1; }
+  for f in state_direct.json state_column.json; do
+    cmp "$out/$f" "fixture/$f" || {
+      echo "fixture/$f is stale (the host's partial-state header changed): regenerate"
+      diff "$out/$f" "fixture/$f" | head -5; rm -rf "$out"; return 1; }
+  done
   cmp "$out/expected_fixed.txt" fixture/expected_fixed.txt || {
     echo "fixture/expected_fixed.txt is stale (the host's fixed-point numbers changed): regenerate"
     diff "$out/expected_fixed.txt" fixture/expected_fixed.txt | head -20; rm -rf "$out"; return 1; }
@@ -142,6 +149,48 @@ done
 
 step "cycles firmware $M4: build" fw --target $M4 --features cycles --bin vltm-firmware-cycles
 step "instruction counts, real setup, on m4f (-icount)" ./run-qemu.sh m4f cycles "$(elf $M4 vltm-firmware-cycles)"
+
+# Firmware to host: the MCU folds the scan's last rows and writes its state in vltm's
+# partial-state format (semihosting files); the host folds the other rows, `vltm merge` adds
+# both and must give the host's whole run (direct light and the column T(P1, ·)). A state
+# with a flipped byte, overlapping rows or other parameters must be refused.
+vltm_bin="${VLTM_BIN:-$here/../../target/release/vltm}"
+gen() { (cd "$here/gen" && cargo run -q --release -- "$@"); }
+state_merge() { # state_merge MACHINE ELF
+  local m="$1" elf="$2" t; t=$(mktemp -d)
+  [ -x "$vltm_bin" ] || { echo "no vltm binary at $vltm_bin (set VLTM_BIN)"; return 1; }
+  local qemu=(qemu-system-arm -machine mps2-an386 -cpu cortex-m4)
+  [ "$m" = m0 ] && qemu=(qemu-system-arm -machine microbit)
+  (cd "$t" && timeout 120 "${qemu[@]}" -nographic -semihosting-config enable=on,target=native \
+    -kernel "$elf") || { echo "state firmware on $m failed"; rm -rf "$t"; return 1; }
+  local pts focus wl rows ok=0
+  pts=$(gen volume) focus=$(gen focus) wl=$(gen wavelength) rows=$(gen host-rows)
+  "$vltm_bin" simulate fixture/scene.json --out "$t/scene.npz" --uncompressed >/dev/null 2>&1
+  local -a d=(direct "$t/scene.npz" --volume "$pts" --wavelength "$wl" --path band)
+  local -a c=(column "$t/scene.npz" --focus="$focus" --volume "$pts" --wavelength "$wl")
+  for p in d c; do
+    local -n args=$p
+    local fw="$t/fw_direct.vltmpart"; [ $p = c ] && fw="$t/fw_column.vltmpart"
+    "$vltm_bin" "${args[@]}" --rows "$rows" --partial "$t/host_$p.part" >/dev/null 2>&1 &&
+    "$vltm_bin" merge "$t/host_$p.part" "$fw" --out "$t/merged_$p.npy" >/dev/null 2>&1 &&
+    "$vltm_bin" "${args[@]}" --out "$t/whole_$p.npy" >/dev/null 2>&1 &&
+    gen compare "$t/merged_$p.npy" "$t/whole_$p.npy" 1e-6 || ok=1
+    # Teeth: a flipped payload byte (CRC), the firmware's rows twice, other parameters.
+    cp "$fw" "$t/bad"; printf '\xff' | dd of="$t/bad" bs=1 seek=$(( $(stat -c %s "$fw") - 3 )) conv=notrunc 2>/dev/null
+    ! "$vltm_bin" merge "$t/host_$p.part" "$t/bad" --out "$t/x.npy" >/dev/null 2>&1 || { echo "corrupt state merged"; ok=1; }
+    ! "$vltm_bin" merge "$fw" "$fw" --out "$t/x.npy" >/dev/null 2>&1 || { echo "overlapping rows merged"; ok=1; }
+    "$vltm_bin" "${args[@]}" --rows "$rows" --partial "$t/other.part" --sigma 0.08 >/dev/null 2>&1
+    ! "$vltm_bin" merge "$t/other.part" "$fw" --out "$t/x.npy" >/dev/null 2>&1 || { echo "other parameters merged"; ok=1; }
+    unset -n args
+  done
+  rm -rf "$t"; return $ok
+}
+for t in $M4 $M0; do
+  m=$([ $t = $M4 ] && echo m4f || echo m0)
+  step "state firmware $t: build" fw --target $t --features state --bin vltm-firmware-state
+  step "firmware state (rows 8..16, $m) + host part (rows 0..8) merged = host's whole run" \
+    state_merge $m "$(elf $t vltm-firmware-state)"
+done
 
 size=$(command -v arm-none-eabi-size || true)
 [ -n "$size" ] || size="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/llvm-size"

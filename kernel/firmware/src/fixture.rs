@@ -101,3 +101,7 @@ pub const DIAG_LEN: usize = 2 * N_VOXELS;
 pub const COLUMN_LEN: usize = 2 * BINS * (N_SPADS + 1);
 /// Higher-order state (diagonal or column): `2(Kv + Nt + 1)` `f64`.
 pub const HO_LEN: usize = 2 * (N_VOXELS + NT + 1);
+
+/// Laser rows the firmware-to-host run (`src/bin/state.rs`) folds before handing its state to
+/// the host, which takes the other rows (`0..8`): the second half of the scan.
+pub const STATE_ROWS: core::ops::Range<usize> = 8..16;

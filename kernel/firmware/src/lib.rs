@@ -5,6 +5,8 @@
 pub mod fixed_pipeline;
 pub mod fixture;
 pub mod pipeline;
+#[cfg(feature = "state")]
+pub mod state;
 
 #[cfg(target_endian = "big")]
 compile_error!(

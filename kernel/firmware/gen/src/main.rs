@@ -17,6 +17,7 @@ mod fixture;
 mod npz;
 #[path = "../../src/pipeline.rs"]
 mod pipeline;
+mod state;
 
 use fixture::*;
 use std::fmt::Write as _;
@@ -241,6 +242,63 @@ fn budget() {
     );
 }
 
+/// The `--volume` spec of [`VOXELS`] (a point list, `x,y,z;…`), and `--focus` of [`FOCUS`]:
+/// what the host passes to run the firmware's probes.
+fn volume_spec() -> String {
+    let pts: Vec<String> = VOXELS
+        .iter()
+        .map(|p| format!("{},{},{}", p[0], p[1], p[2]))
+        .collect();
+    pts.join(";")
+}
+
+/// `fixture/state_direct.json` and `fixture/state_column.json`: the header templates of the
+/// firmware's states (`src/bin/state.rs`), from the host's partial states of the same probes.
+fn state_templates(direct: &Path, column: &Path, dir: &Path) {
+    assert_eq!(
+        STATE_ROWS.end, N_LASERS,
+        "the firmware takes the scan's last rows"
+    );
+    let make = |part: &Path, n_spads: usize, n_acc: usize, name: &str| {
+        let bytes = std::fs::read(part).unwrap_or_else(|e| {
+            eprintln!("{}: {e}", part.display());
+            std::process::exit(1)
+        });
+        let t = state::template(&bytes, n_spads, N_VOXELS, n_acc).unwrap_or_else(|e| {
+            eprintln!("{}: {e}", part.display());
+            std::process::exit(1)
+        });
+        std::fs::write(dir.join(name), t + "\n").expect("write template");
+    };
+    make(direct, 0, DIAG_LEN, "state_direct.json");
+    make(column, N_SPADS, COLUMN_LEN, "state_column.json");
+}
+
+/// Exits 1 unless the `.npy` volumes `a` and `b` agree within `rtol` of `b`'s largest value.
+fn compare(a: &str, b: &str, rtol: &str) {
+    let read = |p: &str| {
+        std::fs::read(p).unwrap_or_else(|e| {
+            eprintln!("{p}: {e}");
+            std::process::exit(1)
+        })
+    };
+    let rtol: f64 = rtol.parse().unwrap_or_else(|_| {
+        eprintln!("RTOL `{rtol}` is not a number");
+        std::process::exit(2)
+    });
+    match state::compare(&read(a), &read(b)) {
+        Ok(e) if e <= rtol => println!("{a} = {b} within {e:.2e} of the peak (rtol {rtol:e})"),
+        Ok(e) => {
+            eprintln!("{a} differs from {b} by {e:.2e} of the peak (rtol {rtol:e})");
+            std::process::exit(1)
+        }
+        Err(e) => {
+            eprintln!("{a} vs {b}: {e}");
+            std::process::exit(1)
+        }
+    }
+}
+
 fn main() {
     let mut args = std::env::args().skip(1);
     match args.next().as_deref() {
@@ -256,8 +314,30 @@ fn main() {
             );
         }
         Some("budget") => budget(),
+        Some("volume") => println!("{}", volume_spec()),
+        // The host's rows: those the firmware-to-host run leaves (`--rows A:B`).
+        Some("host-rows") => println!("0:{}", STATE_ROWS.start),
+        Some("focus") => println!("{},{},{}", FOCUS[0], FOCUS[1], FOCUS[2]),
+        Some("wavelength") => println!("{WAVELENGTH}"),
+        Some("state-template") => {
+            let (Some(d), Some(c), Some(dir)) = (args.next(), args.next(), args.next()) else {
+                eprintln!("usage: vltm-firmware-gen state-template DIRECT.part COLUMN.part DIR");
+                std::process::exit(2);
+            };
+            state_templates(Path::new(&d), Path::new(&c), Path::new(&dir));
+        }
+        Some("compare") => {
+            let (Some(a), Some(b), Some(rtol)) = (args.next(), args.next(), args.next()) else {
+                eprintln!("usage: vltm-firmware-gen compare A.npy B.npy RTOL");
+                std::process::exit(2);
+            };
+            compare(&a, &b, &rtol);
+        }
         _ => {
-            eprintln!("usage: vltm-firmware-gen fixture CAPTURE.npz [DIR] | budget");
+            eprintln!(
+                "usage: vltm-firmware-gen fixture CAPTURE.npz [DIR] | budget | volume | \
+                 state-template DIRECT.part COLUMN.part DIR | compare A.npy B.npy RTOL"
+            );
             std::process::exit(2);
         }
     }

@@ -70,7 +70,7 @@ pub fn read(bytes: &[u8]) -> Result<HashMap<String, Result<Array, String>>, Stri
 }
 
 /// One `.npy` array (format 1.0–3.0, C order, `<f4` or `<f8`).
-fn npy(b: &[u8]) -> Result<Array, String> {
+pub fn npy(b: &[u8]) -> Result<Array, String> {
     if b.get(..6) != Some(b"\x93NUMPY") {
         return Err("not a .npy array".into());
     }
