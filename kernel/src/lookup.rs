@@ -79,7 +79,7 @@ use crate::error::{ConfigError, Error, check_len, check_points};
 use crate::probe::{Report, Target};
 use crate::sample::Sample;
 use crate::scan::{Row, Scan, as_complex, dist};
-use crate::trig::cis_small_turns;
+use crate::phase::cis_small_turns;
 use num_complex::{Complex32, Complex64};
 
 /// Largest grid accepted (`2²⁴` points: tables and `f32` grid positions stay exact).
