@@ -201,7 +201,9 @@ fn without_code_spans_keep(s: &str) -> String {
 
 #[test]
 fn anchors_follow_github() {
-    let a = anchors("# Real data: the Stanford captures\n## Views, as seen (here)\n## Views, as seen (here)\n```\n# not a heading\n```\n## The `vltm` CLI\n");
+    let a = anchors(
+        "# Real data: the Stanford captures\n## Views, as seen (here)\n## Views, as seen (here)\n```\n# not a heading\n```\n## The `vltm` CLI\n",
+    );
     let want: BTreeSet<String> = [
         "real-data-the-stanford-captures",
         "views-as-seen-here",
@@ -272,7 +274,10 @@ fn links_and_images_resolve() {
             }
         }
     }
-    assert!(checked > 20, "only {checked} links found: the scanner is broken");
+    assert!(
+        checked > 20,
+        "only {checked} links found: the scanner is broken"
+    );
     assert!(broken.is_empty(), "broken links:\n{}", broken.join("\n"));
 }
 
@@ -320,7 +325,9 @@ fn examples(text: &str) -> Result<Vec<Example>, String> {
         }
         if t.starts_with("```") {
             if in_console && pending.is_some() {
-                return Err(format!("line {n}: the block ends inside a continued command"));
+                return Err(format!(
+                    "line {n}: the block ends inside a continued command"
+                ));
             }
             in_console = false;
             in_other = false;

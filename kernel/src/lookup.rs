@@ -76,10 +76,11 @@
 
 use crate::config::{Config, Point};
 use crate::error::{ConfigError, Error, check_len, check_points};
+use crate::geometry::dist;
+use crate::phase::cis_small_turns;
 use crate::probe::{Report, Target};
 use crate::sample::Sample;
-use crate::scan::{Row, Scan, as_complex, dist};
-use crate::phase::cis_small_turns;
+use crate::scan::{Row, Scan, as_complex};
 use num_complex::{Complex32, Complex64};
 
 /// Largest grid accepted (`2²⁴` points: tables and `f32` grid positions stay exact).
