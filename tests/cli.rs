@@ -1848,3 +1848,72 @@ fn matrix_and_leak_corrected_parts_through_the_command_line() {
     let worst = rel_of_max(&npy(&whole, SHAPE), &npy(&fm, SHAPE));
     assert!(worst <= 1e-6, "{worst:e}");
 }
+
+/// `indirect`'s summary line (and the provenance of its outputs) gives the configuration pass
+/// 2 ran on: the column configuration over Γ, whose DFT the automatic margin widens when Γ's
+/// 4-vertex paths reach past the window. (It gave pass 1's, the diagonal's.) The window is cut
+/// at `T_MAX` metres, after the direct returns and before the patches' pair paths.
+#[test]
+fn indirect_summary_gives_pass_two_configuration() {
+    use vltm::io::prep::{Bound, Prep, Prepared};
+    use vltm::io::RowSource;
+    use vltm::probe::Wave;
+    const T_MAX: f64 = 2.4;
+    let t = TempDir::new("indirect-pass-two");
+    let cap = fixture("two_patches");
+    let out = ok(
+        &t.0,
+        &[
+            "indirect",
+            cap.to_str().expect("utf-8"),
+            "--volume",
+            SPEC,
+            "--t-max",
+            &T_MAX.to_string(),
+            "--no-leak-correct",
+            "--out",
+            "i.npy",
+        ],
+    );
+    print!("{out}");
+    let j = |prefix: &str| -> usize {
+        let line = out
+            .lines()
+            .find(|l| l.starts_with(prefix))
+            .unwrap_or_else(|| panic!("no `{prefix}` line:\n{out}"));
+        let at = line.find("J = ").expect("J") + 4;
+        line[at..]
+            .split(|c: char| !c.is_ascii_digit())
+            .next()
+            .and_then(|s| s.parse().ok())
+            .expect("J's value")
+    };
+    // Pass 2's configuration, from the library: the column configuration over Γ (the CLI's
+    // own Γ output) on the cut capture.
+    let gamma = npy(&t.path("i.gamma.npy"), SHAPE);
+    let volume = vltm::volume::Volume::parse(SPEC).expect("volume");
+    let pts: Vec<_> = volume
+        .points
+        .iter()
+        .zip(&gamma)
+        .filter_map(|(p, &g)| (g > 0.5).then_some(*p))
+        .collect();
+    assert!(!pts.is_empty(), "Γ is empty");
+    let mut c = vltm::io::open(&cap).expect("capture");
+    let prep = Prep {
+        t_max: Some(Bound::Metres(T_MAX)),
+        rebin: 1,
+        ..Prep::default()
+    };
+    let cut = Prepared::new(&mut c, prep, None).expect("window");
+    let g = cut.geometry();
+    let wave = Wave::default();
+    let pass2 = wave.column_config(g, &pts, &pts).expect("column config");
+    let pass1 = wave.config(g).expect("config");
+    assert_ne!(
+        pass2.bins(),
+        pass1.bins(),
+        "the test needs a window that widens pass 2's DFT"
+    );
+    assert_eq!(j("indirect:"), pass2.bins(), "J of the summary line");
+}

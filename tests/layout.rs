@@ -1,14 +1,24 @@
-//! The host crate's house rules (`host/README.md`), checked against the tree:
+//! The workspace's house rules (`host/README.md`), checked against the tree:
 //!
-//! * every source file of `host/src` has at most [`MAX_LINES`] lines of non-test code;
-//! * the module map in `host/README.md` names every module of the tree and nothing else;
-//! * the file-level import graph of the library has no circle, and every import goes to a
-//!   module that the importing module's row of the map allows.
+//! * every source file of every crate ([`CRATES`]: the library `host/src`, the command line
+//!   `host/cli/src`, the kernel `kernel/src`, the Python package `host/python/src` and the
+//!   firmware `kernel/firmware/src`) has at most [`MAX_LINES`] lines of non-test code;
+//! * the file-level import graph of each crate has no circle;
+//! * no module imports its crate's root `lib.rs`/`main.rs` where the crate root is an entry
+//!   point or a table of contents (the library, the command line): items are imported from
+//!   the module that defines them, so the root is never a helper store;
+//! * the library's data flows one way through its stages ([`STAGES`]: `io`/`sim` → `probe`
+//!   → `export`): no module imports a later stage;
+//! * the module map in `host/README.md`: every row names a module of the library, and every
+//!   import of a module with a row goes to a module its row allows (a module without a row
+//!   is held to the general rules above only, so new modules that follow them pass);
+//! * the library depends on no front-end crate (`clap`, `indicatif`, `anyhow`).
 //!
 //! Imports are the `crate::…`, `super::…` and `self::…` paths in code (comments and test
-//! modules excluded), resolved to the file that defines the longest module prefix of the path.
-//! Module declarations (`mod x;`) are containment, not imports; re-exports (`pub use`) are
-//! imports.
+//! modules excluded), resolved to the file that defines the longest module prefix of the path
+//! (through the root's `pub use` re-exports where a crate imports through them, as the
+//! kernel does). Module declarations (`mod x;`) are containment, not imports; re-exports
+//! (`pub use`) are imports.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
@@ -17,14 +27,63 @@ use std::path::{Path, PathBuf};
 /// The most lines of non-test code a file may hold.
 const MAX_LINES: usize = 800;
 
+/// A crate the rules cover.
+struct Crate {
+    /// Its source folder, relative to the workspace root.
+    src: &'static str,
+    /// Whether its module graph is checked (circles, the crate root): `false` for the
+    /// firmware, whose folder holds several crate roots (`lib.rs`, `main.rs`, `bin/`).
+    graph: bool,
+    /// Whether a module may import the crate root (`crate::Name` through its re-exports).
+    root_imports: bool,
+}
+
+/// Every crate of the workspace (and the two outside it, the Python package and the
+/// firmware).
+const CRATES: [Crate; 5] = [
+    Crate {
+        src: "host/src",
+        graph: true,
+        root_imports: false,
+    },
+    Crate {
+        src: "host/cli/src",
+        graph: true,
+        root_imports: false,
+    },
+    Crate {
+        src: "kernel/src",
+        graph: true,
+        root_imports: true,
+    },
+    Crate {
+        src: "host/python/src",
+        graph: true,
+        root_imports: true,
+    },
+    Crate {
+        src: "kernel/firmware/src",
+        graph: false,
+        root_imports: true,
+    },
+];
+
+/// The library's stages, in the order data flows through them: a module of one stage never
+/// imports a module of a later one.
+const STAGES: [&[&str]; 3] = [&["io", "sim"], &["probe"], &["export"]];
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
 fn src_dir() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("host/src")
+    root().join("host/src")
 }
 
 /// Every `.rs` file below `dir`, sorted.
 fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     let mut entries: Vec<_> = fs::read_dir(dir)
-        .expect("read host/src")
+        .unwrap_or_else(|e| panic!("read {}: {e}", dir.display()))
         .map(|e| e.expect("dir entry").path())
         .collect();
     entries.sort();
@@ -37,8 +96,8 @@ fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
     }
 }
 
-/// The library's module path of a file below `host/src` (`io/tal/mod.rs` → `io::tal`,
-/// `lib.rs` → ``), or `None` for the command line (`bin/`).
+/// The module path of a file below a crate's source folder (`io/tal/mod.rs` → `io::tal`,
+/// `lib.rs` or `main.rs` → ``), or `None` for the further crate roots of `bin/`.
 fn module_of(rel: &Path) -> Option<String> {
     let parts: Vec<String> = rel
         .iter()
@@ -49,7 +108,7 @@ fn module_of(rel: &Path) -> Option<String> {
     }
     let mut segs: Vec<String> = parts[..parts.len() - 1].to_vec();
     let stem = parts[parts.len() - 1].trim_end_matches(".rs").to_string();
-    if stem != "mod" && stem != "lib" {
+    if stem != "mod" && stem != "lib" && stem != "main" {
         segs.push(stem);
     }
     Some(segs.join("::"))
@@ -135,8 +194,19 @@ fn paths(code: &str) -> Vec<Vec<String>> {
     out
 }
 
-/// Resolves a path used in module `from` to the longest module prefix that exists.
+/// Resolves a path used in module `from` to the longest module prefix that exists; a name the
+/// crate root re-exports (`crate::Point`) resolves to the module it comes from when
+/// `reexports` has it.
 fn resolve(from: &str, path: &[String], modules: &BTreeSet<String>) -> Option<String> {
+    resolve_via(from, path, modules, &BTreeMap::new())
+}
+
+fn resolve_via(
+    from: &str,
+    path: &[String],
+    modules: &BTreeSet<String>,
+    reexports: &BTreeMap<String, String>,
+) -> Option<String> {
     let mut base: Vec<String> = if from.is_empty() {
         Vec::new()
     } else {
@@ -156,6 +226,11 @@ fn resolve(from: &str, path: &[String], modules: &BTreeSet<String>) -> Option<St
         base.pop();
         rest = &rest[1..];
     }
+    if base.is_empty()
+        && let Some(m) = rest.first().and_then(|n| reexports.get(n))
+    {
+        return Some(m.clone());
+    }
     let mut best = base.join("::");
     let mut cur = base;
     for seg in rest {
@@ -173,8 +248,7 @@ fn resolve(from: &str, path: &[String], modules: &BTreeSet<String>) -> Option<St
 /// The module map of `host/README.md`: row module → modules it may import (entries ending
 /// in `::*` allow a whole subtree).
 fn module_map() -> BTreeMap<String, Vec<String>> {
-    let readme = fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("host/README.md"))
-        .expect("host/README.md");
+    let readme = fs::read_to_string(root().join("host/README.md")).expect("host/README.md");
     let mut map = BTreeMap::new();
     for line in readme.lines() {
         let cells: Vec<&str> = line.split('|').map(str::trim).collect();
@@ -209,19 +283,59 @@ fn allows(allowed: &[String], target_row: &str) -> bool {
 }
 
 struct Tree {
-    /// Module path → file (relative to host/src), library files only, test files excluded.
+    /// Module path → file (relative to the source folder), test files excluded.
     files: BTreeMap<String, PathBuf>,
     /// Module path → modules it imports.
     edges: BTreeMap<String, BTreeSet<String>>,
 }
 
-fn tree() -> Tree {
-    let root = src_dir();
+/// The names the crate root re-exports (`pub use module::{A, B}`) → their module.
+fn reexports(root_code: &str, modules: &BTreeSet<String>) -> BTreeMap<String, String> {
+    let mut out = BTreeMap::new();
+    for p in paths(root_code) {
+        if p.len() < 3 {
+            continue;
+        }
+        let name = p[p.len() - 1].clone();
+        if let Some(m) = resolve("", &p, modules)
+            && !m.is_empty()
+            && name.starts_with(|c: char| c.is_ascii_uppercase() || c.is_ascii_lowercase())
+        {
+            out.entry(name).or_insert(m);
+        }
+    }
+    // `pub use module::Name;` without a `crate::`/`self::` prefix.
+    for line in root_code.lines() {
+        let Some(rest) = line.trim().strip_prefix("pub use ") else {
+            continue;
+        };
+        let (first, tail) = rest.split_once("::").unwrap_or((rest, ""));
+        if !modules.contains(first) {
+            continue;
+        }
+        let tail = tail.trim_end_matches(';');
+        let names: Vec<&str> = match tail.strip_prefix('{') {
+            Some(g) => g.trim_end_matches('}').split(',').collect(),
+            None => vec![tail],
+        };
+        for n in names {
+            let n = n.trim().rsplit("::").next().unwrap_or("").trim();
+            if !n.is_empty() {
+                out.entry(n.to_string()).or_insert(first.to_string());
+            }
+        }
+    }
+    out
+}
+
+/// The module tree and import graph of the crate in `src` (relative to the workspace).
+fn tree_of(src: &str, via_root: bool) -> Tree {
+    let root_dir = root().join(src);
     let mut all = Vec::new();
-    rust_files(&root, &mut all);
+    rust_files(&root_dir, &mut all);
     let mut files = BTreeMap::new();
     for p in &all {
-        let rel = p.strip_prefix(&root).expect("below src").to_path_buf();
+        let rel = p.strip_prefix(&root_dir).expect("below src").to_path_buf();
         if let Some(m) = module_of(&rel)
             && !is_test_file(&rel)
         {
@@ -229,17 +343,24 @@ fn tree() -> Tree {
         }
     }
     let modules: BTreeSet<String> = files.keys().cloned().collect();
-    let mut edges = BTreeMap::new();
-    for (m, rel) in &files {
-        let text = fs::read_to_string(root.join(rel)).expect("read source");
-        let code: String = code_lines(&text)
+    let code_of = |rel: &Path| -> String {
+        let text = fs::read_to_string(root_dir.join(rel)).expect("read source");
+        code_lines(&text)
             .into_iter()
             .filter(|l| !l.trim_start().starts_with("mod ") && !l.contains(" mod "))
             .collect::<Vec<_>>()
-            .join("\n");
+            .join("\n")
+    };
+    let re = match files.get("") {
+        Some(rel) if via_root => reexports(&code_of(rel), &modules),
+        _ => BTreeMap::new(),
+    };
+    let mut edges = BTreeMap::new();
+    for (m, rel) in &files {
+        let code = code_of(rel);
         let mut targets: BTreeSet<String> = paths(&code)
             .iter()
-            .filter_map(|p| resolve(m, p, &modules))
+            .filter_map(|p| resolve_via(m, p, &modules, &re))
             .collect();
         // `use child::…` (a path relative to this module) imports a submodule.
         for line in code.lines() {
@@ -264,70 +385,107 @@ fn tree() -> Tree {
     Tree { files, edges }
 }
 
-#[test]
-fn no_file_is_over_the_line_limit() {
-    let root = src_dir();
+/// The library's tree.
+fn tree() -> Tree {
+    tree_of("host/src", false)
+}
+
+/// The files over [`MAX_LINES`] lines of non-test code in `src` (relative to the workspace).
+fn over_the_limit(src: &str) -> Vec<String> {
     let mut all = Vec::new();
-    rust_files(&root, &mut all);
-    assert!(all.len() > 20, "host/src has {} files", all.len());
-    let over: Vec<String> = all
-        .iter()
+    rust_files(&root().join(src), &mut all);
+    assert!(!all.is_empty(), "{src} has no source files");
+    all.iter()
         .filter(|p| !is_test_file(p))
         .filter_map(|p| {
             let n = code_lines(&fs::read_to_string(p).expect("read")).len();
             (n > MAX_LINES).then(|| format!("{} ({n} lines)", p.display()))
         })
-        .collect();
+        .collect()
+}
+
+#[test]
+fn no_file_is_over_the_line_limit() {
+    let mut all = Vec::new();
+    rust_files(&src_dir(), &mut all);
+    assert!(all.len() > 20, "host/src has {} files", all.len());
+    let over: Vec<String> = CRATES.iter().flat_map(|c| over_the_limit(c.src)).collect();
     assert!(over.is_empty(), "over {MAX_LINES} lines of code: {over:?}");
+}
+
+/// The library depends on no front-end crate: argument parsing, progress bars and the
+/// command line's error chains live in `vltm-cli`, so the Python package does not build them.
+#[test]
+fn library_has_no_front_end_dependencies() {
+    let manifest = fs::read_to_string(root().join("host/Cargo.toml")).expect("host/Cargo.toml");
+    let deps = manifest
+        .split("\n[")
+        .find(|s| s.starts_with("dependencies]"))
+        .expect("[dependencies]");
+    for front in ["clap", "indicatif", "anyhow"] {
+        assert!(
+            !deps.lines().any(|l| l.trim_start().starts_with(front)),
+            "the library depends on `{front}`, a front end's crate"
+        );
+    }
 }
 
 #[test]
 fn module_map_matches_the_tree() {
     let map = module_map();
     let t = tree();
-    // Every row names a module of the tree (or the command line).
+    // Every row names a module of the library.
     for row in map.keys() {
         assert!(
-            row.starts_with("bin/") || t.files.contains_key(row),
+            t.files.contains_key(row),
             "host/README.md names `{row}`, which is not a module of host/src"
         );
     }
-    // Every top-level module, and every module of `io`, has its row.
-    for m in t.files.keys().filter(|m| !m.is_empty()) {
-        let depth = m.matches("::").count();
-        if depth == 0 || (m.starts_with("io::") && depth == 1) {
-            assert!(
-                map.contains_key(m),
-                "module `{m}` has no row in host/README.md"
-            );
-        }
-        assert!(row_of(m, &map).is_some(), "module `{m}` is in no row");
+    // The map is not trivially small: the stages and the readers have their rows.
+    for m in STAGES.iter().flat_map(|s| s.iter()) {
+        assert!(map.contains_key(*m), "`{m}` has no row in host/README.md");
     }
 }
 
-#[test]
-fn imports_flow_one_way() {
-    let map = module_map();
-    let t = tree();
+/// Imports against the module map (rows that exist) and the stages (every module).
+fn library_import_errors(t: &Tree, map: &BTreeMap<String, Vec<String>>) -> Vec<String> {
+    let stage = |m: &str| {
+        STAGES.iter().position(|s| {
+            s.iter()
+                .any(|r| m == *r || m.starts_with(&format!("{r}::")))
+        })
+    };
     let mut bad = Vec::new();
     for (m, targets) in &t.edges {
         if m.is_empty() {
             continue; // lib.rs: the crate root re-exports
         }
-        let from = row_of(m, &map).expect("mapped");
         for target in targets {
             if target.is_empty() {
-                bad.push(format!(
-                    "{m} → the crate root (import from the defining module)"
-                ));
-                continue;
+                continue; // reported by `no_module_imports_the_crate_root`
             }
-            let to = row_of(target, &map).expect("mapped");
-            if to != from && !allows(&map[from], to) {
+            if let (Some(a), Some(b)) = (stage(m), stage(target))
+                && b > a
+            {
+                bad.push(format!(
+                    "{m} → {target} (data flows {}: a stage never imports a later one)",
+                    STAGES.map(|s| s.join("/")).join(" → ")
+                ));
+            }
+            if let (Some(from), Some(to)) = (row_of(m, map), row_of(target, map))
+                && to != from
+                && !allows(&map[from], to)
+            {
                 bad.push(format!("{m} → {target} (`{from}` may not import `{to}`)"));
             }
         }
     }
+    bad
+}
+
+#[test]
+fn imports_flow_one_way() {
+    let bad = library_import_errors(&tree(), &module_map());
     assert!(
         bad.is_empty(),
         "imports against host/README.md:\n{}",
@@ -336,9 +494,26 @@ fn imports_flow_one_way() {
 }
 
 #[test]
-fn import_graph_has_no_circle() {
-    let t = tree();
-    // Depth-first search with colours; report the first circle found.
+fn no_module_imports_the_crate_root() {
+    let mut bad = Vec::new();
+    for c in CRATES.iter().filter(|c| c.graph && !c.root_imports) {
+        let t = tree_of(c.src, false);
+        for (m, targets) in t.edges.iter().filter(|(m, _)| !m.is_empty()) {
+            if targets.contains("") {
+                bad.push(format!(
+                    "{}: {m} → the crate root (import from the defining module; the root \
+                     is an entry point, not a helper store)",
+                    c.src
+                ));
+            }
+        }
+    }
+    assert!(bad.is_empty(), "{}", bad.join("\n"));
+}
+
+/// The first circle of the graph (depth-first search with colours), if any. The crate
+/// root's own edges are containment and re-exports, not a use of the modules.
+fn circle(edges: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
     fn visit(
         m: &str,
         edges: &BTreeMap<String, BTreeSet<String>>,
@@ -367,19 +542,44 @@ fn import_graph_has_no_circle() {
         state.insert(m.to_string(), 2);
         None
     }
+    let mut edges = edges.clone();
+    edges.remove("");
     let mut state = BTreeMap::new();
-    for m in t.edges.keys() {
+    for m in edges.keys() {
         if state.get(m).copied().unwrap_or(0) == 0
-            && let Some(c) = visit(m, &t.edges, &mut state, &mut Vec::new())
+            && let Some(c) = visit(m, &edges, &mut state, &mut Vec::new())
         {
-            panic!("import circle: {}", c.join(" → "));
+            return Some(c);
         }
     }
-    // The graph is not trivially empty: the readers import the capture model.
-    assert!(t.edges["io::tal"].contains("io::capture"));
+    None
 }
 
-/// The checks can fail: a circle and a forbidden import in made-up code are found.
+#[test]
+fn import_graph_has_no_circle() {
+    for c in CRATES.iter().filter(|c| c.graph) {
+        let t = tree_of(c.src, c.root_imports);
+        if let Some(cycle) = circle(&t.edges) {
+            panic!(
+                "import circle in {}: {}",
+                c.src,
+                cycle
+                    .iter()
+                    .map(|m| if m.is_empty() { "(crate root)" } else { m })
+                    .collect::<Vec<_>>()
+                    .join(" → ")
+            );
+        }
+    }
+    // The graphs are not trivially empty: the readers import the capture model, the command
+    // line's commands import its arguments, the kernel's probe its configuration.
+    assert!(tree().edges["io::tal"].contains("io::capture"));
+    assert!(tree_of("host/cli/src", false).edges["commands"].contains("args"));
+    assert!(tree_of("kernel/src", true).edges["probe"].contains("config"));
+}
+
+/// The checks can fail: a circle, a forbidden import, an import against the data flow and an
+/// import of the crate root in made-up code are found.
 #[test]
 fn checks_have_teeth() {
     let modules: BTreeSet<String> = ["io", "io::tal", "io::capture", "probe", "probe::wave"]
@@ -398,4 +598,34 @@ fn checks_have_teeth() {
         row_of("probe::wave", &map).unwrap_or("")
     ));
     assert!(allows(&map["io::tal"], "io::capture"));
+    // A made-up module without a row, importing a later stage, is caught; the same module
+    // importing an earlier stage passes.
+    let edges = |pairs: &[(&str, &str)]| {
+        let mut e: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+        for (a, b) in pairs {
+            e.entry(a.to_string()).or_default().insert(b.to_string());
+        }
+        e
+    };
+    let t = Tree {
+        files: BTreeMap::new(),
+        edges: edges(&[("io::live", "export::npy"), ("export::live", "io::capture")]),
+    };
+    let bad = library_import_errors(&t, &BTreeMap::new());
+    assert_eq!(bad.len(), 1, "{bad:?}");
+    assert!(bad[0].starts_with("io::live → export::npy"), "{bad:?}");
+    // Circles: the command line's old `ltm` ↔ `partial`, and one through three modules.
+    let c = circle(&edges(&[("ltm", "partial"), ("partial", "ltm")])).expect("circle");
+    assert_eq!(c, ["ltm", "partial", "ltm"]);
+    assert!(circle(&edges(&[("a", "b"), ("b", "c"), ("c", "a")])).is_some());
+    assert!(circle(&edges(&[("a", "b"), ("b", "c"), ("a", "c")])).is_none());
+    // Re-exports: the kernel's `crate::Point` is `config`'s.
+    let kmods: BTreeSet<String> = ["config", "probe"].into_iter().map(String::from).collect();
+    let re = reexports("pub use config::{Config, Point};", &kmods);
+    let p = paths("use crate::Point;");
+    assert_eq!(
+        resolve_via("probe", &p[0], &kmods, &re).as_deref(),
+        Some("config")
+    );
+    assert_eq!(resolve("probe", &p[0], &kmods).as_deref(), Some(""));
 }

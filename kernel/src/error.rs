@@ -133,8 +133,10 @@ pub(crate) fn check_len(what: &'static str, expected: usize, found: usize) -> Re
     }
 }
 
-/// Checks that every coordinate of every point is finite.
-pub(crate) fn check_points(what: &'static str, pts: &[crate::Point]) -> Result<(), Error> {
+/// Checks that every coordinate of every point is finite. (Points as `[f32; 3]`, what
+/// `config::Point` stands for: `config` imports this module, so this one does not import
+/// `config`.)
+pub(crate) fn check_points(what: &'static str, pts: &[[f32; 3]]) -> Result<(), Error> {
     match pts.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
         None => Ok(()),
         Some(index) => Err(Error::NonFinite { what, index }),

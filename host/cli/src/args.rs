@@ -10,6 +10,7 @@ use vltm::probe::{ColumnGate, Wave};
 use vltm_kernel::Weights;
 
 use crate::input::Input;
+use crate::outputs::refuse_overwriting_inputs;
 use crate::progress;
 
 /// Virtual light transport matrices (LTM) of hidden scenes from non-line-of-sight captures
@@ -300,42 +301,6 @@ impl Common {
         } else {
             self.input.open(path)
         }
-    }
-}
-
-/// Refuses an output path that names one of the command's input files (the capture, its PTU
-/// sidecar, a scene): writing it would destroy the input.
-pub(crate) fn refuse_overwriting_inputs(inputs: &[PathBuf], outputs: &[&Path]) -> vltm::Result<()> {
-    for o in outputs {
-        if let Some(i) = inputs.iter().find(|i| same_file(i, o)) {
-            return Err(vltm::Error::arg(
-                "out",
-                format!(
-                    "{} is an input of this command ({}): choose another output path",
-                    o.display(),
-                    i.display()
-                ),
-            ));
-        }
-    }
-    Ok(())
-}
-
-/// Whether two paths name the same file (after resolving links; for a path that does not
-/// exist yet, its directory is resolved).
-fn same_file(a: &Path, b: &Path) -> bool {
-    let resolve = |p: &Path| {
-        p.canonicalize().ok().or_else(|| {
-            let dir = match p.parent() {
-                Some(d) if !d.as_os_str().is_empty() => d,
-                _ => Path::new("."),
-            };
-            Some(dir.canonicalize().ok()?.join(p.file_name()?))
-        })
-    };
-    match (resolve(a), resolve(b)) {
-        (Some(x), Some(y)) => x == y,
-        _ => a == b,
     }
 }
 

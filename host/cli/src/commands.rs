@@ -7,8 +7,9 @@ use vltm::io;
 use vltm::probe::{self, ColumnGate, Gamma, IndirectOptions, LeakOptions, Shell};
 use vltm::volume::{Volume, parse_point};
 
-use crate::args::{Command, DiagGateArg, refuse_overwriting_inputs};
+use crate::args::{Command, DiagGateArg};
 use crate::console::{Failure, say};
+use crate::outputs::refuse_overwriting_inputs;
 use crate::summary::{Label, finish};
 use crate::{demo, input, ltm, partial, progress, split};
 

@@ -2,15 +2,15 @@
 //! `--t-start`, `--grid-width`, for `.mat` captures), the preprocessing of raw counts
 //! (`--t-min`, `--t-max`, `--rebin`, `--background`, [`vltm::io::prep`]), and `vltm info`.
 
-use crate::args::refuse_overwriting_inputs;
-use crate::console::{Failure, say};
-use crate::summary::describe;
+use crate::console::{Failure, flag, say};
+use crate::outputs::refuse_overwriting_inputs;
 use clap::Args;
 use std::path::Path;
 use vltm::atomic::Transaction;
 use vltm::export::figure::plot::Transient;
 use vltm::io::prep::{Background, Bound, Prep, Prepared, Reach};
 use vltm::io::{self, RowSource};
+use vltm::probe;
 use vltm_kernel::Point;
 
 /// How to read a capture and preprocess its counts.
@@ -158,7 +158,8 @@ pub fn info(path: &Path, input: &Input, png: Option<&Path>) -> Result<(), Failur
         say!("variables    {}", m.variables.join(", "));
         say!("conventions:");
         for line in &m.conventions {
-            say!("  {line}");
+            // The library names the options that set a convention by parameter.
+            say!("  {}", vltm::error::respell(line, flag));
         }
         m.capture
     } else {
@@ -267,9 +268,89 @@ pub fn describe_hdf5(path: &Path) -> vltm::Result<()> {
             say!("tal scan     {}", scan(r.scan_type()));
             say!("conventions (y-tal's Z-NLOS converter, tal/io/format.py):");
             for line in r.conventions() {
-                say!("  {line}");
+                say!("  {}", vltm::error::respell(line, flag));
             }
         }
     }
+    Ok(())
+}
+
+/// The capture's format (HDF5), geometry, time axis and counts, for `vltm info`.
+fn describe(path: &Path, c: &io::Capture) -> Result<(), Failure> {
+    let g = &c.geometry;
+    let (kl, ks) = (g.lasers.len(), g.spads_per_row());
+    let span = |p: &[Point]| {
+        let lo: Vec<f32> = (0..3)
+            .map(|i| p.iter().map(|q| q[i]).fold(f32::INFINITY, f32::min))
+            .collect();
+        let hi: Vec<f32> = (0..3)
+            .map(|i| p.iter().map(|q| q[i]).fold(f32::NEG_INFINITY, f32::max))
+            .collect();
+        format!(
+            "x {:.3}..{:.3}, y {:.3}..{:.3}, z {:.3}..{:.3} m",
+            lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]
+        )
+    };
+    if io::is_hdf5(path) {
+        describe_hdf5(path)?;
+    }
+    say!(
+        "scan         {}",
+        if g.confocal {
+            "confocal"
+        } else {
+            "non-confocal"
+        }
+    );
+    say!(
+        "lasers       {} = {}x{} ({})",
+        kl,
+        g.laser_shape[0],
+        g.laser_shape[1],
+        span(&g.lasers)
+    );
+    say!(
+        "SPADs        {} = {}x{} ({})",
+        g.spads.len(),
+        g.spad_shape[0],
+        g.spad_shape[1],
+        span(&g.spads)
+    );
+    say!(
+        "laser_xyz    {:?} m, sensor_xyz {:?} m",
+        g.laser_origin,
+        g.sensor_origin
+    );
+    say!(
+        "time axis    {} bins x {} m from t0 = {} m to {:.4} m; device legs {}",
+        g.nt,
+        g.dt,
+        g.t0,
+        g.t0 + (g.nt as f64 - 1.0) * g.dt,
+        if g.legs_in_time {
+            "included"
+        } else {
+            "not included (wall to wall)"
+        }
+    );
+    let (mut sum, mut max, mut nonzero, mut bad) = (0.0f64, f32::NEG_INFINITY, 0usize, 0usize);
+    for &h in &c.data {
+        if h.is_finite() {
+            sum += h as f64;
+            max = max.max(h);
+            nonzero += usize::from(h != 0.0);
+        } else {
+            bad += 1;
+        }
+    }
+    say!(
+        "histograms   {} = {kl} x {ks} x {} values; sum {sum:.4e}, max {max:.4e}, non-zero {nonzero}, non-finite {bad}",
+        c.data.len(),
+        g.nt
+    );
+    say!(
+        "default λ    {:.4} m (twice the aperture pitch)",
+        probe::default_wavelength(g)
+    );
     Ok(())
 }

@@ -8,9 +8,9 @@ use vltm::probe::{self, Gamma, Pattern};
 use vltm::volume::{Volume, parse_point};
 use vltm_kernel::Point;
 
-use crate::args::{MatrixArgs, RelightArgs, RowArgs, refuse_overwriting_inputs};
+use crate::args::{MatrixArgs, RelightArgs, RowArgs};
 use crate::console::{Failure, say};
-use crate::outputs::{check_matrix_out, write_matrix};
+use crate::outputs::{check_matrix_out, refuse_overwriting_inputs, write_matrix};
 use crate::summary::{Label, finish};
 use crate::{partial, progress};
 

@@ -3,9 +3,9 @@
 //! the parts and finish them: a volume, or the matrix's HDF5 file), and reading a
 //! direct-light `.npy` for Γ.
 
-use crate::args::{Common, refuse_overwriting_inputs};
+use crate::args::Common;
 use crate::console::{Failure, say};
-use crate::outputs::{check_matrix_out, write_matrix, write_outputs};
+use crate::outputs::{check_matrix_out, refuse_overwriting_inputs, write_matrix, write_outputs};
 use crate::summary::summarize;
 use std::ops::Range;
 use std::path::{Path, PathBuf};

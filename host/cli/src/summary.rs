@@ -1,98 +1,16 @@
-//! The summary lines of a run (`describe` for `vltm info`, `summarize` for a probe) and
-//! [`finish`]: the summary and the outputs of a probe over a volume.
+//! The summary line of a probe (`summarize`) and [`finish`]: the summary and the outputs of
+//! a probe over a volume.
 
 use std::path::Path;
 use vltm::exec::Path as EvalPath;
 use vltm::export::h5::Provenance;
-use vltm::io;
 use vltm::probe;
 use vltm::volume::Volume;
 use vltm_kernel::Point;
 
 use crate::args::Common;
 use crate::console::{Failure, say};
-use crate::input;
 use crate::outputs::write_outputs;
-
-/// The capture's format (HDF5), geometry, time axis and counts, for `vltm info`.
-pub(crate) fn describe(path: &Path, c: &io::Capture) -> Result<(), Failure> {
-    let g = &c.geometry;
-    let (kl, ks) = (g.lasers.len(), g.spads_per_row());
-    let span = |p: &[Point]| {
-        let lo: Vec<f32> = (0..3)
-            .map(|i| p.iter().map(|q| q[i]).fold(f32::INFINITY, f32::min))
-            .collect();
-        let hi: Vec<f32> = (0..3)
-            .map(|i| p.iter().map(|q| q[i]).fold(f32::NEG_INFINITY, f32::max))
-            .collect();
-        format!(
-            "x {:.3}..{:.3}, y {:.3}..{:.3}, z {:.3}..{:.3} m",
-            lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]
-        )
-    };
-    if io::is_hdf5(path) {
-        input::describe_hdf5(path)?;
-    }
-    say!(
-        "scan         {}",
-        if g.confocal {
-            "confocal"
-        } else {
-            "non-confocal"
-        }
-    );
-    say!(
-        "lasers       {} = {}x{} ({})",
-        kl,
-        g.laser_shape[0],
-        g.laser_shape[1],
-        span(&g.lasers)
-    );
-    say!(
-        "SPADs        {} = {}x{} ({})",
-        g.spads.len(),
-        g.spad_shape[0],
-        g.spad_shape[1],
-        span(&g.spads)
-    );
-    say!(
-        "laser_xyz    {:?} m, sensor_xyz {:?} m",
-        g.laser_origin,
-        g.sensor_origin
-    );
-    say!(
-        "time axis    {} bins x {} m from t0 = {} m to {:.4} m; device legs {}",
-        g.nt,
-        g.dt,
-        g.t0,
-        g.t0 + (g.nt as f64 - 1.0) * g.dt,
-        if g.legs_in_time {
-            "included"
-        } else {
-            "not included (wall to wall)"
-        }
-    );
-    let (mut sum, mut max, mut nonzero, mut bad) = (0.0f64, f32::NEG_INFINITY, 0usize, 0usize);
-    for &h in &c.data {
-        if h.is_finite() {
-            sum += h as f64;
-            max = max.max(h);
-            nonzero += usize::from(h != 0.0);
-        } else {
-            bad += 1;
-        }
-    }
-    say!(
-        "histograms   {} = {kl} x {ks} x {} values; sum {sum:.4e}, max {max:.4e}, non-zero {nonzero}, non-finite {bad}",
-        c.data.len(),
-        g.nt
-    );
-    say!(
-        "default λ    {:.4} m (twice the aperture pitch)",
-        probe::default_wavelength(g)
-    );
-    Ok(())
-}
 
 /// The summary line of a probe: voxels, rows, time, the configuration and the peak; warnings
 /// for non-finite samples and aliased voxels.

@@ -8,6 +8,7 @@
 //! | [`mat`] | MATLAB `.mat` captures (v5 with zlib elements, v7.3 through HDF5): the Stanford confocal and phasor-field layouts |
 //! | [`prep`] | preprocessing of raw counts as a row wrapper: time window, rebinning, background |
 //! | [`ptu`] | PicoQuant PTU T3 photon streams with a JSON sidecar, binned row by row; the T3 writer |
+//! | [`state`] | the file format of partial states (`probe::partial`): container, sections, CRC-32 |
 //!
 //! Readers only yield rows: nothing here imports the probes, the simulator or the outputs.
 
@@ -16,6 +17,7 @@ pub mod mat;
 pub mod npz;
 pub mod prep;
 pub mod ptu;
+pub mod state;
 pub mod tal;
 
 pub use capture::{Capture, Geometry, RowRange, RowSource, Rows, check_row, swap_roles};

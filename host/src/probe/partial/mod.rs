@@ -10,18 +10,11 @@
 //! merging parts that differ in any of them, or whose row ranges overlap, is an error, and so
 //! is finishing a state whose rows do not cover the scan.
 //!
-//! # Binary format (version 1, little-endian)
+//! # File format
 //!
-//! | bytes | content |
-//! |---|---|
-//! | 8 | magic `VLTMPART` |
-//! | 4 | format version, `u32` (1) |
-//! | 4 | header length `h`, `u32` |
-//! | `h` | header: UTF-8 JSON — `capture` (identity), `probe` (kind and parameters), `rows` (row ranges `[a, b)`), `report` (counters), `legs` (per factorised column: projector leg range or null), `n_spads`, `n_points`, `n_from`, `n_acc`, `crc32` (of the bytes that follow, 8 hex digits), `capture_name` (informational) |
-//! | `12·n_spads` | SPAD spots, `f32` x, y, z (columns and indirect light image with them) |
-//! | `12·n_points` | volume points, `f32` (point lists only; grids are rebuilt from `probe.volume.axes`) |
-//! | `12·n_from` | the matrix's foci `x_a`, `f32` (`n_from` absent = 0: parts written before it read the same) |
-//! | `8·n_acc` | the accumulators, `f64` (complex numbers as re, im pairs) |
+//! [`Partial::to_bytes`] writes the container of [`crate::io::state`] (magic `VLTMPART`,
+//! version, JSON header, SPAD spots, volume points, a matrix's foci, the accumulators, a
+//! CRC-32); the header holds the fields below.
 //!
 //! State per probe (`f64`): direct light `2·Kv`; higher-order column `2·Kv`; factorised
 //! column (two-bounce) `2J(Ks+1)`, un-gated `2Ks`; in-focus indirect light `|Γ|·2J(Ks+1)`
@@ -44,6 +37,7 @@ use super::wave::{Output, Wave};
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path};
 use crate::io::capture::{RowRange, RowSource};
+use crate::io::state;
 use crate::volume::Volume;
 use num_complex::Complex64;
 use serde::{Deserialize, Serialize};
@@ -54,10 +48,7 @@ use vltm_kernel::{Config, Gate, Legs, Params, Point, Report};
 mod names;
 use names::*;
 
-/// The magic bytes that open a partial state.
-pub const MAGIC: &[u8; 8] = b"VLTMPART";
-/// The format version written and read.
-pub const VERSION: u32 = 1;
+pub use crate::io::state::{MAGIC, VERSION};
 
 /// Which probe a partial state accumulates.
 #[derive(Clone, Debug, PartialEq)]
@@ -474,9 +465,8 @@ impl Partial {
 
     /// Size of [`Partial::to_bytes`] without building it (bytes).
     pub fn byte_len(&self) -> usize {
-        16 + self.header_json(0).len()
-            + 12 * (self.spads.len() + self.points.len() + self.from.len())
-            + 8 * self.acc.len()
+        let points = [&self.spads[..], &self.points[..], &self.from[..]];
+        state::byte_len(points, self.acc.len(), self.header_json(0).len())
     }
 
     fn header_json(&self, crc32: u32) -> Vec<u8> {
@@ -488,29 +478,10 @@ impl Partial {
         .unwrap_or_default()
     }
 
-    /// The state in the binary format of the module docs.
+    /// The state in the binary format of [`crate::io::state`].
     pub fn to_bytes(&self) -> Vec<u8> {
-        let mut body =
-            Vec::with_capacity(12 * (self.spads.len() + self.points.len() + self.from.len()));
-        body.extend(point_bytes(&self.spads));
-        body.extend(point_bytes(&self.points));
-        body.extend(point_bytes(&self.from));
-        let mut crc = crc32fast::Hasher::new();
-        crc.update(&body);
-        let acc: &[u8] = bytemuck::cast_slice(&self.acc);
-        // The accumulators as little-endian f64 (the byte order of every supported target is
-        // checked at compile time below).
-        const _: () = assert!(cfg!(target_endian = "little"));
-        crc.update(acc);
-        let head = self.header_json(crc.finalize());
-        let mut out = Vec::with_capacity(16 + head.len() + body.len() + acc.len());
-        out.extend_from_slice(MAGIC);
-        out.extend(VERSION.to_le_bytes());
-        out.extend((head.len() as u32).to_le_bytes());
-        out.extend(head);
-        out.extend(body);
-        out.extend_from_slice(acc);
-        out
+        let points = [&self.spads[..], &self.points[..], &self.from[..]];
+        state::encode(points, &self.acc, |crc| self.header_json(crc))
     }
 
     /// Reads a state written by [`Partial::to_bytes`]; `what` names its origin in errors.
@@ -519,78 +490,15 @@ impl Partial {
     /// [`Error::Format`] for another magic or version, a header that does not parse, a size
     /// that does not match or a CRC that fails.
     pub fn from_bytes(bytes: &[u8], what: &std::path::Path) -> Result<Self> {
-        let bad = |field: &str, expected: &str, found: String| {
-            Error::format(what, field, expected, found)
-        };
-        if bytes.len() < 16 || bytes[..8] != MAGIC[..] {
-            return Err(bad(
-                "magic",
-                "a vltm partial state (VLTMPART)",
-                format!("{} bytes of something else", bytes.len()),
-            ));
-        }
-        let word =
-            |i: usize| u32::from_le_bytes([bytes[i], bytes[i + 1], bytes[i + 2], bytes[i + 3]]);
-        let version = word(8);
-        if version != VERSION {
-            return Err(bad("version", "1", version.to_string()));
-        }
-        let h = word(12) as usize;
-        let rest = &bytes[16..];
-        if rest.len() < h {
-            return Err(bad(
-                "header",
-                &format!("{h} bytes"),
-                format!("{} (truncated)", rest.len()),
-            ));
-        }
-        let head: Head = serde_json::from_slice(&rest[..h])
-            .map_err(|e| bad("header", "the JSON header of format 1", e.to_string()))?;
-        let body = &rest[h..];
-        let want = head
-            .n_spads
-            .checked_add(head.n_points)
-            .and_then(|n| n.checked_add(head.n_from))
-            .and_then(|n| n.checked_mul(12))
-            .and_then(|n| head.n_acc.checked_mul(8).and_then(|a| a.checked_add(n)));
-        if want != Some(body.len()) {
-            return Err(bad(
-                "body",
-                &format!(
-                    "{} SPADs, {} + {} points and {} accumulators",
-                    head.n_spads, head.n_points, head.n_from, head.n_acc
-                ),
-                format!("{} bytes (truncated or padded)", body.len()),
-            ));
-        }
-        if format!("{:08x}", crc32fast::hash(body)) != head.crc32 {
-            return Err(bad(
-                "crc32",
-                &head.crc32,
-                format!("{:08x} (the state is corrupted)", crc32fast::hash(body)),
-            ));
-        }
-        let pts = |b: &[u8]| -> Vec<Point> {
-            b.chunks_exact(12)
-                .map(|p| {
-                    core::array::from_fn(|i| {
-                        f32::from_le_bytes([p[4 * i], p[4 * i + 1], p[4 * i + 2], p[4 * i + 3]])
-                    })
-                })
-                .collect()
-        };
-        let (sp, rest) = body.split_at(12 * head.n_spads);
-        let (pt, rest) = rest.split_at(12 * head.n_points);
-        let (fr, acc) = rest.split_at(12 * head.n_from);
-        let acc = acc
-            .chunks_exact(8)
-            .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
-            .collect();
+        let (head, s) = state::decode(bytes, what)?;
+        let head: Head = serde_json::from_slice(head).map_err(|e| {
+            Error::format(what, "header", "the JSON header of format 1", e.to_string())
+        })?;
         let p = Self {
-            spads: pts(sp),
-            points: pts(pt),
-            from: pts(fr),
-            acc,
+            spads: s.spads,
+            points: s.points,
+            from: s.from,
+            acc: s.acc,
             head,
         };
         p.check_rows(what)?;
