@@ -21,8 +21,8 @@
 //! `<tmp>/repo/{fixtures,benches,docs,examples,kernel}` link to the repository's, and `<tmp>/shared`
 //! to the `shared/` folder beside the repository (`$VLTM_SHARED_DIR` overrides where that is),
 //! so `fixtures/…` and `../shared/data/…` resolve as in the documentation, and what a command
-//! writes stays in the scratch directory. A page whose examples read `../shared/` is skipped
-//! with a note when that folder is missing (CI has it; `VLTM_REQUIRE_REAL=1` makes its absence
+//! writes stays in the scratch directory. A command that reads `../shared/` is skipped with a
+//! note when that folder is missing (CI has it; `VLTM_REQUIRE_REAL=1` makes its absence
 //! an error, as in `tests/real.rs`).
 //!
 //! **Links.** Every relative link and image (`[text](path)`, `![alt](path)`, `src="path"`) of
@@ -201,7 +201,9 @@ fn without_code_spans_keep(s: &str) -> String {
 
 #[test]
 fn anchors_follow_github() {
-    let a = anchors("# Real data: the Stanford captures\n## Views, as seen (here)\n## Views, as seen (here)\n```\n# not a heading\n```\n## The `vltm` CLI\n");
+    let a = anchors(
+        "# Real data: the Stanford captures\n## Views, as seen (here)\n## Views, as seen (here)\n```\n# not a heading\n```\n## The `vltm` CLI\n",
+    );
     let want: BTreeSet<String> = [
         "real-data-the-stanford-captures",
         "views-as-seen-here",
@@ -272,7 +274,10 @@ fn links_and_images_resolve() {
             }
         }
     }
-    assert!(checked > 20, "only {checked} links found: the scanner is broken");
+    assert!(
+        checked > 20,
+        "only {checked} links found: the scanner is broken"
+    );
     assert!(broken.is_empty(), "broken links:\n{}", broken.join("\n"));
 }
 
@@ -320,7 +325,9 @@ fn examples(text: &str) -> Result<Vec<Example>, String> {
         }
         if t.starts_with("```") {
             if in_console && pending.is_some() {
-                return Err(format!("line {n}: the block ends inside a continued command"));
+                return Err(format!(
+                    "line {n}: the block ends inside a continued command"
+                ));
             }
             in_console = false;
             in_other = false;
@@ -570,19 +577,21 @@ fn console_examples_run() {
         if exs.is_empty() {
             continue;
         }
-        let needs_shared = exs
-            .iter()
-            .any(|e| e.args.iter().any(|a| a.contains("../shared/")));
-        if needs_shared && shared_dir().is_none() {
-            assert!(
-                std::env::var("VLTM_REQUIRE_REAL").is_err(),
-                "{name}: ../shared is missing"
-            );
-            eprintln!("skipping {name}: its examples read ../shared, which is not there");
-            continue;
-        }
         let scratch = Scratch::new(&name.replace(['/', '.'], "_"));
         for ex in &exs {
+            let needs_shared = ex.args.iter().any(|a| a.contains("../shared/"));
+            if needs_shared && shared_dir().is_none() {
+                assert!(
+                    std::env::var("VLTM_REQUIRE_REAL").is_err(),
+                    "{name}:{}: ../shared is missing",
+                    ex.line
+                );
+                eprintln!(
+                    "skipping {name}:{}: it reads ../shared, which is not there",
+                    ex.line
+                );
+                continue;
+            }
             ran += 1;
             let out = Command::new(support::vltm_bin())
                 .args(&ex.args)

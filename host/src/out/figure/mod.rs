@@ -421,12 +421,7 @@ struct Panel {
 }
 
 impl Panel {
-    fn new(
-        subtitle: &'static str,
-        h: Axis,
-        v: Axis,
-        labels: [&'static str; 2],
-    ) -> Self {
+    fn new(subtitle: &'static str, h: Axis, v: Axis, labels: [&'static str; 2]) -> Self {
         let rect = Rect::new(0, 0, h.len as i32, v.len as i32);
         let h_ticks = ticks(&h, true);
         let v_ticks = ticks(&v, false);

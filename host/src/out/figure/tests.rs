@@ -135,7 +135,11 @@ fn a_sign_facing_the_wall_reads_as_seen_from_the_wall() {
     let mut mirrored = false;
     for row in 0..ny {
         for col in 0..nx {
-            assert_eq!(drawn(col, row), on(col, row), "pixel ({col}, {row}) of the R");
+            assert_eq!(
+                drawn(col, row),
+                on(col, row),
+                "pixel ({col}, {row}) of the R"
+            );
             mirrored |= drawn(col, row) != on(nx - 1 - col, row);
         }
     }
