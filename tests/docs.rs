@@ -21,8 +21,8 @@
 //! `<tmp>/repo/{fixtures,benches,docs,examples,kernel}` link to the repository's, and `<tmp>/shared`
 //! to the `shared/` folder beside the repository (`$VLTM_SHARED_DIR` overrides where that is),
 //! so `fixtures/…` and `../shared/data/…` resolve as in the documentation, and what a command
-//! writes stays in the scratch directory. A page whose examples read `../shared/` is skipped
-//! with a note when that folder is missing (CI has it; `VLTM_REQUIRE_REAL=1` makes its absence
+//! writes stays in the scratch directory. A command that reads `../shared/` is skipped with a
+//! note when that folder is missing (CI has it; `VLTM_REQUIRE_REAL=1` makes its absence
 //! an error, as in `tests/real.rs`).
 //!
 //! **Links.** Every relative link and image (`[text](path)`, `![alt](path)`, `src="path"`) of
@@ -577,19 +577,21 @@ fn console_examples_run() {
         if exs.is_empty() {
             continue;
         }
-        let needs_shared = exs
-            .iter()
-            .any(|e| e.args.iter().any(|a| a.contains("../shared/")));
-        if needs_shared && shared_dir().is_none() {
-            assert!(
-                std::env::var("VLTM_REQUIRE_REAL").is_err(),
-                "{name}: ../shared is missing"
-            );
-            eprintln!("skipping {name}: its examples read ../shared, which is not there");
-            continue;
-        }
         let scratch = Scratch::new(&name.replace(['/', '.'], "_"));
         for ex in &exs {
+            let needs_shared = ex.args.iter().any(|a| a.contains("../shared/"));
+            if needs_shared && shared_dir().is_none() {
+                assert!(
+                    std::env::var("VLTM_REQUIRE_REAL").is_err(),
+                    "{name}:{}: ../shared is missing",
+                    ex.line
+                );
+                eprintln!(
+                    "skipping {name}:{}: it reads ../shared, which is not there",
+                    ex.line
+                );
+                continue;
+            }
             ran += 1;
             let out = Command::new(support::vltm_bin())
                 .args(&ex.args)

@@ -122,12 +122,13 @@ fn resolution_chart_is_at_40_cm() {
     ) else {
         return;
     };
-    // In the lower-left group of horizontal bars of the front view (x < 0, y < 0): the
-    // second index of `rect_data` runs down y (before, it ran up and this group was at the
-    // upper left, with the exit sign's letters mirrored relative to the lab).
+    // In the lower group of horizontal bars at x < 0, y < 0 (lower right in vltm's figures,
+    // which are drawn as seen from the wall, x increasing to the left): the second index of
+    // `rect_data` runs down y (before, it ran up and this group was at y > 0, with the exit
+    // sign's letters mirrored relative to the lab).
     assert!(
         peak[0] < -0.02 && peak[1] < -0.02,
-        "chart: strongest voxel {peak:?} not in the lower-left bar group"
+        "chart: strongest voxel {peak:?} not in the bar group at x < 0, y < 0"
     );
 }
 

@@ -230,7 +230,8 @@ pub(crate) struct Common {
     /// (datasets `intensity` and `volume_xyz`, the parameters as attributes).
     #[arg(long, value_name = "F.npy|F.h5")]
     pub(crate) out: Option<PathBuf>,
-    /// Output figure: front (x-y) and top (x-z) maximum-intensity projections.
+    /// Output figure: front (x-y) and top (x-z) maximum-intensity projections, drawn as seen
+    /// from the relay wall (x increasing to the left).
     #[arg(long, value_name = "F.png")]
     pub(crate) png: Option<PathBuf>,
     /// Only the laser rows A..B (B exclusive, 0-based) of the scan: one part of a scan split
