@@ -141,7 +141,14 @@ for t in $M4 $M0; do
 done
 
 step "cycles firmware $M4: build" fw --target $M4 --features cycles --bin vltm-firmware-cycles
-step "instruction counts, real setup, on m4f (-icount)" ./run-qemu.sh m4f cycles "$(elf $M4 vltm-firmware-cycles)"
+step "instruction counts, real setup, on m4f (-icount), per-row budgets enforced" ./run-qemu.sh m4f cycles "$(elf $M4 vltm-firmware-cycles)"
+# The M0's fixed-point path: its ARMv6-M code linked for the mps2-an386 (the microbit's 16 KB
+# of RAM cannot hold the real setup), in its own target dir (another memory map). Reported.
+m0_an386() { CARGO_TARGET_DIR="$tdir/an386-m0" VLTM_FW_BOARD=mps2-an386 fw --target $M0 \
+  --features cycles --bin vltm-firmware-fixed-cycles; }
+step "fixed-point cycles firmware $M0 (mps2-an386 memory map): build" m0_an386
+step "instruction counts, fixed-point path (M0 code), real setup (-icount), reported" \
+  ./run-qemu.sh m4f cycles "$tdir/an386-m0/$M0/release/vltm-firmware-fixed-cycles"
 
 size=$(command -v arm-none-eabi-size || true)
 [ -n "$size" ] || size="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/llvm-size"

@@ -17,7 +17,7 @@
 use crate::config::{Config, Legs, Point};
 use crate::error::{Error, check_len, check_points};
 use crate::geometry::dist64;
-use crate::phase::{TwiddleStep, cis_turns_f64};
+use crate::phase::{TwiddleStep, cis_turns_f64, wrap};
 use crate::sample::Sample;
 use num_complex::Complex32;
 
@@ -192,8 +192,8 @@ impl<'t> Scan<'t> {
         for (m, w) in w2.iter_mut().take(n2).enumerate() {
             *w = self.twiddle.get(m * n1).copied().unwrap_or_default();
         }
-        let k0 = self.cfg.k_lo().rem_euclid(n as i64) as usize;
-        let r0 = self.cfg.k_lo().rem_euclid(n2 as i64) as usize;
+        let k0 = wrap(self.cfg.k_lo(), n);
+        let r0 = wrap(self.cfg.k_lo(), n2);
         let half = n2 / 2;
         let mut xs = [[0.0f32; BLOCK]; 2];
         let mut ys = [[ZERO; BLOCK]; 2];
@@ -497,7 +497,7 @@ impl<'m> RowBuffer<'m> {
         }
         // Twiddle index (k_j·bin) mod N, stepping by bin per band bin: the accumulator of
         // frequency `bin` at sample k_lo.
-        let mut q = TwiddleStep::new(bin as i64, cfg.k_lo().rem_euclid(n as i64) as u64, n);
+        let mut q = TwiddleStep::new(bin as i64, wrap(cfg.k_lo(), n) as u64, n);
         for v in hg.iter_mut() {
             if let Some(w) = scan.twiddle.get(q.index()) {
                 *v += *w;

@@ -13,6 +13,7 @@ use vltm::out::h5::Provenance;
 use vltm::probe::{self, IndirectOptions, Shell};
 use vltm::volume::Volume;
 use vltm_kernel::Point;
+use vltm_kernel::geometry::dist;
 
 use crate::outputs::{Part, write_parts};
 use crate::{Common, Failure, summarize};
@@ -125,7 +126,7 @@ pub(crate) fn column_shells(
             o.values
                 .iter()
                 .zip(&volume.points)
-                .map(|(&x, p)| if sh.contains(dist(a, *p)) { x } else { 0.0 })
+                .map(|(&x, p)| if sh.contains(dist(&a, p)) { x } else { 0.0 })
                 .collect()
         })
         .collect();
@@ -278,8 +279,4 @@ pub(crate) fn indirect_write(
         title: "direct light I_d (pass 1)".to_string(),
     });
     write_parts((&c.out, &c.png), &meta, &parts, volume, &[])
-}
-
-fn dist(a: Point, b: Point) -> f32 {
-    ((0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f32>()).sqrt()
 }
