@@ -77,6 +77,16 @@ pub fn cis_turns_f64(t: f64) -> Complex32 {
     cis_turns((t - libm::rint(t)) as f32)
 }
 
+/// `k mod n` in `0..n` (`n = 0` is read as 1), without a panicking branch.
+///
+/// ```
+/// assert_eq!(vltm_kernel::phase::wrap(-3, 10), 7);
+/// ```
+#[inline]
+pub fn wrap(k: i64, n: usize) -> usize {
+    k.checked_rem_euclid(n.max(1) as i64).unwrap_or(0) as usize
+}
+
 /// Integer phase accumulator over a table of `N` twiddles `e^{−2πiq/N}`: the index
 /// `q = (k·n) mod N` of sample `n`, stepped by `k mod N` (all `< N ≤ 2³⁰`, no overflow).
 ///
@@ -99,7 +109,7 @@ impl TwiddleStep {
     #[inline]
     pub fn new(k: i64, start: u64, n: usize) -> Self {
         let n = n.max(1);
-        let step = k.rem_euclid(n as i64) as u64;
+        let step = wrap(k, n) as u64;
         let q = ((step * (start % n as u64)) % n as u64) as usize;
         Self {
             q,

@@ -18,6 +18,7 @@ use vltm::sim::{Aperture, Bounces, Cuboid, Object, Patch, Scene, Setup};
 use vltm::volume::Volume;
 use vltm::{Error, Result};
 use vltm_kernel::Point;
+use vltm_kernel::geometry::dist;
 
 /// Focus of the virtual projector: the panel's centre.
 pub const PANEL: [f64; 3] = [-0.35, 0.0, 0.8];
@@ -75,10 +76,6 @@ fn p32(p: [f64; 3]) -> Point {
     p.map(|c| c as f32)
 }
 
-fn dist(a: Point, b: Point) -> f32 {
-    ((0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f32>()).sqrt()
-}
-
 fn argmax(v: &[f32]) -> usize {
     (0..v.len())
         .max_by(|&a, &b| v[a].total_cmp(&v[b]))
@@ -94,7 +91,7 @@ fn nearest(scene: &Scene, p: Point) -> (String, f32) {
         .map(|sp| {
             (
                 names.get(sp.group).copied().unwrap_or("?").to_string(),
-                dist(p, p32(sp.position)),
+                dist(&p, &p32(sp.position)),
             )
         })
         .min_by(|a, b| a.1.total_cmp(&b.1))
@@ -168,7 +165,7 @@ pub fn run(out: &Path) -> Result<String> {
         let m = mask(&gated.values);
         m.iter()
             .zip(&vol.points)
-            .map(|(&x, p)| if s.contains(dist(a, *p)) { x } else { 0.0 })
+            .map(|(&x, p)| if s.contains(dist(&a, p)) { x } else { 0.0 })
             .collect::<Vec<f32>>()
     };
     lines.push(Line {

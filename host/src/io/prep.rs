@@ -33,6 +33,7 @@
 use crate::error::{Error, Result};
 use crate::io::capture::{Geometry, RowSource};
 use vltm_kernel::Point;
+use vltm_kernel::geometry::dist64;
 
 /// Fewest bins `--background auto` averages over per histogram.
 pub const MIN_QUIET_BINS: usize = 4;
@@ -179,13 +180,6 @@ impl Reach {
         }
         (f64::sqrt(near), f64::sqrt(far))
     }
-}
-
-fn dist(a: [f64; 3], p: Point) -> f64 {
-    (0..3)
-        .map(|i| (a[i] - f64::from(p[i])).powi(2))
-        .sum::<f64>()
-        .sqrt()
 }
 
 /// What the preprocessing did, over the rows read (each row counted once).
@@ -339,7 +333,7 @@ impl<'a> Prepared<'a> {
         let (a0, a1) = r.span(x_l);
         let (b0, b1) = r.span(x_s);
         let legs = if g.legs_in_time {
-            dist(g.laser_origin, x_l) + dist(g.sensor_origin, x_s)
+            dist64(&x_l, &g.laser_origin) + dist64(&x_s, &g.sensor_origin)
         } else {
             0.0
         };

@@ -14,7 +14,7 @@ use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
 use std::time::Instant;
-use vltm_kernel::{Gate, Point, Probe, Report, Scan, Target, cis_turns};
+use vltm_kernel::{Gate, Point, Probe, Report, Scan, Target, cis_turns, geometry};
 
 /// The time gate of a column (the CLI's `--gate`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -581,23 +581,19 @@ pub(super) fn column_aliased(
     voxels: &[Point],
     legs: (f64, f64),
 ) -> usize {
-    let cfg = scan.config();
-    let (af_lo, af_hi) = cfg.alias_free();
-    if legs.0 > legs.1 {
-        return 0;
-    }
+    let window = geometry::alias_window(scan.config());
     voxels
         .par_iter()
         .filter(|b| {
             let d_ab = dist(a, **b);
-            let (lo, hi) = scan.spads().iter().zip(scan.sensor_legs()).fold(
-                (f64::INFINITY, f64::NEG_INFINITY),
-                |(lo, hi), (sp, d4)| {
-                    let x = (d_ab + dist(**b, *sp) + d4) as f64;
-                    (lo.min(x), hi.max(x))
-                },
-            );
-            legs.0 + lo - cfg.t0() < af_lo || legs.1 + hi - cfg.t0() > af_hi
+            let paths = scan
+                .spads()
+                .iter()
+                .zip(scan.sensor_legs())
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |r, (sp, d4)| {
+                    geometry::widen(r, f64::from(d_ab + dist(**b, *sp) + d4))
+                });
+            geometry::leaves_window(window, legs, paths)
         })
         .count()
 }

@@ -65,6 +65,7 @@ use num_complex::Complex64;
 use rayon::prelude::*;
 use std::time::Instant;
 use vltm_kernel::Point;
+use vltm_kernel::geometry::dist64;
 
 /// How the direct light is removed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -165,17 +166,10 @@ struct SpadTables {
     ks: usize,
 }
 
-fn d3(a: Point, b: [f64; 3]) -> f64 {
-    (0..3)
-        .map(|i| (f64::from(a[i]) - b[i]).powi(2))
-        .sum::<f64>()
-        .sqrt()
-}
-
 /// Leg from a wall spot to a voxel: (distance, cos at the wall / d²).
 fn leg(spot: Point, v: Point) -> (f64, f64) {
     let p = v.map(f64::from);
-    let d = d3(spot, p);
+    let d = dist64(&spot, &p);
     if d.is_nan() || d <= 0.0 {
         return (d, 0.0);
     }
@@ -206,7 +200,7 @@ impl Basis {
                 }
             })
             .collect();
-        let leg_len = |x: &Point, o: [f64; 3]| if g.legs_in_time { d3(*x, o) } else { 0.0 };
+        let leg_len = |x: &Point, o: [f64; 3]| if g.legs_in_time { dist64(x, &o) } else { 0.0 };
         Ok(Self {
             omega,
             sigma,

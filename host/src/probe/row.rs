@@ -25,7 +25,7 @@ use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
 use std::time::Instant;
-use vltm_kernel::{Point, Report, cis_turns};
+use vltm_kernel::{Point, Report, cis_turns, geometry};
 
 /// The row `T(·, x_b)` over `volume` (intensities `|A(a, b)|²` per voxel `a`), streamed by
 /// laser rows (see the module docs).
@@ -118,13 +118,12 @@ pub fn row(
         },
     )?;
     // Elements whose path times leave the alias-free window (0 under the automatic margin).
-    let (af_lo, af_hi) = cfg.alias_free();
+    let window = geometry::alias_window(&cfg);
     let span_of = |pts: &[Point], legs: &[f64], x: Point| {
         pts.iter()
             .zip(legs)
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), (p, d)| {
-                let y = f64::from(dist(*p, x)) + d;
-                (lo.min(y), hi.max(y))
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |r, (p, d)| {
+                geometry::widen(r, f64::from(dist(*p, x)) + d)
             })
     };
     let (c_lo, c_hi) = span_of(&g.spads, &d4, b);
@@ -132,9 +131,9 @@ pub fn row(
         .par_iter()
         .zip(&d_ab)
         .filter(|(a, dab)| {
-            let (l_lo, l_hi) = span_of(&g.lasers, &d1, **a);
-            let d = f64::from(**dab) - cfg.t0();
-            l_lo + d + c_lo < af_lo || l_hi + d + c_hi > af_hi
+            let legs = span_of(&g.lasers, &d1, **a);
+            let d = f64::from(**dab);
+            geometry::leaves_window(window, legs, (d + c_lo, d + c_hi))
         })
         .count();
     Ok(Output {

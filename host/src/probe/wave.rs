@@ -289,13 +289,10 @@ pub struct Output {
     pub path: Path,
 }
 
-pub(super) fn dist64(a: &Point, b: &[f64; 3]) -> f64 {
-    (0..3)
-        .map(|i| (a[i] as f64 - b[i]).powi(2))
-        .sum::<f64>()
-        .sqrt()
-}
+pub(super) use vltm_kernel::geometry::dist64;
 
+/// [`vltm_kernel::geometry::dist`] taking its points by value (the host's call sites).
+#[inline]
 pub(super) fn dist(a: Point, b: Point) -> f32 {
-    ((0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f32>()).sqrt()
+    vltm_kernel::geometry::dist(&a, &b)
 }

@@ -4,6 +4,8 @@
 
 pub mod fixed_pipeline;
 pub mod fixture;
+#[cfg(feature = "cycles")]
+pub mod icount;
 pub mod pipeline;
 #[cfg(feature = "state")]
 pub mod state;

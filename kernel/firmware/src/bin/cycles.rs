@@ -19,13 +19,12 @@
 #![no_std]
 #![no_main]
 
-use core::sync::atomic::{AtomicU32, Ordering};
-use cortex_m::peripheral::{SYST, syst::SystClkSource};
 use cortex_m::singleton;
 use cortex_m_rt::{entry, exception};
 use heapless::spsc::{Consumer, Producer, Queue};
 use panic_semihosting as _;
 use semihosting::{println, process};
+use vltm_firmware::icount::{self, measure};
 use vltm_kernel::{ColumnF32, Config, Gate, Params, Point, Probe, RowBuffer, Scan, Target};
 
 const KS: usize = 28;
@@ -156,53 +155,19 @@ static VOXELS: [Point; KV] = {
     v
 };
 
-static WRAPS: AtomicU32 = AtomicU32::new(0);
-
 #[exception]
 fn SysTick() {
-    WRAPS.fetch_add(1, Ordering::Relaxed);
-}
-
-/// SysTick ticks since start (24-bit counter + wraps counted by the exception).
-fn ticks() -> u64 {
-    loop {
-        let w = WRAPS.load(Ordering::Relaxed);
-        let v = SYST::get_current();
-        if WRAPS.load(Ordering::Relaxed) == w {
-            return u64::from(w) * (1 << 24) + u64::from(0xFF_FFFF - v);
-        }
-    }
-}
-
-/// Ticks taken by `f`.
-fn measure<R>(f: impl FnOnce() -> R) -> (u64, R) {
-    let t0 = ticks();
-    let r = f();
-    (ticks() - t0, r)
+    icount::on_systick();
 }
 
 #[entry]
 fn main() -> ! {
-    let Some(mut p) = cortex_m::Peripherals::take() else {
+    let Some(p) = cortex_m::Peripherals::take() else {
         process::exit(7)
     };
-    p.SYST.set_clock_source(SystClkSource::Core);
-    p.SYST.set_reload(0xFF_FFFF);
-    p.SYST.clear_current();
-    p.SYST.enable_interrupt();
-    p.SYST.enable_counter();
-
-    // VAL reads 0 until the first tick reloads it.
-    while SYST::get_current() == 0 {}
-    // Calibration: a loop of exactly 2 instructions per iteration (subs + bne).
-    let n_loop = 5_000_000u32;
-    let (t_cal, ()) = measure(|| unsafe {
-        core::arch::asm!("2:", "subs {0}, #1", "bne 2b", inout(reg) n_loop => _, options(nomem, nostack));
-    });
-    let per_tick = 2.0 * n_loop as f64 / t_cal as f64;
+    let (per_tick, n_cal, t_cal) = icount::start(p.SYST);
     println!(
-        "CYCLES calibration: {} instructions in {t_cal} ticks: {per_tick:.3} instructions/tick",
-        2 * n_loop
+        "CYCLES calibration: {n_cal} instructions in {t_cal} ticks: {per_tick:.3} instructions/tick"
     );
 
     let (Some(tables), Some(rowbuf), Some(hist), Some(diag_s), Some(col_s), Some(out)) = (

@@ -35,13 +35,14 @@ use vltm_firmware::fixture::{
     BINS, FOCUS, LASERS, N_FFT, N_LASERS, N_VOXELS, NT, P1_VOXEL, ROW, SPADS, VOXELS, params,
 };
 use vltm_firmware::pipeline::argmax;
-use vltm_kernel::{Config, Gate, Probe, RowBuffer, Scan, Target};
+use vltm_kernel::{ColumnF32, Config, Gate, Probe, RowBuffer, Scan, Target};
 
 /// SPADs used here.
 const KS: usize = 2;
 const TABLES: usize = 2 * N_FFT + BINS + KS;
 const ROWBUF: usize = KS * (2 * BINS + 3);
 /// The largest probe state: column × Gaussian `2J(Ks+1)` or higher-order `2(Kv+Nt+1)`.
+const COLUMN32: usize = (4 * KS + 2) * BINS;
 const STATE: usize = {
     let col = 2 * BINS * (KS + 1);
     let ho = 2 * (N_VOXELS + NT + 1);
@@ -200,5 +201,47 @@ fn run() -> i32 {
     if photon_rows == 0 {
         return 6;
     }
-    0
+    // The f32 column (Kahan state, no f64): every row, histogram and photon rows, then finish.
+    let (Some(c32), Some(out32)) = (
+        singleton!(: [f32; COLUMN32] = [0.0; COLUMN32]),
+        singleton!(: [f32; N_VOXELS] = [0.0; N_VOXELS]),
+    ) else {
+        return 7;
+    };
+    let Some(c32) = c32.get_mut(..ColumnF32::state_len(&cfg, ks)) else {
+        return 2;
+    };
+    let Ok(mut col) = ColumnF32::new(&scan, black_box(FOCUS), c32) else {
+        return 2;
+    };
+    for (l, &laser) in lasers.iter().enumerate() {
+        let Some(h) = data.get(l * ROW..l * ROW + ks * nt) else {
+            return 2;
+        };
+        let ok = if l % 2 == 0 {
+            rows.load(&scan, laser, h)
+                .and_then(|row| col.push_row(&scan, &row))
+        } else {
+            rows.begin_photons();
+            for (spad, hist) in h.chunks_exact(nt.max(1)).enumerate() {
+                for (bin, &count) in hist.iter().enumerate() {
+                    for _ in 0..count {
+                        rows.push_photon(&scan, spad, bin);
+                    }
+                }
+            }
+            rows.end_photons(&scan, laser)
+                .and_then(|row| col.push_row(&scan, &row))
+        };
+        if ok.is_err() {
+            return 3;
+        }
+    }
+    let Some(out32) = out32.get_mut(..voxels.len()) else {
+        return 2;
+    };
+    match col.finish(&scan, voxels, out32) {
+        Ok(r) if r.rows == N_LASERS as u64 && out32.iter().all(|x| x.is_finite()) => 0,
+        _ => 6,
+    }
 }
