@@ -4,6 +4,9 @@
 
 pub mod fixed_pipeline;
 pub mod fixture;
+#[cfg(feature = "cycles")]
+pub mod lookup_cycles;
+pub mod lookup_pipeline;
 pub mod pipeline;
 
 #[cfg(target_endian = "big")]

@@ -203,5 +203,10 @@ fn main() -> ! {
         i(t_ph),
         i(t_ph) / photons as f64
     );
+    // The lookup path (src/lookup_cycles.rs).
+    let mut m = |f: &mut dyn FnMut()| measure(f).0;
+    if !vltm_firmware::lookup_cycles::run(&scan, &mut rows, &hist[..], &VOXELS, &mut m, per_tick) {
+        process::exit(3)
+    }
     process::exit(0)
 }
