@@ -9,8 +9,8 @@ cd "$(dirname "$0")"
 t="${1:-thumbv7em-none-eabihf}"
 dir="${CARGO_TARGET_DIR:-$PWD/target}"
 cargo build -q --release --no-default-features --features nopanic,find-panics \
-  --bin vltm-firmware-nopanic --target "$t"
-elf="$dir/$t/release/vltm-firmware-nopanic"
+  --bin "${VLTM_NOPANIC_BIN:-vltm-firmware-nopanic}" --target "$t"
+elf="$dir/$t/release/${VLTM_NOPANIC_BIN:-vltm-firmware-nopanic}"
 objdump=$(command -v arm-none-eabi-objdump || echo "$(rustc --print sysroot)/lib/rustlib/x86_64-unknown-linux-gnu/bin/llvm-objdump")
 "$objdump" -d -C -l --no-show-raw-insn "$elf" | awk '
   /^[0-9a-f]+ <.*>:$/ { fn = $0; next }

@@ -6,6 +6,9 @@ pub mod fixed_pipeline;
 pub mod fixture;
 #[cfg(feature = "cycles")]
 pub mod icount;
+#[cfg(feature = "cycles")]
+pub mod lookup_cycles;
+pub mod lookup_pipeline;
 pub mod pipeline;
 #[cfg(feature = "state")]
 pub mod state;

@@ -21,9 +21,12 @@
 //! to a smooth envelope of bandwidth `~m/σ`; `ℓ_q` are the 4-point cubic **Lagrange**
 //! weights (nodes −1, 0, 1, 2). The carrier `e^{2πi k_d τ/span}` is split at the grid:
 //! `e^{2πi k_d n/L}` from a table (exact integer phase `k_d·n mod L`, made once in `f64`)
-//! and the sub-sample rest `e^{2πi (k_d/L)·t}` (≤ 1/8 turn) by the polynomials of
-//! [`vltm_kernel::cis_turns`] without its range reduction: no large-argument phase error,
-//! no `rint` and no data-dependent quadrant branch per pair. The amplitude added to `acc[v]`
+//! and the sub-sample rest `e^{2πi (k_d/L)·t}` (≤ 1/8 turn) by the kernel's
+//! [`vltm_kernel::cis_small_turns`] (the polynomials of [`vltm_kernel::cis_turns`] without its
+//! range reduction): no large-argument phase error, no `rint` and no data-dependent quadrant
+//! branch per pair. The Lagrange weights are the kernel's [`vltm_kernel::lagrange4`]; the
+//! kernel's own lookup path ([`vltm_kernel::LookupProbe`]) is the same method on a
+//! power-of-two grid with caller-owned memory, for firmware. The amplitude added to `acc[v]`
 //! is `w(d_lv)·Σ_s w(d_vs)·Z_s(d_lv + d_vs)`, summed over the SPADs in `Complex32` and added
 //! to the `Complex64` accumulator, as the kernel's band diagonal does. The guard is the
 //! kernel's, bit for bit: a pair with `τ + offset_s` (in `f32`) outside [`Config::guard`]
@@ -67,7 +70,7 @@
 use num_complex::{Complex32, Complex64};
 use rustfft::{Fft, FftPlanner};
 use std::sync::Arc;
-use vltm_kernel::{Config, Point, Row, Sample, Scan, Weights};
+use vltm_kernel::{Config, Point, Row, Sample, Scan, Weights, cis_small_turns, lagrange4};
 
 /// Grid samples per gate std σ: the grid step is `δ = span/L ≤ σ/R` (see the module docs
 /// for the interpolation error this gives).
@@ -174,42 +177,10 @@ fn dist(a: &Point, b: &Point) -> f32 {
     (x * x + y * y + z * z).sqrt()
 }
 
-/// `e^{i2πt}` for a small phase `|t| ≤ 1/8` turn: the polynomials of
-/// [`vltm_kernel::cis_turns`] (Taylor series of sin to x⁹ and cos to x¹⁰ on `|x| ≤ π/4`,
-/// truncation < 2e-9) without its range reduction, so no `rint` and no quadrant branch.
-#[inline(always)]
-fn cis_small(t: f32) -> Complex32 {
-    let x = std::f32::consts::TAU * t;
-    let x2 = x * x;
-    let s = x
-        * (1.0
-            + x2 * (-1.0 / 6.0
-                + x2 * (1.0 / 120.0 + x2 * (-1.0 / 5040.0 + x2 * (1.0 / 362_880.0)))));
-    let c = 1.0
-        + x2 * (-0.5
-            + x2 * (1.0 / 24.0
-                + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40_320.0 + x2 * (-1.0 / 3_628_800.0)))));
-    Complex32::new(c, s)
-}
-
-/// The 4-point cubic Lagrange weights at `t ∈ [0, 1)` for the nodes −1, 0, 1, 2.
-#[inline(always)]
-fn lagrange_weights(t: f32) -> [f32; 4] {
-    let (tp, tm, t2) = (t + 1.0, t - 1.0, t - 2.0);
-    let a = t * tm;
-    let b = tp * t2;
-    [
-        a * t2 * (-1.0 / 6.0),
-        b * tm * 0.5,
-        b * t * -0.5,
-        a * tp * (1.0 / 6.0),
-    ]
-}
-
 /// 4-point cubic Lagrange interpolation at `t ∈ [0, 1)` between `q[1]` and `q[2]`.
 #[inline(always)]
 fn lagrange(q: &[Complex32; 4], t: f32) -> Complex32 {
-    let w = lagrange_weights(t);
+    let w = lagrange4(t);
     q[0] * w[0] + q[1] * w[1] + q[2] * w[2] + q[3] * w[3]
 }
 
@@ -224,7 +195,7 @@ impl Lookup {
         let n = cfg.n_fft();
         let span = cfg.span();
         let want = (r * span / cfg.sigma()).ceil();
-        // δ ≤ σ/r for the interpolation, δ ≤ λ/8 for `cis_small` (|θ·t| ≤ 1/8 turn).
+        // δ ≤ σ/r for the interpolation, δ ≤ λ/8 for `cis_small_turns` (|θ·t| ≤ 1/8 turn).
         let want = want.max((8.0 * span / cfg.wavelength()).ceil());
         let len = fast_len(n.max(if want.is_finite() { want as usize } else { n }));
         let k_d = (span / cfg.wavelength()).round() as i64;
@@ -337,7 +308,7 @@ impl Lookup {
         match (q, self.carrier.get(base.1.wrapping_add(i as usize))) {
             (Some(q), Some(c)) if x >= 1.0 => {
                 let t = (x - i as f64) as f32;
-                lagrange(q, t) * (c * cis_small(self.theta * t))
+                lagrange(q, t) * (c * cis_small_turns(self.theta * t))
             }
             _ => self.gated_wrapped(tab, base.1, x),
         }
@@ -356,7 +327,7 @@ impl Lookup {
             .expect("tables hold L + 8 entries");
         let c = self.carrier[(b_mod as i64 + m as i64).rem_euclid(l) as usize];
         let t = (x - m) as f32;
-        lagrange(q, t) * (c * cis_small(self.theta * t))
+        lagrange(q, t) * (c * cis_small_turns(self.theta * t))
     }
 
     /// Adds to `acc[v]` the diagonal amplitude contribution of this row for every voxel:
@@ -419,11 +390,11 @@ impl Lookup {
                         (true, true) => 1.0 / d_vs.max(d_min),
                         (true, false) => 1.0,
                     };
-                    let l = lagrange_weights(t);
+                    let l = lagrange4(t);
                     for (wq, l) in wq.iter_mut().zip(l) {
                         wq[k] = l * w;
                     }
-                    cs[k] = cis_small(theta * t);
+                    cs[k] = cis_small_turns(theta * t);
                     start[k] = i.saturating_sub(1);
                     ok[k] = inside;
                     xs[k] = x;

@@ -6,7 +6,8 @@
 //!   `vltm simulate ../fixture/scene.json --out CAPTURE.npz --uncompressed`), checks that its
 //!   geometry is the firmware's, writes `DIR/scan.bin` and runs the firmware's own pipeline
 //!   (`../src/pipeline.rs`, the same kernel calls in the same order) on x86 to write
-//!   `DIR/expected.txt` (and the fixed-point `expected_fixed.txt`). DIR defaults to
+//!   `DIR/expected.txt` (and the fixed-point `expected_fixed.txt`, the lookup path's
+//!   `expected_lookup.txt`). DIR defaults to
 //!   `../fixture` (run from `gen/`). `../fixture/regenerate.sh` does both steps.
 //! * `vltm-firmware-gen budget` prints the kernel memory of the paper's real setup.
 
@@ -14,6 +15,9 @@
 mod fixed_pipeline;
 #[path = "../../src/fixture.rs"]
 mod fixture;
+mod lookup;
+#[path = "../../src/lookup_pipeline.rs"]
+mod lookup_pipeline;
 mod npz;
 #[path = "../../src/pipeline.rs"]
 mod pipeline;
@@ -166,6 +170,7 @@ fn fixture(capture: &Path, dir: PathBuf) {
     writeln!(txt, "{}", rep("diag_photons", r.report_photons)).unwrap();
     std::fs::write(dir.join("expected.txt"), &txt).expect("write expected.txt");
     fixed_fixture(&dir, &scan, &r);
+    lookup::lookup_fixture(&dir, &scan, &r);
     print!("{txt}");
     eprintln!(
         "wrote {} ({} bytes) and expected.txt; verdict {verdict}",

@@ -314,6 +314,11 @@ fn main() -> ! {
         i(t_pk),
         i(t_pk) / photons as f64
     );
+    // The lookup path (src/lookup_cycles.rs).
+    let mut m = |f: &mut dyn FnMut()| measure(f).0;
+    if !vltm_firmware::lookup_cycles::run(&scan, &mut rows, &hist[..], &VOXELS, &mut m, per_tick) {
+        process::exit(3)
+    }
     // (name, instructions, budget, enforced). The column's `finish` by the band sum is
     // J band terms per (voxel, SPAD): 4× over its target; it reaches it only with the
     // lookup path's O(1) per pair, so it is reported, not enforced, until `finish` uses it.

@@ -1,0 +1,70 @@
+//! The lookup-path firmware: the fixture through the kernel's lookup diagonal and column
+//! (`src/lookup_pipeline.rs`), `RESULT voxel=i lookup_diag=… lookup_col=…` and `REPORT`
+//! lines compared by `run-qemu.sh` with `fixture/expected_lookup.txt` (the host's numbers,
+//! bit for bit), exit status = `verdict_lookup` (1 = panic, 2 = rejected, 7 = a static
+//! buffer taken twice). Runs on the M4F and on the M0 (≈ 7 KB of `.bss`).
+#![no_std]
+#![no_main]
+
+use cortex_m::singleton;
+use cortex_m_rt::entry;
+use panic_semihosting as _;
+use semihosting::{println, process};
+use vltm_firmware::fixture::{N_VOXELS, ROWBUF_LEN, TABLES_LEN};
+use vltm_firmware::lookup_pipeline::{
+    self, LOOKUP_SCRATCH_LEN, LOOKUP_STATE_LEN, LOOKUP_TABLES_LEN, LookupBuffers, LookupResults,
+};
+
+#[entry]
+fn main() -> ! {
+    let (Some(tables), Some(row), Some(lookup), Some(diag), Some(column), Some(out)) = (
+        singleton!(: [f32; TABLES_LEN] = [0.0; TABLES_LEN]),
+        singleton!(: [f32; ROWBUF_LEN] = [0.0; ROWBUF_LEN]),
+        singleton!(: [f32; LOOKUP_TABLES_LEN] = [0.0; LOOKUP_TABLES_LEN]),
+        singleton!(: [f64; LOOKUP_STATE_LEN] = [0.0; LOOKUP_STATE_LEN]),
+        singleton!(: [f64; LOOKUP_STATE_LEN] = [0.0; LOOKUP_STATE_LEN]),
+        singleton!(: LookupResults = LookupResults::ZERO),
+    ) else {
+        process::exit(7)
+    };
+    let (Some(diag_scratch), Some(column_scratch)) = (
+        singleton!(: [f32; LOOKUP_SCRATCH_LEN] = [0.0; LOOKUP_SCRATCH_LEN]),
+        singleton!(: [f32; LOOKUP_SCRATCH_LEN] = [0.0; LOOKUP_SCRATCH_LEN]),
+    ) else {
+        process::exit(7)
+    };
+    let Some(scan) = vltm_firmware::scan_data() else {
+        process::exit(2)
+    };
+    let bufs = LookupBuffers {
+        tables,
+        row,
+        lookup,
+        diag,
+        column,
+        diag_scratch,
+        column_scratch,
+    };
+    if let Err(e) = lookup_pipeline::run_lookup(scan, bufs, out) {
+        println!("ERROR {e:?}");
+        process::exit(2)
+    }
+    for i in 0..N_VOXELS {
+        println!(
+            "RESULT voxel={i} lookup_diag={:e} lookup_col={:e}",
+            out.diag[i], out.col[i]
+        );
+    }
+    for (name, r) in [
+        ("lookup_diag", out.report_diag),
+        ("lookup_col", out.report_col),
+    ] {
+        println!(
+            "REPORT {name} rows={} non_finite={} dropped={} aliased={}",
+            r.rows, r.non_finite, r.dropped, r.aliased
+        );
+    }
+    let verdict = lookup_pipeline::verdict_lookup(out);
+    println!("VERDICT {verdict}");
+    process::exit(verdict)
+}

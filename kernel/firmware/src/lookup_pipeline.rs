@@ -1,0 +1,155 @@
+//! The fixture through the kernel's **lookup path** ([`LookupProbe`]: a per-SPAD baseband grid
+//! and cubic interpolation instead of the band sum), shared word for word by the firmware
+//! (bin `vltm-firmware-lookup`) and the host generator (which writes
+//! `fixture/expected_lookup.txt` from it), so both run the same kernel calls in the same order.
+//!
+//! Per laser row: [`RowBuffer::load`] → push to the lookup diagonal and the lookup column
+//! `T(FOCUS, ·)`; then [`LookupProbe::finish`] both. The grid is made for the tolerance
+//! [`LOOKUP_TOLERANCE`] (1e-4 here: `L` = 256, so that the M0's 16 KB of RAM holds it).
+
+use crate::fixture::{
+    BINS, FOCUS, LASERS, N_FFT, N_LASERS, N_VOXELS, P1_VOXEL, P2_VOXEL, ROW, ROWBUF_LEN, SLICE,
+    SPADS, TABLES_LEN, VOXELS, params,
+};
+use crate::pipeline::{Failure, argmax};
+use vltm_kernel::{
+    Config, Lookup, LookupGrid, LookupParams, LookupProbe, Report, RowBuffer, Scan, Target,
+};
+
+/// Interpolation tolerance `η` of the fixture's grid.
+pub const LOOKUP_TOLERANCE: f64 = 1e-4;
+/// Grid length `L` for [`params`] at [`LOOKUP_TOLERANCE`] (checked at run time).
+pub const LOOKUP_GRID: usize = 256;
+/// `Lookup::tables_len`: `4L` `f32`.
+pub const LOOKUP_TABLES_LEN: usize = 4 * LOOKUP_GRID;
+/// `LookupProbe::state_len`: `2Kv` `f64`.
+pub const LOOKUP_STATE_LEN: usize = 2 * N_VOXELS;
+/// `LookupProbe::scratch_len`: `2(L + 3) + 3Kv` `f32`.
+pub const LOOKUP_SCRATCH_LEN: usize = 2 * (LOOKUP_GRID + 3) + 3 * N_VOXELS;
+
+/// The lookup parameters of the fixture.
+pub const fn lookup_params() -> LookupParams {
+    LookupParams {
+        tolerance: LOOKUP_TOLERANCE,
+        grid_len: None,
+    }
+}
+
+/// Caller-owned buffers of the lookup pipeline.
+pub struct LookupBuffers<'a> {
+    /// `Scan::tables_len` `f32`.
+    pub tables: &'a mut [f32],
+    /// `RowBuffer::len` `f32`.
+    pub row: &'a mut [f32],
+    /// `Lookup::tables_len` `f32`.
+    pub lookup: &'a mut [f32],
+    /// Diagonal state.
+    pub diag: &'a mut [f64],
+    /// Column state.
+    pub column: &'a mut [f64],
+    /// Diagonal scratch.
+    pub diag_scratch: &'a mut [f32],
+    /// Column scratch.
+    pub column_scratch: &'a mut [f32],
+}
+
+/// Intensities `T = |A|²` per voxel from the lookup path, and the reports.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct LookupResults {
+    /// Lookup diagonal `T(v, v)`.
+    pub diag: [f64; N_VOXELS],
+    /// Lookup column `T(FOCUS, v)`.
+    pub col: [f64; N_VOXELS],
+    /// Report of the diagonal.
+    pub report_diag: Report,
+    /// Report of the column.
+    pub report_col: Report,
+}
+
+const ZERO_REPORT: Report = Report {
+    rows: 0,
+    non_finite: 0,
+    dropped: 0,
+    aliased: 0,
+};
+
+impl LookupResults {
+    /// All zeros (a `const`, so a `static` of it lives in `.bss`).
+    pub const ZERO: Self = Self {
+        diag: [0.0; N_VOXELS],
+        col: [0.0; N_VOXELS],
+        report_diag: ZERO_REPORT,
+        report_col: ZERO_REPORT,
+    };
+}
+
+/// Runs the fixture scan through the lookup diagonal and column into `out`.
+///
+/// # Errors
+/// [`Failure`] if a buffer, the grid or the scan data does not fit the configuration.
+pub fn run_lookup(
+    scan_data: &[u16],
+    b: LookupBuffers<'_>,
+    out: &mut LookupResults,
+) -> Result<(), Failure> {
+    let cfg = Config::try_new(&params()).map_err(Failure::Config)?;
+    if cfg.bins() != BINS || cfg.n_fft() != N_FFT {
+        return Err(Failure::Sizes);
+    }
+    let grid = LookupGrid::try_new(&cfg, &lookup_params()).map_err(Failure::Config)?;
+    if grid.len() != LOOKUP_GRID || b.tables.len() != TABLES_LEN || b.row.len() != ROWBUF_LEN {
+        return Err(Failure::Sizes);
+    }
+    if scan_data.len() != N_LASERS * ROW {
+        return Err(Failure::ScanData);
+    }
+    let scan = Scan::new(&cfg, &SPADS, b.tables)?;
+    let lookup = Lookup::new(&grid, b.lookup)?;
+    let mut rows = RowBuffer::new(&scan, b.row)?;
+    let mut diag = LookupProbe::new(
+        &scan,
+        &lookup,
+        Target::Diagonal,
+        &VOXELS,
+        b.diag,
+        b.diag_scratch,
+    )?;
+    let mut col = LookupProbe::new(
+        &scan,
+        &lookup,
+        Target::Column(FOCUS),
+        &VOXELS,
+        b.column,
+        b.column_scratch,
+    )?;
+    for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
+        let row = rows.load(&scan, laser, hists)?;
+        diag.push_row(&scan, &lookup, &row)?;
+        col.push_row(&scan, &lookup, &row)?;
+    }
+    out.report_diag = diag.finish(&mut out.diag)?;
+    out.report_col = col.finish(&mut out.col)?;
+    Ok(())
+}
+
+/// The lookup firmware's own checks (the exit status); 0 = passed. 3: the diagonal does not
+/// peak at P1; 4: in the z = 0.5 m slice without P1 the column does not peak at P2; 6: a
+/// report is off.
+pub fn verdict_lookup(r: &LookupResults) -> i32 {
+    if argmax(&r.diag) != P1_VOXEL {
+        return 3;
+    }
+    let mut slice = [0.0f64; SLICE];
+    for ((s, c), i) in slice.iter_mut().zip(r.col).zip(0..) {
+        *s = if i == P1_VOXEL { 0.0 } else { c };
+    }
+    if argmax(&slice) != P2_VOXEL {
+        return 4;
+    }
+    for rep in [r.report_diag, r.report_col] {
+        if rep.rows != N_LASERS as u64 || rep.non_finite != 0 || rep.dropped != 0 {
+            return 6;
+        }
+    }
+    0
+}
