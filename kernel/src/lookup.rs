@@ -76,7 +76,6 @@
 
 use crate::config::{Config, Point, Weights};
 use crate::error::{ConfigError, Error, check_len, check_points};
-use crate::geometry::dist;
 use crate::phase::cis_small_turns;
 use crate::probe::{Report, Target};
 use crate::sample::Sample;
