@@ -1855,8 +1855,8 @@ fn matrix_and_leak_corrected_parts_through_the_command_line() {
 /// at `T_MAX` metres, after the direct returns and before the patches' pair paths.
 #[test]
 fn indirect_summary_gives_pass_two_configuration() {
-    use vltm::io::prep::{Bound, Prep, Prepared};
     use vltm::io::RowSource;
+    use vltm::io::prep::{Bound, Prep, Prepared};
     use vltm::probe::Wave;
     const T_MAX: f64 = 2.4;
     let t = TempDir::new("indirect-pass-two");
