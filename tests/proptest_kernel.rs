@@ -24,6 +24,11 @@
 //!   carrier recurrences re-seeded every 64 samples. Example: λ = 0.1 m, τ ≈ 5 m, J = 200,
 //!   Nt = 400 → Φ ≈ 100 turns → ε_f32 ≈ 7.7e-5.
 //!
+//! * `ColumnF32` (the factorised Gaussian column with `f32` Kahan state, checked as a seventh
+//!   probe `column/Gaussian/f32`): its compensated sums add `≤ 2u` over the whole scan
+//!   (independent of the number of rows) and its `f32` `finish` the band and SPAD sums, so its
+//!   `ε_f32` gets `u·(2J + Ks + 8)` more (kernel module `column32`).
+//!
 //! So `|√T_k − |A_r|| ≤ ε·S` with `ε = ε_f32 + erfc(m/√2) + 2e^{−c_g²/2}` (Gaussian),
 //! `ε_f32 + e^{−c_g²/2}` (higher-order), `ε_f32` (none); no absolute term (S = 0 ⇒ both 0).
 //!
