@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Embedded checks of vltm-kernel in QEMU: the fixture is up to date with the host kernel, the
 # firmware on Cortex-M4F (mps2-an386) and Cortex-M0 (microbit) reproduces the host's numbers,
-# the defmt firmware runs (and is decoded when defmt-print is installed), the kernel's per-row
-# paths link with panic-never on both ISAs (and a planted panic does not), the instruction
-# counts of the real setup, and the sizes.
+# the defmt firmware runs (and is decoded when defmt-print is installed), the lookup path's
+# firmware is bit-identical to the host on both, the kernel's per-row paths link with
+# panic-never on both ISAs (and a planted panic does not), the instruction counts of the real
+# setup, and the sizes.
 #
 # Needs (installs nothing): qemu-system-arm (apt), rustup targets thumbv7em-none-eabihf and
 # thumbv6m-none-eabi; the host's `vltm` binary (VLTM_BIN, else built in the root workspace) to
@@ -59,9 +60,12 @@ fixture_up_to_date() { # the host simulator renders fixture/scene.json, gen runs
   cmp "$out/expected_fixed.txt" fixture/expected_fixed.txt || {
     echo "fixture/expected_fixed.txt is stale (the host's fixed-point numbers changed): regenerate"
     diff "$out/expected_fixed.txt" fixture/expected_fixed.txt | head -20; rm -rf "$out"; return 1; }
+  cmp "$out/expected_lookup.txt" fixture/expected_lookup.txt || {
+    echo "fixture/expected_lookup.txt is stale (the host's lookup-path numbers changed): regenerate"
+    diff "$out/expected_lookup.txt" fixture/expected_lookup.txt | head -20; rm -rf "$out"; return 1; }
   rm -rf "$out"
 }
-step "fixture: host simulator + kernel (x86) reproduce scan.bin, expected.txt, expected_fixed.txt" fixture_up_to_date
+step "fixture: host simulator + kernel (x86) reproduce scan.bin, expected.txt, expected_fixed.txt, expected_lookup.txt" fixture_up_to_date
 
 for t in $M4 $M0; do
   m=$([ $t = $M4 ] && echo m4f || echo m0)
@@ -76,6 +80,17 @@ for t in $M0 $M4; do
   step "fixed-point firmware $t: build" fw --target $t --features fixed --bin vltm-firmware-fixed
   step "fixed-point firmware on $m: verdict 0, bit-identical to host" env VLTM_FW_RTOL=0 \
     VLTM_FW_EXPECTED="$here/fixture/expected_fixed.txt" ./run-qemu.sh $m text "$(elf $t vltm-firmware-fixed)"
+done
+
+# The lookup path (src/lookup_pipeline.rs): bit-identical to the host on both ISAs.
+for t in $M4 $M0; do
+  m=$([ $t = $M4 ] && echo m4f || echo m0)
+  step "lookup firmware $t: build" fw --target $t --features lookup --bin vltm-firmware-lookup
+  step "lookup firmware on $m: verdict 0, bit-identical to host" env VLTM_FW_RTOL=0 \
+    VLTM_FW_EXPECTED="$here/fixture/expected_lookup.txt" ./run-qemu.sh $m text "$(elf $t vltm-firmware-lookup)"
+  step "no-panic proof, lookup path, $t: links with panic-never" fw --target $t \
+    --no-default-features --features nopanic --bin vltm-firmware-lookup-nopanic
+  step "no-panic lookup firmware on $m: exit 0" ./run-qemu.sh $m status "$(elf $t vltm-firmware-lookup-nopanic)"
 done
 
 negative() { # a host value changed by 1.1e-6 of its maximum must be reported
@@ -115,14 +130,15 @@ no_fmt() { # the no-panic ELFs hold no core::fmt symbol; the text firmware (teet
   [ -n "$nm" ] || nm="$(rustc --print sysroot)/lib/rustlib/$(rustc -vV | sed -n 's/^host: //p')/bin/llvm-nm"
   [ -x "$nm" ] || { echo "no arm-none-eabi-nm or llvm-nm"; return 1; }
   for e in "$(elf $M4 vltm-firmware-nopanic)" "$(elf $M0 vltm-firmware-nopanic)" \
-           "$(elf $M4 vltm-firmware-fixed-nopanic)" "$(elf $M0 vltm-firmware-fixed-nopanic)"; do
+           "$(elf $M4 vltm-firmware-fixed-nopanic)" "$(elf $M0 vltm-firmware-fixed-nopanic)" \
+           "$(elf $M4 vltm-firmware-lookup-nopanic)" "$(elf $M0 vltm-firmware-lookup-nopanic)"; do
     n=$("$nm" -C "$e" | grep -c 'core::fmt' || true)
     [ "$n" -eq 0 ] || { echo "$e: $n core::fmt symbols"; "$nm" -C "$e" | grep 'core::fmt' | head -5; return 1; }
   done
   n=$("$nm" -C "$(elf $M4 vltm-firmware)" | grep -c 'core::fmt' || true)
   [ "$n" -gt 0 ] || { echo "the check finds no core::fmt even in the text firmware"; return 1; }
 }
-step "no-panic ELFs (M4F, M0; float, fixed) hold no core::fmt" no_fmt
+step "no-panic ELFs (M4F, M0; float, fixed, lookup) hold no core::fmt" no_fmt
 
 canary() { # the same bin with one panicking index must fail to link, with panic-never's message
   local log; log=$(mktemp)
@@ -204,7 +220,8 @@ size=$(command -v arm-none-eabi-size || true)
 if [ -x "$size" ]; then
   echo "== sizes ($(basename "$size"); text = flash incl. the 16 KB scan, bss = static RAM)"
   for t in $M4 $M0; do
-    for b in vltm-firmware vltm-firmware-defmt vltm-firmware-nopanic vltm-firmware-fixed vltm-firmware-fixed-nopanic; do
+    for b in vltm-firmware vltm-firmware-defmt vltm-firmware-nopanic vltm-firmware-fixed vltm-firmware-fixed-nopanic \
+             vltm-firmware-lookup vltm-firmware-lookup-nopanic; do
       [ -f "$(elf $t $b)" ] && "$size" "$(elf $t $b)" | tail -1 | awk -v t=$t -v b=$b '{printf "   %-22s %-22s text %7d data %5d bss %6d\n", t, b, $1, $2, $3}'
     done
   done

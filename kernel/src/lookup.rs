@@ -214,8 +214,9 @@ impl LookupGrid {
             return Err(ConfigError::NotPositive("tolerance"));
         }
         let k_d = libm::round(cfg.span() / cfg.wavelength()) as i64;
-        // At least J points (distinct bins) and 8 per carrier turn (θ ≤ 1/8).
-        let floor = cfg.bins().max(8 * k_d.unsigned_abs() as usize).max(2);
+        // At least J points (distinct bins), 8 per carrier turn (θ ≤ 1/8), and 4 (the first
+        // FFT pass is radix 4).
+        let floor = cfg.bins().max(8 * k_d.unsigned_abs() as usize).max(4);
         let len = match p.grid_len {
             Some(l) => {
                 if !l.is_power_of_two() {
@@ -359,7 +360,14 @@ impl<'t> Lookup<'t> {
         let Some((grid, extra)) = y.split_at_mut_checked(l) else {
             return;
         };
-        let mut h = 1;
+        // Stages h = 1 and 2 together (twiddles 1 and i): one radix-4 pass.
+        for q in grid.as_chunks_mut::<4>().0 {
+            let (a0, a1) = (q[0] + q[1], q[0] - q[1]);
+            let (a2, a3) = (q[2] + q[3], q[2] - q[3]);
+            let ia3 = Complex32::new(-a3.im, a3.re);
+            *q = [a0 + a2, a1 + ia3, a0 - a2, a1 - ia3];
+        }
+        let mut h = 4;
         while h < l {
             let (Some(tw), Some(size)) = (
                 self.twiddle.get(h - 1..2 * h - 1),
@@ -370,9 +378,9 @@ impl<'t> Lookup<'t> {
             for block in grid.chunks_exact_mut(size.get()) {
                 let (a, b) = block.split_at_mut(h);
                 for ((a, b), w) in a.iter_mut().zip(b.iter_mut()).zip(tw) {
-                    let t = *b * *w;
-                    *b = *a - t;
-                    *a += t;
+                    let (av, t) = (*a, *b * *w);
+                    *a = av + t;
+                    *b = av - t;
                 }
             }
             h *= 2;
@@ -657,4 +665,102 @@ impl<'m> LookupProbe<'m> {
 #[inline]
 fn c64(z: Complex32) -> Complex64 {
     Complex64::new(z.re as f64, z.im as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::Params;
+
+    fn cfg() -> Config {
+        Config::try_new(&Params::new(0.2, 64, 0.01)).unwrap()
+    }
+
+    #[test]
+    fn grid_validation_names_the_parameter() {
+        let c = cfg();
+        let p = |tolerance, grid_len| LookupParams {
+            tolerance,
+            grid_len,
+        };
+        let g = LookupGrid::try_new(&c, &LookupParams::new()).unwrap();
+        assert!(g.len().is_power_of_two() && g.len() >= c.bins() && g.bound() <= 1e-5);
+        // The smallest grid that meets the tolerance: at the floor, or half of it does not.
+        let floor = c.bins().max(8 * g.carrier_bin() as usize).max(4);
+        assert!(g.len() == floor.next_power_of_two() || eta(&c, g.len() / 2, g.k_d) > 1e-5);
+        for (params, err) in [
+            (p(f64::NAN, None), ConfigError::NotFinite("tolerance")),
+            (p(0.0, None), ConfigError::NotPositive("tolerance")),
+            (p(-1.0, None), ConfigError::NotPositive("tolerance")),
+            (p(1e-5, Some(100)), ConfigError::NotPowerOfTwo("grid_len")),
+            (p(1e-5, Some(8)), ConfigError::TooCoarse("grid_len")),
+            (
+                p(1e-5, Some(g.len() / 2)),
+                ConfigError::TooCoarse("grid_len"),
+            ),
+            (
+                p(1e-5, Some(1 << 30)),
+                ConfigError::SizeOverflow("grid_len"),
+            ),
+            (p(1e-300, None), ConfigError::SizeOverflow("grid_len")),
+        ] {
+            assert_eq!(LookupGrid::try_new(&c, &params), Err(err), "{params:?}");
+        }
+        assert_eq!(LookupGrid::try_new(&c, &p(1e-5, Some(g.len()))), Ok(g));
+    }
+
+    #[test]
+    fn newton_sqrt_within_one_ulp() {
+        let mut x = 1e-6f32;
+        while x < 1e4 {
+            let r = sqrt_nr(x);
+            let e = libm::sqrtf(x);
+            assert!(r.to_bits().abs_diff(e.to_bits()) <= 1, "{x}: {r} vs {e}");
+            x *= 1.0007;
+        }
+        assert_eq!(sqrt_nr(0.0), 0.0);
+    }
+
+    #[test]
+    fn lagrange_weights_reproduce_cubics() {
+        for i in 0..16 {
+            let t = i as f32 / 16.0;
+            let w = lagrange4(t);
+            let f = |x: f32| 0.5 - 2.0 * x + 0.25 * x * x * x;
+            let p = w[0] * f(-1.0) + w[1] * f(0.0) + w[2] * f(1.0) + w[3] * f(2.0);
+            assert!((p - f(t)).abs() < 1e-5, "{t}: {p} vs {}", f(t));
+        }
+    }
+
+    /// The inverse FFT synthesis equals the direct sum `Σ_j HG_j e^{2πi(k_j − k_d)n/L}`.
+    #[test]
+    fn synthesis_matches_direct_sum() {
+        let c = cfg();
+        let grid = LookupGrid::try_new(&c, &LookupParams::new()).unwrap();
+        let l = grid.len();
+        let mut tables = [0.0f32; 4 * 512];
+        let lookup = Lookup::new(&grid, &mut tables[..4 * l]).unwrap();
+        let mut hg = [Complex32::new(0.0, 0.0); 64];
+        let j = c.bins();
+        assert!(j <= 64 && l <= 512);
+        for (i, h) in hg.iter_mut().take(j).enumerate() {
+            *h = Complex32::new(libm::sinf(i as f32 * 1.3), libm::cosf(i as f32 * 0.7));
+        }
+        let mut y = [Complex32::new(0.0, 0.0); 512 + EXTRA];
+        lookup.synthesise(&hg[..j], &mut y[..l + EXTRA]);
+        let mut worst = 0.0f64;
+        for n in 0..l + EXTRA {
+            let (mut re, mut im) = (0.0f64, 0.0f64);
+            for (i, h) in hg.iter().take(j).enumerate() {
+                let k = c.k_lo() + i as i64 - grid.k_d;
+                let a = core::f64::consts::TAU * (k * n as i64) as f64 / l as f64;
+                let (s, co) = (libm::sin(a), libm::cos(a));
+                re += h.re as f64 * co - h.im as f64 * s;
+                im += h.re as f64 * s + h.im as f64 * co;
+            }
+            let e = libm::hypot(y[n].re as f64 - re, y[n].im as f64 - im);
+            worst = worst.max(e);
+        }
+        assert!(worst < 1e-4 * j as f64, "worst {worst}");
+    }
 }
