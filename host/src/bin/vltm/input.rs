@@ -2,7 +2,7 @@
 //! `--t-start`, `--grid-width`, for `.mat` captures), the preprocessing of raw counts
 //! (`--t-min`, `--t-max`, `--rebin`, `--background`, [`vltm::io::prep`]), and `vltm info`.
 
-use crate::{Failure, say};
+use crate::{Failure, say, tell};
 use clap::Args;
 use std::path::Path;
 use vltm::atomic::Transaction;
@@ -135,9 +135,10 @@ fn check_stats(p: &Prepared<'_>) -> Result<(), Failure> {
         .into());
     }
     if 2 * s.empty > s.histograms {
-        eprintln!(
+        tell!(
             "vltm: warning: the background left {} of {} histograms empty: it is larger than most of the signal",
-            s.empty, s.histograms
+            s.empty,
+            s.histograms
         );
     }
     Ok(())
@@ -165,6 +166,7 @@ pub fn info(path: &Path, input: &Input, png: Option<&Path>) -> Result<(), Failur
         io::open(path)?
     };
     crate::describe(path, &c)?;
+    say!("memory       budget {}", vltm::budget::describe());
     let prep = input.prep()?;
     let (g, sum) = match prep {
         Some(p) => {

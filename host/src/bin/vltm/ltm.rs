@@ -251,7 +251,7 @@ pub(crate) fn write_matrix(
         tb[2]
     );
     if m.report.aliased > 0 {
-        eprintln!(
+        tell!(
             "vltm: warning: {} elements have path lengths outside the capture's alias-free window",
             m.report.aliased
         );

@@ -27,6 +27,16 @@ macro_rules! say {
     }};
 }
 
+/// `eprintln!` that ignores a closed stderr (`vltm … 2>&1 | head -1` must not panic; the
+/// exit code stays the one the run would have had).
+#[macro_export]
+macro_rules! tell {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($t)*);
+    }};
+}
+
 mod ltm;
 mod outputs;
 mod partial;
@@ -420,7 +430,7 @@ fn main() -> ExitCode {
                 .join(" ");
             let msg = msg.trim_start_matches("error: ");
             let msg = if msg.is_empty() { "bad arguments" } else { msg };
-            eprintln!("vltm: {msg} (see --help)");
+            tell!("vltm: {msg} (see --help)");
             return ExitCode::from(2);
         }
     };
@@ -429,7 +439,7 @@ fn main() -> ExitCode {
         let cores = std::thread::available_parallelism().map_or(1, usize::from);
         let most = 4 * cores;
         if n == 0 || n > most {
-            eprintln!(
+            tell!(
                 "vltm: argument `--threads`: expected 1 to {most} threads (4 per core, {cores} cores), found {n}"
             );
             return ExitCode::from(2);
@@ -439,7 +449,7 @@ fn main() -> ExitCode {
             .build_global()
             .is_err()
         {
-            eprintln!("vltm: argument `--threads`: the thread pool could not be started");
+            tell!("vltm: argument `--threads`: the thread pool could not be started");
             return ExitCode::from(1);
         }
     }
@@ -447,7 +457,7 @@ fn main() -> ExitCode {
         match vltm::budget::parse_size(m) {
             Ok(b) => vltm::budget::set(b),
             Err(e) => {
-                eprintln!("vltm: {}", printable(&e.to_string()));
+                tell!("vltm: {}", printable(&e.to_string()));
                 return ExitCode::from(2);
             }
         }
@@ -460,7 +470,7 @@ fn main() -> ExitCode {
                 Some(e) => e.to_string(),
                 None => format!("{:#}", f.err),
             };
-            eprintln!("vltm: {}", printable(&msg.replace('\n', " ")));
+            tell!("vltm: {}", printable(&msg.replace('\n', " ")));
             ExitCode::from(f.code)
         }
     }
@@ -836,13 +846,13 @@ fn summarize(
         p[2]
     );
     if report.non_finite > 0 {
-        eprintln!(
+        tell!(
             "vltm: warning: {} non-finite histogram samples were read as 0",
             report.non_finite
         );
     }
     if report.aliased > 0 {
-        eprintln!(
+        tell!(
             "vltm: warning: {} voxels have path lengths outside the capture's alias-free window",
             report.aliased
         );

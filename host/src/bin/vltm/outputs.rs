@@ -108,7 +108,7 @@ pub(crate) fn write_parts(
                     wrote.push(p);
                 }
                 None if part.tag.is_none() => {
-                    eprintln!("vltm: note: no figure for a point list (only for grid volumes)");
+                    tell!("vltm: note: no figure for a point list (only for grid volumes)");
                 }
                 None => {}
             }
