@@ -656,8 +656,6 @@ fn address_space_limit_bounds_the_budget() {
         }
     }
     // `info` says where the budget comes from.
-    let o = run_under(&t, &["info", "deflated.npz"], limit);
-    let _ = o;
     valid_npz(&t, "ok.npz", true);
     let o = run_under(&t, &["info", "ok.npz"], limit);
     let out = String::from_utf8_lossy(&o.stdout);
