@@ -1313,7 +1313,9 @@ fn column_masks_and_shells_partition() {
     // Voxels the capture never saw: the window check (the same error for every probe)
     // refuses them before Γ is formed.
     assert!(
-        err.contains("--volume") && err.contains("contains no path") && err.lines().count() == 1,
+        err.contains("volume")
+            && err.contains("no path through the probed points")
+            && err.lines().count() == 1,
         "{err}"
     );
     assert!(!t.path("x.npy").exists());
@@ -1423,7 +1425,9 @@ fn indirect_writes_gamma_direct_shells_and_higher_order() {
     // Voxels the capture never saw: the window check (the same error for every probe)
     // refuses them before Γ is formed.
     assert!(
-        err.contains("--volume") && err.contains("contains no path") && err.lines().count() == 1,
+        err.contains("volume")
+            && err.contains("no path through the probed points")
+            && err.lines().count() == 1,
         "{err}"
     );
 }
@@ -1646,7 +1650,9 @@ fn leak_correct_on_the_command_line() {
     // an empty Γ inside the window is refused naming --leak-correct (tests/leak.rs).
     let err = fails(&t.0, &["indirect", cap, "--volume", far], 2);
     assert!(
-        err.contains("--volume") && err.contains("contains no path") && err.lines().count() == 1,
+        err.contains("volume")
+            && err.contains("no path through the probed points")
+            && err.lines().count() == 1,
         "{err}"
     );
     let out = ok(

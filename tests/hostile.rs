@@ -65,22 +65,29 @@ impl Drop for TempDir {
 
 /// Runs `vltm args…` in `dir`; with `fsize = Some(n)`, under a file-size limit of `n` blocks
 /// (`ulimit -f`, SIGXFSZ ignored so that a write past it fails with EFBIG), through `sh`.
+fn run_in(dir: &TempDir, args: &[&str], fsize: Option<u32>) -> Output {
+    let limit = fsize.map(|n| format!("trap '' XFSZ; ulimit -f {n}"));
+    run_under(dir, args, limit.as_deref())
+}
+
+/// Runs `vltm args…` in `dir`, through `sh` after the shell commands `limit` (e.g. `ulimit -v
+/// 4000000`) when given.
 ///
 /// With `VLTM_HOSTILE_OLD` set (replaying the cases against a binary older than issue 14,
 /// named by `VLTM_BIN`), `--max-memory SIZE` is left out: that binary does not know it.
-fn run_in(dir: &TempDir, args: &[&str], fsize: Option<u32>) -> Output {
+fn run_under(dir: &TempDir, args: &[&str], limit: Option<&str>) -> Output {
     let mut args: Vec<&str> = args.to_vec();
     if std::env::var_os("VLTM_HOSTILE_OLD").is_some() {
         while let Some(i) = args.iter().position(|&a| a == "--max-memory") {
             args.drain(i..(i + 2).min(args.len()));
         }
     }
-    let mut cmd = match fsize {
+    let mut cmd = match limit {
         None => Command::new(bin()),
-        Some(n) => {
+        Some(l) => {
             let mut c = Command::new("sh");
             c.arg("-c")
-                .arg(format!("trap '' XFSZ; ulimit -f {n} && exec \"$0\" \"$@\""))
+                .arg(format!("{l} && exec \"$0\" \"$@\""))
                 .arg(bin());
             c
         }
@@ -104,8 +111,20 @@ fn fails(dir: &TempDir, args: &[&str], code: i32, says: &[&str]) -> String {
 
 /// [`fails`], run as [`run_in`] with a file-size limit.
 fn fails_in(dir: &TempDir, args: &[&str], fsize: Option<u32>, code: i32, says: &[&str]) -> String {
+    let limit = fsize.map(|n| format!("trap '' XFSZ; ulimit -f {n}"));
+    fails_under(dir, args, limit.as_deref(), code, says)
+}
+
+/// [`fails`], run as [`run_under`] after the shell commands `limit`.
+fn fails_under(
+    dir: &TempDir,
+    args: &[&str],
+    limit: Option<&str>,
+    code: i32,
+    says: &[&str],
+) -> String {
     let before = dir.snapshot();
-    let o = run_in(dir, args, fsize);
+    let o = run_under(dir, args, limit);
     let err = String::from_utf8_lossy(&o.stderr).into_owned();
     assert_eq!(
         o.status.code(),
@@ -525,14 +544,18 @@ fn absurd_bin_width() {
     );
 }
 
-/// A time window that misses every path: the same `--volume` error for direct, column and
-/// indirect (direct and indirect wrote all-zero images, column failed on the DFT size).
+/// The one line every probe gives when no path of the probed points lies in the capture's
+/// window (`vltm::probe::window_coverage`).
+const NO_PATH: &str = "no path through the probed points lies in the capture's time window";
+
+/// A time window that misses every path: the same error for direct, column and indirect
+/// (direct and indirect wrote all-zero images, column failed on the DFT size).
 #[test]
 fn window_without_paths() {
     let t = TempDir::new("window");
     valid_npz(&t, "c.npz", false);
     let far = "-0.2:0.2:3,-0.2:0.2:3,30:31:2";
-    let says = ["--volume", "contains no path through the probed voxels"];
+    let says = ["volume", NO_PATH];
     let mut lines = Vec::new();
     for probe in ["direct", "indirect"] {
         lines.push(fails(
@@ -551,6 +574,284 @@ fn window_without_paths() {
         &says,
     ));
     assert_eq!(lines[0], lines[1], "direct and indirect say the same");
+}
+
+/// The capture of [`SCENE`] recorded 4 m too early (`t_start` = −3 m): its window
+/// (−3 to −1.85 m of path) holds no path of [`VOLUME`] (1.2 to 2.0 m). Every probe gives the
+/// same one-line error before any work (`direct` and `indirect` wrote images whose peak was
+/// the gate's tail, 10⁻¹⁴ of the scene).
+#[test]
+fn empty_window_is_one_error_on_every_probe() {
+    let t = TempDir::new("empty-window");
+    let mut c = capture();
+    c.geometry.t0 = -3.0;
+    vltm::io::npz::write_with(&c, &t.path("early.npz"), false).unwrap();
+    let vol = ["--volume", VOLUME];
+    let probes: [&[&str]; 6] = [
+        &["direct"],
+        &["indirect"],
+        &["column", "--focus", "0,0,0.8"],
+        &["row", "--focus", "0,0,0.8"],
+        &["relight", "--pattern", "0,0,0.8"],
+        &["matrix", "--from", "0,0,0.8"],
+    ];
+    let mut lines = Vec::new();
+    for p in probes {
+        let mut a = vec![p[0], "early.npz"];
+        a.extend(&p[1..]);
+        if p[0] == "matrix" {
+            a.extend(["--to", VOLUME, "--out", "o.h5"]);
+        } else {
+            a.extend(vol);
+            a.extend(["--out", "o.npy"]);
+        }
+        lines.push(fails(&t, &a, 2, &["volume", NO_PATH, "t_start"]));
+    }
+    assert!(
+        lines.iter().all(|l| *l == lines[0]),
+        "one error for every probe: {lines:#?}"
+    );
+    // One voxel of six in the window: the probes run, and warn that few paths are.
+    valid_npz(&t, "c.npz", false);
+    let pts = "0,0,0.8;0,0,30;0,0,31;0,0,32;0,0,33;0,0,34";
+    for p in [&["direct"][..], &["column", "--focus", "0,0,0.8"]] {
+        let mut a = vec![p[0], "c.npz"];
+        a.extend(&p[1..]);
+        a.extend(["--volume", pts, "--out", "o.npy"]);
+        let o = run(&t, &a);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(o.status.success(), "{a:?}: {err}");
+        assert!(
+            err.contains("vltm: warning: only") && err.contains("lie in the capture's time window"),
+            "{a:?}: {err}"
+        );
+    }
+}
+
+/// A `.npz` whose `H.npy` header claims (8, 8, 1, 1, 2·10⁷) float32 (5.1 GB) but holds the
+/// capture's few kB, deflated and stored, read under an address-space limit of 4 GB
+/// (`ulimit -v 4000000`, as a batch job or container sets it): the budget follows the limit,
+/// so `info` and `direct` refuse it in one line — even with `--max-memory 12G`, which the
+/// limit caps. They aborted ("memory allocation of 5120000000 bytes failed", SIGABRT); for a
+/// stored entry `info` allocated the claimed 5.1 GB before noticing the entry was short.
+#[test]
+fn address_space_limit_bounds_the_budget() {
+    let t = TempDir::new("ulimit");
+    let good = valid_npz(&t, "good.npz", true);
+    let mut m = members(&good);
+    let data = m["H.npy"][128..].to_vec();
+    m.insert("H.npy".into(), npy("<f4", &[8, 8, 1, 1, 20_000_000], &data));
+    write_npz(&t.path("deflated.npz"), &m, true);
+    write_npz(&t.path("stored.npz"), &m, false);
+    std::fs::remove_file(&good).unwrap();
+    let limit = Some("ulimit -v 4000000");
+    for f in ["deflated.npz", "stored.npz"] {
+        for mem in [&[][..], &["--max-memory", "12G"]] {
+            let mut a: Vec<&str> = mem.to_vec();
+            a.extend(["info", f]);
+            fails_under(&t, &a, limit, 1, &[f]);
+            let mut a: Vec<&str> = mem.to_vec();
+            a.extend(["direct", f, "--volume", VOLUME, "--out", "o.npy"]);
+            fails_under(&t, &a, limit, 1, &[f]);
+        }
+    }
+    // `info` says where the budget comes from.
+    valid_npz(&t, "ok.npz", true);
+    let o = run_under(&t, &["info", "ok.npz"], limit);
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        out.lines()
+            .any(|l| l.starts_with("memory") && l.contains("RLIMIT_AS")),
+        "{out}"
+    );
+}
+
+/// Output to a pipe whose reader has gone (`vltm … 2>&1 | head -1` once `head` exits): the
+/// writes fail with EPIPE and the run ends quietly with the exit code it would have had
+/// (it panicked, exit code 101, on the first error line).
+#[test]
+fn closed_pipes_keep_the_exit_code() {
+    let t = TempDir::new("pipe");
+    valid_npz(&t, "c.npz", false);
+    let mut m = members(&t.path("c.npz"));
+    m.insert(
+        "H.npy".into(),
+        npy("<f4", &[2, 2, 2, 1, 125_000_000_000], &[0u8; 64]),
+    );
+    write_npz(&t.path("lie.npz"), &m, true);
+    let far = "-0.2:0.2:3,-0.2:0.2:3,30:31:2";
+    let cases: [(&[&str], i32); 5] = [
+        (&["info", "c.npz"], 0),
+        (&["--max-memory", "3G", "info", "lie.npz"], 1),
+        (
+            &["direct", "c.npz", "--volume", VOLUME, "--out", "o.npy"],
+            0,
+        ),
+        (&["direct", "c.npz", "--volume", far, "--out", "o.npy"], 2),
+        (&["direct", "--no-such-flag"], 2),
+    ];
+    for (args, code) in cases {
+        // Both streams closed, as `2>&1 | head -1` leaves them; then stdout alone (stderr
+        // read here, so that a panic message would show).
+        for both in [true, false] {
+            let (reader, writer) = std::io::pipe().unwrap();
+            drop(reader);
+            let mut cmd = Command::new(bin());
+            cmd.current_dir(&t.0)
+                .args(args)
+                .stdout(writer.try_clone().unwrap());
+            if both {
+                cmd.stderr(writer);
+            } else {
+                drop(writer);
+                cmd.stderr(std::process::Stdio::piped());
+            }
+            let o = cmd.output().expect("run vltm");
+            let err = String::from_utf8_lossy(&o.stderr);
+            assert_eq!(
+                o.status.code(),
+                Some(code),
+                "vltm {args:?} (stderr closed: {both}): {err}"
+            );
+            assert!(!err.contains("panicked"), "vltm {args:?}: {err}");
+        }
+    }
+}
+
+/// The peak resident memory of `vltm args…` (`VmHWM` of `/proc/PID/status`, read every
+/// 2 ms while it runs: a high-water mark, so only growth in its last 2 ms could be missed)
+/// and its output.
+fn peak_rss(dir: &TempDir, args: &[&str]) -> (u64, Output) {
+    use std::process::Stdio;
+    let mut child = Command::new(bin())
+        .current_dir(&dir.0)
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("run vltm");
+    let status = format!("/proc/{}/status", child.id());
+    let mut peak = 0u64;
+    while child.try_wait().expect("wait").is_none() {
+        if let Some(kb) = std::fs::read_to_string(&status).ok().and_then(|s| {
+            let l = s.lines().find(|l| l.starts_with("VmHWM:"))?;
+            l.split_whitespace().nth(1)?.parse::<u64>().ok()
+        }) {
+            peak = peak.max(kb * 1024);
+        }
+        std::thread::sleep(std::time::Duration::from_millis(2));
+    }
+    (peak, child.wait_with_output().expect("wait"))
+}
+
+/// Every probe at σ = 20,000 m (a DFT period of 10⁷ bins) under a 150 MB budget: the run
+/// succeeds and its measured peak stays under the budget. `direct` and `indirect` planned the
+/// lookup grid (a 16·N-byte carrier) just to price it, outside the budget: 243 MB.
+#[test]
+fn measured_peak_stays_in_the_budget() {
+    let t = TempDir::new("peak");
+    let fixture = root().join("fixtures/two_patches.npz");
+    let f = fixture.to_str().unwrap();
+    let vol = "-0.5:0.5:5,-0.5:0.5:5,0.5:1:5";
+    let budget = 150u64 << 20;
+    let probes: [&[&str]; 6] = [
+        &["direct"],
+        &["indirect"],
+        &["column", "--focus", "0,0,0.8"],
+        &["row", "--focus", "0,0,0.8"],
+        &["relight", "--pattern", "0,0,0.8"],
+        &["matrix", "--from", "0,0,0.8"],
+    ];
+    for p in probes {
+        let mut a = vec!["--max-memory", "150M", p[0], f, "--sigma", "2e4"];
+        a.extend(&p[1..]);
+        if p[0] == "matrix" {
+            a.extend(["--to", vol, "--out", "o.h5"]);
+        } else {
+            a.extend(["--volume", vol, "--out", "o.npy"]);
+        }
+        let (peak, o) = peak_rss(&t, &a);
+        assert!(
+            o.status.success(),
+            "{a:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        println!("{}: peak {} MB of {} MB", p[0], peak >> 20, budget >> 20);
+        assert!(
+            peak > 0 && peak <= budget,
+            "{a:?}: peak {peak} B > budget {budget} B"
+        );
+    }
+    // Beyond the budget: one line naming the budget and the largest buffer, before any work.
+    let a = [
+        "--max-memory",
+        "150M",
+        "direct",
+        f,
+        "--sigma",
+        "1e6",
+        "--volume",
+        vol,
+    ];
+    let (peak, o) = peak_rss(&t, &a);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.lines().count() == 1 && err.contains("largest buffer: the kernel's tables"),
+        "{err}"
+    );
+    assert!(
+        err.contains("memory budget") && peak <= budget,
+        "{err} {peak}"
+    );
+}
+
+/// `simulate` of 2×2 lasers × 1 SPAD × 1.25·10⁷ bins (a 200 MB capture) on one thread under
+/// a 330 MiB budget: the capture and the thread's f64 row accumulator (100 MB) fit, and the
+/// file is written from the capture's own buffer; the measured peak stays in the budget
+/// (writing the `.npz` copied the capture: 400 MB).
+#[test]
+fn simulate_peak_stays_in_the_budget() {
+    let t = TempDir::new("sim-peak");
+    let mut s: serde_json::Value = serde_json::from_str(SCENE).unwrap();
+    s["setup"]["nt"] = 12_500_000u64.into();
+    s["setup"]["spads"]["grid"] = serde_json::json!([1, 1]);
+    std::fs::write(t.path("big.json"), s.to_string()).unwrap();
+    let budget = 330u64 << 20;
+    let a = [
+        "--max-memory",
+        "330M",
+        "--threads",
+        "1",
+        "simulate",
+        "big.json",
+        "--out",
+        "o.npz",
+        "--uncompressed",
+    ];
+    let (peak, o) = peak_rss(&t, &a);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    println!("simulate: peak {} MB of {} MB", peak >> 20, budget >> 20);
+    assert!(peak <= budget, "peak {peak} B > budget {budget} B");
+    // A second thread's accumulator does not fit: refused before rendering.
+    let a = [
+        "--max-memory",
+        "330M",
+        "--threads",
+        "2",
+        "simulate",
+        "big.json",
+        "--out",
+        "p.npz",
+    ];
+    let (_, o) = peak_rss(&t, &a);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert!(
+        err.contains("largest buffer") && err.contains("budget"),
+        "{err}"
+    );
 }
 
 /// A tal-style HDF5 capture of [`capture`] (H `(Nt, Lx, Ly, Sx, Sy)` f32), optionally

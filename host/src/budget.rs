@@ -2,26 +2,175 @@
 //! argument is checked against it **before** it is made, so that a header claiming 10¹²
 //! samples or a time axis of 10⁹ bins gives a one-line error instead of an aborted process.
 //!
-//! The budget is process-wide: half of the machine's physical memory by default (`MemTotal`
-//! of `/proc/meminfo`; 8 GiB where that cannot be read), set with [`set`] (the CLI's
-//! `--max-memory`). [`check`] compares one allocation with it; callers add up what they hold
-//! at once (a capture, its tables, per-thread buffers) and check the sum.
+//! # Where the default comes from
+//!
+//! The process-wide budget is the smallest of the limits the process really runs under, less
+//! headroom ([`limits`], [`describe`]):
+//!
+//! - **physical memory** (`MemTotal` of `/proc/meminfo`): half of it, the rest is left to the
+//!   system and to other programs;
+//! - **the address-space limit** `RLIMIT_AS` and **the data-segment limit** `RLIMIT_DATA`
+//!   (`ulimit -v`, `ulimit -d`, as batch schedulers set them; read from `/proc/self/limits`):
+//!   three quarters of the limit less [`THREAD_RESERVE`] per worker thread — these limits count
+//!   address space, and every thread reserves a stack and an allocator arena in it;
+//! - **the cgroup's memory limit** (a container's or a systemd unit's): `memory.max` (cgroup
+//!   v2) or `memory.limit_in_bytes` (v1) of the process's cgroup and its ancestors, three
+//!   quarters of it (the page cache of the files read is charged to the cgroup too).
+//!
+//! Where none can be read the budget is 8 GiB. [`set`] replaces the default (the CLI's
+//! `--max-memory`, the `max_memory` parameter of other front ends), but never above the hard
+//! limits (address space, data segment, cgroup) less their headroom: past those the process
+//! is killed or aborted whatever the budget says.
+//!
+//! # What is checked
+//!
+//! [`check`] compares one allocation with the budget; [`Plan`] adds up the named buffers a pass
+//! holds at once (a capture, its tables, per-thread buffers) and, when they do not fit, names
+//! the largest in the one-line error, before any of them is made.
 
+use std::sync::OnceLock;
 use std::sync::atomic::{AtomicU64, Ordering};
 
-#[cfg(test)]
 use crate::error::human;
 use crate::error::{Error, Result};
 
 /// The budget in bytes; 0 = not set yet (the default applies).
 static BUDGET: AtomicU64 = AtomicU64::new(0);
 
-/// The budget when physical memory cannot be read (bytes).
+/// The budget when no limit can be read (bytes).
 const FALLBACK: u64 = 8 << 30;
 
-/// Sets the process-wide budget in bytes (at least 1 MiB).
+/// Address space reserved per worker thread on top of the buffers (stack and allocator arena),
+/// subtracted from address-space and data-segment limits (bytes).
+pub const THREAD_RESERVE: u64 = 64 << 20;
+
+/// One limit the process runs under.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Limit {
+    /// What it is, e.g. `the address-space limit RLIMIT_AS`.
+    pub name: String,
+    /// The limit in bytes.
+    pub bytes: u64,
+    /// The budget it allows once headroom is taken off (bytes).
+    pub allows: u64,
+    /// Whether exceeding it kills or aborts the process (address space, data segment, cgroup),
+    /// as opposed to physical memory (swapping, the system's OOM killer).
+    pub hard: bool,
+}
+
+/// The limits the process runs under (those that could be read and are not unlimited),
+/// read once.
+pub fn limits() -> &'static [Limit] {
+    static LIMITS: OnceLock<Vec<Limit>> = OnceLock::new();
+    LIMITS.get_or_init(read_limits)
+}
+
+fn read_limits() -> Vec<Limit> {
+    let threads = std::thread::available_parallelism().map_or(1, usize::from) as u64;
+    let quarter = |b: u64| b - b / 4;
+    let mut out = Vec::new();
+    if let Some(m) = physical_memory() {
+        out.push(Limit {
+            name: "half of the physical memory".into(),
+            bytes: m,
+            allows: m / 2,
+            hard: false,
+        });
+    }
+    if let Ok(text) = std::fs::read_to_string("/proc/self/limits") {
+        for (key, name) in [
+            (
+                "Max address space",
+                "the address-space limit RLIMIT_AS (ulimit -v)",
+            ),
+            (
+                "Max data size",
+                "the data-segment limit RLIMIT_DATA (ulimit -d)",
+            ),
+        ] {
+            if let Some(b) = rlimit_soft(&text, key) {
+                out.push(Limit {
+                    name: name.into(),
+                    bytes: b,
+                    allows: quarter(b).saturating_sub(THREAD_RESERVE.saturating_mul(threads + 1)),
+                    hard: true,
+                });
+            }
+        }
+    }
+    if let Some((b, file)) = cgroup_limit() {
+        out.push(Limit {
+            name: format!("the cgroup's memory limit {file}"),
+            bytes: b,
+            allows: quarter(b),
+            hard: true,
+        });
+    }
+    out
+}
+
+/// The soft limit of `key` in `/proc/self/limits` text, in bytes (`None` if unlimited).
+fn rlimit_soft(text: &str, key: &str) -> Option<u64> {
+    let line = text.lines().find(|l| l.starts_with(key))?;
+    line[key.len()..].split_whitespace().next()?.parse().ok()
+}
+
+/// The smallest memory limit of the process's cgroup and its ancestors: cgroup v2
+/// `memory.max`, else v1 `memory.limit_in_bytes` (values of 2⁶² and above are "unlimited").
+/// Returns the limit and the file it came from.
+fn cgroup_limit() -> Option<(u64, String)> {
+    let groups = std::fs::read_to_string("/proc/self/cgroup").ok()?;
+    let mut best: Option<(u64, String)> = None;
+    let mut consider = |dir: std::path::PathBuf, file: &str| {
+        // The cgroup and every ancestor up to the mount point.
+        let mut d = Some(dir.as_path());
+        while let Some(p) = d {
+            let f = p.join(file);
+            if let Some(b) = std::fs::read_to_string(&f)
+                .ok()
+                .and_then(|s| s.trim().parse::<u64>().ok())
+                .filter(|&b| b < 1 << 62)
+                && best.as_ref().is_none_or(|(x, _)| b < *x)
+            {
+                best = Some((b, f.display().to_string()));
+            }
+            if p == std::path::Path::new("/sys/fs/cgroup") || p.parent().is_none() {
+                break;
+            }
+            d = p.parent();
+        }
+    };
+    for line in groups.lines() {
+        let mut parts = line.splitn(3, ':');
+        let (_, ctrl, path) = (parts.next()?, parts.next()?, parts.next()?);
+        let rel = path.trim_start_matches('/');
+        if ctrl.is_empty() {
+            consider(
+                std::path::Path::new("/sys/fs/cgroup").join(rel),
+                "memory.max",
+            );
+        } else if ctrl.split(',').any(|c| c == "memory") {
+            consider(
+                std::path::Path::new("/sys/fs/cgroup/memory").join(rel),
+                "memory.limit_in_bytes",
+            );
+        }
+    }
+    best
+}
+
+/// Sets the process-wide budget in bytes (at least 1 MiB; at most what the hard limits
+/// allow, see the module docs).
 pub fn set(bytes: u64) {
-    BUDGET.store(bytes.max(1 << 20), Ordering::Relaxed);
+    BUDGET.store(cap(bytes.max(1 << 20)), Ordering::Relaxed);
+}
+
+/// `bytes` capped by the hard limits' allowances.
+fn cap(bytes: u64) -> u64 {
+    limits()
+        .iter()
+        .filter(|l| l.hard)
+        .fold(bytes, |b, l| b.min(l.allows.max(1 << 20)))
 }
 
 /// The process-wide budget in bytes.
@@ -32,9 +181,58 @@ pub fn get() -> u64 {
     }
 }
 
-/// Half of the physical memory, or 8 GiB where that cannot be read.
+/// The default budget: the smallest allowance of [`limits`] (at least 1 MiB), or 8 GiB where
+/// none can be read.
 pub fn default_budget() -> u64 {
-    physical_memory().map_or(FALLBACK, |m| m / 2)
+    limits()
+        .iter()
+        .map(|l| l.allows)
+        .min()
+        .map_or(FALLBACK, |b| b.max(1 << 20))
+}
+
+/// The budget and where it came from, for people: e.g. `2.9 GB: 3/4 of the address-space
+/// limit RLIMIT_AS (ulimit -v) of 4.1 GB less 64 MiB per thread (other limits: half of the
+/// physical memory of 25 GB)`.
+pub fn describe() -> String {
+    let b = get();
+    let set_by_user = BUDGET.load(Ordering::Relaxed) != 0;
+    let binding = limits().iter().min_by_key(|l| l.allows);
+    let how = |l: &Limit| match (l.hard, l.name.contains("RLIMIT")) {
+        (false, _) => format!("{} of {}", l.name, human(l.bytes.into())),
+        (true, true) => format!(
+            "3/4 of {} of {} less {} per thread",
+            l.name,
+            human(l.bytes.into()),
+            human(THREAD_RESERVE.into())
+        ),
+        (true, false) => format!("3/4 of {} of {}", l.name, human(l.bytes.into())),
+    };
+    let source = if set_by_user {
+        match binding.filter(|l| l.hard && l.allows.max(1 << 20) == b) {
+            Some(l) => format!("the size asked for, capped at {}", how(l)),
+            None => "as asked for (max_memory)".into(),
+        }
+    } else {
+        match binding {
+            Some(l) => how(l),
+            None => "no memory limit could be read: the fallback of 8 GiB".into(),
+        }
+    };
+    let others: Vec<String> = limits()
+        .iter()
+        .filter(|l| binding != Some(*l))
+        .map(|l| format!("{} {}", l.name, human(l.bytes.into())))
+        .collect();
+    if others.is_empty() {
+        format!("{}: {source}", human(b.into()))
+    } else {
+        format!(
+            "{}: {source} (other limits: {})",
+            human(b.into()),
+            others.join(", ")
+        )
+    }
 }
 
 /// `MemTotal` of `/proc/meminfo` in bytes.
@@ -60,6 +258,63 @@ pub fn check(what: impl FnOnce() -> String, bytes: u128) -> Result<()> {
         });
     }
     Ok(())
+}
+
+/// The named buffers a pass holds at once, checked together against the budget before any
+/// is made ([`Plan::check`] names the largest when they do not fit).
+#[derive(Clone, Debug, Default)]
+pub struct Plan {
+    items: Vec<(String, u128)>,
+}
+
+impl Plan {
+    /// An empty plan.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Adds a buffer of `bytes` named `name` (e.g. `the lookup grid's carrier (2·10⁹ complex
+    /// f32)`); zero-sized buffers are skipped.
+    pub fn add(&mut self, name: impl Into<String>, bytes: u128) -> &mut Self {
+        if bytes > 0 {
+            self.items.push((name.into(), bytes));
+        }
+        self
+    }
+
+    /// The sum of the buffers (saturating).
+    pub fn total(&self) -> u128 {
+        self.items
+            .iter()
+            .fold(0u128, |a, (_, b)| a.saturating_add(*b))
+    }
+
+    /// The largest buffer and its size.
+    pub fn largest(&self) -> Option<(&str, u128)> {
+        self.items
+            .iter()
+            .max_by_key(|(_, b)| *b)
+            .map(|(n, b)| (n.as_str(), *b))
+    }
+
+    /// Whether the buffers fit the budget.
+    pub fn fits(&self) -> bool {
+        self.total() <= u128::from(get())
+    }
+
+    /// Checks the sum against the budget.
+    ///
+    /// # Errors
+    /// [`Error::Memory`] naming `what`, the largest buffer, the sum and the budget.
+    pub fn check(&self, what: impl FnOnce() -> String) -> Result<()> {
+        check(
+            || match self.largest() {
+                Some((n, b)) => format!("{}; largest buffer: {n}, {}", what(), human(b)),
+                None => what(),
+            },
+            self.total(),
+        )
+    }
 }
 
 /// `count · size` bytes, saturating (a size from a file must never wrap).
@@ -159,5 +414,25 @@ mod tests {
             "{e}"
         );
         assert!(check(|| unreachable!(), 1024).is_ok());
+    }
+
+    #[test]
+    fn limits_parse_and_the_plan_names_its_largest_buffer() {
+        let text = "Limit                     Soft Limit           Hard Limit           Units\n\
+Max data size             unlimited            unlimited            bytes\n\
+Max address space         4096000000           unlimited            bytes\n";
+        assert_eq!(rlimit_soft(text, "Max address space"), Some(4_096_000_000));
+        assert_eq!(rlimit_soft(text, "Max data size"), None);
+        // The default is the smallest allowance, and a set budget never exceeds a hard one.
+        let least = limits().iter().map(|l| l.allows).min();
+        assert_eq!(default_budget(), least.map_or(FALLBACK, |b| b.max(1 << 20)));
+        assert!(describe().contains(" B"), "{}", describe());
+        let mut p = Plan::new();
+        p.add("tables", 10).add("carrier", 1 << 40).add("empty", 0);
+        assert_eq!(p.total(), (1 << 40) + 10);
+        assert_eq!(p.largest(), Some(("carrier", 1 << 40)));
+        let e = p.check(|| "direct light".into()).unwrap_err().to_string();
+        assert!(e.contains("largest buffer: carrier, 1.1 TB"), "{e}");
+        assert!(Plan::new().add("small", 1).fits());
     }
 }

@@ -21,6 +21,9 @@ pub trait Progress: Sync {
     fn advance(&self, n: u64);
     /// The current pass ended, completed or not.
     fn finish(&self);
+    /// A warning about the run (one line, e.g. that few of the probed paths lie in the
+    /// capture's window); the default drops it.
+    fn warn(&self, _message: &str) {}
 }
 
 /// How the voxel sums of the diagonal and of Gaussian columns are evaluated (the CLI's

@@ -13,6 +13,16 @@ macro_rules! say {
 }
 pub(crate) use say;
 
+/// `eprintln!` that ignores a closed stderr (`vltm … 2>&1 | head -1` must not panic; the
+/// exit code stays the one the run would have had).
+macro_rules! tell {
+    ($($t:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stderr(), $($t)*);
+    }};
+}
+pub(crate) use tell;
+
 /// The command line's spelling of a library parameter: `--` and the name with dashes
 /// (`t_min` → `--t-min`), the flags being named after the parameters.
 pub(crate) fn flag(param: &str) -> String {
@@ -71,7 +81,7 @@ impl Failure {
             })
             .collect::<Vec<_>>()
             .join(": ");
-        eprintln!("vltm: {}", printable(&msg.replace('\n', " ")));
+        tell!("vltm: {}", printable(&msg.replace('\n', " ")));
         ExitCode::from(self.code)
     }
 }

@@ -4,6 +4,7 @@
 
 use crate::console::{Failure, flag, say};
 use crate::outputs::refuse_overwriting_inputs;
+use crate::console::tell;
 use clap::Args;
 use std::path::Path;
 use vltm::atomic::Transaction;
@@ -137,9 +138,10 @@ fn check_stats(p: &Prepared<'_>) -> Result<(), Failure> {
         .into());
     }
     if 2 * s.empty > s.histograms {
-        eprintln!(
+        tell!(
             "vltm: warning: the background left {} of {} histograms empty: it is larger than most of the signal",
-            s.empty, s.histograms
+            s.empty,
+            s.histograms
         );
     }
     Ok(())
@@ -168,6 +170,7 @@ pub fn info(path: &Path, input: &Input, png: Option<&Path>) -> Result<(), Failur
         io::open(path)?
     };
     describe(path, &c)?;
+    say!("memory       budget {}", vltm::budget::describe());
     let prep = input.prep()?;
     let (g, sum) = match prep {
         Some(p) => {

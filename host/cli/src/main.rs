@@ -49,7 +49,7 @@ fn main() -> ExitCode {
                 .join(" ");
             let msg = msg.trim_start_matches("error: ");
             let msg = if msg.is_empty() { "bad arguments" } else { msg };
-            eprintln!("vltm: {msg} (see --help)");
+            tell!("vltm: {msg} (see --help)");
             return ExitCode::from(2);
         }
     };
@@ -58,7 +58,7 @@ fn main() -> ExitCode {
         let cores = std::thread::available_parallelism().map_or(1, usize::from);
         let most = 4 * cores;
         if n == 0 || n > most {
-            eprintln!(
+            tell!(
                 "vltm: argument `--threads`: expected 1 to {most} threads (4 per core, {cores} cores), found {n}"
             );
             return ExitCode::from(2);
@@ -68,7 +68,7 @@ fn main() -> ExitCode {
             .build_global()
             .is_err()
         {
-            eprintln!("vltm: argument `--threads`: the thread pool could not be started");
+            tell!("vltm: argument `--threads`: the thread pool could not be started");
             return ExitCode::from(1);
         }
     }
@@ -76,7 +76,7 @@ fn main() -> ExitCode {
         match vltm::budget::parse_size(m) {
             Ok(b) => vltm::budget::set(b),
             Err(e) => {
-                eprintln!("vltm: {}", printable(&e.render(flag)));
+                tell!("vltm: {}", printable(&e.render(flag)));
                 return ExitCode::from(2);
             }
         }

@@ -14,7 +14,7 @@ use vltm::probe;
 use vltm::volume::Volume;
 use vltm_kernel::Point;
 
-use crate::console::{Failure, say};
+use crate::console::{Failure, say, tell};
 
 /// One output volume of a run: its name part (`None` for the main output), values, title.
 pub(crate) struct Part<'a> {
@@ -109,7 +109,7 @@ pub(crate) fn write_parts(
                     wrote.push(p);
                 }
                 None if part.tag.is_none() => {
-                    eprintln!("vltm: note: no figure for a point list (only for grid volumes)");
+                    tell!("vltm: note: no figure for a point list (only for grid volumes)");
                 }
                 None => {}
             }
@@ -172,7 +172,7 @@ pub(crate) fn write_matrix(
         tb[2]
     );
     if m.report.aliased > 0 {
-        eprintln!(
+        tell!(
             "vltm: warning: {} elements have path lengths outside the capture's alias-free window",
             m.report.aliased
         );

@@ -36,6 +36,14 @@ impl Progress for Bars {
         }
     }
 
+    fn warn(&self, message: &str) {
+        let line = || crate::console::tell!("vltm: warning: {message}");
+        match self.bar().as_ref() {
+            Some(b) => b.suspend(line),
+            None => line(),
+        }
+    }
+
     fn finish(&self) {
         if let Some(b) = self.bar().take() {
             b.finish_and_clear();

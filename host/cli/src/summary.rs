@@ -9,7 +9,7 @@ use vltm::volume::Volume;
 use vltm_kernel::Point;
 
 use crate::args::Common;
-use crate::console::{Failure, say};
+use crate::console::{Failure, say, tell};
 use crate::outputs::write_outputs;
 
 /// The summary line of a probe: voxels, rows, time, the configuration and the peak; warnings
@@ -42,13 +42,13 @@ pub(crate) fn summarize(
         p[2]
     );
     if report.non_finite > 0 {
-        eprintln!(
+        tell!(
             "vltm: warning: {} non-finite histogram samples were read as 0",
             report.non_finite
         );
     }
     if report.aliased > 0 {
-        eprintln!(
+        tell!(
             "vltm: warning: {} voxels have path lengths outside the capture's alias-free window",
             report.aliased
         );

@@ -75,8 +75,10 @@ fn write_to(c: &Capture, file: &mut File, path: &Path, compress: bool) -> Result
         Array::from_shape_vec(IxDyn(&shape), v).expect("shape checked by Capture::new")
     };
     let pts = |p: &[vltm_kernel::Point]| p.iter().flatten().copied().collect::<Vec<f32>>();
-    w.add_array("H", &arr(h_shape, c.data.clone()))
-        .map_err(npz)?;
+    // A view of the capture's buffer: writing holds no second copy of H.
+    let h = ndarray::ArrayView::from_shape(IxDyn(&h_shape), &c.data)
+        .expect("shape checked by Capture::new");
+    w.add_array("H", &h).map_err(npz)?;
     w.add_array("laser_grid_xyz", &arr(vec![lx, ly, 3], pts(&g.lasers)))
         .map_err(npz)?;
     w.add_array("sensor_grid_xyz", &arr(vec![sx, sy, 3], pts(&g.spads)))
@@ -287,6 +289,16 @@ fn check_members(path: &Path) -> Result<()> {
                 path.display()
             )
         };
+        // The archive records each member's uncompressed size: data that cannot be there is
+        // a truncated member, refused before the reader allocates the claimed array (a claim
+        // over the budget is refused by the budget, below).
+        let room = u128::from(e.size()).saturating_sub(u128::from(skip + hlen));
+        if bytes > room && bytes <= u128::from(budget::get()) {
+            return Err(bad(
+                &format!("{bytes} bytes of data as its header claims"),
+                format!("{room} bytes in the archive (truncated)"),
+            ));
+        }
         budget::check(what, bytes)?;
         total = total.saturating_add(bytes);
     }

@@ -150,6 +150,7 @@ pub fn diagonal(
     }
     let t = Instant::now();
     let cfg = wave.config(src.geometry())?;
+    super::window::window_rule(src.geometry(), &cfg, None, &volume.points, gate, exec)?;
     let (v, report) = elementwise(
         src,
         Job {
@@ -262,11 +263,16 @@ pub(super) fn column_acc(
         }
         _ => {}
     }
-    if gate != ColumnGate::None {
-        let base = wave.config(src.geometry())?;
-        let after = gate == ColumnGate::HigherOrder;
-        check_window(src.geometry(), &base, Some(&[focus]), &volume.points, after)?;
-    }
+    let base = wave.config(src.geometry())?;
+    let foci = [focus];
+    super::window::window_rule(
+        src.geometry(),
+        &base,
+        Some(&foci),
+        &volume.points,
+        gate,
+        exec,
+    )?;
     let cfg = if gate == ColumnGate::TwoBounce {
         wave.column_config(src.geometry(), &[focus], &volume.points)?
     } else {

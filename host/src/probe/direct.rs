@@ -58,7 +58,14 @@ pub(super) fn direct_acc(
     exec: Exec<'_>,
 ) -> Result<(Amplitudes, Config)> {
     let cfg = wave.config(src.geometry())?;
-    check_window(src.geometry(), &cfg, None, &volume.points, false)?;
+    super::window::window_rule(
+        src.geometry(),
+        &cfg,
+        None,
+        &volume.points,
+        super::ColumnGate::TwoBounce,
+        exec,
+    )?;
     check_memory(
         src.geometry(),
         &cfg,
@@ -76,8 +83,11 @@ pub(super) fn direct_acc(
         return Ok((Amplitudes { acc, report, path }, cfg));
     }
     let band_cost = band_flops(g, &cfg, volume.len());
-    let lookup_cost = Some({
-        let l = Lookup::new(&cfg).grid_len() as f64;
+    // The lookup competes only when its grid fits the budget (at large σ its carrier and
+    // tables grow with N; the band sum then runs in bounded memory).
+    let lookup_fits = lookup_plan(g, &cfg, volume.len()).fits();
+    let lookup_cost = lookup_fits.then(|| {
+        let l = Lookup::plan_len(&cfg) as f64;
         let ks = g.spads_per_row() as f64;
         // One complex inverse FFT per SPAD, then E0 + 16 flops per (voxel, SPAD) (§B.8).
         ks * 5.0 * l * l.log2() + volume.len() as f64 * ks * 76.0
@@ -129,7 +139,11 @@ fn direct_confocal(
     let (values, report, path) = if let Some(c) = conv {
         let (v, r) = confocal::direct_convolution(src, job, volume, c)?;
         (v, r, Path::Planar)
-    } else if job.exec.path == Path::Lookup || (job.exec.path == Path::Auto && lookup < band) {
+    } else if job.exec.path == Path::Lookup
+        || (job.exec.path == Path::Auto
+            && lookup < band
+            && lookup_plan(g, cfg, volume.len()).fits())
+    {
         let (v, r) = direct_lookup(src, job, volume)?;
         (v, r, Path::Lookup)
     } else {
@@ -236,6 +250,7 @@ pub(super) fn direct_lookup(
 ) -> Result<(Vec<Complex64>, Report)> {
     let cfg = job.cfg;
     let g = src.geometry().clone();
+    lookup_plan(&g, cfg, volume.len()).check(|| pass_name(&g, cfg, "direct light (lookup)"))?;
     let ks = g.spads_per_row();
     // Confocal captures: `drive_rows` makes one scan per row (this one only sizes things).
     let spads = if g.confocal { &g.spads[..1] } else { &g.spads };
@@ -276,6 +291,15 @@ pub(super) fn direct_lookup(
         report.non_finite += r.non_finite;
     }
     Ok((acc, report))
+}
+
+/// What the diagonal holds at once on the lookup path: the pass's tables and row buffers
+/// ([`memory_plan`]) and the lookup's grid and per-thread scratch.
+pub(super) fn lookup_plan(g: &Geometry, cfg: &Config, n_voxels: usize) -> budget::Plan {
+    let mut plan = memory_plan(g, cfg, budget::bytes(n_voxels, 32), "direct light");
+    let threads = rayon::current_num_threads().max(1);
+    Lookup::add_to_plan(cfg, g.spads_per_row(), n_voxels, threads, &mut plan);
+    plan
 }
 
 /// Per-thread state of the planar diagonal.

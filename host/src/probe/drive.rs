@@ -186,27 +186,46 @@ pub(super) fn drive_rows<W: Send>(
 /// # Errors
 /// [`Error::Memory`] naming the pass, the DFT sizes and σ.
 pub(super) fn check_memory(g: &Geometry, cfg: &Config, extra: u128, what: &str) -> Result<()> {
+    memory_plan(g, cfg, extra, what).check(|| pass_name(g, cfg, what))
+}
+
+/// The buffers of [`check_memory`], named (`extra` as `what`'s states and outputs).
+pub(super) fn memory_plan(g: &Geometry, cfg: &Config, extra: u128, what: &str) -> budget::Plan {
     let threads = rayon::current_num_threads() as u128;
     let ks = g.spads_per_row();
-    let need = budget::bytes(Scan::tables_len(cfg, ks), 4)
-        .saturating_add(
-            BandDft::table_bytes(cfg).min(crate::probe::fast::band::MAX_TABLE_BYTES as u128),
-        )
-        .saturating_add(budget::bytes(RowBuffer::len(cfg, ks), 4 * threads))
-        .saturating_add(budget::bytes(ks.saturating_mul(g.nt), 8 * threads))
-        .saturating_add(extra);
-    budget::check(
-        || {
-            format!(
-                "{what} with a DFT period of {} bins, a band of {} bins and rows of {} SPADs × {} bins (σ = {} m)",
-                budget::count(cfg.n_fft() as u128),
-                budget::count(cfg.bins() as u128),
-                ks,
-                g.nt,
-                cfg.sigma()
-            )
-        },
-        need,
+    let mut plan = budget::Plan::new();
+    plan.add(
+        format!(
+            "the kernel's tables (2N + J + Ks = {} f32)",
+            budget::count(Scan::tables_len(cfg, ks) as u128)
+        ),
+        budget::bytes(Scan::tables_len(cfg, ks), 4),
+    )
+    .add(
+        "the band-DFT table",
+        BandDft::table_bytes(cfg).min(crate::probe::fast::band::MAX_TABLE_BYTES as u128),
+    )
+    .add(
+        format!("{threads} row buffers (one per thread)"),
+        budget::bytes(RowBuffer::len(cfg, ks), 4 * threads),
+    )
+    .add(
+        format!("{threads} × 2 rows of histograms"),
+        budget::bytes(ks.saturating_mul(g.nt), 8 * threads),
+    )
+    .add(format!("the states and outputs of {what}"), extra);
+    plan
+}
+
+/// A pass's name with its sizes, for [`Error::Memory`].
+pub(super) fn pass_name(g: &Geometry, cfg: &Config, what: &str) -> String {
+    format!(
+        "{what} with a DFT period of {} bins, a band of {} bins and rows of {} SPADs × {} bins (σ = {} m)",
+        budget::count(cfg.n_fft() as u128),
+        budget::count(cfg.bins() as u128),
+        g.spads_per_row(),
+        g.nt,
+        cfg.sigma()
     )
 }
 

@@ -170,6 +170,10 @@ fn pair_sums(
             format!("expected {} flags, found {}", volume.len(), gamma.len()),
         ));
     }
+    // The window rule on the volume's diagonal, as pass 1 (`direct`) applies it: the same
+    // error when Γ comes from a file (pass 1 already warned otherwise).
+    let base = wave.config(src.geometry())?;
+    super::window::window_coverage(src.geometry(), &base, None, &volume.points, opts.gate)?;
     let idx: Vec<usize> = (0..gamma.len()).filter(|&i| gamma[i]).collect();
     let pts: Vec<Point> = idx.iter().map(|&i| volume.points[i]).collect();
     let kgate = match opts.gate {

@@ -254,6 +254,15 @@ pub(super) fn matrix_acc(
             "a confocal capture has no separate camera aperture: the matrix needs a SPAD grid",
         ));
     }
+    let base = wave.config(src.geometry())?;
+    super::window::window_rule(
+        src.geometry(),
+        &base,
+        Some(from),
+        to,
+        super::ColumnGate::TwoBounce,
+        exec,
+    )?;
     let cfg = wave.column_config(src.geometry(), from, to)?;
     let ks = src.geometry().spads_per_row();
     let per =
@@ -355,6 +364,15 @@ pub fn matrix(
     let t = Instant::now();
     let (nf, nt) = (from.len(), to.len());
     let out_bytes = check_result(nf, nt)?;
+    let base = wave.config(src.geometry())?;
+    super::window::window_rule(
+        src.geometry(),
+        &base,
+        Some(from),
+        to,
+        super::ColumnGate::TwoBounce,
+        exec,
+    )?;
     let cfg = wave.column_config(src.geometry(), from, to)?;
     let ks = src.geometry().spads_per_row();
     let fixed = out_bytes.saturating_add(imaging_bytes(nt));
@@ -510,6 +528,15 @@ pub fn relight(
     let t = Instant::now();
     let nb = volume.len();
     let fixed = budget::bytes(nb, 16).saturating_add(imaging_bytes(nb));
+    let base = wave.config(src.geometry())?;
+    super::window::window_rule(
+        src.geometry(),
+        &base,
+        Some(&pattern.foci),
+        &volume.points,
+        super::ColumnGate::TwoBounce,
+        exec,
+    )?;
     let cfg = wave.column_config(src.geometry(), &pattern.foci, &volume.points)?;
     let ks = src.geometry().spads_per_row();
     let per_pass = foci_per_pass(

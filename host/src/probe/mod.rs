@@ -33,6 +33,7 @@ mod matrix;
 pub mod partial;
 mod row;
 mod wave;
+pub mod window;
 
 pub use crate::exec::{Exec, Path};
 pub use column::{ColumnGate, Shell, check_focus, column, diagonal};
@@ -47,3 +48,4 @@ pub use matrix::{MATRIX_BYTES_PER_ELEMENT, Matrix, Pattern, Relit, matrix, relig
 pub use partial::{Finished, Partial, Task};
 pub use row::row;
 pub use wave::{Output, Wave, default_wavelength};
+pub use window::{Coverage, WARN_FRACTION, window_coverage};

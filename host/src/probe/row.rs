@@ -51,7 +51,17 @@ pub fn row(
     }
     let b = focus;
     let voxels = &volume.points;
-    let cfg = wave.column_config(&g, voxels, &[b])?;
+    let base = wave.config(&g)?;
+    let to = [b];
+    super::window::window_rule(
+        &g,
+        &base,
+        Some(voxels),
+        &to,
+        super::ColumnGate::TwoBounce,
+        exec,
+    )?;
+    let cfg = wave.column_config(&g, voxels, &to)?;
     let j = cfg.bins().max(1);
     let span = cfg.span();
     let (klo, inv) = ((cfg.k_lo() as f64 / span) as f32, (1.0 / span) as f32);

@@ -47,21 +47,28 @@ impl Scene {
         let values = kl.saturating_mul(ks).saturating_mul(s.nt);
         let threads = rayon::current_num_threads() as u128;
         let pulse = (6.0 * self.pulse_sigma() / s.dt * (1.0 + FINE as f64)).ceil() as u128;
-        let need = budget::bytes(values, 4)
-            .saturating_add(budget::bytes(points, 16 * (kl as u128 + ks as u128)))
-            .saturating_add(budget::bytes(ks.saturating_mul(s.nt), 8 * threads))
-            .saturating_add(budget::bytes(pulse, 8));
-        budget::check(
-            || {
-                format!(
-                    "rendering {} lasers × {} SPADs × {} bins and {points} surface samples",
-                    budget::count(kl as u128),
-                    budget::count(ks as u128),
-                    budget::count(s.nt as u128),
-                )
-            },
-            need,
+        let mut plan = budget::Plan::new();
+        plan.add(
+            format!("the capture ({} f32)", budget::count(values as u128)),
+            budget::bytes(values, 4),
         )
+        .add(
+            "the leg tables of every surface sample",
+            budget::bytes(points, 16 * (kl as u128 + ks as u128)),
+        )
+        .add(
+            format!("{threads} row accumulators (one per thread, f64)"),
+            budget::bytes(ks.saturating_mul(s.nt), 8 * threads),
+        )
+        .add("the sampled pulse", budget::bytes(pulse, 8));
+        plan.check(|| {
+            format!(
+                "rendering {} lasers × {} SPADs × {} bins and {points} surface samples",
+                budget::count(kl as u128),
+                budget::count(ks as u128),
+                budget::count(s.nt as u128),
+            )
+        })
     }
 
     /// Renders the whole capture (rows in parallel), with noise if `noise` is set.

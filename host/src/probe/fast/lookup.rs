@@ -192,12 +192,8 @@ impl Lookup {
 
     /// As [`Lookup::new`] with `r` grid samples per σ instead of [`SAMPLES_PER_SIGMA`].
     fn with_density(cfg: &Config, r: f64) -> Self {
-        let n = cfg.n_fft();
+        let len = Self::len_with_density(cfg, r);
         let span = cfg.span();
-        let want = (r * span / cfg.sigma()).ceil();
-        // δ ≤ σ/r for the interpolation, δ ≤ λ/8 for `cis_small_turns` (|θ·t| ≤ 1/8 turn).
-        let want = want.max((8.0 * span / cfg.wavelength()).ceil());
-        let len = fast_len(n.max(if want.is_finite() { want as usize } else { n }));
         let k_d = (span / cfg.wavelength()).round() as i64;
         let first = (cfg.k_lo() - k_d).rem_euclid(len as i64) as usize;
         let (g_lo, g_hi) = cfg.guard();
@@ -220,6 +216,65 @@ impl Lookup {
             guard: (g_lo as f32, g_hi as f32),
             ifft,
         }
+    }
+
+    /// The grid length `L` of [`Lookup::new`] for `cfg`, without planning anything (for cost
+    /// models and the memory budget).
+    pub fn plan_len(cfg: &Config) -> usize {
+        Self::len_with_density(cfg, SAMPLES_PER_SIGMA)
+    }
+
+    fn len_with_density(cfg: &Config, r: f64) -> usize {
+        let n = cfg.n_fft();
+        let span = cfg.span();
+        let want = (r * span / cfg.sigma()).ceil();
+        // δ ≤ σ/r for the interpolation, δ ≤ λ/8 for `cis_small` (|θ·t| ≤ 1/8 turn).
+        let want = want.max((8.0 * span / cfg.wavelength()).ceil());
+        fast_len(n.max(if want.is_finite() { want as usize } else { n }))
+    }
+
+    /// Adds what the lookup path holds to `plan`, before any of it is made: the shared grid
+    /// carrier (`2L + 8` complex f32) and inverse-FFT plan (twiddles, counted as `2L` complex
+    /// f32), and per worker thread its [`LookupScratch`] for rows of `n_spads` SPADs (`L`
+    /// spectrum, `L` FFT scratch, `n_spads·(L + 8)` tables) and `n_voxels` complex f64
+    /// accumulators.
+    pub fn add_to_plan(
+        cfg: &Config,
+        n_spads: usize,
+        n_voxels: usize,
+        threads: usize,
+        plan: &mut crate::budget::Plan,
+    ) {
+        use crate::budget::{bytes, count};
+        let len = Self::plan_len(cfg);
+        let l = len as u128;
+        plan.add(
+            format!(
+                "the lookup grid's carrier ({} complex f32)",
+                count(2 * l + EXTRA as u128)
+            ),
+            bytes(2 * l + EXTRA as u128, 8),
+        )
+        .add(
+            format!("the lookup grid's FFT plan (L = {})", count(l)),
+            bytes(2 * l, 8),
+        )
+        .add(
+            format!(
+                "{threads} lookup scratches (one per thread, {} SPADs × L = {})",
+                n_spads,
+                count(l)
+            ),
+            bytes(
+                threads,
+                bytes(n_spads, bytes(len + EXTRA, 8).saturating_add(16))
+                    .saturating_add(bytes(len, 16)),
+            ),
+        )
+        .add(
+            format!("{threads} accumulators of {n_voxels} voxels (one per thread)"),
+            bytes(threads, bytes(n_voxels, 16)),
+        );
     }
 
     /// Grid length `L` (a `2^a·3^b·5^c` size ≥ N).

@@ -274,6 +274,9 @@ pub fn accumulate(
             }
             let idx: Vec<usize> = (0..gamma.len()).filter(|&i| gamma[i]).collect();
             let pts: Vec<Point> = idx.iter().map(|&i| volume.points[i]).collect();
+            // The window rule on the volume's diagonal, as a whole `indirect` applies it.
+            let base = wave.config(&g)?;
+            super::window::window_coverage(&g, &base, None, &volume.points, ColumnGate::TwoBounce)?;
             let cfg = wave.column_config(&g, &pts, &pts)?;
             let shell = shell.unwrap_or(Shell {
                 r0: 1.5 * cfg.sigma() as f32,
