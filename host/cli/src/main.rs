@@ -26,7 +26,7 @@ mod split;
 mod summary;
 
 use args::Cli;
-use console::{flag, printable};
+use console::{flag, printable, tell};
 
 fn main() -> ExitCode {
     let cli = match Cli::try_parse() {
