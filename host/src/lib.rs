@@ -5,6 +5,7 @@ pub mod atomic;
 pub mod budget;
 pub mod error;
 pub mod exec;
+pub mod front;
 pub mod io;
 pub mod out;
 pub mod probe;
