@@ -10,6 +10,7 @@ the repository's fixtures/two_patches.npz; default figure: docs/python-example.p
 from __future__ import annotations
 
 import argparse
+import os
 import pathlib
 import time
 
@@ -22,7 +23,8 @@ import numpy as np  # noqa: E402
 import vltm  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[3]
-SHARED = REPO.parent / "shared" / "data" / "two_patches" / "two_patches.hdf5"
+SHARED = (pathlib.Path(os.environ.get("VLTM_SHARED", REPO.parent / "shared")) / "data"
+          / "two_patches" / "two_patches.hdf5")
 GRID = "-0.75:0.75:24,-0.75:0.75:24,0.4:1.35:20"
 FOCUS = (-0.25, 0.15, 0.7)  # on patch A
 

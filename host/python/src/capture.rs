@@ -8,7 +8,7 @@ use pyo3::types::PyDict;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use vltm::atomic::Transaction;
-use vltm::io::prep::{Background, Bound, Prep, Prepared};
+use vltm::io::prep::{Background, Bound as TimeBound, Prep, Prepared};
 use vltm::io::{self, Capture, Geometry, RowSource};
 use vltm::{front, probe};
 use vltm_kernel::Point;
@@ -106,11 +106,11 @@ pub(crate) fn prep_of(
 ) -> PyResult<Option<Prep>> {
     let p = Prep {
         t_min: t_min
-            .map(|s| Bound::parse("t_min", s))
+            .map(|s| TimeBound::parse("t_min", s))
             .transpose()
             .map_err(py_err)?,
         t_max: t_max
-            .map(|s| Bound::parse("t_max", s))
+            .map(|s| TimeBound::parse("t_max", s))
             .transpose()
             .map_err(py_err)?,
         rebin,

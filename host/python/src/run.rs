@@ -589,7 +589,7 @@ fn one_pass(
                 Some(cuts) => {
                     let (s, r) =
                         probe::indirect_shells(rows, vol, &gamma, &opts, &cuts, wave, exec)?;
-                    let total = (0..vol.len()).map(|i| s.iter().map(|v| v[i]).sum()).collect();
+                    let total: Vec<f32> = (0..vol.len()).map(|i| s.iter().map(|v| v[i]).sum::<f32>()).collect();
                     (total, Some(s), r, None)
                 }
             };

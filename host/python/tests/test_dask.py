@@ -103,7 +103,7 @@ OPTIONS = {
         "report": True, "as_xarray": True}),
     "row": ((SMALL, (0.25, 0.0, 0.9)), {
         "wavelength": 0.3, "sigma": 0.2, "weights": "one", "band": 4.0,
-        "compensate_laser": True, "path": "band", "t_min": 1.0, "t_max": "500b",
+        "compensate_laser": True, "path": "band", "swap_roles": True, "t_min": 1.0, "t_max": "500b",
         "rebin": 2, "background": "auto", "report": True, "as_xarray": True}),
     "matrix": (("-0.3:0.3:2,-0.3:0.3:2,0.6:0.8:2", "gamma"), {
         "volume": SMALL, "epsilon": 0.3, "direct": None, "wavelength": 0.3, "sigma": 0.2,
@@ -125,8 +125,10 @@ def _same(a, b):
         for x, y in zip(a, b):
             _same(x, y)
     elif isinstance(a, dict):
-        for k in ("wavelength", "sigma", "rows", "explained", "passes"):
+        for k in ("wavelength", "sigma", "rows", "passes"):
             assert a.get(k) == b.get(k), k
+        # The removed energy's f64 sums add up in another order over the tasks.
+        assert a.get("explained") == pytest.approx(b.get("explained"), rel=1e-9)
     elif hasattr(a, "dims"):  # xarray
         assert a.dims == b.dims
         for k in ("wavelength", "sigma", "gate", "probe"):
@@ -134,6 +136,9 @@ def _same(a, b):
         for c in a.coords:
             np.testing.assert_array_equal(a[c].values, b[c].values)
         np.testing.assert_array_equal(a.values, b.values)
+    elif np.iscomplexobj(a):
+        # Complex128 amplitudes: f64 accumulators added in another order over the tasks.
+        np.testing.assert_allclose(a, b, rtol=0, atol=1e-9 * np.abs(a).max())
     else:
         np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
 
@@ -145,7 +150,13 @@ def test_dask_passes_every_option(two_patches, client, fn, opt):
     kw = {opt: value}
     if opt == "direct":  # Γ from a given direct-light volume
         kw["direct"] = vltm.direct(two_patches, SMALL)
-    want = getattr(vltm, fn)(two_patches, *args, **kw)
+    try:
+        want = getattr(vltm, fn)(two_patches, *args, **kw)
+    except vltm.ArgumentError as e:  # refused in process (row's swap_roles): the same error
+        with pytest.raises(vltm.ArgumentError) as d:
+            getattr(vltm.dask, fn)(two_patches, *args, client=client, **kw)
+        assert str(d.value) == str(e)
+        return
     got = getattr(vltm.dask, fn)(two_patches, *args, client=client, **kw)
     if fn == "matrix":
         np.testing.assert_array_equal(want.intensities, got.intensities)
