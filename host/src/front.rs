@@ -188,7 +188,10 @@ mod tests {
     #[test]
     fn shells_parse_and_cut() {
         let s = parse_shells("0.2, 0.5").unwrap();
-        assert_eq!((s[0].r0, s[0].r1, s[1].r0, s[1].r1, s[2].r0), (0.0, 0.2, 0.2, 0.5, 0.5));
+        assert_eq!(
+            (s[0].r0, s[0].r1, s[1].r0, s[1].r1, s[2].r0),
+            (0.0, 0.2, 0.2, 0.5, 0.5)
+        );
         assert!(s[2].r1.is_infinite());
         for bad in ["0.5,0.2", "0,1", "1", "a,b", "0.1,inf"] {
             let e = parse_shells(bad).unwrap_err().to_string();
@@ -204,8 +207,21 @@ mod tests {
 
     #[test]
     fn gamma_of_refuses_empty_and_bad_epsilon() {
-        assert_eq!(gamma_of(&[0.0, 1.0, 0.5], 0.6, "e").unwrap(), [false, true, false]);
-        assert!(gamma_of(&[0.0, 0.0], 0.1, "e").unwrap_err().to_string().contains("Γ is empty"));
-        assert!(gamma_of(&[1.0], 1.0, "--epsilon").unwrap_err().to_string().starts_with("argument `--epsilon`"));
+        assert_eq!(
+            gamma_of(&[0.0, 1.0, 0.5], 0.6, "e").unwrap(),
+            [false, true, false]
+        );
+        assert!(
+            gamma_of(&[0.0, 0.0], 0.1, "e")
+                .unwrap_err()
+                .to_string()
+                .contains("Γ is empty")
+        );
+        assert!(
+            gamma_of(&[1.0], 1.0, "--epsilon")
+                .unwrap_err()
+                .to_string()
+                .starts_with("argument `--epsilon`")
+        );
     }
 }

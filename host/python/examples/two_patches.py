@@ -32,7 +32,8 @@ FOCUS = (-0.25, 0.15, 0.7)  # on patch A
 def mip(ax, a, title, focus=None):
     """Front view: the maximum over z of a DataArray over (x, y, z)."""
     m = a.max("z")
-    ext = [float(a.x[0]), float(a.x[-1]), float(a.y[0]), float(a.y[-1])]
+    hx, hy = float(a.x[1] - a.x[0]) / 2, float(a.y[1] - a.y[0]) / 2  # voxel centres → edges
+    ext = [float(a.x[0]) - hx, float(a.x[-1]) + hx, float(a.y[0]) - hy, float(a.y[-1]) + hy]
     ax.imshow(m.values.T, origin="lower", extent=ext, cmap="inferno")
     if focus is not None:
         ax.plot(focus[0], focus[1], "c+", ms=12, mew=2)

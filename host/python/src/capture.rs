@@ -130,7 +130,12 @@ impl NativeCapture {
         let g = &self.geometry;
         let d = PyDict::new(py);
         match &self.store {
-            Store::File { path, bytes } | Store::Memory { path: Some(path), bytes, .. } => {
+            Store::File { path, bytes }
+            | Store::Memory {
+                path: Some(path),
+                bytes,
+                ..
+            } => {
                 d.set_item("path", path.to_string_lossy().into_owned())?;
                 d.set_item("file_bytes", *bytes)?;
             }

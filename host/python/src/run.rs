@@ -203,7 +203,10 @@ fn run<'py>(
     let (wave, epath) = wave_of(wavelength, sigma, weights, band, compensate_laser, path)?;
     let prep = prep_of(t_min, t_max, rebin, background)?;
     let shell = shell_of("shell", shell)?;
-    let cuts = shells.map(front::parse_shells).transpose().map_err(py_err)?;
+    let cuts = shells
+        .map(front::parse_shells)
+        .transpose()
+        .map_err(py_err)?;
     if cuts.is_some() && shell.is_some() {
         return Err(arg(
             "shells",
@@ -381,7 +384,11 @@ fn run<'py>(
         ..Exec::default()
     };
     let outcome = py
-        .detach(|| compute(cap, vol, job, &wave, exec, prep, swap_roles, rows, amplitudes))
+        .detach(|| {
+            compute(
+                cap, vol, job, &wave, exec, prep, swap_roles, rows, amplitudes,
+            )
+        })
         .map_err(py_err)?;
     match outcome {
         Outcome::Part(p) => Ok(Py::new(py, NativePartial(*p))?.into_any()),
@@ -537,14 +544,8 @@ fn one_pass(
             let mut explained = None;
             let mut o = match leak_epsilon {
                 Some(le) => {
-                    let model = probe::fit_over_volume(
-                        rows,
-                        vol,
-                        le,
-                        wave,
-                        &LeakOptions::default(),
-                        exec,
-                    )?;
+                    let model =
+                        probe::fit_over_volume(rows, vol, le, wave, &LeakOptions::default(), exec)?;
                     explained = Some(model.explained);
                     let mut lc = LeakCorrected::new(rows, &model);
                     probe::column(&mut lc, focus, vol, gate, shell, wave, exec)?
@@ -578,7 +579,10 @@ fn one_pass(
                 Some(d) => (front::gamma_of(&d, opts.epsilon, "--epsilon")?, d),
                 None => {
                     let d = probe::direct(rows, vol, wave, exec)?;
-                    (front::gamma_of(&d.values, opts.epsilon, "--epsilon")?, d.values)
+                    (
+                        front::gamma_of(&d.values, opts.epsilon, "--epsilon")?,
+                        d.values,
+                    )
                 }
             };
             let (values, parts, report, explained) = match shells {
@@ -589,7 +593,9 @@ fn one_pass(
                 Some(cuts) => {
                     let (s, r) =
                         probe::indirect_shells(rows, vol, &gamma, &opts, &cuts, wave, exec)?;
-                    let total: Vec<f32> = (0..vol.len()).map(|i| s.iter().map(|v| v[i]).sum::<f32>()).collect();
+                    let total: Vec<f32> = (0..vol.len())
+                        .map(|i| s.iter().map(|v| v[i]).sum::<f32>())
+                        .collect();
                     (total, Some(s), r, None)
                 }
             };
@@ -615,7 +621,10 @@ fn one_pass(
             Ok(d)
         }
         Job::Row { focus } => Ok(Done::of(probe::row(rows, focus, vol, wave, exec)?)),
-        Job::Matrix { .. } => Err(vltm::Error::arg("kind", "a matrix is run over all rows above")),
+        Job::Matrix { .. } => Err(vltm::Error::arg(
+            "kind",
+            "a matrix is run over all rows above",
+        )),
     }
 }
 
