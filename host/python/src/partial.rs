@@ -45,7 +45,7 @@ impl NativePartial {
         self.0.focus()
     }
     /// Finishes the state: (intensities float32 1-D, amplitudes complex128 1-D or None,
-    /// shape, report dict); `amplitudes`: also image a two-bounce column's amplitudes.
+    /// shape, report dict, voxel points float32 1-D, whether they are a grid); `amplitudes`: also image a two-bounce column's amplitudes.
     /// A matrix state finishes into (intensities float32 1-D, amplitudes complex64 1-D,
     /// (n_from, n_to), report dict, from points float32 1-D, to points float32 1-D).
     #[pyo3(signature = (amplitudes=false))]
@@ -72,11 +72,14 @@ impl NativePartial {
             return t.into_pyobject(py).map(|t| t.into_any());
         }
         let s = f.volume.shape;
+        let grid = f.volume.axes.is_some();
         let t = (
             f.output.values.into_pyarray(py),
             f.amplitudes.map(|a| a.into_pyarray(py)),
             (s[0], s[1], s[2]),
             rep,
+            flat_points(&f.volume.points).into_pyarray(py),
+            grid,
         );
         t.into_pyobject(py).map(|t| t.into_any())
     }

@@ -51,6 +51,11 @@ def test_partial_finish_matrix_and_transient(two_patches, tmp_path):
     parts = [vltm.direct(two_patches, SMALL, rows=slice(a, b)) for a, b in [(0, 30), (30, 64)]]
     a = vltm.merge(parts).finish(as_xarray=True)
     xr.testing.assert_equal(a, vltm.direct(two_patches, SMALL, as_xarray=True))
+    # A state read from a file (as `--partial` writes it) knows its voxels too.
+    vltm.merge(parts).write(tmp_path / "d.part")
+    b = vltm.Partial.read(tmp_path / "d.part").finish(as_xarray=True)
+    assert b.dims == ("x", "y", "z")
+    xr.testing.assert_equal(a, b)  # values and coordinates (attributes aside)
     m = vltm.matrix(two_patches, "-0.3:0.3:2,-0.3:0.3:2,0.6:0.8:2", SMALL)
     x = m.to_xarray()
     assert x.dims == ("from", "to") and x.shape == (8, 144)

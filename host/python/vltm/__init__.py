@@ -358,12 +358,12 @@ class Partial:
         amplitudes = _check.flag("amplitudes", amplitudes)
         if self.kind == "matrix":
             return _matrix_result(*self._native.finish())
-        values, amps, shape, rep = self._native.finish(amplitudes=amplitudes)
+        values, amps, shape, rep, pts, grid = self._native.finish(amplitudes=amplitudes)
         shape = _out_shape(shape, self._shape)
         labels = None
         if as_xarray:
-            vol = self._volume if self._volume is not None else Volume(
-                np.zeros(shape + (3,), np.float32))
+            vol = self._volume if self._volume is not None else _Voxels(
+                pts.reshape(tuple(shape) + (3,)), grid)
             attrs = dict(self._attrs or {}, probe=self.kind)
             f = self._native.focus()
             if f is not None:
@@ -381,6 +381,13 @@ class Partial:
     def __repr__(self) -> str:
         rows = ", ".join(f"{r.start}:{r.stop}" for r in self.rows)
         return f"vltm.Partial({self.kind}, rows [{rows}] of {self.total_rows}, {self.nbytes} bytes)"
+
+
+class _Voxels(NamedTuple):
+    """Voxel centres of a finished state whose volume was not given from Python."""
+
+    points: np.ndarray
+    is_grid: bool
 
 
 def _partial_from_state(data: bytes, shape: Optional[Tuple[int, ...]]) -> Partial:
