@@ -62,14 +62,20 @@ fn keyword(flag: &str) -> String {
     if flag.contains('/') {
         return flag.split('/').map(keyword).collect::<Vec<_>>().join("/");
     }
-    let name = flag.trim_start_matches("--");
+    let Some(name) = flag.strip_prefix("--") else {
+        // A parameter name already (`threads`), or a positional (`CAPTURE`).
+        return if flag.chars().all(|c| c.is_ascii_uppercase()) {
+            flag.to_ascii_lowercase()
+        } else {
+            flag.to_string()
+        };
+    };
     match name {
         "from" => "from_".into(),
         "no-leak-correct" => "leak_correct".into(),
         "max-memory" => "vltm.set_max_memory()".into(),
         "threads" => "vltm.set_threads()".into(),
         "partial" => "rows".into(),
-        n if n.chars().all(|c| c.is_ascii_uppercase()) => n.to_ascii_lowercase(),
         n => n.replace('-', "_"),
     }
 }
@@ -172,6 +178,8 @@ mod tests {
         assert_eq!(keyword("--from"), "from_");
         assert_eq!(keyword("CAPTURE"), "capture");
         assert_eq!(keyword("epsilon"), "epsilon");
+        assert_eq!(keyword("threads"), "threads");
+        assert_eq!(keyword("--threads"), "vltm.set_threads()");
         assert_eq!(
             respell("fewer than --rebin 3, see --mask-epsilon; a--b and -- x"),
             "fewer than rebin 3, see mask_epsilon; a--b and -- x"

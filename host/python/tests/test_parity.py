@@ -143,6 +143,8 @@ def test_preprocessing(two_patches, tmp_path, probe):
     got, rep = getattr(vltm, probe)(two_patches, SMALL, *args, report=True, **kw)
     close(want, got)
     assert rep["preprocessing"].startswith("window bins")
+    empty, of = re.search(r"(\d+) of (\d+) histograms left empty", rep["preprocessing"]).groups()
+    assert int(empty) <= int(of) == 64 * 64 == rep["preprocessing_stats"]["histograms"]
     # Each option on its own changes the result (it is not ignored).
     plain = getattr(vltm, probe)(two_patches, SMALL, *args)
     for _, _, k, v in PREP:
