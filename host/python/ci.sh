@@ -1,6 +1,8 @@
 #!/usr/bin/env bash
-# Builds the Python package in a fresh virtualenv and runs its pytest suite (API against the
-# command line on the shared captures, errors, split/merge, a 2-worker Dask LocalCluster).
+# Builds the Python package's abi3 wheel once, installs the built file in a fresh virtualenv
+# and runs its pytest suite (every probe against the command line on the shared captures, bad
+# input, xarray/netCDF round trips, split/merge, a 2-worker Dask LocalCluster) and the example
+# script.
 # Usage: host/python/ci.sh            (from anywhere; VENV=/path to choose the virtualenv)
 # Exits non-zero on any failure, including "no tests collected" (pytest exit code 5).
 set -euo pipefail
@@ -14,10 +16,20 @@ export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$repo/target}"
 rm -rf "$venv"
 "$python" -m venv "$venv"
 "$venv/bin/pip" install -q --upgrade pip
-"$venv/bin/pip" install -q maturin numpy pytest dask distributed h5py
-# The command line, for the tests that compare against its .npy volumes.
+"$venv/bin/pip" install -q maturin numpy pytest dask distributed h5py xarray h5netcdf matplotlib
+# The command line, for the tests that compare against its outputs.
 (cd "$repo" && cargo build --release -q -p vltm-cli --bin vltm)
-"$venv/bin/pip" install -q "$here"
+# One wheel for every CPython >= 3.10 (abi3), built once; pip installs the built file.
+wheels="$CARGO_TARGET_DIR/wheels"
+rm -rf "$wheels"
+(cd "$here" && "$venv/bin/maturin" build --release -i "$venv/bin/python" -o "$wheels")
+shopt -s nullglob
+built=("$wheels"/vltm-*-cp310-abi3-*.whl)
+if [ "${#built[@]}" -ne 1 ]; then
+    echo "host/python/ci.sh: expected one cp310-abi3 wheel in $wheels, found: $(ls "$wheels")" >&2
+    exit 1
+fi
+"$venv/bin/pip" install -q "${built[0]}"
 export VLTM_BIN="$CARGO_TARGET_DIR/release/vltm"
 cd "$repo"
 set +e
@@ -28,4 +40,6 @@ if [ "$rc" -eq 5 ]; then
     echo "host/python/ci.sh: pytest collected no tests" >&2
     exit 1
 fi
-exit "$rc"
+[ "$rc" -eq 0 ] || exit "$rc"
+# The example: opens a shared capture, plots, runs the same on a Dask cluster.
+"$venv/bin/python" "$here/examples/two_patches.py" --png "$CARGO_TARGET_DIR/python-example.png"

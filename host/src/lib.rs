@@ -6,6 +6,7 @@ pub mod budget;
 pub mod error;
 pub mod exec;
 pub mod export;
+pub mod front;
 pub mod io;
 pub mod probe;
 pub mod sim;

@@ -39,3 +39,24 @@ def cli_volume(tmp: pathlib.Path, *args: str) -> np.ndarray:
 def two_patches() -> pathlib.Path:
     assert TWO_PATCHES.exists(), f"shared capture missing: {TWO_PATCHES}"
     return TWO_PATCHES
+
+
+KEYWORDS = {"from": "from_", "no-leak-correct": "leak_correct", "partial": "rows",
+            "max-memory": "vltm.set_max_memory()", "threads": "vltm.set_threads()"}
+
+
+def as_python(stderr: str) -> str:
+    """A command-line error line as the Python API words it: `vltm: ` dropped, every
+    `--flag` spelled as its keyword argument (`--t-min` → `t_min`)."""
+    import re
+
+    msg = stderr.strip()
+    assert msg.startswith("vltm: "), msg
+    msg = msg[len("vltm: "):]
+    return re.sub(r"(?<![\w-])--([a-z][a-z0-9-]*)",
+                  lambda m: KEYWORDS.get(m.group(1), m.group(1).replace("-", "_")), msg)
+
+
+SMALL = "-0.6:0.6:6,-0.6:0.6:6,0.5:1.2:4"
+MAT = REPO / "fixtures" / "mat" / "stanford_v73.mat"
+SCENE = REPO / "fixtures" / "sim" / "small_scene.json"

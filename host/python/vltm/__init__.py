@@ -11,24 +11,30 @@ optical path.
 >>> C = vltm.column(cap, vol, focus=(-0.25, 0.15, 0.7))
 >>> Ii = vltm.indirect(cap, vol)                         # leak-corrected, as `vltm indirect`
 >>> M = vltm.matrix(cap, from_="gamma", to="gamma", volume=vol)  # M.amplitudes: (n_from, n_to)
+>>> R = vltm.relight(cap, vol, pattern="-0.25,0.15,0.7,1;0.25,0,0.9,0.5")
+>>> Rb = vltm.row(cap, vol, focus=(0.25, 0.0, 0.9))     # T(., x_b)
 >>> part = vltm.direct(cap, vol, rows=slice(0, 32))     # a Partial (accumulator state)
 >>> rest = vltm.direct(cap, vol, rows=slice(32, 64))
 >>> vltm.merge([part, rest]).finish()                   # == vltm.direct(cap, vol)
+>>> vltm.direct(cap, vol, as_xarray=True)               # xarray.DataArray over x, y, z (m)
 
 Every probe releases the GIL while it runs. Errors are :class:`VltmError` subclasses
 (:class:`ArgumentError` is a ``ValueError``, :class:`DataError` an ``OSError``) carrying the
-command line's one-line messages. Scale-out over a Dask cluster: :mod:`vltm.dask`.
+command line's one-line messages, naming keyword arguments (``t_min``) where the command
+line names flags (``--t-min``). Scale-out over a Dask cluster: :mod:`vltm.dask` (imported
+on first use; needs ``dask`` and ``distributed``).
 """
 
 from __future__ import annotations
 
 import builtins
+import importlib
 import os
-from typing import Any, Iterable, NamedTuple, Optional, Sequence, Tuple, Union
+from typing import Any, Dict, Iterable, NamedTuple, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _native
+from . import _check, _native
 from ._errors import ArgumentError, DataError, VltmError
 
 __version__: str = _native.__version__
@@ -36,23 +42,35 @@ __version__: str = _native.__version__
 __all__ = [
     "ArgumentError",
     "Capture",
-    "MatrixResult",
     "DataError",
+    "MatrixResult",
     "Partial",
-    "Volume",
     "VltmError",
+    "Volume",
     "column",
     "direct",
     "gamma_mask",
     "indirect",
     "matrix",
+    "max_memory",
     "merge",
     "open",
+    "relight",
+    "row",
+    "set_max_memory",
     "set_threads",
+    "simulate",
     "volume",
 ]
 
 PathLike = Union[str, "os.PathLike[str]"]
+
+
+def __getattr__(name: str) -> Any:
+    """``vltm.dask`` on first use (Dask stays optional)."""
+    if name == "dask":
+        return importlib.import_module(".dask", __name__)
+    raise AttributeError(f"module 'vltm' has no attribute {name!r}")
 
 
 class Volume:
@@ -61,23 +79,21 @@ class Volume:
     Results come back shaped like the volume: ``(nx, ny, nz)`` for a grid, the array's
     leading shape for points."""
 
-    def __init__(self, spec: Union[str, np.ndarray, "Volume"]) -> None:
+    def __init__(self, spec: Union[str, np.ndarray, "Volume"], name: str = "volume") -> None:
         if isinstance(spec, Volume):
-            self._native, self.shape = spec._native, spec.shape
+            self._native, self.shape, self.is_grid = spec._native, spec.shape, spec.is_grid
             return
         if isinstance(spec, str):
             self._native = _native.volume_from_spec(spec)
+            self.is_grid: bool = bool(self._native.is_grid)
             self.shape: Tuple[int, ...] = (
                 tuple(self._native.shape) if self._native.is_grid else (len(self._native),)
             )
             return
-        pts = np.asarray(spec, dtype=np.float32)
-        if pts.ndim < 1 or pts.shape[-1] != 3:
-            raise ArgumentError(
-                f"argument `volume`: expected a SPEC string or an (..., 3) array of points, found shape {pts.shape}"
-            )
+        pts = _check.array(name, spec, last=3)
         self._native = _native.volume_from_points(np.ascontiguousarray(pts.reshape(-1, 3)))
         self.shape = tuple(pts.shape[:-1])
+        self.is_grid = False
 
     @property
     def spec(self) -> Optional[str]:
@@ -104,15 +120,23 @@ def volume(spec: Union[str, np.ndarray, Volume]) -> Volume:
     return Volume(spec)
 
 
+def _volume(v: Any, name: str = "volume") -> Volume:
+    if not isinstance(v, (str, Volume, np.ndarray, list, tuple)):
+        raise _check.fail(name, f"expected a SPEC string, a vltm.Volume or an (..., 3) array of points, found {type(v).__name__}")
+    return Volume(v, name)
+
+
 class Capture:
     """A transient NLOS capture: ``H[l][s][t]`` for laser spot l, SPAD spot s, time bin t at
     path length ``t_start + t * delta_t``. Open a file with :func:`open` (its rows are
     streamed from the file by every probe: never shipped, never read whole unless the format
     needs it) or build one from arrays with :meth:`Capture.from_arrays`."""
 
-    def __init__(self, native: Any, path: Optional[str] = None) -> None:
+    def __init__(self, native: Any, path: Optional[str] = None,
+                 open_options: Optional[Dict[str, Any]] = None) -> None:
         self._native = native
         self.path = path
+        self._open_options = dict(open_options or {})
 
     @classmethod
     def from_arrays(
@@ -133,29 +157,29 @@ class Capture:
         ``(Lx, Ly, 3)`` and ``(Sx, Sy, 3)``, or ``(nt, L, S)`` with point lists ``(L, 3)``,
         ``(S, 3)``. ``scan_type="confocal"``: ``H`` of shape ``(nt, Sx, Sy)`` (or ``(nt, S)``)
         and ``laser_grid_xyz`` = ``sensor_grid_xyz``. ``laser_xyz``/``sensor_xyz``: the device
-        positions (y-tal's defaults)."""
-        H = np.asarray(H)
-        lg = np.asarray(laser_grid_xyz, dtype=np.float32)
-        sg = np.asarray(sensor_grid_xyz, dtype=np.float32)
+        positions (y-tal's defaults). ``H`` must be real and finite (counts)."""
+        lg = _check.array("laser_grid_xyz", laser_grid_xyz, last=3, ndim=(2, 3))
+        sg = _check.array("sensor_grid_xyz", sensor_grid_xyz, last=3, ndim=(2, 3))
+        H = _check.array("H", H, ndim=(2, 3, 4, 5))
+        dt = _check.real("delta_t", delta_t)
+        if dt <= 0:  # type: ignore[operator]
+            raise _check.fail("delta_t", f"expected a bin width > 0 in metres, found {dt}")
+        t0 = _check.real("t_start", t_start)
+        lx = _check.point("laser_xyz", laser_xyz)
+        sx = _check.point("sensor_xyz", sensor_xyz)
+        legs = _check.flag("t_accounts_first_and_last_bounces", t_accounts_first_and_last_bounces)
+        _check.text("scan_type", scan_type)
 
-        def grid_shape(g: np.ndarray, what: str) -> Tuple[int, int]:
-            if g.ndim == 3 and g.shape[2] == 3:
-                return (g.shape[0], g.shape[1])
-            if g.ndim == 2 and g.shape[1] == 3:
-                return (g.shape[0], 1)
-            raise ArgumentError(
-                f"argument `{what}`: expected (nx, ny, 3) or (n, 3), found shape {g.shape}"
-            )
+        def grid_shape(g: np.ndarray) -> Tuple[int, int]:
+            return (g.shape[0], g.shape[1]) if g.ndim == 3 else (g.shape[0], 1)
 
-        ls, ss = grid_shape(lg, "laser_grid_xyz"), grid_shape(sg, "sensor_grid_xyz")
+        ls, ss = grid_shape(lg), grid_shape(sg)
         nl, ns = ls[0] * ls[1], ss[0] * ss[1]
         confocal = scan_type == "confocal"
         if scan_type not in ("exhaustive", "confocal"):
             raise ArgumentError(
                 f"argument `scan_type`: expected exhaustive or confocal, found `{scan_type}`"
             )
-        if H.ndim < 2:
-            raise ArgumentError(f"argument `H`: expected time first, found shape {H.shape}")
         nt = H.shape[0]
         per = ns if not confocal else 1
         rows = nl if not confocal else ns
@@ -163,23 +187,13 @@ class Capture:
             raise ArgumentError(
                 f"argument `H`: expected {nt} x {rows} x {per} values for these grids, found shape {H.shape}"
             )
-        h = np.ascontiguousarray(
-            np.moveaxis(H.reshape(nt, rows, per), 0, -1), dtype=np.float32
-        )
+        h = np.ascontiguousarray(np.moveaxis(H.reshape(nt, rows, per), 0, -1), dtype=np.float32)
         if confocal:
             lg, ls = sg, ss
         native = _native.capture_from_arrays(
-            h,
-            np.ascontiguousarray(lg.reshape(-1, 3)),
-            ls,
-            np.ascontiguousarray(sg.reshape(-1, 3)),
-            ss,
-            float(delta_t),
-            float(t_start),
-            [float(x) for x in laser_xyz],
-            [float(x) for x in sensor_xyz],
-            bool(t_accounts_first_and_last_bounces),
-            confocal,
+            h, np.ascontiguousarray(lg.reshape(-1, 3)), ls,
+            np.ascontiguousarray(sg.reshape(-1, 3)), ss, dt, t0,
+            list(lx), list(sx), legs, confocal,
         )
         return cls(native)
 
@@ -187,6 +201,42 @@ class Capture:
         """Dimensions, geometry and time axis: ``lasers``, ``spads``, ``nt``, ``delta_t``,
         ``t_start``, ``confocal``, shapes, device positions, ``default_wavelength``…"""
         return self._native.info()
+
+    def transient(self, *, t_min: Any = None, t_max: Any = None, rebin: int = 1,
+                  background: Any = None, report: bool = False,
+                  as_xarray: bool = False) -> Any:
+        """The summed transient (``vltm info --png``'s curve): every histogram summed bin by
+        bin (non-finite samples skipped), float64 ``(nt,)``, after the preprocessing
+        (``t_min``, ``t_max``, ``rebin``, ``background`` as :func:`direct`; ``auto`` uses
+        the last tenth of the window, as ``vltm info``). ``report=True`` also returns a dict
+        with the path axis ``t`` (m), ``t_start``, ``delta_t`` and the preprocessing summary;
+        ``as_xarray=True`` a ``DataArray`` over ``t``."""
+        report = _check.flag("report", report)
+        as_xarray = _check.flag("as_xarray", as_xarray)
+        counts, t0, dt, summary, warning = self._native.transient(
+            t_min=_check.time_bound("t_min", t_min), t_max=_check.time_bound("t_max", t_max),
+            rebin=_check.integer("rebin", rebin), background=_check.background(background))
+        _warn(warning)
+        t = t0 + dt * np.arange(len(counts))
+        rep = {"t": t, "t_start": t0, "delta_t": dt, "preprocessing": summary}
+        if as_xarray:
+            from . import _xarray
+
+            a = _xarray.xr().DataArray(counts, dims=["t"], coords={"t": t}, name="counts",
+                                       attrs=_xarray.clean_attrs({
+                                           "t_start": t0, "delta_t": dt,
+                                           "preprocessing": summary, "capture": self.path}))
+            a["t"].attrs["units"] = "m"
+            return a
+        return (counts, rep) if report else counts
+
+    def save(self, path: PathLike, *, uncompressed: bool = False,
+             ptu: Optional[PathLike] = None) -> None:
+        """Writes the capture as a vltm ``.npz`` (compressed unless ``uncompressed``), and
+        with ``ptu`` also as a synthetic PicoQuant T3 stream with its ``.json`` sidecar (as
+        ``vltm simulate --out F.npz --ptu F.ptu``); all files or none."""
+        self._native.save(os.fspath(path), _check.flag("uncompressed", uncompressed),
+                          None if ptu is None else os.fspath(ptu))
 
     @property
     def laser_points(self) -> np.ndarray:
@@ -203,11 +253,35 @@ class Capture:
         return f"vltm.Capture({i['path']!r}: {i['lasers']} lasers x {i['spads_per_row']} SPADs x {i['nt']} bins)"
 
 
-def open(path: PathLike) -> Capture:  # noqa: A001 - mirrors the library's `io::open`
-    """Opens a capture file: vltm ``.npz``, y-tal ``HDF5_TAL`` (``.hdf5``/``.h5``),
-    PicoQuant ``.ptu`` (with its ``.json`` sidecar)… Reads the geometry only."""
+def open(path: PathLike, *, delta_t: Optional[float] = None,  # noqa: A001 - `io::open`
+         t_start: Optional[float] = None, grid_width: Optional[float] = None) -> Capture:
+    """Opens a capture file: vltm ``.npz``, y-tal ``HDF5_TAL`` / Z-NLOS (``.hdf5``/``.h5``),
+    PicoQuant ``.ptu`` (with its ``.json`` sidecar), MATLAB ``.mat``… Reads the geometry only
+    (a ``.mat`` file is read into memory once). ``delta_t`` (bin width, m), ``t_start``
+    (path of bin 0, m) and ``grid_width`` (half-width of a confocal grid, m) override a
+    ``.mat`` file's conventions, as ``--delta-t``, ``--t-start``, ``--grid-width``."""
+    if isinstance(path, Capture):
+        return path
+    if not isinstance(path, (str, os.PathLike)):
+        raise _check.fail("capture", f"expected a path or a vltm.Capture, found {type(path).__name__}")
     p = os.fspath(path)
-    return Capture(_native.open_capture(p), p)
+    kw = {"delta_t": _check.real("delta_t", delta_t, none=True),
+          "t_start": _check.real("t_start", t_start, none=True),
+          "grid_width": _check.real("grid_width", grid_width, none=True)}
+    return Capture(_native.open_capture(p, **kw), p, {k: v for k, v in kw.items() if v is not None})
+
+
+def simulate(scene: PathLike, out: Optional[PathLike] = None, *,
+             ptu: Optional[PathLike] = None, uncompressed: bool = False) -> Capture:
+    """Renders a synthetic capture from a scene file (JSON, as ``vltm simulate``), in
+    memory; with ``out`` also writes it (``.npz``, and ``ptu``: a PicoQuant T3 stream, see
+    :meth:`Capture.save`)."""
+    c = Capture(_native.simulate(os.fspath(scene)))
+    if out is not None:
+        c.save(out, uncompressed=uncompressed, ptu=ptu)
+    elif ptu is not None:
+        raise _check.fail("ptu", "the PTU stream is written beside the capture: give out= too")
+    return c
 
 
 class Partial:
@@ -222,6 +296,8 @@ class Partial:
     @classmethod
     def from_bytes(cls, data: bytes) -> "Partial":
         """Reads a state from bytes (:meth:`to_bytes`, or a ``--partial`` file's content)."""
+        if not isinstance(data, (bytes, bytearray, memoryview)):
+            raise _check.fail("data", f"expected bytes, found {type(data).__name__}")
         return cls(_native.partial_from_bytes(bytes(data)))
 
     @classmethod
@@ -272,17 +348,32 @@ class Partial:
         """This state plus others (see :func:`merge`)."""
         return merge([self, *others])
 
-    def finish(self, amplitudes: bool = False, report: bool = False) -> Any:
+    def finish(self, amplitudes: bool = False, report: bool = False,
+               as_xarray: bool = False) -> Any:
         """The probe's volume (float32, shaped like the volume). With ``amplitudes=True``
         also the complex amplitudes ``A`` (``T = |A|²``; direct light, two-bounce and
-        higher-order columns), with ``report=True`` also the counters dict. A ``matrix``
-        state finishes into a :class:`MatrixResult` (``amplitudes``/``report`` ignored)."""
+        higher-order columns), with ``report=True`` also the counters dict, with
+        ``as_xarray=True`` an ``xarray.DataArray`` (see :func:`direct`). A ``matrix`` state
+        finishes into a :class:`MatrixResult` (``amplitudes``/``report`` ignored)."""
+        amplitudes = _check.flag("amplitudes", amplitudes)
         if self.kind == "matrix":
             return _matrix_result(*self._native.finish())
-        values, amps, shape, rep = self._native.finish(amplitudes=bool(amplitudes))
-        return _shape_out(values, amps, rep, _out_shape(shape, self._shape), amplitudes, report)
+        values, amps, shape, rep, pts, grid = self._native.finish(amplitudes=amplitudes)
+        shape = _out_shape(shape, self._shape)
+        labels = None
+        if as_xarray:
+            vol = self._volume if self._volume is not None else _Voxels(
+                pts.reshape(tuple(shape) + (3,)), grid)
+            attrs = dict(self._attrs or {}, probe=self.kind)
+            f = self._native.focus()
+            if f is not None:
+                attrs["focus"] = list(f)
+            labels = (vol, attrs)
+        return _shape_out(values, amps, rep, shape, amplitudes, report, labels)
 
     _shape: Optional[Tuple[int, ...]] = None
+    _volume: Optional[Volume] = None
+    _attrs: Optional[Dict[str, Any]] = None
 
     def __reduce__(self) -> Any:
         return (_partial_from_state, (self.to_bytes(), self._shape))
@@ -290,6 +381,13 @@ class Partial:
     def __repr__(self) -> str:
         rows = ", ".join(f"{r.start}:{r.stop}" for r in self.rows)
         return f"vltm.Partial({self.kind}, rows [{rows}] of {self.total_rows}, {self.nbytes} bytes)"
+
+
+class _Voxels(NamedTuple):
+    """Voxel centres of a finished state whose volume was not given from Python."""
+
+    points: np.ndarray
+    is_grid: bool
 
 
 def _partial_from_state(data: bytes, shape: Optional[Tuple[int, ...]]) -> Partial:
@@ -310,31 +408,70 @@ def merge(parts: Iterable[Union[Partial, bytes]]) -> Partial:
     overlapping rows."""
     ps = [p if isinstance(p, Partial) else Partial.from_bytes(p) for p in parts]
     if not ps:
-        raise ArgumentError("argument `merge`: no partial states to merge")
+        raise ArgumentError("argument `parts`: no partial states to merge")
     m = Partial(_native.merge([p._native for p in ps]))
-    m._shape = ps[0]._shape
+    m._shape, m._volume, m._attrs = ps[0]._shape, ps[0]._volume, ps[0]._attrs
     return m
 
 
 def gamma_mask(direct: np.ndarray, epsilon: float = 0.1) -> np.ndarray:
     """Γ = {v : I_d(v) > ε·max I_d} (Eq. 15), as vltm computes it; boolean, shaped like
     ``direct``."""
-    d = np.asarray(direct, dtype=np.float32)
-    return np.asarray(_native.gamma_mask(d.ravel().tolist(), float(epsilon)), dtype=bool).reshape(d.shape)
+    d = _check.array("direct", direct)
+    e = _check.real("epsilon", epsilon)
+    return np.asarray(_native.gamma_mask(d.ravel().tolist(), e), dtype=bool).reshape(d.shape)
 
 
 def set_threads(n: int) -> None:
-    """Worker threads of this process (once, before the first probe; default: all cores,
-    or ``RAYON_NUM_THREADS``)."""
-    _native.set_threads(int(n))
+    """Worker threads of this process, as ``--threads`` (1 to 4 per core; once, before the
+    first probe; default: all cores, or ``RAYON_NUM_THREADS``)."""
+    _native.set_threads(_check.integer("threads", n, lo=-(2**62)))
 
 
-def _shape_out(values, amps, rep, shape, amplitudes, report):
-    out = [values.reshape(shape)]
+def set_max_memory(size: Union[str, int]) -> int:
+    """The memory budget, as ``--max-memory``: ``"12G"``, ``"500M"`` or bytes (default:
+    half of the physical memory). Every buffer sized from a file, a scene or an argument is
+    checked against it before it is made. Returns the budget in bytes."""
+    if not isinstance(size, str):
+        size = str(_check.integer("size", size, lo=1))
+    return _native.set_max_memory(size)
+
+
+def max_memory() -> int:
+    """The memory budget in bytes (see :func:`set_max_memory`)."""
+    return _native.max_memory()
+
+
+def _warn(msg: Optional[str]) -> None:
+    if msg:
+        import warnings
+
+        warnings.warn(f"vltm: {msg}", RuntimeWarning, stacklevel=3)
+
+
+def _shape_out(values, amps, rep, shape, amplitudes, report, labels=None, lead=None):
+    """The caller's return value: values shaped like the volume (``lead`` parts first), then
+    the amplitudes and the report on request; ``labels`` = (volume, attrs): a DataArray."""
+    full = shape if lead is None else (len(lead),) + tuple(shape)
+    out = [values.reshape(full)]
+    for k in ("gamma", "direct"):
+        if k in rep:
+            rep[k] = rep[k].reshape(shape)
+    for w in rep.get("warnings", []):
+        _warn(w)
+    if labels is not None:
+        from . import _xarray
+
+        vol, attrs = labels
+        attrs = dict(attrs, wavelength=rep.get("wavelength"), sigma=rep.get("sigma"),
+                     path=rep.get("path"), bins=rep.get("bins"), rows=rep.get("rows"),
+                     explained=rep.get("explained"), preprocessing=rep.get("preprocessing"),
+                     units="relative intensity (T = |A|^2)", length_units="m")
+        out[0] = _xarray.volume_array(out[0], vol.points, vol.is_grid, attrs, lead=lead)
     if amplitudes:
         if amps is None:
             raise ArgumentError(
-                "argument `amplitudes`: complex amplitudes exist for direct light, two-bounce and higher-order columns only (the un-gated column and indirect light are imaged as intensities)"
+                "argument `amplitudes`: complex amplitudes exist for direct light, two-bounce and higher-order columns and relighting only (the un-gated column and indirect light are imaged as intensities)"
             )
         out.append(amps.reshape(shape))
     if report:
@@ -342,68 +479,127 @@ def _shape_out(values, amps, rep, shape, amplitudes, report):
     return out[0] if len(out) == 1 else tuple(out)
 
 
-def _rows(rows: Optional[slice], capture: Capture) -> Optional[Tuple[int, int]]:
+def _rows(rows: Any, capture: Capture, swap_roles: bool = False) -> Optional[Tuple[int, int]]:
     if rows is None:
         return None
     if isinstance(rows, range):
         rows = slice(rows.start, rows.stop, rows.step)
     if not isinstance(rows, slice) or rows.step not in (None, 1):
         raise ArgumentError(f"argument `rows`: expected slice(a, b) with step 1, found {rows!r}")
-    n = capture.info()["lasers"]
-    a = 0 if rows.start is None else int(rows.start)
-    b = n if rows.stop is None else int(rows.stop)
+    n = capture.info()["spads" if swap_roles else "lasers"]
+    a = 0 if rows.start is None else _check.integer("rows", rows.start)
+    b = n if rows.stop is None else _check.integer("rows", rows.stop)
     if not (0 <= a <= b <= n):
         raise ArgumentError(
-            f"argument `--rows`: expected A:B with 0 <= A <= B <= {n} (laser rows, B exclusive), found `{a}:{b}`"
+            f"argument `rows`: expected A:B with 0 <= A <= B <= {n} (laser rows, B exclusive), found `{a}:{b}`"
         )
     return (a, b)
 
 
-def _probe(kind: str, capture: Union[Capture, PathLike], volume: Union[str, np.ndarray, Volume],
-           rows: Optional[slice], amplitudes: bool, report: bool, **kw: Any) -> Any:
-    cap = capture if isinstance(capture, Capture) else open(capture)
-    vol = Volume(volume)
-    r = _rows(rows, cap)
-    res = _native.run(cap._native, vol._native, kind, rows=r, amplitudes=amplitudes, **kw)
-    if r is not None:
-        p = Partial(res)
-        p._shape = vol.shape
-        return p
-    values, amps, rep = res
-    return _shape_out(values, amps, rep, vol.shape, amplitudes, report)
+def _capture(capture: Any) -> Capture:
+    if isinstance(capture, Capture):
+        return capture
+    return open(capture)
 
 
 def _wave(wavelength, sigma, weights, band, compensate_laser, path) -> dict:
-    return dict(wavelength=None if wavelength is None else float(wavelength),
-                sigma=None if sigma is None else float(sigma), weights=weights,
-                band=float(band), compensate_laser=bool(compensate_laser), path=path)
+    """The wave options, checked (ranges are the library's checks)."""
+    return dict(wavelength=_check.real("wavelength", wavelength, none=True),
+                sigma=_check.real("sigma", sigma, none=True),
+                weights=_check.text("weights", weights),
+                band=_check.real("band", band),
+                compensate_laser=_check.flag("compensate_laser", compensate_laser),
+                path=_check.text("path", path))
+
+
+def _input(swap_roles, t_min, t_max, rebin, background) -> dict:
+    """The capture options: role swap and preprocessing of the counts, checked."""
+    return dict(swap_roles=_check.flag("swap_roles", swap_roles),
+                t_min=_check.time_bound("t_min", t_min), t_max=_check.time_bound("t_max", t_max),
+                rebin=_check.integer("rebin", rebin),
+                background=_check.background(background))
+
+
+def _probe(kind: str, capture: Any, volume: Any, rows: Any, amplitudes: Any, report: Any,
+           as_xarray: Any, attrs: Dict[str, Any], lead: Optional[Sequence[str]] = None,
+           **kw: Any) -> Any:
+    cap = _capture(capture)
+    vol = _volume(volume)
+    amplitudes = _check.flag("amplitudes", amplitudes)
+    report = _check.flag("report", report)
+    as_xarray = _check.flag("as_xarray", as_xarray)
+    if as_xarray:
+        from . import _xarray
+
+        _xarray.xr()
+    r = _rows(rows, cap, kw.get("swap_roles", False))
+    res = _native.run(cap._native, vol._native, kind, rows=r, amplitudes=amplitudes, **kw)
+    attrs = dict(attrs, probe=kind, capture=cap.path or "<arrays>")
+    if r is not None:
+        p = Partial(res)
+        p._shape, p._volume, p._attrs = vol.shape, vol, attrs
+        return p
+    values, amps, rep = res
+    labels = (vol, attrs) if as_xarray else None
+    return _shape_out(values, amps, rep, vol.shape, amplitudes, report, labels, lead)
+
+
+_SHELLS = ("near", "middle", "far")
+
+
+def _shells(shells: Any) -> Optional[str]:
+    if shells is None:
+        return None
+    r1, r2 = _check.pair("shells", shells, inf=False)
+    return f"{r1!r},{r2!r}"
 
 
 def direct(
     capture: Union[Capture, PathLike],
     volume: Union[str, np.ndarray, Volume],
     *,
+    gate: str = "gaussian",
     wavelength: Optional[float] = None,
     sigma: Optional[float] = None,
     weights: str = "inv",
     band: float = 5.0,
     compensate_laser: bool = False,
     path: str = "auto",
+    swap_roles: bool = False,
+    t_min: Any = None,
+    t_max: Any = None,
+    rebin: int = 1,
+    background: Any = None,
     rows: Optional[slice] = None,
     amplitudes: bool = False,
     report: bool = False,
+    as_xarray: bool = False,
 ) -> Any:
     """Direct light: the LTM diagonal ``T(x_v, x_v)`` over ``volume`` (Eqs. 11–12), float32
     shaped like the volume — the same numbers as ``vltm direct``.
 
-    ``wavelength`` λ (m, default twice the aperture pitch), ``sigma`` the gate std (m,
-    default 2λ/3), ``weights`` ``"inv"`` (the paper's 1/d) or ``"one"`` (y-tal), ``band`` the
-    band half-width in 1/σ, ``compensate_laser`` divides each row by the laser's cos θ/d²,
-    ``path`` ``auto|band|planar|lookup``. ``rows=slice(a, b)`` returns a :class:`Partial`
-    over those laser rows instead; ``amplitudes=True`` also returns the complex amplitudes;
-    ``report=True`` also the counters."""
-    return _probe("direct", capture, volume, rows, amplitudes, report,
-                  **_wave(wavelength, sigma, weights, band, compensate_laser, path))
+    ``gate``: ``"gaussian"`` (direct light), ``"none"`` (monochromatic, no gate: paper
+    Fig. 6) or ``"higher-order"`` (light arriving after the 3-vertex time: Eq. 18 on the
+    diagonal). ``wavelength`` λ (m, default twice the aperture pitch), ``sigma`` the gate
+    std (m, default 2λ/3), ``weights`` ``"inv"`` (the paper's 1/d) or ``"one"`` (y-tal),
+    ``band`` the band half-width in 1/σ, ``compensate_laser`` divides each row by the
+    laser's cos θ/d², ``path`` ``auto|band|planar|lookup``, ``swap_roles`` uses the SPADs
+    as the projector and the lasers as the camera (reciprocity; reads the capture into
+    memory).
+
+    Preprocessing of raw counts, per histogram in this order: the window ``t_min`` ..
+    ``t_max`` (metres of path as numbers or ``"0.72m"``, bins as ``"600b"``; cropped),
+    ``rebin`` K bins summed, ``background`` ``"auto"`` (each histogram's floor from the bins
+    no return from the volume reaches), ``"none"`` or counts per source bin.
+
+    ``rows=slice(a, b)`` returns a :class:`Partial` over those laser rows instead;
+    ``amplitudes=True`` also returns the complex amplitudes; ``report=True`` also the
+    counters; ``as_xarray=True`` returns an ``xarray.DataArray`` with coordinates ``x``,
+    ``y``, ``z`` (m) and the parameters as attributes."""
+    return _probe("direct", capture, volume, rows, amplitudes, report, as_xarray,
+                  {"gate": gate}, gate=_check.text("gate", gate),
+                  **_wave(wavelength, sigma, weights, band, compensate_laser, path),
+                  **_input(swap_roles, t_min, t_max, rebin, background))
 
 
 def column(
@@ -413,29 +609,52 @@ def column(
     *,
     gate: str = "two-bounce",
     shell: Optional[Tuple[float, float]] = None,
+    shells: Optional[Tuple[float, float]] = None,
+    mask_epsilon: Optional[float] = None,
+    leak_correct: bool = False,
+    leak_epsilon: float = 0.1,
     wavelength: Optional[float] = None,
     sigma: Optional[float] = None,
     weights: str = "inv",
     band: float = 5.0,
     compensate_laser: bool = False,
     path: str = "auto",
+    swap_roles: bool = False,
+    t_min: Any = None,
+    t_max: Any = None,
+    rebin: int = 1,
+    background: Any = None,
     rows: Optional[slice] = None,
     amplitudes: bool = False,
     report: bool = False,
+    as_xarray: bool = False,
 ) -> Any:
     """A column ``T(x_a, ·)`` of the LTM for the focus ``x_a`` = ``focus`` (m, z > 0):
     ``gate`` ``"two-bounce"`` (Eq. 14), ``"higher-order"`` (Eq. 18) or ``"none"``; ``shell``
-    ``(r0, r1)`` keeps ``r0 <= |x_a - x_b| < r1``. ``amplitudes=True`` also returns the
-    complex amplitudes ``A(x_a, ·)`` (complex128, ``T = |A|²``, 0 outside ``shell``) of
-    two-bounce (imaged beside the intensities: about twice the imaging time) and
+    ``(r0, r1)`` keeps ``r0 <= |x_a - x_b| < r1``. ``shells=(r1, r2)``: the near
+    ``[0, r1)``, middle ``[r1, r2)`` and far ``[r2, inf)`` light of one run, stacked as
+    ``(3,) + shape`` (``vltm column --shells``; a ``shell`` dimension with ``as_xarray``).
+    ``mask_epsilon`` zeroes every voxel whose direct light is not above ε·max (an extra
+    diagonal pass). ``leak_correct=True`` removes the capture's direct light first (the
+    3-vertex windows of Γ = direct light above ``leak_epsilon``·max; ``report["explained"]``
+    the energy removed). ``amplitudes=True`` also returns the complex amplitudes
+    ``A(x_a, ·)`` (complex128, ``T = |A|²``, 0 outside ``shell``) of two-bounce and
     higher-order columns; the un-gated column has none. Other arguments as
     :func:`direct`."""
-    f = [float(x) for x in focus]
-    if len(f) != 3:
-        raise ArgumentError(f"argument `focus`: expected (x, y, z), found {focus!r}")
-    return _probe("column", capture, volume, rows, amplitudes, report, focus=f, gate=gate,
-                  shell=None if shell is None else (float(shell[0]), float(shell[1])),
-                  **_wave(wavelength, sigma, weights, band, compensate_laser, path))
+    f = _check.point("focus", focus)
+    me = _check.real("mask_epsilon", mask_epsilon, none=True)
+    le = _check.real("leak_epsilon", leak_epsilon)
+    sh = None if shell is None else _check.pair("shell", shell)
+    cut = _shells(shells)
+    attrs = {"gate": gate, "focus": list(f), "mask_epsilon": me, "shell": sh,
+             "shells": None if shells is None else list(_check.pair("shells", shells)),
+             "leak_correct": leak_correct, "leak_epsilon": le if leak_correct else None}
+    return _probe("column", capture, volume, rows, amplitudes, report, as_xarray, attrs,
+                  _SHELLS if cut else None, focus=list(f), gate=_check.text("gate", gate),
+                  shell=sh, shells=cut, mask_epsilon=me,
+                  leak_correct=_check.flag("leak_correct", leak_correct), leak_epsilon=le,
+                  **_wave(wavelength, sigma, weights, band, compensate_laser, path),
+                  **_input(swap_roles, t_min, t_max, rebin, background))
 
 
 def indirect(
@@ -445,39 +664,153 @@ def indirect(
     epsilon: float = 0.1,
     min_separation: Optional[float] = None,
     shell: Optional[Tuple[float, float]] = None,
+    shells: Optional[Tuple[float, float]] = None,
+    gate: str = "two-bounce",
     direct: Optional[np.ndarray] = None,
+    leak_correct: bool = True,
     wavelength: Optional[float] = None,
     sigma: Optional[float] = None,
     weights: str = "inv",
     band: float = 5.0,
     compensate_laser: bool = False,
     path: str = "auto",
-    leak_correct: bool = True,
+    swap_roles: bool = False,
+    t_min: Any = None,
+    t_max: Any = None,
+    rebin: int = 1,
+    background: Any = None,
     rows: Optional[slice] = None,
     report: bool = False,
+    as_xarray: bool = False,
 ) -> Any:
     """In-focus indirect light (Eqs. 15–17): Γ = voxels whose direct light exceeds
     ``epsilon``·max, then ``Σ T(x_a, x_b)`` over pairs of Γ at least ``min_separation``
-    apart (default 1.5σ) or within ``shell``. ``direct``: the direct light over the same
-    volume (e.g. from :func:`direct` or a merged Dask run) instead of pass 1 — required with
-    ``rows=``. Other arguments as :func:`direct`.
+    apart (default 1.5σ) or within ``shell``; ``shells=(r1, r2)``: the near, middle and far
+    pair sums of one run, stacked as ``(3,) + shape``. ``gate``: of the summed columns,
+    ``"two-bounce"`` (first-order indirect light), ``"higher-order"`` (the paper's ">= 3rd
+    bounce") or ``"none"``. ``direct``: the direct light over the same volume (e.g. from
+    :func:`direct` or a merged Dask run) instead of pass 1 — required with ``rows=``.
+    ``report=True`` also returns Γ (``report["gamma"]``, boolean) and the direct light
+    (``report["direct"]``), as ``vltm indirect`` writes them beside ``I_i``. Other
+    arguments as :func:`direct`.
 
     ``leak_correct=True`` (the default, as ``vltm indirect``): the capture's direct light is
     removed first — per laser/SPAD pair the bins where a 3-vertex return of a Γ voxel can
-    arrive are zeroed (docs/indirect-light.md); one more pass over the
-    capture measures the removed energy (``report["explained"]``). It uses the return
-    times only, so each row is corrected on its own and partial states (``rows=``) take it
-    too. ``leak_correct=False``: the paper's Eq. 17 on the capture as it is
-    (``vltm indirect --no-leak-correct``)."""
-    if shell is None and min_separation is not None:
-        if min_separation < 0:
-            raise ArgumentError(f"argument `--min-separation`: expected R >= 0, found {min_separation}")
-        shell = (float(min_separation), float("inf"))
-    d = None if direct is None else np.asarray(direct, dtype=np.float32).ravel().tolist()
-    return _probe("indirect", capture, volume, rows, False, report, epsilon=float(epsilon),
-                  shell=None if shell is None else (float(shell[0]), float(shell[1])), direct=d,
-                  leak_correct=bool(leak_correct),
-                  **_wave(wavelength, sigma, weights, band, compensate_laser, path))
+    arrive are zeroed; one more pass over the capture measures the removed energy
+    (``report["explained"]``). It uses the return times only, so each row is corrected on
+    its own and partial states (``rows=``) take it too. ``leak_correct=False``: the paper's
+    Eq. 17 on the capture as it is (``vltm indirect --no-leak-correct``)."""
+    eps = _check.real("epsilon", epsilon)
+    ms = _check.real("min_separation", min_separation, none=True)
+    sh = None if shell is None else _check.pair("shell", shell)
+    if sh is None and ms is not None:
+        if ms < 0:
+            raise ArgumentError(f"argument `min_separation`: expected R >= 0, found {ms}")
+        sh = (ms, float("inf"))
+    if shells is not None and (shell is not None or min_separation is not None):
+        raise ArgumentError("argument `shells`: cannot be used with shell or min_separation")
+    d = None
+    if direct is not None:
+        d = _check.array("direct", direct).ravel().tolist()
+    cut = _shells(shells)
+    attrs = {"gate": gate, "epsilon": eps, "shell": sh, "leak_correct": leak_correct,
+             "shells": None if shells is None else list(_check.pair("shells", shells))}
+    return _probe("indirect", capture, volume, rows, False, report, as_xarray, attrs,
+                  _SHELLS if cut else None, epsilon=eps, shell=sh, shells=cut, direct=d,
+                  gate=_check.text("gate", gate),
+                  leak_correct=_check.flag("leak_correct", leak_correct),
+                  **_wave(wavelength, sigma, weights, band, compensate_laser, path),
+                  **_input(swap_roles, t_min, t_max, rebin, background))
+
+
+def relight(
+    capture: Union[Capture, PathLike],
+    volume: Union[str, np.ndarray, Volume],
+    pattern: Union[str, np.ndarray],
+    *,
+    wavelength: Optional[float] = None,
+    sigma: Optional[float] = None,
+    weights: str = "inv",
+    band: float = 5.0,
+    compensate_laser: bool = False,
+    path: str = "auto",
+    swap_roles: bool = False,
+    t_min: Any = None,
+    t_max: Any = None,
+    rebin: int = 1,
+    background: Any = None,
+    amplitudes: bool = False,
+    report: bool = False,
+    as_xarray: bool = False,
+) -> Any:
+    """Relighting (``vltm relight``): the virtual camera's image ``i = T·p`` over
+    ``volume`` under an illumination that weights several projector foci, in one factorised
+    pass (amplitudes add: ``A_p(b) = Σ_a p_a A(a, b)``, intensities ``|A_p|²``).
+
+    ``pattern``: weighted foci ``"x,y,z,w;x,y,z,w"`` (metres; w = 1 if left out), an
+    ``(n, 3)`` or ``(n, 4)`` array of foci (and weights), a voxel image of the volume's
+    shape (its voxels are the foci, its values the weights), or the path of a float32
+    ``.npy`` image. ``amplitudes=True`` also returns ``A_p`` (complex128);
+    ``report["passes"]`` the passes over the capture. Other arguments as :func:`direct`."""
+    vol = _volume(volume)
+    spec, pts = None, None
+    if isinstance(pattern, (str, os.PathLike)) and os.fspath(pattern).strip().endswith(".npy"):
+        p = os.fspath(pattern).strip()
+        try:
+            img = np.load(p)
+        except OSError as e:
+            raise DataError(f"{p}: {e.strerror or e}") from None
+        if img.ndim != len(vol.shape) or img.size != len(vol):
+            raise ArgumentError(
+                f"argument `pattern`: {p}: shape {list(img.shape)}, expected the volume's {list(vol.shape)}")
+        pattern = img
+    if isinstance(pattern, str):
+        spec = pattern
+    else:
+        a = _check.array("pattern", pattern, dtype=np.float64)
+        if a.shape == tuple(vol.shape):
+            pts = np.concatenate([vol.points.reshape(-1, 3).astype(np.float64),
+                                  a.reshape(-1, 1)], axis=1)
+        elif a.ndim == 2 and a.shape[1] in (3, 4):
+            pts = a if a.shape[1] == 4 else np.concatenate([a, np.ones((len(a), 1))], axis=1)
+        else:
+            raise ArgumentError(
+                f"argument `pattern`: expected x,y,z,w;... foci, an (n, 3) or (n, 4) array, or an image of the volume's shape {list(vol.shape)}, found shape {list(a.shape)}")
+        pts = np.ascontiguousarray(pts, dtype=np.float64)
+    return _probe("relight", capture, vol, None, amplitudes, report, as_xarray,
+                  {"pattern": spec}, pattern=pts, pattern_spec=spec,
+                  **_wave(wavelength, sigma, weights, band, compensate_laser, path),
+                  **_input(swap_roles, t_min, t_max, rebin, background))
+
+
+def row(
+    capture: Union[Capture, PathLike],
+    volume: Union[str, np.ndarray, Volume],
+    focus: Sequence[float],
+    *,
+    wavelength: Optional[float] = None,
+    sigma: Optional[float] = None,
+    weights: str = "inv",
+    band: float = 5.0,
+    compensate_laser: bool = False,
+    path: str = "auto",
+    swap_roles: bool = False,
+    t_min: Any = None,
+    t_max: Any = None,
+    rebin: int = 1,
+    background: Any = None,
+    report: bool = False,
+    as_xarray: bool = False,
+) -> Any:
+    """A row ``T(·, x_b)`` of the LTM (``vltm row``): the virtual camera focused at
+    ``x_b`` = ``focus`` (m, z > 0), the projector over ``volume`` (two-bounce gate),
+    streamed by laser rows without transposing the capture. ``swap_roles`` is refused (a
+    row is the transposed column already). Other arguments as :func:`direct`."""
+    f = _check.point("focus", focus)
+    return _probe("row", capture, volume, None, False, report, as_xarray,
+                  {"gate": "two-bounce", "focus": list(f)}, focus=list(f),
+                  **_wave(wavelength, sigma, weights, band, compensate_laser, path),
+                  **_input(swap_roles, t_min, t_max, rebin, background))
 
 
 class MatrixResult(NamedTuple):
@@ -496,6 +829,29 @@ class MatrixResult(NamedTuple):
     #: Counters and configuration: ``rows``, ``aliased``, ``wavelength``, ``sigma``, ``bins``…
     report: dict
 
+    def to_xarray(self) -> Any:
+        """The intensities as an ``xarray.DataArray`` over dimensions ``from`` and ``to``
+        with coordinates ``from_x/from_y/from_z`` and ``to_x/to_y/to_z`` (m); the
+        amplitudes' real and imaginary parts as ``re``/``im`` coordinates would double
+        the size, so they stay in :attr:`amplitudes`."""
+        from . import _xarray
+
+        xr = _xarray.xr()
+        coords: Dict[str, Any] = {}
+        for side, pts in (("from", self.from_xyz), ("to", self.to_xyz)):
+            for k, c in enumerate("xyz"):
+                coords[f"{side}_{c}"] = ((side,), pts[:, k].astype(np.float64))
+        attrs = _xarray.clean_attrs({
+            "probe": "matrix", "gate": "two-bounce", "wavelength": self.report.get("wavelength"),
+            "sigma": self.report.get("sigma"), "path": self.report.get("path", "band"),
+            "bins": self.report.get("bins"), "rows": self.report.get("rows"),
+            "units": "relative intensity (T = |A|^2)", "length_units": "m"})
+        a = xr.DataArray(self.intensities, dims=["from", "to"], coords=coords,
+                         name="intensity", attrs=attrs)
+        for c in coords:
+            a[c].attrs["units"] = "m"
+        return a
+
 
 def _matrix_result(values, amps, shape, rep, frm, to) -> MatrixResult:
     return MatrixResult(amps.reshape(shape), values.reshape(shape), frm.reshape(-1, 3),
@@ -509,10 +865,10 @@ def _voxel_set(spec: Any, what: str, gamma: Optional[np.ndarray]) -> np.ndarray:
         assert gamma is not None
         return gamma
     try:
-        v = Volume(spec)
+        v = _volume(spec, what)
     except ArgumentError as e:
         msg = str(e)
-        for old in ("argument `--volume`: ", "argument `volume`: "):
+        for old in ("argument `volume`: ", f"argument `{what}`: "):
             if msg.startswith(old):
                 msg = msg[len(old):]
         raise ArgumentError(f"argument `{what}`: {msg}") from None
@@ -536,7 +892,8 @@ def matrix(
 ) -> Any:
     """The two-bounce LTM (Eq. 14) between two voxel sets as a matrix — the same numbers as
     ``vltm matrix``: a :class:`MatrixResult` with the complex amplitudes (complex64) and
-    intensities (float32) of shape ``(n_from, n_to)`` and the voxel coordinates.
+    intensities (float32) of shape ``(n_from, n_to)`` and the voxel coordinates
+    (``.to_xarray()`` labels them).
 
     ``from_`` (the projector foci, the rows) and ``to`` (the imaged voxels, the columns): a
     SPEC, a :class:`Volume`, an ``(..., 3)`` array of points (m, z > 0), or ``"gamma"``: Γ of
@@ -547,15 +904,16 @@ def matrix(
     per focus and 44 bytes per element. ``rows=slice(a, b)`` returns a :class:`Partial` (one
     factorised column per focus; ``gamma`` then needs ``direct``). Wave options as
     :func:`direct`; the matrix is imaged on the band path."""
-    cap = capture if isinstance(capture, Capture) else open(capture)
+    cap = _capture(capture)
     wave = _wave(wavelength, sigma, weights, band, compensate_laser, "auto")
+    eps = _check.real("epsilon", epsilon)
     gamma = None
     if any(isinstance(x, str) and x.strip() == "gamma" for x in (from_, to)):
         if volume is None:
-            raise ArgumentError("argument `--volume`: `gamma` in --from/--to needs the volume of Γ")
-        if not (0.0 <= float(epsilon) < 1.0):
-            raise ArgumentError(f"argument `--epsilon`: expected 0 <= E < 1, found {epsilon}")
-        vol = Volume(volume)
+            raise ArgumentError("argument `volume`: `gamma` in from_/to needs the volume of Γ")
+        if not (0.0 <= eps < 1.0):
+            raise ArgumentError(f"argument `epsilon`: expected 0 <= E < 1, found {eps}")
+        vol = _volume(volume)
         if direct is None:
             if rows is not None:
                 raise ArgumentError(
@@ -564,23 +922,19 @@ def matrix(
             d = globals()["direct"](cap, vol, wavelength=wavelength, sigma=sigma, weights=weights,
                                     band=band, compensate_laser=compensate_laser)
         else:
-            d = np.asarray(direct, dtype=np.float32)
+            d = _check.array("direct", direct)
             if d.size != len(vol):
                 raise ArgumentError(
                     f"argument `direct`: expected {len(vol)} values (the volume's voxels), found {d.size}"
                 )
-        g = gamma_mask(d, float(epsilon)).ravel()
+        g = gamma_mask(d, eps).ravel()
         gamma = np.ascontiguousarray(vol.points.reshape(-1, 3)[g], dtype=np.float32)
         if len(gamma) == 0:
             raise ArgumentError(
-                "argument `--epsilon`: Γ is empty: no voxel of --volume has direct light above ε·max (all zero)"
+                "argument `epsilon`: Γ is empty: no voxel of volume has direct light above ε·max (all zero)"
             )
-    frm = _voxel_set(from_, "--from", gamma)
-    dst = _voxel_set(to, "--to", gamma)
-    if len(frm) == 0 or len(dst) == 0:
-        raise ArgumentError(
-            f"argument `{'--from' if len(frm) == 0 else '--to'}`: the voxel set is empty"
-        )
+    frm = _voxel_set(from_, "from_", gamma)
+    dst = _voxel_set(to, "to", gamma)
     r = _rows(rows, cap)
     res = _native.run(cap._native, _native.volume_from_points(dst), "matrix", rows=r,
                       from_points=frm, **wave)

@@ -10,6 +10,16 @@ class NativeCapture:
     def info(self) -> Dict[str, Any]: ...
     def laser_points(self) -> np.ndarray: ...
     def spad_points(self) -> np.ndarray: ...
+    def transient(
+        self,
+        t_min: Optional[str] = ...,
+        t_max: Optional[str] = ...,
+        rebin: int = ...,
+        background: Optional[str] = ...,
+    ) -> Tuple[np.ndarray, float, float, Optional[str], Optional[str]]:
+        """(summed counts float64, t0, dt, preprocessing summary, warning)."""
+        ...
+    def save(self, path: str, uncompressed: bool = ..., ptu: Optional[str] = ...) -> None: ...
 
 class Volume:
     @property
@@ -28,12 +38,18 @@ class NativePartial:
     def kind(self) -> str: ...
     def is_complete(self) -> bool: ...
     def nbytes(self) -> int: ...
+    def focus(self) -> Optional[Tuple[float, float, float]]: ...
     def finish(self, amplitudes: bool = ...) -> Tuple[Any, ...]:
-        """(intensities, amplitudes or None, shape, report); a matrix state:
+        """(intensities, amplitudes or None, shape, report, voxel points, is_grid); a matrix state:
         (intensities, amplitudes complex64, (n_from, n_to), report, from points, to points)."""
         ...
 
-def open_capture(path: str) -> NativeCapture: ...
+def open_capture(
+    path: str,
+    delta_t: Optional[float] = ...,
+    t_start: Optional[float] = ...,
+    grid_width: Optional[float] = ...,
+) -> NativeCapture: ...
 def capture_from_arrays(
     h: np.ndarray,
     lasers: np.ndarray,
@@ -53,6 +69,7 @@ def partial_from_bytes(data: bytes) -> NativePartial: ...
 def merge(parts: List[NativePartial]) -> NativePartial: ...
 def merge_bytes(parts: List[bytes]) -> bytes: ...
 def gamma_mask(direct: List[float], epsilon: float) -> List[bool]: ...
+def simulate(scene: str) -> NativeCapture: ...
 def run(
     capture: NativeCapture,
     volume: Volume,
@@ -61,20 +78,33 @@ def run(
     focus: Optional[Sequence[float]] = ...,
     gate: str = ...,
     shell: Optional[Tuple[float, float]] = ...,
+    shells: Optional[str] = ...,
     epsilon: float = ...,
     direct: Optional[List[float]] = ...,
+    mask_epsilon: Optional[float] = ...,
+    leak_correct: bool = ...,
+    leak_epsilon: float = ...,
     wavelength: Optional[float] = ...,
     sigma: Optional[float] = ...,
     weights: str = ...,
     band: float = ...,
     compensate_laser: bool = ...,
     path: str = ...,
+    swap_roles: bool = ...,
+    t_min: Optional[str] = ...,
+    t_max: Optional[str] = ...,
+    rebin: int = ...,
+    background: Optional[str] = ...,
     rows: Optional[Tuple[int, int]] = ...,
     amplitudes: bool = ...,
-    leak_correct: bool = ...,
     from_points: Optional[np.ndarray] = ...,
+    pattern: Optional[np.ndarray] = ...,
+    pattern_spec: Optional[str] = ...,
 ) -> Any:
-    """A probe (direct, column, indirect, matrix): (values, amplitudes, report), a matrix's
+    """A probe (direct, column, indirect, matrix, relight, row): (values, amplitudes,
+    report) — values flat, three volumes concatenated with ``shells`` — a matrix's
     (intensities, amplitudes, report), or a NativePartial with ``rows``."""
     ...
 def set_threads(n: int) -> None: ...
+def set_max_memory(size: str) -> int: ...
+def max_memory() -> int: ...

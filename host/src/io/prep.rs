@@ -308,8 +308,8 @@ impl<'a> Prepared<'a> {
             Background::Value(b) => parts.push(format!(
                 "background {b} counts per source bin ({} per bin) subtracted: {removed:.1} % of the window's counts removed, {} of {} histograms left empty",
                 b * self.k as f64,
-                s.histograms,
                 s.empty,
+                s.histograms,
             )),
             Background::Auto => parts.push(format!(
                 "background auto: mean floor {:.4} counts per bin from {:.0} bins per histogram {}; {removed:.1} % of the window's counts removed, {} of {} histograms left empty",

@@ -1,0 +1,376 @@
+//! Captures: a file vltm streams, a file read into memory (`.mat` with its conventions), or
+//! arrays; their geometry, summed transient, and the synthetic captures of `simulate`.
+
+use crate::{arg, py_err};
+use numpy::{IntoPyArray, PyArray1, PyReadonlyArray2, PyReadonlyArray3};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use vltm::atomic::Transaction;
+use vltm::io::prep::{Background, Bound as TimeBound, Prep, Prepared};
+use vltm::io::{self, Capture, Geometry, RowSource};
+use vltm::{front, probe};
+use vltm_kernel::Point;
+
+/// Where a capture's rows come from.
+pub(crate) enum Store {
+    /// A file, opened (and streamed) by every call; never read whole into memory unless its
+    /// format needs it (compressed `.npz`).
+    File { path: PathBuf, bytes: u64 },
+    /// Rows in memory: a `.mat` file read with its conventions (`path`, `bytes` set), arrays
+    /// given from Python or a simulated scene.
+    Memory {
+        capture: Arc<Capture>,
+        path: Option<PathBuf>,
+        bytes: u64,
+        name: String,
+    },
+}
+
+/// A capture: a file vltm reads, or arrays (`Capture.from_arrays`).
+#[pyclass(name = "NativeCapture", module = "vltm._native", frozen)]
+pub(crate) struct NativeCapture {
+    pub(crate) store: Store,
+    pub(crate) geometry: Geometry,
+}
+
+impl NativeCapture {
+    /// The rows, as a source read by one probe.
+    pub(crate) fn source(&self) -> vltm::Result<Box<dyn RowSource + '_>> {
+        match &self.store {
+            Store::File { path, .. } => io::open_source(path),
+            Store::Memory { capture, .. } => Ok(Box::new(MemSource(capture))),
+        }
+    }
+
+    /// The rows, with the lasers and SPADs swapped on request (read into memory then).
+    pub(crate) fn load(&self, swap_roles: bool) -> vltm::Result<Box<dyn RowSource + '_>> {
+        let mut src = self.source()?;
+        if !swap_roles {
+            return Ok(src);
+        }
+        let c = front::read_all(&mut *src, Path::new(&self.name()))?;
+        Ok(Box::new(io::swap_roles(&c)?))
+    }
+
+    /// The file's size (what partial states record of a capture; 0 for arrays).
+    pub(crate) fn file_bytes(&self) -> u64 {
+        match &self.store {
+            Store::File { bytes, .. } | Store::Memory { bytes, .. } => *bytes,
+        }
+    }
+
+    /// The file's name (what partial states record of a capture).
+    pub(crate) fn name(&self) -> String {
+        match &self.store {
+            Store::File { path, .. } => file_name(path),
+            Store::Memory { name, .. } => name.clone(),
+        }
+    }
+}
+
+fn file_name(p: &Path) -> String {
+    p.file_name()
+        .map_or_else(String::new, |f| f.to_string_lossy().into_owned())
+}
+
+/// An in-memory capture as a row source, borrowed.
+struct MemSource<'a>(&'a Capture);
+
+impl RowSource for MemSource<'_> {
+    fn geometry(&self) -> &Geometry {
+        &self.0.geometry
+    }
+    fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> vltm::Result<Point> {
+        let c = self.0;
+        let g = &c.geometry;
+        let n = g.spads_per_row() * g.nt;
+        let x = *g
+            .lasers
+            .get(l)
+            .ok_or_else(|| vltm::Error::arg("row", format!("row {l} does not exist")))?;
+        out.clear();
+        out.extend_from_slice(&c.data[l * n..(l + 1) * n]);
+        Ok(x)
+    }
+}
+
+/// The preprocessing asked for (`--t-min`, `--t-max`, `--rebin`, `--background`), if any:
+/// the command line's parsing and defaults.
+pub(crate) fn prep_of(
+    t_min: Option<&str>,
+    t_max: Option<&str>,
+    rebin: usize,
+    background: Option<&str>,
+) -> PyResult<Option<Prep>> {
+    let p = Prep {
+        t_min: t_min
+            .map(|s| TimeBound::parse("t_min", s))
+            .transpose()
+            .map_err(py_err)?,
+        t_max: t_max
+            .map(|s| TimeBound::parse("t_max", s))
+            .transpose()
+            .map_err(py_err)?,
+        rebin,
+        background: background
+            .map(Background::parse)
+            .transpose()
+            .map_err(py_err)?
+            .unwrap_or_default(),
+    };
+    Ok((!p.is_identity() || rebin == 0).then_some(p))
+}
+
+#[pymethods]
+impl NativeCapture {
+    /// The capture's dimensions, geometry and time axis as a dict.
+    fn info<'py>(&self, py: Python<'py>) -> PyResult<Bound<'py, PyDict>> {
+        let g = &self.geometry;
+        let d = PyDict::new(py);
+        match &self.store {
+            Store::File { path, bytes }
+            | Store::Memory {
+                path: Some(path),
+                bytes,
+                ..
+            } => {
+                d.set_item("path", path.to_string_lossy().into_owned())?;
+                d.set_item("file_bytes", *bytes)?;
+            }
+            Store::Memory { path: None, .. } => d.set_item("path", py.None())?,
+        }
+        d.set_item("lasers", g.lasers.len())?;
+        d.set_item("laser_shape", (g.laser_shape[0], g.laser_shape[1]))?;
+        d.set_item("spads", g.spads.len())?;
+        d.set_item("spad_shape", (g.spad_shape[0], g.spad_shape[1]))?;
+        d.set_item("spads_per_row", g.spads_per_row())?;
+        d.set_item("confocal", g.confocal)?;
+        d.set_item("nt", g.nt)?;
+        d.set_item("delta_t", g.dt)?;
+        d.set_item("t_start", g.t0)?;
+        d.set_item("laser_xyz", g.laser_origin.to_vec())?;
+        d.set_item("sensor_xyz", g.sensor_origin.to_vec())?;
+        d.set_item("t_accounts_first_and_last_bounces", g.legs_in_time)?;
+        d.set_item("default_wavelength", probe::default_wavelength(g))?;
+        Ok(d)
+    }
+
+    /// Laser spots, (lasers, 3) float32.
+    fn laser_points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
+        crate::volume::flat_points(&self.geometry.lasers).into_pyarray(py)
+    }
+
+    /// SPAD spots, (spads, 3) float32.
+    fn spad_points<'py>(&self, py: Python<'py>) -> Bound<'py, PyArray1<f32>> {
+        crate::volume::flat_points(&self.geometry.spads).into_pyarray(py)
+    }
+
+    /// The summed transient (`vltm info --png`): every histogram summed bin by bin after
+    /// the preprocessing, as (counts float64 1-D, t0, dt, preprocessing summary or None,
+    /// warning or None).
+    #[pyo3(signature = (t_min=None, t_max=None, rebin=1, background=None))]
+    #[allow(clippy::type_complexity)]
+    fn transient<'py>(
+        &self,
+        py: Python<'py>,
+        t_min: Option<&str>,
+        t_max: Option<&str>,
+        rebin: usize,
+        background: Option<&str>,
+    ) -> PyResult<(
+        Bound<'py, PyArray1<f64>>,
+        f64,
+        f64,
+        Option<String>,
+        Option<String>,
+    )> {
+        let prep = prep_of(t_min, t_max, rebin, background)?;
+        let (sum, t0, dt, summary, warning) = py
+            .detach(|| -> vltm::Result<_> {
+                let mut src = self.source()?;
+                match prep {
+                    Some(p) => {
+                        let mut pr = Prepared::new(&mut *src, p, None)?;
+                        let sum = front::summed(&mut pr)?;
+                        let (t0, dt) = (pr.geometry().t0, pr.geometry().dt);
+                        let r = front::check(&pr)?;
+                        Ok((sum, t0, dt, Some(r.summary), r.warning))
+                    }
+                    None => {
+                        let sum = front::summed(&mut *src)?;
+                        Ok((sum, self.geometry.t0, self.geometry.dt, None, None))
+                    }
+                }
+            })
+            .map_err(py_err)?;
+        Ok((sum.into_pyarray(py), t0, dt, summary, warning))
+    }
+
+    /// Writes the capture as a vltm `.npz` (compressed unless `uncompressed`), and with
+    /// `ptu` also as a synthetic PicoQuant T3 stream with its `.json` sidecar; all or nothing.
+    #[pyo3(signature = (path, uncompressed=false, ptu=None))]
+    fn save(
+        &self,
+        py: Python<'_>,
+        path: PathBuf,
+        uncompressed: bool,
+        ptu: Option<PathBuf>,
+    ) -> PyResult<()> {
+        py.detach(|| -> vltm::Result<()> {
+            let owned;
+            let c: &Capture = match &self.store {
+                Store::Memory { capture, .. } => capture,
+                Store::File { path: p, .. } => {
+                    owned = io::open(p)?;
+                    &owned
+                }
+            };
+            let mut t = Transaction::new();
+            io::npz::stage(&mut t, c, &path, !uncompressed)?;
+            if let Some(p) = &ptu {
+                io::ptu::stage_t3(&mut t, c, p, &io::ptu::T3WriteOptions::default())?;
+            }
+            t.commit()
+        })
+        .map_err(py_err)
+    }
+}
+
+/// Opens a capture file (any format vltm reads); reads its geometry only, except for `.mat`
+/// files, read once into memory with their conventions overridden by `delta_t`, `t_start`,
+/// `grid_width` (as `--delta-t`, `--t-start`, `--grid-width`; refused for other formats).
+#[pyfunction]
+#[pyo3(signature = (path, delta_t=None, t_start=None, grid_width=None))]
+fn open_capture(
+    py: Python<'_>,
+    path: PathBuf,
+    delta_t: Option<f64>,
+    t_start: Option<f64>,
+    grid_width: Option<f64>,
+) -> PyResult<NativeCapture> {
+    let mat = io::extension(&path).as_deref() == Some("mat");
+    if !mat {
+        for (set, name) in [
+            (delta_t.is_some(), "delta_t"),
+            (t_start.is_some(), "t_start"),
+            (grid_width.is_some(), "grid_width"),
+        ] {
+            if set {
+                return Err(arg(
+                    name,
+                    "only for .mat captures (other formats record their time axis and grid)",
+                ));
+            }
+        }
+    }
+    let (store, geometry) = py
+        .detach(|| -> vltm::Result<_> {
+            let bytes = std::fs::metadata(&path)
+                .map_err(|e| vltm::Error::io(&path, e))?
+                .len();
+            if mat {
+                let o = io::mat::MatOptions {
+                    delta_t,
+                    t_start,
+                    grid_width,
+                };
+                let c = io::mat::read(&path, &o)?.capture;
+                let g = c.geometry.clone();
+                let store = Store::Memory {
+                    capture: Arc::new(c),
+                    name: file_name(&path),
+                    path: Some(path.clone()),
+                    bytes,
+                };
+                return Ok((store, g));
+            }
+            let g = io::open_source(&path)?.geometry().clone();
+            Ok((
+                Store::File {
+                    path: path.clone(),
+                    bytes,
+                },
+                g,
+            ))
+        })
+        .map_err(py_err)?;
+    Ok(NativeCapture { store, geometry })
+}
+
+/// A capture from arrays: `h` as (rows, spads_per_row, nt) float32, spots as (n, 3).
+#[pyfunction]
+#[allow(clippy::too_many_arguments)]
+fn capture_from_arrays(
+    py: Python<'_>,
+    h: PyReadonlyArray3<'_, f32>,
+    lasers: PyReadonlyArray2<'_, f32>,
+    laser_shape: (usize, usize),
+    spads: PyReadonlyArray2<'_, f32>,
+    spad_shape: (usize, usize),
+    delta_t: f64,
+    t_start: f64,
+    laser_xyz: [f64; 3],
+    sensor_xyz: [f64; 3],
+    legs_in_time: bool,
+    confocal: bool,
+) -> PyResult<NativeCapture> {
+    let lasers = crate::volume::points_of(&lasers, "laser_grid_xyz")?;
+    let spads = crate::volume::points_of(&spads, "sensor_grid_xyz")?;
+    let hv = h.as_array();
+    let nt = hv.shape()[2];
+    let data: Vec<f32> = hv.iter().copied().collect();
+    let geometry = Geometry {
+        lasers,
+        laser_shape: [laser_shape.0, laser_shape.1],
+        spads,
+        spad_shape: [spad_shape.0, spad_shape.1],
+        laser_origin: laser_xyz,
+        sensor_origin: sensor_xyz,
+        legs_in_time,
+        confocal,
+        nt,
+        dt: delta_t,
+        t0: t_start,
+    };
+    let c = py
+        .detach(|| Capture::new(geometry, data, Path::new("H")))
+        .map_err(py_err)?;
+    let geometry = c.geometry.clone();
+    Ok(NativeCapture {
+        store: Store::Memory {
+            capture: Arc::new(c),
+            path: None,
+            bytes: 0,
+            name: "<arrays>".into(),
+        },
+        geometry,
+    })
+}
+
+/// Renders a synthetic capture from a scene file (JSON), in memory (`vltm simulate`).
+#[pyfunction]
+fn simulate(py: Python<'_>, scene: PathBuf) -> PyResult<NativeCapture> {
+    let c = py
+        .detach(|| vltm::sim::Scene::load(&scene)?.render())
+        .map_err(py_err)?;
+    let geometry = c.geometry.clone();
+    Ok(NativeCapture {
+        store: Store::Memory {
+            capture: Arc::new(c),
+            path: None,
+            bytes: 0,
+            name: file_name(&scene),
+        },
+        geometry,
+    })
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_class::<NativeCapture>()?;
+    m.add_function(wrap_pyfunction!(open_capture, m)?)?;
+    m.add_function(wrap_pyfunction!(capture_from_arrays, m)?)?;
+    m.add_function(wrap_pyfunction!(simulate, m)?)?;
+    Ok(())
+}

@@ -1,0 +1,634 @@
+//! Running a probe: the command line's `direct`, `column`, `indirect`, `matrix`, `relight`
+//! and `row` with all their options, in one entry point ([`run`]) that mirrors what the
+//! command line does (same library calls in the same order, so the volumes are the same bit
+//! for bit).
+
+use crate::capture::{NativeCapture, prep_of};
+use crate::partial::{NativePartial, counters, report};
+use crate::volume::{NativeVolume, points_of};
+use crate::{arg, py_err};
+use numpy::{IntoPyArray, PyReadonlyArray2};
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use vltm::exec::{Exec, Path as EvalPath};
+use vltm::front::{self, PrepReport};
+use vltm::io::RowSource;
+use vltm::probe::{
+    self, ColumnGate, IndirectOptions, LeakCorrected, LeakOptions, Partial, Pattern, Shell, Task,
+    Wave, partial,
+};
+use vltm_kernel::{Point, Weights};
+
+/// The wave options and the evaluation path, from Python keywords.
+fn wave_of(
+    wavelength: Option<f64>,
+    sigma: Option<f64>,
+    weights: &str,
+    band: f64,
+    compensate_laser: bool,
+    path: &str,
+) -> PyResult<(Wave, EvalPath)> {
+    let weights = match weights {
+        "inv" => Weights::Inv,
+        "one" => Weights::One,
+        w => return Err(arg("weights", format!("expected inv or one, found `{w}`"))),
+    };
+    let path = match path {
+        "auto" => EvalPath::Auto,
+        "band" => EvalPath::Band,
+        "planar" => EvalPath::Planar,
+        "lookup" => EvalPath::Lookup,
+        p => {
+            return Err(arg(
+                "path",
+                format!("expected auto, band, planar or lookup, found `{p}`"),
+            ));
+        }
+    };
+    let wave = Wave {
+        wavelength,
+        sigma,
+        weights,
+        band_half_width: band,
+        compensate_laser,
+        auto_margin: true,
+    };
+    Ok((wave, path))
+}
+
+fn shell_of(name: &str, shell: Option<(f32, f32)>) -> PyResult<Option<Shell>> {
+    match shell {
+        None => Ok(None),
+        Some((r0, r1)) if r0 >= 0.0 && r1 > r0 => Ok(Some(Shell { r0, r1 })),
+        Some((r0, r1)) => Err(arg(
+            name,
+            format!("expected (r0, r1) with 0 <= r0 < r1 in metres, found ({r0}, {r1})"),
+        )),
+    }
+}
+
+fn column_gate(gate: &str) -> PyResult<ColumnGate> {
+    match gate {
+        "two-bounce" => Ok(ColumnGate::TwoBounce),
+        "higher-order" => Ok(ColumnGate::HigherOrder),
+        "none" => Ok(ColumnGate::None),
+        g => Err(arg(
+            "gate",
+            format!("expected two-bounce, higher-order or none, found `{g}`"),
+        )),
+    }
+}
+
+/// The diagonal's gates: `gaussian` is direct light.
+fn diagonal_gate(gate: &str) -> PyResult<ColumnGate> {
+    match gate {
+        "gaussian" => Ok(ColumnGate::TwoBounce),
+        "higher-order" => Ok(ColumnGate::HigherOrder),
+        "none" => Ok(ColumnGate::None),
+        g => Err(arg(
+            "gate",
+            format!("expected gaussian, none or higher-order, found `{g}`"),
+        )),
+    }
+}
+
+/// A finished probe.
+struct Done {
+    /// The main output (for shells: the whole column or the first shell's sum).
+    out: probe::Output,
+    /// Several volumes of one run (near, middle, far), if asked for.
+    parts: Option<Vec<Vec<f32>>>,
+    amplitudes: Option<Vec<num_complex::Complex64>>,
+    explained: Option<f64>,
+    gamma: Option<Vec<bool>>,
+    direct: Option<Vec<f32>>,
+    passes: Option<usize>,
+    prep: Option<PrepReport>,
+}
+
+impl Done {
+    fn of(out: probe::Output) -> Self {
+        Self {
+            out,
+            parts: None,
+            amplitudes: None,
+            explained: None,
+            gamma: None,
+            direct: None,
+            passes: None,
+            prep: None,
+        }
+    }
+}
+
+/// What a probe call returns: finished arrays, a matrix, or a partial state.
+#[allow(clippy::large_enum_variant)] // one per call, moved once
+enum Outcome {
+    Done(Done),
+    Matrix(probe::Matrix),
+    Part(Box<Partial>),
+}
+
+/// What each probe needs beyond the shared options.
+enum Job {
+    Direct {
+        gate: ColumnGate,
+    },
+    Column {
+        focus: Point,
+        gate: ColumnGate,
+        shell: Shell,
+        shells: Option<[Shell; 3]>,
+        mask_epsilon: Option<f32>,
+        leak_epsilon: Option<f32>,
+    },
+    Indirect {
+        opts: IndirectOptions,
+        shells: Option<[Shell; 3]>,
+        direct: Option<Vec<f32>>,
+    },
+    Matrix {
+        from: Vec<Point>,
+    },
+    Relight {
+        pattern: Pattern,
+    },
+    Row {
+        focus: Point,
+    },
+}
+
+/// Runs a probe: `kind` is direct, column, indirect, matrix (`from_points` × the volume),
+/// relight (`pattern` (n, 4) foci and weights, or `pattern_spec`) or row; `rows` makes it
+/// partial. Options as the command line's (flags spelled as keywords).
+#[pyfunction]
+#[pyo3(signature = (capture, volume, kind, *, focus=None, gate="two-bounce", shell=None,
+    shells=None, epsilon=0.1, direct=None, mask_epsilon=None, leak_correct=false,
+    leak_epsilon=0.1, wavelength=None, sigma=None, weights="inv", band=5.0,
+    compensate_laser=false, path="auto", swap_roles=false, t_min=None, t_max=None, rebin=1,
+    background=None, rows=None, amplitudes=false, from_points=None, pattern=None,
+    pattern_spec=None))]
+#[allow(clippy::too_many_arguments)]
+fn run<'py>(
+    py: Python<'py>,
+    capture: PyRef<'py, NativeCapture>,
+    volume: PyRef<'py, NativeVolume>,
+    kind: &str,
+    focus: Option<[f32; 3]>,
+    gate: &str,
+    shell: Option<(f32, f32)>,
+    shells: Option<&str>,
+    epsilon: f32,
+    direct: Option<Vec<f32>>,
+    mask_epsilon: Option<f32>,
+    leak_correct: bool,
+    leak_epsilon: f32,
+    wavelength: Option<f64>,
+    sigma: Option<f64>,
+    weights: &str,
+    band: f64,
+    compensate_laser: bool,
+    path: &str,
+    swap_roles: bool,
+    t_min: Option<&str>,
+    t_max: Option<&str>,
+    rebin: usize,
+    background: Option<&str>,
+    rows: Option<(usize, usize)>,
+    amplitudes: bool,
+    from_points: Option<PyReadonlyArray2<'py, f32>>,
+    pattern: Option<PyReadonlyArray2<'py, f64>>,
+    pattern_spec: Option<&str>,
+) -> PyResult<Py<PyAny>> {
+    let (wave, epath) = wave_of(wavelength, sigma, weights, band, compensate_laser, path)?;
+    let prep = prep_of(t_min, t_max, rebin, background)?;
+    let shell = shell_of("shell", shell)?;
+    let cuts = shells
+        .map(front::parse_shells)
+        .transpose()
+        .map_err(py_err)?;
+    if cuts.is_some() && shell.is_some() {
+        return Err(arg(
+            "shells",
+            "cannot be used with shell (or min_separation)",
+        ));
+    }
+    if rows.is_some() && prep.is_some() {
+        return Err(arg(
+            "rows",
+            "partial states do not record preprocessing yet: run without t_min/t_max/rebin/background",
+        ));
+    }
+    let vol = &volume.volume;
+    let need_focus = || -> PyResult<Point> {
+        let a = focus.ok_or_else(|| arg("focus", "this probe needs a focus (x, y, z)"))?;
+        probe::check_focus(a).map_err(py_err)?;
+        Ok(a)
+    };
+    let no_part = |what: &str| -> PyResult<()> {
+        if rows.is_some() {
+            return Err(arg(
+                "rows",
+                format!("{what} has no partial states: run it over all rows"),
+            ));
+        }
+        Ok(())
+    };
+    let job = match kind {
+        "direct" => {
+            let gate = diagonal_gate(gate)?;
+            if gate != ColumnGate::TwoBounce {
+                if rows.is_some() {
+                    return Err(arg(
+                        "rows",
+                        "partial states hold the Gaussian-gated diagonal (direct light) only",
+                    ));
+                }
+                if amplitudes {
+                    return Err(arg(
+                        "amplitudes",
+                        "complex amplitudes exist for the Gaussian-gated diagonal (direct light) only",
+                    ));
+                }
+            }
+            Job::Direct { gate }
+        }
+        "column" => {
+            let focus = need_focus()?;
+            let gate = column_gate(gate)?;
+            let extra = cuts.is_some() || mask_epsilon.is_some() || leak_correct;
+            if rows.is_some() && extra {
+                return Err(arg(
+                    "rows",
+                    "a partial column takes shell, not shells, mask_epsilon or leak_correct (apply them to the merged volume)",
+                ));
+            }
+            if amplitudes && extra {
+                return Err(arg(
+                    "amplitudes",
+                    "complex amplitudes come with a column without shells, mask_epsilon or leak_correct",
+                ));
+            }
+            Job::Column {
+                focus,
+                gate,
+                shell: shell.unwrap_or(Shell::ALL),
+                shells: cuts,
+                mask_epsilon,
+                leak_epsilon: leak_correct.then_some(leak_epsilon),
+            }
+        }
+        "indirect" => {
+            if !(0.0..1.0).contains(&epsilon) {
+                return Err(arg(
+                    "epsilon",
+                    format!("expected 0 <= E < 1, found {epsilon}"),
+                ));
+            }
+            let opts = IndirectOptions {
+                epsilon,
+                shell,
+                gate: column_gate(gate)?,
+                leak: leak_correct.then(LeakOptions::default),
+                ..IndirectOptions::default()
+            };
+            if let Some(d) = &direct
+                && d.len() != vol.len()
+            {
+                return Err(arg(
+                    "direct",
+                    format!(
+                        "expected {} values (the volume's voxels), found {}",
+                        vol.len(),
+                        d.len()
+                    ),
+                ));
+            }
+            if rows.is_some() {
+                if direct.is_none() {
+                    return Err(arg(
+                        "direct",
+                        "in-focus indirect light over a part of the rows needs Γ: pass direct=, the finished direct light over the same volume and options",
+                    ));
+                }
+                if cuts.is_some() || opts.gate != ColumnGate::TwoBounce {
+                    return Err(arg(
+                        "rows",
+                        "a partial in-focus sum takes the two-bounce gate and one shell",
+                    ));
+                }
+            }
+            if amplitudes {
+                return Err(arg(
+                    "amplitudes",
+                    "in-focus indirect light is imaged as intensities",
+                ));
+            }
+            Job::Indirect {
+                opts,
+                shells: cuts,
+                direct,
+            }
+        }
+        "matrix" => Job::Matrix {
+            from: match &from_points {
+                Some(a) => points_of(a, "from_")?,
+                None => return Err(arg("from_", "a matrix needs its foci (from_)")),
+            },
+        },
+        "relight" => {
+            no_part("relighting")?;
+            let pattern = match (&pattern, pattern_spec) {
+                (_, Some(s)) => Pattern::parse(s).map_err(py_err)?,
+                (Some(a), None) => {
+                    let v = a.as_array();
+                    if v.shape()[1] != 4 {
+                        return Err(arg(
+                            "pattern",
+                            format!("expected (n, 4) foci and weights, found {:?}", v.shape()),
+                        ));
+                    }
+                    let pts: Vec<(Point, f64)> = v
+                        .rows()
+                        .into_iter()
+                        .map(|r| ([r[0] as f32, r[1] as f32, r[2] as f32], r[3]))
+                        .collect();
+                    Pattern::new(&pts).map_err(py_err)?
+                }
+                (None, None) => return Err(arg("pattern", "relighting needs a pattern")),
+            };
+            Job::Relight { pattern }
+        }
+        "row" => {
+            no_part("a row")?;
+            let focus = need_focus()?;
+            if swap_roles {
+                return Err(arg(
+                    "swap_roles",
+                    "`row` is the transposed column already (use column with swap_roles=True for the in-memory transpose)",
+                ));
+            }
+            Job::Row { focus }
+        }
+        k => return Err(arg("kind", format!("unknown probe `{k}`"))),
+    };
+    if amplitudes && matches!(job, Job::Row { .. } | Job::Matrix { .. }) {
+        return Err(arg(
+            "amplitudes",
+            "not offered for this probe (a matrix always has them)",
+        ));
+    }
+    let cap: &NativeCapture = &capture;
+    let exec = Exec {
+        path: epath,
+        ..Exec::default()
+    };
+    let outcome = py
+        .detach(|| {
+            compute(
+                cap, vol, job, &wave, exec, prep, swap_roles, rows, amplitudes,
+            )
+        })
+        .map_err(py_err)?;
+    match outcome {
+        Outcome::Part(p) => Ok(Py::new(py, NativePartial(*p))?.into_any()),
+        Outcome::Matrix(m) => {
+            let rep = counters(py, &m.report, m.seconds, &m.config)?;
+            rep.set_item("passes", m.passes)?;
+            rep.set_item("path", "band")?;
+            let t = (
+                m.intensities().into_pyarray(py),
+                m.amplitudes.into_pyarray(py),
+                rep,
+            );
+            Ok(t.into_pyobject(py)?.into_any().unbind())
+        }
+        Outcome::Done(d) => {
+            let rep = report(py, &d.out)?;
+            extras(py, &rep, &d)?;
+            let values = match d.parts {
+                Some(parts) => parts.concat(),
+                None => d.out.values,
+            };
+            let amps = d.amplitudes.map(|a| a.into_pyarray(py));
+            let t = (values.into_pyarray(py), amps, rep);
+            Ok(t.into_pyobject(py)?.into_any().unbind())
+        }
+    }
+}
+
+/// What a run adds to its report: leak correction, Γ and `I_d`, passes, preprocessing.
+fn extras(py: Python<'_>, rep: &Bound<'_, PyDict>, d: &Done) -> PyResult<()> {
+    if let Some(e) = d.explained {
+        rep.set_item("explained", e)?;
+    }
+    if let Some(g) = &d.gamma {
+        rep.set_item("gamma", g.clone().into_pyarray(py))?;
+    }
+    if let Some(v) = &d.direct {
+        rep.set_item("direct", v.clone().into_pyarray(py))?;
+    }
+    if let Some(p) = d.passes {
+        rep.set_item("passes", p)?;
+    }
+    if let Some(p) = &d.prep {
+        rep.set_item("preprocessing", &p.summary)?;
+        let s = &p.stats;
+        let st = PyDict::new(py);
+        st.set_item("histograms", s.histograms)?;
+        st.set_item("empty", s.empty)?;
+        st.set_item("counts_in", s.counts_in)?;
+        st.set_item("counts_out", s.counts_out)?;
+        rep.set_item("preprocessing_stats", st)?;
+        if let Some(w) = &p.warning {
+            rep.set_item("warnings", vec![w.clone()])?;
+        }
+    }
+    Ok(())
+}
+
+/// The probe itself, without the GIL: the command line's calls, in its order.
+#[allow(clippy::too_many_arguments)]
+fn compute(
+    cap: &NativeCapture,
+    vol: &vltm::volume::Volume,
+    job: Job,
+    wave: &Wave,
+    exec: Exec<'_>,
+    prep: Option<vltm::io::prep::Prep>,
+    swap_roles: bool,
+    rows: Option<(usize, usize)>,
+    amplitudes: bool,
+) -> vltm::Result<Outcome> {
+    let mut src = cap.load(swap_roles)?;
+    if let (Job::Matrix { from }, None) = (&job, rows) {
+        let m = probe::matrix(&mut *src, from, &vol.points, wave, exec)?;
+        return Ok(Outcome::Matrix(m));
+    }
+    if rows.is_some() || amplitudes {
+        let task = match &job {
+            Job::Direct { .. } => Some(Task::Direct),
+            Job::Column {
+                focus, gate, shell, ..
+            } => Some(Task::Column {
+                focus: *focus,
+                gate: *gate,
+                shell: *shell,
+            }),
+            Job::Indirect { opts, direct, .. } => direct.as_ref().map(|d| Task::Indirect {
+                gamma: probe::gamma_mask(d, opts.epsilon),
+                shell: opts.shell,
+                leak: opts.leak.is_some(),
+            }),
+            Job::Matrix { from } => Some(Task::Matrix { from: from.clone() }),
+            Job::Relight { .. } | Job::Row { .. } => None,
+        };
+        if let Some(task) = task {
+            let sigma = wave.config(src.geometry())?.sigma();
+            let n = src.geometry().lasers.len();
+            let r = rows.map_or(0..n, |(a, b)| a..b);
+            let (bytes, name) = (cap.file_bytes(), cap.name());
+            let (p, prep) = front::with_prep(prep, &mut *src, &vol.points, sigma, |s| {
+                partial::accumulate(s, bytes, &name, vol, &task, wave, exec, r)
+            })?;
+            if rows.is_some() {
+                return Ok(Outcome::Part(Box::new(p)));
+            }
+            let f = p.finish_with(true)?;
+            let mut d = Done::of(f.output);
+            d.amplitudes = f.amplitudes;
+            d.explained = f.explained;
+            d.prep = prep;
+            return Ok(Outcome::Done(d));
+        }
+    }
+    let sigma = wave.config(src.geometry())?.sigma();
+    let (mut d, prep) = front::with_prep(prep, &mut *src, &vol.points, sigma, |rows| {
+        one_pass(rows, vol, job, wave, exec)
+    })?;
+    d.prep = prep;
+    Ok(Outcome::Done(d))
+}
+
+/// A whole-capture run on the (preprocessed) rows.
+fn one_pass(
+    rows: &mut dyn RowSource,
+    vol: &vltm::volume::Volume,
+    job: Job,
+    wave: &Wave,
+    exec: Exec<'_>,
+) -> vltm::Result<Done> {
+    match job {
+        Job::Direct { gate } => Ok(Done::of(probe::diagonal(rows, vol, gate, wave, exec)?)),
+        Job::Column {
+            focus,
+            gate,
+            shell,
+            shells,
+            mask_epsilon,
+            leak_epsilon,
+        } => {
+            let mask = match mask_epsilon {
+                Some(e) => {
+                    if !(0.0..1.0).contains(&e) {
+                        return Err(vltm::Error::arg(
+                            "--mask-epsilon",
+                            format!("expected 0 <= E < 1, found {e}"),
+                        ));
+                    }
+                    let d = probe::direct(rows, vol, wave, exec)?;
+                    Some(front::gamma_of(&d.values, e, "--mask-epsilon")?)
+                }
+                None => None,
+            };
+            let mut explained = None;
+            let mut o = match leak_epsilon {
+                Some(le) => {
+                    let model =
+                        probe::fit_over_volume(rows, vol, le, wave, &LeakOptions::default(), exec)?;
+                    explained = Some(model.explained);
+                    let mut lc = LeakCorrected::new(rows, &model);
+                    probe::column(&mut lc, focus, vol, gate, shell, wave, exec)?
+                }
+                None => probe::column(rows, focus, vol, gate, shell, wave, exec)?,
+            };
+            if let Some(m) = &mask {
+                o.values
+                    .iter_mut()
+                    .zip(m)
+                    .for_each(|(x, &k)| *x *= f32::from(u8::from(k)));
+            }
+            let parts = shells.map(|cuts| {
+                cuts.iter()
+                    .map(|sh| front::cut(&o.values, &vol.points, focus, *sh))
+                    .collect()
+            });
+            let mut d = Done::of(o);
+            d.parts = parts;
+            d.explained = explained;
+            d.gamma = mask;
+            Ok(d)
+        }
+        Job::Indirect {
+            opts,
+            shells,
+            direct,
+        } => {
+            let t = std::time::Instant::now();
+            let (gamma, direct) = match direct {
+                Some(d) => (front::gamma_of(&d, opts.epsilon, "--epsilon")?, d),
+                None => {
+                    let d = probe::direct(rows, vol, wave, exec)?;
+                    (
+                        front::gamma_of(&d.values, opts.epsilon, "--epsilon")?,
+                        d.values,
+                    )
+                }
+            };
+            let (values, parts, report, explained) = match shells {
+                None => {
+                    let o = probe::indirect_over(rows, vol, &gamma, &opts, wave, exec)?;
+                    (o.values, None, o.report, o.explained)
+                }
+                Some(cuts) => {
+                    let (s, r) =
+                        probe::indirect_shells(rows, vol, &gamma, &opts, &cuts, wave, exec)?;
+                    let total: Vec<f32> = (0..vol.len())
+                        .map(|i| s.iter().map(|v| v[i]).sum::<f32>())
+                        .collect();
+                    (total, Some(s), r, None)
+                }
+            };
+            let config = wave.config(rows.geometry())?;
+            let mut d = Done::of(probe::Output {
+                values,
+                report,
+                seconds: t.elapsed().as_secs_f64(),
+                config,
+                path: EvalPath::Band,
+            });
+            d.parts = parts;
+            d.explained = explained;
+            d.gamma = Some(gamma);
+            d.direct = Some(direct);
+            Ok(d)
+        }
+        Job::Relight { pattern } => {
+            let r = probe::relight(rows, &pattern, vol, wave, exec)?;
+            let mut d = Done::of(r.output);
+            d.amplitudes = Some(r.amplitudes);
+            d.passes = Some(r.passes);
+            Ok(d)
+        }
+        Job::Row { focus } => Ok(Done::of(probe::row(rows, focus, vol, wave, exec)?)),
+        Job::Matrix { .. } => Err(vltm::Error::arg(
+            "kind",
+            "a matrix is run over all rows above",
+        )),
+    }
+}
+
+pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add_function(wrap_pyfunction!(run, m)?)?;
+    Ok(())
+}
