@@ -109,7 +109,8 @@ impl Scene {
     /// [`Scene::source`].
     ///
     /// # Errors
-    /// As [`Scene::validate`]; [`Error::Argument`] if `l` is not a laser row.
+    /// As [`Scene::validate`]; [`Error::Argument`](crate::Error::Argument) if `l` is not a
+    /// laser row.
     pub fn render_row(&self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
         self.source()?.read_row(l, out)
     }
