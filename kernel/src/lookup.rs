@@ -749,7 +749,7 @@ mod tests {
         let mut y = [Complex32::new(0.0, 0.0); 512 + EXTRA];
         lookup.synthesise(&hg[..j], &mut y[..l + EXTRA]);
         let mut worst = 0.0f64;
-        for n in 0..l + EXTRA {
+        for (n, yn) in y.iter().enumerate().take(l + EXTRA) {
             let (mut re, mut im) = (0.0f64, 0.0f64);
             for (i, h) in hg.iter().take(j).enumerate() {
                 let k = c.k_lo() + i as i64 - grid.k_d;
@@ -758,7 +758,7 @@ mod tests {
                 re += h.re as f64 * co - h.im as f64 * s;
                 im += h.re as f64 * s + h.im as f64 * co;
             }
-            let e = libm::hypot(y[n].re as f64 - re, y[n].im as f64 - im);
+            let e = libm::hypot(yn.re as f64 - re, yn.im as f64 - im);
             worst = worst.max(e);
         }
         assert!(worst < 1e-4 * j as f64, "worst {worst}");

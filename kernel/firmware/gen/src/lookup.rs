@@ -39,10 +39,8 @@ pub fn lookup_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results
         0,
         "lookup pipeline fails its checks: {f:#?}"
     );
-    // |√T_lookup − √T_band| relative to the largest amplitude. The diagonal: the grid's
-    // interpolation error (η = 1e-4 of the histograms' L1 norm, far less of the peak). The
-    // column differs more: the band column is factorised (no per-path guard), the lookup
-    // column guards every path.
+    // |√T_lookup − √T_band| relative to the largest amplitude: the grid's interpolation
+    // error (η = 1e-4 of the histograms' L1 norm, far less of the peak: 8.8e-6 measured).
     let rel = |a: &[f64], b: &[f64]| {
         let big = b.iter().fold(0.0f64, |m, x| m.max(x.sqrt()));
         a.iter()

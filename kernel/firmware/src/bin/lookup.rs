@@ -2,7 +2,7 @@
 //! (`src/lookup_pipeline.rs`), `RESULT voxel=i lookup_diag=… lookup_col=…` and `REPORT`
 //! lines compared by `run-qemu.sh` with `fixture/expected_lookup.txt` (the host's numbers,
 //! bit for bit), exit status = `verdict_lookup` (1 = panic, 2 = rejected, 7 = a static
-//! buffer taken twice). Runs on the M4F and on the M0 (≈ 7 KB of `.bss`).
+//! buffer taken twice). Runs on the M4F and on the M0 (13 KB of `.bss`).
 #![no_std]
 #![no_main]
 
