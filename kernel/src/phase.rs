@@ -32,8 +32,29 @@ const TAU: f32 = core::f32::consts::TAU;
 pub fn cis_turns(t: f32) -> Complex32 {
     let r = t - libm::rintf(t);
     let q4 = libm::rintf(4.0 * r);
-    let f = r - 0.25 * q4;
-    let x = TAU * f;
+    let Complex32 { re: c, im: s } = cis_small(r - 0.25 * q4);
+    // q4 ∈ {−2, −1, 0, 1, 2}; rotate by q4 quarter turns. (`as i32` saturates; NaN → 0.)
+    match (q4 as i32) & 3 {
+        0 => Complex32::new(c, s),
+        1 => Complex32::new(-s, c),
+        2 => Complex32::new(-c, -s),
+        _ => Complex32::new(s, -c),
+    }
+}
+
+/// `e^{i2πt}` for a small phase `|t| ≤ 1/8` turn: the polynomials of [`cis_turns`] (Taylor
+/// series of sin to x⁹ and cos to x¹⁰ on `|x| ≤ π/4`, truncation < 2e-9, Horner in `f32`)
+/// without its range reduction — no `rint`, no quadrant branch — for callers whose phases are
+/// already reduced (interpolation offsets, residual carriers). Outside `|t| ≤ 1/8` the error
+/// grows as the Taylor remainder.
+///
+/// ```
+/// let c = vltm_kernel::phase::cis_small(0.125);
+/// assert!((c.re - core::f32::consts::FRAC_1_SQRT_2).abs() < 2e-7);
+/// ```
+#[inline(always)]
+pub fn cis_small(t: f32) -> Complex32 {
+    let x = TAU * t;
     let x2 = x * x;
     let s = x
         * (1.0
@@ -43,13 +64,7 @@ pub fn cis_turns(t: f32) -> Complex32 {
         + x2 * (-0.5
             + x2 * (1.0 / 24.0
                 + x2 * (-1.0 / 720.0 + x2 * (1.0 / 40_320.0 + x2 * (-1.0 / 3_628_800.0)))));
-    // q4 ∈ {−2, −1, 0, 1, 2}; rotate by q4 quarter turns. (`as i32` saturates; NaN → 0.)
-    match (q4 as i32) & 3 {
-        0 => Complex32::new(c, s),
-        1 => Complex32::new(-s, c),
-        2 => Complex32::new(-c, -s),
-        _ => Complex32::new(s, -c),
-    }
+    Complex32::new(c, s)
 }
 
 /// `e^{i2πt}` for a phase in turns given in `f64`: reduced in `f64` (exact), evaluated in
