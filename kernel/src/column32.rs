@@ -304,3 +304,50 @@ mod tests {
         );
     }
 }
+
+#[cfg(test)]
+mod config_checks {
+    extern crate std;
+    use crate::{ColumnF32, Config, Error, Gate, Params, Probe, RowBuffer, Scan, Target};
+    use std::vec;
+
+    /// `Probe::push_row` and `ColumnF32::push_row` refuse a scan of another configuration (as
+    /// `Probe::merge` does) and change nothing.
+    #[test]
+    fn push_row_rejects_a_scan_of_another_configuration() {
+        let a = Config::try_new(&Params::new(0.2, 64, 0.01)).unwrap();
+        let b = Config::try_new(&Params {
+            t0: 0.1,
+            ..Params::new(0.2, 64, 0.01)
+        })
+        .unwrap();
+        let spads = [[0.0f32; 3]];
+        let (mut ta, mut tb) = (
+            vec![0.0; Scan::tables_len(&a, 1)],
+            vec![0.0; Scan::tables_len(&b, 1)],
+        );
+        let (sa, sb) = (
+            Scan::new(&a, &spads, &mut ta).unwrap(),
+            Scan::new(&b, &spads, &mut tb).unwrap(),
+        );
+        let mut buf = vec![0.0; RowBuffer::len(&b, 1)];
+        let mut rows = RowBuffer::new(&sb, &mut buf).unwrap();
+        let row = rows.load(&sb, [0.0; 3], &[1u16; 64]).unwrap();
+        let voxels = [[0.0f32, 0.0, 0.5]];
+        let mut st = vec![0.0; Probe::state_len(&a, Target::Diagonal, Gate::Gaussian, 1, 1)];
+        let mut probe =
+            Probe::new(&sa, Target::Diagonal, Gate::Gaussian, &voxels, &mut st).unwrap();
+        assert!(matches!(
+            probe.push_row(&sb, &row),
+            Err(Error::Incompatible(_))
+        ));
+        assert_eq!(probe.report().rows, 0);
+        let mut s32 = vec![0.0f32; ColumnF32::state_len(&a, 1)];
+        let mut col = ColumnF32::new(&sa, [0.0, 0.0, 0.3], &mut s32).unwrap();
+        assert!(matches!(
+            col.push_row(&sb, &row),
+            Err(Error::Incompatible(_))
+        ));
+        assert_eq!(col.report().rows, 0);
+    }
+}
