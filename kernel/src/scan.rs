@@ -619,7 +619,10 @@ mod tests {
             let l1: f64 = h.iter().map(|x| f64::from(x.value()).abs()).sum();
             // The chosen plan, and a two-stage one with the largest factor ≤ 64 (to test the
             // transform where the chooser keeps the direct DFT).
-            let n2 = (2..=BLOCK).rev().find(|d| n % d == 0).unwrap_or(1);
+            let n2 = (2..=BLOCK)
+                .rev()
+                .find(|d| n.is_multiple_of(*d))
+                .unwrap_or(1);
             let forced = BandPlan::TwoStage { n1: n / n2, n2 };
             for plan in [BandPlan::Direct, BandPlan::choose(&cfg), forced] {
                 let bound = match plan {

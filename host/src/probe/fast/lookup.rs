@@ -228,7 +228,7 @@ impl Lookup {
         let n = cfg.n_fft();
         let span = cfg.span();
         let want = (r * span / cfg.sigma()).ceil();
-        // δ ≤ σ/r for the interpolation, δ ≤ λ/8 for `cis_small` (|θ·t| ≤ 1/8 turn).
+        // δ ≤ σ/r for the interpolation, δ ≤ λ/8 for `cis_small_turns` (|θ·t| ≤ 1/8 turn).
         let want = want.max((8.0 * span / cfg.wavelength()).ceil());
         fast_len(n.max(if want.is_finite() { want as usize } else { n }))
     }
