@@ -6,6 +6,7 @@ pub mod budget;
 pub mod error;
 pub mod exec;
 pub mod io;
+pub mod live;
 pub mod out;
 pub mod probe;
 pub mod sim;

@@ -14,6 +14,7 @@ use vltm::volume::{Volume, parse_point};
 
 mod demo;
 mod input;
+mod live;
 mod progress;
 use input::Input;
 use vltm_kernel::Point;
@@ -71,6 +72,10 @@ enum Command {
         #[command(flatten)]
         input: Input,
     },
+    /// Follow a scan while it is acquired (a .ptu file being written, `-` for a T3 stream on
+    /// stdin, or a capture replayed at --replay-rate): direct light and columns row by row,
+    /// snapshots every K rows, in-focus indirect light at the end, a live page with --serve.
+    Live(live::LiveArgs),
     /// Render a synthetic capture from a scene file (JSON).
     Simulate {
         /// Scene file.
@@ -471,6 +476,7 @@ fn run(cmd: Command) -> Result<(), Failure> {
         Command::Matrix(a) => ltm::matrix(a),
         Command::Relight(a) => ltm::relight(a),
         Command::Row(a) => ltm::row(a),
+        Command::Live(a) => live::run(a),
         Command::Demo { out } => {
             let table = demo::run(&out)?;
             let _ = std::io::Write::write_all(&mut std::io::stdout(), table.as_bytes());
