@@ -82,7 +82,9 @@ fn ok(o: &Output) {
 fn fails_with(o: &Output, needles: &[&str]) -> String {
     let err = text(&o.stderr);
     assert!(!o.status.success(), "expected a failure, got: {err}");
-    let last = err.lines().rfind(|l| l.starts_with("vltm: ") && !l.starts_with("vltm: note"));
+    let last = err
+        .lines()
+        .rfind(|l| l.starts_with("vltm: ") && !l.starts_with("vltm: note"));
     let line = last.unwrap_or_else(|| panic!("no error line in: {err}"));
     for n in needles {
         assert!(line.contains(n), "`{n}` not in `{line}`");
@@ -107,14 +109,10 @@ fn close(a: &[f32], b: &[f32], what: &str) -> usize {
             "{what}: voxel {i}: live {x} vs offline {y} (peak {peak})"
         );
     }
-    a.iter().zip(b).filter(|(x, y)| x.to_bits() == y.to_bits()).count()
-}
-
-fn argmax(v: &[f32]) -> usize {
-    v.iter()
-        .enumerate()
-        .fold((0, f32::NEG_INFINITY), |a, (i, &x)| if x > a.1 { (i, x) } else { a })
-        .0
+    a.iter()
+        .zip(b)
+        .filter(|(x, y)| x.to_bits() == y.to_bits())
+        .count()
 }
 
 /// A small PTU capture: `two_patches_single` (64 rows, one SPAD) scaled to whole photons.
@@ -233,7 +231,9 @@ fn http_get(port: u16, path: &str) -> Option<Vec<u8>> {
     let mut buf = Vec::new();
     s.read_to_end(&mut buf).ok()?;
     let i = buf.windows(4).position(|w| w == b"\r\n\r\n")?;
-    buf[..i].starts_with(b"HTTP/1.1 200").then(|| buf[i + 4..].to_vec())
+    buf[..i]
+        .starts_with(b"HTTP/1.1 200")
+        .then(|| buf[i + 4..].to_vec())
 }
 
 /// A free loopback port.
@@ -268,7 +268,10 @@ fn replay_matches_the_offline_commands() {
     ok(&o);
     let err = text(&o.stderr);
     // The progress line: rows, photons/s, time per row against the dwell, ETA.
-    let progress: Vec<&str> = err.lines().filter(|l| l.starts_with("live: rows")).collect();
+    let progress: Vec<&str> = err
+        .lines()
+        .filter(|l| l.starts_with("live: rows"))
+        .collect();
     assert!(!progress.is_empty(), "no progress line in {err}");
     assert!(
         progress.iter().all(|l| l.contains("photons/s")
@@ -289,9 +292,16 @@ fn replay_matches_the_offline_commands() {
     let column = offline(&["column", cap, "--focus", FOCUS], "column.npy");
     let indirect = offline(&["indirect", cap], "indirect.npy");
     let same = close(&npy(&out), &direct, "direct light");
-    eprintln!("direct light: {same} of {} voxels bit-identical", direct.len());
+    eprintln!(
+        "direct light: {same} of {} voxels bit-identical",
+        direct.len()
+    );
     close(&npy(&d.path("live.column0.npy")), &column, "column");
-    close(&npy(&d.path("live.indirect.npy")), &indirect, "indirect light");
+    close(
+        &npy(&d.path("live.indirect.npy")),
+        &indirect,
+        "indirect light",
+    );
     for f in [
         "live.png",
         "live.column0.png",
@@ -395,10 +405,19 @@ fn follows_a_ptu_file_written_by_another_process() {
     // The progress line shows the dwell read from the sync clock: not far from 87 ms.
     let err = text(&o.stderr);
     assert!(err.contains("ms dwell"), "{err}");
+    let last = err.lines().rfind(|l| l.starts_with("live: rows"));
+    eprintln!("followed at {DWELL_MS} ms per row: {last:?}; rows seen by the server: {seen:?}");
     // The finished file, offline.
     let p = |n: &str| d.path(n).to_str().expect("utf-8").to_string();
     let f = live_ptu.to_str().expect("utf-8");
-    ok(&vltm(&["direct", f, "--volume", SPEC, "--out", &p("d.npy")]));
+    ok(&vltm(&[
+        "direct",
+        f,
+        "--volume",
+        SPEC,
+        "--out",
+        &p("d.npy"),
+    ]));
     ok(&vltm(&[
         "column",
         f,
@@ -451,7 +470,13 @@ fn a_marker_that_never_comes_keeps_the_rows_before_it_and_resumes() {
     assert!(writer.wait().expect("writer").success());
     let line = fails_with(
         &o,
-        &["acq.ptu", "markers", "64 row markers", "stopped growing", "byte"],
+        &[
+            "acq.ptu",
+            "markers",
+            "64 row markers",
+            "stopped growing",
+            "byte",
+        ],
     );
     assert!(line.contains("40 before"), "{line}");
     let state = d.path("live.direct.part");
@@ -496,7 +521,14 @@ fn a_marker_that_never_comes_keeps_the_rows_before_it_and_resumes() {
         "--out",
         d.path("other.npy").to_str().expect("utf-8"),
     ]);
-    fails_with(&o, &["--resume", "live.direct.part", "not a state of this capture"]);
+    fails_with(
+        &o,
+        &[
+            "--resume",
+            "live.direct.part",
+            "not a state of this capture",
+        ],
+    );
 }
 
 #[test]
@@ -538,7 +570,12 @@ fn bad_streams_fail_with_one_line_naming_the_position() {
     let o = child.wait_with_output().expect("wait");
     fails_with(
         &o,
-        &["<stdin>", "records", "partial record of 2 bytes", &format!("byte {}", cut - 2)],
+        &[
+            "<stdin>",
+            "records",
+            "partial record of 2 bytes",
+            &format!("byte {}", cut - 2),
+        ],
     );
     // The 9 rows closed by a row marker are kept as a state.
     let part = vltm::probe::Partial::read(&d.path("o.direct.part")).expect("state kept");

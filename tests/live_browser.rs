@@ -10,7 +10,7 @@
 
 mod support;
 
-use std::io::{BufRead, BufReader, Read, Write};
+use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
@@ -206,7 +206,9 @@ fn the_live_page_in_headless_chromium() {
             std::env::var_os("CI").is_none(),
             "CI is set but chromium is missing: install Debian's `chromium` (see .ci/run)"
         );
-        eprintln!("SKIPPED the_live_page_in_headless_chromium: no chromium on PATH (apt install chromium, or set VLTM_CHROMIUM)");
+        eprintln!(
+            "SKIPPED the_live_page_in_headless_chromium: no chromium on PATH (apt install chromium, or set VLTM_CHROMIUM)"
+        );
         return;
     };
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
@@ -264,33 +266,37 @@ fn the_live_page_in_headless_chromium() {
             .arg(format!("--user-data-dir={}", profile.display()))
             .arg("about:blank")
             .stdout(Stdio::null())
-            .stderr(Stdio::piped())
+            .stderr(Stdio::null())
             .spawn()
             .expect("start chromium"),
     );
-    // "DevTools listening on ws://127.0.0.1:PORT/devtools/browser/ID"
-    let stderr = browser.0.stderr.take().expect("stderr");
-    let mut lines = BufReader::new(stderr).lines();
-    let browser_ws = loop {
-        let l = lines
-            .next()
-            .expect("chromium exited before DevTools listened")
-            .expect("line");
-        if let Some(i) = l.find("ws://") {
-            break l[i..].trim().to_string();
+    // Chromium writes its DevTools port to DevToolsActivePort in the profile once it listens.
+    let active = profile.join("DevToolsActivePort");
+    let t = Instant::now();
+    let devtools_port = loop {
+        if let Ok(s) = std::fs::read_to_string(&active)
+            && let Some(Ok(p)) = s.lines().next().map(str::parse::<u16>)
+        {
+            break p;
         }
+        if let Ok(Some(st)) = browser.0.try_wait() {
+            panic!("chromium exited before listening: {st}");
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(60),
+            "chromium did not write {}",
+            active.display()
+        );
+        std::thread::sleep(Duration::from_millis(100));
     };
-    // Keep draining chromium's stderr so that it never blocks on a full pipe.
-    std::thread::spawn(move || for _ in lines {});
-    let host = browser_ws
-        .strip_prefix("ws://")
-        .and_then(|r| r.split('/').next())
-        .expect("host")
-        .to_string();
+    let host = format!("127.0.0.1:{devtools_port}");
     let page_ws = {
         let mut s = TcpStream::connect(&host).expect("devtools http");
-        write!(s, "GET /json/list HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n")
-            .expect("list");
+        write!(
+            s,
+            "GET /json/list HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
+        )
+        .expect("list");
         let mut b = String::new();
         s.read_to_string(&mut b).expect("list reply");
         let body = &b[b.find("\r\n\r\n").expect("head") + 4..];
@@ -345,7 +351,8 @@ fn the_live_page_in_headless_chromium() {
     }
     let shot = ws.call("Page.captureScreenshot", json!({"format": "png"}));
     let png = base64_decode(shot["data"].as_str().expect("screenshot data"));
-    let target = std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), PathBuf::from);
+    let target =
+        std::env::var_os("CARGO_TARGET_DIR").map_or_else(|| root.join("target"), PathBuf::from);
     let _ = std::fs::create_dir_all(&target);
     let shot_path = target.join("live-browser.png");
     std::fs::write(&shot_path, &png).expect("write screenshot");
@@ -357,8 +364,14 @@ fn the_live_page_in_headless_chromium() {
     assert!(png.starts_with(b"\x89PNG"), "screenshot is a PNG");
     assert!(final_errors.is_empty(), "console errors: {final_errors:#?}");
     assert_eq!(last["state"], "(finished)", "the page saw the end: {last}");
-    assert!(last["img"].as_u64() > Some(0), "the figure appeared: {last}");
-    assert!(last["tr"].as_u64() > Some(0), "the transient appeared: {last}");
+    assert!(
+        last["img"].as_u64() > Some(0),
+        "the figure appeared: {last}"
+    );
+    assert!(
+        last["tr"].as_u64() > Some(0),
+        "the transient appeared: {last}"
+    );
     let partway = seen.iter().filter(|&&r| r > 0 && r < 64).count();
     assert!(
         partway >= 3,
@@ -368,7 +381,14 @@ fn the_live_page_in_headless_chromium() {
     // The final peak is where `vltm direct` puts it.
     let d = dir.join("direct.npy");
     let o = Command::new(support::vltm_bin())
-        .args(["direct", cap, "--volume", SPEC, "--out", d.to_str().expect("utf-8")])
+        .args([
+            "direct",
+            cap,
+            "--volume",
+            SPEC,
+            "--out",
+            d.to_str().expect("utf-8"),
+        ])
         .output()
         .expect("vltm direct");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
@@ -376,7 +396,10 @@ fn the_live_page_in_headless_chromium() {
     let i = v
         .iter()
         .enumerate()
-        .fold((0, f32::NEG_INFINITY), |a, (i, &x)| if x > a.1 { (i, x) } else { a })
+        .fold(
+            (0, f32::NEG_INFINITY),
+            |a, (i, &x)| if x > a.1 { (i, x) } else { a },
+        )
         .0;
     let vol = vltm::volume::Volume::parse(SPEC).expect("volume");
     let p = vol.points[i];
@@ -388,7 +411,10 @@ fn the_live_page_in_headless_chromium() {
         .collect();
     assert_eq!(shown.len(), 3, "{last}");
     for k in 0..3 {
-        assert!((shown[k] - p[k]).abs() < 1e-5, "peak {shown:?} vs vltm direct {p:?}");
+        assert!(
+            (shown[k] - p[k]).abs() < 1e-5,
+            "peak {shown:?} vs vltm direct {p:?}"
+        );
     }
     let _ = std::fs::remove_dir_all(&dir);
     let _ = Path::new(&shot_path);

@@ -160,7 +160,10 @@ impl LiveSource for Replay {
         }
         let start = *self.start.get_or_insert_with(Instant::now);
         // Row l is complete at (l + 1) intervals after the start.
-        let due = start + self.interval.saturating_mul(u32::try_from(l + 1).unwrap_or(u32::MAX));
+        let due = start
+            + self
+                .interval
+                .saturating_mul(u32::try_from(l + 1).unwrap_or(u32::MAX));
         let now = Instant::now();
         if due > now {
             std::thread::sleep(due - now);
@@ -242,7 +245,11 @@ impl LiveRun {
             budget::bytes(n, 4),
         )?;
         let mut capture = Capture::new(g.clone(), vec![0.0; n], Path::new("live"))?;
-        let mut tasks = vec![("direct".to_string(), "direct light".to_string(), Task::Direct)];
+        let mut tasks = vec![(
+            "direct".to_string(),
+            "direct light".to_string(),
+            Task::Direct,
+        )];
         for (i, &a) in opts.focus.iter().enumerate() {
             tasks.push((
                 format!("column{i}"),
@@ -562,10 +569,11 @@ pub fn view(
         )?,
         None => Vec::new(),
     };
-    let (i, m) = values.iter().enumerate().fold(
-        (0, f32::NEG_INFINITY),
-        |a, (i, &x)| if x > a.1 { (i, x) } else { a },
-    );
+    let (i, m) =
+        values.iter().enumerate().fold(
+            (0, f32::NEG_INFINITY),
+            |a, (i, &x)| if x > a.1 { (i, x) } else { a },
+        );
     let p = volume.points.get(i).copied().unwrap_or_default();
     Ok(View {
         tag: tag.to_string(),
@@ -821,17 +829,15 @@ pub fn drive(
         }
         let t = Instant::now();
         let n = run.fold()?;
-        if n == 0 && !ended {
+        let unsaved = failure.is_some() && run.folded() > snapshot_at && !run.complete();
+        if n == 0 && !unsaved {
+            // Nothing new to show (a resumed run re-reading rows it holds, or the end).
             continue;
-        }
-        if n == 0 && run.folded() == snapshot_at {
-            break;
         }
         let views = run.views()?;
         let fold = (t.elapsed().as_secs_f64(), n);
         let due = every > 0 && run.folded() / every > snapshot_at / every;
-        let snapshot = (due || (failure.is_some() && run.folded() > snapshot_at))
-            && !run.complete();
+        let snapshot = (due || unsaved) && !run.complete();
         if snapshot {
             outputs.write(run, &views, capture)?;
             snapshot_at = run.folded();
@@ -875,9 +881,6 @@ pub fn drive(
         )?);
     }
     outputs.write(run, &views, capture)?;
-    observe(Update::Finished {
-        run,
-        views: &views,
-    });
+    observe(Update::Finished { run, views: &views });
     Ok(())
 }

@@ -111,7 +111,9 @@ impl Read for Tail {
                 self.ended = Ended::Count;
                 return Ok(0);
             }
-            Some(e) => buf.len().min(usize::try_from(e - self.pos).unwrap_or(usize::MAX)),
+            Some(e) => buf
+                .len()
+                .min(usize::try_from(e - self.pos).unwrap_or(usize::MAX)),
             None => buf.len(),
         };
         let mut idle_since = Instant::now();
@@ -180,6 +182,8 @@ pub struct Follower {
     decoder: Decoder,
     records: u64,
     markers_seen: usize,
+    /// Rows handed out.
+    handed: usize,
     marker_sync: u64,
     last_sync: u64,
     counts: Counts,
@@ -277,6 +281,7 @@ impl Follower {
             reader,
             records: 0,
             markers_seen: 0,
+            handed: 0,
             marker_sync: 0,
             last_sync: 0,
             counts: Counts::default(),
@@ -414,7 +419,9 @@ impl Follower {
         if t.ended == Ended::Count
             && let (Some(path), Some(end)) = (&t.file, t.end)
         {
-            let len = std::fs::metadata(path).map_err(|e| Error::io(path, e))?.len();
+            let len = std::fs::metadata(path)
+                .map_err(|e| Error::io(path, e))?
+                .len();
             if len > end {
                 return Err(Error::format(
                     &self.name,
@@ -450,7 +457,7 @@ impl Follower {
     fn bin_next(&mut self) -> Result<Option<FollowedRow>> {
         let bits = self.plan.row_bits;
         let rows = self.plan.rows;
-        if self.markers_seen >= rows {
+        if self.handed >= rows {
             return Ok(None);
         }
         // Before the first row marker.
@@ -546,6 +553,7 @@ impl Follower {
                 }
             }
         };
+        self.handed += 1;
         Ok(Some(FollowedRow {
             index: l,
             data: self.hist.iter().map(|&c| c as f32).collect(),

@@ -104,14 +104,16 @@ impl Progress {
         // The dwell from the source (sync clock, replay rate), else the arrival interval.
         let arrival = el / run.received().max(1) as f64;
         let dwell = run.dwell().unwrap_or(arrival);
+        // Rows come no faster than they are acquired, nor than they arrive.
+        let pace = dwell.max(arrival);
         let left = total.saturating_sub(done) as f64;
-        let eta = left * dwell.max(per_row);
+        let eta = left * pace.max(per_row);
         format!(
             "live: rows {done}/{total}, {:.3e} photons/s, {:.1} ms/row folded vs {:.1} ms dwell{}, ETA {:.1} s",
             run.photons() / el,
             per_row * 1e3,
             dwell * 1e3,
-            if per_row > dwell {
+            if per_row > pace {
                 " (falling behind)"
             } else {
                 ""
@@ -146,6 +148,7 @@ fn status_json(run: &LiveRun, line: &str, views: &[live::View], done: bool) -> s
         "received": run.received(),
         "total": run.total_rows(),
         "photons": run.photons(),
+        "transient": run.transient().iter().any(|&x| x > 0.0),
         "line": line,
         "done": done,
         "probes": probes,
@@ -165,6 +168,13 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
         return Err(vltm::Error::arg(
             "--idle-timeout",
             format!("expected seconds > 0, found {}", a.idle_timeout),
+        )
+        .into());
+    }
+    if !(a.linger.is_finite() && a.linger >= 0.0) {
+        return Err(vltm::Error::arg(
+            "--linger",
+            format!("expected seconds >= 0, found {}", a.linger),
         )
         .into());
     }
@@ -216,8 +226,23 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
     }
     let tag_refs: Vec<&str> = tags.iter().map(String::as_str).collect();
     let all = outputs.all(&tag_refs);
-    // Inputs are never outputs.
-    let mut inputs: Vec<PathBuf> = a.resume.clone();
+    // Inputs are never outputs (a resumed state is replaced by the run that continues it,
+    // but it may not be one of the other outputs).
+    let mut inputs: Vec<PathBuf> = Vec::new();
+    for r in &a.resume {
+        if let Some(o) = all.iter().find(|o| same_file(r, o))
+            && !tag_refs.iter().any(|t| same_file(&outputs.state(t), o))
+        {
+            return Err(vltm::Error::arg(
+                "--resume",
+                format!(
+                    "{} is an output of this run, not a partial state",
+                    o.display()
+                ),
+            )
+            .into());
+        }
+    }
     if !stdin {
         inputs.push(a.source.clone());
     }
