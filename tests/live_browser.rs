@@ -297,10 +297,23 @@ fn the_live_page_in_headless_chromium() {
             "GET /json/list HTTP/1.1\r\nHost: {host}\r\nConnection: close\r\n\r\n"
         )
         .expect("list");
-        let mut b = String::new();
-        s.read_to_string(&mut b).expect("list reply");
-        let body = &b[b.find("\r\n\r\n").expect("head") + 4..];
-        let v: Value = serde_json::from_str(body).expect("targets");
+        // Read the head, then Content-Length bytes (DevTools keeps the connection open).
+        let mut head = Vec::new();
+        let mut byte = [0u8; 1];
+        while !head.ends_with(b"\r\n\r\n") {
+            s.read_exact(&mut byte).expect("list reply");
+            head.push(byte[0]);
+        }
+        let head = String::from_utf8_lossy(&head).to_ascii_lowercase();
+        let len: usize = head
+            .lines()
+            .find_map(|l| l.strip_prefix("content-length:"))
+            .and_then(|v| v.trim().parse().ok())
+            .expect("content-length");
+        let mut b = vec![0u8; len];
+        s.read_exact(&mut b).expect("list body");
+        let body = String::from_utf8(b).expect("utf-8");
+        let v: Value = serde_json::from_str(&body).expect("targets");
         v.as_array()
             .expect("array")
             .iter()
