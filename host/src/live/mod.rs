@@ -90,10 +90,10 @@ pub trait LiveSource: Send {
 
 impl LiveSource for Follower {
     fn geometry(&self) -> &Geometry {
-        Follower::geometry(self)
+        Self::geometry(self)
     }
     fn next_row(&mut self) -> Result<Option<Arrival>> {
-        Ok(Follower::next_row(self)?.map(Arrival::from))
+        Ok(Self::next_row(self)?.map(Arrival::from))
     }
 }
 
@@ -865,7 +865,7 @@ pub fn drive(
         ));
     }
     let mut views = run.views()?;
-    if let Some(opts) = run.opts.indirect.clone() {
+    if let Some(opts) = run.opts.indirect {
         let direct = views[0].values.clone();
         let o = run.indirect(&direct, &opts)?;
         let title = format!(
