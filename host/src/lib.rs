@@ -8,6 +8,7 @@ pub mod exec;
 pub mod export;
 pub mod front;
 pub mod io;
+pub mod live;
 pub mod probe;
 pub mod sim;
 pub mod volume;

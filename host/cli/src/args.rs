@@ -174,6 +174,10 @@ pub(crate) enum Command {
     /// A row T(., x_b) of the LTM (virtual camera focused at x_b, projector over the volume),
     /// streamed by laser rows without transposing the capture.
     Row(RowArgs),
+    /// Follow a scan while it is acquired (a .ptu file being written, `-` for a T3 stream on
+    /// stdin, or a capture replayed at --replay-rate): direct light and columns row by row,
+    /// snapshots every K rows, in-focus indirect light at the end, a live page with --serve.
+    Live(crate::live::LiveArgs),
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug)]

@@ -19,6 +19,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
         Command::Matrix(a) => ltm::matrix(a),
         Command::Relight(a) => ltm::relight(a),
         Command::Row(a) => ltm::row(a),
+        Command::Live(a) => crate::live::run(a),
         Command::Demo { out } => {
             let table = demo::run(&out)?;
             let _ = std::io::Write::write_all(&mut std::io::stdout(), table.as_bytes());

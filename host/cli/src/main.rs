@@ -18,6 +18,7 @@ mod commands;
 mod console;
 mod demo;
 mod input;
+mod live;
 mod ltm;
 mod outputs;
 mod partial;

@@ -236,7 +236,7 @@ pub(crate) fn refuse_overwriting_inputs(inputs: &[PathBuf], outputs: &[&Path]) -
 
 /// Whether two paths name the same file (after resolving links; for a path that does not
 /// exist yet, its directory is resolved).
-fn same_file(a: &Path, b: &Path) -> bool {
+pub(crate) fn same_file(a: &Path, b: &Path) -> bool {
     let resolve = |p: &Path| {
         p.canonicalize().ok().or_else(|| {
             let dir = match p.parent() {

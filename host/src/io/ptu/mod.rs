@@ -11,7 +11,9 @@
 //! 2. bins the stream into laser rows for the kernel ([`PtuSource`], a [`RowSource`](crate::io::RowSource);
 //!    [`read_all`] for a whole [`Capture`](crate::io::Capture)), guided by a small JSON **sidecar** ([`Sidecar`])
 //!    that describes the scan;
-//! 3. writes synthetic HydraHarp V2 T3 files and their sidecars from a [`Capture`](crate::io::Capture)
+//! 3. follows a stream that is still being written (a growing file, a pipe) and hands out
+//!    each row once the next row marker closes it ([`Follower`], module `follow`);
+//! 4. writes synthetic HydraHarp V2 T3 files and their sidecars from a [`Capture`](crate::io::Capture)
 //!    ([`write_t3`], [`write_t3_to`]), so that capture → PTU → rows gives back the capture's
 //!    histograms rounded to whole photons, exactly.
 //!
@@ -158,12 +160,14 @@
 //! ```
 
 mod decode;
+mod follow;
 mod header;
 mod sidecar;
 mod source;
 mod write;
 
 pub use decode::{Decoded, Decoder, Event, Records, open};
+pub use follow::{Ended, FollowOptions, FollowedRow, Follower};
 pub use header::{
     Header, ImageTags, MAGIC, MAX_MARKER, MAX_TAGS, RecordType, SPEED_OF_LIGHT, Tag, TagValue,
     tag_type,

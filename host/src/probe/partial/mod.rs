@@ -688,6 +688,20 @@ impl Partial {
                 ),
             ));
         }
+        self.image(amplitudes, t)
+    }
+
+    /// The probe's volume from the rows accumulated so far, whether or not they cover the
+    /// scan: the picture of a scan still being acquired (`vltm live`). For a complete state it
+    /// is [`Partial::finish`]'s.
+    ///
+    /// # Errors
+    /// Configuration and kernel errors, as [`Partial::finish`].
+    pub fn preview(&self) -> Result<Finished> {
+        self.image(false, Instant::now())
+    }
+
+    fn image(&self, amplitudes: bool, t: Instant) -> Result<Finished> {
         let p = &self.head.probe;
         let c = &p.config;
         let cfg = Config::try_new(&Params {

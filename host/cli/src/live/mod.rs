@@ -1,0 +1,409 @@
+//! `vltm live`: follow a scan while it is acquired (a PTU file still being written, a T3
+//! stream on standard input, or any capture replayed at a fixed rate), fold its rows into
+//! the direct light and the `--focus` columns as they arrive, write snapshots every
+//! `--every` rows, the in-focus indirect light at the end, and optionally serve a live page
+//! (`--serve`, module `serve`). The domain logic is `vltm::live`.
+
+mod serve;
+
+use std::io::IsTerminal as _;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use clap::Args;
+use vltm::exec::Path as EvalPath;
+use vltm::io::{self, ptu};
+use vltm::live::{self, LiveOptions, LiveRun, LiveSource, Outputs, Update};
+use vltm::probe::{self, IndirectOptions, LeakOptions, Partial};
+use vltm::volume::{Volume, parse_point};
+
+use crate::args::{PathArg, WaveArgs};
+use crate::console::{Failure, say};
+use crate::outputs::{refuse_overwriting_inputs, same_file};
+
+/// `vltm live` arguments.
+#[derive(Args, Debug)]
+pub(crate) struct LiveArgs {
+    /// What to follow: a PicoQuant .ptu (T3) file still being written (followed like
+    /// `tail -f`), `-` (a T3 record stream on standard input, header first), or any capture
+    /// vltm reads, replayed at --replay-rate.
+    source: PathBuf,
+    /// Voxels: "x0:x1:nx,y0:y1:ny,z0:z1:nz" (metres, inclusive end points) or "x,y,z;x,y,z".
+    #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
+    volume: String,
+    /// Focus x_a of a two-bounce column run row by row beside the direct light, "X,Y,Z" in
+    /// metres (repeatable).
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    focus: Vec<String>,
+    /// Output volume F.npy (or F.h5): the direct light; columns F.column<i>.npy, the in-focus
+    /// indirect light F.indirect.npy, figures beside them (.png), partial states
+    /// F.<probe>.part, the summed transient F.transient.png.
+    #[arg(long, value_name = "F.npy|F.h5")]
+    out: PathBuf,
+    /// Write the volumes, figures and partial states every K rows (0: only at the end).
+    #[arg(long, value_name = "K", default_value_t = 8)]
+    every: usize,
+    /// Continue an interrupted run from its partial states (F.direct.part and every
+    /// F.column<i>.part; repeat the option).
+    #[arg(long, value_name = "STATE")]
+    resume: Vec<PathBuf>,
+    /// End the stream when a followed file has not grown for S seconds.
+    #[arg(long, value_name = "S", default_value_t = 10.0)]
+    idle_timeout: f64,
+    /// Replay the capture at this many rows per second (any capture; a .ptu file is then read
+    /// as finished instead of followed).
+    #[arg(long, value_name = "ROWS/s")]
+    replay_rate: Option<f64>,
+    /// The PTU sidecar (default: the .ptu file with extension .json; needed for `-`).
+    #[arg(long, value_name = "F.json")]
+    sidecar: Option<PathBuf>,
+    /// Serve a live page at this address: PORT or ADDR:PORT (loopback unless an address is
+    /// given).
+    #[arg(long, value_name = "127.0.0.1:PORT")]
+    serve: Option<String>,
+    /// Keep serving the page this many seconds after the run ends.
+    #[arg(long, value_name = "S", default_value_t = 10.0)]
+    linger: f64,
+    /// Γ threshold of the in-focus indirect light at the end (relative to the direct
+    /// light's maximum).
+    #[arg(long, value_name = "E", default_value_t = 0.1)]
+    epsilon: f32,
+    /// Skip the in-focus indirect light at the end.
+    #[arg(long)]
+    no_indirect: bool,
+    /// In-focus indirect light without the leak correction (as `vltm indirect`).
+    #[arg(long)]
+    no_leak_correct: bool,
+    #[command(flatten)]
+    wave: WaveArgs,
+    /// Evaluation path of the direct light and the columns (as the probes' --path).
+    #[arg(long, value_enum, default_value_t = PathArg::Auto)]
+    path: PathArg,
+}
+
+/// Where the rows come from.
+enum Kind {
+    Follow(PathBuf),
+    Stdin(PathBuf),
+    Replay(f64),
+}
+
+/// The progress line: rows done, photons per second, time per row against the dwell, ETA.
+struct Progress {
+    start: Instant,
+    tty: bool,
+}
+
+impl Progress {
+    fn line(&self, run: &LiveRun, fold: (f64, usize)) -> String {
+        let el = self.start.elapsed().as_secs_f64().max(1e-9);
+        let (done, total) = (run.folded(), run.total_rows());
+        let per_row = if fold.1 > 0 {
+            fold.0 / fold.1 as f64
+        } else {
+            0.0
+        };
+        // The dwell from the source (sync clock, replay rate), else the arrival interval.
+        let arrival = el / run.received().max(1) as f64;
+        let dwell = run.dwell().unwrap_or(arrival);
+        // Rows come no faster than they are acquired, nor than they arrive.
+        let pace = dwell.max(arrival);
+        let left = total.saturating_sub(done) as f64;
+        let eta = left * pace.max(per_row);
+        format!(
+            "live: rows {done}/{total}, {:.3e} photons/s, {:.1} ms/row folded vs {:.1} ms dwell{}, ETA {:.1} s",
+            run.photons() / el,
+            per_row * 1e3,
+            dwell * 1e3,
+            if per_row > pace {
+                " (falling behind)"
+            } else {
+                ""
+            },
+            eta
+        )
+    }
+
+    fn show(&self, s: &str) {
+        if self.tty {
+            eprint!("\r\x1b[2K{s}");
+        } else {
+            eprintln!("{s}");
+        }
+    }
+}
+
+fn status_json(run: &LiveRun, line: &str, views: &[live::View], done: bool) -> serde_json::Value {
+    let probes: Vec<serde_json::Value> = views
+        .iter()
+        .map(|v| {
+            serde_json::json!({
+                "tag": v.tag,
+                "title": v.title,
+                "peak": v.peak.0,
+                "peak_at": v.peak.1,
+            })
+        })
+        .collect();
+    serde_json::json!({
+        "rows": run.folded(),
+        "received": run.received(),
+        "total": run.total_rows(),
+        "photons": run.photons(),
+        "transient": run.transient().iter().any(|&x| x > 0.0),
+        "line": line,
+        "done": done,
+        "probes": probes,
+    })
+}
+
+/// Runs `vltm live`.
+pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
+    let volume = Volume::parse(&a.volume)?;
+    let mut focus = Vec::new();
+    for f in &a.focus {
+        let p = parse_point("--focus", f)?;
+        probe::check_focus(p)?;
+        focus.push(p);
+    }
+    if !(a.idle_timeout.is_finite() && a.idle_timeout > 0.0) {
+        return Err(vltm::Error::arg(
+            "--idle-timeout",
+            format!("expected seconds > 0, found {}", a.idle_timeout),
+        )
+        .into());
+    }
+    if !(a.linger.is_finite() && a.linger >= 0.0) {
+        return Err(vltm::Error::arg(
+            "--linger",
+            format!("expected seconds >= 0, found {}", a.linger),
+        )
+        .into());
+    }
+    if !(0.0..1.0).contains(&a.epsilon) {
+        return Err(vltm::Error::arg(
+            "--epsilon",
+            format!("expected 0 <= E < 1, found {}", a.epsilon),
+        )
+        .into());
+    }
+    let is_ptu = io::extension(&a.source).as_deref() == Some("ptu");
+    let stdin = a.source.as_os_str() == "-";
+    let kind = match (a.replay_rate, stdin, is_ptu) {
+        (Some(r), false, _) => Kind::Replay(r),
+        (Some(_), true, _) => {
+            return Err(vltm::Error::arg(
+                "--replay-rate",
+                "standard input is followed as it comes: replay a capture file",
+            )
+            .into());
+        }
+        (None, true, _) => Kind::Stdin(a.sidecar.clone().ok_or_else(|| {
+            vltm::Error::arg(
+                "--sidecar",
+                "a T3 stream on standard input needs its sidecar: --sidecar F.json",
+            )
+        })?),
+        (None, false, true) => Kind::Follow(
+            a.sidecar
+                .clone()
+                .unwrap_or_else(|| a.source.with_extension("json")),
+        ),
+        (None, false, false) => {
+            return Err(vltm::Error::arg(
+                "--replay-rate",
+                format!(
+                    "{} is not a PTU stream: replay it with --replay-rate ROWS/s",
+                    a.source.display()
+                ),
+            )
+            .into());
+        }
+    };
+    let outputs = Outputs { out: a.out.clone() };
+    let mut tags = vec!["direct".to_string()];
+    tags.extend((0..focus.len()).map(|i| format!("column{i}")));
+    if !a.no_indirect {
+        tags.push("indirect".into());
+    }
+    let tag_refs: Vec<&str> = tags.iter().map(String::as_str).collect();
+    let all = outputs.all(&tag_refs);
+    // Inputs are never outputs (a resumed state is replaced by the run that continues it,
+    // but it may not be one of the other outputs).
+    let mut inputs: Vec<PathBuf> = Vec::new();
+    for r in &a.resume {
+        if let Some(o) = all.iter().find(|o| same_file(r, o))
+            && !tag_refs.iter().any(|t| same_file(&outputs.state(t), o))
+        {
+            return Err(vltm::Error::arg(
+                "--resume",
+                format!(
+                    "{} is an output of this run, not a partial state",
+                    o.display()
+                ),
+            )
+            .into());
+        }
+    }
+    if !stdin {
+        inputs.push(a.source.clone());
+    }
+    if let Kind::Follow(s) | Kind::Stdin(s) = &kind {
+        inputs.push(s.clone());
+    }
+    let outs: Vec<&Path> = all.iter().map(PathBuf::as_path).collect();
+    refuse_overwriting_inputs(&inputs, &outs)?;
+    // A state on disk is only replaced by this run's when this run continues it.
+    for t in &tag_refs {
+        let p = outputs.state(t);
+        if p.exists() && !a.resume.iter().any(|r| same_file(r, &p)) {
+            let held = Partial::read(&p).map_or_else(
+                |_| "unreadable".to_string(),
+                |s| format!("rows {:?} of {}", s.rows(), s.total_rows()),
+            );
+            return Err(vltm::Error::arg(
+                "--out",
+                format!(
+                    "{} exists ({held}): continue that run with --resume, or remove it or choose another --out",
+                    p.display()
+                ),
+            )
+            .into());
+        }
+    }
+    let mut resume = Vec::new();
+    for r in &a.resume {
+        resume.push((r.clone(), Partial::read(r)?));
+    }
+    // The port first: a port in use fails before anything is read.
+    let server = match &a.serve {
+        Some(addr) => Some(serve::Server::bind(addr)?),
+        None => None,
+    };
+    let opts_follow = ptu::FollowOptions {
+        idle_timeout: Duration::from_secs_f64(a.idle_timeout),
+        ..Default::default()
+    };
+    let name = if stdin {
+        PathBuf::from("<stdin>")
+    } else {
+        a.source.clone()
+    };
+    let source: Box<dyn LiveSource> = match &kind {
+        Kind::Follow(side) => Box::new(ptu::Follower::file(&a.source, side, opts_follow)?),
+        Kind::Stdin(side) => {
+            let sc = ptu::Sidecar::load(side)?;
+            Box::new(ptu::Follower::stream(
+                Box::new(std::io::stdin()),
+                &name,
+                sc,
+                side,
+            )?)
+        }
+        Kind::Replay(rate) => {
+            let input = crate::input::Input::default();
+            let mut src = input.open(&a.source)?;
+            Box::new(live::Replay::from_source(&mut *src, *rate, &a.source)?)
+        }
+    };
+    let g = source.geometry().clone();
+    let wave = a.wave.wave();
+    let indirect = (!a.no_indirect).then(|| IndirectOptions {
+        epsilon: a.epsilon,
+        leak: (!a.no_leak_correct).then(LeakOptions::default),
+        ..Default::default()
+    });
+    let opts = LiveOptions {
+        volume,
+        focus,
+        wave,
+        path: match a.path {
+            PathArg::Auto => EvalPath::Auto,
+            PathArg::Band => EvalPath::Band,
+            PathArg::Planar => EvalPath::Planar,
+            PathArg::Lookup => EvalPath::Lookup,
+        },
+        indirect,
+        capture_name: name
+            .file_name()
+            .map_or_else(String::new, |f| f.to_string_lossy().into_owned()),
+    };
+    let mut run = LiveRun::new(&g, opts, resume)?;
+    if run.folded() > 0 {
+        say!(
+            "live: resuming after row {} of {}",
+            run.folded(),
+            run.total_rows()
+        );
+    }
+    if let Some(s) = &server {
+        say!("live: serving http://{}/", s.addr());
+    }
+    let progress = Progress {
+        start: Instant::now(),
+        tty: std::io::stderr().is_terminal(),
+    };
+    let mut observe = |u: Update<'_>| match u {
+        Update::Folded {
+            run, views, fold, ..
+        } => {
+            let line = progress.line(run, fold);
+            progress.show(&line);
+            if let Some(s) = &server {
+                s.publish(status_json(run, &line, views, false), views, run);
+            }
+        }
+        Update::Finished { run, views } => {
+            if progress.tty {
+                eprintln!();
+            }
+            let line = format!(
+                "live: {} rows in {:.1} s, {:.3e} photons/s",
+                run.total_rows(),
+                progress.start.elapsed().as_secs_f64(),
+                run.photons() / progress.start.elapsed().as_secs_f64().max(1e-9)
+            );
+            if let Some(s) = &server {
+                s.publish(status_json(run, &line, views, true), views, run);
+            }
+            say!("{line}");
+            for v in views {
+                let p = v.peak.1;
+                say!(
+                    "{}: peak {:.4e} at ({:.3}, {:.3}, {:.3}) m",
+                    v.tag,
+                    v.peak.0,
+                    p[0],
+                    p[1],
+                    p[2]
+                );
+            }
+        }
+    };
+    let r = live::drive(source, &mut run, &outputs, a.every, &name, &mut observe);
+    if let Some(s) = &server {
+        if let Err(e) = &r {
+            s.fail(&e.to_string());
+        }
+        s.linger(Duration::from_secs_f64(a.linger.clamp(0.0, 86_400.0)));
+    }
+    if let Err(e) = r {
+        if progress.tty {
+            eprintln!();
+        }
+        if run.folded() > 0 {
+            eprintln!(
+                "vltm: note: the states of rows 0:{} are in {} (continue with --resume)",
+                run.folded(),
+                outputs.state("direct").display()
+            );
+        }
+        return Err(e.into());
+    }
+    for p in &all {
+        if p.exists() {
+            say!("wrote {}", p.display());
+        }
+    }
+    Ok(())
+}

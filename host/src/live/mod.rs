@@ -1,0 +1,886 @@
+//! Following a scan while it is acquired (`vltm live`): rows arrive one at a time from a
+//! [`LiveSource`] (a PTU file still being written or a pipe, [`Follower`]; any capture
+//! replayed at a fixed rate, [`Replay`]), are folded into the direct light and the columns at
+//! the focus points as they come, and every `K` rows the current volumes, their figures and
+//! the partial states are written at once ([`crate::atomic`]). When the last row is in, the
+//! in-focus indirect light (whose Γ needs the whole diagonal) is computed over the whole scan.
+//!
+//! # Folding
+//!
+//! Each probe keeps a [`Partial`] state. The rows that arrived since the last fold are run as
+//! one part ([`crate::probe::partial::accumulate`]) and [merged](Partial::merge) into it: the
+//! batch grows by itself when the rows arrive faster than they are folded, and is one row at
+//! a time otherwise. The previews ([`Partial::preview`]) and the final volumes are imaged
+//! from these states exactly as `vltm merge` images parts, so the final direct light and
+//! columns equal one pass over the finished file up to the order of the `f64` sums (parts
+//! are summed, then added): within float rounding, far below 10⁻⁶ of the peak. The in-focus
+//! indirect light is one pass over the stored rows with Γ from the final diagonal, as
+//! `vltm indirect --direct` computes it.
+//!
+//! # Memory and cost
+//!
+//! The rows are kept (`Kl·Ks·Nt` `f32`, checked against the memory budget) for the indirect
+//! pass at the end; the probes' states are those of [`Partial`]. A fold costs what the same
+//! rows cost offline plus the probe's set-up (per batch) and a preview per probe (imaging a
+//! factorised column over the volume).
+//!
+//! # Resuming
+//!
+//! A run started with the states a previous run wrote ([`LiveRun::new`]'s `resume`) reads the
+//! stream from its start again (the rows are needed for the indirect pass) but folds only the
+//! rows after the states' rows. A state of another capture, probe or configuration is refused
+//! (the checks of [`Partial::merge`]).
+
+use std::path::{Path, PathBuf};
+use std::sync::mpsc;
+use std::time::{Duration, Instant};
+
+use crate::atomic::Transaction;
+use crate::budget;
+use crate::error::{Error, Result};
+use crate::exec::{Exec, Path as EvalPath};
+use crate::io::capture::{Capture, Geometry, RowSource};
+use crate::io::ptu::{FollowedRow, Follower};
+use crate::export::figure::Figure;
+use crate::export::figure::plot::Transient;
+use crate::probe::partial::{self, Finished, Partial, Task};
+use crate::probe::{
+    ColumnGate, IndirectOptions, IndirectOutput, Shell, Wave, gamma_mask, indirect_over,
+};
+use crate::volume::Volume;
+use vltm_kernel::Point;
+
+/// One laser row as it arrives.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Arrival {
+    /// Laser row index (rows arrive in order 0, 1, 2, …).
+    pub index: usize,
+    /// Histograms, `Ks·Nt` values, SPAD-major.
+    pub data: Vec<f32>,
+    /// Photons (the sum of the histograms for a replayed capture).
+    pub photons: f64,
+    /// The row's acquisition time (s), when the source knows it (the PTU sync clock).
+    pub dwell: Option<f64>,
+    /// Byte position in the stream after the row, for a T3 stream.
+    pub position: Option<u64>,
+}
+
+impl From<FollowedRow> for Arrival {
+    fn from(r: FollowedRow) -> Self {
+        Self {
+            index: r.index,
+            photons: r.photons as f64,
+            data: r.data,
+            dwell: r.seconds,
+            position: Some(r.position),
+        }
+    }
+}
+
+/// Where rows come from, in scan order, as they are acquired.
+pub trait LiveSource: Send {
+    /// The capture's geometry (known before the first row).
+    fn geometry(&self) -> &Geometry;
+    /// The next row, waiting for it; `None` after the last row.
+    ///
+    /// # Errors
+    /// The source's read and format errors.
+    fn next_row(&mut self) -> Result<Option<Arrival>>;
+}
+
+impl LiveSource for Follower {
+    fn geometry(&self) -> &Geometry {
+        Self::geometry(self)
+    }
+    fn next_row(&mut self) -> Result<Option<Arrival>> {
+        Ok(Self::next_row(self)?.map(Arrival::from))
+    }
+}
+
+/// A capture replayed row by row at a fixed rate (demos and tests).
+#[derive(Debug)]
+pub struct Replay {
+    capture: Capture,
+    interval: Duration,
+    next: usize,
+    start: Option<Instant>,
+}
+
+impl Replay {
+    /// Replays `capture` at `rows_per_second` (> 0; infinite: as fast as it is read).
+    ///
+    /// # Errors
+    /// [`Error::Argument`] (`--replay-rate`) for a rate that is not > 0.
+    pub fn new(capture: Capture, rows_per_second: f64) -> Result<Self> {
+        if rows_per_second.is_nan() || rows_per_second <= 0.0 {
+            return Err(Error::arg(
+                "--replay-rate",
+                format!("expected a rate > 0 rows/s, found {rows_per_second}"),
+            ));
+        }
+        let interval = Duration::try_from_secs_f64(1.0 / rows_per_second).unwrap_or_default();
+        Ok(Self {
+            capture,
+            interval,
+            next: 0,
+            start: None,
+        })
+    }
+
+    /// Reads every row of `src` into memory (checked against the memory budget), then replays
+    /// them as [`Replay::new`].
+    ///
+    /// # Errors
+    /// As [`Replay::new`]; the source's read errors; the budget.
+    pub fn from_source(src: &mut dyn RowSource, rows_per_second: f64, what: &Path) -> Result<Self> {
+        let g = src.geometry().clone();
+        let n = g.lasers.len() * g.spads_per_row() * g.nt;
+        budget::check(
+            || format!("the replayed capture {} in memory", what.display()),
+            budget::bytes(n, 4),
+        )?;
+        let mut data = Vec::with_capacity(n);
+        let mut row = Vec::new();
+        for l in 0..g.lasers.len() {
+            src.read_row(l, &mut row)?;
+            data.extend_from_slice(&row);
+        }
+        Self::new(Capture::new(g, data, what)?, rows_per_second)
+    }
+}
+
+impl LiveSource for Replay {
+    fn geometry(&self) -> &Geometry {
+        &self.capture.geometry
+    }
+    fn next_row(&mut self) -> Result<Option<Arrival>> {
+        let l = self.next;
+        if l >= self.capture.geometry.lasers.len() {
+            return Ok(None);
+        }
+        let start = *self.start.get_or_insert_with(Instant::now);
+        // Row l is complete at (l + 1) intervals after the start.
+        let due = start
+            + self
+                .interval
+                .saturating_mul(u32::try_from(l + 1).unwrap_or(u32::MAX));
+        let now = Instant::now();
+        if due > now {
+            std::thread::sleep(due - now);
+        }
+        self.next += 1;
+        let data = self.capture.row(l).to_vec();
+        Ok(Some(Arrival {
+            index: l,
+            photons: data.iter().map(|&x| f64::from(x)).sum(),
+            data,
+            dwell: Some(self.interval.as_secs_f64()),
+            position: None,
+        }))
+    }
+}
+
+/// One probe of a live run.
+#[derive(Clone, Debug)]
+pub struct LiveProbe {
+    /// Short name used in file names and the page: `direct`, `column0`, `column1`, ….
+    pub tag: String,
+    /// A title for figures.
+    pub title: String,
+    /// What it accumulates.
+    pub task: Task,
+    /// Its state: the rows folded so far.
+    pub state: Partial,
+}
+
+/// What the run needs to know besides the rows.
+#[derive(Clone, Debug)]
+pub struct LiveOptions {
+    /// The voxels.
+    pub volume: Volume,
+    /// Focus points of the columns (two-bounce gate, every voxel).
+    pub focus: Vec<Point>,
+    /// Wave options, as the offline commands take them.
+    pub wave: Wave,
+    /// Evaluation path.
+    pub path: EvalPath,
+    /// The in-focus indirect light at the end (`None`: not computed).
+    pub indirect: Option<IndirectOptions>,
+    /// The capture's name, recorded in the states (informational).
+    pub capture_name: String,
+}
+
+/// The state of a live run: the rows received, the probes' states, the summed transient.
+#[derive(Debug)]
+pub struct LiveRun {
+    opts: LiveOptions,
+    capture: Capture,
+    received: usize,
+    folded: usize,
+    probes: Vec<LiveProbe>,
+    transient: Vec<f64>,
+    photons: f64,
+    dwell: Vec<f64>,
+}
+
+fn exec(path: EvalPath) -> Exec<'static> {
+    Exec {
+        progress: None,
+        path,
+    }
+}
+
+impl LiveRun {
+    /// A run over a capture of geometry `g`; `resume`: the states of an interrupted run, one
+    /// per probe (direct light first, then the columns), each over rows `0..k` (the same `k`).
+    ///
+    /// # Errors
+    /// [`Error::Argument`] (`--resume`) for states that do not match the probes, the capture
+    /// or the parameters, or hold other rows; the probes' configuration errors; the memory
+    /// budget for the stored rows.
+    pub fn new(g: &Geometry, opts: LiveOptions, resume: Vec<(PathBuf, Partial)>) -> Result<Self> {
+        let n = g.lasers.len() * g.spads_per_row() * g.nt;
+        budget::check(
+            || "the live run's rows (kept for the in-focus indirect light)".to_string(),
+            budget::bytes(n, 4),
+        )?;
+        let mut capture = Capture::new(g.clone(), vec![0.0; n], Path::new("live"))?;
+        let mut tasks = vec![(
+            "direct".to_string(),
+            "direct light".to_string(),
+            Task::Direct,
+        )];
+        for (i, &a) in opts.focus.iter().enumerate() {
+            tasks.push((
+                format!("column{i}"),
+                format!(
+                    "column T(x_a, .) at x_a = ({:.3}, {:.3}, {:.3})",
+                    a[0], a[1], a[2]
+                ),
+                Task::Column {
+                    focus: a,
+                    gate: ColumnGate::TwoBounce,
+                    shell: Shell::ALL,
+                },
+            ));
+        }
+        let mut resume: Vec<Option<(PathBuf, Partial)>> = resume.into_iter().map(Some).collect();
+        let mut probes = Vec::new();
+        let mut folded = None;
+        for (tag, title, task) in tasks {
+            let empty = partial::accumulate(
+                &mut capture,
+                0,
+                &opts.capture_name,
+                &opts.volume,
+                &task,
+                &opts.wave,
+                exec(opts.path),
+                0..0,
+            )?;
+            let focus = match &task {
+                Task::Column { focus, .. } => Some(*focus),
+                _ => None,
+            };
+            let found = resume.iter_mut().find(|r| {
+                r.as_ref()
+                    .is_some_and(|(_, p)| p.kind() == empty.kind() && p.focus() == focus)
+            });
+            let state = match found.and_then(Option::take) {
+                None if folded.is_some_and(|k| k > 0) => {
+                    return Err(Error::arg(
+                        "--resume",
+                        format!("no state given for the {title}"),
+                    ));
+                }
+                None => {
+                    folded = Some(0);
+                    empty
+                }
+                Some((path, p)) => {
+                    let rows = p.rows();
+                    let k = match rows.as_slice() {
+                        [] => 0,
+                        [r] if r.start == 0 => r.end,
+                        _ => {
+                            return Err(Error::arg(
+                                "--resume",
+                                format!(
+                                    "{} holds rows {rows:?}: a live run's state holds rows 0:k",
+                                    path.display()
+                                ),
+                            ));
+                        }
+                    };
+                    if folded.is_some_and(|f| f != k) {
+                        return Err(Error::arg(
+                            "--resume",
+                            format!(
+                                "{} holds rows 0:{k}, the other states another number: give the states of one run",
+                                path.display()
+                            ),
+                        ));
+                    }
+                    folded = Some(k);
+                    let names = [path.display().to_string(), "this run".to_string()];
+                    Partial::merge(vec![p, empty], &names).map_err(|e| {
+                        Error::arg(
+                            "--resume",
+                            format!(
+                                "{} is not a state of this capture and these parameters: {e}",
+                                path.display()
+                            ),
+                        )
+                    })?
+                }
+            };
+            probes.push(LiveProbe {
+                tag,
+                title,
+                task,
+                state,
+            });
+        }
+        if let Some((path, p)) = resume.into_iter().flatten().next() {
+            return Err(Error::arg(
+                "--resume",
+                format!(
+                    "{} is a {} state that matches no probe of this run (check --focus)",
+                    path.display(),
+                    p.kind()
+                ),
+            ));
+        }
+        let nt = g.nt;
+        Ok(Self {
+            opts,
+            capture,
+            received: 0,
+            folded: folded.unwrap_or(0),
+            probes,
+            transient: vec![0.0; nt],
+            photons: 0.0,
+            dwell: Vec::new(),
+        })
+    }
+
+    /// The geometry.
+    pub fn geometry(&self) -> &Geometry {
+        &self.capture.geometry
+    }
+
+    /// The options.
+    pub fn options(&self) -> &LiveOptions {
+        &self.opts
+    }
+
+    /// Laser rows of the scan.
+    pub fn total_rows(&self) -> usize {
+        self.capture.geometry.lasers.len()
+    }
+
+    /// Rows received.
+    pub fn received(&self) -> usize {
+        self.received
+    }
+
+    /// Rows folded into the probes (those of resumed states included).
+    pub fn folded(&self) -> usize {
+        self.folded
+    }
+
+    /// Photons received (since the start of this run).
+    pub fn photons(&self) -> f64 {
+        self.photons
+    }
+
+    /// The median acquisition time of a row (s) among the rows that carried one.
+    pub fn dwell(&self) -> Option<f64> {
+        let mut d = self.dwell.clone();
+        if d.is_empty() {
+            return None;
+        }
+        d.sort_by(f64::total_cmp);
+        Some(d[d.len() / 2])
+    }
+
+    /// The capture's summed transient so far: counts per bin over every row and SPAD.
+    pub fn transient(&self) -> &[f64] {
+        &self.transient
+    }
+
+    /// The probes.
+    pub fn probes(&self) -> &[LiveProbe] {
+        &self.probes
+    }
+
+    /// The rows received (zeros for rows not yet received).
+    pub fn capture(&self) -> &Capture {
+        &self.capture
+    }
+
+    /// Stores a row.
+    ///
+    /// # Errors
+    /// [`Error::Format`] (`rows`) for a row out of order or of the wrong length.
+    pub fn receive(&mut self, a: Arrival) -> Result<()> {
+        let per_row = self.capture.geometry.spads_per_row() * self.capture.geometry.nt;
+        if a.index != self.received || a.data.len() != per_row {
+            return Err(Error::format(
+                Path::new(&self.opts.capture_name),
+                "rows",
+                format!("row {} of {per_row} values", self.received),
+                format!("row {} of {} values", a.index, a.data.len()),
+            ));
+        }
+        let nt = self.capture.geometry.nt;
+        for h in a.data.chunks(nt) {
+            for (t, &x) in self.transient.iter_mut().zip(h) {
+                *t += f64::from(x);
+            }
+        }
+        self.capture.data[a.index * per_row..(a.index + 1) * per_row].copy_from_slice(&a.data);
+        self.photons += a.photons;
+        if let Some(d) = a.dwell.filter(|d| d.is_finite() && *d > 0.0) {
+            self.dwell.push(d);
+        }
+        self.received += 1;
+        Ok(())
+    }
+
+    /// Folds the rows received but not yet folded into every probe; returns how many.
+    ///
+    /// # Errors
+    /// The probes' errors.
+    pub fn fold(&mut self) -> Result<usize> {
+        if self.received <= self.folded {
+            return Ok(0);
+        }
+        let rows = self.folded..self.received;
+        for p in &mut self.probes {
+            let part = partial::accumulate(
+                &mut self.capture,
+                0,
+                &self.opts.capture_name,
+                &self.opts.volume,
+                &p.task,
+                &self.opts.wave,
+                exec(self.opts.path),
+                rows.clone(),
+            )?;
+            let state = std::mem::replace(&mut p.state, part.clone());
+            p.state = Partial::merge(vec![state, part], &[])?;
+        }
+        self.folded = rows.end;
+        Ok(rows.len())
+    }
+
+    /// Whether every row is folded.
+    pub fn complete(&self) -> bool {
+        self.folded == self.total_rows()
+    }
+
+    /// The probe `i`'s volume from the rows folded so far.
+    ///
+    /// # Errors
+    /// As [`Partial::preview`].
+    pub fn preview(&self, i: usize) -> Result<Finished> {
+        self.probes[i].state.preview()
+    }
+
+    /// The in-focus indirect light over the whole scan, Γ from `direct` (the final direct
+    /// light): as `vltm indirect --direct`.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] before every row is in; the probe's errors.
+    pub fn indirect(&mut self, direct: &[f32], opts: &IndirectOptions) -> Result<IndirectOutput> {
+        if self.received < self.total_rows() {
+            return Err(Error::arg(
+                "indirect",
+                format!(
+                    "the in-focus indirect light needs the whole scan: {} of {} rows are in",
+                    self.received,
+                    self.total_rows()
+                ),
+            ));
+        }
+        let gamma = gamma_mask(direct, opts.epsilon);
+        let mut o = indirect_over(
+            &mut self.capture,
+            &self.opts.volume,
+            &gamma,
+            opts,
+            &self.opts.wave,
+            exec(self.opts.path),
+        )?;
+        o.direct = direct.to_vec();
+        Ok(o)
+    }
+}
+
+/// One volume to show and write: a probe's preview (or final) volume.
+#[derive(Clone, Debug)]
+pub struct View {
+    /// `direct`, `column0`, …, `indirect`.
+    pub tag: String,
+    /// Figure title.
+    pub title: String,
+    /// One value per voxel.
+    pub values: Vec<f32>,
+    /// The figure (front and top views, axes, colour bar) as PNG bytes (empty for a point
+    /// list volume).
+    pub png: Vec<u8>,
+    /// Focus marks drawn on the figure.
+    pub marks: Vec<(Point, String)>,
+    /// Peak value and its voxel.
+    pub peak: (f32, Point),
+}
+
+fn encode_png(img: &image::RgbImage) -> Result<Vec<u8>> {
+    let mut png = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut png, image::ImageFormat::Png)
+        .map_err(|e| Error::io("png", std::io::Error::other(e)))?;
+    Ok(png.into_inner())
+}
+
+/// A view of `values` over `volume` with its figure.
+///
+/// # Errors
+/// PNG encoding errors.
+pub fn view(
+    tag: &str,
+    title: &str,
+    values: Vec<f32>,
+    volume: &Volume,
+    marks: Vec<(Point, String)>,
+) -> Result<View> {
+    let png = match volume.axes {
+        Some([x, y, z]) => encode_png(
+            &Figure {
+                data: &values,
+                shape: volume.shape,
+                x,
+                y,
+                z,
+                title: title.to_string(),
+                marks: marks.clone(),
+            }
+            .render(),
+        )?,
+        None => Vec::new(),
+    };
+    let (i, m) =
+        values.iter().enumerate().fold(
+            (0, f32::NEG_INFINITY),
+            |a, (i, &x)| if x > a.1 { (i, x) } else { a },
+        );
+    let p = volume.points.get(i).copied().unwrap_or_default();
+    Ok(View {
+        tag: tag.to_string(),
+        title: title.to_string(),
+        values,
+        png,
+        marks,
+        peak: (m, p),
+    })
+}
+
+impl LiveRun {
+    /// The views of every probe from the rows folded so far (titles say how many).
+    ///
+    /// # Errors
+    /// As [`LiveRun::preview`].
+    pub fn views(&self) -> Result<Vec<View>> {
+        let mut out = Vec::new();
+        for (i, p) in self.probes.iter().enumerate() {
+            let f = self.preview(i)?;
+            let marks = match p.task {
+                Task::Column { focus, .. } => vec![(focus, "x_a".to_string())],
+                _ => Vec::new(),
+            };
+            let title = if self.complete() {
+                p.title.clone()
+            } else {
+                format!(
+                    "{} (rows 0:{} of {})",
+                    p.title,
+                    self.folded,
+                    self.total_rows()
+                )
+            };
+            out.push(view(&p.tag, &title, f.output.values, &f.volume, marks)?);
+        }
+        Ok(out)
+    }
+
+    /// The summed transient's plot (log counts against path length) as PNG bytes; `None`
+    /// while no count is positive.
+    pub fn transient_png(&self) -> Option<Vec<u8>> {
+        let g = &self.capture.geometry;
+        let t = Transient {
+            counts: &self.transient,
+            t0: g.t0,
+            dt: g.dt,
+            title: format!(
+                "summed transient, rows 0:{} of {}",
+                self.received,
+                self.total_rows()
+            ),
+            shade: None,
+        };
+        encode_png(&t.render().ok()?).ok()
+    }
+}
+
+/// Output paths of a live run, from `--out F.npy` (or `F.h5`): probe `tag` is written to
+/// `F.npy` for the direct light and `F.<tag>.npy` otherwise, its figure beside it as `.png`,
+/// its state as `F.<tag>.part`; the summed transient as `F.transient.png`.
+#[derive(Clone, Debug)]
+pub struct Outputs {
+    /// `--out`.
+    pub out: PathBuf,
+}
+
+impl Outputs {
+    fn tagged(&self, tag: Option<&str>, ext: &str) -> PathBuf {
+        let stem = self.out.file_stem().unwrap_or_default().to_string_lossy();
+        let name = match tag {
+            Some(t) => format!("{stem}.{t}.{ext}"),
+            None => format!("{stem}.{ext}"),
+        };
+        self.out.with_file_name(name)
+    }
+
+    fn main_tag(tag: &str) -> Option<&str> {
+        (tag != "direct").then_some(tag)
+    }
+
+    /// The volume file of probe `tag`.
+    pub fn volume(&self, tag: &str) -> PathBuf {
+        let ext = self
+            .out
+            .extension()
+            .map_or_else(|| "npy".to_string(), |e| e.to_string_lossy().into_owned());
+        self.tagged(Self::main_tag(tag), &ext)
+    }
+
+    /// The figure of probe `tag`.
+    pub fn png(&self, tag: &str) -> PathBuf {
+        self.tagged(Self::main_tag(tag), "png")
+    }
+
+    /// The partial state of probe `tag`.
+    pub fn state(&self, tag: &str) -> PathBuf {
+        self.tagged(Some(tag), "part")
+    }
+
+    /// The summed transient's plot.
+    pub fn transient(&self) -> PathBuf {
+        self.tagged(Some("transient"), "png")
+    }
+
+    /// Every file the run writes for `tags`.
+    pub fn all(&self, tags: &[&str]) -> Vec<PathBuf> {
+        let mut v = vec![self.transient()];
+        for t in tags {
+            v.extend([self.volume(t), self.png(t), self.state(t)]);
+        }
+        v
+    }
+
+    /// Writes `views` (volumes and figures), the states of `run` and the transient, all or
+    /// nothing.
+    ///
+    /// # Errors
+    /// [`Error::Io`] and encoder errors; nothing is replaced then.
+    pub fn write(&self, run: &LiveRun, views: &[View], capture: &Path) -> Result<Vec<PathBuf>> {
+        let mut t = Transaction::new();
+        let mut wrote = Vec::new();
+        let volume = &run.opts.volume;
+        for v in views {
+            let p = self.volume(&v.tag);
+            if crate::io::is_hdf5(&p) {
+                let probe = run.probes.iter().find(|q| q.tag == v.tag);
+                let cfg = match probe {
+                    Some(q) => q.state.preview()?.output.config,
+                    None => run.opts.wave.config(run.geometry())?,
+                };
+                let focus = probe.and_then(|q| q.state.focus());
+                let meta = crate::export::h5::Provenance {
+                    probe: &v.tag,
+                    config: &cfg,
+                    focus,
+                    capture,
+                };
+                crate::export::h5::stage_volume(&mut t, &p, &v.values, volume, &meta)?;
+            } else {
+                crate::export::npy::stage_f32(&mut t, &p, &v.values, &volume.shape)?;
+            }
+            wrote.push(p);
+            if !v.png.is_empty() {
+                let p = self.png(&v.tag);
+                t.stage(&p, |f| {
+                    std::io::Write::write_all(f, &v.png).map_err(|e| Error::io(&p, e))
+                })?;
+                wrote.push(p);
+            }
+        }
+        for q in &run.probes {
+            let p = self.state(&q.tag);
+            let bytes = q.state.to_bytes();
+            t.stage(&p, |f| {
+                std::io::Write::write_all(f, &bytes).map_err(|e| Error::io(&p, e))
+            })?;
+            wrote.push(p);
+        }
+        if let Some(png) = run.transient_png() {
+            let p = self.transient();
+            t.stage(&p, |f| {
+                std::io::Write::write_all(f, &png).map_err(|e| Error::io(&p, e))
+            })?;
+            wrote.push(p);
+        }
+        t.commit()?;
+        Ok(wrote)
+    }
+}
+
+/// What the driver reports to its observer.
+#[derive(Debug)]
+pub enum Update<'a> {
+    /// Rows were folded; `views` are the current volumes.
+    Folded {
+        /// The run.
+        run: &'a LiveRun,
+        /// The current views.
+        views: &'a [View],
+        /// Seconds the last fold took (the previews included) and the rows it folded.
+        fold: (f64, usize),
+        /// Whether a snapshot was written after this fold.
+        snapshot: bool,
+    },
+    /// The final volumes (the in-focus indirect light included).
+    Finished {
+        /// The run.
+        run: &'a LiveRun,
+        /// The final views.
+        views: &'a [View],
+    },
+}
+
+/// Drives a live run: reads rows from `source` on a thread of its own, folds them in batches
+/// as they come, writes a snapshot ([`Outputs::write`]) whenever the rows folded pass a
+/// multiple of `every` (0: only at the end), and at the end writes the final volumes, the
+/// in-focus indirect light included. `observe` sees every fold and the end.
+///
+/// On a source error the rows received before it are folded and written as a snapshot (the
+/// states only grow: nothing is replaced by a state with fewer rows), then the error is
+/// returned.
+///
+/// # Errors
+/// The source's errors; the probes'; [`Error::Io`] writing the outputs.
+pub fn drive(
+    source: Box<dyn LiveSource>,
+    run: &mut LiveRun,
+    outputs: &Outputs,
+    every: usize,
+    capture: &Path,
+    observe: &mut dyn FnMut(Update<'_>),
+) -> Result<()> {
+    let (tx, rx) = mpsc::sync_channel::<Result<Arrival>>(1024);
+    let reader = std::thread::spawn(move || {
+        let mut source = source;
+        loop {
+            let r = source.next_row();
+            let stop = !matches!(r, Ok(Some(_)));
+            let item = r.transpose();
+            if let Some(item) = item
+                && tx.send(item).is_err()
+            {
+                return;
+            }
+            if stop {
+                return;
+            }
+        }
+    });
+    let mut snapshot_at = run.folded();
+    let mut failure = None;
+    let mut ended = false;
+    while !ended {
+        // Wait for one row, then take whatever else has arrived.
+        let mut batch = Vec::new();
+        match rx.recv() {
+            Ok(r) => batch.push(r),
+            Err(_) => ended = true,
+        }
+        while let Ok(r) = rx.try_recv() {
+            batch.push(r);
+        }
+        for r in batch {
+            match r.and_then(|a| run.receive(a)) {
+                Ok(()) => {}
+                Err(e) => {
+                    failure = Some(e);
+                    ended = true;
+                    break;
+                }
+            }
+        }
+        let t = Instant::now();
+        let n = run.fold()?;
+        let unsaved = failure.is_some() && run.folded() > snapshot_at && !run.complete();
+        if n == 0 && !unsaved {
+            // Nothing new to show (a resumed run re-reading rows it holds, or the end).
+            continue;
+        }
+        let views = run.views()?;
+        let fold = (t.elapsed().as_secs_f64(), n);
+        let due = every > 0 && run.folded() / every > snapshot_at / every;
+        let snapshot = (due || unsaved) && !run.complete();
+        if snapshot {
+            outputs.write(run, &views, capture)?;
+            snapshot_at = run.folded();
+        }
+        observe(Update::Folded {
+            run,
+            views: &views,
+            fold,
+            snapshot,
+        });
+    }
+    drop(rx);
+    let _ = reader.join();
+    if let Some(e) = failure {
+        return Err(e);
+    }
+    if !run.complete() {
+        return Err(Error::arg(
+            "live",
+            format!(
+                "the source ended after {} of {} rows",
+                run.received(),
+                run.total_rows()
+            ),
+        ));
+    }
+    let mut views = run.views()?;
+    if let Some(opts) = run.opts.indirect {
+        let direct = views[0].values.clone();
+        let o = run.indirect(&direct, &opts)?;
+        let title = format!(
+            "in-focus indirect light (epsilon {}, r0 {:.3} m)",
+            opts.epsilon, o.shell.r0
+        );
+        views.push(view(
+            "indirect",
+            &title,
+            o.values,
+            &run.opts.volume,
+            Vec::new(),
+        )?);
+    }
+    outputs.write(run, &views, capture)?;
+    observe(Update::Finished { run, views: &views });
+    Ok(())
+}

@@ -1,0 +1,681 @@
+//! `vltm live`: following a scan while it is acquired.
+//!
+//! * a replayed capture gives, at the end, the offline commands' volumes (direct light,
+//!   column, in-focus indirect light) within 1e-6 of the peak, and snapshots on the way;
+//! * a PTU file written row by row by a **separate process** at the paper's dwell (87 ms per
+//!   row, records split at odd byte boundaries, the record count patched into the header at
+//!   the end as acquisition software does) is followed, the served status advances while the
+//!   file grows, and the result equals `vltm direct` / `vltm column` on the finished file;
+//! * bad input: a stream that stops mid-record, a header that is not T3, a marker that never
+//!   comes (the states of the rows before it kept, then resumed to the offline result), a
+//!   state of another configuration, a port in use, a state that would be overwritten;
+//! * the [`Follower`] on a stream equals [`PtuSource`] row by row, and every truncation of a
+//!   stream is a clean error.
+//!
+//! The browser test is `tests/live_browser.rs`.
+
+mod support;
+
+use std::io::{Read, Seek, SeekFrom, Write};
+use std::net::TcpStream;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output, Stdio};
+use std::time::{Duration, Instant};
+
+use vltm::io::RowSource;
+use vltm::io::ptu::{self, Follower, PtuSource, Sidecar, T3WriteOptions};
+
+const SPEC: &str = "-0.6:0.6:13,-0.1:0.1:3,0.5:1.2:8";
+const FOCUS: &str = "-0.45,0,0.8";
+/// The paper's dwell per laser row.
+const DWELL_MS: u64 = 87;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn fixture(stem: &str) -> PathBuf {
+    root().join("fixtures").join(format!("{stem}.npz"))
+}
+
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(test: &str) -> Self {
+        let p = std::env::temp_dir().join(format!("vltm-live-{}-{test}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&p);
+        std::fs::create_dir_all(&p).expect("create temp dir");
+        Self(p)
+    }
+    fn path(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn vltm(args: &[&str]) -> Output {
+    Command::new(support::vltm_bin())
+        .args(args)
+        .output()
+        .expect("run vltm")
+}
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+fn ok(o: &Output) {
+    assert!(
+        o.status.success(),
+        "vltm failed: {}\n{}",
+        text(&o.stderr),
+        text(&o.stdout)
+    );
+}
+
+/// A failure with exit code 1 and one line on stderr, which contains every `needle`.
+fn fails_with(o: &Output, needles: &[&str]) -> String {
+    let err = text(&o.stderr);
+    assert!(!o.status.success(), "expected a failure, got: {err}");
+    let last = err
+        .lines()
+        .rfind(|l| l.starts_with("vltm: ") && !l.starts_with("vltm: note"));
+    let line = last.unwrap_or_else(|| panic!("no error line in: {err}"));
+    for n in needles {
+        assert!(line.contains(n), "`{n}` not in `{line}`");
+    }
+    line.to_string()
+}
+
+fn npy(p: &Path) -> Vec<f32> {
+    vltm::export::npy::read_f32(p)
+        .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+        .0
+}
+
+/// `a` equals `b` within `1e-6·max|b|`; returns how many values are bit-identical.
+fn close(a: &[f32], b: &[f32], what: &str) -> usize {
+    assert_eq!(a.len(), b.len(), "{what}: lengths");
+    let peak = b.iter().fold(0f32, |m, x| m.max(x.abs()));
+    assert!(peak > 0.0, "{what}: an empty volume proves nothing");
+    for (i, (x, y)) in a.iter().zip(b).enumerate() {
+        assert!(
+            (x - y).abs() <= 1e-6 * peak,
+            "{what}: voxel {i}: live {x} vs offline {y} (peak {peak})"
+        );
+    }
+    a.iter()
+        .zip(b)
+        .filter(|(x, y)| x.to_bits() == y.to_bits())
+        .count()
+}
+
+/// A small PTU capture: `two_patches_single` (64 rows, one SPAD) scaled to whole photons.
+fn make_ptu(dir: &TempDir) -> (PathBuf, PathBuf) {
+    let mut c = vltm::io::open(&fixture("two_patches_single")).expect("fixture");
+    let max = c.data.iter().fold(0f32, |m, &x| m.max(x));
+    for x in &mut c.data {
+        *x = (*x / max * 400.0).round();
+    }
+    let p = dir.path("scan.ptu");
+    ptu::write_t3(&c, &p, &T3WriteOptions::default()).expect("write ptu");
+    (p.clone(), p.with_extension("json"))
+}
+
+/// The byte offsets in a PTU file where each row marker record starts, and the header's
+/// length.
+fn row_offsets(ptu_bytes: &[u8], side: &Path) -> (usize, Vec<usize>) {
+    let sidecar = Sidecar::load(side).expect("sidecar");
+    let h = ptu::Header::read(&mut &ptu_bytes[..], Path::new("scan.ptu")).expect("header");
+    let start = h.data_offset as usize;
+    let mut dec = ptu::Decoder::new(h.record_type);
+    let bit = 1u8 << (sidecar.row_marker - 1);
+    let mut rows = Vec::new();
+    for (i, r) in ptu_bytes[start..].chunks_exact(4).enumerate() {
+        let rec = u32::from_le_bytes([r[0], r[1], r[2], r[3]]);
+        if let ptu::Decoded::Event(ptu::Event::Marker { bits, .. }) = dec.decode(rec)
+            && bits & bit != 0
+        {
+            rows.push(start + 4 * i);
+        }
+    }
+    (start, rows)
+}
+
+/// Where `TTResult_NumberOfRecords`'s 8-byte value sits in the header.
+fn count_offset(bytes: &[u8]) -> usize {
+    let name = b"TTResult_NumberOfRecords";
+    let i = bytes
+        .windows(name.len())
+        .position(|w| w == name)
+        .expect("record count tag");
+    i + 32 + 4 + 4
+}
+
+/// Run by [`follows_a_ptu_file_written_by_another_process`] in a child process: writes the
+/// PTU file `$VLTM_WRITER_SRC` to `$VLTM_WRITER_DST` as an acquisition does — the header with
+/// a record count of 0, then each row's records `$VLTM_WRITER_DWELL_MS` after the previous
+/// ones (in two writes split inside a record), the count patched in at the end — stopping
+/// after `$VLTM_WRITER_ROWS` rows if set (a marker that never comes).
+#[test]
+#[ignore = "a helper process of follows_a_ptu_file_written_by_another_process"]
+fn ptu_writer_process() {
+    let Some(src) = std::env::var_os("VLTM_WRITER_SRC") else {
+        return;
+    };
+    let dst = PathBuf::from(std::env::var_os("VLTM_WRITER_DST").expect("dst"));
+    let dwell: u64 = std::env::var("VLTM_WRITER_DWELL_MS")
+        .expect("dwell")
+        .parse()
+        .expect("dwell ms");
+    let stop: Option<usize> = std::env::var("VLTM_WRITER_ROWS")
+        .ok()
+        .map(|s| s.parse().expect("rows"));
+    let bytes = std::fs::read(&src).expect("read src");
+    let side = PathBuf::from(&src).with_extension("json");
+    let (start, rows) = row_offsets(&bytes, &side);
+    let at = count_offset(&bytes);
+    let mut header = bytes[..start].to_vec();
+    header[at..at + 8].copy_from_slice(&0i64.to_le_bytes());
+    let mut f = std::fs::File::create(&dst).expect("create dst");
+    // The header in two pieces: the reader waits inside it too.
+    f.write_all(&header[..start / 2]).expect("write");
+    f.flush().expect("flush");
+    std::thread::sleep(Duration::from_millis(dwell));
+    f.write_all(&header[start / 2..]).expect("write");
+    let mut cuts = rows.clone();
+    cuts.push(bytes.len());
+    let n = stop.unwrap_or(rows.len());
+    for w in cuts.windows(2).take(n) {
+        let (a, b) = (w[0], w[1]);
+        // Split inside a record: the reader sees an incomplete record and waits.
+        let mid = (a + (b - a) / 2) | 1;
+        let mid = mid.min(b);
+        std::thread::sleep(Duration::from_millis(dwell));
+        f.write_all(&bytes[a..mid]).expect("write");
+        f.flush().expect("flush");
+        f.write_all(&bytes[mid..b]).expect("write");
+        f.flush().expect("flush");
+    }
+    if stop.is_none() {
+        f.seek(SeekFrom::Start(at as u64)).expect("seek");
+        f.write_all(&bytes[at..at + 8]).expect("patch count");
+        f.flush().expect("flush");
+    }
+}
+
+/// Starts [`ptu_writer_process`] in a child process.
+fn spawn_writer(src: &Path, dst: &Path, dwell_ms: u64, rows: Option<usize>) -> std::process::Child {
+    let mut c = Command::new(std::env::current_exe().expect("test exe"));
+    c.args(["--ignored", "--exact", "ptu_writer_process", "--nocapture"])
+        .env("VLTM_WRITER_SRC", src)
+        .env("VLTM_WRITER_DST", dst)
+        .env("VLTM_WRITER_DWELL_MS", dwell_ms.to_string())
+        .stdout(Stdio::null());
+    if let Some(r) = rows {
+        c.env("VLTM_WRITER_ROWS", r.to_string());
+    }
+    c.spawn().expect("spawn writer")
+}
+
+/// GET `path` from a server on loopback: the body, or `None` if it does not answer.
+fn http_get(port: u16, path: &str) -> Option<Vec<u8>> {
+    let mut s = TcpStream::connect(("127.0.0.1", port)).ok()?;
+    s.set_read_timeout(Some(Duration::from_secs(5))).ok()?;
+    write!(s, "GET {path} HTTP/1.1\r\nHost: localhost\r\n\r\n").ok()?;
+    let mut buf = Vec::new();
+    s.read_to_end(&mut buf).ok()?;
+    let i = buf.windows(4).position(|w| w == b"\r\n\r\n")?;
+    buf[..i]
+        .starts_with(b"HTTP/1.1 200")
+        .then(|| buf[i + 4..].to_vec())
+}
+
+/// A free loopback port.
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0")
+        .expect("bind")
+        .local_addr()
+        .expect("addr")
+        .port()
+}
+
+#[test]
+fn replay_matches_the_offline_commands() {
+    let d = TempDir::new("replay");
+    let cap = fixture("two_patches");
+    let cap = cap.to_str().expect("utf-8");
+    let out = d.path("live.npy");
+    let o = vltm(&[
+        "live",
+        cap,
+        "--replay-rate",
+        "400",
+        "--volume",
+        SPEC,
+        "--focus",
+        FOCUS,
+        "--every",
+        "16",
+        "--out",
+        out.to_str().expect("utf-8"),
+    ]);
+    ok(&o);
+    let err = text(&o.stderr);
+    // The progress line: rows, photons/s, time per row against the dwell, ETA.
+    let progress: Vec<&str> = err
+        .lines()
+        .filter(|l| l.starts_with("live: rows"))
+        .collect();
+    assert!(!progress.is_empty(), "no progress line in {err}");
+    assert!(
+        progress.iter().all(|l| l.contains("photons/s")
+            && l.contains("ms/row folded vs")
+            && l.contains("ms dwell")
+            && l.contains("ETA")),
+        "{progress:?}"
+    );
+    assert!(progress.last().is_some_and(|l| l.contains("rows 64/64")));
+    let offline = |args: &[&str], name: &str| {
+        let p = d.path(name);
+        let mut a = args.to_vec();
+        a.extend(["--volume", SPEC, "--out", p.to_str().expect("utf-8")]);
+        ok(&vltm(&a));
+        npy(&p)
+    };
+    let direct = offline(&["direct", cap], "direct.npy");
+    let column = offline(&["column", cap, "--focus", FOCUS], "column.npy");
+    let indirect = offline(&["indirect", cap], "indirect.npy");
+    let same = close(&npy(&out), &direct, "direct light");
+    eprintln!(
+        "direct light: {same} of {} voxels bit-identical",
+        direct.len()
+    );
+    close(&npy(&d.path("live.column0.npy")), &column, "column");
+    close(
+        &npy(&d.path("live.indirect.npy")),
+        &indirect,
+        "indirect light",
+    );
+    for f in [
+        "live.png",
+        "live.column0.png",
+        "live.indirect.png",
+        "live.transient.png",
+        "live.direct.part",
+        "live.column0.part",
+    ] {
+        assert!(d.path(f).is_file(), "{f} missing");
+    }
+    // The final states are complete: `vltm merge` finishes them into the same volume.
+    let merged = d.path("merged.npy");
+    ok(&vltm(&[
+        "merge",
+        d.path("live.direct.part").to_str().expect("utf-8"),
+        "--out",
+        merged.to_str().expect("utf-8"),
+    ]));
+    assert_eq!(npy(&merged), npy(&out));
+    // A second run onto the same states is refused (they would be replaced by fewer rows).
+    let again = vltm(&[
+        "live",
+        cap,
+        "--replay-rate",
+        "400",
+        "--volume",
+        SPEC,
+        "--out",
+        out.to_str().expect("utf-8"),
+    ]);
+    fails_with(&again, &["live.direct.part exists", "--resume"]);
+}
+
+#[test]
+fn follows_a_ptu_file_written_by_another_process() {
+    let d = TempDir::new("follow");
+    let (src, side) = make_ptu(&d);
+    let live_ptu = d.path("acq.ptu");
+    std::fs::copy(&side, live_ptu.with_extension("json")).expect("sidecar");
+    let mut writer = spawn_writer(&src, &live_ptu, DWELL_MS, None);
+    // The file appears when the writer starts.
+    let t = Instant::now();
+    while !live_ptu.exists() && t.elapsed() < Duration::from_secs(30) {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let port = free_port();
+    let out = d.path("live.npy");
+    let child = Command::new(support::vltm_bin())
+        .args([
+            "live",
+            live_ptu.to_str().expect("utf-8"),
+            "--volume",
+            SPEC,
+            "--focus",
+            FOCUS,
+            "--every",
+            "8",
+            "--no-indirect",
+            "--serve",
+            &port.to_string(),
+            "--linger",
+            "1",
+            "--out",
+            out.to_str().expect("utf-8"),
+        ])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn vltm live");
+    // The served status advances while the file grows.
+    let mut seen = Vec::new();
+    let t = Instant::now();
+    while t.elapsed() < Duration::from_secs(60) {
+        if let Some(b) = http_get(port, "/status.json") {
+            let v: serde_json::Value = serde_json::from_slice(&b).expect("status json");
+            let rows = v["rows"].as_u64().unwrap_or(0);
+            if seen.last() != Some(&rows) {
+                seen.push(rows);
+            }
+            if v["done"].as_bool() == Some(true) {
+                break;
+            }
+            if rows > 0 {
+                assert!(
+                    http_get(port, "/png/direct.png").is_some_and(|p| p.starts_with(b"\x89PNG")),
+                    "no figure served"
+                );
+            }
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let o = child.wait_with_output().expect("vltm live");
+    assert!(writer.wait().expect("writer").success());
+    ok(&o);
+    let partway: Vec<_> = seen.iter().filter(|&&r| r > 0 && r < 64).collect();
+    assert!(
+        partway.len() >= 3,
+        "the rows should appear while the file is written: {seen:?}"
+    );
+    assert_eq!(seen.last(), Some(&64), "{seen:?}");
+    // The progress line shows the dwell read from the sync clock: not far from 87 ms.
+    let err = text(&o.stderr);
+    assert!(err.contains("ms dwell"), "{err}");
+    let last = err.lines().rfind(|l| l.starts_with("live: rows"));
+    eprintln!("followed at {DWELL_MS} ms per row: {last:?}; rows seen by the server: {seen:?}");
+    // The finished file, offline.
+    let p = |n: &str| d.path(n).to_str().expect("utf-8").to_string();
+    let f = live_ptu.to_str().expect("utf-8");
+    ok(&vltm(&[
+        "direct",
+        f,
+        "--volume",
+        SPEC,
+        "--out",
+        &p("d.npy"),
+    ]));
+    ok(&vltm(&[
+        "column",
+        f,
+        "--focus",
+        FOCUS,
+        "--volume",
+        SPEC,
+        "--out",
+        &p("c.npy"),
+    ]));
+    close(&npy(&out), &npy(&d.path("d.npy")), "direct light");
+    close(
+        &npy(&d.path("live.column0.npy")),
+        &npy(&d.path("c.npy")),
+        "column",
+    );
+    assert_eq!(
+        std::fs::read(&live_ptu).expect("read"),
+        std::fs::read(&src).expect("read"),
+        "the writer wrote the file"
+    );
+}
+
+#[test]
+fn a_marker_that_never_comes_keeps_the_rows_before_it_and_resumes() {
+    let d = TempDir::new("never");
+    let (src, side) = make_ptu(&d);
+    let live_ptu = d.path("acq.ptu");
+    std::fs::copy(&side, live_ptu.with_extension("json")).expect("sidecar");
+    // The writer stops after 40 rows: the 41st row marker never comes.
+    let mut writer = spawn_writer(&src, &live_ptu, 5, Some(40));
+    let t = Instant::now();
+    while !live_ptu.exists() && t.elapsed() < Duration::from_secs(30) {
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let out = d.path("live.npy");
+    let o = vltm(&[
+        "live",
+        live_ptu.to_str().expect("utf-8"),
+        "--volume",
+        SPEC,
+        "--every",
+        "16",
+        "--idle-timeout",
+        "1.5",
+        "--no-indirect",
+        "--out",
+        out.to_str().expect("utf-8"),
+    ]);
+    assert!(writer.wait().expect("writer").success());
+    let line = fails_with(
+        &o,
+        &[
+            "acq.ptu",
+            "markers",
+            "64 row markers",
+            "stopped growing",
+            "byte",
+        ],
+    );
+    assert!(line.contains("40 before"), "{line}");
+    let state = d.path("live.direct.part");
+    let part = vltm::probe::Partial::read(&state).expect("the last good state is kept");
+    assert_eq!(part.rows(), vec![0..39], "rows whose end marker came");
+    // The acquisition goes on (the whole file now): resume from the state.
+    std::fs::copy(&src, &live_ptu).expect("finish the file");
+    let o = vltm(&[
+        "live",
+        live_ptu.to_str().expect("utf-8"),
+        "--volume",
+        SPEC,
+        "--every",
+        "16",
+        "--no-indirect",
+        "--resume",
+        state.to_str().expect("utf-8"),
+        "--out",
+        out.to_str().expect("utf-8"),
+    ]);
+    ok(&o);
+    assert!(text(&o.stdout).contains("resuming after row 39"));
+    let off = d.path("d.npy");
+    ok(&vltm(&[
+        "direct",
+        live_ptu.to_str().expect("utf-8"),
+        "--volume",
+        SPEC,
+        "--out",
+        off.to_str().expect("utf-8"),
+    ]));
+    close(&npy(&out), &npy(&off), "resumed direct light");
+    // A state of another configuration is refused, naming it.
+    let o = vltm(&[
+        "live",
+        live_ptu.to_str().expect("utf-8"),
+        "--volume",
+        "-0.6:0.6:7,-0.1:0.1:3,0.5:1.2:8",
+        "--no-indirect",
+        "--resume",
+        state.to_str().expect("utf-8"),
+        "--out",
+        d.path("other.npy").to_str().expect("utf-8"),
+    ]);
+    fails_with(
+        &o,
+        &[
+            "--resume",
+            "live.direct.part",
+            "not a state of this capture",
+        ],
+    );
+}
+
+#[test]
+fn bad_streams_fail_with_one_line_naming_the_position() {
+    let d = TempDir::new("bad");
+    let (src, side) = make_ptu(&d);
+    let bytes = std::fs::read(&src).expect("read");
+    let (_, rows) = row_offsets(&bytes, &side);
+    let side_s = side.to_str().expect("utf-8");
+    let out = d.path("o.npy");
+    let out_s = out.to_str().expect("utf-8");
+    // A pipe that stops mid-record, after 10 rows.
+    let cut = rows[10] + 2;
+    let mut child = Command::new(support::vltm_bin())
+        .args([
+            "live",
+            "-",
+            "--sidecar",
+            side_s,
+            "--volume",
+            SPEC,
+            "--every",
+            "4",
+            "--no-indirect",
+            "--out",
+            out_s,
+        ])
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    child
+        .stdin
+        .take()
+        .expect("stdin")
+        .write_all(&bytes[..cut])
+        .expect("pipe");
+    let o = child.wait_with_output().expect("wait");
+    fails_with(
+        &o,
+        &[
+            "<stdin>",
+            "records",
+            "partial record of 2 bytes",
+            &format!("byte {}", cut - 2),
+        ],
+    );
+    // The 9 rows closed by a row marker are kept as a state.
+    let part = vltm::probe::Partial::read(&d.path("o.direct.part")).expect("state kept");
+    assert_eq!(part.rows(), vec![0..9]);
+    // A header that is not T3 (a T2 record type).
+    let mut t2 = bytes.clone();
+    let name = b"TTResultFormat_TTTRRecType";
+    let i = t2
+        .windows(name.len())
+        .position(|w| w == name)
+        .expect("record type tag")
+        + 40;
+    t2[i..i + 8].copy_from_slice(&0x0101_0204i64.to_le_bytes());
+    let bad = d.path("t2.ptu");
+    std::fs::write(&bad, &t2).expect("write");
+    std::fs::copy(&side, bad.with_extension("json")).expect("sidecar");
+    let o = vltm(&[
+        "live",
+        bad.to_str().expect("utf-8"),
+        "--volume",
+        SPEC,
+        "--out",
+        d.path("t2.npy").to_str().expect("utf-8"),
+    ]);
+    fails_with(&o, &["t2.ptu", "TTResultFormat_TTTRRecType"]);
+    assert!(!d.path("t2.npy").exists() && !d.path("t2.direct.part").exists());
+    // A port in use.
+    let l = std::net::TcpListener::bind("127.0.0.1:0").expect("bind");
+    let port = l.local_addr().expect("addr").port();
+    let o = vltm(&[
+        "live",
+        src.to_str().expect("utf-8"),
+        "--volume",
+        SPEC,
+        "--serve",
+        &port.to_string(),
+        "--out",
+        d.path("p.npy").to_str().expect("utf-8"),
+    ]);
+    fails_with(&o, &["--serve", &format!("127.0.0.1:{port}")]);
+    drop(l);
+}
+
+/// The follower over a finished stream gives [`PtuSource`]'s rows; every truncation of the
+/// stream is an error naming the position, never a panic or a wrong row.
+#[test]
+fn follower_equals_ptu_source_and_truncations_fail_cleanly() {
+    let d = TempDir::new("follower");
+    let (src, side) = make_ptu(&d);
+    let bytes = std::fs::read(&src).expect("read");
+    let sc = Sidecar::load(&side).expect("sidecar");
+    let mut a = PtuSource::open(&src, &side).expect("open");
+    let mut f = Follower::stream(
+        Box::new(std::io::Cursor::new(bytes.clone())),
+        Path::new("s"),
+        sc.clone(),
+        &side,
+    )
+    .expect("follower");
+    let mut row = Vec::new();
+    for l in 0..a.geometry().lasers.len() {
+        a.read_row(l, &mut row).expect("row");
+        let r = f.next_row().expect("row").expect("a row");
+        assert_eq!((r.index, &r.data), (l, &row));
+        assert!(r.seconds.is_some_and(|s| s > 0.0));
+    }
+    assert!(f.next_row().expect("end").is_none());
+    assert_eq!(f.counts().binned, a.counts().binned);
+    // Truncations at 97 positions across the file.
+    let (start, _) = row_offsets(&bytes, &side);
+    let mut cut = 1;
+    while cut < bytes.len() {
+        let mut b = bytes[..cut].to_vec();
+        // The count says 0 (a stream): the end of the pipe ends it.
+        if cut > start {
+            let at = count_offset(&b);
+            b[at..at + 8].copy_from_slice(&0i64.to_le_bytes());
+        }
+        let r = Follower::stream(
+            Box::new(std::io::Cursor::new(b)),
+            Path::new("s"),
+            sc.clone(),
+            &side,
+        );
+        if let Ok(mut f) = r {
+            let mut n = 0;
+            let e = loop {
+                match f.next_row() {
+                    Ok(Some(_)) => n += 1,
+                    Ok(None) => break None,
+                    Err(e) => break Some(e),
+                }
+            };
+            if let Some(e) = e {
+                let m = e.to_string();
+                assert!(m.contains("byte"), "cut {cut}: {m}");
+            } else {
+                assert_eq!(n, 64, "cut {cut} ended cleanly with {n} rows");
+            }
+        }
+        cut += bytes.len() / 97 + 1;
+    }
+}
