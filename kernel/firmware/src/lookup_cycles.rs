@@ -12,7 +12,8 @@ use vltm_kernel::{Lookup, LookupGrid, LookupParams, LookupProbe, Point, RowBuffe
 const L_MAX: usize = 1024;
 
 /// Runs the measurements. `measure(f)` returns the SysTick ticks taken by `f`,
-/// `per_tick` the instructions per tick. Returns `false` if a kernel call was rejected.
+/// `per_tick` the instructions per tick. Returns the 64×64 diagonal's and column's
+/// instructions per row at the default tolerance, `None` if a kernel call was rejected.
 pub fn run(
     scan: &Scan<'_>,
     rows: &mut RowBuffer<'_>,
@@ -20,39 +21,41 @@ pub fn run(
     voxels: &[Point],
     measure: &mut dyn FnMut(&mut dyn FnMut()) -> u64,
     per_tick: f64,
-) -> bool {
+) -> Option<[f64; 2]> {
     const KV_MAX: usize = 64 * 64;
     let (Some(tables), Some(state), Some(scratch)) = (
         singleton!(: [f32; 4 * L_MAX] = [0.0; 4 * L_MAX]),
         singleton!(: [f64; 2 * KV_MAX] = [0.0; 2 * KV_MAX]),
         singleton!(: [f32; 2 * (L_MAX + 3) + 3 * KV_MAX] = [0.0; 2 * (L_MAX + 3) + 3 * KV_MAX]),
     ) else {
-        return false;
+        return None;
     };
     let cfg = scan.config();
     let ks = scan.spads().len();
     let kv = voxels.len().min(KV_MAX);
     let Some(voxels) = voxels.get(..kv) else {
-        return false;
+        return None;
     };
     let laser = [-0.45f32, -0.5, 0.0];
+    // Instructions of the diagonal and the column at the default tolerance (the first).
+    let mut first: Option<[f64; 2]> = None;
     for tol in [1e-5, 1e-4] {
         let p = LookupParams {
             tolerance: tol,
             grid_len: None,
         };
         let Ok(grid) = LookupGrid::try_new(cfg, &p) else {
-            return false;
+            return None;
         };
         let l = grid.len();
         if l > L_MAX {
-            return false;
+            return None;
         }
         let Some(t) = tables.get_mut(..Lookup::tables_len(&grid)) else {
-            return false;
+            return None;
         };
         let Ok(lookup) = Lookup::new(&grid, t) else {
-            return false;
+            return None;
         };
         let mut counts = [0u64; 3];
         for (k, (target, n)) in [
@@ -64,24 +67,24 @@ pub fn run(
         .enumerate()
         {
             let Some(vox) = voxels.get(..n) else {
-                return false;
+                return None;
             };
             let (Some(s), Some(sc)) = (
                 state.get_mut(..LookupProbe::state_len(n)),
                 scratch.get_mut(..LookupProbe::scratch_len(&grid, n)),
             ) else {
-                return false;
+                return None;
             };
             let Ok(mut probe) = LookupProbe::new(scan, &lookup, target, vox, s, sc) else {
-                return false;
+                return None;
             };
             let Ok(row) = rows.load(scan, laser, hists) else {
-                return false;
+                return None;
             };
             let mut ok = true;
             let t = measure(&mut || ok = probe.push_row(scan, &lookup, &row).is_ok());
             if !ok {
-                return false;
+                return None;
             }
             if let Some(c) = counts.get_mut(k) {
                 *c = t;
@@ -107,6 +110,7 @@ pub fn run(
             i(t_col),
             i(t_col) / pairs
         );
+        first.get_or_insert([i(t_diag), i(t_col)]);
     }
-    true
+    first
 }
