@@ -502,6 +502,7 @@ fn opts(
             band_half_width: band,
             compensate_laser,
             auto_margin: true,
+            crop: true,
         },
         path,
     })

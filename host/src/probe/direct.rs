@@ -2,6 +2,7 @@
 //! (planar FFT convolution, baseband lookup or the kernel's band sum, DESIGN §B.8).
 
 use super::confocal;
+use super::crop::{Crop, Reach, with_crop};
 use super::drive::*;
 use super::wave::*;
 use crate::budget;
@@ -38,6 +39,7 @@ pub fn direct(
         seconds: t.elapsed().as_secs_f64(),
         config,
         path: a.path,
+        crop: a.crop,
     })
 }
 
@@ -47,18 +49,40 @@ pub(super) struct Amplitudes {
     pub(super) acc: Vec<Complex64>,
     pub(super) report: Report,
     pub(super) path: Path,
+    /// The part of the time axis kept.
+    pub(super) crop: Option<Crop>,
 }
 
 /// The accumulators of [`direct`] over the source's rows ([`RowSource::rows`]), with the
-/// configuration.
+/// configuration (of the time axis cropped to the voxels' reach, `crop`).
 pub(super) fn direct_acc(
     src: &mut dyn RowSource,
     volume: &Volume,
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<(Amplitudes, Config)> {
+    let base = wave.config(src.geometry())?;
+    check_window(src.geometry(), &base, None, &volume.points, false)?;
+    let reach = Reach {
+        foci: None,
+        voxels: &volume.points,
+        late: false,
+    };
+    with_crop(src, wave, exec, reach, |src, exec, crop| {
+        let (mut a, cfg) = direct_acc_on(src, volume, wave, exec)?;
+        a.crop = crop;
+        Ok((a, cfg))
+    })
+}
+
+/// [`direct_acc`] on the (cropped) source.
+fn direct_acc_on(
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    wave: &Wave,
+    exec: Exec<'_>,
+) -> Result<(Amplitudes, Config)> {
     let cfg = wave.config(src.geometry())?;
-    check_window(src.geometry(), &cfg, None, &volume.points, false)?;
     check_memory(
         src.geometry(),
         &cfg,
@@ -73,7 +97,15 @@ pub(super) fn direct_acc(
     let g = src.geometry();
     if g.confocal {
         let (acc, report, path) = direct_confocal(src, job, volume)?;
-        return Ok((Amplitudes { acc, report, path }, cfg));
+        return Ok((
+            Amplitudes {
+                acc,
+                report,
+                path,
+                crop: None,
+            },
+            cfg,
+        ));
     }
     let band_cost = band_flops(g, &cfg, volume.len());
     let lookup_cost = Some({
@@ -110,7 +142,15 @@ pub(super) fn direct_acc(
         )?;
         (acc, report, Path::Band)
     };
-    Ok((Amplitudes { acc, report, path }, cfg))
+    Ok((
+        Amplitudes {
+            acc,
+            report,
+            path,
+            crop: None,
+        },
+        cfg,
+    ))
 }
 
 /// Direct light of a confocal capture: the confocal convolution on a regular wall grid

@@ -22,6 +22,7 @@
 
 mod column;
 mod confocal;
+mod crop;
 mod direct;
 mod drive;
 pub mod fast;
@@ -34,6 +35,7 @@ mod wave;
 
 pub use crate::exec::{Exec, Path};
 pub use column::{ColumnGate, Shell, check_focus, column, diagonal};
+pub use crop::Crop;
 pub use direct::direct;
 pub use indirect::{
     IndirectOptions, IndirectOutput, fit_over_volume, gamma_mask, indirect, indirect_over,

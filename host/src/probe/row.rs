@@ -143,5 +143,6 @@ pub fn row(
         seconds: t.elapsed().as_secs_f64(),
         config: cfg,
         path: Path::Band,
+        crop: None,
     })
 }

@@ -68,6 +68,10 @@ pub(crate) struct WaveArgs {
     /// Divide each laser row by the physical laser's cos θ / d² falloff to its spot.
     #[arg(long)]
     compensate_laser: bool,
+    /// Keep the whole time axis (by default it is cropped to the bins the probed voxels can
+    /// reach, with the gate's support, before the band transform).
+    #[arg(long)]
+    no_crop: bool,
 }
 
 impl WaveArgs {
@@ -83,6 +87,7 @@ impl WaveArgs {
             band_half_width: self.band,
             compensate_laser: self.compensate_laser,
             auto_margin: true,
+            crop: !self.no_crop,
         }
     }
 }
@@ -405,6 +410,9 @@ fn finish(
         &o.config,
         Some(o.path),
     );
+    if let Some(cr) = o.crop {
+        say!("{probe}: {cr}");
+    }
     let meta = Provenance {
         probe,
         config: &o.config,

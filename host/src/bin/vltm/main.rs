@@ -869,6 +869,9 @@ fn finish_probe(
         &o.config,
         Some(o.path),
     );
+    if let Some(c) = o.crop {
+        say!("{probe}: {c}");
+    }
     let meta = Provenance {
         probe,
         config: &o.config,
