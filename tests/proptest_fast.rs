@@ -1695,8 +1695,14 @@ fn cropped_axis_matches_uncropped_and_reference() {
             );
             s.max("cropped/ref err/tol", r.worst);
             s.max("cropped/uncropped err/tol", u.worst);
-            prop_assert!(r.worst <= 1.0, "{path:?} cropped vs reference: {r:?}, {tol:?}");
-            prop_assert!(u.worst <= 1.0, "{path:?} cropped vs uncropped: {u:?}, {tol:?}");
+            prop_assert!(
+                r.worst <= 1.0,
+                "{path:?} cropped vs reference: {r:?}, {tol:?}"
+            );
+            prop_assert!(
+                u.worst <= 1.0,
+                "{path:?} cropped vs uncropped: {u:?}, {tol:?}"
+            );
         }
         s.count("cases cropped", any);
         // The two-bounce column: the foci's legs widen the reach.
@@ -1713,15 +1719,27 @@ fn cropped_axis_matches_uncropped_and_reference() {
             .collect();
         let scale = fullc.scales(Kind::Column);
         let tol = fullc.tol(Kind::Column);
-        let u = compare(&a.values, &amplitudes(&b), &scale, 2.0 * tol.reference, &inside);
+        let u = compare(
+            &a.values,
+            &amplitudes(&b),
+            &scale,
+            2.0 * tol.reference,
+            &inside,
+        );
         s.max("column cropped/uncropped err/tol", u.worst);
         s.count("column cases cropped", a.crop.is_some());
-        prop_assert!(u.worst <= 1.0, "column cropped vs uncropped: {u:?}, {tol:?}");
+        prop_assert!(
+            u.worst <= 1.0,
+            "column cropped vs uncropped: {u:?}, {tol:?}"
+        );
         prop_assert_eq!(a.report.aliased, b.report.aliased, "alias counts");
         Ok(())
     });
     if coverage_checked() {
-        assert!(s.get("cases cropped") >= s.get("cases") / 2, "crop coverage");
+        assert!(
+            s.get("cases cropped") >= s.get("cases") / 2,
+            "crop coverage"
+        );
         assert!(s.get("column cases cropped") >= 3, "column crop coverage");
     }
 }

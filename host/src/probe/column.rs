@@ -128,6 +128,7 @@ pub fn diagonal(
         config: cfg,
         path: Path::Band,
         crop,
+        aligned: None,
     })
 }
 
@@ -173,6 +174,7 @@ pub fn column(
         config: cfg,
         path,
         crop,
+        aligned: None,
     })
 }
 

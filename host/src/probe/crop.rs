@@ -103,7 +103,9 @@ impl Bbox {
         let (mut near, mut far) = (0.0, 0.0);
         for i in 0..3 {
             let d = (o.lo[i] - self.hi[i]).max(self.lo[i] - o.hi[i]).max(0.0);
-            let f = (o.hi[i] - self.lo[i]).abs().max((self.hi[i] - o.lo[i]).abs());
+            let f = (o.hi[i] - self.lo[i])
+                .abs()
+                .max((self.hi[i] - o.lo[i]).abs());
             near += d * d;
             far += f * f;
         }
@@ -307,7 +309,9 @@ mod tests {
         }
         assert!(r.len() < 2_000, "{r:?}");
         // The late gate keeps the end; columns reach further than the diagonal.
-        let late = bins(&g, &wave, Reach { late: true, ..diag }).unwrap().unwrap();
+        let late = bins(&g, &wave, Reach { late: true, ..diag })
+            .unwrap()
+            .unwrap();
         assert_eq!((late.start, late.end), (r.start, g.nt));
         let col = Reach {
             foci: Some(&vox[..1]),
@@ -348,14 +352,10 @@ mod tests {
         };
         let r = bins(&g, &wave, reach).unwrap().unwrap();
         assert!(r.is_empty());
-        let mut c = crate::io::Capture::new(
-            g.clone(),
-            vec![0.0; 2 * 1000],
-            std::path::Path::new("c"),
-        )
-        .unwrap();
-        let e = with_crop(&mut c, &wave, Exec::default(), reach, |_, _, _| Ok(()))
-            .unwrap_err();
+        let mut c =
+            crate::io::Capture::new(g.clone(), vec![0.0; 2 * 1000], std::path::Path::new("c"))
+                .unwrap();
+        let e = with_crop(&mut c, &wave, Exec::default(), reach, |_, _, _| Ok(())).unwrap_err();
         let msg = e.to_string();
         assert!(msg.contains("--volume") && !msg.contains('\n'), "{msg}");
     }

@@ -1,6 +1,7 @@
 //! Direct light: the diagonal `T(x_v, x_v)` (Eqs. 11–12) on the cheapest applicable path
 //! (planar FFT convolution, baseband lookup or the kernel's band sum, DESIGN §B.8).
 
+use super::aligned::fast_hint;
 use super::confocal;
 use super::crop::{Crop, Reach, with_crop};
 use super::drive::*;
@@ -33,6 +34,9 @@ pub fn direct(
     let (a, config) = direct_acc(src, volume, wave, exec)?;
     let values = intensities(&a.acc);
     check_finite(&values, &volume.points, "direct light")?;
+    let aligned = (a.path != Path::Planar && volume.axes.is_some())
+        .then(|| fast_hint(src.geometry(), volume, config.wavelength()))
+        .flatten();
     Ok(Output {
         values,
         report: a.report,
@@ -40,6 +44,7 @@ pub fn direct(
         config,
         path: a.path,
         crop: a.crop,
+        aligned,
     })
 }
 

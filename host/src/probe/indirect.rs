@@ -5,9 +5,9 @@
 //! the same pass.
 
 use super::column::*;
+use super::crop::{Reach, with_crop};
 use super::direct::*;
 use super::drive::*;
-use super::crop::{Reach, with_crop};
 use super::leak::{DirectModel, LeakCorrected, LeakOptions, cell_radius};
 use super::wave::*;
 use crate::error::{Error, Result};

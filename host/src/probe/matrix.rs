@@ -561,6 +561,7 @@ pub fn relight(
             config: cfg,
             path: crate::exec::Path::Band,
             crop: None,
+            aligned: None,
         },
         passes,
     })

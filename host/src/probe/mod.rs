@@ -20,6 +20,7 @@
 //! the voxels in parallel at the end; the indirect sum keeps one factorised column per focus
 //! `a ∈ Γ`, pushed in parallel. Memory never grows with the number of laser rows.
 
+mod aligned;
 mod column;
 mod confocal;
 mod crop;
@@ -34,6 +35,7 @@ mod row;
 mod wave;
 
 pub use crate::exec::{Exec, Path};
+pub use aligned::aligned_volume;
 pub use column::{ColumnGate, Shell, check_focus, column, diagonal};
 pub use crop::Crop;
 pub use direct::direct;

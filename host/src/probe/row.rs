@@ -144,5 +144,6 @@ pub fn row(
         config: cfg,
         path: Path::Band,
         crop: None,
+        aligned: None,
     })
 }

@@ -294,6 +294,9 @@ pub struct Output {
     pub path: Path,
     /// The part of the time axis kept ([`Wave::crop`]); `None`: all of it.
     pub crop: Option<super::Crop>,
+    /// When a slower path than the FFT convolution ran on a grid because of its x–y pitch:
+    /// the `--volume` SPEC of the nearest grid the FFT path takes ([`super::aligned_volume`]).
+    pub aligned: Option<String>,
 }
 
 pub(super) fn dist64(a: &Point, b: &[f64; 3]) -> f64 {

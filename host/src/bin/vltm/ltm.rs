@@ -413,6 +413,12 @@ fn finish(
     if let Some(cr) = o.crop {
         say!("{probe}: {cr}");
     }
+    if let Some(v) = &o.aligned {
+        say!(
+            "{probe}: path {} (the FFT path needs an x-y pitch dividing the wall's; it would take --volume {v})",
+            o.path.name()
+        );
+    }
     let meta = Provenance {
         probe,
         config: &o.config,

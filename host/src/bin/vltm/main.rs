@@ -872,6 +872,12 @@ fn finish_probe(
     if let Some(c) = o.crop {
         say!("{probe}: {c}");
     }
+    if let Some(v) = &o.aligned {
+        say!(
+            "{probe}: path {} (the FFT path needs an x-y pitch dividing the wall's; it would take --volume {v})",
+            o.path.name()
+        );
+    }
     let meta = Provenance {
         probe,
         config: &o.config,

@@ -369,8 +369,8 @@ mod tests {
                     (a + f64::from(x) * c, b + f64::from(x) * si)
                 });
                 let got = band[s * cfg.bins() + j];
-                let err = ((f64::from(got.re) - re).powi(2) + (f64::from(got.im) - im).powi(2))
-                    .sqrt();
+                let err =
+                    ((f64::from(got.re) - re).powi(2) + (f64::from(got.im) - im).powi(2)).sqrt();
                 assert!(err <= 1e-5 * l1, "bin {j}: {got} vs ({re}, {im}), l1 {l1}");
             }
         }

@@ -906,6 +906,7 @@ impl Partial {
                 config: cfg,
                 path,
                 crop: None,
+                aligned: None,
             },
             amplitudes,
             volume,
