@@ -676,6 +676,8 @@ fn run<'py>(
                         seconds: r.seconds,
                         config,
                         path: EvalPath::Band,
+                        crop: None,
+                        aligned: None,
                     }
                 }
                 Task::Matrix { .. } => {
