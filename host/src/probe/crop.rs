@@ -77,9 +77,9 @@ impl Bbox {
             hi: first,
         };
         for p in pts {
-            for i in 0..3 {
-                b.lo[i] = b.lo[i].min(f64::from(p[i]));
-                b.hi[i] = b.hi[i].max(f64::from(p[i]));
+            for (i, &c) in p.iter().enumerate() {
+                b.lo[i] = b.lo[i].min(f64::from(c));
+                b.hi[i] = b.hi[i].max(f64::from(c));
             }
         }
         Some(b)
