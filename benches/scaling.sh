@@ -14,8 +14,73 @@
 #   SPADs   SPADs 8x8, 16x16 on the same wall (volume pitch = SPAD pitch, so planar applies)
 #   voxels  6, 12, 24 slices of the volume
 #   bins    400, 800, 1600 bins over the same 4.8 m window (Δt = 12, 6, 3 mm)
+#
+#   bash benches/scaling.sh --efficiency [THREADS...]   (default: 1 2, and 4 8 16 up to nproc)
+#
+# prints instead the parallel-efficiency table on exh16 itself: wall time of the whole command
+# for direct (auto path), column and indirect (defaults, leak correction) at each thread count
+# (best of REPEAT runs, default 2), the speed-up T1/Tn, the efficiency T1/(n·Tn) and Amdahl's
+# serial fraction f = (Tn/T1 − 1/n)/(1 − 1/n). Needs only bash, awk and the binary (set VLTM to a
+# prebuilt one to skip cargo, e.g. on a machine without a toolchain).
 set -euo pipefail
 cd "$(dirname "$0")/.."
+if [ "${1:-}" = "--efficiency" ]; then
+  shift
+  counts=("$@")
+  if [ ${#counts[@]} -eq 0 ]; then
+    counts=(1 2)
+    for n in 4 8 16; do [ "$n" -le "$(nproc)" ] && counts+=("$n"); done
+  fi
+  vltm="${VLTM:-}"
+  if [ -z "$vltm" ]; then
+    cargo build -q --release -p vltm --bin vltm
+    vltm="${CARGO_TARGET_DIR:-$PWD/target}/release/vltm"
+  fi
+  work="$(mktemp -d)"
+  trap 'rm -rf "$work"' EXIT
+  "$vltm" simulate benches/scenes/exh16.json --out "$work/exh16.npz" --uncompressed >/dev/null
+  vol='-0.9375:0.9375:16,-0.9375:0.9375:16,0.5:1.25:24'
+  common=(--volume "$vol" --wavelength 0.5 --sigma 0.5 --weights one --out "$work/o.npy")
+  declare -A cmd=(
+    [direct]="direct"
+    [column]="column --focus=-0.4,0,0.75"
+    [indirect]="indirect"
+  )
+  calc() { awk "BEGIN { print $1 }"; }
+  best() { # best N PROBE...: least wall seconds of REPEAT runs
+    local n="$1"; shift
+    local b=""
+    for _ in $(seq "${REPEAT:-2}"); do
+      local s e
+      s=$(date +%s.%N)
+      "$vltm" --threads "$n" "$@" "$work/exh16.npz" "${common[@]}" >/dev/null
+      e=$(date +%s.%N)
+      local t; t=$(calc "$e - $s")
+      if [ -z "$b" ] || [ "$(calc "$t < $b")" = 1 ]; then b=$t; fi
+    done
+    echo "$b"
+  }
+  echo "| probe | threads | wall time [s] | speed-up | efficiency | serial fraction |"
+  echo "|---|---|---|---|---|---|"
+  for probe in direct column indirect; do
+    read -r -a args <<<"${cmd[$probe]}"
+    t1=""
+    for n in "${counts[@]}"; do
+      t=$(best "$n" "${args[@]}")
+      [ -z "$t1" ] && t1=$t
+      sp=$(calc "$t1 / $t")
+      eff=$(calc "100 * $sp / $n")
+      if [ "$n" -gt 1 ]; then
+        f=$(calc "100 * ($t / $t1 - 1 / $n) / (1 - 1 / $n)")
+        f=$(printf '%.1f %%' "$f")
+      else
+        f="-"
+      fi
+      printf '| %s | %s | %.3f | %.2f | %.0f %% | %s |\n' "$probe" "$n" "$t" "$sp" "$eff" "$f"
+    done
+  done
+  exit 0
+fi
 threads="${1:-$(nproc)}"
 for tool in jq /usr/bin/time; do
   command -v "$tool" >/dev/null || { echo "scaling.sh needs $tool (apt-get install jq time)" >&2; exit 2; }

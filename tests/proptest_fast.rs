@@ -24,6 +24,7 @@
 //! | `confocal_diagonal_matches_reference_and_band` (96) | confocal captures (the case's SPAD grid as the wall points, laser and SPAD together; a quarter with one point jittered off the lattice): the confocal FFT convolution (`Path::Planar`), band and lookup vs the sum of one-pair references (`ε·S`, lookup `(ε + ε_interp)·S`), the convolution vs band on every voxel (`ε_pb·S`, also under `compensate_laser`), `Auto` vs band (`(ε_pb + ε_interp)·S`); jittered walls: `Path::Planar` an error; coverage of paths outside the guard, legs and r = 3 |
 //! | `forced_paths_that_do_not_apply_are_errors` | `Path::Lookup` on a column and `Path::Planar` on a higher-order or un-gated column → `Error::Argument` naming `--path`; the paths that apply succeed (every diagonal path on a confocal grid) |
 //! | `planar_path_rejects_non_planar_inputs` | point list, pitch ratio 2/3 or 3/2, one SPAD moved 1 mm, L-shaped or tilted SPADs, a confocal wall point moved 1 mm, a confocal point-list volume: `Path::Planar` → `Error::Argument` naming `--path` and the reason (diagonal and, not confocal, column); `Path::Auto` succeeds and equals `Path::Band` (within `(ε_pb + ε_interp)·S`, as Auto may pick the lookup) |
+//! | `cropped_axis_matches_uncropped_and_reference` (64) | the automatic crop of the time axis (`Wave::crop`) on long axes (Nt × 8, up to 2,400 bins, the returns anywhere in the window): the cropped band and `Auto` diagonals vs the reference (`ε·S`, `Auto` `(ε + ε_interp)·S`) and vs the uncropped ones (`(2ε + ε_interp)·S`); the cropped two-bounce column vs the uncropped one on the alias-free voxels, equal alias counts; the crop recorded in `Output::crop` and its configuration of the kept bins; coverage: most cases cropped |
 //! | `tolerances_detect_small_mistakes` | the comparisons fail on small perturbations (below) |
 //! | `spad_order_does_not_matter`, `descending_voxel_axes` | edge cases of the grid detection |
 //!
@@ -351,6 +352,9 @@ impl Case {
             // These properties compare against the reference under `params` (its own
             // alias-free window and alias counts); the automatic margin is tested in e2e.
             auto_margin: false,
+            // And under its configuration: the time axis is cropped only in
+            // `cropped_axis_matches_uncropped_and_reference`.
+            crop: false,
         };
         Scan {
             capture,
@@ -1058,6 +1062,7 @@ impl Case {
             band_half_width: self.m,
             compensate_laser: false,
             auto_margin: false,
+            crop: false,
         };
         Confocal {
             scan: Scan {
@@ -1641,5 +1646,100 @@ fn descending_voxel_axes() {
             let a = compare(&auto.values, &b, &scale, tol.pb + tol.interp, &all);
             assert!(p.worst <= 1.0 && a.worst <= 1.0, "{p:?} {a:?}");
         }
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Property: the automatic crop of the time axis
+// ---------------------------------------------------------------------------------------------
+
+/// Long time axes (the case's Nt × 8): the probes crop the axis to the voxels' reach
+/// (`Wave::crop`, the default) and agree with the uncropped probes and with the reference.
+/// Differences come from the gate's tail beyond `c_g·σ` and the band truncation on either
+/// axis, both inside `ε` (module docs), so cropped vs uncropped is held to `2ε`.
+#[test]
+fn cropped_axis_matches_uncropped_and_reference() {
+    let long = case().prop_map(|c| Case {
+        nt: (c.nt * 8).min(2400),
+        cover: true,
+        ..c
+    });
+    let s = property("cropped time axis", SEED ^ 4, 64, long, |c, s| {
+        let full = c.build(Kind::Diagonal);
+        let mut cropped = full.clone();
+        cropped.wave.crop = true;
+        let truth = full.reference_amplitudes(Kind::Diagonal);
+        let scale = full.scales(Kind::Diagonal);
+        let tol = full.tol(Kind::Diagonal);
+        let all = vec![true; truth.len()];
+        let mut any = false;
+        for path in [Path::Band, Path::Auto] {
+            let a = cropped.direct(path).expect("cropped");
+            let b = full.direct(path).expect("uncropped");
+            prop_assert_eq!(b.crop, None);
+            if let Some(cr) = a.crop {
+                any = true;
+                prop_assert!(cr.end - cr.start < c.nt && cr.end <= c.nt, "{cr:?}");
+                prop_assert_eq!(a.config.nt(), cr.end - cr.start);
+                let t0 = full.params.t0 + cr.start as f64 * full.params.dt;
+                prop_assert!((a.config.t0() - t0).abs() <= 1e-9 * (1.0 + t0.abs()));
+            }
+            let interp = if path == Path::Band { 0.0 } else { tol.interp };
+            let r = compare(&a.values, &truth, &scale, tol.reference + interp, &all);
+            let u = compare(
+                &a.values,
+                &amplitudes(&b),
+                &scale,
+                2.0 * tol.reference + interp,
+                &all,
+            );
+            s.max("cropped/ref err/tol", r.worst);
+            s.max("cropped/uncropped err/tol", u.worst);
+            prop_assert!(
+                r.worst <= 1.0,
+                "{path:?} cropped vs reference: {r:?}, {tol:?}"
+            );
+            prop_assert!(
+                u.worst <= 1.0,
+                "{path:?} cropped vs uncropped: {u:?}, {tol:?}"
+            );
+        }
+        s.count("cases cropped", any);
+        // The two-bounce column: the foci's legs widen the reach.
+        let fullc = c.build(Kind::Column);
+        let mut croppedc = fullc.clone();
+        croppedc.wave.crop = true;
+        let a = croppedc.column(Path::Band).expect("cropped column");
+        let b = fullc.column(Path::Band).expect("uncropped column");
+        let cfg = fullc.config();
+        let inside: Vec<bool> = fullc
+            .outside(Kind::Column, cfg.alias_free())
+            .iter()
+            .map(|o| *o == Some(false))
+            .collect();
+        let scale = fullc.scales(Kind::Column);
+        let tol = fullc.tol(Kind::Column);
+        let u = compare(
+            &a.values,
+            &amplitudes(&b),
+            &scale,
+            2.0 * tol.reference,
+            &inside,
+        );
+        s.max("column cropped/uncropped err/tol", u.worst);
+        s.count("column cases cropped", a.crop.is_some());
+        prop_assert!(
+            u.worst <= 1.0,
+            "column cropped vs uncropped: {u:?}, {tol:?}"
+        );
+        prop_assert_eq!(a.report.aliased, b.report.aliased, "alias counts");
+        Ok(())
+    });
+    if coverage_checked() {
+        assert!(
+            s.get("cases cropped") >= s.get("cases") / 2,
+            "crop coverage"
+        );
+        assert!(s.get("column cases cropped") >= 3, "column crop coverage");
     }
 }

@@ -96,6 +96,7 @@ fn wave(wl: f64) -> Wave {
         band_half_width: 6.0,
         compensate_laser: true,
         auto_margin: true,
+        crop: true,
     }
 }
 

@@ -361,6 +361,10 @@ pub(crate) struct WaveArgs {
     /// Divide each laser row by the physical laser's cos θ / d² falloff to its spot.
     #[arg(long)]
     pub(crate) compensate_laser: bool,
+    /// Keep the whole time axis (by default it is cropped to the bins the probed voxels can
+    /// reach, with the gate's support, before the band transform).
+    #[arg(long)]
+    pub(crate) no_crop: bool,
 }
 
 impl WaveArgs {
@@ -376,6 +380,7 @@ impl WaveArgs {
             band_half_width: self.band,
             compensate_laser: self.compensate_laser,
             auto_margin: true,
+            crop: !self.no_crop,
         }
     }
 }

@@ -2,9 +2,9 @@
 //! `--t-start`, `--grid-width`, for `.mat` captures), the preprocessing of raw counts
 //! (`--t-min`, `--t-max`, `--rebin`, `--background`, [`vltm::io::prep`]), and `vltm info`.
 
+use crate::console::tell;
 use crate::console::{Failure, flag, say};
 use crate::outputs::refuse_overwriting_inputs;
-use crate::console::tell;
 use clap::Args;
 use std::path::Path;
 use vltm::atomic::Transaction;

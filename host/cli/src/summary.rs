@@ -85,6 +85,16 @@ pub(crate) fn finish(
         &o.config,
         Some(o.path),
     );
+    if let Some(c) = o.crop {
+        say!("{}: {c}", label.probe);
+    }
+    if let Some(v) = &o.aligned {
+        say!(
+            "{}: path {} (the FFT path needs an x-y pitch dividing the wall's; it would take --volume {v})",
+            label.probe,
+            o.path.name()
+        );
+    }
     let meta = Provenance {
         probe: label.probe,
         config: &o.config,

@@ -52,6 +52,7 @@ fn wave_of(
         band_half_width: band,
         compensate_laser,
         auto_margin: true,
+        crop: true,
     };
     Ok((wave, path))
 }
@@ -591,8 +592,8 @@ fn one_pass(
                     (o.values, None, o.report, o.explained)
                 }
                 Some(cuts) => {
-                    let (s, r) =
-                        probe::indirect_shells(rows, vol, &gamma, &opts, &cuts, wave, exec)?;
+                    let p = probe::indirect_shells(rows, vol, &gamma, &opts, &cuts, wave, exec)?;
+                    let (s, r) = (p.sums, p.report);
                     let total: Vec<f32> = (0..vol.len())
                         .map(|i| s.iter().map(|v| v[i]).sum::<f32>())
                         .collect();
@@ -606,6 +607,8 @@ fn one_pass(
                 seconds: t.elapsed().as_secs_f64(),
                 config,
                 path: EvalPath::Band,
+                crop: None,
+                aligned: None,
             });
             d.parts = parts;
             d.explained = explained;

@@ -389,6 +389,10 @@ impl RowSource for Prepared<'_> {
         &self.geometry
     }
 
+    fn rows(&self) -> std::ops::Range<usize> {
+        self.inner.rows()
+    }
+
     fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
         let mut buf = std::mem::take(&mut self.buf);
         let x_l = self.inner.read_row(l, &mut buf)?;
@@ -446,6 +450,78 @@ impl RowSource for Prepared<'_> {
             }
         }
         self.buf = buf;
+        Ok(x_l)
+    }
+}
+
+/// The bins `start..end` of another source's time axis, and nothing else done: the probes'
+/// automatic crop to the window the probed voxels can reach (`crate::probe`'s module docs).
+/// The new `t0` is the path of bin `start`; Δt is unchanged. Cost O(Nt) per row (one copy);
+/// memory one source row.
+pub struct Cropped<'a> {
+    inner: &'a mut dyn RowSource,
+    geometry: Geometry,
+    start: usize,
+    buf: Vec<f32>,
+}
+
+impl std::fmt::Debug for Cropped<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Cropped")
+            .field("start", &self.start)
+            .field("nt", &self.geometry.nt)
+            .finish_non_exhaustive()
+    }
+}
+
+impl<'a> Cropped<'a> {
+    /// Keeps the bins `bins` of `inner`'s time axis.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] (`--volume`: the crop follows from the probed voxels) when `bins`
+    /// is empty or does not lie in the axis.
+    pub fn new(inner: &'a mut dyn RowSource, bins: std::ops::Range<usize>) -> Result<Self> {
+        let g = inner.geometry().clone();
+        if bins.is_empty() || bins.end > g.nt {
+            return Err(Error::arg(
+                "--volume",
+                format!(
+                    "the time axis cropped to the voxels' reach keeps bins {}..{} of the capture's {}: no bins left (choose voxels the capture saw, or check its t_start and delta_t)",
+                    bins.start, bins.end, g.nt
+                ),
+            ));
+        }
+        let geometry = Geometry {
+            nt: bins.len(),
+            t0: g.t0 + bins.start as f64 * g.dt,
+            ..g
+        };
+        Ok(Self {
+            inner,
+            geometry,
+            start: bins.start,
+            buf: Vec::new(),
+        })
+    }
+}
+
+impl RowSource for Cropped<'_> {
+    fn geometry(&self) -> &Geometry {
+        &self.geometry
+    }
+
+    fn rows(&self) -> std::ops::Range<usize> {
+        self.inner.rows()
+    }
+
+    fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
+        let x_l = self.inner.read_row(l, &mut self.buf)?;
+        let src_nt = self.inner.geometry().nt;
+        let (nt, n0) = (self.geometry.nt, self.start);
+        out.clear();
+        for h in self.buf.chunks_exact(src_nt) {
+            out.extend_from_slice(&h[n0..n0 + nt]);
+        }
         Ok(x_l)
     }
 }

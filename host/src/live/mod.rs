@@ -39,10 +39,10 @@ use crate::atomic::Transaction;
 use crate::budget;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path as EvalPath};
-use crate::io::capture::{Capture, Geometry, RowSource};
-use crate::io::ptu::{FollowedRow, Follower};
 use crate::export::figure::Figure;
 use crate::export::figure::plot::Transient;
+use crate::io::capture::{Capture, Geometry, RowSource};
+use crate::io::ptu::{FollowedRow, Follower};
 use crate::probe::partial::{self, Finished, Partial, Task};
 use crate::probe::{
     ColumnGate, IndirectOptions, IndirectOutput, Shell, Wave, gamma_mask, indirect_over,

@@ -2,6 +2,7 @@
 //! to a distance [`Shell`]; the factorised column accumulation shared with the in-focus
 //! indirect sum; the diagonal under the same three gates ([`diagonal`]).
 
+use super::crop::{Crop, Reach, with_crop};
 use super::direct::*;
 use super::drive::*;
 use super::wave::*;
@@ -149,20 +150,28 @@ pub fn diagonal(
         ));
     }
     let t = Instant::now();
-    let cfg = wave.config(src.geometry())?;
-    super::window::window_rule(src.geometry(), &cfg, None, &volume.points, gate, exec)?;
-    let (v, report) = elementwise(
-        src,
-        Job {
+    let base = wave.config(src.geometry())?;
+    super::window::window_rule(src.geometry(), &base, None, &volume.points, gate, exec)?;
+    // The late gate counts light after the path: only the start of the axis is cropped.
+    let reach = Reach {
+        foci: None,
+        voxels: &volume.points,
+        late: true,
+    };
+    let wave_crop = Wave {
+        crop: wave.crop && kgate == Gate::HigherOrder,
+        ..*wave
+    };
+    let (v, report, cfg, crop) = with_crop(src, &wave_crop, exec, reach, |src, exec, crop| {
+        let cfg = wave.config(src.geometry())?;
+        let job = Job {
             cfg: &cfg,
             wave,
             exec,
-        },
-        Target::Diagonal,
-        kgate,
-        &volume.points,
-        "direct",
-    )?;
+        };
+        let (v, r) = elementwise(src, job, Target::Diagonal, kgate, &volume.points, "direct")?;
+        Ok((v, r, cfg, crop))
+    })?;
     let values = intensities(&v);
     check_finite(&values, &volume.points, "the diagonal")?;
     Ok(Output {
@@ -171,6 +180,8 @@ pub fn diagonal(
         seconds: t.elapsed().as_secs_f64(),
         config: cfg,
         path: Path::Band,
+        crop,
+        aligned: None,
     })
 }
 
@@ -205,7 +216,7 @@ pub fn column(
     exec: Exec<'_>,
 ) -> Result<Output> {
     let t = Instant::now();
-    let (state, cfg) = column_acc(src, focus, volume, gate, wave, exec, false)?;
+    let (state, cfg, crop) = column_acc(src, focus, volume, gate, wave, exec, false)?;
     let spads = src.geometry().spads.clone();
     let (values, report, path, _) = state.finish(&cfg, &spads, focus, volume, shell, false)?;
     check_finite(&values, &volume.points, "column")?;
@@ -215,6 +226,8 @@ pub fn column(
         seconds: t.elapsed().as_secs_f64(),
         config: cfg,
         path,
+        crop,
+        aligned: None,
     })
 }
 
@@ -236,8 +249,9 @@ pub(super) enum ColumnState {
 }
 
 /// The accumulators of [`column`] over the source's rows ([`RowSource::rows`]), with the
-/// configuration. `defer`: leave the choice of the imaging path under [`Path::Auto`] to
-/// [`ColumnState::finish`] (the path is then recorded as `Auto`).
+/// configuration (of the time axis cropped to the paths' reach) and the crop. `defer`: leave
+/// the choice of the imaging path under [`Path::Auto`] to [`ColumnState::finish`] (the path is
+/// then recorded as `Auto`).
 pub(super) fn column_acc(
     src: &mut dyn RowSource,
     focus: Point,
@@ -246,7 +260,7 @@ pub(super) fn column_acc(
     wave: &Wave,
     exec: Exec<'_>,
     defer: bool,
-) -> Result<(ColumnState, vltm_kernel::Config)> {
+) -> Result<(ColumnState, vltm_kernel::Config, Option<Crop>)> {
     check_focus(focus)?;
     match (exec.path, gate) {
         (Path::Lookup, _) => {
@@ -273,6 +287,32 @@ pub(super) fn column_acc(
         gate,
         exec,
     )?;
+    if gate == ColumnGate::None {
+        let (state, cfg) = column_acc_on(src, focus, volume, gate, wave, exec, defer)?;
+        return Ok((state, cfg, None));
+    }
+    let after = gate == ColumnGate::HigherOrder;
+    let reach = Reach {
+        foci: Some(&foci),
+        voxels: &volume.points,
+        late: after,
+    };
+    with_crop(src, wave, exec, reach, |src, exec, crop| {
+        let (state, cfg) = column_acc_on(src, focus, volume, gate, wave, exec, defer)?;
+        Ok((state, cfg, crop))
+    })
+}
+
+/// [`column_acc`] on the (cropped) source.
+fn column_acc_on(
+    src: &mut dyn RowSource,
+    focus: Point,
+    volume: &Volume,
+    gate: ColumnGate,
+    wave: &Wave,
+    exec: Exec<'_>,
+    defer: bool,
+) -> Result<(ColumnState, vltm_kernel::Config)> {
     let cfg = if gate == ColumnGate::TwoBounce {
         wave.column_config(src.geometry(), &[focus], &volume.points)?
     } else {

@@ -1,7 +1,9 @@
 //! Direct light: the diagonal `T(x_v, x_v)` (Eqs. 11–12) on the cheapest applicable path
 //! (planar FFT convolution, baseband lookup or the kernel's band sum, DESIGN §B.8).
 
+use super::aligned::fast_hint;
 use super::confocal;
+use super::crop::{Crop, Reach, with_crop};
 use super::drive::*;
 use super::wave::*;
 use crate::budget;
@@ -32,12 +34,17 @@ pub fn direct(
     let (a, config) = direct_acc(src, volume, wave, exec)?;
     let values = intensities(&a.acc);
     check_finite(&values, &volume.points, "direct light")?;
+    let aligned = (a.path != Path::Planar && volume.axes.is_some())
+        .then(|| fast_hint(src.geometry(), volume, config.wavelength()))
+        .flatten();
     Ok(Output {
         values,
         report: a.report,
         seconds: t.elapsed().as_secs_f64(),
         config,
         path: a.path,
+        crop: a.crop,
+        aligned,
     })
 }
 
@@ -47,25 +54,47 @@ pub(super) struct Amplitudes {
     pub(super) acc: Vec<Complex64>,
     pub(super) report: Report,
     pub(super) path: Path,
+    /// The part of the time axis kept.
+    pub(super) crop: Option<Crop>,
 }
 
 /// The accumulators of [`direct`] over the source's rows ([`RowSource::rows`]), with the
-/// configuration.
+/// configuration (of the time axis cropped to the voxels' reach, `crop`).
 pub(super) fn direct_acc(
     src: &mut dyn RowSource,
     volume: &Volume,
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<(Amplitudes, Config)> {
-    let cfg = wave.config(src.geometry())?;
+    let base = wave.config(src.geometry())?;
     super::window::window_rule(
         src.geometry(),
-        &cfg,
+        &base,
         None,
         &volume.points,
         super::ColumnGate::TwoBounce,
         exec,
     )?;
+    let reach = Reach {
+        foci: None,
+        voxels: &volume.points,
+        late: false,
+    };
+    with_crop(src, wave, exec, reach, |src, exec, crop| {
+        let (mut a, cfg) = direct_acc_on(src, volume, wave, exec)?;
+        a.crop = crop;
+        Ok((a, cfg))
+    })
+}
+
+/// [`direct_acc`] on the (cropped) source.
+fn direct_acc_on(
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    wave: &Wave,
+    exec: Exec<'_>,
+) -> Result<(Amplitudes, Config)> {
+    let cfg = wave.config(src.geometry())?;
     check_memory(
         src.geometry(),
         &cfg,
@@ -80,7 +109,15 @@ pub(super) fn direct_acc(
     let g = src.geometry();
     if g.confocal {
         let (acc, report, path) = direct_confocal(src, job, volume)?;
-        return Ok((Amplitudes { acc, report, path }, cfg));
+        return Ok((
+            Amplitudes {
+                acc,
+                report,
+                path,
+                crop: None,
+            },
+            cfg,
+        ));
     }
     let band_cost = band_flops(g, &cfg, volume.len());
     // The lookup competes only when its grid fits the budget (at large σ its carrier and
@@ -120,7 +157,15 @@ pub(super) fn direct_acc(
         )?;
         (acc, report, Path::Band)
     };
-    Ok((Amplitudes { acc, report, path }, cfg))
+    Ok((
+        Amplitudes {
+            acc,
+            report,
+            path,
+            crop: None,
+        },
+        cfg,
+    ))
 }
 
 /// Direct light of a confocal capture: the confocal convolution on a regular wall grid

@@ -5,6 +5,7 @@
 //! the same pass.
 
 use super::column::*;
+use super::crop::{Reach, with_crop};
 use super::drive::*;
 use super::gamma::Gamma;
 use super::leak::{DirectModel, LeakCorrected, LeakOptions, cell_radius};
@@ -240,18 +241,35 @@ fn pair_sums(
             }
             None => src,
         };
-        let job = Job {
-            cfg: &cfg,
-            wave,
-            exec,
+        // The time axis cropped to the Γ pairs' reach (not for the un-gated columns).
+        let reach = Reach {
+            foci: Some(&pts),
+            voxels: &pts,
+            late: kgate == Gate::HigherOrder,
         };
-        let cols = if kgate == Gate::HigherOrder {
-            higher_order_columns(src, job, &pts, "indirect")?
-        } else {
-            let spads = src.geometry().spads.clone();
-            factorised_columns(src, job, &pts, kgate, "indirect")?
-                .image(&cfg, &spads, &pts, kgate, &pts)?
+        let wave_crop = Wave {
+            crop: wave.crop && kgate != Gate::None,
+            ..*wave
         };
+        let cols = with_crop(src, &wave_crop, exec, reach, |src, exec, _| {
+            let cfg = if kgate == Gate::Gaussian {
+                wave.column_config(src.geometry(), &pts, &pts)?
+            } else {
+                wave.config(src.geometry())?
+            };
+            let job = Job {
+                cfg: &cfg,
+                wave,
+                exec,
+            };
+            if kgate == Gate::HigherOrder {
+                higher_order_columns(src, job, &pts, "indirect")
+            } else {
+                let spads = src.geometry().spads.clone();
+                factorised_columns(src, job, &pts, kgate, "indirect")?
+                    .image(&cfg, &spads, &pts, kgate, &pts)
+            }
+        })?;
         let mut sums = vec![vec![0.0f64; pts.len()]; shells.len()];
         report = summed_reports(&cols);
         for (ai, (col, _)) in cols.iter().enumerate() {

@@ -587,6 +587,8 @@ pub fn relight(
             seconds: t.elapsed().as_secs_f64(),
             config: cfg,
             path: crate::exec::Path::Band,
+            crop: None,
+            aligned: None,
         },
         passes,
     })

@@ -21,8 +21,10 @@
 //! the voxels in parallel at the end; the indirect sum keeps one factorised column per focus
 //! `a ∈ Γ`, pushed in parallel. Memory never grows with the number of laser rows.
 
+mod aligned;
 mod column;
 mod confocal;
+mod crop;
 mod direct;
 mod drive;
 pub mod fast;
@@ -36,7 +38,9 @@ mod wave;
 pub mod window;
 
 pub use crate::exec::{Exec, Path};
+pub use aligned::aligned_volume;
 pub use column::{ColumnGate, Shell, check_focus, column, diagonal};
+pub use crop::Crop;
 pub use direct::direct;
 pub use gamma::{Gamma, gamma_mask};
 pub use indirect::{

@@ -152,5 +152,7 @@ pub fn row(
         seconds: t.elapsed().as_secs_f64(),
         config: cfg,
         path: Path::Band,
+        crop: None,
+        aligned: None,
     })
 }

@@ -27,6 +27,10 @@ pub struct Wave {
     /// wrapping around (default true). The factorised column cannot zero single paths as the
     /// diagonal does; this buys the same result with a larger band (`J ∝ N`).
     pub auto_margin: bool,
+    /// Crop the time axis to the window the probed voxels can reach before the band
+    /// transform (default true; `crate::probe`'s crop: the results agree within the gate's
+    /// tail, the cost falls with the crop).
+    pub crop: bool,
 }
 
 impl Default for Wave {
@@ -38,6 +42,7 @@ impl Default for Wave {
             band_half_width: 5.0,
             compensate_laser: false,
             auto_margin: true,
+            crop: true,
         }
     }
 }
@@ -204,6 +209,11 @@ pub struct Output {
     pub config: Config,
     /// The evaluation path that computed the voxel sums (never [`Path::Auto`]).
     pub path: Path,
+    /// The part of the time axis kept ([`Wave::crop`]); `None`: all of it.
+    pub crop: Option<super::Crop>,
+    /// When a slower path than the FFT convolution ran on a grid because of its x–y pitch:
+    /// the `--volume` SPEC of the nearest grid the FFT path takes ([`super::aligned_volume`]).
+    pub aligned: Option<String>,
 }
 
 pub(super) use vltm_kernel::geometry::dist64;

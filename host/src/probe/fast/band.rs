@@ -21,14 +21,46 @@
 //! time, its `Nt` phasors made by a complex recurrence in `f64` (resynchronised on the exact
 //! integer phase every 256 bins, error ≲ 1e-13) and reused for every SPAD; memory O(Nt), the
 //! same flops as the product at the speed of a plain loop.
+//!
+//! **Long axes: the FFT.** The product costs `J·Nt` per histogram and `J ∝ N ≥ Nt`, so it grows
+//! as `Nt²`. Where one N-point FFT per histogram is cheaper — `5·N·log₂N / 2` flops (two real
+//! histograms packed into one complex transform) against `4·J·Nt` at the product's 4× better
+//! flop rate, or whenever the table is not made — the band bins are read off the N-point
+//! FFT of the zero-padded histogram (`rustfft`, `f32`, any N: mixed radix, Rader or
+//! Bluestein, all O(N log N)). Same spectra: the FFT's bins are the DFT's (error
+//! ≲ log₂N·2⁻²⁴ of `‖H‖₂·√N`, below the sums' own). Memory: one N-point complex buffer and
+//! rustfft's scratch per call.
 
 use ndarray::linalg::general_mat_mul;
 use ndarray::{Array2, ArrayView2, ArrayViewMut2};
 use num_complex::Complex32;
+use rustfft::{Fft, FftPlanner};
+use std::sync::Arc;
 use vltm_kernel::Config;
 
 /// Largest band-DFT table `W` made (bytes); above it the sums run table-free (module docs).
 pub const MAX_TABLE_BYTES: usize = 256 << 20;
+
+/// How stage 1 runs (module docs).
+#[derive(Clone)]
+enum Method {
+    /// The matrix product with the table `W`.
+    Table(Array2<f32>),
+    /// One band bin at a time, phasors by recurrence.
+    TableFree,
+    /// One N-point FFT per pair of histograms.
+    Fft(Arc<dyn Fft<f32>>),
+}
+
+impl std::fmt::Debug for Method {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Table(_) => "Table",
+            Self::TableFree => "TableFree",
+            Self::Fft(_) => "Fft",
+        })
+    }
+}
 
 /// The band DFT matrix of a configuration (see the module docs).
 #[derive(Clone, Debug)]
@@ -38,9 +70,9 @@ pub struct BandDft {
     /// The band's first bin `k_lo` and the DFT period N.
     k_lo: i64,
     n: i64,
-    /// (2J × Nt): row 2j = cos, row 2j+1 = sin of −2π k_j n/N; `None` above
-    /// [`MAX_TABLE_BYTES`].
-    w: Option<Array2<f32>>,
+    /// The table `W` (2J × Nt: row 2j = cos, row 2j+1 = sin of −2π k_j n/N), none above
+    /// [`MAX_TABLE_BYTES`], or the FFT.
+    method: Method,
     /// cos / sin of −Ω nΔt (the un-gated carrier), Nt each.
     carrier: [Vec<f32>; 2],
 }
@@ -54,6 +86,25 @@ impl BandDft {
     /// Builds `W` for `cfg` (cost `2J·Nt` sincos in `f64`, once), or no table above
     /// [`MAX_TABLE_BYTES`] (module docs).
     pub fn new(cfg: &Config) -> Self {
+        let table = Self::table_bytes(cfg) <= MAX_TABLE_BYTES as u128;
+        if Self::fft_is_cheaper(cfg) || !table {
+            let fft = FftPlanner::<f32>::new().plan_fft_forward(cfg.n_fft());
+            return Self::with_method(cfg, Method::Fft(fft));
+        }
+        Self::table(cfg)
+    }
+
+    /// Whether one FFT per pair of histograms costs less than the matrix product (module docs:
+    /// `5·N·log₂N / 2` against `J·Nt`, the product's flops counted at a quarter).
+    pub fn fft_is_cheaper(cfg: &Config) -> bool {
+        let n = cfg.n_fft() as f64;
+        let fft = 2.5 * n * n.log2().max(1.0);
+        (cfg.bins() as f64) * (cfg.nt() as f64) > fft
+    }
+
+    /// The matrix product (or table-free sums above [`MAX_TABLE_BYTES`]), whatever the FFT
+    /// would cost.
+    pub fn table(cfg: &Config) -> Self {
         let (nt, bins, n) = (cfg.nt(), cfg.bins(), cfg.n_fft() as i64);
         let w = (Self::table_bytes(cfg) <= MAX_TABLE_BYTES as u128).then(|| {
             let mut w = Array2::<f32>::zeros((2 * bins, nt));
@@ -67,6 +118,11 @@ impl BandDft {
             }
             w
         });
+        Self::with_method(cfg, w.map_or(Method::TableFree, Method::Table))
+    }
+
+    fn with_method(cfg: &Config, method: Method) -> Self {
+        let nt = cfg.nt();
         let turns = -cfg.dt() / cfg.wavelength();
         let phase = |t: usize| {
             let x = t as f64 * turns;
@@ -78,17 +134,22 @@ impl BandDft {
         ];
         Self {
             nt,
-            bins,
+            bins: cfg.bins(),
             k_lo: cfg.k_lo(),
-            n,
-            w,
+            n: cfg.n_fft() as i64,
+            method,
             carrier,
         }
     }
 
-    /// Whether the table `W` was made (else the sums run table-free).
+    /// Whether the table `W` was made (else the sums run table-free or by FFT).
     pub fn has_table(&self) -> bool {
-        self.w.is_some()
+        matches!(self.method, Method::Table(_))
+    }
+
+    /// Whether the spectra come from one FFT per pair of histograms.
+    pub fn uses_fft(&self) -> bool {
+        matches!(self.method, Method::Fft(_))
     }
 
     /// Number of band bins J.
@@ -109,15 +170,16 @@ impl BandDft {
         if ks == 0 || self.nt == 0 {
             return;
         }
-        match &self.w {
-            Some(w) => {
+        match &self.method {
+            Method::Table(w) => {
                 let a = ArrayView2::from_shape((ks, self.nt), hists).expect("checked shape");
                 let out: &mut [f32] = bytemuck::cast_slice_mut(band);
                 let mut c =
                     ArrayViewMut2::from_shape((ks, 2 * self.bins), out).expect("checked shape");
                 general_mat_mul(1.0, &a, &w.t(), 0.0, &mut c);
             }
-            None => self.apply_without_table(hists, band, ks),
+            Method::TableFree => self.apply_without_table(hists, band, ks),
+            Method::Fft(fft) => self.apply_fft(fft.as_ref(), hists, band, ks),
         }
         for (h, m) in hists.chunks_exact(self.nt).zip(ungated.iter_mut()) {
             *m = Complex32::new(dot(h, &self.carrier[0]), dot(h, &self.carrier[1]));
@@ -126,6 +188,47 @@ impl BandDft {
 }
 
 impl BandDft {
+    /// The band bins from one N-point FFT per pair of histograms (module docs): `z = h₁ + i·h₂`,
+    /// `Z = FFT(z)`, then `H₁[k] = (Z[k] + Z̄[N−k])/2`, `H₂[k] = (Z[k] − Z̄[N−k])/(2i)`.
+    fn apply_fft(&self, fft: &dyn Fft<f32>, hists: &[f32], band: &mut [Complex32], ks: usize) {
+        let n = self.n as usize;
+        let mut buf = vec![Complex32::new(0.0, 0.0); n];
+        let mut scratch = vec![Complex32::new(0.0, 0.0); fft.get_inplace_scratch_len()];
+        let bins: Vec<usize> = (0..self.bins)
+            .map(|j| (self.k_lo + j as i64).rem_euclid(self.n) as usize)
+            .collect();
+        let mut s = 0;
+        while s < ks {
+            let pair = s + 1 < ks;
+            buf.fill(Complex32::new(0.0, 0.0));
+            let h1 = &hists[s * self.nt..(s + 1) * self.nt];
+            if pair {
+                let h2 = &hists[(s + 1) * self.nt..(s + 2) * self.nt];
+                for ((z, &a), &b) in buf.iter_mut().zip(h1).zip(h2) {
+                    *z = Complex32::new(a, b);
+                }
+            } else {
+                for (z, &a) in buf.iter_mut().zip(h1) {
+                    z.re = a;
+                }
+            }
+            fft.process_with_scratch(&mut buf, &mut scratch);
+            for (j, &k) in bins.iter().enumerate() {
+                if pair {
+                    let zk = buf[k];
+                    let zm = buf[(n - k) % n].conj();
+                    band[s * self.bins + j] = (zk + zm) * 0.5;
+                    let d = (zk - zm) * 0.5;
+                    // d / i = (d.im, −d.re)
+                    band[(s + 1) * self.bins + j] = Complex32::new(d.im, -d.re);
+                } else {
+                    band[s * self.bins + j] = buf[k];
+                }
+            }
+            s += if pair { 2 } else { 1 };
+        }
+    }
+
     /// The band sums one bin at a time, its phasors by recurrence (module docs).
     fn apply_without_table(&self, hists: &[f32], band: &mut [Complex32], ks: usize) {
         let mut tw = vec![(0.0f64, 0.0f64); self.nt];
@@ -197,7 +300,7 @@ mod tests {
         let mut r2 = RowBuffer::new(&scan, &mut b2).unwrap();
         let laser = [0.3, 0.2, 0.0];
         let a = r1.load(&scan, laser, &hists).unwrap();
-        let dft = BandDft::new(&cfg);
+        let dft = BandDft::table(&cfg);
         let b = r2
             .load_with(&scan, laser, &hists, |band, m| dft.apply(&hists, band, m))
             .unwrap();
@@ -211,8 +314,8 @@ mod tests {
         }
         assert_eq!(a.offsets(), b.offsets());
         // The table-free sums give the same spectra.
-        let mut free = BandDft::new(&cfg);
-        free.w = None;
+        let mut free = BandDft::table(&cfg);
+        free.method = Method::TableFree;
         let mut b3 = vec![0.0f32; RowBuffer::len(&cfg, spads.len())];
         let mut r3 = RowBuffer::new(&scan, &mut b3).unwrap();
         let c = r3
@@ -222,6 +325,55 @@ mod tests {
             assert!((x - y).norm() <= 2e-6 * scale * g0, "{x} vs {y}");
         }
         assert!(!free.has_table() && dft.has_table());
+        // The FFT gives the same spectra, for an odd number of SPADs (pairs and a single).
+        let fft = BandDft::with_method(
+            &cfg,
+            Method::Fft(FftPlanner::new().plan_fft_forward(cfg.n_fft())),
+        );
+        let mut b4 = vec![0.0f32; RowBuffer::len(&cfg, spads.len())];
+        let mut r4 = RowBuffer::new(&scan, &mut b4).unwrap();
+        let d = r4
+            .load_with(&scan, laser, &hists, |band, m| fft.apply(&hists, band, m))
+            .unwrap();
+        for (x, y) in a.band().iter().zip(d.band()) {
+            assert!((x - y).norm() <= 2e-6 * scale * g0, "{x} vs {y}");
+        }
+        assert!(fft.uses_fft());
+    }
+
+    /// 100,000 bins by FFT against the exact DFT in f64, for two SPADs (one packed pair).
+    #[test]
+    fn fft_matches_f64_dft_on_long_axes() {
+        let cfg = Config::try_new(&Params::new(0.05, 100_000, 0.0005)).unwrap();
+        let dft = BandDft::new(&cfg);
+        assert!(dft.uses_fft());
+        let nt = cfg.nt();
+        let hists: Vec<f32> = (0..2 * nt)
+            .map(|i| {
+                let t = (i % nt) as f64 * 0.0005;
+                let c = if i < nt { 20.0 } else { 31.0 };
+                ((-((t - c) / 0.01).powi(2)).exp() + ((i * 7919) % 13) as f64 * 1e-3) as f32
+            })
+            .collect();
+        let mut band = vec![Complex32::new(0.0, 0.0); 2 * cfg.bins()];
+        let mut m = vec![Complex32::new(0.0, 0.0); 2];
+        dft.apply(&hists, &mut band, &mut m);
+        let n = cfg.n_fft() as i64;
+        for s in 0..2 {
+            let h = &hists[s * nt..(s + 1) * nt];
+            let l1: f64 = h.iter().map(|x| f64::from(x.abs())).sum();
+            for j in (0..cfg.bins()).step_by(97) {
+                let k = (cfg.k_lo() + j as i64).rem_euclid(n);
+                let (re, im) = h.iter().enumerate().fold((0.0, 0.0), |(a, b), (t, &x)| {
+                    let (c, si) = phasor(k, t as i64, n);
+                    (a + f64::from(x) * c, b + f64::from(x) * si)
+                });
+                let got = band[s * cfg.bins() + j];
+                let err =
+                    ((f64::from(got.re) - re).powi(2) + (f64::from(got.im) - im).powi(2)).sqrt();
+                assert!(err <= 1e-5 * l1, "bin {j}: {got} vs ({re}, {im}), l1 {l1}");
+            }
+        }
     }
 
     /// 100,000 bins: no 13 GB table is made.
@@ -230,5 +382,6 @@ mod tests {
         let cfg = Config::try_new(&Params::new(0.05, 100_000, 0.001)).unwrap();
         assert!(BandDft::table_bytes(&cfg) > MAX_TABLE_BYTES as u128);
         assert!(!BandDft::new(&cfg).has_table());
+        assert!(!BandDft::table(&cfg).has_table());
     }
 }

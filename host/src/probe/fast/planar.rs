@@ -174,7 +174,7 @@ pub(super) struct SubGrid {
 /// A regular wall lattice and a wall-parallel voxel grid whose pitch divides it, laid out for
 /// a zero-padded 2-D convolution (shared by [`Planar`] and [`super::confocal`]).
 #[derive(Clone, Debug)]
-pub(super) struct Layout {
+pub(crate) struct Layout {
     /// FFT size (powers of two, `≥ n_s + n_v − 1` per axis).
     pub(super) mx: usize,
     pub(super) my: usize,
@@ -194,7 +194,7 @@ pub(super) struct Layout {
 
 /// Lays out `voxels` (C order over `shape`) against the wall lattice `wall`, or says why
 /// they do not fit (lattice tolerance `tol`, m).
-pub(super) fn layout(
+pub(crate) fn layout(
     wall: &[Point],
     voxels: &[Point],
     shape: [usize; 3],

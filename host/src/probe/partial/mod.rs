@@ -28,6 +28,7 @@
 use super::column::{
     ColumnGate, ColumnState, Columns, Shell, check_focus, column_acc, factorised_columns,
 };
+use super::crop::{self, Reach};
 use super::direct::direct_acc;
 use super::drive::{Job, intensities};
 use super::indirect::indirect_sum;
@@ -247,7 +248,7 @@ pub fn accumulate(
             (cfg, acc, a.report, a.path, None, None, None, None)
         }
         Task::Column { focus, gate, shell } => {
-            let (state, cfg) = column_acc(&mut part, *focus, volume, *gate, wave, exec, true)?;
+            let (state, cfg, _) = column_acc(&mut part, *focus, volume, *gate, wave, exec, true)?;
             let (acc, report, path) = match state {
                 ColumnState::Voxels(acc, r) => (flat(&acc), r, Path::Band),
                 ColumnState::Factorised {
@@ -277,7 +278,14 @@ pub fn accumulate(
             // The window rule on the volume's diagonal, as a whole `indirect` applies it.
             let base = wave.config(&g)?;
             super::window::window_coverage(&g, &base, None, &volume.points, ColumnGate::TwoBounce)?;
-            let cfg = wave.column_config(&g, &pts, &pts)?;
+            // The time axis cropped to the Γ pairs' reach, as `indirect` crops it.
+            let reach = Reach {
+                foci: Some(&pts),
+                voxels: &pts,
+                late: false,
+            };
+            let bins = crop::bins(&g, wave, reach)?;
+            let cfg = wave.column_config(&crop::cropped_geometry(&g, &bins), &pts, &pts)?;
             let shell = shell.unwrap_or(Shell {
                 r0: 1.5 * cfg.sigma() as f32,
                 r1: f32::INFINITY,
@@ -303,13 +311,15 @@ pub fn accumulate(
                     let lo = LeakOptions::default();
                     let model = DirectModel::gate(&g, &pts, cell_radius(volume), wave, &lo)?;
                     let mut lc = LeakCorrected::measuring(&mut part, &model);
-                    let c = factorised_columns(&mut lc, job, &pts, Gate::Gaussian, "indirect")?;
+                    let c = crop::on_bins(&mut lc, bins, |s| {
+                        factorised_columns(s, job, &pts, Gate::Gaussian, "indirect")
+                    })?;
                     energy = lc.energy().unwrap_or_default();
                     c
                 }
-                (false, false) => {
-                    factorised_columns(&mut part, job, &pts, Gate::Gaussian, "indirect")?
-                }
+                (false, false) => crop::on_bins(&mut part, bins, |s| {
+                    factorised_columns(s, job, &pts, Gate::Gaussian, "indirect")
+                })?,
             };
             legs = cols.legs.iter().copied().map(leg_head).collect();
             spads.clone_from(&g.spads);
@@ -820,6 +830,8 @@ impl Partial {
                 seconds: t.elapsed().as_secs_f64(),
                 config: cfg,
                 path,
+                crop: None,
+                aligned: None,
             },
             amplitudes,
             volume,

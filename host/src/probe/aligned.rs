@@ -1,0 +1,139 @@
+//! The aligned volume: for a wall-parallel voxel grid that the FFT paths (planar, confocal)
+//! cannot take because its x–y pitch does not divide the wall's, the nearest grid that they
+//! can take — the same first voxel and extent (to within one pitch), the pitch `p/r` with
+//! `r = max(1, round(p / p_v))` (`p` the wall's pitch, `p_v` the asked one). The probes report
+//! it ([`crate::probe::Output::aligned`]) when a slower path ran, so that the user can type it.
+//! Cost O(1).
+
+use crate::io::capture::Geometry;
+use crate::volume::Volume;
+use vltm_kernel::Point;
+
+/// The wall lattice's pitch along x and y (the SPADs, or the scanned points of a confocal
+/// capture; C order over the grid shape), 0 along an axis of one point.
+fn wall_pitch(g: &Geometry) -> [f64; 2] {
+    let (pts, shape) = if g.confocal {
+        (&g.lasers, g.laser_shape)
+    } else {
+        (&g.spads, g.spad_shape)
+    };
+    let d = |a: Point, b: Point| {
+        (0..3)
+            .map(|i| f64::from(a[i] - b[i]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    let px = if shape[0] > 1 && pts.len() > shape[1] {
+        d(pts[0], pts[shape[1]])
+    } else {
+        0.0
+    };
+    let py = if shape[1] > 1 && pts.len() > 1 {
+        d(pts[0], pts[1])
+    } else {
+        0.0
+    };
+    [px, py]
+}
+
+/// The `--volume` SPEC of the grid nearest to `volume` whose x–y pitch divides the wall's
+/// (module docs), or `None` when `volume` is a point list, already aligned, or the wall has no
+/// pitch along an axis the volume spans.
+pub fn aligned_volume(g: &Geometry, volume: &Volume) -> Option<String> {
+    let axes = volume.axes?;
+    let p = wall_pitch(g);
+    let mut changed = false;
+    let mut spec = Vec::with_capacity(3);
+    for i in 0..3 {
+        let [a32, b32] = axes[i];
+        let [a, b] = axes[i].map(f64::from);
+        let n = volume.shape[i];
+        if i == 2 || n < 2 {
+            spec.push(format!("{a32}:{b32}:{n}"));
+            continue;
+        }
+        if p[i] <= 0.0 {
+            return None;
+        }
+        let pv = (b - a) / (n - 1) as f64;
+        let r = (p[i] / pv.abs()).round().max(1.0);
+        let step = p[i] / r * pv.signum();
+        let m = ((b - a) / step).round() as usize + 1;
+        let end = a + (m - 1) as f64 * step;
+        if m != n || (end - b).abs() > 1e-3 * p[i] {
+            changed = true;
+        }
+        let end = if end.abs() < 5e-8 { 0.0 } else { end };
+        let end = format!("{end:.7}");
+        let end = end.trim_end_matches('0').trim_end_matches('.');
+        spec.push(format!("{a32}:{end}:{m}"));
+    }
+    changed.then(|| spec.join(","))
+}
+
+/// [`aligned_volume`] when the FFT paths would take it: the wall is a regular lattice and the
+/// aligned grid lays out on it (lattice tolerance `1e-5·λ`, as the paths check).
+pub(super) fn fast_hint(g: &Geometry, volume: &Volume, wavelength: f64) -> Option<String> {
+    let spec = aligned_volume(g, volume)?;
+    let v = Volume::parse(&spec).ok()?;
+    let wall = if g.confocal { &g.lasers } else { &g.spads };
+    crate::probe::fast::planar::layout(wall, &v.points, v.shape, 1e-5 * wavelength).ok()?;
+    Some(spec)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn wall(n: usize, half: f32) -> Geometry {
+        let pitch = 2.0 * half / (n - 1) as f32;
+        let pts: Vec<Point> = (0..n * n)
+            .map(|i| {
+                [
+                    -half + (i / n) as f32 * pitch,
+                    -half + (i % n) as f32 * pitch,
+                    0.0,
+                ]
+            })
+            .collect();
+        Geometry {
+            lasers: pts.clone(),
+            laser_shape: [n, n],
+            spads: pts,
+            spad_shape: [n, n],
+            laser_origin: [0.0; 3],
+            sensor_origin: [0.0; 3],
+            legs_in_time: false,
+            confocal: true,
+            nt: 10,
+            dt: 0.01,
+            t0: 0.0,
+        }
+    }
+
+    /// A wider view at nearly the wall's pitch gets the wall's pitch; a coarser one the wall's;
+    /// a finer one a divisor; the wall's own grid and point lists get none.
+    #[test]
+    fn aligned_grids() {
+        let g = wall(64, 0.2);
+        let p = 0.4 / 63.0;
+        let v = Volume::grid([-0.35, -0.35, 0.4], [0.35, 0.35, 1.0], [112, 112, 36]).unwrap();
+        let s = aligned_volume(&g, &v).unwrap();
+        let w = Volume::parse(&s).unwrap();
+        assert_eq!(w.shape, [111, 111, 36], "{s}");
+        let pitch = |v: &Volume| {
+            f64::from(v.axes.unwrap()[0][1] - v.axes.unwrap()[0][0]) / (v.shape[0] - 1) as f64
+        };
+        assert!((pitch(&w) - p).abs() < 1e-7, "{s}");
+        let coarse = Volume::grid([-0.35, -0.35, 0.4], [0.35, 0.35, 1.0], [64, 64, 36]).unwrap();
+        let c = Volume::parse(&aligned_volume(&g, &coarse).unwrap()).unwrap();
+        assert!((pitch(&c) - p).abs() < 1e-7);
+        let fine = Volume::grid([-0.1, -0.1, 0.4], [0.1, 0.1, 1.0], [70, 70, 2]).unwrap();
+        let f = Volume::parse(&aligned_volume(&g, &fine).unwrap()).unwrap();
+        assert!((pitch(&f) - p / 2.0).abs() < 1e-7, "{:?}", f.shape);
+        let own = Volume::grid([-0.2, -0.2, 0.4], [0.2, 0.2, 1.0], [64, 64, 36]).unwrap();
+        assert_eq!(aligned_volume(&g, &own), None);
+        let list = Volume::points(vec![[0.0, 0.0, 0.5]]).unwrap();
+        assert_eq!(aligned_volume(&g, &list), None);
+    }
+}
