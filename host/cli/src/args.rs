@@ -27,8 +27,10 @@ pub(crate) struct Cli {
     /// Worker threads (default: all cores).
     #[arg(long, global = true)]
     pub(crate) threads: Option<usize>,
-    /// Memory budget, e.g. 12G or 500M (default: half of the physical memory). Every buffer
-    /// sized from a file, a scene or an argument is checked against it before it is made.
+    /// Memory budget, e.g. 12G or 500M (default: the least of half the physical memory and
+    /// 3/4 of the address-space, data-segment and cgroup limits; `vltm info` shows it; never
+    /// above those limits). Every buffer sized from a file, a scene or an argument is checked
+    /// against it before it is made.
     #[arg(long, global = true, value_name = "SIZE")]
     pub(crate) max_memory: Option<String>,
 }
