@@ -55,12 +55,12 @@ pub fn with_prep<T>(
 /// half of them a warning.
 ///
 /// # Errors
-/// [`Error::Argument`] (`--background`) when every histogram read was left empty.
+/// [`Error::Argument`] (`background`) when every histogram read was left empty.
 pub fn check(p: &Prepared<'_>) -> Result<PrepReport> {
     let s = &p.stats;
     if s.histograms > 0 && s.empty == s.histograms {
         return Err(Error::arg(
-            "--background",
+            "background",
             format!(
                 "the background removed every count of all {} histograms: nothing left to image (lower it or use auto)",
                 s.histograms
@@ -88,7 +88,7 @@ pub fn check(p: &Prepared<'_>) -> Result<PrepReport> {
 pub fn parse_shells(s: &str) -> Result<[Shell; 3]> {
     let bad = || {
         Error::arg(
-            "--shells",
+            "shells",
             format!("expected R1,R2 with 0 < R1 < R2 in metres, found `{s}`"),
         )
     };
@@ -138,7 +138,7 @@ pub fn gamma_of(direct: &[f32], epsilon: f32, arg: &str) -> Result<Vec<bool>> {
     if !g.contains(&true) {
         return Err(Error::arg(
             arg,
-            "Γ is empty: the direct light is zero on every voxel of --volume",
+            "Γ is empty: the direct light is zero on every voxel of $volume",
         ));
     }
     Ok(g)
@@ -195,7 +195,7 @@ mod tests {
         assert!(s[2].r1.is_infinite());
         for bad in ["0.5,0.2", "0,1", "1", "a,b", "0.1,inf"] {
             let e = parse_shells(bad).unwrap_err().to_string();
-            assert!(e.starts_with("argument `--shells`"), "{e}");
+            assert!(e.starts_with("argument `shells`"), "{e}");
         }
         let pts = [[0.0, 0.0, 1.0], [0.0, 0.0, 1.3], [0.0, 0.0, 2.0]];
         let v = [1.0, 2.0, 3.0];
@@ -218,10 +218,10 @@ mod tests {
                 .contains("Γ is empty")
         );
         assert!(
-            gamma_of(&[1.0], 1.0, "--epsilon")
+            gamma_of(&[1.0], 1.0, "epsilon")
                 .unwrap_err()
                 .to_string()
-                .starts_with("argument `--epsilon`")
+                .starts_with("argument `epsilon`")
         );
     }
 }

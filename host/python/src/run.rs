@@ -533,12 +533,12 @@ fn one_pass(
                 Some(e) => {
                     if !(0.0..1.0).contains(&e) {
                         return Err(vltm::Error::arg(
-                            "--mask-epsilon",
+                            "mask_epsilon",
                             format!("expected 0 <= E < 1, found {e}"),
                         ));
                     }
                     let d = probe::direct(rows, vol, wave, exec)?;
-                    Some(front::gamma_of(&d.values, e, "--mask-epsilon")?)
+                    Some(front::gamma_of(&d.values, e, "mask_epsilon")?)
                 }
                 None => None,
             };
@@ -577,11 +577,11 @@ fn one_pass(
         } => {
             let t = std::time::Instant::now();
             let (gamma, direct) = match direct {
-                Some(d) => (front::gamma_of(&d, opts.epsilon, "--epsilon")?, d),
+                Some(d) => (front::gamma_of(&d, opts.epsilon, "epsilon")?, d),
                 None => {
                     let d = probe::direct(rows, vol, wave, exec)?;
                     (
-                        front::gamma_of(&d.values, opts.epsilon, "--epsilon")?,
+                        front::gamma_of(&d.values, opts.epsilon, "epsilon")?,
                         d.values,
                     )
                 }

@@ -478,13 +478,13 @@ impl<'a> Cropped<'a> {
     /// Keeps the bins `bins` of `inner`'s time axis.
     ///
     /// # Errors
-    /// [`Error::Argument`] (`--volume`: the crop follows from the probed voxels) when `bins`
+    /// [`Error::Argument`] (`volume`: the crop follows from the probed voxels) when `bins`
     /// is empty or does not lie in the axis.
     pub fn new(inner: &'a mut dyn RowSource, bins: std::ops::Range<usize>) -> Result<Self> {
         let g = inner.geometry().clone();
         if bins.is_empty() || bins.end > g.nt {
             return Err(Error::arg(
-                "--volume",
+                "volume",
                 format!(
                     "the time axis cropped to the voxels' reach keeps bins {}..{} of the capture's {}: no bins left (choose voxels the capture saw, or check its t_start and delta_t)",
                     bins.start, bins.end, g.nt

@@ -114,7 +114,7 @@ impl Replay {
     pub fn new(capture: Capture, rows_per_second: f64) -> Result<Self> {
         if rows_per_second.is_nan() || rows_per_second <= 0.0 {
             return Err(Error::arg(
-                "--replay-rate",
+                "replay_rate",
                 format!("expected a rate > 0 rows/s, found {rows_per_second}"),
             ));
         }
@@ -289,7 +289,7 @@ impl LiveRun {
             let state = match found.and_then(Option::take) {
                 None if folded.is_some_and(|k| k > 0) => {
                     return Err(Error::arg(
-                        "--resume",
+                        "resume",
                         format!("no state given for the {title}"),
                     ));
                 }
@@ -304,7 +304,7 @@ impl LiveRun {
                         [r] if r.start == 0 => r.end,
                         _ => {
                             return Err(Error::arg(
-                                "--resume",
+                                "resume",
                                 format!(
                                     "{} holds rows {rows:?}: a live run's state holds rows 0:k",
                                     path.display()
@@ -314,7 +314,7 @@ impl LiveRun {
                     };
                     if folded.is_some_and(|f| f != k) {
                         return Err(Error::arg(
-                            "--resume",
+                            "resume",
                             format!(
                                 "{} holds rows 0:{k}, the other states another number: give the states of one run",
                                 path.display()
@@ -325,7 +325,7 @@ impl LiveRun {
                     let names = [path.display().to_string(), "this run".to_string()];
                     Partial::merge(vec![p, empty], &names).map_err(|e| {
                         Error::arg(
-                            "--resume",
+                            "resume",
                             format!(
                                 "{} is not a state of this capture and these parameters: {e}",
                                 path.display()
@@ -343,9 +343,9 @@ impl LiveRun {
         }
         if let Some((path, p)) = resume.into_iter().flatten().next() {
             return Err(Error::arg(
-                "--resume",
+                "resume",
                 format!(
-                    "{} is a {} state that matches no probe of this run (check --focus)",
+                    "{} is a {} state that matches no probe of this run (check $focus)",
                     path.display(),
                     p.kind()
                 ),

@@ -357,6 +357,6 @@ mod tests {
                 .unwrap();
         let e = with_crop(&mut c, &wave, Exec::default(), reach, |_, _, _| Ok(())).unwrap_err();
         let msg = e.to_string();
-        assert!(msg.contains("--volume") && !msg.contains('\n'), "{msg}");
+        assert!(msg.contains("`volume`") && !msg.contains('\n'), "{msg}");
     }
 }
