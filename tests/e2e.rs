@@ -838,16 +838,20 @@ fn indirect_counts_the_aliased_pairs_of_every_focus() {
         path: vltm::probe::Path::Band,
     };
     let s = scene("two_patches");
+    // Uncropped: a time axis cropped to the voxels' reach keeps every pair in the window.
     let wave = Wave {
         auto_margin: false,
+        crop: false,
         ..indirect_wave(&fixture("two_patches").geometry)
     };
     // Foci: the patches and deeper voxels whose 4-vertex paths to the far foci leave the
     // capture's window (no margin: those pairs alias). A focus none of whose paths the
     // capture saw is refused by the column; it is left out until every column runs.
     let mut pts = vec![centre(&s, "A"), centre(&s, "B")];
-    for k in 0..8 {
-        pts.push([0.1 * (k % 3) as f32 - 0.1, 0.0, 1.6 + 0.3 * k as f32]);
+    // Depths in fine steps: a focus none of whose paths meets the window is refused (the
+    // window rule), so the aliasing foci are those just short of that.
+    for k in 0..16 {
+        pts.push([0.1 * (k % 3) as f32 - 0.1, 0.0, 1.6 + 0.075 * k as f32]);
     }
     let column = |a, vol: &Volume| {
         let c = &mut fixture("two_patches");
