@@ -179,7 +179,7 @@ pub(crate) enum Command {
     /// Follow a scan while it is acquired (a .ptu file being written, `-` for a T3 stream on
     /// stdin, or a capture replayed at --replay-rate): direct light and columns row by row,
     /// snapshots every K rows, in-focus indirect light at the end, a live page with --serve.
-    Live(crate::live::LiveArgs),
+    Live(LiveArgs),
 }
 
 #[derive(ValueEnum, Clone, Copy, Debug)]
@@ -410,4 +410,64 @@ pub(crate) struct RowArgs {
     pub(crate) focus: String,
     #[command(flatten)]
     pub(crate) common: Common,
+}
+
+/// `vltm live` arguments.
+#[derive(Args, Debug)]
+pub(crate) struct LiveArgs {
+    /// What to follow: a PicoQuant .ptu (T3) file still being written (followed like
+    /// `tail -f`), `-` (a T3 record stream on standard input, header first), or any capture
+    /// vltm reads, replayed at --replay-rate.
+    pub(crate) source: PathBuf,
+    /// Voxels: "x0:x1:nx,y0:y1:ny,z0:z1:nz" (metres, inclusive end points) or "x,y,z;x,y,z".
+    #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
+    pub(crate) volume: String,
+    /// Focus x_a of a two-bounce column run row by row beside the direct light, "X,Y,Z" in
+    /// metres (repeatable).
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
+    pub(crate) focus: Vec<String>,
+    /// Output volume F.npy (or F.h5): the direct light; columns F.column<i>.npy, the in-focus
+    /// indirect light F.indirect.npy, figures beside them (.png), partial states
+    /// F.<probe>.part, the summed transient F.transient.png.
+    #[arg(long, value_name = "F.npy|F.h5")]
+    pub(crate) out: PathBuf,
+    /// Write the volumes, figures and partial states every K rows (0: only at the end).
+    #[arg(long, value_name = "K", default_value_t = 8)]
+    pub(crate) every: usize,
+    /// Continue an interrupted run from its partial states (F.direct.part and every
+    /// F.column<i>.part; repeat the option).
+    #[arg(long, value_name = "STATE")]
+    pub(crate) resume: Vec<PathBuf>,
+    /// End the stream when a followed file has not grown for S seconds.
+    #[arg(long, value_name = "S", default_value_t = 10.0)]
+    pub(crate) idle_timeout: f64,
+    /// Replay the capture at this many rows per second (any capture; a .ptu file is then read
+    /// as finished instead of followed).
+    #[arg(long, value_name = "ROWS/s")]
+    pub(crate) replay_rate: Option<f64>,
+    /// The PTU sidecar (default: the .ptu file with extension .json; needed for `-`).
+    #[arg(long, value_name = "F.json")]
+    pub(crate) sidecar: Option<PathBuf>,
+    /// Serve a live page at this address: PORT or ADDR:PORT (loopback unless an address is
+    /// given).
+    #[arg(long, value_name = "127.0.0.1:PORT")]
+    pub(crate) serve: Option<String>,
+    /// Keep serving the page this many seconds after the run ends.
+    #[arg(long, value_name = "S", default_value_t = 10.0)]
+    pub(crate) linger: f64,
+    /// Γ threshold of the in-focus indirect light at the end (relative to the direct
+    /// light's maximum).
+    #[arg(long, value_name = "E", default_value_t = 0.1)]
+    pub(crate) epsilon: f32,
+    /// Skip the in-focus indirect light at the end.
+    #[arg(long)]
+    pub(crate) no_indirect: bool,
+    /// In-focus indirect light without the leak correction (as `vltm indirect`).
+    #[arg(long)]
+    pub(crate) no_leak_correct: bool,
+    #[command(flatten)]
+    pub(crate) wave: WaveArgs,
+    /// Evaluation path of the direct light and the columns (as the probes' --path).
+    #[arg(long, value_enum, default_value_t = PathArg::Auto)]
+    pub(crate) path: PathArg,
 }

@@ -5,6 +5,7 @@
 use super::crop::{Crop, Reach, with_crop};
 use super::direct::*;
 use super::drive::*;
+pub use super::wave::ColumnGate;
 use super::wave::*;
 use crate::budget;
 use crate::error::{Error, Result};
@@ -16,17 +17,6 @@ use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
 use std::time::Instant;
 use vltm_kernel::{Gate, Point, Probe, Report, Scan, Target, cis_turns, geometry};
-
-/// The time gate of a column (the CLI's `--gate`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ColumnGate {
-    /// 4-vertex Gaussian gate (Eq. 14): first-order indirect light from `x_a`.
-    TwoBounce,
-    /// The late gate (Eq. 18): higher-order indirect light.
-    HigherOrder,
-    /// No gate (the paper's Fig. 6 control).
-    None,
-}
 
 /// A distance shell `r0 ≤ |x_a − x_b| < r1` (m) (near / middle / far decompositions).
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -21,35 +21,14 @@
 //! beyond `c_g·σ` and the band truncation (both ≲ 4e-6 of the signal, `tests/proptest_fast.rs`).
 //! Cost of the bound: O(Kl + Ks + voxels); of the crop: one copy per row (`Cropped`).
 
+pub use super::wave::Crop;
 use super::wave::{Wave, legs};
 use crate::error::Result;
 use crate::exec::{Exec, Progress};
 use crate::io::capture::{Geometry, RowSource};
 use crate::io::prep::Cropped;
-use std::fmt;
 use std::ops::Range;
 use vltm_kernel::Point;
-
-/// The part of the capture's time axis a probe kept (bins `start..end` of `nt`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Crop {
-    /// First kept bin.
-    pub start: usize,
-    /// One past the last kept bin.
-    pub end: usize,
-    /// Bins of the capture's axis.
-    pub nt: usize,
-}
-
-impl fmt::Display for Crop {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(
-            f,
-            "time axis cropped to bins {}..{} of {} (the voxels' reach)",
-            self.start, self.end, self.nt
-        )
-    }
-}
 
 /// What the probed paths are.
 #[derive(Clone, Copy, Debug)]

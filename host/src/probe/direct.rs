@@ -72,7 +72,7 @@ pub(super) fn direct_acc(
         &base,
         None,
         &volume.points,
-        super::ColumnGate::TwoBounce,
+        super::wave::ColumnGate::TwoBounce,
         exec,
     )?;
     let reach = Reach {

@@ -260,7 +260,7 @@ pub(super) fn matrix_acc(
         &base,
         Some(from),
         to,
-        super::ColumnGate::TwoBounce,
+        super::wave::ColumnGate::TwoBounce,
         exec,
     )?;
     let cfg = wave.column_config(src.geometry(), from, to)?;
@@ -370,7 +370,7 @@ pub fn matrix(
         &base,
         Some(from),
         to,
-        super::ColumnGate::TwoBounce,
+        super::wave::ColumnGate::TwoBounce,
         exec,
     )?;
     let cfg = wave.column_config(src.geometry(), from, to)?;
@@ -534,7 +534,7 @@ pub fn relight(
         &base,
         Some(&pattern.foci),
         &volume.points,
-        super::ColumnGate::TwoBounce,
+        super::wave::ColumnGate::TwoBounce,
         exec,
     )?;
     let cfg = wave.column_config(src.geometry(), &pattern.foci, &volume.points)?;

@@ -58,7 +58,7 @@ pub fn row(
         &base,
         Some(voxels),
         &to,
-        super::ColumnGate::TwoBounce,
+        super::wave::ColumnGate::TwoBounce,
         exec,
     )?;
     let cfg = wave.column_config(&g, voxels, &to)?;

@@ -210,9 +210,9 @@ pub struct Output {
     /// The evaluation path that computed the voxel sums (never [`Path::Auto`]).
     pub path: Path,
     /// The part of the time axis kept ([`Wave::crop`]); `None`: all of it.
-    pub crop: Option<super::Crop>,
+    pub crop: Option<Crop>,
     /// When a slower path than the FFT convolution ran on a grid because of its x–y pitch:
-    /// the `--volume` SPEC of the nearest grid the FFT path takes ([`super::aligned_volume`]).
+    /// the `--volume` SPEC of the nearest grid the FFT path takes (`probe::aligned_volume`).
     pub aligned: Option<String>,
 }
 
@@ -222,4 +222,36 @@ pub(super) use vltm_kernel::geometry::dist64;
 #[inline]
 pub(super) fn dist(a: Point, b: Point) -> f32 {
     vltm_kernel::geometry::dist(&a, &b)
+}
+
+/// The part of the capture's time axis a probe kept (bins `start..end` of `nt`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Crop {
+    /// First kept bin.
+    pub start: usize,
+    /// One past the last kept bin.
+    pub end: usize,
+    /// Bins of the capture's axis.
+    pub nt: usize,
+}
+
+impl std::fmt::Display for Crop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "time axis cropped to bins {}..{} of {} (the voxels' reach)",
+            self.start, self.end, self.nt
+        )
+    }
+}
+
+/// The time gate of a column (the CLI's `--gate`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ColumnGate {
+    /// 4-vertex Gaussian gate (Eq. 14): first-order indirect light from `x_a`.
+    TwoBounce,
+    /// The late gate (Eq. 18): higher-order indirect light.
+    HigherOrder,
+    /// No gate (the paper's Fig. 6 control).
+    None,
 }

@@ -23,8 +23,7 @@
 //! that meets the window. The fraction is counted exactly on a strided sample of at most 32
 //! lasers × 32 SPADs × 32 foci × 1024 voxels (sorted legs, `O(n log n)` per pair).
 
-use super::column::ColumnGate;
-use super::wave::{dist, legs};
+use super::wave::{ColumnGate, dist, legs};
 use crate::error::{Error, Result};
 use crate::exec::Exec;
 use crate::io::capture::Geometry;

@@ -1,6 +1,13 @@
 //! [`FixedColumn`]: the factorised Gaussian column in fixed point.
 
-use super::*;
+use super::arith::scale;
+use super::config::FixedConfig;
+use super::nco::{cis_q15, phase_step};
+use super::row::FixedRow;
+use super::scan::FixedScan;
+use crate::config::Point;
+use crate::error::{Error, check_len, check_points};
+use crate::geometry::{alias_window, dist, leaves_window, widen};
 
 /// Factorised Gaussian column `T(x_a, ·)` in fixed point: per row
 /// `U[s][j] += w_la·e^{iν_j d_la}·HG_ls[j]` (`i64` complex, `2·Ks·J`, LSB

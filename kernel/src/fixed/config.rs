@@ -1,7 +1,9 @@
 //! [`FixedLimits`] (what must fit) and [`FixedConfig`] (the shifts derived from them, and the
 //! headroom budget checked once).
 
-use super::*;
+use super::nco::q15;
+use crate::config::{Config, Weights};
+use crate::error::ConfigError;
 
 /// What the fixed-point path must hold without overflow (the headroom budget's inputs).
 #[derive(Clone, Copy, Debug, PartialEq)]

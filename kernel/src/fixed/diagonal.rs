@@ -1,6 +1,13 @@
 //! [`FixedDiagonal`]: the Gaussian diagonal in fixed point (and its integer band sum).
 
-use super::*;
+use super::arith::{round_shift, scale};
+use super::config::FixedConfig;
+use super::nco::{cis_q15, phase_step};
+use super::row::FixedRow;
+use super::scan::FixedScan;
+use crate::config::Point;
+use crate::error::{Error, check_len, check_points};
+use crate::geometry::dist;
 
 /// `Σ_j HG_j·e^{iν_j τ}` in `HG` LSB (the `i64` sums `>> 15`, rounded): the NCO phase steps
 /// by `round(2³²τ/(NΔt))` from `k_lo·step`.

@@ -96,12 +96,6 @@
 //! Not in fixed point (use the float path): the un-gated and higher-order gates, `f32`
 //! histograms.
 
-use crate::config::{Config, Legs, Point, Weights};
-use crate::error::{ConfigError, Error, check_len, check_points};
-use crate::geometry::{alias_window, dist, dist64 as dist_f64, leaves_window, widen};
-use crate::phase::{TwiddleStep, wrap};
-use ::fixed::types::I1F15;
-
 mod arith;
 mod column;
 mod config;
@@ -118,6 +112,3 @@ pub use nco::{CIS_ERR, cis_q15};
 pub use photons::FixedPhotons;
 pub use row::{FixedRow, FixedRowBuffer};
 pub use scan::FixedScan;
-
-use arith::{round_shift, scale};
-use nco::{phase_step, q15};

@@ -1,7 +1,7 @@
 //! The integer phase NCO: a compile-time Q1.15 cos/sin table over one turn, read with
 //! linear interpolation ([`cis_q15`]), and the phase step `round(2³²·x/(NΔt))`.
 
-use super::*;
+use ::fixed::types::I1F15;
 
 /// Bits of the cos/sin table index (1024 intervals over one turn).
 pub(super) const CIS_BITS: u32 = 10;

@@ -1,6 +1,9 @@
 //! [`FixedPhotons`]: a row's photon events folded into integer DFT sums as they arrive.
 
-use super::*;
+use super::config::FixedConfig;
+use super::scan::FixedScan;
+use crate::error::{Error, check_len};
+use crate::phase::{TwiddleStep, wrap};
 
 /// Caller-owned integer accumulators of one row's **photon events** for the fixed-point path:
 /// the DFT sums `D_j` of every SPAD (`i64` re/im) and a photon count per SPAD, so firmware

@@ -1,7 +1,14 @@
 //! [`FixedRowBuffer`] → [`FixedRow`]: one laser row's integer band spectra, from `u16`
 //! histograms or from photon sums.
 
-use super::*;
+use super::arith::round_shift;
+use super::config::FixedConfig;
+use super::nco::{cis_q15, phase_step};
+use super::photons::FixedPhotons;
+use super::scan::FixedScan;
+use crate::config::Point;
+use crate::error::{Error, check_len, check_points};
+use crate::phase::TwiddleStep;
 
 /// Caller-owned `i32` buffer for one row's band spectra: `Ks·(2J + 1)` (`HG` as re/im
 /// pairs, then the leg offsets `x_s` as `f32` bits).

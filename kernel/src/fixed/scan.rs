@@ -1,6 +1,11 @@
 //! [`FixedScan`]: the Q1.15 twiddle and gate tables in caller memory.
 
-use super::*;
+use super::config::FixedConfig;
+use super::nco::q15;
+use crate::config::{Legs, Point};
+use crate::error::{Error, check_len, check_points};
+use crate::geometry::dist64 as dist_f64;
+use ::fixed::types::I1F15;
 
 /// Fixed-point tables in caller memory: Q1.15 twiddles `e^{−2πiq/N}` (`2N`) and gate
 /// weights `ĝ_j` (`J`).

@@ -10,76 +10,16 @@ use std::io::IsTerminal as _;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use clap::Args;
 use vltm::exec::Path as EvalPath;
 use vltm::io::{self, ptu};
 use vltm::live::{self, LiveOptions, LiveRun, LiveSource, Outputs, Update};
 use vltm::probe::{self, IndirectOptions, LeakOptions, Partial};
 use vltm::volume::{Volume, parse_point};
 
-use crate::args::{PathArg, WaveArgs};
+use crate::args::LiveArgs;
+use crate::args::PathArg;
 use crate::console::{Failure, say};
 use crate::outputs::{refuse_overwriting_inputs, same_file};
-
-/// `vltm live` arguments.
-#[derive(Args, Debug)]
-pub(crate) struct LiveArgs {
-    /// What to follow: a PicoQuant .ptu (T3) file still being written (followed like
-    /// `tail -f`), `-` (a T3 record stream on standard input, header first), or any capture
-    /// vltm reads, replayed at --replay-rate.
-    source: PathBuf,
-    /// Voxels: "x0:x1:nx,y0:y1:ny,z0:z1:nz" (metres, inclusive end points) or "x,y,z;x,y,z".
-    #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
-    volume: String,
-    /// Focus x_a of a two-bounce column run row by row beside the direct light, "X,Y,Z" in
-    /// metres (repeatable).
-    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
-    focus: Vec<String>,
-    /// Output volume F.npy (or F.h5): the direct light; columns F.column<i>.npy, the in-focus
-    /// indirect light F.indirect.npy, figures beside them (.png), partial states
-    /// F.<probe>.part, the summed transient F.transient.png.
-    #[arg(long, value_name = "F.npy|F.h5")]
-    out: PathBuf,
-    /// Write the volumes, figures and partial states every K rows (0: only at the end).
-    #[arg(long, value_name = "K", default_value_t = 8)]
-    every: usize,
-    /// Continue an interrupted run from its partial states (F.direct.part and every
-    /// F.column<i>.part; repeat the option).
-    #[arg(long, value_name = "STATE")]
-    resume: Vec<PathBuf>,
-    /// End the stream when a followed file has not grown for S seconds.
-    #[arg(long, value_name = "S", default_value_t = 10.0)]
-    idle_timeout: f64,
-    /// Replay the capture at this many rows per second (any capture; a .ptu file is then read
-    /// as finished instead of followed).
-    #[arg(long, value_name = "ROWS/s")]
-    replay_rate: Option<f64>,
-    /// The PTU sidecar (default: the .ptu file with extension .json; needed for `-`).
-    #[arg(long, value_name = "F.json")]
-    sidecar: Option<PathBuf>,
-    /// Serve a live page at this address: PORT or ADDR:PORT (loopback unless an address is
-    /// given).
-    #[arg(long, value_name = "127.0.0.1:PORT")]
-    serve: Option<String>,
-    /// Keep serving the page this many seconds after the run ends.
-    #[arg(long, value_name = "S", default_value_t = 10.0)]
-    linger: f64,
-    /// Γ threshold of the in-focus indirect light at the end (relative to the direct
-    /// light's maximum).
-    #[arg(long, value_name = "E", default_value_t = 0.1)]
-    epsilon: f32,
-    /// Skip the in-focus indirect light at the end.
-    #[arg(long)]
-    no_indirect: bool,
-    /// In-focus indirect light without the leak correction (as `vltm indirect`).
-    #[arg(long)]
-    no_leak_correct: bool,
-    #[command(flatten)]
-    wave: WaveArgs,
-    /// Evaluation path of the direct light and the columns (as the probes' --path).
-    #[arg(long, value_enum, default_value_t = PathArg::Auto)]
-    path: PathArg,
-}
 
 /// Where the rows come from.
 enum Kind {
