@@ -31,18 +31,7 @@ pub(super) fn round_shift(x: i128, k: u32) -> i64 {
 
 #[cfg(test)]
 mod tests {
-    use super::column::FixedColumn;
-    use super::config::{FixedConfig, FixedLimits};
-    use super::diagonal::FixedDiagonal;
-    use super::nco::{CIS_ERR, cis_q15, phase_step, q15};
-    use super::photons::FixedPhotons;
-    use super::row::{FixedRow, FixedRowBuffer};
-    use super::scan::FixedScan;
-    use crate::config::{Config, Legs, Point, Weights};
-    use crate::error::{ConfigError, Error, check_len, check_points};
-    use crate::geometry::{alias_window, dist, dist64 as dist_f64, leaves_window, widen};
-    use crate::phase::{TwiddleStep, wrap};
-    use ::fixed::types::I1F15;
+    use super::*;
 
     #[test]
     fn scale_rounds_exactly() {
