@@ -151,9 +151,10 @@ fn relighting_is_linear_in_the_pattern() {
         "two foci (w = 1, -0.5): amplitudes vs A(x_a,·) - 0.5·A(x_b,·) {worst_amp:.2e}, \
          intensities {worst_int:.2e}; interference changes intensities by up to {coherent:.2} relative to the sum of intensities"
     );
-    // The matrix stores f32 amplitudes: 1e-6 is 16 ulp of f32.
+    // The matrix stores f32 amplitudes: 1e-6 is 16 ulp of f32; an intensity |A|² carries
+    // twice its amplitude's relative error.
     assert!(
-        worst_amp <= 1e-6 && worst_int <= 1e-6,
+        worst_amp <= 1e-6 && worst_int <= 2e-6,
         "{worst_amp:.3e} {worst_int:.3e}"
     );
     assert!(coherent > 0.1, "the test needs interfering foci");
