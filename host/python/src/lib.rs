@@ -55,11 +55,17 @@ pub(crate) fn python_message(e: &vltm::Error) -> String {
         vltm::Error::Argument { arg, msg } => format!(
             "argument `{}`: {}",
             keyword(arg),
-            vltm::error::respell(msg, str::to_string)
+            vltm::error::respell(msg, param)
         ),
-        e => e.render(str::to_string),
+        e => e.render(param),
     };
     respell(&text.replace('\n', " "))
+}
+
+/// A library parameter name (`max_memory`) as Python spells it (`vltm.set_max_memory()`; most
+/// keep their name).
+fn param(name: &str) -> String {
+    keyword(&format!("--{}", name.replace('_', "-")))
 }
 
 /// A flag (`--t-min`, `--from`, `CAPTURE`, `--t-min/--t-max`) as a keyword (`t_min`, `from_`,

@@ -76,7 +76,9 @@ def test_from_arrays_equals_file():
     pts = vltm.volume(vol).points[2:4, 3:6]
     got = vltm.direct(c, pts, path="band")
     assert got.shape == (2, 3, 6)
-    close(vltm.direct(c, vol, path="band")[2:4, 3:6], got)
+    # The time axis is cropped to each volume's reach, so a sub-volume runs on a shorter axis:
+    # equal within the crop's bound (≲ 4e-6 of the signal, tests/proptest_fast.rs).
+    close(vltm.direct(c, vol, path="band")[2:4, 3:6], got, rel=5e-6)
 
 
 def test_amplitudes(two_patches, tmp_path):
