@@ -437,7 +437,7 @@ pub struct LookupProbe<'m> {
 }
 
 impl<'m> LookupProbe<'m> {
-    /// Length in `f64` of the state: `2Kv` (as the band diagonal's [`Probe::state_len`]).
+    /// Length in `f64` of the state: `2Kv` (as the band diagonal's [`Probe::state_len`](crate::Probe::state_len)).
     pub const fn state_len(n_voxels: usize) -> usize {
         n_voxels.saturating_mul(2)
     }

@@ -426,16 +426,16 @@ pub(crate) struct LiveArgs {
     /// metres (repeatable).
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub(crate) focus: Vec<String>,
-    /// Output volume F.npy (or F.h5): the direct light; columns F.column<i>.npy, the in-focus
+    /// Output volume F.npy (or F.h5): the direct light; columns `F.column<i>.npy`, the in-focus
     /// indirect light F.indirect.npy, figures beside them (.png), partial states
-    /// F.<probe>.part, the summed transient F.transient.png.
+    /// `F.<probe>.part`, the summed transient F.transient.png.
     #[arg(long, value_name = "F.npy|F.h5")]
     pub(crate) out: PathBuf,
     /// Write the volumes, figures and partial states every K rows (0: only at the end).
     #[arg(long, value_name = "K", default_value_t = 8)]
     pub(crate) every: usize,
     /// Continue an interrupted run from its partial states (F.direct.part and every
-    /// F.column<i>.part; repeat the option).
+    /// `F.column<i>.part`; repeat the option).
     #[arg(long, value_name = "STATE")]
     pub(crate) resume: Vec<PathBuf>,
     /// End the stream when a followed file has not grown for S seconds.

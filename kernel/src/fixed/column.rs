@@ -12,7 +12,7 @@ use crate::geometry::{alias_window, dist, leaves_window, widen};
 /// Factorised Gaussian column `T(x_a, ·)` in fixed point: per row
 /// `U[s][j] += w_la·e^{iν_j d_la}·HG_ls[j]` (`i64` complex, `2·Ks·J`, LSB
 /// [`FixedConfig::column_lsb`]), imaged at [`FixedColumn::finish`] with the same NCO and
-/// `i128` sums. Exact while path times stay inside [`Config::alias_free`] (counted in the
+/// `i128` sums. Exact while path times stay inside [`Config::alias_free`](crate::Config::alias_free) (counted in the
 /// return value of `finish`, as [`Report::aliased`](crate::Report)).
 #[derive(Debug)]
 pub struct FixedColumn<'m> {
@@ -51,7 +51,7 @@ impl<'m> FixedColumn<'m> {
     /// Adds one row: `Ks·J` integer complex MACs, one phase step and one weight.
     ///
     /// # Errors
-    /// As [`FixedDiagonal::push_row`].
+    /// As [`FixedDiagonal::push_row`](crate::FixedDiagonal::push_row).
     pub fn push_row(&mut self, scan: &FixedScan<'_>, row: &FixedRow<'_>) -> Result<(), Error> {
         let fc = &scan.fc;
         let j = fc.cfg.bins();
@@ -100,7 +100,7 @@ impl<'m> FixedColumn<'m> {
     }
 
     /// Images `voxels`: `out[i] = T(x_a, voxels[i])` in counts²; returns the number of
-    /// voxels whose path times left [`Config::alias_free`]. `Σ_j U·c` in `i128` with the NCO,
+    /// voxels whose path times left [`Config::alias_free`](crate::Config::alias_free). `Σ_j U·c` in `i128` with the NCO,
     /// then the `1/d` weight and the intensity in `f64` (once per voxel and SPAD).
     ///
     /// # Errors

@@ -64,7 +64,7 @@ impl<'m> FixedDiagonal<'m> {
     /// Adds one row (guard interval as in the float path).
     ///
     /// # Errors
-    /// [`Error::Incompatible`] past [`FixedLimits::max_rows`] (the budget); [`Error::Length`]
+    /// [`Error::Incompatible`] past [`FixedLimits::max_rows`](crate::FixedLimits::max_rows) (the budget); [`Error::Length`]
     /// for a row of another scan size. Nothing is changed then.
     pub fn push_row(&mut self, scan: &FixedScan<'_>, row: &FixedRow<'_>) -> Result<(), Error> {
         let fc = &scan.fc;

@@ -8,7 +8,7 @@ use crate::phase::{TwiddleStep, wrap};
 /// Caller-owned integer accumulators of one row's **photon events** for the fixed-point path:
 /// the DFT sums `D_j` of every SPAD (`i64` re/im) and a photon count per SPAD, so firmware
 /// without an FPU folds TCSPC events as they arrive and never stores histograms
-/// ([`FixedRowBuffer::load_photons`] then gives the row, bit-identical to the histogram path).
+/// ([`FixedRowBuffer::load_photons`](crate::FixedRowBuffer::load_photons) then gives the row, bit-identical to the histogram path).
 ///
 /// Per photon: `J` integer complex additions (one twiddle each, the index stepped by the
 /// photon's bin). Memory: [`FixedPhotons::len`] `i64`. A SPAD's photons beyond the budget's

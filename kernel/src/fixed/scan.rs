@@ -27,7 +27,7 @@ impl<'t> FixedScan<'t> {
     ///
     /// # Errors
     /// [`Error::Length`] for a wrong `tables` length or more SPADs than
-    /// [`FixedLimits::max_spads`]; [`Error::NonFinite`] for a non-finite SPAD.
+    /// [`FixedLimits::max_spads`](crate::FixedLimits::max_spads); [`Error::NonFinite`] for a non-finite SPAD.
     pub fn new(
         fc: &FixedConfig,
         spads: &'t [Point],
