@@ -58,8 +58,8 @@ use proptest::test_runner::{FileFailurePersistence, RngAlgorithm, RngSeed};
 use reference::{Reference, p64};
 use support::{Data, all_rows, run};
 use vltm_kernel::{
-    Config, Gate, Legs, Lookup, LookupGrid, LookupParams, LookupProbe, Params, Point, Report,
-    RowBuffer, Sample, Scan, Target, Weights,
+    Config, Gate, Lattice, Legs, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice,
+    Params, Point, Report, RowBuffer, Sample, Scan, SliceLayout, Target, Weights,
 };
 
 const SEED: u64 = 0x7a11_5eed_0f1b_7e00;
@@ -472,12 +472,25 @@ impl Scene {
         target: Target,
         tol: f64,
     ) -> Outcome {
+        self.compare_lookup_on(kernel, truth, target, tol, None)
+    }
+
+    /// [`Self::compare_lookup`] on the general path (`lattice = None`, the voxel list) or
+    /// on the structured slice [`LookupSlice`] over `lattice` (whose points are the voxels).
+    fn compare_lookup_on(
+        &self,
+        kernel: &Params,
+        truth: &Reference,
+        target: Target,
+        tol: f64,
+        lattice: Option<&Lattice>,
+    ) -> Outcome {
         if self.counts {
             let hists: Vec<u16> = self.h.iter().map(|&x| x as u16).collect();
-            self.compare_lookup_with(&hists, kernel, truth, target, tol)
+            self.compare_lookup_with(&hists, kernel, truth, target, tol, lattice)
         } else {
             let hists: Vec<f32> = self.h.iter().map(|&x| x as f32).collect();
-            self.compare_lookup_with(&hists, kernel, truth, target, tol)
+            self.compare_lookup_with(&hists, kernel, truth, target, tol, lattice)
         }
     }
 
@@ -488,6 +501,7 @@ impl Scene {
         truth: &Reference,
         target: Target,
         tol: f64,
+        lattice: Option<&Lattice>,
     ) -> Outcome {
         let cfg = Config::try_new(kernel).expect("valid by construction");
         let grid = LookupGrid::try_new(
@@ -498,15 +512,18 @@ impl Scene {
             },
         )
         .expect("a grid for every tolerance");
-        let (t_k, report) = run_lookup(
-            &cfg,
-            &grid,
-            &self.lasers,
-            &self.spads,
-            hists,
-            target,
-            &self.voxels,
-        );
+        let (t_k, report) = match lattice {
+            None => run_lookup(
+                &cfg,
+                &grid,
+                &self.lasers,
+                &self.spads,
+                hists,
+                target,
+                &self.voxels,
+            ),
+            Some(lat) => run_slice(&cfg, &grid, &self.lasers, &self.spads, hists, target, lat),
+        };
         let (amps, scales): (Vec<Complex64>, Vec<f64>) = match target {
             Target::Diagonal => (
                 truth.diagonal(reference::Gate::Gaussian, &self.voxels),
@@ -529,10 +546,11 @@ impl Scene {
             + reference::erfc(cfg.params().band_half_width / 2f64.sqrt())
             + 2.0 * tail
             + grid.bound();
-        let kind = if let Target::Column(_) = target {
-            "lookup column"
-        } else {
-            "lookup diagonal"
+        let kind = match (target, lattice) {
+            (Target::Column(_), None) => "lookup column",
+            (Target::Diagonal, None) => "lookup diagonal",
+            (Target::Column(_), Some(_)) => "lookup slice column",
+            (Target::Diagonal, Some(_)) => "lookup slice diagonal",
         };
         let mut out = Outcome {
             probe: format!("{kind} (L = {}, η = {:.1e})", grid.len(), grid.bound()),
@@ -618,6 +636,50 @@ fn run_lookup<T: Sample>(
         probe.push_row(&scan, &lookup, &row).expect("push_row");
     }
     let mut out = vec![0.0f64; voxels.len()];
+    let report = probe.finish(&mut out).expect("finish");
+    (out, report)
+}
+
+/// Streams every row through a [`LookupSlice`] over `lattice` and returns `(T, report)`.
+fn run_slice<T: Sample>(
+    cfg: &Config,
+    grid: &LookupGrid,
+    lasers: &[Point],
+    spads: &[Point],
+    hists: &[T],
+    target: Target,
+    lattice: &Lattice,
+) -> (Vec<f64>, Report) {
+    let ks = spads.len();
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+    let scan = Scan::new(cfg, spads, &mut tables).expect("scan");
+    let mut lt = vec![0.0f32; Lookup::tables_len(grid)];
+    let lookup = Lookup::new(grid, &mut lt).expect("lookup tables");
+    let layout = SliceLayout::try_new(&scan, grid, lattice, usize::MAX).expect("on the lattice");
+    let mut st = vec![0.0f32; layout.tables_len()];
+    let kv = lattice.len();
+    let mut state = vec![0.0f64; LookupSlice::state_len(kv)];
+    let mut scratch = vec![0.0f32; LookupSlice::scratch_len(grid, kv)];
+    let mut probe = LookupSlice::new(
+        &scan,
+        &lookup,
+        &layout,
+        target,
+        &mut st,
+        &mut state,
+        &mut scratch,
+    )
+    .expect("slice probe");
+    let mut buf = vec![0.0f32; RowBuffer::len(cfg, ks)];
+    let mut rows = RowBuffer::new(&scan, &mut buf).expect("row buffer");
+    let len = ks * cfg.nt();
+    for (l, laser) in lasers.iter().enumerate() {
+        let row = rows
+            .load(&scan, *laser, &hists[l * len..(l + 1) * len])
+            .expect("load");
+        probe.push_row(&scan, &lookup, &row).expect("push_row");
+    }
+    let mut out = vec![0.0f64; kv];
     let report = probe.finish(&mut out).expect("finish");
     (out, report)
 }
@@ -1018,6 +1080,204 @@ fn lookup_tolerance_detects_half_step_error() {
             println!("{}: half a grid step off, err/tol {:.3}", o.probe, o.worst);
             assert!(o.worst > 3.0, "{}: mistake not detected ({o:?})", o.probe);
         }
+    }
+}
+
+/// A structured slice: voxels on a random lattice (1–4 × 1–3, pitch 1–12 cm along the SPAD
+/// line), SPADs at random integer offsets along it, the rest of the case drawn as above.
+fn slice_case() -> impl Strategy<Value = (Case, Lattice)> {
+    (
+        case(),
+        hidden(),
+        (0.01f32..=0.12, 0.0f32..=std::f32::consts::TAU),
+        (-0.1f32..=0.1, -0.1f32..=0.1, -0.1f32..=0.1),
+        (1usize..=4, 1usize..=3),
+        wall(),
+        prop::collection::vec(-8i32..=8, 1..=6),
+    )
+        .prop_map(
+            |(mut c, origin, (r, phi), (bx, by, bz), (nx, ny), s0, shifts)| {
+                let lattice = Lattice {
+                    origin,
+                    step_x: [r * phi.cos(), r * phi.sin(), 0.0],
+                    step_y: [bx, by, bz],
+                    nx,
+                    ny,
+                };
+                let a = lattice.step_x;
+                c.spads = std::iter::once(0)
+                    .chain(shifts)
+                    .map(|m| {
+                        let m = m as f32;
+                        [s0[0] + m * a[0], s0[1] + m * a[1], s0[2] + m * a[2]]
+                    })
+                    .collect();
+                c.voxels = (0..lattice.len()).map(|i| lattice.point(i)).collect();
+                (c, lattice)
+            },
+        )
+}
+
+fn check_slice(case: &Case, lattice: &Lattice) -> Result<(), TestCaseError> {
+    let (scene, p) = case.prepare();
+    let truth = scene.reference(&p);
+    for t in [Target::Diagonal, Target::Column(scene.focus)] {
+        let o = scene.compare_lookup_on(&p, &truth, t, lookup_tolerance(case), Some(lattice));
+        prop_assert!(
+            o.worst <= 1.0,
+            "{}: error {:.3}× the tolerance ({o:?})",
+            o.probe,
+            o.worst
+        );
+        prop_assert_eq!(o.report.rows, case.lasers.len() as u64);
+        prop_assert_eq!(o.report.non_finite, 0);
+    }
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig {
+        cases: 192,
+        rng_algorithm: RngAlgorithm::ChaCha,
+        rng_seed: RngSeed::Fixed(SEED ^ 0x51ce),
+        failure_persistence: Some(Box::new(FileFailurePersistence::WithSource("proptest-regressions"))),
+        ..ProptestConfig::default()
+    })]
+
+    /// The structured-slice lookup ([`LookupSlice`]), diagonal and column, within the lookup
+    /// path's tolerance of the f64 reference.
+    #[test]
+    fn slice_lookup_matches_time_domain_reference((case, lattice) in slice_case()) {
+        check_slice(&case, &lattice)?;
+    }
+}
+
+/// A 3 × 2 slice seen by SPADs 0, 2 and −3 lattice steps from the first, over the small
+/// laser grid.
+fn slice_scene(p: &Params) -> (Scene, Lattice) {
+    let lattice = Lattice {
+        origin: [-0.1, -0.05, 0.7],
+        step_x: [0.05, 0.0, 0.0],
+        step_y: [0.0, 0.08, 0.1],
+        nx: 3,
+        ny: 2,
+    };
+    let (lasers, _) = small_grids();
+    let spads: Vec<Point> = [0.0f32, 2.0, -3.0]
+        .iter()
+        .map(|m| [0.1 + m * 0.05, 0.2, 0.0])
+        .collect();
+    let voxels: Vec<Point> = (0..lattice.len()).map(|i| lattice.point(i)).collect();
+    let focus = [0.0, 0.0, 0.7];
+    let n = lasers.len() * spads.len() * p.nt;
+    let geo = Reference::new(p, &lasers, &spads, vec![0.0; n]);
+    let h = draw_histograms(&geo, &voxels, focus, false, (7, 20, 0.01));
+    let scene = Scene {
+        lasers,
+        spads,
+        voxels,
+        focus,
+        h,
+        counts: false,
+    };
+    (scene, lattice)
+}
+
+/// The structured slice's tolerance has teeth as the general path's: half a grid step off
+/// fails it by > 3× at every tolerance, while the correct configuration passes.
+#[test]
+fn slice_lookup_tolerance_detects_half_step_error() {
+    let p = Params {
+        t0: 1.0,
+        ..Params::new(0.1, 300, 0.01)
+    };
+    let (sc, lattice) = slice_scene(&p);
+    let truth = sc.reference(&p);
+    let cfg = Config::try_new(&p).unwrap();
+    for tol in [1e-6, 1e-5, 1e-4, 1e-3] {
+        let grid = LookupGrid::try_new(
+            &cfg,
+            &LookupParams {
+                tolerance: tol,
+                grid_len: None,
+            },
+        )
+        .unwrap();
+        let half_step = Params {
+            t0: p.t0 + grid.step() / 2.0,
+            ..p
+        };
+        for t in [Target::Diagonal, Target::Column(sc.focus)] {
+            let o = sc.compare_lookup_on(&p, &truth, t, tol, Some(&lattice));
+            println!("{}: correct, err/tol {:.3}", o.probe, o.worst);
+            assert!(o.worst <= 1.0, "{o:?}");
+            let o = sc.compare_lookup_on(&half_step, &truth, t, tol, Some(&lattice));
+            println!("{}: half a grid step off, err/tol {:.3}", o.probe, o.worst);
+            assert!(o.worst > 3.0, "{}: mistake not detected ({o:?})", o.probe);
+        }
+    }
+}
+
+/// The structured slice agrees with the general lookup path over the same voxels (same grid
+/// and maths, other rounding), and its configuration errors name the parameter.
+#[test]
+fn slice_lookup_matches_general_path_and_validates() {
+    let p = Params {
+        t0: 1.0,
+        ..Params::new(0.1, 300, 0.01)
+    };
+    let (sc, lattice) = slice_scene(&p);
+    let cfg = Config::try_new(&p).unwrap();
+    let grid = LookupGrid::try_new(&cfg, &LookupParams::new()).unwrap();
+    let hists: Vec<f32> = sc.h.iter().map(|&x| x as f32).collect();
+    for t in [Target::Diagonal, Target::Column(sc.focus)] {
+        let (general, _) = run_lookup(&cfg, &grid, &sc.lasers, &sc.spads, &hists, t, &sc.voxels);
+        let (slice, _) = run_slice(&cfg, &grid, &sc.lasers, &sc.spads, &hists, t, &lattice);
+        let peak = general.iter().fold(0.0f64, |m, x| m.max(x.sqrt()));
+        assert!(peak > 0.0);
+        for (g, s) in general.iter().zip(&slice) {
+            let e = (g.sqrt() - s.sqrt()).abs() / peak;
+            assert!(e < 2e-5, "{t:?}: {g} vs {s} ({e:.2e} of the peak)");
+        }
+    }
+    let mut tables = vec![0.0f32; Scan::tables_len(&cfg, sc.spads.len())];
+    let scan = Scan::new(&cfg, &sc.spads, &mut tables).unwrap();
+    let layout = SliceLayout::try_new(&scan, &grid, &lattice, usize::MAX).unwrap();
+    // 3 voxels + SPAD offsets −3..2 → 8 entries per row; 2 rows; 3 SPADs.
+    assert_eq!(layout.width(), 8);
+    assert_eq!(layout.tables_len(), 4 * (3 + 16));
+    use vltm_kernel::ConfigError;
+    let fits = SliceLayout::try_new(&scan, &grid, &lattice, layout.tables_len() - 1);
+    assert_eq!(fits, Err(ConfigError::DoesNotFit("slice tables")));
+    let off = Lattice {
+        step_x: [0.03, 0.0, 0.0],
+        ..lattice
+    };
+    let e = SliceLayout::try_new(&scan, &grid, &off, usize::MAX);
+    assert_eq!(e, Err(ConfigError::NotOnLattice("spads")));
+    assert!(e.unwrap_err().to_string().contains("`spads`"));
+    for (bad, err) in [
+        (Lattice { nx: 0, ..lattice }, ConfigError::NotPositive("nx")),
+        (Lattice { ny: 0, ..lattice }, ConfigError::NotPositive("ny")),
+        (
+            Lattice {
+                step_x: [0.0; 3],
+                ..lattice
+            },
+            ConfigError::NotPositive("step_x"),
+        ),
+        (
+            Lattice {
+                origin: [f32::NAN, 0.0, 0.0],
+                ..lattice
+            },
+            ConfigError::NotFinite("origin"),
+        ),
+    ] {
+        assert_eq!(
+            SliceLayout::try_new(&scan, &grid, &bad, usize::MAX),
+            Err(err)
+        );
     }
 }
 

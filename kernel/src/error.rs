@@ -39,6 +39,12 @@ pub enum ConfigError {
     /// The parameter makes a lookup grid too coarse: its interpolation error bound exceeds
     /// the tolerance, or it has fewer points than band bins or than 8 per carrier wavelength.
     TooCoarse(&'static str),
+    /// The parameter (the SPAD positions of a structured slice) does not lie on the slice's
+    /// lattice: a SPAD's offset from the first is not an integer multiple of `step_x`.
+    NotOnLattice(&'static str),
+    /// The parameter (a table of a structured slice) needs more memory than the caller
+    /// offers: use the general path.
+    DoesNotFit(&'static str),
 }
 
 impl fmt::Display for ConfigError {
@@ -60,6 +66,12 @@ impl fmt::Display for ConfigError {
                 "parameter `{p}` gives a grid too coarse for the tolerance \
                  (or fewer points than band bins, or than 8 per wavelength)"
             ),
+            Self::NotOnLattice(p) => write!(
+                f,
+                "parameter `{p}` is not on the slice's lattice (offsets must be integer \
+                 multiples of `step_x`)"
+            ),
+            Self::DoesNotFit(p) => write!(f, "`{p}` does not fit the memory offered"),
         }
     }
 }

@@ -86,7 +86,7 @@ use num_complex::{Complex32, Complex64};
 const MAX_LEN: usize = 1 << 24;
 
 /// Extra grid entries past `L` (the 4-point stencil reads up to 3 past its start).
-const EXTRA: usize = 3;
+pub(crate) const EXTRA: usize = 3;
 
 /// `√x` for finite `x ≥ 0` in plain `f32` arithmetic: an integer first guess of `1/√x`, two
 /// Newton steps for `1/√x` and one for `√x`. Within 1 ulp of the correctly rounded square
@@ -95,7 +95,7 @@ const EXTRA: usize = 3;
 /// routine on a Cortex-M (≈ 100 instructions; `f32::sqrt` and the FPU's `vsqrt` are not
 /// reachable from stable `no_std` Rust without `unsafe`): this is ≈ 14.
 #[inline(always)]
-fn sqrt_nr(x: f32) -> f32 {
+pub(crate) fn sqrt_nr(x: f32) -> f32 {
     let mut y = f32::from_bits(0x5f37_59df_u32.wrapping_sub(x.to_bits() >> 1));
     let h = 0.5 * x;
     y = y * (1.5 - h * y * y);
@@ -106,7 +106,7 @@ fn sqrt_nr(x: f32) -> f32 {
 
 /// Euclidean distance with [`sqrt_nr`] (within 1 ulp of the correctly rounded `f32` one).
 #[inline(always)]
-fn dist_nr(a: &Point, b: &Point) -> f32 {
+pub(crate) fn dist_nr(a: &Point, b: &Point) -> f32 {
     let (x, y, z) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
     sqrt_nr(x * x + y * y + z * z)
 }
@@ -340,10 +340,15 @@ impl<'t> Lookup<'t> {
         &self.grid
     }
 
+    /// The carrier table `C[i] = e^{2πi k_d i/L}`, `L` entries.
+    pub(crate) const fn carrier_table(&self) -> &[Complex32] {
+        self.carrier
+    }
+
     /// One SPAD's baseband grid `Y[n]` (`n < L`, then `EXTRA` wrapped copies) from its band
     /// spectrum `hg` (J values): the band placed in bit-reversed order, then the radix-2
     /// decimation-in-time stages of an inverse FFT.
-    fn synthesise(&self, hg: &[Complex32], y: &mut [Complex32]) {
+    pub(crate) fn synthesise(&self, hg: &[Complex32], y: &mut [Complex32]) {
         let l = self.grid.len;
         let shift = usize::BITS - self.grid.bits;
         let mask = l - 1;

@@ -1,0 +1,652 @@
+//! The lookup path on a **structured slice**: the Gaussian diagonal or column of a plane of
+//! voxels on a regular lattice, seen by SPADs on a line commensurate with the lattice, with
+//! the laser-independent part of every (voxel, SPAD) pair precomputed once.
+//!
+//! # When it applies
+//!
+//! Voxel `(ix, iy)` (index `iy·nx + ix`) is `o + ix·a + iy·b` ([`Lattice`]), and every SPAD is
+//! `s_k = s_0 + m_k·a` for an integer `m_k` (checked to `f32` rounding by
+//! [`SliceLayout::try_new`], [`ConfigError::NotOnLattice`] otherwise). Then
+//! `v − s_k = (o − s_0) + (ix − m_k)·a + iy·b` depends only on `(ix − m_k, iy)`: the distinct
+//! SPAD legs `d_vs` fill a table of `ny × (nx + max m − min m)` entries instead of `Kv·Ks`
+//! (for 64 × 64 voxels and 28 SPADs at the lattice pitch: 5 824 entries, 93 KB, instead of
+//! 114 688 pairs, 1.8 MB). When the table does not fit the memory the caller offers,
+//! [`SliceLayout::try_new`] says so ([`ConfigError::DoesNotFit`]) and the caller uses the
+//! general [`LookupProbe`](crate::LookupProbe).
+//!
+//! # Method (same maths as [`LookupProbe`](crate::LookupProbe), other factorisation)
+//!
+//! In grid units (`x = τ·L/span`), the lookup path's value is
+//! `Z_s(τ) = e^{2πiθx}·Y_s(x)` (`θ = k_d/L`, `Y_s` the baseband grid interpolated by the
+//! 4-point cubic). With `x = x_lead(v) + x_vs(v, s)` the carrier splits into a per-voxel factor
+//! `e^{2πiθ x_lead}` (once per voxel and row, outside the SPAD loop) and a per-pair factor
+//! `P = w(d_vs)·e^{2πiθ x_vs}` that does not depend on the laser: it is stored in the table
+//! with `x_vs`, computed once in `f64`. Per row and SPAD, the baseband grid is synthesised
+//! ([`Lookup`]) and turned into the cubic's power-basis coefficients per grid cell
+//! (`p(t) = a₀ + a₁t + a₂t² + a₃t³`, the same cubic as the Lagrange form of
+//! [`lagrange4`](crate::lagrange4)), so a pair is: one add (`x`), the floor and fraction, one
+//! bounds-checked cell read, a complex Horner step of three multiply-adds, the complex product
+//! with `P` and the row sum. The guard interval ([`Config::guard`](crate::Config::guard)) is
+//! proved once per SPAD and row from the extreme lead and leg values (`f32`, in grid units);
+//! only when it cannot be proved is it tested per pair. The loops run SPAD-outer and voxel-row
+//! inner over contiguous table rows (no index arithmetic per pair).
+//!
+//! # Error bound
+//!
+//! The interpolated function, grid and carrier are those of [`LookupProbe`](crate::LookupProbe),
+//! so its module's bound holds unchanged: `|Z_slice − Z_band| ≤ η·‖h_s‖₁` per pair with
+//! `η` = [`LookupGrid::bound`], plus `f32` rounding: the power-basis coefficients are sums of
+//! at most four grid values with weights ≤ 1 (`|a_q| ≤ 2·max|Y|`), Horner at `0 ≤ t < 1` adds
+//! ≈ 6u of `max|Y|`; the carrier phases are `θ·x_lead` in `f32` (a relative `u` of the path
+//! in grid units, as the general path's grid position) and `θ·x_vs` rounded once from `f64`.
+//! The lattice positions are computed in `f64` from the `f32` origin and steps, and the SPADs
+//! are taken at `s_0 + m_k·a` (within a few `f32` ulps of the given ones, checked).
+//!
+//! # Cost and memory
+//!
+//! Per row: `Ks` inverse FFTs of length `L` and `Ks·L` cell conversions (≈ 25 flops each),
+//! `Kv` lead distances and carriers, then `Kv·Ks` pairs of ≈ 20 flops with no square root,
+//! no carrier polynomial and no weight. Memory, all caller-owned: the slice tables
+//! `4·Ks + 4·ny·width` `f32` ([`SliceLayout::tables_len`]; `width = nx + max m − min m`), the
+//! state `2Kv` `f64`, the scratch `2(L + 3) + 8L + 3Kv` `f32` ([`LookupSlice::scratch_len`]:
+//! one SPAD's grid and its cubic cells, the voxels' row sums and leads). No allocation, no
+//! panic on data; configuration and geometry checked once.
+
+use crate::config::{Point, Weights};
+use crate::error::{ConfigError, Error, check_len};
+use crate::lookup::{EXTRA, Lookup, LookupGrid, dist_nr};
+use crate::phase::cis_small_turns;
+use crate::probe::{Report, Target};
+use crate::sample::Sample;
+use crate::scan::{Row, Scan, as_complex};
+use num_complex::{Complex32, Complex64};
+
+/// A plane of voxels on a regular lattice: voxel `(ix, iy)`, index `iy·nx + ix`, at
+/// `origin + ix·step_x + iy·step_y` (m).
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct Lattice {
+    /// Voxel (0, 0) (m).
+    pub origin: Point,
+    /// From voxel `(ix, iy)` to `(ix + 1, iy)` (m); the SPAD line's direction.
+    pub step_x: Point,
+    /// From voxel `(ix, iy)` to `(ix, iy + 1)` (m).
+    pub step_y: Point,
+    /// Voxels along `step_x` (≥ 1).
+    pub nx: usize,
+    /// Voxels along `step_y` (≥ 1).
+    pub ny: usize,
+}
+
+impl Lattice {
+    /// Number of voxels `nx·ny`.
+    #[allow(clippy::len_without_is_empty)]
+    pub const fn len(&self) -> usize {
+        self.nx.saturating_mul(self.ny)
+    }
+
+    /// Voxel `(ix, iy)` in `f64` (the table's position).
+    fn point64(&self, ix: f64, iy: f64) -> [f64; 3] {
+        let mut p = [0.0; 3];
+        for (k, c) in p.iter_mut().enumerate() {
+            *c = f64::from(self.origin[k])
+                + ix * f64::from(self.step_x[k])
+                + iy * f64::from(self.step_y[k]);
+        }
+        p
+    }
+
+    /// Voxel number `i` (`iy·nx + ix`), rounded to `f32`: the voxel list the general path
+    /// ([`LookupProbe`](crate::LookupProbe)) takes for the same slice.
+    pub fn point(&self, i: usize) -> Point {
+        let nx = self.nx.max(1);
+        let p = self.point64((i % nx) as f64, (i / nx) as f64);
+        [p[0] as f32, p[1] as f32, p[2] as f32]
+    }
+}
+
+/// The validated layout of a structured slice for one scan and lookup grid: `Copy`, no
+/// tables. See the module docs.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub struct SliceLayout {
+    grid: LookupGrid,
+    lattice: Lattice,
+    ks: usize,
+    /// Smallest and largest SPAD lattice offset `m_k`.
+    m_min: i64,
+    m_max: i64,
+    /// Table entries per voxel row: `nx + m_max − m_min`.
+    width: usize,
+}
+
+/// Largest table (entries) and lattice offset accepted: indices stay exact in `f32`.
+const MAX_ENTRIES: usize = 1 << 22;
+
+impl SliceLayout {
+    /// Checks that the scan's SPADs lie on `lattice`'s x lattice and that the slice tables
+    /// fit `capacity` `f32` (pass `usize::MAX` to only validate).
+    ///
+    /// # Errors
+    /// [`ConfigError`] naming the parameter: `nx`/`ny` zero ([`ConfigError::NotPositive`]);
+    /// a non-finite `origin`, `step_x`, `step_y` or SPAD ([`ConfigError::NotFinite`]); a zero
+    /// `step_x` ([`ConfigError::NotPositive`]); a SPAD off the lattice
+    /// ([`ConfigError::NotOnLattice`]`("spads")`); tables over 2²² entries
+    /// ([`ConfigError::SizeOverflow`]) or over `capacity` ([`ConfigError::DoesNotFit`]`("slice
+    /// tables")`).
+    pub fn try_new(
+        scan: &Scan<'_>,
+        grid: &LookupGrid,
+        lattice: &Lattice,
+        capacity: usize,
+    ) -> Result<Self, ConfigError> {
+        if lattice.nx == 0 {
+            return Err(ConfigError::NotPositive("nx"));
+        }
+        if lattice.ny == 0 {
+            return Err(ConfigError::NotPositive("ny"));
+        }
+        for (p, name) in [
+            (lattice.origin, "origin"),
+            (lattice.step_x, "step_x"),
+            (lattice.step_y, "step_y"),
+        ] {
+            if !p.iter().all(|c| c.is_finite()) {
+                return Err(ConfigError::NotFinite(name));
+            }
+        }
+        let a = lattice.step_x.map(f64::from);
+        let a2 = a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
+        if a2 <= 0.0 {
+            return Err(ConfigError::NotPositive("step_x"));
+        }
+        let spads = scan.spads();
+        let s0 = spads.first().copied().unwrap_or([0.0; 3]).map(f64::from);
+        let (mut m_min, mut m_max) = (0i64, 0i64);
+        for s in spads {
+            if !s.iter().all(|c| c.is_finite()) {
+                return Err(ConfigError::NotFinite("spads"));
+            }
+            let m = lattice_offset(&a, a2, &s0, s).ok_or(ConfigError::NotOnLattice("spads"))?;
+            m_min = m_min.min(m);
+            m_max = m_max.max(m);
+        }
+        let span = (m_max - m_min) as usize;
+        let width = lattice
+            .nx
+            .checked_add(span)
+            .ok_or(ConfigError::SizeOverflow("slice tables"))?;
+        let entries = width
+            .checked_mul(lattice.ny)
+            .filter(|&e| e <= MAX_ENTRIES && lattice.len() <= MAX_ENTRIES)
+            .ok_or(ConfigError::SizeOverflow("slice tables"))?;
+        if 4 * (entries + spads.len()) > capacity {
+            return Err(ConfigError::DoesNotFit("slice tables"));
+        }
+        Ok(Self {
+            grid: *grid,
+            lattice: *lattice,
+            ks: spads.len(),
+            m_min,
+            m_max,
+            width,
+        })
+    }
+
+    /// Length in `f32` of the slice tables: `4·Ks + 4·ny·width`.
+    pub const fn tables_len(&self) -> usize {
+        4 * (self.ks + self.width * self.lattice.ny)
+    }
+    /// The lattice.
+    pub const fn lattice(&self) -> &Lattice {
+        &self.lattice
+    }
+    /// Table entries per voxel row, `nx + max m − min m`.
+    pub const fn width(&self) -> usize {
+        self.width
+    }
+}
+
+/// `m` with `s = s0 + m·a` to `f32` rounding, or `None`.
+fn lattice_offset(a: &[f64; 3], a2: f64, s0: &[f64; 3], s: &Point) -> Option<i64> {
+    let d = [
+        f64::from(s[0]) - s0[0],
+        f64::from(s[1]) - s0[1],
+        f64::from(s[2]) - s0[2],
+    ];
+    let m = libm::round((d[0] * a[0] + d[1] * a[1] + d[2] * a[2]) / a2);
+    if !(m.abs() <= MAX_ENTRIES as f64) {
+        return None;
+    }
+    let mut scale = 0.0f64;
+    let mut resid = 0.0f64;
+    for k in 0..3 {
+        let r = d[k] - m * a[k];
+        resid = resid.max(libm::fabs(r));
+        scale = scale
+            .max(libm::fabs(s0[k]))
+            .max(libm::fabs(f64::from(s[k])))
+            .max(libm::fabs(m * a[k]));
+    }
+    // A few f32 ulps of the coordinates: what rounding the positions to f32 leaves.
+    (resid <= 8.0 * f64::from(f32::EPSILON) * scale).then_some(m as i64)
+}
+
+/// A Gaussian-gated diagonal or column over a structured slice on the lookup path (module
+/// docs): the result equals [`LookupProbe`](crate::LookupProbe)'s over the voxel list
+/// [`Lattice::point`]`(0..Kv)` within the lookup path's bound.
+///
+/// ```
+/// use vltm_kernel::{Config, Lattice, Lookup, LookupGrid, LookupParams, LookupSlice, Params,
+///     RowBuffer, Scan, SliceLayout, Target};
+/// let cfg = Config::try_new(&Params::new(0.2, 128, 0.01)).unwrap();
+/// let spads = [[0.0f32, 0.0, 0.0], [0.1, 0.0, 0.0]];
+/// let mut tables = vec![0.0; Scan::tables_len(&cfg, 2)];
+/// let scan = Scan::new(&cfg, &spads, &mut tables).unwrap();
+/// let grid = LookupGrid::try_new(&cfg, &LookupParams::new()).unwrap();
+/// let mut lt = vec![0.0; Lookup::tables_len(&grid)];
+/// let lookup = Lookup::new(&grid, &mut lt).unwrap();
+/// // 4 × 2 voxels at z = 0.5 m, 5 cm pitch along the SPAD line (SPAD pitch 10 cm = 2 steps).
+/// let lattice = Lattice {
+///     origin: [-0.1, 0.0, 0.5], step_x: [0.05, 0.0, 0.0], step_y: [0.0, 0.05, 0.0], nx: 4, ny: 2,
+/// };
+/// let layout = SliceLayout::try_new(&scan, &grid, &lattice, usize::MAX).unwrap();
+/// let mut st = vec![0.0; layout.tables_len()];
+/// let mut state = vec![0.0; LookupSlice::state_len(lattice.len())];
+/// let mut scratch = vec![0.0; LookupSlice::scratch_len(&grid, lattice.len())];
+/// let mut diag = LookupSlice::new(&scan, &lookup, &layout, Target::Diagonal, &mut st,
+///     &mut state, &mut scratch).unwrap();
+/// let mut buf = vec![0.0; RowBuffer::len(&cfg, 2)];
+/// let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
+/// let mut h = [0u16; 256];
+/// h[100] = 50; // SPAD 0: a return at 1.00 m = 2 × 0.5 m
+/// let row = rows.load(&scan, [0.0, 0.0, 0.0], &h).unwrap();
+/// diag.push_row(&scan, &lookup, &row).unwrap();
+/// let mut out = [0.0f64; 8];
+/// diag.finish(&mut out).unwrap();
+/// assert!(out[2] > 10.0 * out[7]); // voxel (2, 0) is at (0, 0, 0.5)
+/// ```
+#[derive(Debug)]
+pub struct LookupSlice<'m> {
+    target: Target,
+    layout: SliceLayout,
+    /// Per SPAD: `[row offset m_max − m_k, min x_vs, max x_vs, 0]`.
+    spad_info: &'m [[f32; 4]],
+    /// Per (iy, u): `[x_vs, P.re, P.im, 0]`, `ny × width`.
+    table: &'m [[f32; 4]],
+    acc: &'m mut [Complex64],
+    /// One SPAD's grid, `L + EXTRA`.
+    grid_buf: &'m mut [Complex32],
+    /// One SPAD's cubic cells `[a₀, a₁, a₂, a₃]` (re, im interleaved), `L`.
+    cells: &'m mut [[f32; 8]],
+    /// Per voxel: this row's sum over the SPADs.
+    sums: &'m mut [Complex32],
+    /// Per voxel: the lead path in grid units.
+    lead: &'m mut [f32],
+    report: Report,
+}
+
+impl<'m> LookupSlice<'m> {
+    /// Length in `f64` of the state: `2Kv`.
+    pub const fn state_len(n_voxels: usize) -> usize {
+        n_voxels.saturating_mul(2)
+    }
+
+    /// Length in `f32` of the scratch: `2(L + 3) + 8L + 3Kv`.
+    pub const fn scratch_len(grid: &LookupGrid, n_voxels: usize) -> usize {
+        (2 * (grid.len() + EXTRA) + 8 * grid.len()).saturating_add(n_voxels.saturating_mul(3))
+    }
+
+    /// Fills the slice tables (once, in `f64`) and returns a zeroed probe.
+    ///
+    /// # Errors
+    /// [`Error::Incompatible`] if `layout` or `lookup` was made for another scan or
+    /// configuration; [`Error::Length`] if `tables`, `state` or `scratch` does not have
+    /// [`SliceLayout::tables_len`] / [`Self::state_len`] / [`Self::scratch_len`] elements;
+    /// [`Error::NonFinite`] for a non-finite column focus.
+    pub fn new(
+        scan: &Scan<'_>,
+        lookup: &Lookup<'_>,
+        layout: &SliceLayout,
+        target: Target,
+        tables: &'m mut [f32],
+        state: &'m mut [f64],
+        scratch: &'m mut [f32],
+    ) -> Result<Self, Error> {
+        let grid = *lookup.grid();
+        let cfg = scan.config();
+        if grid != layout.grid || grid.config() != cfg {
+            return Err(Error::Incompatible("lookup grid of another configuration"));
+        }
+        let lat = layout.lattice;
+        let a = lat.step_x.map(f64::from);
+        let a2 = a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
+        let s0 = scan
+            .spads()
+            .first()
+            .copied()
+            .unwrap_or([0.0; 3])
+            .map(f64::from);
+        // The SPADs' offsets, re-derived: the layout must be this scan's.
+        if scan.spads().len() != layout.ks
+            || scan.spads().iter().any(|s| {
+                lattice_offset(&a, a2, &s0, s).is_none_or(|m| m < layout.m_min || m > layout.m_max)
+            })
+        {
+            return Err(Error::Incompatible("slice layout of another scan"));
+        }
+        let kv = lat.len();
+        check_len("slice tables", layout.tables_len(), tables.len())?;
+        check_len("state", Self::state_len(kv), state.len())?;
+        check_len("scratch", Self::scratch_len(&grid, kv), scratch.len())?;
+        if let Target::Column(f) = target {
+            crate::error::check_points("focus", &[f])?;
+        }
+        let l = grid.len();
+        let short = |what, expected, found| Error::Length {
+            what,
+            expected,
+            found,
+        };
+        let found = tables.len();
+        let (info, entries) = tables.split_at_mut_checked(4 * layout.ks).ok_or(short(
+            "slice tables",
+            layout.tables_len(),
+            found,
+        ))?;
+        let info: &mut [[f32; 4]] = bytemuck::try_cast_slice_mut(info)
+            .map_err(|_| short("slice tables", layout.tables_len(), found))?;
+        let entries: &mut [[f32; 4]] = bytemuck::try_cast_slice_mut(entries)
+            .map_err(|_| short("slice tables", layout.tables_len(), found))?;
+        // Entries: x_vs and P = w(d_vs)·e^{2πiθ x_vs}, from f64 positions.
+        let span = cfg.span();
+        let per_m = l as f64 / span;
+        let theta = grid.carrier_bin() as f64 / l as f64;
+        let width = layout.width;
+        for (n, e) in entries.iter_mut().enumerate() {
+            let (iy, u) = (n / width.max(1), n % width.max(1));
+            // Entry u holds v − s_k for ix − m_k = u − m_max: the lattice point there, − s_0.
+            let ix = u as f64 - layout.m_max as f64;
+            let p = lat.point64(ix, iy as f64);
+            let (dx, dy, dz) = (p[0] - s0[0], p[1] - s0[1], p[2] - s0[2]);
+            let d = libm::sqrt(dx * dx + dy * dy + dz * dz);
+            let x = d * per_m;
+            let turns = theta * x;
+            let ph = core::f64::consts::TAU * (turns - libm::rint(turns));
+            let w = f64::from(cfg.weight(d as f32));
+            *e = [
+                x as f32,
+                (w * libm::cos(ph)) as f32,
+                (w * libm::sin(ph)) as f32,
+                0.0,
+            ];
+        }
+        // Per SPAD: its row offset and the extreme legs of its window.
+        for (s, inf) in scan.spads().iter().zip(info.iter_mut()) {
+            let m = lattice_offset(&a, a2, &s0, s).unwrap_or(layout.m_max);
+            // u = ix − m_k + m_max: SPAD k's voxel row starts at u = m_max − m_k.
+            let start = (layout.m_max - m) as usize;
+            let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+            for row in entries.chunks_exact(width.max(1)) {
+                for e in row.iter().skip(start).take(lat.nx) {
+                    lo = if e[0] < lo { e[0] } else { lo };
+                    hi = if e[0] > hi { e[0] } else { hi };
+                }
+            }
+            *inf = [start as f32, lo, hi, 0.0];
+        }
+        let found = state.len();
+        let acc: &mut [Complex64] =
+            bytemuck::try_cast_slice_mut(state).map_err(|_| short("state", 2 * kv, found))?;
+        let sl = Self::scratch_len(&grid, kv);
+        let found = scratch.len();
+        let (g, rest) = scratch
+            .split_at_mut_checked(2 * (l + EXTRA))
+            .ok_or(short("scratch", sl, found))?;
+        let (cells, rest) = rest
+            .split_at_mut_checked(8 * l)
+            .ok_or(short("scratch", sl, found))?;
+        let (sums, lead) = rest
+            .split_at_mut_checked(2 * kv)
+            .ok_or(short("scratch", sl, found))?;
+        acc.fill(Complex64::new(0.0, 0.0));
+        Ok(Self {
+            target,
+            layout: *layout,
+            spad_info: info,
+            table: entries,
+            acc,
+            grid_buf: as_complex("scratch", g)?,
+            cells: bytemuck::try_cast_slice_mut(cells).map_err(|_| short("scratch", sl, found))?,
+            sums: as_complex("scratch", sums)?,
+            lead,
+            report: Report::default(),
+        })
+    }
+
+    /// The target.
+    pub const fn target(&self) -> Target {
+        self.target
+    }
+    /// The layout (lattice, grid).
+    pub const fn layout(&self) -> &SliceLayout {
+        &self.layout
+    }
+    /// Counters so far (`aliased` is always 0: every path gets the guard).
+    pub const fn report(&self) -> Report {
+        self.report
+    }
+    /// The complex amplitudes accumulated so far, one per voxel (`iy·nx + ix`).
+    pub fn accumulators(&self) -> &[Complex64] {
+        self.acc
+    }
+    /// Zeroes the accumulators and counters.
+    pub fn reset(&mut self) {
+        self.acc.fill(Complex64::new(0.0, 0.0));
+        self.report = Report::default();
+    }
+
+    /// Adds one laser row: `Ks` grid syntheses and cell conversions, then `Kv·Ks` O(1)
+    /// lookups. Infallible on data values and panic-free.
+    ///
+    /// # Errors
+    /// [`Error::Incompatible`] if `lookup` or `scan` is not the probe's configuration or
+    /// SPAD count; [`Error::Length`] if `row` was loaded for a scan of another size. Nothing
+    /// is changed then.
+    pub fn push_row<T: Sample>(
+        &mut self,
+        scan: &Scan<'_>,
+        lookup: &Lookup<'_>,
+        row: &Row<'_, T>,
+    ) -> Result<(), Error> {
+        let grid = self.layout.grid;
+        let cfg = scan.config();
+        if *lookup.grid() != grid || cfg != grid.config() || scan.spads().len() != self.layout.ks {
+            return Err(Error::Incompatible("lookup grid of another configuration"));
+        }
+        let ks = scan.spads().len();
+        let j = cfg.bins().max(1);
+        check_len("row spectra", ks * cfg.bins(), row.band().len())?;
+        check_len("row histograms", ks * cfg.nt(), ks * row.nt())?;
+        check_len("row offsets", ks, row.offsets().len())?;
+        let l = grid.len();
+        let mask = l - 1;
+        let per_m = (l as f64 / cfg.span()) as f32;
+        let theta = (grid.carrier_bin() as f64 / l as f64) as f32;
+        let lat = self.layout.lattice;
+        let nx = lat.nx.max(1);
+        // Leads in grid units, and their extremes.
+        let laser = row.laser();
+        let (focus, d_la) = match self.target {
+            Target::Diagonal => (laser, 0.0),
+            Target::Column(a) => (a, dist_nr(&laser, &a)),
+        };
+        let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+        for (i, g) in self.lead.iter_mut().enumerate() {
+            let (ix, iy) = ((i % nx) as f32, (i / nx) as f32);
+            let v = [
+                lat.origin[0] + ix * lat.step_x[0] + iy * lat.step_y[0],
+                lat.origin[1] + ix * lat.step_x[1] + iy * lat.step_y[1],
+                lat.origin[2] + ix * lat.step_x[2] + iy * lat.step_y[2],
+            ];
+            let x = (d_la + dist_nr(&focus, &v)) * per_m;
+            lo = if x < lo { x } else { lo };
+            hi = if x > hi { x } else { hi };
+            *g = x;
+        }
+        self.sums.fill(Complex32::new(0.0, 0.0));
+        let (g_lo, g_hi) = cfg.guard();
+        let (g_lo, g_hi) = ((g_lo as f32) * per_m, (g_hi as f32) * per_m);
+        let width = self.layout.width.max(1);
+        for ((info, hg), off) in self
+            .spad_info
+            .iter()
+            .zip(row.band().chunks_exact(j))
+            .zip(row.offsets())
+        {
+            lookup.synthesise(hg, self.grid_buf);
+            cubic_cells(self.grid_buf, self.cells);
+            let cells: &[[f32; 8]] = self.cells;
+            let start = info[0] as usize;
+            let off = *off * per_m;
+            // The guard, proved for the whole SPAD when the extremes allow it.
+            let proved = lo + info[1] + off >= g_lo && hi + info[2] + off <= g_hi;
+            for ((tab, leads), sums) in self
+                .table
+                .chunks_exact(width)
+                .zip(self.lead.chunks_exact(nx))
+                .zip(self.sums.chunks_exact_mut(nx))
+            {
+                let Some(tab) = tab.get(start..).and_then(|t| t.get(..nx)) else {
+                    continue;
+                };
+                if proved {
+                    pairs::<false>(cells, mask, tab, leads, sums, (off, g_lo, g_hi));
+                } else {
+                    pairs::<true>(cells, mask, tab, leads, sums, (off, g_lo, g_hi));
+                }
+            }
+        }
+        // Per voxel: the lead's carrier e^{2πiθ x_lead} (exact table at the integer part,
+        // small-phase polynomial for the fraction) and weight.
+        let carrier = lookup.carrier_table();
+        let d_min = cfg.params().d_min as f32;
+        let inv = matches!(cfg.weights(), Weights::Inv);
+        let w_col = cfg.weight(d_la);
+        let per_grid = (cfg.span() / l as f64) as f32;
+        for ((a, s), x) in self
+            .acc
+            .iter_mut()
+            .zip(self.sums.iter())
+            .zip(self.lead.iter())
+        {
+            let i = *x as u32 as usize;
+            let t = *x - i as f32;
+            let c = carrier
+                .get(i & mask)
+                .copied()
+                .unwrap_or(Complex32::new(0.0, 0.0));
+            let w = match self.target {
+                Target::Column(_) => w_col,
+                Target::Diagonal if inv => {
+                    let d = *x * per_grid;
+                    1.0 / if d > d_min { d } else { d_min }
+                }
+                Target::Diagonal => 1.0,
+            };
+            *a += c64(*s * (c * cis_small_turns(theta * t)) * w);
+        }
+        self.report.rows += 1;
+        self.report.non_finite += u64::from(row.non_finite());
+        self.report.dropped += u64::from(row.dropped());
+        Ok(())
+    }
+
+    /// Adds another slice probe's accumulators (same layout and target).
+    ///
+    /// # Errors
+    /// [`Error::Incompatible`] if the probes differ; nothing is changed then.
+    pub fn merge(&mut self, other: &LookupSlice<'_>) -> Result<(), Error> {
+        if self.target != other.target || self.layout != other.layout {
+            return Err(Error::Incompatible("different target or slice layout"));
+        }
+        for (a, b) in self.acc.iter_mut().zip(other.acc.iter()) {
+            *a += *b;
+        }
+        self.report.rows += other.report.rows;
+        self.report.non_finite += other.report.non_finite;
+        self.report.dropped += other.report.dropped;
+        Ok(())
+    }
+
+    /// Writes the intensities `T = |A|²` into `out` (length `nx·ny`, index `iy·nx + ix`) and
+    /// returns the counters. Does not change the accumulators.
+    ///
+    /// # Errors
+    /// [`Error::Length`] if `out` has the wrong length.
+    pub fn finish(&self, out: &mut [f64]) -> Result<Report, Error> {
+        check_len("out", self.acc.len(), out.len())?;
+        for (o, a) in out.iter_mut().zip(self.acc.iter()) {
+            *o = a.norm_sqr();
+        }
+        Ok(self.report)
+    }
+}
+
+/// The cubic of [`lagrange4`](crate::lagrange4) on cell `n` (nodes `n − 1 … n + 2`) in power
+/// form, `p(t) = a₀ + a₁t + a₂t² + a₃t³`, for every `n < L`; `y` holds `L + EXTRA` values
+/// (wrapped copies at the end), `y[L − 1]` stands for `y[−1]`.
+#[inline(always)]
+fn cubic_cells(y: &[Complex32], cells: &mut [[f32; 8]]) {
+    let l = cells.len();
+    let mut ym = y
+        .get(l.wrapping_sub(1))
+        .copied()
+        .unwrap_or(Complex32::new(0.0, 0.0));
+    for (c, w) in cells.iter_mut().zip(y.windows(3)) {
+        let [y0, y1, y2] = [w[0], w[1], w[2]];
+        let a1 = y1 - ym * (1.0 / 3.0) - y0 * 0.5 - y2 * (1.0 / 6.0);
+        let a2 = (ym + y1) * 0.5 - y0;
+        let a3 = (y2 - ym) * (1.0 / 6.0) + (y0 - y1) * 0.5;
+        *c = [y0.re, y0.im, a1.re, a1.im, a2.re, a2.im, a3.re, a3.im];
+        ym = y0;
+    }
+}
+
+/// One SPAD over one voxel row: `sums[i] += P·p(t)` at `x = lead[i] + x_vs`, with the guard
+/// tested per pair when `GUARD` (`(off, g_lo, g_hi)` in grid units).
+#[inline(always)]
+fn pairs<const GUARD: bool>(
+    cells: &[[f32; 8]],
+    mask: usize,
+    tab: &[[f32; 4]],
+    leads: &[f32],
+    sums: &mut [Complex32],
+    guard: (f32, f32, f32),
+) {
+    let (off, g_lo, g_hi) = guard;
+    for ((e, lead), s) in tab.iter().zip(leads).zip(sums.iter_mut()) {
+        let x = *lead + e[0];
+        if GUARD {
+            let rel = x + off;
+            if !(rel >= g_lo && rel <= g_hi) {
+                continue;
+            }
+        }
+        // x ≥ 0: the cast floors (and saturates at u32::MAX, masked below).
+        let i = x as u32 as usize;
+        let t = x - i as f32;
+        let Some(c) = cells.get(i & mask) else {
+            continue;
+        };
+        let re = ((c[6] * t + c[4]) * t + c[2]) * t + c[0];
+        let im = ((c[7] * t + c[5]) * t + c[3]) * t + c[1];
+        s.re += re * e[1] - im * e[2];
+        s.im += re * e[2] + im * e[1];
+    }
+}
+
+#[inline]
+fn c64(z: Complex32) -> Complex64 {
+    Complex64::new(z.re as f64, z.im as f64)
+}
