@@ -658,7 +658,7 @@ fn run_slice<T: Sample>(
     let layout = SliceLayout::try_new(&scan, grid, lattice, usize::MAX).expect("on the lattice");
     let mut st = vec![0.0f32; layout.tables_len()];
     let kv = lattice.len();
-    let mut state = vec![0.0f64; LookupSlice::state_len(kv)];
+    let mut state = vec![0.0f32; LookupSlice::state_len(kv)];
     let mut scratch = vec![0.0f32; LookupSlice::scratch_len(grid, kv)];
     let mut probe = LookupSlice::new(
         &scan,

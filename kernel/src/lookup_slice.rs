@@ -46,9 +46,11 @@
 //!
 //! Per row: `Ks` inverse FFTs of length `L` and `Ks·L` cell conversions (≈ 25 flops each),
 //! `Kv` lead distances and carriers, then `Kv·Ks` pairs of ≈ 20 flops with no square root,
-//! no carrier polynomial and no weight. Memory, all caller-owned: the slice tables
+//! no carrier polynomial and no weight; the row's sums join the state as Kahan-compensated
+//! `f32` sums (no soft `f64` on a Cortex-M4F; error `≤ 2u·Σ_rows |row sum|` plus `O(n u²)`,
+//! far below the lookup tolerance). Memory, all caller-owned: the slice tables
 //! `4·Ks + 4·ny·width` `f32` ([`SliceLayout::tables_len`]; `width = nx + max m − min m`), the
-//! state `2Kv` `f64`, the scratch `2(L + 3) + 8L + 3Kv` `f32` ([`LookupSlice::scratch_len`]:
+//! state `4Kv` `f32` (the bytes of `2Kv` `f64`), the scratch `2(L + 3) + 8L + 4Kv` `f32` ([`LookupSlice::scratch_len`]:
 //! one SPAD's grid and its cubic cells, the voxels' row sums and leads). No allocation, no
 //! panic on data; configuration and geometry checked once.
 
@@ -252,7 +254,7 @@ fn lattice_offset(a: &[f64; 3], a2: f64, s0: &[f64; 3], s: &Point) -> Option<i64
 /// };
 /// let layout = SliceLayout::try_new(&scan, &grid, &lattice, usize::MAX).unwrap();
 /// let mut st = vec![0.0; layout.tables_len()];
-/// let mut state = vec![0.0; LookupSlice::state_len(lattice.len())];
+/// let mut state = vec![0.0f32; LookupSlice::state_len(lattice.len())];
 /// let mut scratch = vec![0.0; LookupSlice::scratch_len(&grid, lattice.len())];
 /// let mut diag = LookupSlice::new(&scan, &lookup, &layout, Target::Diagonal, &mut st,
 ///     &mut state, &mut scratch).unwrap();
@@ -274,27 +276,28 @@ pub struct LookupSlice<'m> {
     spad_info: &'m [[f32; 4]],
     /// Per (iy, u): `[x_vs, P.re, P.im, 0]`, `ny × width`.
     table: &'m [[f32; 4]],
-    acc: &'m mut [Complex64],
+    /// Per voxel: the amplitude as a Kahan-compensated `f32` sum `[s.re, s.im, c.re, c.im]`.
+    acc: &'m mut [[f32; 4]],
     /// One SPAD's grid, `L + EXTRA`.
     grid_buf: &'m mut [Complex32],
     /// One SPAD's cubic cells `[a₀, a₁, a₂, a₃]` (re, im interleaved), `L`.
     cells: &'m mut [[f32; 8]],
-    /// Per voxel: this row's sum over the SPADs.
-    sums: &'m mut [Complex32],
-    /// Per voxel: the lead path in grid units.
-    lead: &'m mut [f32],
+    /// Per voxel: `[sum.re, sum.im, x_lead, 0]`, this row's sum over the SPADs and the lead
+    /// path in grid units.
+    voxel: &'m mut [[f32; 4]],
     report: Report,
 }
 
 impl<'m> LookupSlice<'m> {
-    /// Length in `f64` of the state: `2Kv`.
+    /// Length in `f32` of the state: `4Kv` (per voxel a Kahan-compensated complex sum: the
+    /// bytes of the general path's `2Kv` `f64`, with no soft `f64` per row on a Cortex-M4F).
     pub const fn state_len(n_voxels: usize) -> usize {
-        n_voxels.saturating_mul(2)
+        n_voxels.saturating_mul(4)
     }
 
-    /// Length in `f32` of the scratch: `2(L + 3) + 8L + 3Kv`.
+    /// Length in `f32` of the scratch: `2(L + 3) + 8L + 4Kv`.
     pub const fn scratch_len(grid: &LookupGrid, n_voxels: usize) -> usize {
-        (2 * (grid.len() + EXTRA) + 8 * grid.len()).saturating_add(n_voxels.saturating_mul(3))
+        (2 * (grid.len() + EXTRA) + 8 * grid.len()).saturating_add(n_voxels.saturating_mul(4))
     }
 
     /// Fills the slice tables (once, in `f64`) and returns a zeroed probe.
@@ -310,7 +313,7 @@ impl<'m> LookupSlice<'m> {
         layout: &SliceLayout,
         target: Target,
         tables: &'m mut [f32],
-        state: &'m mut [f64],
+        state: &'m mut [f32],
         scratch: &'m mut [f32],
     ) -> Result<Self, Error> {
         let grid = *lookup.grid();
@@ -396,8 +399,8 @@ impl<'m> LookupSlice<'m> {
             *inf = [start as f32, lo, hi, 0.0];
         }
         let found = state.len();
-        let acc: &mut [Complex64] =
-            bytemuck::try_cast_slice_mut(state).map_err(|_| short("state", 2 * kv, found))?;
+        let acc: &mut [[f32; 4]] =
+            bytemuck::try_cast_slice_mut(state).map_err(|_| short("state", 4 * kv, found))?;
         let sl = Self::scratch_len(&grid, kv);
         let found = scratch.len();
         let (g, rest) = scratch
@@ -406,10 +409,8 @@ impl<'m> LookupSlice<'m> {
         let (cells, rest) = rest
             .split_at_mut_checked(8 * l)
             .ok_or(short("scratch", sl, found))?;
-        let (sums, lead) = rest
-            .split_at_mut_checked(2 * kv)
-            .ok_or(short("scratch", sl, found))?;
-        acc.fill(Complex64::new(0.0, 0.0));
+        let voxel = bytemuck::try_cast_slice_mut(rest).map_err(|_| short("scratch", sl, found))?;
+        acc.fill([0.0; 4]);
         Ok(Self {
             target,
             layout: *layout,
@@ -418,8 +419,7 @@ impl<'m> LookupSlice<'m> {
             acc,
             grid_buf: as_complex("scratch", g)?,
             cells: bytemuck::try_cast_slice_mut(cells).map_err(|_| short("scratch", sl, found))?,
-            sums: as_complex("scratch", sums)?,
-            lead,
+            voxel,
             report: Report::default(),
         })
     }
@@ -436,13 +436,13 @@ impl<'m> LookupSlice<'m> {
     pub const fn report(&self) -> Report {
         self.report
     }
-    /// The complex amplitudes accumulated so far, one per voxel (`iy·nx + ix`).
-    pub fn accumulators(&self) -> &[Complex64] {
-        self.acc
+    /// The complex amplitude accumulated so far at voxel `i` (`iy·nx + ix`; 0 past the end).
+    pub fn amplitude(&self, i: usize) -> Complex64 {
+        self.acc.get(i).map_or(Complex64::new(0.0, 0.0), value)
     }
     /// Zeroes the accumulators and counters.
     pub fn reset(&mut self) {
-        self.acc.fill(Complex64::new(0.0, 0.0));
+        self.acc.fill([0.0; 4]);
         self.report = Report::default();
     }
 
@@ -482,19 +482,19 @@ impl<'m> LookupSlice<'m> {
             Target::Column(a) => (a, dist_nr(&laser, &a)),
         };
         let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
-        for (i, g) in self.lead.iter_mut().enumerate() {
-            let (ix, iy) = ((i % nx) as f32, (i / nx) as f32);
-            let v = [
-                lat.origin[0] + ix * lat.step_x[0] + iy * lat.step_y[0],
-                lat.origin[1] + ix * lat.step_x[1] + iy * lat.step_y[1],
-                lat.origin[2] + ix * lat.step_x[2] + iy * lat.step_y[2],
-            ];
-            let x = (d_la + dist_nr(&focus, &v)) * per_m;
-            lo = if x < lo { x } else { lo };
-            hi = if x > hi { x } else { hi };
-            *g = x;
+        let (o, a, b) = (lat.origin, lat.step_x, lat.step_y);
+        for (iy, leads) in self.voxel.chunks_exact_mut(nx).enumerate() {
+            let iy = iy as f32;
+            let r = [o[0] + iy * b[0], o[1] + iy * b[1], o[2] + iy * b[2]];
+            for (ix, g) in leads.iter_mut().enumerate() {
+                let ix = ix as f32;
+                let v = [r[0] + ix * a[0], r[1] + ix * a[1], r[2] + ix * a[2]];
+                let x = (d_la + dist_nr(&focus, &v)) * per_m;
+                lo = if x < lo { x } else { lo };
+                hi = if x > hi { x } else { hi };
+                *g = [0.0, 0.0, x, 0.0];
+            }
         }
-        self.sums.fill(Complex32::new(0.0, 0.0));
         let (g_lo, g_hi) = cfg.guard();
         let (g_lo, g_hi) = ((g_lo as f32) * per_m, (g_hi as f32) * per_m);
         let width = self.layout.width.max(1);
@@ -505,25 +505,29 @@ impl<'m> LookupSlice<'m> {
             .zip(row.offsets())
         {
             lookup.synthesise(hg, self.grid_buf);
-            cubic_cells(self.grid_buf, self.cells);
+            // Only the cells this SPAD's pairs read: x ∈ [lo + min x_vs, hi + max x_vs]
+            // (rounding is monotone, so every f32 x of a pair lies in the rounded interval).
+            let first = (lo + info[1]) as u32 as usize;
+            let last = (hi + info[2]) as u32 as usize;
+            let count = last.wrapping_sub(first).saturating_add(1);
+            cubic_cells(self.grid_buf, self.cells, first & mask, count);
             let cells: &[[f32; 8]] = self.cells;
             let start = info[0] as usize;
             let off = *off * per_m;
             // The guard, proved for the whole SPAD when the extremes allow it.
             let proved = lo + info[1] + off >= g_lo && hi + info[2] + off <= g_hi;
-            for ((tab, leads), sums) in self
+            for (tab, vox) in self
                 .table
                 .chunks_exact(width)
-                .zip(self.lead.chunks_exact(nx))
-                .zip(self.sums.chunks_exact_mut(nx))
+                .zip(self.voxel.chunks_exact_mut(nx))
             {
                 let Some(tab) = tab.get(start..).and_then(|t| t.get(..nx)) else {
                     continue;
                 };
                 if proved {
-                    pairs::<false>(cells, mask, tab, leads, sums, (off, g_lo, g_hi));
+                    pairs::<false>(cells, mask, tab, vox, (off, g_lo, g_hi));
                 } else {
-                    pairs::<true>(cells, mask, tab, leads, sums, (off, g_lo, g_hi));
+                    pairs::<true>(cells, mask, tab, vox, (off, g_lo, g_hi));
                 }
             }
         }
@@ -534,14 +538,10 @@ impl<'m> LookupSlice<'m> {
         let inv = matches!(cfg.weights(), Weights::Inv);
         let w_col = cfg.weight(d_la);
         let per_grid = (cfg.span() / l as f64) as f32;
-        for ((a, s), x) in self
-            .acc
-            .iter_mut()
-            .zip(self.sums.iter())
-            .zip(self.lead.iter())
-        {
-            let i = *x as u32 as usize;
-            let t = *x - i as f32;
+        for (a, &[s_re, s_im, x, _]) in self.acc.iter_mut().zip(self.voxel.iter()) {
+            let s = Complex32::new(s_re, s_im);
+            let i = x as u32 as usize;
+            let t = x - i as f32;
             let c = carrier
                 .get(i & mask)
                 .copied()
@@ -549,12 +549,12 @@ impl<'m> LookupSlice<'m> {
             let w = match self.target {
                 Target::Column(_) => w_col,
                 Target::Diagonal if inv => {
-                    let d = *x * per_grid;
+                    let d = x * per_grid;
                     1.0 / if d > d_min { d } else { d_min }
                 }
                 Target::Diagonal => 1.0,
             };
-            *a += c64(*s * (c * cis_small_turns(theta * t)) * w);
+            kahan(a, s * (c * cis_small_turns(theta * t)) * w);
         }
         self.report.rows += 1;
         self.report.non_finite += u64::from(row.non_finite());
@@ -571,7 +571,7 @@ impl<'m> LookupSlice<'m> {
             return Err(Error::Incompatible("different target or slice layout"));
         }
         for (a, b) in self.acc.iter_mut().zip(other.acc.iter()) {
-            *a += *b;
+            kahan(a, Complex32::new(b[0] - b[2], b[1] - b[3]));
         }
         self.report.rows += other.report.rows;
         self.report.non_finite += other.report.non_finite;
@@ -587,23 +587,38 @@ impl<'m> LookupSlice<'m> {
     pub fn finish(&self, out: &mut [f64]) -> Result<Report, Error> {
         check_len("out", self.acc.len(), out.len())?;
         for (o, a) in out.iter_mut().zip(self.acc.iter()) {
-            *o = a.norm_sqr();
+            *o = value(a).norm_sqr();
         }
         Ok(self.report)
     }
 }
 
 /// The cubic of [`lagrange4`](crate::lagrange4) on cell `n` (nodes `n − 1 … n + 2`) in power
-/// form, `p(t) = a₀ + a₁t + a₂t² + a₃t³`, for every `n < L`; `y` holds `L + EXTRA` values
-/// (wrapped copies at the end), `y[L − 1]` stands for `y[−1]`.
-#[inline(always)]
-fn cubic_cells(y: &[Complex32], cells: &mut [[f32; 8]]) {
+/// form, `p(t) = a₀ + a₁t + a₂t² + a₃t³`, for the `count` cells from `first` on (wrapping at
+/// `L`; all `L` when `count ≥ L`); `y` holds `L + EXTRA` values (wrapped copies at the end),
+/// `y[L − 1]` stands for `y[−1]`. Cells outside the range keep their values.
+fn cubic_cells(y: &[Complex32], cells: &mut [[f32; 8]], first: usize, count: usize) {
     let l = cells.len();
-    let mut ym = y
-        .get(l.wrapping_sub(1))
-        .copied()
-        .unwrap_or(Complex32::new(0.0, 0.0));
-    for (c, w) in cells.iter_mut().zip(y.windows(3)) {
+    let (first, count) = if count >= l { (0, l) } else { (first, count) };
+    // The range as at most two runs: first .. min(first + count, L), then 0 .. the rest.
+    let head = count.min(l.saturating_sub(first));
+    for (from, n) in [(first, head), (0, count - head)] {
+        let ym = y
+            .get(from.wrapping_sub(1).min(l.wrapping_sub(1)))
+            .copied()
+            .unwrap_or(Complex32::new(0.0, 0.0));
+        let (Some(c), Some(w)) = (cells.get_mut(from..), y.get(from..)) else {
+            continue;
+        };
+        cubic_run(ym, w, c, n);
+    }
+}
+
+/// [`cubic_cells`] over one run of `n` cells: `cells[k]` from `ym` (the node before) and
+/// `y[k], y[k + 1], y[k + 2]`.
+#[inline(always)]
+fn cubic_run(mut ym: Complex32, y: &[Complex32], cells: &mut [[f32; 8]], n: usize) {
+    for (c, w) in cells.iter_mut().zip(y.windows(3)).take(n) {
         let [y0, y1, y2] = [w[0], w[1], w[2]];
         let a1 = y1 - ym * (1.0 / 3.0) - y0 * 0.5 - y2 * (1.0 / 6.0);
         let a2 = (ym + y1) * 0.5 - y0;
@@ -613,40 +628,77 @@ fn cubic_cells(y: &[Complex32], cells: &mut [[f32; 8]]) {
     }
 }
 
-/// One SPAD over one voxel row: `sums[i] += P·p(t)` at `x = lead[i] + x_vs`, with the guard
-/// tested per pair when `GUARD` (`(off, g_lo, g_hi)` in grid units).
-#[inline(always)]
+/// One SPAD over one voxel row: `sum += P·p(t)` at `x = x_lead + x_vs` for each voxel
+/// `[sum.re, sum.im, x_lead, _]`, with the guard tested per pair when `GUARD`
+/// (`(off, g_lo, g_hi)` in grid units). Two pairs per iteration (fewer loop instructions).
+#[inline(never)]
 fn pairs<const GUARD: bool>(
     cells: &[[f32; 8]],
     mask: usize,
     tab: &[[f32; 4]],
-    leads: &[f32],
-    sums: &mut [Complex32],
+    vox: &mut [[f32; 4]],
     guard: (f32, f32, f32),
 ) {
-    let (off, g_lo, g_hi) = guard;
-    for ((e, lead), s) in tab.iter().zip(leads).zip(sums.iter_mut()) {
-        let x = *lead + e[0];
-        if GUARD {
-            let rel = x + off;
-            if !(rel >= g_lo && rel <= g_hi) {
-                continue;
-            }
-        }
-        // x ≥ 0: the cast floors (and saturates at u32::MAX, masked below).
-        let i = x as u32 as usize;
-        let t = x - i as f32;
-        let Some(c) = cells.get(i & mask) else {
-            continue;
-        };
-        let re = ((c[6] * t + c[4]) * t + c[2]) * t + c[0];
-        let im = ((c[7] * t + c[5]) * t + c[3]) * t + c[1];
-        s.re += re * e[1] - im * e[2];
-        s.im += re * e[2] + im * e[1];
+    // `cells` has `mask + 1` entries, so `i & mask` is in range (lets the check go).
+    let Some(cells) = cells.get(..=mask) else {
+        return;
+    };
+    let (t2, t1) = tab.as_chunks::<2>();
+    let (v2, v1) = vox.as_chunks_mut::<2>();
+    for (e, v) in t2.iter().zip(v2.iter_mut()) {
+        pair::<GUARD>(cells, mask, &e[0], &mut v[0], guard);
+        pair::<GUARD>(cells, mask, &e[1], &mut v[1], guard);
+    }
+    for (e, v) in t1.iter().zip(v1.iter_mut()) {
+        pair::<GUARD>(cells, mask, e, v, guard);
     }
 }
 
+/// One pair of [`pairs`].
+#[inline(always)]
+fn pair<const GUARD: bool>(
+    cells: &[[f32; 8]],
+    mask: usize,
+    e: &[f32; 4],
+    v: &mut [f32; 4],
+    guard: (f32, f32, f32),
+) {
+    let (off, g_lo, g_hi) = guard;
+    let x = v[2] + e[0];
+    if GUARD {
+        let rel = x + off;
+        if !(rel >= g_lo && rel <= g_hi) {
+            return;
+        }
+    }
+    // x ≥ 0: the cast floors (and saturates at u32::MAX, masked below).
+    let i = x as u32 as usize;
+    let t = x - i as f32;
+    let Some(c) = cells.get(i & mask) else {
+        return;
+    };
+    let re = ((c[6] * t + c[4]) * t + c[2]) * t + c[0];
+    let im = ((c[7] * t + c[5]) * t + c[3]) * t + c[1];
+    // Multiply-accumulate form (`vmla`/`vmls` on the M4F, no separate product).
+    v[0] = v[0] + re * e[1] - im * e[2];
+    v[1] = v[1] + re * e[2] + im * e[1];
+}
+
+/// Kahan step: `acc = [s.re, s.im, c.re, c.im]` += `z` (`c` the running compensation, the
+/// rounding error still to subtract).
+#[inline(always)]
+fn kahan(acc: &mut [f32; 4], z: Complex32) {
+    let [s_re, s_im, c_re, c_im] = *acc;
+    let (y_re, y_im) = (z.re - c_re, z.im - c_im);
+    let (t_re, t_im) = (s_re + y_re, s_im + y_im);
+    *acc = [t_re, t_im, (t_re - s_re) - y_re, (t_im - s_im) - y_im];
+}
+
+/// The compensated sum's value `s − c`, in `f64`.
 #[inline]
-fn c64(z: Complex32) -> Complex64 {
-    Complex64::new(z.re as f64, z.im as f64)
+fn value(a: &[f32; 4]) -> Complex64 {
+    Complex64::new(
+        f64::from(a[0]) - f64::from(a[2]),
+        f64::from(a[1]) - f64::from(a[3]),
+    )
 }

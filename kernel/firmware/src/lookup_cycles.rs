@@ -6,7 +6,10 @@
 
 use cortex_m::singleton;
 use semihosting::println;
-use vltm_kernel::{Lookup, LookupGrid, LookupParams, LookupProbe, Point, RowBuffer, Scan, Target};
+use vltm_kernel::{
+    Lattice, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice, Point, RowBuffer, Scan,
+    SliceLayout, Target,
+};
 
 /// Largest grid measured.
 const L_MAX: usize = 1024;
@@ -113,4 +116,125 @@ pub fn run(
         first.get_or_insert([i(t_diag), i(t_col)]);
     }
     first
+}
+
+/// The structured slice's 64 × 64 voxels: z = 1 m, x pitch 2.5 cm (the SPAD pitch, so the
+/// 28 SPADs sit at lattice offsets 0 … 27), y pitch 2/63 m; 1.575 m × 2 m centred.
+pub const SLICE: Lattice = Lattice {
+    origin: [-0.7875, -1.0, 1.0],
+    step_x: [0.025, 0.0, 0.0],
+    step_y: [0.0, 2.0 / 63.0, 0.0],
+    nx: 64,
+    ny: 64,
+};
+
+/// Slice tables for [`SLICE`] and 28 SPADs: `4·(28 + 64·(64 + 27))`.
+const SLICE_TABLES: usize = 4 * (28 + 64 * 91);
+
+/// The structured slice ([`LookupSlice`]) over [`SLICE`]: the diagonal and the column per
+/// row at tolerances 1e-5 (`L` = 1024) and 1e-4 (`L` = 512), plus the per-row fixed part (a
+/// 1 × 1 slice: the `Ks` syntheses and cubic cells). Prints `CYCLES lookup_slice_…` lines and
+/// returns `[diag, column]` instructions per row at each tolerance, `None` if a kernel call
+/// was rejected.
+pub fn run_slice(
+    scan: &Scan<'_>,
+    rows: &mut RowBuffer<'_>,
+    hists: &[u16],
+    measure: &mut dyn FnMut(&mut dyn FnMut()) -> u64,
+    per_tick: f64,
+) -> Option<[[f64; 2]; 2]> {
+    const KV: usize = 64 * 64;
+    const SCRATCH: usize = 2 * (L_MAX + 3) + 8 * L_MAX + 4 * KV;
+    let (Some(tables), Some(st), Some(state), Some(scratch)) = (
+        singleton!(: [f32; 4 * L_MAX] = [0.0; 4 * L_MAX]),
+        singleton!(: [f32; SLICE_TABLES] = [0.0; SLICE_TABLES]),
+        singleton!(: [f32; 4 * KV] = [0.0; 4 * KV]),
+        singleton!(: [f32; SCRATCH] = [0.0; SCRATCH]),
+    ) else {
+        return None;
+    };
+    let cfg = scan.config();
+    let ks = scan.spads().len();
+    let laser = [-0.45f32, -0.5, 0.0];
+    let mut result = [[0.0; 2]; 2];
+    for (slot, tol) in [1e-5, 1e-4].into_iter().enumerate() {
+        let p = LookupParams {
+            tolerance: tol,
+            grid_len: None,
+        };
+        let Ok(grid) = LookupGrid::try_new(cfg, &p) else {
+            return None;
+        };
+        let l = grid.len();
+        let Some(t) = tables.get_mut(..Lookup::tables_len(&grid)) else {
+            return None;
+        };
+        let Ok(lookup) = Lookup::new(&grid, t) else {
+            return None;
+        };
+        let one = Lattice {
+            nx: 1,
+            ny: 1,
+            ..SLICE
+        };
+        let mut counts = [0u64; 3];
+        for (k, (target, lattice)) in [
+            (Target::Diagonal, one),
+            (Target::Diagonal, SLICE),
+            (Target::Column([0.1, 0.2, 1.0]), SLICE),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            // The layout checks that the slice tables fit the static buffer.
+            let Ok(layout) = SliceLayout::try_new(scan, &grid, &lattice, st.len()) else {
+                return None;
+            };
+            let n = lattice.len();
+            let (Some(tb), Some(s), Some(sc)) = (
+                st.get_mut(..layout.tables_len()),
+                state.get_mut(..LookupSlice::state_len(n)),
+                scratch.get_mut(..LookupSlice::scratch_len(&grid, n)),
+            ) else {
+                return None;
+            };
+            let Ok(mut probe) = LookupSlice::new(scan, &lookup, &layout, target, tb, s, sc) else {
+                return None;
+            };
+            let Ok(row) = rows.load(scan, laser, hists) else {
+                return None;
+            };
+            let mut ok = true;
+            let t = measure(&mut || ok = probe.push_row(scan, &lookup, &row).is_ok());
+            if !ok {
+                return None;
+            }
+            if let Some(c) = counts.get_mut(k) {
+                *c = t;
+            }
+        }
+        let i = |t: u64| t as f64 * per_tick;
+        let pairs = (KV * ks) as f64;
+        let [t_fixed, t_diag, t_col] = counts;
+        println!(
+            "CYCLES lookup_slice_grid tolerance={tol:e} L={l} fixed_instructions={:.0} per_spad={:.0} (synthesis + cubic cells)",
+            i(t_fixed),
+            i(t_fixed) / ks as f64
+        );
+        println!(
+            "CYCLES lookup_slice_diag64x64 L={l} instructions={:.0} per_pair={:.1} lookups_per_pair={:.1}",
+            i(t_diag),
+            i(t_diag) / pairs,
+            (i(t_diag) - i(t_fixed)) / pairs
+        );
+        println!(
+            "CYCLES lookup_slice_column64x64 L={l} instructions={:.0} per_pair={:.1}",
+            i(t_col),
+            i(t_col) / pairs
+        );
+        if let Some(r) = result.get_mut(slot) {
+            *r = [i(t_diag), i(t_col)];
+        }
+    }
+    Some(result)
 }

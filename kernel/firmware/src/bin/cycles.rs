@@ -323,6 +323,13 @@ fn main() -> ! {
     else {
         process::exit(3)
     };
+    // The lookup path on the structured slice (src/lookup_cycles.rs): [1e-5, 1e-4] × [diag, column].
+    let Some([[t_sl_diag, t_sl_col], [t_sl_diag4, t_sl_col4]]) =
+        vltm_firmware::lookup_cycles::run_slice(&scan, &mut rows, &hist[..], &mut m, per_tick)
+    else {
+        process::exit(3)
+    };
+    let _ = (t_sl_diag, t_sl_col, t_sl_diag4, t_sl_col4);
     // (name, instructions, budget, enforced). The column's `finish` by the band sum is
     // J band terms per (voxel, SPAD): 4× over its target; it reaches it only with the
     // lookup path's O(1) per pair, so it is reported, not enforced, until `finish` uses it.
