@@ -2,7 +2,10 @@
 //! panic: `LookupGrid::try_new`, `Lookup::new`, `LookupProbe::new`/`push_row`/`merge`/
 //! `finish`/`reset` for the diagonal and a column, `u16` and `f32` rows, and a refused
 //! grid that is not a power of two or too coarse, with the inputs through `black_box` (any configuration, grid and
-//! voxel list). Two SPADs of the fixture keep the statics within the microbit's 16 KB.
+//! voxel list); then the structured slice (`SliceLayout::try_new`, `LookupSlice::new`/
+//! `push_row`/`finish`/`reset`/`amplitude`, a refused off-lattice SPAD line and a table that does
+//! not fit) on a small configuration of its own (`L` = 64). Two SPADs of the fixture keep the
+//! statics within the microbit's 16 KB.
 //! Exit status 0 = every call succeeded and the diagonal peaks at P1.
 #![no_std]
 #![no_main]
@@ -26,7 +29,10 @@ use vltm_firmware::lookup_pipeline::{
     LOOKUP_SCRATCH_LEN, LOOKUP_STATE_LEN, LOOKUP_TABLES_LEN, lookup_params,
 };
 use vltm_firmware::pipeline::argmax;
-use vltm_kernel::{Config, Lookup, LookupGrid, LookupParams, LookupProbe, RowBuffer, Scan, Target};
+use vltm_kernel::{
+    Config, Lattice, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice, Params, RowBuffer,
+    Scan, SliceLayout, Target,
+};
 
 /// SPADs used here.
 const KS: usize = 2;
@@ -36,6 +42,128 @@ const ROWBUF: usize = KS * (2 * BINS + 3);
 #[entry]
 fn main() -> ! {
     process::exit(run())
+}
+
+/// The structured slice's small configuration: Nt = 24, Δt = 5 cm, λ = 0.4 m, σ = λ/2,
+/// m = c_g = 3 (N = 49, J = 13, `L` = 64 at tolerance 1e-3).
+const S_NT: usize = 24;
+/// Its largest grid and table sizes (checked at run time).
+const S_L: usize = 64;
+/// A 3 × 2 slice at the SPAD pitch (10 cm).
+const S_LATTICE: Lattice = Lattice {
+    origin: [-0.2, -0.1, 0.4],
+    step_x: [0.1, 0.0, 0.0],
+    step_y: [0.0, 0.1, 0.05],
+    nx: 3,
+    ny: 2,
+};
+const S_KV: usize = 6;
+const S_SLICE_TABLES: usize = 4 * (KS + 2 * (3 + 1));
+const S_STATE: usize = 4 * S_KV;
+const S_SCRATCH: usize = 2 * (S_L + 3) + 8 * S_L + 4 * S_KV;
+const _: () = assert!(4 * S_L + S_SLICE_TABLES + S_STATE + S_SCRATCH <= LOOKUP_TABLES_LEN);
+
+/// The structured slice on the buffers of [`run`] (its probes are done with them): the
+/// fixture's scan tables and row buffer, and its lookup tables split into the small grid's
+/// tables, the slice tables, the state and the scratch.
+fn run_slice(tables: &mut [f32], rowbuf: &mut [f32], lt: &mut [f32], out: &mut [f64]) -> i32 {
+    let Some((lt, rest)) = lt.split_at_mut_checked(4 * S_L) else {
+        return 20;
+    };
+    let Some((st, rest)) = rest.split_at_mut_checked(S_SLICE_TABLES) else {
+        return 20;
+    };
+    let Some((s1, sc)) = rest.split_at_mut_checked(S_STATE) else {
+        return 20;
+    };
+    let mut hb = [0u16; KS * S_NT];
+    let h = &mut hb[..];
+    let p = Params {
+        sigma: Some(0.2),
+        gate_support: 3.0,
+        band_half_width: 3.0,
+        ..Params::new(0.4, S_NT, 0.05)
+    };
+    let Ok(cfg) = Config::try_new(&black_box(p)) else {
+        return 21;
+    };
+    let p = LookupParams {
+        tolerance: 1e-3,
+        grid_len: None,
+    };
+    let Ok(grid) = LookupGrid::try_new(&cfg, &black_box(p)) else {
+        return 22;
+    };
+    let ks = black_box(KS);
+    let Some(spads) = black_box(&SPADS[..]).get(..ks) else {
+        return 23;
+    };
+    let (Some(tables), Some(lt)) = (
+        tables.get_mut(..Scan::tables_len(&cfg, ks)),
+        lt.get_mut(..Lookup::tables_len(&grid)),
+    ) else {
+        return 24;
+    };
+    let Ok(scan) = Scan::new(&cfg, spads, black_box(tables)) else {
+        return 25;
+    };
+    let Ok(lookup) = Lookup::new(&grid, black_box(lt)) else {
+        return 26;
+    };
+    let Some(rowbuf) = rowbuf.get_mut(..RowBuffer::len(&cfg, ks)) else {
+        return 27;
+    };
+    let Ok(mut rows) = RowBuffer::new(&scan, black_box(rowbuf)) else {
+        return 28;
+    };
+    let lattice = black_box(S_LATTICE);
+    // Off the lattice, and a table that does not fit: refused.
+    let off = Lattice {
+        step_x: [0.03, 0.0, 0.0],
+        ..lattice
+    };
+    if SliceLayout::try_new(&scan, &grid, &black_box(off), usize::MAX).is_ok()
+        || SliceLayout::try_new(&scan, &grid, &lattice, black_box(4)).is_ok()
+    {
+        return 16;
+    }
+    let Ok(layout) = SliceLayout::try_new(&scan, &grid, &lattice, st.len()) else {
+        return 29;
+    };
+    let kv = lattice.len();
+    let (Some(st), Some(s1), Some(sc)) = (
+        st.get_mut(..layout.tables_len()),
+        s1.get_mut(..LookupSlice::state_len(kv)),
+        sc.get_mut(..LookupSlice::scratch_len(&grid, kv)),
+    ) else {
+        return 30;
+    };
+    let target = black_box(Target::Diagonal);
+    let Ok(mut diag) = LookupSlice::new(&scan, &lookup, &layout, target, st, s1, sc) else {
+        return 31;
+    };
+    for (i, c) in h.iter_mut().enumerate() {
+        *c = black_box(u16::from(i % S_NT == 16) * 30 + 1);
+    }
+    for laser in black_box(&LASERS[..4]) {
+        let Ok(row) = rows.load(&scan, *laser, &h[..]) else {
+            return 32;
+        };
+        if diag.push_row(&scan, &lookup, &row).is_err() {
+            return 33;
+        }
+    }
+    let Some(out) = out.get_mut(..kv) else {
+        return 34;
+    };
+    if diag.finish(out).is_err() || out.iter().all(|x| *x == 0.0) {
+        return 13;
+    }
+    diag.reset();
+    if diag.finish(out).is_err() || out.iter().any(|x| *x != 0.0) || diag.amplitude(kv).re != 0.0 {
+        return 14;
+    }
+    0
 }
 
 fn run() -> i32 {
@@ -152,5 +280,5 @@ fn run() -> i32 {
     if col.finish(&mut out[..]).is_err() || out.iter().any(|x| *x != 0.0) {
         return 4;
     }
-    0
+    run_slice(&mut tables[..], &mut rowbuf[..], &mut lt[..], &mut out[..])
 }
