@@ -340,6 +340,11 @@ impl<'t> Lookup<'t> {
         &self.grid
     }
 
+    /// The FFT twiddles, stage with half-size `h` at entries `h − 1 .. 2h − 1`.
+    pub(crate) const fn twiddle_table(&self) -> &[Complex32] {
+        self.twiddle
+    }
+
     /// The carrier table `C[i] = e^{2πi k_d i/L}`, `L` entries.
     pub(crate) const fn carrier_table(&self) -> &[Complex32] {
         self.carrier
