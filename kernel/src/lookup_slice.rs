@@ -248,9 +248,9 @@ fn lattice_offset(a: &[f64; 3], a2: f64, s0: &[f64; 3], s: &Point) -> Option<i64
 /// let grid = LookupGrid::try_new(&cfg, &LookupParams::new()).unwrap();
 /// let mut lt = vec![0.0; Lookup::tables_len(&grid)];
 /// let lookup = Lookup::new(&grid, &mut lt).unwrap();
-/// // 4 × 2 voxels at z = 0.5 m, 5 cm pitch along the SPAD line (SPAD pitch 10 cm = 2 steps).
+/// // 4 × 2 voxels at z = 0.5 m, 10 cm pitch along the SPAD line (= the SPAD pitch), 40 cm in y.
 /// let lattice = Lattice {
-///     origin: [-0.1, 0.0, 0.5], step_x: [0.05, 0.0, 0.0], step_y: [0.0, 0.05, 0.0], nx: 4, ny: 2,
+///     origin: [-0.3, 0.0, 0.5], step_x: [0.1, 0.0, 0.0], step_y: [0.0, 0.4, 0.0], nx: 4, ny: 2,
 /// };
 /// let layout = SliceLayout::try_new(&scan, &grid, &lattice, usize::MAX).unwrap();
 /// let mut st = vec![0.0; layout.tables_len()];
@@ -266,7 +266,7 @@ fn lattice_offset(a: &[f64; 3], a2: f64, s0: &[f64; 3], s: &Point) -> Option<i64
 /// diag.push_row(&scan, &lookup, &row).unwrap();
 /// let mut out = [0.0f64; 8];
 /// diag.finish(&mut out).unwrap();
-/// assert!(out[2] > 10.0 * out[7]); // voxel (2, 0) is at (0, 0, 0.5)
+/// assert!(out[3] > 10.0 * out[4]); // voxel (3, 0) is at (0, 0, 0.5); (0, 1) 41 cm further
 /// ```
 #[derive(Debug)]
 pub struct LookupSlice<'m> {
