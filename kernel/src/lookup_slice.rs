@@ -28,8 +28,10 @@
 //! bounds-checked cell read, a complex Horner step of three multiply-adds, the complex product
 //! with `P` and the row sum. The guard interval ([`Config::guard`](crate::Config::guard)) is
 //! proved once per SPAD and row from the extreme lead and leg values (`f32`, in grid units);
-//! only when it cannot be proved is it tested per pair. The loops run SPAD-outer and voxel-row
-//! inner over contiguous table rows (no index arithmetic per pair).
+//! only when it cannot be proved is it tested per pair. The loops run over SPADs two at a time
+//! (outer; each voxel's sum and lead are loaded and stored once per two SPADs, additions in
+//! the same order as one SPAD after the other) and voxel rows inner, over contiguous table
+//! rows (no index arithmetic per pair).
 //!
 //! # Error bound
 //!
@@ -44,15 +46,16 @@
 //!
 //! # Cost and memory
 //!
-//! Per row: `Ks` inverse FFTs of length `L` and `Ks·L` cell conversions (≈ 25 flops each),
-//! `Kv` lead distances and carriers, then `Kv·Ks` pairs of ≈ 20 flops with no square root,
-//! no carrier polynomial and no weight; the row's sums join the state as Kahan-compensated
-//! `f32` sums (no soft `f64` on a Cortex-M4F; error `≤ 2u·Σ_rows |row sum|` plus `O(n u²)`,
-//! far below the lookup tolerance). Memory, all caller-owned: the slice tables
-//! `4·Ks + 4·ny·width` `f32` ([`SliceLayout::tables_len`]; `width = nx + max m − min m`), the
-//! state `4Kv` `f32` (the bytes of `2Kv` `f64`), the scratch `2(L + 3) + 8L + 4Kv` `f32` ([`LookupSlice::scratch_len`]:
-//! one SPAD's grid and its cubic cells, the voxels' row sums and leads). No allocation, no
-//! panic on data; configuration and geometry checked once.
+//! Per row: `Ks` inverse FFTs of length `L` and at most `Ks·L` cell conversions (≈ 25 flops
+//! each; only the cells a SPAD reads), `Kv` lead distances and carriers, then `Kv·Ks` pairs
+//! of ≈ 20 flops with no square root, no carrier polynomial and no weight (≈ 31 instructions
+//! per pair on a Cortex-M4F); the row's sums join the state as Kahan-compensated `f32` sums
+//! (no soft `f64` on a Cortex-M4F; error `≤ 2u·Σ_rows |row sum|` plus `O(n u²)`, far below
+//! the lookup tolerance). Memory, all caller-owned: the slice tables `4·Ks + 4·ny·width`
+//! `f32` ([`SliceLayout::tables_len`]; `width = nx + max m − min m`), the state `4Kv` `f32`
+//! (the bytes of `2Kv` `f64`), the scratch `2(L + 3) + 16L + 4Kv` `f32`
+//! ([`LookupSlice::scratch_len`]: one SPAD's grid, two SPADs' cubic cells, the voxels' row
+//! sums and leads). No allocation, no panic on data; configuration and geometry checked once.
 
 use crate::config::{Point, Weights};
 use crate::error::{ConfigError, Error, check_len};
@@ -280,7 +283,7 @@ pub struct LookupSlice<'m> {
     acc: &'m mut [[f32; 4]],
     /// One SPAD's grid, `L + EXTRA`.
     grid_buf: &'m mut [Complex32],
-    /// One SPAD's cubic cells `[a₀, a₁, a₂, a₃]` (re, im interleaved), `L`.
+    /// Two SPADs' cubic cells `[a₀, a₁, a₂, a₃]` (re, im interleaved), `2L`.
     cells: &'m mut [[f32; 8]],
     /// Per voxel: `[sum.re, sum.im, x_lead, 0]`, this row's sum over the SPADs and the lead
     /// path in grid units.
@@ -295,9 +298,9 @@ impl<'m> LookupSlice<'m> {
         n_voxels.saturating_mul(4)
     }
 
-    /// Length in `f32` of the scratch: `2(L + 3) + 8L + 4Kv`.
+    /// Length in `f32` of the scratch: `2(L + 3) + 16L + 4Kv`.
     pub const fn scratch_len(grid: &LookupGrid, n_voxels: usize) -> usize {
-        (2 * (grid.len() + EXTRA) + 8 * grid.len()).saturating_add(n_voxels.saturating_mul(4))
+        (2 * (grid.len() + EXTRA) + 16 * grid.len()).saturating_add(n_voxels.saturating_mul(4))
     }
 
     /// Fills the slice tables (once, in `f64`) and returns a zeroed probe.
@@ -407,7 +410,7 @@ impl<'m> LookupSlice<'m> {
             .split_at_mut_checked(2 * (l + EXTRA))
             .ok_or(short("scratch", sl, found))?;
         let (cells, rest) = rest
-            .split_at_mut_checked(8 * l)
+            .split_at_mut_checked(16 * l)
             .ok_or(short("scratch", sl, found))?;
         let voxel = bytemuck::try_cast_slice_mut(rest).map_err(|_| short("scratch", sl, found))?;
         acc.fill([0.0; 4]);
@@ -498,36 +501,65 @@ impl<'m> LookupSlice<'m> {
         let (g_lo, g_hi) = cfg.guard();
         let (g_lo, g_hi) = ((g_lo as f32) * per_m, (g_hi as f32) * per_m);
         let width = self.layout.width.max(1);
-        for ((info, hg), off) in self
-            .spad_info
-            .iter()
-            .zip(row.band().chunks_exact(j))
-            .zip(row.offsets())
-        {
-            synthesise_fused(lookup, hg, self.grid_buf);
-            // Only the cells this SPAD's pairs read: x ∈ [lo + min x_vs, hi + max x_vs]
-            // (rounding is monotone, so every f32 x of a pair lies in the rounded interval).
-            let first = (lo + info[1]) as u32 as usize;
-            let last = (hi + info[2]) as u32 as usize;
-            let count = last.wrapping_sub(first).saturating_add(1);
-            cubic_cells(self.grid_buf, self.cells, first & mask, count);
-            let cells: &[[f32; 8]] = self.cells;
-            let start = info[0] as usize;
-            let off = *off * per_m;
-            // The guard, proved for the whole SPAD when the extremes allow it.
-            let proved = lo + info[1] + off >= g_lo && hi + info[2] + off <= g_hi;
+        let Some((cells_a, cells_b)) = self.cells.split_at_mut_checked(l) else {
+            return Ok(());
+        };
+        let guard = (lo, hi, g_lo, g_hi, per_m, mask);
+        // SPADs two at a time: one pass over the voxels per pair of SPADs (the voxel's sum
+        // and lead are loaded and stored once for both; same order of additions as one SPAD
+        // after the other).
+        let mut bands = row.band().chunks_exact(j);
+        let mut offs = row.offsets().iter();
+        for infos in self.spad_info.chunks(2) {
+            let (Some(ia), Some(hg_a), Some(oa)) = (infos.first(), bands.next(), offs.next())
+            else {
+                break;
+            };
+            let a = prepare(lookup, hg_a, self.grid_buf, cells_a, ia, *oa, guard);
+            let b = match infos.get(1) {
+                Some(ib) => {
+                    let (Some(hg_b), Some(ob)) = (bands.next(), offs.next()) else {
+                        break;
+                    };
+                    Some(prepare(
+                        lookup,
+                        hg_b,
+                        self.grid_buf,
+                        cells_b,
+                        ib,
+                        *ob,
+                        guard,
+                    ))
+                }
+                None => None,
+            };
             for (tab, vox) in self
                 .table
                 .chunks_exact(width)
                 .zip(self.voxel.chunks_exact_mut(nx))
             {
-                let Some(tab) = tab.get(start..).and_then(|t| t.get(..nx)) else {
+                let Some(ta) = tab.get(a.0..).and_then(|t| t.get(..nx)) else {
                     continue;
                 };
-                if proved {
-                    pairs::<false>(cells, mask, tab, vox, (off, g_lo, g_hi));
-                } else {
-                    pairs::<true>(cells, mask, tab, vox, (off, g_lo, g_hi));
+                match b {
+                    Some(b) => {
+                        let Some(tb) = tab.get(b.0..).and_then(|t| t.get(..nx)) else {
+                            continue;
+                        };
+                        let g = (a.1, b.1, g_lo, g_hi);
+                        if a.2 && b.2 {
+                            pairs2::<false>(cells_a, cells_b, mask, ta, tb, vox, g);
+                        } else {
+                            pairs2::<true>(cells_a, cells_b, mask, ta, tb, vox, g);
+                        }
+                    }
+                    None => {
+                        if a.2 {
+                            pairs::<false>(cells_a, mask, ta, vox, (a.1, g_lo, g_hi));
+                        } else {
+                            pairs::<true>(cells_a, mask, ta, vox, (a.1, g_lo, g_hi));
+                        }
+                    }
                 }
             }
         }
@@ -635,9 +667,14 @@ fn synthesise_fused(lookup: &Lookup<'_>, hg: &[Complex32], y: &mut [Complex32]) 
             break;
         };
         for block in g.chunks_exact_mut(size.get()) {
-            let (q01, q23) = block.split_at_mut(2 * h);
-            let (q0, q1) = q01.split_at_mut(h);
-            let (q2, q3) = q23.split_at_mut(h);
+            let Some((q01, q23)) = block.split_at_mut_checked(2 * h) else {
+                return;
+            };
+            let (Some((q0, q1)), Some((q2, q3))) =
+                (q01.split_at_mut_checked(h), q23.split_at_mut_checked(h))
+            else {
+                return;
+            };
             for ((((a0, a1), (a2, a3)), w1), w2) in q0
                 .iter_mut()
                 .zip(q1.iter_mut())
@@ -666,7 +703,9 @@ fn synthesise_fused(lookup: &Lookup<'_>, hg: &[Complex32], y: &mut [Complex32]) 
             return;
         };
         for block in g.chunks_exact_mut(size.get()) {
-            let (a, b) = block.split_at_mut(h);
+            let Some((a, b)) = block.split_at_mut_checked(h) else {
+                return;
+            };
             for ((a, b), w) in a.iter_mut().zip(b.iter_mut()).zip(w) {
                 let (av, t) = (*a, *b * *w);
                 *a = av + t;
@@ -714,6 +753,55 @@ fn cubic_run(mut ym: Complex32, y: &[Complex32], cells: &mut [[f32; 8]], n: usiz
     }
 }
 
+/// One SPAD's grid and cells for a row: synthesis, then the cubic cells its pairs read
+/// (`x ∈ [lo + min x_vs, hi + max x_vs]`: rounding is monotone, so every `f32` `x` of a pair
+/// lies in the rounded interval). Returns the SPAD's table offset, its leg offset in grid
+/// units and whether the guard holds for all its pairs (proved from the extremes).
+#[inline(always)]
+fn prepare(
+    lookup: &Lookup<'_>,
+    hg: &[Complex32],
+    y: &mut [Complex32],
+    cells: &mut [[f32; 8]],
+    info: &[f32; 4],
+    off: f32,
+    guard: (f32, f32, f32, f32, f32, usize),
+) -> (usize, f32, bool) {
+    let (lo, hi, g_lo, g_hi, per_m, mask) = guard;
+    synthesise_fused(lookup, hg, y);
+    let first = (lo + info[1]) as u32 as usize;
+    let last = (hi + info[2]) as u32 as usize;
+    let count = last.wrapping_sub(first).saturating_add(1);
+    cubic_cells(y, cells, first & mask, count);
+    let off = off * per_m;
+    let proved = lo + info[1] + off >= g_lo && hi + info[2] + off <= g_hi;
+    (info[0] as usize, off, proved)
+}
+
+/// Two SPADs over one voxel row, as [`pairs`] for SPAD A then SPAD B per voxel.
+#[inline(never)]
+fn pairs2<const GUARD: bool>(
+    cells_a: &[[f32; 8]],
+    cells_b: &[[f32; 8]],
+    mask: usize,
+    tab_a: &[[f32; 4]],
+    tab_b: &[[f32; 4]],
+    vox: &mut [[f32; 4]],
+    guard: (f32, f32, f32, f32),
+) {
+    let (Some(ca), Some(cb)) = (cells_a.get(..=mask), cells_b.get(..=mask)) else {
+        return;
+    };
+    let (off_a, off_b, g_lo, g_hi) = guard;
+    for ((ea, eb), v) in tab_a.iter().zip(tab_b).zip(vox.iter_mut()) {
+        let mut s = [v[0], v[1]];
+        mac::<GUARD>(ca, mask, ea, v[2], (off_a, g_lo, g_hi), &mut s);
+        mac::<GUARD>(cb, mask, eb, v[2], (off_b, g_lo, g_hi), &mut s);
+        v[0] = s[0];
+        v[1] = s[1];
+    }
+}
+
 /// One SPAD over one voxel row: `sum += P·p(t)` at `x = x_lead + x_vs` for each voxel
 /// `[sum.re, sum.im, x_lead, _]`, with the guard tested per pair when `GUARD`
 /// (`(off, g_lo, g_hi)` in grid units). Two pairs per iteration (fewer loop instructions).
@@ -749,8 +837,25 @@ fn pair<const GUARD: bool>(
     v: &mut [f32; 4],
     guard: (f32, f32, f32),
 ) {
+    let mut s = [v[0], v[1]];
+    mac::<GUARD>(cells, mask, e, v[2], guard, &mut s);
+    v[0] = s[0];
+    v[1] = s[1];
+}
+
+/// `s += P·p(t)` for the pair with table entry `e = [x_vs, P.re, P.im, _]` and lead `lead`
+/// (grid units), skipped outside the guard when `GUARD`.
+#[inline(always)]
+fn mac<const GUARD: bool>(
+    cells: &[[f32; 8]],
+    mask: usize,
+    e: &[f32; 4],
+    lead: f32,
+    guard: (f32, f32, f32),
+    s: &mut [f32; 2],
+) {
     let (off, g_lo, g_hi) = guard;
-    let x = v[2] + e[0];
+    let x = lead + e[0];
     if GUARD {
         let rel = x + off;
         if !(rel >= g_lo && rel <= g_hi) {
@@ -766,8 +871,8 @@ fn pair<const GUARD: bool>(
     let re = ((c[6] * t + c[4]) * t + c[2]) * t + c[0];
     let im = ((c[7] * t + c[5]) * t + c[3]) * t + c[1];
     // Multiply-accumulate form (`vmla`/`vmls` on the M4F, no separate product).
-    v[0] = v[0] + re * e[1] - im * e[2];
-    v[1] = v[1] + re * e[2] + im * e[1];
+    s[0] = s[0] + re * e[1] - im * e[2];
+    s[1] = s[1] + re * e[2] + im * e[1];
 }
 
 /// Kahan step: `acc = [s.re, s.im, c.re, c.im]` += `z` (`c` the running compensation, the

@@ -144,7 +144,7 @@ pub fn run_slice(
     per_tick: f64,
 ) -> Option<[[f64; 2]; 2]> {
     const KV: usize = 64 * 64;
-    const SCRATCH: usize = 2 * (L_MAX + 3) + 8 * L_MAX + 4 * KV;
+    const SCRATCH: usize = 2 * (L_MAX + 3) + 16 * L_MAX + 4 * KV;
     let (Some(tables), Some(st), Some(state), Some(scratch)) = (
         singleton!(: [f32; 4 * L_MAX] = [0.0; 4 * L_MAX]),
         singleton!(: [f32; SLICE_TABLES] = [0.0; SLICE_TABLES]),

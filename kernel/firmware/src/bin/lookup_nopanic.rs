@@ -4,7 +4,7 @@
 //! grid that is not a power of two or too coarse, with the inputs through `black_box` (any configuration, grid and
 //! voxel list); then the structured slice (`SliceLayout::try_new`, `LookupSlice::new`/
 //! `push_row`/`finish`/`reset`/`amplitude`, a refused off-lattice SPAD line and a table that does
-//! not fit) on a small configuration of its own (`L` = 64). Two SPADs of the fixture keep the
+//! not fit) on a small configuration of its own (`L` = 32). Two SPADs of the fixture keep the
 //! statics within the microbit's 16 KB.
 //! Exit status 0 = every call succeeded and the diagonal peaks at P1.
 #![no_std]
@@ -44,11 +44,11 @@ fn main() -> ! {
     process::exit(run())
 }
 
-/// The structured slice's small configuration: Nt = 24, Δt = 5 cm, λ = 0.4 m, σ = λ/2,
-/// m = c_g = 3 (N = 49, J = 13, `L` = 64 at tolerance 1e-3).
-const S_NT: usize = 24;
+/// The structured slice's small configuration: Nt = 10, Δt = 5 cm, λ = 0.5 m, σ = λ/2,
+/// m = c_g = 3 (N = 40, J = 9, `L` = 32 at tolerance 1e-2).
+const S_NT: usize = 10;
 /// Its largest grid and table sizes (checked at run time).
-const S_L: usize = 64;
+const S_L: usize = 32;
 /// A 3 × 2 slice at the SPAD pitch (10 cm).
 const S_LATTICE: Lattice = Lattice {
     origin: [-0.2, -0.1, 0.4],
@@ -60,7 +60,7 @@ const S_LATTICE: Lattice = Lattice {
 const S_KV: usize = 6;
 const S_SLICE_TABLES: usize = 4 * (KS + 2 * (3 + 1));
 const S_STATE: usize = 4 * S_KV;
-const S_SCRATCH: usize = 2 * (S_L + 3) + 8 * S_L + 4 * S_KV;
+const S_SCRATCH: usize = 2 * (S_L + 3) + 16 * S_L + 4 * S_KV;
 const _: () = assert!(4 * S_L + S_SLICE_TABLES + S_STATE + S_SCRATCH <= LOOKUP_TABLES_LEN);
 
 /// The structured slice on the buffers of [`run`] (its probes are done with them): the
@@ -79,16 +79,16 @@ fn run_slice(tables: &mut [f32], rowbuf: &mut [f32], lt: &mut [f32], out: &mut [
     let mut hb = [0u16; KS * S_NT];
     let h = &mut hb[..];
     let p = Params {
-        sigma: Some(0.2),
+        sigma: Some(0.25),
         gate_support: 3.0,
         band_half_width: 3.0,
-        ..Params::new(0.4, S_NT, 0.05)
+        ..Params::new(0.5, S_NT, 0.05)
     };
     let Ok(cfg) = Config::try_new(&black_box(p)) else {
         return 21;
     };
     let p = LookupParams {
-        tolerance: 1e-3,
+        tolerance: 1e-2,
         grid_len: None,
     };
     let Ok(grid) = LookupGrid::try_new(&cfg, &black_box(p)) else {
@@ -143,7 +143,7 @@ fn run_slice(tables: &mut [f32], rowbuf: &mut [f32], lt: &mut [f32], out: &mut [
         return 31;
     };
     for (i, c) in h.iter_mut().enumerate() {
-        *c = black_box(u16::from(i % S_NT == 16) * 30 + 1);
+        *c = black_box(u16::from(i % S_NT == 6) * 30 + 1);
     }
     for laser in black_box(&LASERS[..4]) {
         let Ok(row) = rows.load(&scan, *laser, &h[..]) else {
