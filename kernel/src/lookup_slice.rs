@@ -220,7 +220,7 @@ fn lattice_offset(a: &[f64; 3], a2: f64, s0: &[f64; 3], s: &Point) -> Option<i64
         f64::from(s[2]) - s0[2],
     ];
     let m = libm::round((d[0] * a[0] + d[1] * a[1] + d[2] * a[2]) / a2);
-    if !(m.abs() <= MAX_ENTRIES as f64) {
+    if m.is_nan() || m.abs() > MAX_ENTRIES as f64 {
         return None;
     }
     let mut scale = 0.0f64;
