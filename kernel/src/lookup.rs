@@ -391,6 +391,87 @@ impl<'t> Lookup<'t> {
     }
 }
 
+/// Reads one SPAD's baseband grid (made by [`Lookup::baseband`]) at any path time: the
+/// cubic interpolation and carrier restoration of the module docs, with the grid constants
+/// converted to `f32` once ([`Lookup::reader`]). `Copy`; cost per read: one `f32→u32`
+/// conversion, four Lagrange weights, four complex loads, one carrier table entry and one
+/// small-phase polynomial (no square root, no division, no `f64`).
+#[derive(Clone, Copy, Debug)]
+pub struct GridReader<'l> {
+    carrier: &'l [Complex32],
+    /// Grid points per metre `L/(NΔt)`.
+    per_m: f32,
+    /// Carrier turns per grid step `k_d/L`.
+    theta: f32,
+    mask: usize,
+}
+
+impl GridReader<'_> {
+    /// `Z_s(τ) = Σ_j hg[j]·e^{iν_j τ}` (module docs) read from the baseband grid `y` at the
+    /// path time `tau ≥ 0` (m), within [`LookupGrid::bound`] per unit of `Σ_j |hg[j]|/Ĝ_j`.
+    /// The grid is `NΔt`-periodic, so any `τ ≥ 0` is valid; a negative or NaN `τ` reads
+    /// node 0, and a `y` shorter than [`Lookup::grid_buf_len`] reads 0 (never a panic).
+    #[inline(always)]
+    pub fn read(&self, y: &[Complex32], tau: f32) -> Complex32 {
+        // τ ≥ 0: the cast floors (and saturates at u32::MAX, masked below).
+        let x = tau * self.per_m;
+        let i = x as u32 as usize;
+        let t = x - i as f32;
+        let start = i.wrapping_sub(1) & self.mask;
+        let (Some(q), Some(c)) = (
+            y.get(start..).and_then(|q| q.first_chunk::<4>()),
+            self.carrier.get(i & self.mask),
+        ) else {
+            return Complex32::new(0.0, 0.0);
+        };
+        let w = lagrange4(t);
+        let base = q[0] * w[0] + q[1] * w[1] + q[2] * w[2] + q[3] * w[3];
+        base * (*c * cis_small_turns(self.theta * t))
+    }
+}
+
+impl Lookup<'_> {
+    /// Length in complex values of one SPAD's baseband grid buffer: `L + 3` (the grid and the
+    /// wrapped copies the 4-point stencil reads past its end).
+    pub const fn grid_buf_len(grid: &LookupGrid) -> usize {
+        grid.len + EXTRA
+    }
+
+    /// Synthesises the baseband grid `Y[n] = Σ_j hg[j]·e^{2πi(k_lo + j − k_d)n/L}` of one
+    /// band spectrum `hg` (J values, sign convention A of the module docs) into `y`, for
+    /// reading with [`Lookup::reader`]: one inverse FFT of length `L`, `(L/2)·log₂L`
+    /// butterflies. Any spectrum on the configuration's band works: a row's
+    /// [`Row::band`] chunk, or a factorised column's `U[s][·]`
+    /// ([`ColumnF32::finish_lookup`](crate::ColumnF32::finish_lookup)).
+    ///
+    /// # Errors
+    /// [`Error::Length`] if `hg` does not have `J` values or `y` not
+    /// [`Lookup::grid_buf_len`]; `y` is unchanged then.
+    pub fn baseband(&self, hg: &[Complex32], y: &mut [Complex32]) -> Result<(), Error> {
+        check_len("band spectrum", self.grid.cfg.bins(), hg.len())?;
+        check_len("grid buffer", Self::grid_buf_len(&self.grid), y.len())?;
+        self.synthesise(hg, y);
+        Ok(())
+    }
+
+    /// The reader of the grids synthesised by [`Lookup::baseband`] (constants in `f32`, made
+    /// once: hoist it out of per-pair loops).
+    pub fn reader(&self) -> GridReader<'_> {
+        GridReader {
+            carrier: self.carrier,
+            per_m: (self.grid.len as f64 / self.grid.cfg.span()) as f32,
+            theta: (self.grid.k_d as f64 / self.grid.len as f64) as f32,
+            mask: self.grid.len - 1,
+        }
+    }
+}
+
+/// [`dist_nr`] for the other modules of the kernel (the lookup paths' per-pair distance).
+#[inline(always)]
+pub(crate) fn dist_fast(a: &Point, b: &Point) -> f32 {
+    dist_nr(a, b)
+}
+
 /// A Gaussian-gated diagonal or column on the lookup path: the [`Probe`](crate::Probe) of
 /// [`Target`] × [`Gate::Gaussian`](crate::Gate::Gaussian) with an O(1) cost per pair (module
 /// docs). Same accumulators (`2Kv` `f64`, complex per voxel), merge and `finish` as the band
