@@ -240,12 +240,16 @@ impl<'m> ColumnF32<'m> {
             *ph = p;
             p *= step;
         }
-        for ((us, cs), hg) in self
-            .sums
-            .chunks_exact_mut(j)
-            .zip(self.comps.chunks_exact_mut(j))
-            .zip(row.band().chunks_exact(j))
-        {
+        // Per SPAD by index, not a zip of two `chunks_exact_mut`: an out-of-line `Zip::new`
+        // of those keeps `size_hint`'s division by the chunk length (a panicking branch for
+        // the panic-never link, whatever `j ≥ 1` is).
+        for (s, hg) in row.band().chunks_exact(j).enumerate() {
+            let range = s * j..(s + 1) * j;
+            let (Some(us), Some(cs)) =
+                (self.sums.get_mut(range.clone()), self.comps.get_mut(range))
+            else {
+                break;
+            };
             for (((u, c), h), ph) in us
                 .iter_mut()
                 .zip(cs.iter_mut())
