@@ -219,7 +219,7 @@ impl<'m> ColumnF32<'m> {
     /// size. Nothing is changed then.
     pub fn push_row<T: Sample>(&mut self, scan: &Scan<'_>, row: &Row<'_, T>) -> Result<(), Error> {
         let cfg = scan.config();
-        if *cfg != self.cfg || scan.spads().len() != self.n_spads {
+        if !cfg.same(&self.cfg) || scan.spads().len() != self.n_spads {
             return Err(Error::Incompatible("scan of another configuration"));
         }
         let j = cfg.bins().max(1);
@@ -281,7 +281,7 @@ impl<'m> ColumnF32<'m> {
         out: &mut [f32],
     ) -> Result<Report, Error> {
         let cfg = scan.config();
-        if *cfg != self.cfg || scan.spads().len() != self.n_spads {
+        if !cfg.same(&self.cfg) || scan.spads().len() != self.n_spads {
             return Err(Error::Incompatible("scan of another configuration"));
         }
         check_len("out", voxels.len(), out.len())?;
@@ -386,11 +386,11 @@ impl ColumnF32<'_> {
         out: &mut [f32],
     ) -> Result<Report, Error> {
         let cfg = scan.config();
-        if *cfg != self.cfg || scan.spads().len() != self.n_spads {
+        if !cfg.same(&self.cfg) || scan.spads().len() != self.n_spads {
             return Err(Error::Incompatible("scan of another configuration"));
         }
         let grid = lookup.grid();
-        if *grid.config() != self.cfg {
+        if !grid.config().same(&self.cfg) {
             return Err(Error::Incompatible("lookup grid of another configuration"));
         }
         let kv = voxels.len();
