@@ -415,7 +415,7 @@ impl ColumnF32<'_> {
         let j = cfg.bins().max(1);
         let k = &self.k;
         let (window, legs) = (k.window, self.leg_range);
-        let reader = lookup.reader();
+        let reader = lookup.reader_f32(k.inv);
         for ((sp, us), d4) in scan
             .spads()
             .iter()

@@ -466,6 +466,21 @@ impl Lookup<'_> {
     }
 }
 
+impl Lookup<'_> {
+    /// [`Lookup::reader`] without `f64` arithmetic, for the per-scan paths on an FPU without
+    /// double precision: from `inv_span = (1/(NΔt)) as f32`, the same bits (`L` is a power
+    /// of two, so `L·fl(1/span) = fl(L/span)` and `fl(k_d)/L = fl(k_d/L)`, `|k_d| < 2²⁴`).
+    pub(crate) fn reader_f32(&self, inv_span: f32) -> GridReader<'_> {
+        let len = self.grid.len as u32;
+        GridReader {
+            carrier: self.carrier,
+            per_m: len as f32 * inv_span,
+            theta: self.grid.k_d as i32 as f32 / len as f32,
+            mask: self.grid.len - 1,
+        }
+    }
+}
+
 /// [`dist_nr`] for the other modules of the kernel (the lookup paths' per-pair distance).
 #[inline(always)]
 pub(crate) fn dist_fast(a: &Point, b: &Point) -> f32 {
@@ -788,6 +803,22 @@ mod tests {
             assert_eq!(LookupGrid::try_new(&c, &params), Err(err), "{params:?}");
         }
         assert_eq!(LookupGrid::try_new(&c, &p(1e-5, Some(g.len()))), Ok(g));
+    }
+
+    /// `reader_f32` (no `f64`) has the same constants as `reader`.
+    #[test]
+    fn reader_f32_is_reader() {
+        for (lam, nt, dt) in [(0.13, 255, 0.0255), (0.2, 64, 0.01), (0.1, 1000, 0.003)] {
+            let c = Config::try_new(&Params::new(lam, nt, dt)).unwrap();
+            let grid = LookupGrid::try_new(&c, &LookupParams::new()).unwrap();
+            let mut t = [0.0f32; 4 * 2048];
+            let t = &mut t[..Lookup::tables_len(&grid)];
+            let lookup = Lookup::new(&grid, t).unwrap();
+            let (a, b) = (lookup.reader(), lookup.reader_f32((1.0 / c.span()) as f32));
+            assert_eq!(a.per_m.to_bits(), b.per_m.to_bits());
+            assert_eq!(a.theta.to_bits(), b.theta.to_bits());
+            assert_eq!(a.mask, b.mask);
+        }
     }
 
     #[test]
