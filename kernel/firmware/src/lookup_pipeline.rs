@@ -3,10 +3,12 @@
 //! (bin `vltm-firmware-lookup`) and the host generator (which writes
 //! `fixture/expected_lookup.txt` from it), so both run the same kernel calls in the same order.
 //!
-//! Per laser row: [`RowBuffer::load`] → push to the lookup diagonal, the lookup column
-//! `T(FOCUS, ·)` and the factorised `f32` column [`ColumnF32`]; then [`LookupProbe::finish`]
-//! the first two and [`ColumnF32::finish_lookup`] the third (its lookup finish, with the
-//! lookup column's scratch, free by then). The grid is made for the tolerance
+//! Two passes over the scan (it is in flash), so that the three probes share one scratch:
+//! per laser row [`RowBuffer::load`] → push to the lookup diagonal and the factorised `f32`
+//! column [`ColumnF32`], then [`LookupProbe::finish`]; per laser row again → push to the
+//! lookup column `T(FOCUS, ·)`, then its finish; last [`ColumnF32::finish_lookup`] (the
+//! factorised column's lookup finish). Each probe sees the same rows in the same order as in
+//! one pass, so the results are the same bits. The grid is made for the tolerance
 //! [`LOOKUP_TOLERANCE`] (1e-4 here: `L` = 256, so that the M0's 16 KB of RAM holds it).
 
 use crate::fixture::{
@@ -56,10 +58,9 @@ pub struct LookupBuffers<'a> {
     pub diag: &'a mut [f64],
     /// Column state.
     pub column: &'a mut [f64],
-    /// Diagonal scratch.
-    pub diag_scratch: &'a mut [f32],
-    /// Column scratch (then the factorised column's `finish_lookup` scratch).
-    pub column_scratch: &'a mut [f32],
+    /// Scratch of the diagonal, then of the column, then of the factorised column's
+    /// `finish_lookup` ([`LOOKUP_SCRATCH_LEN`]).
+    pub scratch: &'a mut [f32],
     /// Factorised `f32` column state ([`COLUMN32_STATE_LEN`]).
     pub column32: &'a mut [f32],
 }
@@ -123,34 +124,38 @@ pub fn run_lookup(
     let scan = Scan::new(&cfg, &SPADS, b.tables)?;
     let lookup = Lookup::new(&grid, b.lookup)?;
     let mut rows = RowBuffer::new(&scan, b.row)?;
+    let mut col32 = ColumnF32::new(&scan, FOCUS, b.column32)?;
     let mut diag = LookupProbe::new(
         &scan,
         &lookup,
         Target::Diagonal,
         &VOXELS,
         b.diag,
-        b.diag_scratch,
+        &mut *b.scratch,
     )?;
+    for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
+        let row = rows.load(&scan, laser, hists)?;
+        diag.push_row(&scan, &lookup, &row)?;
+        col32.push_row(&scan, &row)?;
+    }
+    out.report_diag = diag.finish(&mut out.diag)?;
+    drop(diag);
     let mut col = LookupProbe::new(
         &scan,
         &lookup,
         Target::Column(FOCUS),
         &VOXELS,
         b.column,
-        &mut *b.column_scratch,
+        &mut *b.scratch,
     )?;
-    let mut col32 = ColumnF32::new(&scan, FOCUS, b.column32)?;
     for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
         let row = rows.load(&scan, laser, hists)?;
-        diag.push_row(&scan, &lookup, &row)?;
         col.push_row(&scan, &lookup, &row)?;
-        col32.push_row(&scan, &row)?;
     }
-    out.report_diag = diag.finish(&mut out.diag)?;
     out.report_col = col.finish(&mut out.col)?;
     drop(col);
     let scratch = b
-        .column_scratch
+        .scratch
         .get_mut(..COLUMN32_SCRATCH_LEN)
         .ok_or(Failure::Sizes)?;
     out.report_col32 = col32.finish_lookup(&scan, &lookup, &VOXELS, scratch, &mut out.col32)?;

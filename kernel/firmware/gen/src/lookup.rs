@@ -19,8 +19,7 @@ pub fn lookup_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results
         vec![0.0f64; LOOKUP_STATE_LEN],
         vec![0.0f64; LOOKUP_STATE_LEN],
     );
-    let (mut ds, mut cs, mut c32) = (
-        vec![0.0f32; LOOKUP_SCRATCH_LEN],
+    let (mut sc, mut c32) = (
         vec![0.0f32; LOOKUP_SCRATCH_LEN],
         vec![0.0f32; COLUMN32_STATE_LEN],
     );
@@ -31,8 +30,7 @@ pub fn lookup_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results
         lookup: &mut lt,
         diag: &mut d,
         column: &mut c,
-        diag_scratch: &mut ds,
-        column_scratch: &mut cs,
+        scratch: &mut sc,
         column32: &mut c32,
     };
     run_lookup(scan, bufs, &mut f).expect("lookup pipeline");
