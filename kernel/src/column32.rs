@@ -41,7 +41,7 @@
 //!   ([`crate::GridReader`]). Its error adds `η·S(a, b)` (`η =` [`LookupGrid::bound`], e.g.
 //!   3.4e-6 for L = 1024 on the paper's setup) to the bound above — derivation in
 //!   [`ColumnF32::finish_lookup`]. Scratch `2(L + 3) + 2Kv` `f32`; cost `Ks` FFTs of length
-//!   `L` plus `Kv·Ks` O(1) reads: 21.3 M instructions for the 64×64 slice above (0.18 s on a
+//!   `L` plus `Kv·Ks` O(1) reads: 21.8 M instructions for the 64×64 slice above (0.19 s on a
 //!   168 MHz Cortex-M4F).
 //!
 //! Neither `push_row` nor the finishes do any `f64` arithmetic: the configuration's
@@ -345,7 +345,7 @@ impl ColumnF32<'_> {
     ///
     /// Cost: `Ks` inverse FFTs plus `Kv·Ks` pairs (a distance with a Newton square root, the
     /// alias test, one grid read, one weight); no `f64`. For a 64×64 slice, 28 SPADs, J =
-    /// 137, L = 1024: 21.3 M instructions on a Cortex-M4F, against 470 M for the band sum.
+    /// 137, L = 1024: 21.8 M instructions on a Cortex-M4F, against 467 M for the band sum.
     ///
     /// ```
     /// use vltm_kernel::{ColumnF32, Config, Lookup, LookupGrid, LookupParams, Params, RowBuffer, Scan};
