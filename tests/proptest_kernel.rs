@@ -29,6 +29,11 @@
 //!   (independent of the number of rows) and its `f32` `finish` the band and SPAD sums, so its
 //!   `ε_f32` gets `u·(2J + Ks + 8)` more (kernel module `column32`).
 //!
+//! * `ColumnF32::finish_lookup` (the same column imaged on the lookup path, checked as
+//!   `lookup column/f32 finish` with the lookup probes): `ColumnF32`'s tolerance plus the
+//!   grid's derived bound `η` (`LookupGrid::bound`) and the lookup's `f32` terms; its
+//!   teeth test is `lookup_tolerance_detects_half_step_error`.
+//!
 //! So `|√T_k − |A_r|| ≤ ε·S` with `ε = ε_f32 + erfc(m/√2) + 2e^{−c_g²/2}` (Gaussian),
 //! `ε_f32 + e^{−c_g²/2}` (higher-order), `ε_f32` (none); no absolute term (S = 0 ⇒ both 0).
 //!
@@ -58,8 +63,8 @@ use proptest::test_runner::{FileFailurePersistence, RngAlgorithm, RngSeed};
 use reference::{Reference, p64};
 use support::{Data, all_rows, run};
 use vltm_kernel::{
-    Config, Gate, Lattice, Legs, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice,
-    Params, Point, Report, RowBuffer, Sample, Scan, SliceLayout, Target, Weights,
+    ColumnF32, Config, Gate, Lattice, Legs, Lookup, LookupGrid, LookupParams, LookupProbe,
+    LookupSlice, Params, Point, Report, RowBuffer, Sample, Scan, SliceLayout, Target, Weights,
 };
 
 const SEED: u64 = 0x7a11_5eed_0f1b_7e00;
@@ -494,6 +499,37 @@ impl Scene {
         }
     }
 
+    /// The factorised `f32` column (`ColumnF32`) finished on the lookup path
+    /// (`finish_lookup`) with tolerance `tol` under `kernel` (made alias-free), against the
+    /// Gaussian reference `truth`: `ColumnF32`'s tolerance plus `η` and the lookup's `f32`
+    /// terms ([`eps_lookup`]).
+    fn compare_column_lookup(&self, kernel: &Params, truth: &Reference, tol: f64) -> Outcome {
+        let kernel = self.alias_free_column(*kernel);
+        if self.counts {
+            let hists: Vec<u16> = self.h.iter().map(|&x| x as u16).collect();
+            self.compare_lookup_run(
+                &hists,
+                &kernel,
+                truth,
+                Target::Column(self.focus),
+                tol,
+                true,
+                None,
+            )
+        } else {
+            let hists: Vec<f32> = self.h.iter().map(|&x| x as f32).collect();
+            self.compare_lookup_run(
+                &hists,
+                &kernel,
+                truth,
+                Target::Column(self.focus),
+                tol,
+                true,
+                None,
+            )
+        }
+    }
+
     fn compare_lookup_with<T: Sample>(
         &self,
         hists: &[T],
@@ -501,6 +537,20 @@ impl Scene {
         truth: &Reference,
         target: Target,
         tol: f64,
+        lattice: Option<&Lattice>,
+    ) -> Outcome {
+        self.compare_lookup_run(hists, kernel, truth, target, tol, false, lattice)
+    }
+
+    /// `factorised`: the column through `ColumnF32::finish_lookup` instead of `LookupProbe`.
+    fn compare_lookup_run<T: Sample>(
+        &self,
+        hists: &[T],
+        kernel: &Params,
+        truth: &Reference,
+        target: Target,
+        tol: f64,
+        factorised: bool,
         lattice: Option<&Lattice>,
     ) -> Outcome {
         let cfg = Config::try_new(kernel).expect("valid by construction");
@@ -512,8 +562,22 @@ impl Scene {
             },
         )
         .expect("a grid for every tolerance");
-        let (t_k, report) = match lattice {
-            None => run_lookup(
+        let (t_k, report) = match (target, factorised, lattice) {
+            (Target::Column(a), true, _) => run_column_lookup(
+                &cfg,
+                &grid,
+                Data {
+                    lasers: &self.lasers,
+                    spads: &self.spads,
+                    hists,
+                },
+                a,
+                &self.voxels,
+            ),
+            (_, _, Some(lat)) => {
+                run_slice(&cfg, &grid, &self.lasers, &self.spads, hists, target, lat)
+            }
+            _ => run_lookup(
                 &cfg,
                 &grid,
                 &self.lasers,
@@ -522,7 +586,6 @@ impl Scene {
                 target,
                 &self.voxels,
             ),
-            Some(lat) => run_slice(&cfg, &grid, &self.lasers, &self.spads, hists, target, lat),
         };
         let (amps, scales): (Vec<Complex64>, Vec<f64>) = match target {
             Target::Diagonal => (
@@ -540,17 +603,22 @@ impl Scene {
                     .collect(),
             ),
         };
-        let eps32 = eps_lookup(&cfg, &grid, truth, target, &self.voxels);
+        let mut eps32 = eps_lookup(&cfg, &grid, truth, target, &self.voxels);
+        if factorised {
+            // ColumnF32 (kernel module `column32`): Kahan state, f32 SPAD sums in `finish`.
+            eps32 += U32 * (2 * cfg.bins() + self.spads.len() + 8) as f64;
+        }
         let tail = (-cfg.params().gate_support.powi(2) / 2.0).exp();
         let eps = eps32
             + reference::erfc(cfg.params().band_half_width / 2f64.sqrt())
             + 2.0 * tail
             + grid.bound();
-        let kind = match (target, lattice) {
-            (Target::Column(_), None) => "lookup column",
-            (Target::Diagonal, None) => "lookup diagonal",
-            (Target::Column(_), Some(_)) => "lookup slice column",
-            (Target::Diagonal, Some(_)) => "lookup slice diagonal",
+        let kind = match (target, lattice, factorised) {
+            (Target::Column(_), _, true) => "lookup column/f32 finish",
+            (Target::Column(_), None, false) => "lookup column",
+            (Target::Diagonal, None, _) => "lookup diagonal",
+            (Target::Column(_), Some(_), false) => "lookup slice column",
+            (Target::Diagonal, Some(_), _) => "lookup slice diagonal",
         };
         let mut out = Outcome {
             probe: format!("{kind} (L = {}, η = {:.1e})", grid.len(), grid.bound()),
@@ -573,13 +641,16 @@ impl Scene {
         out
     }
 
-    /// Both lookup probes under `p` with tolerance `tol`.
+    /// Both lookup probes and the factorised column's lookup finish under `p` with
+    /// tolerance `tol`.
     fn lookup_outcomes(&self, p: &Params, tol: f64) -> Vec<Outcome> {
         let truth = self.reference(p);
-        [Target::Diagonal, Target::Column(self.focus)]
+        let mut v: Vec<Outcome> = [Target::Diagonal, Target::Column(self.focus)]
             .iter()
             .map(|&t| self.compare_lookup(p, &truth, t, tol))
-            .collect()
+            .collect();
+        v.push(self.compare_column_lookup(p, &truth, tol));
+        v
     }
 
     /// All six probes under `p` against the reference under `p`.
@@ -684,6 +755,38 @@ fn run_slice<T: Sample>(
     (out, report)
 }
 
+/// Streams every row through a [`ColumnF32`] and images `voxels` with
+/// [`ColumnF32::finish_lookup`]; returns `(T, report)`.
+fn run_column_lookup<T: Sample>(
+    cfg: &Config,
+    grid: &LookupGrid,
+    data: Data<'_, T>,
+    focus: Point,
+    voxels: &[Point],
+) -> (Vec<f64>, Report) {
+    let ks = data.spads.len();
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+    let scan = Scan::new(cfg, data.spads, &mut tables).expect("scan");
+    let mut lt = vec![0.0f32; Lookup::tables_len(grid)];
+    let lookup = Lookup::new(grid, &mut lt).expect("lookup tables");
+    let mut state = vec![0.0f32; ColumnF32::state_len(cfg, ks)];
+    let mut col = ColumnF32::new(&scan, focus, &mut state).expect("column");
+    let mut buf = vec![0.0f32; RowBuffer::len(cfg, ks)];
+    let mut rows = RowBuffer::new(&scan, &mut buf).expect("row buffer");
+    for l in 0..data.lasers.len() {
+        let row = rows
+            .load(&scan, data.lasers[l], data.row(cfg.nt(), l))
+            .expect("load");
+        col.push_row(&scan, &row).expect("push_row");
+    }
+    let mut scratch = vec![0.0f32; ColumnF32::lookup_scratch_len(grid, voxels.len())];
+    let mut out = vec![0.0f32; voxels.len()];
+    let report = col
+        .finish_lookup(&scan, &lookup, voxels, &mut scratch, &mut out)
+        .expect("finish_lookup");
+    (out.into_iter().map(f64::from).collect(), report)
+}
+
 /// The lookup path's `f32` model: the band path's phase term twice (the `f32` path time and
 /// the `f32` grid position `τ/δ` each carry a relative `u`), the band recurrences'
 /// `J + Nt + 64` of the band spectra, and `4·log₂L` for the inverse FFT's stage sums.
@@ -740,6 +843,7 @@ fn check(case: &Case) -> Result<(), TestCaseError> {
         );
         prop_assert_eq!(o.report.rows, case.lasers.len() as u64);
         prop_assert_eq!(o.report.non_finite, 0);
+        prop_assert_eq!(o.report.aliased, 0, "{}", o.probe);
     }
     Ok(())
 }
@@ -1080,6 +1184,9 @@ fn lookup_tolerance_detects_half_step_error() {
             println!("{}: half a grid step off, err/tol {:.3}", o.probe, o.worst);
             assert!(o.worst > 3.0, "{}: mistake not detected ({o:?})", o.probe);
         }
+        let o = sc.compare_column_lookup(&half_step, &truth, tol);
+        println!("{}: half a grid step off, err/tol {:.3}", o.probe, o.worst);
+        assert!(o.worst > 3.0, "{}: mistake not detected ({o:?})", o.probe);
     }
 }
 

@@ -153,6 +153,81 @@ fn positive(name: &'static str, x: f64) -> Result<f64, ConfigError> {
 /// Largest DFT length accepted: keeps `k·n mod N` products in `u64` and tables addressable.
 const MAX_N: f64 = (1u64 << 30) as f64;
 
+/// `f64` equality by bits (NaN never occurs in a validated configuration, and `+0.0` /
+/// `−0.0` are told apart, which only makes a comparison stricter): integer compares, so no
+/// soft-float routine on an FPU without double precision.
+#[inline]
+fn same_f64(a: f64, b: f64) -> bool {
+    a.to_bits() == b.to_bits()
+}
+
+fn same_point(a: &[f64; 3], b: &[f64; 3]) -> bool {
+    a.iter().zip(b).all(|(x, y)| same_f64(*x, *y))
+}
+
+impl Config {
+    /// `self == other` without `f64` arithmetic (bitwise on the `f64` fields): the check
+    /// the per-row paths make that a scan, row or grid belongs to their configuration. Every
+    /// field is destructured, so a new field cannot be forgotten here.
+    pub(crate) fn same(&self, other: &Self) -> bool {
+        let Self {
+            params: p,
+            sigma,
+            n_fft,
+            k_lo,
+            bins,
+        } = self;
+        let Params {
+            wavelength,
+            sigma: p_sigma,
+            band_half_width,
+            gate_support,
+            margin,
+            nt,
+            dt,
+            t0,
+            legs,
+            weights,
+            d_min,
+        } = p;
+        let q = &other.params;
+        let legs_same = match (legs, &q.legs) {
+            (Legs::WallToWall, Legs::WallToWall) => true,
+            (
+                Legs::FirstAndLast {
+                    laser_origin: a,
+                    sensor_origin: b,
+                },
+                Legs::FirstAndLast {
+                    laser_origin: c,
+                    sensor_origin: d,
+                },
+            ) => same_point(a, c) && same_point(b, d),
+            _ => false,
+        };
+        let sigma_same = match (p_sigma, q.sigma) {
+            (None, None) => true,
+            (Some(a), Some(b)) => same_f64(*a, b),
+            _ => false,
+        };
+        same_f64(*wavelength, q.wavelength)
+            && sigma_same
+            && same_f64(*band_half_width, q.band_half_width)
+            && same_f64(*gate_support, q.gate_support)
+            && same_f64(*margin, q.margin)
+            && *nt == q.nt
+            && same_f64(*dt, q.dt)
+            && same_f64(*t0, q.t0)
+            && legs_same
+            && *weights == q.weights
+            && same_f64(*d_min, q.d_min)
+            && same_f64(*sigma, other.sigma)
+            && *n_fft == other.n_fft
+            && *k_lo == other.k_lo
+            && *bins == other.bins
+    }
+}
+
 impl Config {
     /// Validates `p` and derives the band.
     ///
@@ -312,6 +387,76 @@ impl Config {
         match self.params.weights {
             Weights::Inv => 1.0 / d.max(self.params.d_min as f32),
             Weights::One => 1.0,
+        }
+    }
+}
+
+#[cfg(test)]
+mod same_tests {
+    use super::*;
+
+    /// `Config::same` agrees with `==` (the derived `f64` comparison) on equal configurations
+    /// and on each single-field change.
+    #[test]
+    fn same_is_equality() {
+        let base = Params {
+            t0: 0.3,
+            legs: Legs::FirstAndLast {
+                laser_origin: [0.1, 0.2, -1.0],
+                sensor_origin: [0.0, 0.0, -1.0],
+            },
+            ..Params::new(0.1, 128, 0.01)
+        };
+        let a = Config::try_new(&base).unwrap();
+        assert!(a.same(&a) && a.same(&Config::try_new(&base).unwrap()));
+        let variants = [
+            Params {
+                wavelength: 0.11,
+                ..base
+            },
+            Params {
+                sigma: Some(0.07),
+                ..base
+            },
+            Params {
+                band_half_width: 4.0,
+                ..base
+            },
+            Params {
+                gate_support: 4.5,
+                ..base
+            },
+            Params {
+                margin: 0.1,
+                ..base
+            },
+            Params { nt: 129, ..base },
+            Params { dt: 0.011, ..base },
+            Params { t0: 0.31, ..base },
+            Params {
+                legs: Legs::WallToWall,
+                ..base
+            },
+            Params {
+                legs: Legs::FirstAndLast {
+                    laser_origin: [0.1, 0.2, -1.0],
+                    sensor_origin: [0.0, 1e-9, -1.0],
+                },
+                ..base
+            },
+            Params {
+                weights: Weights::One,
+                ..base
+            },
+            Params {
+                d_min: 0.002,
+                ..base
+            },
+        ];
+        for p in variants {
+            let b = Config::try_new(&p).unwrap();
+            assert_eq!(a.same(&b), a == b, "{p:?}");
+            assert!(!a.same(&b), "{p:?}");
         }
     }
 }

@@ -401,6 +401,102 @@ impl<'t> Lookup<'t> {
     }
 }
 
+/// Reads one SPAD's baseband grid (made by [`Lookup::baseband`]) at any path time: the
+/// cubic interpolation and carrier restoration of the module docs, with the grid constants
+/// converted to `f32` once ([`Lookup::reader`]). `Copy`; cost per read: one `f32→u32`
+/// conversion, four Lagrange weights, four complex loads, one carrier table entry and one
+/// small-phase polynomial (no square root, no division, no `f64`).
+#[derive(Clone, Copy, Debug)]
+pub struct GridReader<'l> {
+    carrier: &'l [Complex32],
+    /// Grid points per metre `L/(NΔt)`.
+    per_m: f32,
+    /// Carrier turns per grid step `k_d/L`.
+    theta: f32,
+    mask: usize,
+}
+
+impl GridReader<'_> {
+    /// `Z_s(τ) = Σ_j hg[j]·e^{iν_j τ}` (module docs) read from the baseband grid `y` at the
+    /// path time `tau ≥ 0` (m), within [`LookupGrid::bound`] per unit of `Σ_j |hg[j]|/Ĝ_j`.
+    /// The grid is `NΔt`-periodic, so any `τ ≥ 0` is valid; a negative or NaN `τ` reads
+    /// node 0, and a `y` shorter than [`Lookup::grid_buf_len`] reads 0 (never a panic).
+    #[inline(always)]
+    pub fn read(&self, y: &[Complex32], tau: f32) -> Complex32 {
+        // τ ≥ 0: the cast floors (and saturates at u32::MAX, masked below).
+        let x = tau * self.per_m;
+        let i = x as u32 as usize;
+        let t = x - i as f32;
+        let start = i.wrapping_sub(1) & self.mask;
+        let (Some(q), Some(c)) = (
+            y.get(start..).and_then(|q| q.first_chunk::<4>()),
+            self.carrier.get(i & self.mask),
+        ) else {
+            return Complex32::new(0.0, 0.0);
+        };
+        let w = lagrange4(t);
+        let base = q[0] * w[0] + q[1] * w[1] + q[2] * w[2] + q[3] * w[3];
+        base * (*c * cis_small_turns(self.theta * t))
+    }
+}
+
+impl Lookup<'_> {
+    /// Length in complex values of one SPAD's baseband grid buffer: `L + 3` (the grid and the
+    /// wrapped copies the 4-point stencil reads past its end).
+    pub const fn grid_buf_len(grid: &LookupGrid) -> usize {
+        grid.len + EXTRA
+    }
+
+    /// Synthesises the baseband grid `Y[n] = Σ_j hg[j]·e^{2πi(k_lo + j − k_d)n/L}` of one
+    /// band spectrum `hg` (J values, sign convention A of the module docs) into `y`, for
+    /// reading with [`Lookup::reader`]: one inverse FFT of length `L`, `(L/2)·log₂L`
+    /// butterflies. Any spectrum on the configuration's band works: a row's
+    /// [`Row::band`] chunk, or a factorised column's `U[s][·]`
+    /// ([`ColumnF32::finish_lookup`](crate::ColumnF32::finish_lookup)).
+    ///
+    /// # Errors
+    /// [`Error::Length`] if `hg` does not have `J` values or `y` not
+    /// [`Lookup::grid_buf_len`]; `y` is unchanged then.
+    pub fn baseband(&self, hg: &[Complex32], y: &mut [Complex32]) -> Result<(), Error> {
+        check_len("band spectrum", self.grid.cfg.bins(), hg.len())?;
+        check_len("grid buffer", Self::grid_buf_len(&self.grid), y.len())?;
+        self.synthesise(hg, y);
+        Ok(())
+    }
+
+    /// The reader of the grids synthesised by [`Lookup::baseband`] (constants in `f32`, made
+    /// once: hoist it out of per-pair loops).
+    pub fn reader(&self) -> GridReader<'_> {
+        GridReader {
+            carrier: self.carrier,
+            per_m: (self.grid.len as f64 / self.grid.cfg.span()) as f32,
+            theta: (self.grid.k_d as f64 / self.grid.len as f64) as f32,
+            mask: self.grid.len - 1,
+        }
+    }
+}
+
+impl Lookup<'_> {
+    /// [`Lookup::reader`] without `f64` arithmetic, for the per-scan paths on an FPU without
+    /// double precision: from `inv_span = (1/(NΔt)) as f32`, the same bits (`L` is a power
+    /// of two, so `L·fl(1/span) = fl(L/span)` and `fl(k_d)/L = fl(k_d/L)`, `|k_d| < 2²⁴`).
+    pub(crate) fn reader_f32(&self, inv_span: f32) -> GridReader<'_> {
+        let len = self.grid.len as u32;
+        GridReader {
+            carrier: self.carrier,
+            per_m: len as f32 * inv_span,
+            theta: self.grid.k_d as i32 as f32 / len as f32,
+            mask: self.grid.len - 1,
+        }
+    }
+}
+
+/// [`dist_nr`] for the other modules of the kernel (the lookup paths' per-pair distance).
+#[inline(always)]
+pub(crate) fn dist_fast(a: &Point, b: &Point) -> f32 {
+    dist_nr(a, b)
+}
+
 /// A Gaussian-gated diagonal or column on the lookup path: the [`Probe`](crate::Probe) of
 /// [`Target`] × [`Gate::Gaussian`](crate::Gate::Gaussian) with an O(1) cost per pair (module
 /// docs). Same accumulators (`2Kv` `f64`, complex per voxel), merge and `finish` as the band
@@ -717,6 +813,22 @@ mod tests {
             assert_eq!(LookupGrid::try_new(&c, &params), Err(err), "{params:?}");
         }
         assert_eq!(LookupGrid::try_new(&c, &p(1e-5, Some(g.len()))), Ok(g));
+    }
+
+    /// `reader_f32` (no `f64`) has the same constants as `reader`.
+    #[test]
+    fn reader_f32_is_reader() {
+        for (lam, nt, dt) in [(0.13, 255, 0.0255), (0.2, 64, 0.01), (0.1, 1000, 0.003)] {
+            let c = Config::try_new(&Params::new(lam, nt, dt)).unwrap();
+            let grid = LookupGrid::try_new(&c, &LookupParams::new()).unwrap();
+            let mut t = [0.0f32; 4 * 2048];
+            let t = &mut t[..Lookup::tables_len(&grid)];
+            let lookup = Lookup::new(&grid, t).unwrap();
+            let (a, b) = (lookup.reader(), lookup.reader_f32((1.0 / c.span()) as f32));
+            assert_eq!(a.per_m.to_bits(), b.per_m.to_bits());
+            assert_eq!(a.theta.to_bits(), b.theta.to_bits());
+            assert_eq!(a.mask, b.mask);
+        }
     }
 
     #[test]

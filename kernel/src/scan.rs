@@ -16,11 +16,29 @@
 //!     ([`TwiddleStep`], no drift with n), in blocks of 64 samples. Error ≈ `Nt·6e-8` of
 //!     `Σ|H|` at worst (measured ≤ 3e-7).
 //! * un-gated value `M_ls = e^{iΩ x_ls} · Σ_n H_ls[n]·e^{−iΩ nΔt}` (the monochromatic
-//!   phasor at Ω), by a complex recurrence re-seeded from `f64` every 64 samples;
+//!   phasor at Ω), by a complex recurrence `e^{−iΩΔt}` re-seeded every 64 samples, the block
+//!   seeds `e^{−iΩ·64cΔt}` themselves by a recurrence of the block step;
 //! * the leg offset `x_ls` itself (for the guard and the time-domain gates).
 //!
-//! Soft `f64` per row (on an FPU without double precision): only the phase seeds, reduced to
-//! turns in `f64` for exactness — three per SPAD (legs) and one per 64 samples (carrier).
+//! **No `f64` per row** (soft float on an FPU without double precision, such as the
+//! Cortex-M4F's FPv4-SP): [`Scan::new`] converts the constants once (`k_lo/NΔt`, `1/NΔt`,
+//! `1/λ`, `t0`, the laser origin, the carrier steps `e^{−iΩΔt}` and `e^{−iΩ·64Δt}` from
+//! `f64` `libm`), and `load`, `end_photons` and `push_photon` work in `f32`:
+//!
+//! * legs: `x = (d1 + d4) − t0` in `f32` (`d1` by `sqrtf`), then the phases in turns
+//!   `x·k_lo/NΔt`, `x/NΔt` and `x/λ` ([`cis_turns`]). Error: `x` carries `≤ 2u·(|d1| + |d4| +
+//!   |t0|)` m, the turns product a relative `u` on top, so a leg phase is off by
+//!   `≤ 2π·3u·Φ_x` rad, `Φ_x = max|ν|·(|d1| + |d4| + |t0|)/2π` turns (`u = 2⁻²⁴`), plus
+//!   [`cis_turns`]' 2.5e-7. The paper's setup (Φ_x ≈ 25 turns): 2.9e-5 rad. The same order
+//!   as the `f32` phases of the probes' path times (`2π·u·Φ`, module docs of
+//!   [`Probe`](crate::Probe)), which the proptest tolerance already carries.
+//! * un-gated carrier: block `c`'s seed is `c` products of the block step (each rounded to
+//!   `f32`, ≤ 2.5e-7 + 2u), so `≤ c·3.5e-7` after `Nt/64` blocks, and the in-block
+//!   recurrence `64·(2u + 1e-8)` as before: `M` is within `(Nt/64 + 64)·3.5e-7` of `Σ|H|`.
+//! * photon events: the phase `bin·(−Δt/λ)` in `f32` (relative `2u` of `Nt·Δt/λ` turns).
+//!
+//! `load_matches_f64_reference` checks `HG` and `M` against an `f64` evaluation of the same
+//! formulas with this bound.
 //!
 //! Cost per row: the band transform above (+ `Ks·Nt` for `M`, `Ks·J` for the legs); on the
 //! Cortex-M4F 2.4 M instructions for Ks = 28, Nt = 255, N = 289, J = 137 (firmware README).
@@ -29,8 +47,8 @@
 
 use crate::config::{Config, Legs, Point};
 use crate::error::{Error, check_len, check_points};
-use crate::geometry::dist64;
-use crate::phase::{TwiddleStep, cis_turns_f64, wrap};
+use crate::geometry::{dist, dist64};
+use crate::phase::{TwiddleStep, cis_turns, cis_turns_f64, wrap};
 use crate::sample::Sample;
 use num_complex::Complex32;
 
@@ -68,6 +86,50 @@ pub struct Scan<'t> {
     gate: &'t [f32],
     d4: &'t [f32],
     plan: BandPlan,
+    k: RowConsts,
+}
+
+/// The configuration's per-row constants in `f32`, converted once by [`Scan::new`] (module
+/// docs: no `f64` per row).
+#[derive(Clone, Copy, Debug)]
+struct RowConsts {
+    /// `k_lo/(NΔt)`, `1/(NΔt)` and `1/λ` (turns per metre).
+    klo: f32,
+    inv_span: f32,
+    inv_lambda: f32,
+    /// `t0` (m).
+    t0: f32,
+    /// The laser origin of [`Legs::FirstAndLast`], `None` for wall-to-wall legs.
+    origin: Option<Point>,
+    /// `−Δt/λ`: carrier turns per sample.
+    carrier_turns: f32,
+    /// `e^{−iΩΔt}` and `e^{−iΩ·64Δt}`.
+    carrier_step: Complex32,
+    block_step: Complex32,
+}
+
+impl RowConsts {
+    fn new(cfg: &Config) -> Self {
+        let span = cfg.span();
+        let turns_per_bin = -cfg.dt() / cfg.wavelength();
+        Self {
+            klo: (cfg.k_lo() as f64 / span) as f32,
+            inv_span: (1.0 / span) as f32,
+            inv_lambda: (1.0 / cfg.wavelength()) as f32,
+            t0: cfg.t0() as f32,
+            origin: match cfg.legs() {
+                Legs::WallToWall => None,
+                Legs::FirstAndLast { laser_origin, .. } => Some([
+                    laser_origin[0] as f32,
+                    laser_origin[1] as f32,
+                    laser_origin[2] as f32,
+                ]),
+            },
+            carrier_turns: turns_per_bin as f32,
+            carrier_step: cis_turns_f64(turns_per_bin),
+            block_step: cis_turns_f64(64.0 * turns_per_bin),
+        }
+    }
 }
 
 impl<'t> Scan<'t> {
@@ -115,6 +177,7 @@ impl<'t> Scan<'t> {
             gate,
             d4,
             plan: BandPlan::choose(cfg),
+            k: RowConsts::new(cfg),
         })
     }
 
@@ -391,8 +454,7 @@ impl<'m> RowBuffer<'m> {
     ) -> Result<Row<'r, T>, Error> {
         let cfg = &scan.cfg;
         let (nt, j) = (cfg.nt().max(1), cfg.bins().max(1));
-        let turns_per_bin = -cfg.dt() / cfg.wavelength();
-        let carrier_step = cis_turns_f64(turns_per_bin);
+        let (carrier_step, block_step) = (scan.k.carrier_step, scan.k.block_step);
         self.load_with(scan, laser, hists, |hg, mono| {
             for ((h, hg), mono) in hists
                 .chunks_exact(nt)
@@ -400,14 +462,17 @@ impl<'m> RowBuffer<'m> {
                 .zip(mono.iter_mut())
             {
                 scan.dft_band(h, hg);
-                // Un-gated: Σ H_n e^{−iΩ nΔt}, re-seeded every 64 samples.
+                // Un-gated: Σ H_n e^{−iΩ nΔt}, re-seeded every 64 samples from the block
+                // recurrence (module docs).
                 let mut acc = Complex32::new(0.0, 0.0);
-                for (c, block) in h.chunks(64).enumerate() {
-                    let mut ph = cis_turns_f64((c * 64) as f64 * turns_per_bin);
+                let mut seed = Complex32::new(1.0, 0.0);
+                for block in h.chunks(64) {
+                    let mut ph = seed;
                     for &s in block {
                         acc += ph * s.value();
                         ph *= carrier_step;
                     }
+                    seed *= block_step;
                 }
                 *mono = acc;
             }
@@ -454,9 +519,11 @@ impl<'m> RowBuffer<'m> {
     fn fold_legs(&mut self, scan: &Scan<'_>, laser: &Point) {
         let cfg = &scan.cfg;
         let j = cfg.bins().max(1);
-        let d1 = scan.laser_leg(laser);
-        let span = cfg.span();
-        let k_lo = cfg.k_lo() as f64;
+        let k = &scan.k;
+        let d1 = match &k.origin {
+            None => 0.0,
+            Some(origin) => dist(laser, origin),
+        };
         for (((hg, mono), off), d4) in self
             .hg
             .chunks_exact_mut(j)
@@ -464,15 +531,15 @@ impl<'m> RowBuffer<'m> {
             .zip(self.offset.iter_mut())
             .zip(scan.d4)
         {
-            let x = d1 + *d4 as f64 - cfg.t0();
-            *off = x as f32;
-            let mut p = cis_turns_f64(k_lo * x / span);
-            let step = cis_turns_f64(x / span);
+            let x = (d1 + *d4) - k.t0;
+            *off = x;
+            let mut p = cis_turns(k.klo * x);
+            let step = cis_turns(k.inv_span * x);
             for (v, g) in hg.iter_mut().zip(scan.gate) {
                 *v = *v * p * *g;
                 p *= step;
             }
-            *mono *= cis_turns_f64(x / cfg.wavelength());
+            *mono *= cis_turns(k.inv_lambda * x);
         }
     }
 
@@ -517,7 +584,7 @@ impl<'m> RowBuffer<'m> {
             }
             q.advance();
         }
-        *mono += cis_turns_f64(bin as f64 * -cfg.dt() / cfg.wavelength());
+        *mono += cis_turns(bin as f32 * scan.k.carrier_turns);
     }
 
     /// Ends a photon-event row: folds gate weights and legs in and returns the row for the
@@ -592,6 +659,132 @@ mod tests {
     extern crate std;
     use super::*;
     use crate::config::Params;
+
+    /// `load` (and a photon row through `end_photons`) against an `f64` evaluation of the
+    /// same formulas — `HG[j] = Ĝ_j·e^{iν_j x}·Σ_n H[n]e^{−2πik_j n/N}`,
+    /// `M = e^{iΩx}·Σ_n H[n]e^{−iΩnΔt}`, `x = d1 + d4 − t0` — with legs and a long time
+    /// axis: within the module docs' bound, `(ε_dft + 2π·3u·Φ_x + 2.5e-7)·Σ|H|` for `HG`
+    /// and `((Nt/64 + 64)·3.5e-7 + 2π·3u·Φ_x)·Σ|H|` for `M`. No `f64` in the row path.
+    #[test]
+    fn load_matches_f64_reference() {
+        use std::vec;
+        use std::vec::Vec;
+        for (lam, nt, dt, t0, legs) in [
+            (0.13, 255, 0.0255, 0.7, true),
+            (0.1, 2000, 0.004, 1.5, true),
+            (0.2, 300, 0.01, 0.0, false),
+        ] {
+            let mut p = Params::new(lam, nt, dt);
+            p.t0 = t0;
+            if legs {
+                p.legs = Legs::FirstAndLast {
+                    laser_origin: [0.3, -0.2, -1.1],
+                    sensor_origin: [-0.4, 0.1, -0.9],
+                };
+            }
+            let cfg = Config::try_new(&p).unwrap();
+            let spads = [[0.05f32, 0.1, 0.0], [-0.3, 0.2, 0.01]];
+            let ks = spads.len();
+            let mut tables = vec![0.0f32; Scan::tables_len(&cfg, ks)];
+            let scan = Scan::new(&cfg, &spads, &mut tables).unwrap();
+            let mut buf = vec![0.0f32; RowBuffer::len(&cfg, ks)];
+            let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
+            let mut seed = 11u32;
+            let h: Vec<u16> = (0..ks * nt)
+                .map(|_| {
+                    seed = seed.wrapping_mul(1_664_525).wrapping_add(1_013_904_223);
+                    (seed >> 28) as u16
+                })
+                .collect();
+            let laser = [0.21f32, -0.13, 0.02];
+            let (band, mono): (Vec<Complex32>, Vec<Complex32>) = {
+                let row = rows.load(&scan, laser, &h).unwrap();
+                (row.band().to_vec(), row.ungated().to_vec())
+            };
+            // The same counts as photon events.
+            rows.begin_photons();
+            for (sp, hs) in h.chunks_exact(nt).enumerate() {
+                for (n, &c) in hs.iter().enumerate() {
+                    for _ in 0..c {
+                        rows.push_photon(&scan, sp, n);
+                    }
+                }
+            }
+            let photons = rows.end_photons(&scan, laser).unwrap();
+            let (pband, pmono) = (photons.band().to_vec(), photons.ungated().to_vec());
+            let j = cfg.bins();
+            let n_fft = cfg.n_fft() as f64;
+            let tau = core::f64::consts::TAU;
+            for (s, sp) in spads.iter().enumerate() {
+                let (d1, d4) = match cfg.legs() {
+                    Legs::WallToWall => (0.0, 0.0),
+                    Legs::FirstAndLast {
+                        laser_origin,
+                        sensor_origin,
+                    } => (dist64(&laser, &laser_origin), dist64(sp, &sensor_origin)),
+                };
+                let x = d1 + d4 - cfg.t0();
+                let hs = &h[s * nt..(s + 1) * nt];
+                let l1: f64 = hs.iter().map(|&c| f64::from(c)).sum();
+                let nu_max = (0..j).map(|i| cfg.nu(i).abs()).fold(cfg.omega(), f64::max);
+                let phi_x = nu_max * (d1.abs() + d4.abs() + cfg.t0().abs()) / tau;
+                let u = f64::from(f32::EPSILON) / 2.0;
+                let leg = tau * 3.0 * u * phi_x;
+                let dft = (cfg.n_fft() as f64 + nt as f64) * 6e-8;
+                // Per bin, relative to Ĝ_j·Σ|H| (the bin's own scale).
+                let tol_band = dft + leg + 2.5e-7;
+                let tol_mono = ((nt as f64 / 64.0 + 64.0) * 3.5e-7 + leg) * l1;
+                let mut worst = [0.0f64; 2];
+                for i in 0..j {
+                    let k = (cfg.k_lo() + i as i64) as f64;
+                    let (mut re, mut im) = (0.0, 0.0);
+                    for (n, &c) in hs.iter().enumerate() {
+                        let a = -tau * ((k as i64 * n as i64) as f64 % n_fft) / n_fft;
+                        re += f64::from(c) * libm::cos(a);
+                        im += f64::from(c) * libm::sin(a);
+                    }
+                    let (sn, cs) = libm::sincos(cfg.nu(i) * x);
+                    let g = cfg.gate_weight(i);
+                    let (er, ei) = (g * (re * cs - im * sn), g * (re * sn + im * cs));
+                    for (w, z) in worst.iter_mut().zip([band[s * j + i], pband[s * j + i]]) {
+                        let e = libm::hypot(f64::from(z.re) - er, f64::from(z.im) - ei);
+                        *w = w.max(e / (g * l1));
+                    }
+                }
+                assert!(
+                    worst[0] <= tol_band,
+                    "band {lam} {nt}: {worst:?} > {tol_band:e}"
+                );
+                assert!(
+                    worst[1] <= tol_band,
+                    "photons {lam} {nt}: {worst:?} > {tol_band:e}"
+                );
+                let (mut re, mut im) = (0.0, 0.0);
+                for (n, &c) in hs.iter().enumerate() {
+                    let a = -cfg.omega() * n as f64 * cfg.dt();
+                    re += f64::from(c) * libm::cos(a);
+                    im += f64::from(c) * libm::sin(a);
+                }
+                let (sn, cs) = libm::sincos(cfg.omega() * x);
+                let (er, ei) = (re * cs - im * sn, re * sn + im * cs);
+                let mut e_mono = 0.0f64;
+                for (what, z) in [("load", mono[s]), ("photons", pmono[s])] {
+                    let e = libm::hypot(f64::from(z.re) - er, f64::from(z.im) - ei);
+                    assert!(
+                        e <= tol_mono,
+                        "mono {what} {lam} {nt}: {e:e} > {tol_mono:e}"
+                    );
+                    e_mono = e_mono.max(e);
+                }
+                std::println!(
+                    "λ {lam} Nt {nt}: band err {:.2e} of Ĝ_j·Σ|H| (bound {tol_band:.2e}), mono err {:.2e} of Σ|H| (bound {:.2e})",
+                    worst[0].max(worst[1]),
+                    e_mono / l1,
+                    tol_mono / l1
+                );
+            }
+        }
+    }
 
     /// Both transforms against an `f64` DFT, for N with and without a small factor, `u16`
     /// and `f32` samples (a NaN reads as 0): error ≤ 4e-7·Σ|h|.

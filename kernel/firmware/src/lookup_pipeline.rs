@@ -3,8 +3,12 @@
 //! (bin `vltm-firmware-lookup`) and the host generator (which writes
 //! `fixture/expected_lookup.txt` from it), so both run the same kernel calls in the same order.
 //!
-//! Per laser row: [`RowBuffer::load`] → push to the lookup diagonal and the lookup column
-//! `T(FOCUS, ·)`; then [`LookupProbe::finish`] both. The grid is made for the tolerance
+//! Two passes over the scan (it is in flash), so that the three probes share one scratch:
+//! per laser row [`RowBuffer::load`] → push to the lookup diagonal and the factorised `f32`
+//! column [`ColumnF32`], then [`LookupProbe::finish`]; per laser row again → push to the
+//! lookup column `T(FOCUS, ·)`, then its finish; last [`ColumnF32::finish_lookup`] (the
+//! factorised column's lookup finish). Each probe sees the same rows in the same order as in
+//! one pass, so the results are the same bits. The grid is made for the tolerance
 //! [`LOOKUP_TOLERANCE`] (1e-4 here: `L` = 256, so that the M0's 16 KB of RAM holds it).
 
 use crate::fixture::{
@@ -13,7 +17,8 @@ use crate::fixture::{
 };
 use crate::pipeline::{Failure, argmax};
 use vltm_kernel::{
-    Config, Lookup, LookupGrid, LookupParams, LookupProbe, Report, RowBuffer, Scan, Target,
+    ColumnF32, Config, Lookup, LookupGrid, LookupParams, LookupProbe, Report, RowBuffer, Scan,
+    Target,
 };
 
 /// Interpolation tolerance `η` of the fixture's grid.
@@ -26,6 +31,12 @@ pub const LOOKUP_TABLES_LEN: usize = 4 * LOOKUP_GRID;
 pub const LOOKUP_STATE_LEN: usize = 2 * N_VOXELS;
 /// `LookupProbe::scratch_len`: `2(L + 3) + 3Kv` `f32`.
 pub const LOOKUP_SCRATCH_LEN: usize = 2 * (LOOKUP_GRID + 3) + 3 * N_VOXELS;
+
+/// `ColumnF32::state_len`: `(4Ks + 2)·J` `f32`.
+pub const COLUMN32_STATE_LEN: usize = (4 * SPADS.len() + 2) * BINS;
+/// `ColumnF32::lookup_scratch_len`: `2(L + 3) + 2Kv` `f32` (a prefix of the column's
+/// [`LOOKUP_SCRATCH_LEN`]).
+pub const COLUMN32_SCRATCH_LEN: usize = 2 * (LOOKUP_GRID + 3) + 2 * N_VOXELS;
 
 /// The lookup parameters of the fixture.
 pub const fn lookup_params() -> LookupParams {
@@ -47,10 +58,11 @@ pub struct LookupBuffers<'a> {
     pub diag: &'a mut [f64],
     /// Column state.
     pub column: &'a mut [f64],
-    /// Diagonal scratch.
-    pub diag_scratch: &'a mut [f32],
-    /// Column scratch.
-    pub column_scratch: &'a mut [f32],
+    /// Scratch of the diagonal, then of the column, then of the factorised column's
+    /// `finish_lookup` ([`LOOKUP_SCRATCH_LEN`]).
+    pub scratch: &'a mut [f32],
+    /// Factorised `f32` column state ([`COLUMN32_STATE_LEN`]).
+    pub column32: &'a mut [f32],
 }
 
 /// Intensities `T = |A|²` per voxel from the lookup path, and the reports.
@@ -64,6 +76,10 @@ pub struct LookupResults {
     pub report_diag: Report,
     /// Report of the column.
     pub report_col: Report,
+    /// Factorised `f32` column `T(FOCUS, v)` by [`ColumnF32::finish_lookup`].
+    pub col32: [f32; N_VOXELS],
+    /// Its report.
+    pub report_col32: Report,
 }
 
 const ZERO_REPORT: Report = Report {
@@ -80,6 +96,8 @@ impl LookupResults {
         col: [0.0; N_VOXELS],
         report_diag: ZERO_REPORT,
         report_col: ZERO_REPORT,
+        col32: [0.0; N_VOXELS],
+        report_col32: ZERO_REPORT,
     };
 }
 
@@ -106,29 +124,41 @@ pub fn run_lookup(
     let scan = Scan::new(&cfg, &SPADS, b.tables)?;
     let lookup = Lookup::new(&grid, b.lookup)?;
     let mut rows = RowBuffer::new(&scan, b.row)?;
+    let mut col32 = ColumnF32::new(&scan, FOCUS, b.column32)?;
     let mut diag = LookupProbe::new(
         &scan,
         &lookup,
         Target::Diagonal,
         &VOXELS,
         b.diag,
-        b.diag_scratch,
+        &mut *b.scratch,
     )?;
+    for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
+        let row = rows.load(&scan, laser, hists)?;
+        diag.push_row(&scan, &lookup, &row)?;
+        col32.push_row(&scan, &row)?;
+    }
+    out.report_diag = diag.finish(&mut out.diag)?;
+    drop(diag);
     let mut col = LookupProbe::new(
         &scan,
         &lookup,
         Target::Column(FOCUS),
         &VOXELS,
         b.column,
-        b.column_scratch,
+        &mut *b.scratch,
     )?;
     for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
         let row = rows.load(&scan, laser, hists)?;
-        diag.push_row(&scan, &lookup, &row)?;
         col.push_row(&scan, &lookup, &row)?;
     }
-    out.report_diag = diag.finish(&mut out.diag)?;
     out.report_col = col.finish(&mut out.col)?;
+    drop(col);
+    let scratch = b
+        .scratch
+        .get_mut(..COLUMN32_SCRATCH_LEN)
+        .ok_or(Failure::Sizes)?;
+    out.report_col32 = col32.finish_lookup(&scan, &lookup, &VOXELS, scratch, &mut out.col32)?;
     Ok(())
 }
 
@@ -146,7 +176,14 @@ pub fn verdict_lookup(r: &LookupResults) -> i32 {
     if argmax(&slice) != P2_VOXEL {
         return 4;
     }
-    for rep in [r.report_diag, r.report_col] {
+    let mut slice32 = [0.0f64; SLICE];
+    for ((s, c), i) in slice32.iter_mut().zip(r.col32).zip(0..) {
+        *s = if i == P1_VOXEL { 0.0 } else { f64::from(c) };
+    }
+    if argmax(&slice32) != P2_VOXEL {
+        return 4;
+    }
+    for rep in [r.report_diag, r.report_col, r.report_col32] {
         if rep.rows != N_LASERS as u64 || rep.non_finite != 0 || rep.dropped != 0 {
             return 6;
         }

@@ -19,9 +19,9 @@ pub fn lookup_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results
         vec![0.0f64; LOOKUP_STATE_LEN],
         vec![0.0f64; LOOKUP_STATE_LEN],
     );
-    let (mut ds, mut cs) = (
+    let (mut sc, mut c32) = (
         vec![0.0f32; LOOKUP_SCRATCH_LEN],
-        vec![0.0f32; LOOKUP_SCRATCH_LEN],
+        vec![0.0f32; COLUMN32_STATE_LEN],
     );
     let mut f = LookupResults::ZERO;
     let bufs = LookupBuffers {
@@ -30,8 +30,8 @@ pub fn lookup_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results
         lookup: &mut lt,
         diag: &mut d,
         column: &mut c,
-        diag_scratch: &mut ds,
-        column_scratch: &mut cs,
+        scratch: &mut sc,
+        column32: &mut c32,
     };
     run_lookup(scan, bufs, &mut f).expect("lookup pipeline");
     assert_eq!(
@@ -47,13 +47,22 @@ pub fn lookup_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results
             .zip(b)
             .fold(0.0f64, |m, (x, y)| m.max((x.sqrt() - y.sqrt()).abs() / big))
     };
-    let (ed, ec) = (rel(&f.diag, &r.diag), rel(&f.col, &r.col));
+    let col32: Vec<f64> = f.col32.iter().map(|&x| f64::from(x)).collect();
+    let (ed, ec, e32) = (
+        rel(&f.diag, &r.diag),
+        rel(&f.col, &r.col),
+        rel(&col32, &r.col),
+    );
     assert!(
-        ed < 1e-3 && ec < 1e-2,
-        "lookup vs band: diag {ed:e}, col {ec:e}"
+        ed < 1e-3 && ec < 1e-2 && e32 < 1e-3,
+        "lookup vs band: diag {ed:e}, col {ec:e}, factorised col (lookup finish) {e32:e}"
+    );
+    assert_eq!(
+        f.report_col32.aliased, r.report_col.aliased,
+        "the lookup finish reports the band finish's aliased voxels"
     );
     eprintln!(
-        "lookup vs band, max |√T_lookup − √T_band| / max √T_band: diag {ed:.2e}, col {ec:.2e}"
+        "lookup vs band, max |√T_lookup − √T_band| / max √T_band: diag {ed:.2e}, col {ec:.2e}, col32 {e32:.2e}"
     );
     let mut txt = String::new();
     writeln!(
@@ -64,18 +73,22 @@ pub fn lookup_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results
     .unwrap();
     writeln!(
         txt,
-        "# same scan.bin; max |sqrt(T_lookup) - sqrt(T_band)| / max sqrt(T_band): diag {ed:.2e}, col {ec:.2e}"
+        "# same scan.bin; max |sqrt(T_lookup) - sqrt(T_band)| / max sqrt(T_band): diag {ed:.2e}, col {ec:.2e}, col32 (ColumnF32::finish_lookup vs the band column) {e32:.2e}"
     )
     .unwrap();
     for i in 0..N_VOXELS {
         writeln!(
             txt,
-            "RESULT voxel={i} lookup_diag={:e} lookup_col={:e}",
-            f.diag[i], f.col[i]
+            "RESULT voxel={i} lookup_diag={:e} lookup_col={:e} lookup_col32={:e}",
+            f.diag[i], f.col[i], f.col32[i]
         )
         .unwrap();
     }
-    for (name, x) in [("lookup_diag", f.report_diag), ("lookup_col", f.report_col)] {
+    for (name, x) in [
+        ("lookup_diag", f.report_diag),
+        ("lookup_col", f.report_col),
+        ("lookup_col32", f.report_col32),
+    ] {
         writeln!(
             txt,
             "REPORT {name} rows={} non_finite={} dropped={} aliased={}",

@@ -1,6 +1,8 @@
 //! Link-time proof (as `nopanic.rs`, panic-never) that the kernel's **lookup path** cannot
 //! panic: `LookupGrid::try_new`, `Lookup::new`, `LookupProbe::new`/`push_row`/`merge`/
-//! `finish`/`reset` for the diagonal and a column, `u16` and `f32` rows, and a refused
+//! `finish`/`reset` for the diagonal and a column, `ColumnF32::new`/`push_row`/
+//! `finish_lookup` (the factorised column's lookup finish, and its refusal of a short
+//! scratch), `u16` and `f32` rows, and a refused
 //! grid that is not a power of two or too coarse, with the inputs through `black_box` (any configuration, grid and
 //! voxel list); then the structured slice (`SliceLayout::try_new`, `LookupSlice::new`/
 //! `push_row`/`finish`/`reset`/`amplitude`, a refused off-lattice SPAD line and a table that does
@@ -31,13 +33,15 @@ use vltm_firmware::lookup_pipeline::{
 use vltm_firmware::pipeline::argmax;
 use vltm_kernel::{
     Config, Lattice, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice, Params, RowBuffer,
-    Scan, SliceLayout, Target,
+    Scan, SliceLayout, Target, ColumnF32,
 };
 
 /// SPADs used here.
 const KS: usize = 2;
 const TABLES: usize = 2 * N_FFT + BINS + KS;
 const ROWBUF: usize = KS * (2 * BINS + 3);
+/// `ColumnF32::state_len` for [`KS`] SPADs.
+const COLUMN32: usize = (4 * KS + 2) * BINS;
 
 #[entry]
 fn main() -> ! {
@@ -177,10 +181,12 @@ fn run() -> i32 {
     ) else {
         return 7;
     };
-    let (Some(sc1), Some(sc2), Some(hf)) = (
+    let (Some(sc1), Some(sc2), Some(hf), Some(c32), Some(out32)) = (
         singleton!(: [f32; LOOKUP_SCRATCH_LEN] = [0.0; LOOKUP_SCRATCH_LEN]),
         singleton!(: [f32; LOOKUP_SCRATCH_LEN] = [0.0; LOOKUP_SCRATCH_LEN]),
         singleton!(: [f32; KS * NT] = [0.0; KS * NT]),
+        singleton!(: [f32; COLUMN32] = [0.0; COLUMN32]),
+        singleton!(: [f32; N_VOXELS] = [0.0; N_VOXELS]),
     ) else {
         return 7;
     };
@@ -228,6 +234,12 @@ fn run() -> i32 {
     ) else {
         return 2;
     };
+    let Some(c32) = black_box(&mut c32[..]).get_mut(..ColumnF32::state_len(&cfg, ks)) else {
+        return 2;
+    };
+    let Ok(mut col32) = ColumnF32::new(&scan, black_box(FOCUS), c32) else {
+        return 2;
+    };
     let nt = black_box(cfg.nt());
     let row_len = black_box(ROW);
     for (hists, laser) in data
@@ -243,6 +255,7 @@ fn run() -> i32 {
         };
         if diag.push_row(&scan, &lookup, &row).is_err()
             || col.push_row(&scan, &lookup, &row).is_err()
+            || col32.push_row(&scan, &row).is_err()
         {
             return 2;
         }
@@ -254,7 +267,7 @@ fn run() -> i32 {
     let Ok(row) = rows.load(&scan, LASERS[0], &hf[..]) else {
         return 2;
     };
-    if col.push_row(&scan, &lookup, &row).is_err() {
+    if col.push_row(&scan, &lookup, &row).is_err() || col32.push_row(&scan, &row).is_err() {
         return 2;
     }
     // A grid that is not a power of two, or too coarse, is refused.
@@ -279,6 +292,30 @@ fn run() -> i32 {
     col.reset();
     if col.finish(&mut out[..]).is_err() || out.iter().any(|x| *x != 0.0) {
         return 4;
+    }
+    // The factorised column's lookup finish, in the lookup column's scratch (free now); a
+    // scratch one element short is refused.
+    drop(col);
+    let need = black_box(ColumnF32::lookup_scratch_len(&grid, voxels.len()));
+    let (Some(short), Some(scratch)) = (
+        black_box(&mut sc1[..]).get_mut(..need.saturating_sub(1)),
+        black_box(&mut sc2[..]).get_mut(..need),
+    ) else {
+        return 2;
+    };
+    let out32 = black_box(&mut out32[..]);
+    if col32
+        .finish_lookup(&scan, &lookup, voxels, short, out32)
+        .is_ok()
+    {
+        return 6;
+    }
+    match col32.finish_lookup(&scan, &lookup, voxels, scratch, out32) {
+        Ok(r) if r.rows == black_box(LASERS.len() as u64 + 1) => {}
+        _ => return 2,
+    }
+    if out32.iter().any(|x| !x.is_finite()) {
+        return 5;
     }
     run_slice(&mut tables[..], &mut rowbuf[..], &mut lt[..], &mut out[..])
 }
