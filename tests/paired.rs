@@ -21,8 +21,11 @@
 //! spot moved by 1 cm by 1.7–147× (1.7× at λ = 0.26 m).
 
 mod reference;
+#[allow(dead_code)]
+mod support;
 
 use reference::{Reference, p64};
+use std::process::Command;
 use vltm::io::{Capture, Geometry};
 use vltm::kernel::{Config, Legs, Params, Point, Weights};
 use vltm::probe::fast::Lookup;
@@ -409,4 +412,229 @@ fn paired_columns_are_refused_with_one_line() {
         msg.contains("paired scan") && msg.contains("SPAD grid") && !msg.contains('\n'),
         "{msg}"
     );
+}
+
+/// A paired scene on a flat or bumpy (±5 cm) wall: 10 × 10 laser spots over ±0.45 m, each
+/// SPAD spot 5 cm right of its laser spot; one patch facing the wall at (0.1, −0.05, 0.7).
+fn paired_scene(bumpy: bool) -> vltm::sim::Scene {
+    use vltm::sim::{Aperture, Patch, Scene, Setup};
+    let amp = if bumpy { 0.05 } else { 0.0 };
+    let mut lasers = Vec::new();
+    let mut spads = Vec::new();
+    for i in 0..10 {
+        for j in 0..10 {
+            let (x, y) = (-0.45 + 0.1 * i as f64, -0.45 + 0.1 * j as f64);
+            lasers.push([x, y, f64::from(bump(amp, x, y))]);
+            spads.push([x + 0.05, y, f64::from(bump(amp, x + 0.05, y))]);
+        }
+    }
+    let setup = Setup {
+        t0: 0.8,
+        ..Setup::paired_with(
+            Aperture::Points {
+                points: lasers,
+                shape: [10, 10],
+            },
+            Aperture::Points {
+                points: spads,
+                shape: [10, 10],
+            },
+            160,
+            0.01,
+        )
+    };
+    Scene::new(setup).with(Patch::new(
+        "P",
+        [0.1, -0.05, 0.7],
+        [0.0, 0.0, -1.0],
+        [0.1, 0.1],
+    ))
+}
+
+/// `vltm::sim` renders paired scenes (flat and bumpy wall): one histogram per pair; the
+/// direct light of the rendered capture (band and lookup) matches the `f64` reference on the
+/// same histograms, and peaks at the patch.
+#[test]
+fn simulated_paired_captures_match_reference() {
+    for bumpy in [false, true] {
+        let scene = paired_scene(bumpy);
+        let capture = scene.render().expect("render");
+        let g = capture.geometry.clone();
+        assert!(g.paired_apart() && g.spads_per_row() == 1);
+        assert_eq!(capture.data.len(), 100 * 160);
+        let volume = Volume::parse("-0.2:0.4:7,-0.35:0.25:7,0.5:0.9:5").unwrap();
+        let params = Params {
+            sigma: Some(0.1),
+            band_half_width: 5.0,
+            t0: g.t0,
+            weights: Weights::Inv,
+            ..Params::new(0.1, g.nt, g.dt)
+        };
+        let rows: Vec<Reference> = (0..g.lasers.len())
+            .map(|l| {
+                Reference::new(
+                    &params,
+                    &g.lasers[l..=l],
+                    &g.spads[l..=l],
+                    capture.row(l).iter().map(|&x| f64::from(x)).collect(),
+                )
+            })
+            .collect();
+        let case = Case {
+            capture,
+            volume,
+            wave: Wave {
+                wavelength: Some(0.1),
+                sigma: Some(0.1),
+                weights: Weights::Inv,
+                band_half_width: 5.0,
+                compensate_laser: false,
+                auto_margin: false,
+                crop: false,
+            },
+            params,
+            rows,
+        };
+        let (eps, _) = case.tol();
+        let truth = case.truth();
+        let scale = case.scales();
+        for path in [Path::Band, Path::Lookup] {
+            let o = case.direct(path).expect("direct");
+            let tol = if path == Path::Lookup {
+                eps + INTERP
+            } else {
+                eps
+            };
+            let w = worst(&o.values, &truth, &scale, tol);
+            assert!(w <= 1.0, "bumpy {bumpy} {path:?}: {w}");
+            let peak = (0..o.values.len())
+                .max_by(|&a, &b| o.values[a].total_cmp(&o.values[b]))
+                .unwrap();
+            let v = case.volume.points[peak];
+            let d = ((v[0] - 0.1).powi(2) + (v[1] + 0.05).powi(2) + (v[2] - 0.7).powi(2)).sqrt();
+            assert!(d < 0.11, "bumpy {bumpy} {path:?}: peak at {v:?}");
+        }
+    }
+}
+
+fn vltm_cmd(args: &[&str]) -> std::process::Output {
+    Command::new(support::vltm_bin())
+        .args(args)
+        .output()
+        .expect("run vltm")
+}
+
+/// The command line: `vltm simulate` writes a paired capture from a scene file with
+/// `"scan": "paired"`; `vltm info` names the scan, the relay surface and the paths that
+/// apply; `vltm direct` images it; `vltm column` refuses it in one line; a scene whose lists
+/// differ in length and a capture with NaN points are one-line errors naming the field, and
+/// nothing is written (an existing output is kept).
+#[test]
+fn cli_simulate_info_direct_paired() {
+    let dir = std::env::temp_dir().join(format!("vltm-paired-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut json = serde_json::to_value(paired_scene(true)).unwrap();
+    let scene = dir.join("paired.json");
+    std::fs::write(&scene, serde_json::to_string_pretty(&json).unwrap()).unwrap();
+    assert!(
+        std::fs::read_to_string(&scene)
+            .unwrap()
+            .contains("\"scan\": \"paired\"")
+    );
+    let cap = dir.join("paired.npz");
+    let o = vltm_cmd(&[
+        "simulate",
+        scene.to_str().unwrap(),
+        "--out",
+        cap.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = vltm_cmd(&["info", cap.to_str().unwrap()]);
+    let info = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        info.contains("paired (one laser spot and one SPAD spot per histogram)"),
+        "{info}"
+    );
+    assert!(info.contains("relay        not planar"), "{info}");
+    assert!(
+        info.contains("paths        direct: band or lookup"),
+        "{info}"
+    );
+    let out = dir.join("direct.npy");
+    let o = vltm_cmd(&[
+        "direct",
+        cap.to_str().unwrap(),
+        "--volume",
+        "-0.2:0.4:7,-0.35:0.25:7,0.5:0.9:5",
+        "--wavelength",
+        "0.1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.is_file());
+    let o = vltm_cmd(&[
+        "column",
+        cap.to_str().unwrap(),
+        "--focus",
+        "0.1,-0.05,0.7",
+        "--volume",
+        "-0.2:0.4:7,-0.35:0.25:7,0.5:0.9:5",
+        "--wavelength",
+        "0.1",
+        "--out",
+        dir.join("column.npy").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("paired scan") && err.trim().lines().count() == 1,
+        "{err}"
+    );
+    assert!(!dir.join("column.npy").exists());
+
+    // Lists of different lengths in the scene: nothing written, the old capture kept.
+    let before = std::fs::read(&cap).unwrap();
+    let spads = json["setup"]["spads"]["points"].as_array_mut().unwrap();
+    spads.pop();
+    json["setup"]["spads"]["shape"] = serde_json::json!([99, 1]);
+    std::fs::write(&scene, serde_json::to_string(&json).unwrap()).unwrap();
+    let o = vltm_cmd(&[
+        "simulate",
+        scene.to_str().unwrap(),
+        "--out",
+        cap.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("setup.spads") && err.trim().lines().count() == 1,
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&cap).unwrap(), before);
+
+    // A paired capture with a NaN laser point: `direct` fails naming the field; the old
+    // output is kept.
+    let mut c = vltm::io::open(&cap).unwrap();
+    c.geometry.lasers[7][1] = f32::NAN;
+    let bad = dir.join("nan.npz");
+    vltm::io::npz::write(&c, &bad).unwrap();
+    let old = std::fs::read(&out).unwrap();
+    let o = vltm_cmd(&[
+        "direct",
+        bad.to_str().unwrap(),
+        "--volume",
+        "-0.2:0.4:7,-0.35:0.25:7,0.5:0.9:5",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("laser_grid") && err.trim().lines().count() == 1,
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&out).unwrap(), old);
+    let _ = std::fs::remove_dir_all(dir);
 }
