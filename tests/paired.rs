@@ -21,7 +21,6 @@
 //! spot moved by 1 cm by 1.7–147× (1.7× at λ = 0.26 m).
 
 mod reference;
-#[allow(dead_code)]
 mod support;
 
 use reference::{Reference, p64};
@@ -108,7 +107,7 @@ fn build(seed: u64, bumpy: bool) -> Case {
                 sensor_origin,
             },
         },
-        weights: if seed % 3 == 0 {
+        weights: if seed.is_multiple_of(3) {
             Weights::One
         } else {
             Weights::Inv
@@ -194,7 +193,7 @@ fn build(seed: u64, bumpy: bool) -> Case {
 }
 
 fn rng_sigma(seed: u64) -> bool {
-    seed % 2 == 0
+    seed.is_multiple_of(2)
 }
 
 impl Case {
@@ -298,7 +297,7 @@ fn paired_diagonal_matches_reference_flat_and_bumpy() {
     let mut worst_pair: f64 = 0.0;
     let mut bumpy_cases = 0;
     for seed in 1..=48u64 {
-        let bumpy = seed % 2 == 0;
+        let bumpy = seed.is_multiple_of(2);
         let c = build(seed, bumpy);
         let g = &c.capture.geometry;
         assert!(g.paired_apart(), "seed {seed}");

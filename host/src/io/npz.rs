@@ -824,7 +824,7 @@ mod tests {
                 Box::new(move |a| {
                     let mut l = a.iter().find(|(n, _)| *n == "laser_xyz").unwrap().1.clone();
                     l[&[2usize, 1][..]] = f64::NAN;
-                    set(a, "laser_xyz", l)
+                    set(a, "laser_xyz", l);
                 }),
                 "laser_xyz",
             ),
@@ -845,7 +845,7 @@ mod tests {
                         a,
                         "t_accounts_first_and_last_bounces",
                         ndarray::arr0(1.0).into_dyn(),
-                    )
+                    );
                 }),
                 "t_accounts_first_and_last_bounces",
             ),
