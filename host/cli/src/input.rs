@@ -245,6 +245,10 @@ pub fn describe_hdf5(path: &Path) -> vltm::Result<()> {
     let scan = |s: ScanType| match s {
         ScanType::Exhaustive => "exhaustive (every laser spot x every SPAD spot)",
         ScanType::Confocal => "confocal (the SPAD looks at the laser spot)",
+        ScanType::Paired => {
+            "paired (one laser spot and one SPAD spot per histogram, apart: a non-confocal \
+             galvo or arbitrary scan)"
+        }
         ScanType::Single => {
             "single (one laser spot, the SPAD grid scanned): shown below by reciprocity \
              as the SPAD grid's spots as lasers x one SPAD at the laser spot"
@@ -299,8 +303,10 @@ fn describe(path: &Path, c: &io::Capture) -> Result<(), Failure> {
     }
     say!(
         "scan         {}",
-        if g.confocal {
+        if g.coincident() {
             "confocal"
+        } else if g.confocal {
+            "paired (one laser spot and one SPAD spot per histogram)"
         } else {
             "non-confocal"
         }
@@ -319,6 +325,31 @@ fn describe(path: &Path, c: &io::Capture) -> Result<(), Failure> {
         g.spad_shape[1],
         span(&g.spads)
     );
+    if g.paired_apart() {
+        let z = g
+            .lasers
+            .iter()
+            .chain(&g.spads)
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), p| {
+                (a.min(p[2]), b.max(p[2]))
+            });
+        say!(
+            "relay        {}",
+            if z.1 - z.0 > 0.0 {
+                format!(
+                    "not planar (z spans {:.4} m): the FFT paths need a flat wall",
+                    z.1 - z.0
+                )
+            } else {
+                "planar (every point at one z)".to_string()
+            }
+        );
+        say!(
+            "paths        direct: band or lookup (each row imaged with its own laser and SPAD \
+             spot); no FFT path (the planar one needs a SPAD grid, the confocal one coincident \
+             points); columns, rows and the matrix need a SPAD grid"
+        );
+    }
     say!(
         "laser_xyz    {:?} m, sensor_xyz {:?} m",
         g.laser_origin,

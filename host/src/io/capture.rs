@@ -25,8 +25,13 @@ pub struct Geometry {
     /// Whether the time axis includes the device legs (y-tal
     /// `t_accounts_first_and_last_bounces`).
     pub legs_in_time: bool,
-    /// Confocal capture: row `l` holds one histogram, for a SPAD at the laser spot `l`
-    /// (`spads` is then equal to `lasers`).
+    /// One histogram per row (a **paired** scan, y-tal's `is_laser_paired_to_sensor()`): row
+    /// `l` holds one histogram, for the laser spot `lasers[l]` and the SPAD spot `spads[l]`
+    /// (the two lists have the same length). A **confocal** capture is the paired scan whose
+    /// points coincide (`spads == lasers`, [`Geometry::coincident`]); a galvo-scanned
+    /// non-confocal or "arbitrary scanning" capture has them apart, on a relay surface that
+    /// need not be flat. (The field keeps its historical name: every paired scan, confocal
+    /// or not, sets it.)
     pub confocal: bool,
     /// Bins per histogram.
     pub nt: usize,
@@ -45,9 +50,70 @@ impl Geometry {
         (v[2].abs() / d2.sqrt()) / d2
     }
 
-    /// Number of SPAD histograms in each row (1 for confocal captures).
+    /// Number of SPAD histograms in each row (1 for paired and confocal captures).
     pub fn spads_per_row(&self) -> usize {
         if self.confocal { 1 } else { self.spads.len() }
+    }
+
+    /// A paired scan whose laser and SPAD points coincide: a confocal capture in the strict
+    /// sense (the confocal FFT convolution applies only then). `false` for grid scans.
+    pub fn coincident(&self) -> bool {
+        self.confocal && self.spads == self.lasers
+    }
+
+    /// A paired scan with laser and SPAD points apart (one histogram per row,
+    /// [`Geometry::confocal`], not [`Geometry::coincident`]).
+    pub fn paired_apart(&self) -> bool {
+        self.confocal && !self.coincident()
+    }
+
+    /// The SPAD spots of row `l`: `spads[l..l + 1]` for a paired (or confocal) scan, every
+    /// SPAD for a grid scan. `l` must be a row index.
+    pub fn row_spads(&self, l: usize) -> &[Point] {
+        if self.confocal {
+            &self.spads[l..l + 1]
+        } else {
+            &self.spads
+        }
+    }
+
+    /// Refuses a probe that needs a SPAD grid seen from every laser row (columns, rows, the
+    /// matrix: their factorised sums run over `laser × SPAD` grids, DESIGN §B.3.2) on a
+    /// paired or confocal capture. `what` names the probe's output (`"columns"`), `arg` the
+    /// argument of the error.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] `arg` with one line that says why.
+    pub fn need_spad_grid(&self, arg: &str, what: &str) -> Result<()> {
+        if self.coincident() {
+            Err(Error::arg(
+                arg,
+                format!("a confocal capture has no separate camera aperture: {what} a SPAD grid"),
+            ))
+        } else if self.confocal {
+            Err(Error::arg(
+                arg,
+                format!(
+                    "a paired scan has one SPAD per laser spot, not a camera aperture shared by \
+                     every laser spot: {what} a SPAD grid (their sums factorise over laser × SPAD \
+                     grids); `direct` images paired scans"
+                ),
+            ))
+        } else {
+            Ok(())
+        }
+    }
+
+    /// The kind of scan in words, for messages: `"confocal"`, `"paired (laser and SPAD
+    /// points apart)"` or `"laser grid × SPAD grid"`.
+    pub fn scan_kind(&self) -> &'static str {
+        if self.coincident() {
+            "confocal"
+        } else if self.confocal {
+            "paired (laser and SPAD points apart)"
+        } else {
+            "laser grid × SPAD grid"
+        }
     }
 
     /// Checks shapes and values: grid sizes match, positions finite, Δt > 0, Nt > 0.
@@ -72,12 +138,15 @@ impl Geometry {
                 self.spads.len(),
             ));
         }
-        if self.confocal && self.spads != self.lasers {
+        if self.confocal && self.spads.len() != self.lasers.len() {
             return Err(Error::format(
                 what,
                 "sensor_grid",
-                "the laser grid (confocal)",
-                "a different grid",
+                format!(
+                    "one SPAD point per laser point (a paired scan: {} laser points)",
+                    self.lasers.len()
+                ),
+                format!("{} SPAD points", self.spads.len()),
             ));
         }
         for (name, pts) in [("laser_grid", &self.lasers), ("sensor_grid", &self.spads)] {

@@ -11,6 +11,25 @@
 //! | `laser_xyz`, `sensor_xyz` | f64 `(3,)` | device positions |
 //! | `delta_t`, `t_start` | f64 `()` | bin width, time of bin 0 (m) |
 //! | `t_accounts_first_and_last_bounces`, `confocal` | u8 `()` | flags |
+//!
+//! `confocal = 1` means one histogram per row: a **paired** scan, row `l` lit at
+//! `laser_grid_xyz[l]` and seen at `sensor_grid_xyz[l]` (the two grids have one shape; a
+//! confocal capture when they are equal). vltm writes paired captures in this layout.
+//!
+//! **Per-histogram paired form** (what a user writes with numpy for a galvo-scanned or
+//! arbitrary scan; recognised by `laser_xyz` of shape `(K, 3)` and no `laser_grid_xyz`):
+//!
+//! | key | dtype, shape | meaning |
+//! |---|---|---|
+//! | `H` | f32 `(K, Nt)` | histogram `k`, time last |
+//! | `laser_xyz`, `sensor_xyz` | f32 or f64 `(K, 3)` | the laser and SPAD spot of histogram `k` (m) |
+//! | `delta_t`, `t_start` | f64 `()` | bin width, time of bin 0 (m) |
+//! | `laser_normals`, `sensor_normals` (optional) | f32 or f64 `(K, 3)` | relay-surface normals at the spots: checked (finite, non-zero length) |
+//! | `laser_origin`, `sensor_origin` (optional) | f64 `(3,)` | device positions (default the origin) |
+//! | `t_accounts_first_and_last_bounces` (optional) | u8 `()` | device legs in the time axis (needs both origins) |
+//!
+//! Every field is checked before anything is read into the capture: lists of different
+//! lengths, NaN or infinite points and zero-length normals are one-line errors naming the key.
 
 use crate::atomic::Transaction;
 use crate::budget;
@@ -308,8 +327,162 @@ fn check_members(path: &Path) -> Result<()> {
     )
 }
 
-/// The geometry of an archive whose `H` has shape `s` (checked against the grids).
+/// A `(K, 3)` array of points stored as f64 or f32 (`None` when the key is absent).
+fn points(r: &mut NpzReader<File>, path: &Path, key: &str) -> Result<Option<Vec<[f64; 3]>>> {
+    let names = r
+        .names()
+        .map_err(|e| Error::format(path, "(archive)", "a NumPy .npz archive", e.to_string()))?;
+    if !names.iter().any(|n| n.trim_end_matches(".npy") == key) {
+        return Ok(None);
+    }
+    let (v, shape): (Vec<f64>, Vec<usize>) = match r.by_name::<ndarray::OwnedRepr<f64>, IxDyn>(key)
+    {
+        Ok(a) => (a.iter().copied().collect(), a.shape().to_vec()),
+        Err(_) => {
+            let a = get::<f32>(r, path, key)?;
+            (
+                a.iter().map(|&x| f64::from(x)).collect(),
+                a.shape().to_vec(),
+            )
+        }
+    };
+    if shape.len() != 2 || shape[1] != 3 {
+        return Err(Error::format(
+            path,
+            key,
+            "shape (K, 3): one point per histogram",
+            format!("{shape:?}"),
+        ));
+    }
+    let pts: Vec<[f64; 3]> = v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    if let Some(i) = pts.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
+        return Err(Error::format(
+            path,
+            key,
+            "finite coordinates",
+            format!("{:?} at index {i}", pts[i]),
+        ));
+    }
+    Ok(Some(pts))
+}
+
+/// Whether the archive is in the per-histogram paired form (module docs).
+fn per_histogram(r: &mut NpzReader<File>, path: &Path) -> Result<bool> {
+    let names = r
+        .names()
+        .map_err(|e| Error::format(path, "(archive)", "a NumPy .npz archive", e.to_string()))?;
+    let has = |k: &str| names.iter().any(|n| n.trim_end_matches(".npy") == k);
+    Ok(!has("laser_grid_xyz") && has("laser_xyz") && has("sensor_xyz"))
+}
+
+/// The geometry of a per-histogram paired archive whose `H` has shape `s` (module docs).
+fn paired_geometry(r: &mut NpzReader<File>, path: &Path, s: &[usize]) -> Result<Geometry> {
+    let need = |key: &str, p: Option<Vec<[f64; 3]>>| {
+        p.ok_or_else(|| Error::format(path, key, "a (K, 3) array", "nothing"))
+    };
+    let lasers = need("laser_xyz", points(r, path, "laser_xyz")?)?;
+    let spads = need("sensor_xyz", points(r, path, "sensor_xyz")?)?;
+    if spads.len() != lasers.len() {
+        return Err(Error::format(
+            path,
+            "sensor_xyz",
+            format!(
+                "one SPAD point per laser point (laser_xyz has {})",
+                lasers.len()
+            ),
+            format!("{} points", spads.len()),
+        ));
+    }
+    if s.len() != 2 || s[0] != lasers.len() {
+        return Err(Error::format(
+            path,
+            "H",
+            format!("shape ({}, Nt): one histogram per pair", lasers.len()),
+            format!("{s:?}"),
+        ));
+    }
+    for key in ["laser_normals", "sensor_normals"] {
+        if let Some(n) = points(r, path, key)? {
+            if n.len() != lasers.len() {
+                return Err(Error::format(
+                    path,
+                    key,
+                    format!("{} normals, one per pair", lasers.len()),
+                    n.len(),
+                ));
+            }
+            if let Some(i) = n
+                .iter()
+                .position(|v| v.iter().map(|c| c * c).sum::<f64>() <= 0.0)
+            {
+                return Err(Error::format(
+                    path,
+                    key,
+                    "normals of non-zero length",
+                    format!("{:?} at index {i}", n[i]),
+                ));
+            }
+        }
+    }
+    let names = r
+        .names()
+        .map_err(|e| Error::format(path, "(archive)", "a NumPy .npz archive", e.to_string()))?;
+    let has = |k: &str| names.iter().any(|n| n.trim_end_matches(".npy") == k);
+    let origin = |r: &mut NpzReader<File>, key: &str| -> Result<[f64; 3]> {
+        if has(key) {
+            let o = xyz(r, path, key)?;
+            if !o.iter().all(|c| c.is_finite()) {
+                return Err(Error::format(
+                    path,
+                    key,
+                    "finite coordinates",
+                    format!("{o:?}"),
+                ));
+            }
+            Ok(o)
+        } else {
+            Ok([0.0; 3])
+        }
+    };
+    let legs_in_time = has("t_accounts_first_and_last_bounces")
+        && scalar::<u8>(r, path, "t_accounts_first_and_last_bounces")? != 0;
+    if legs_in_time && !(has("laser_origin") && has("sensor_origin")) {
+        return Err(Error::format(
+            path,
+            "t_accounts_first_and_last_bounces",
+            "laser_origin and sensor_origin (the device legs need the device positions)",
+            "1 without them",
+        ));
+    }
+    let f32s = |p: &[[f64; 3]]| -> Vec<vltm_kernel::Point> {
+        p.iter()
+            .map(|q| [q[0] as f32, q[1] as f32, q[2] as f32])
+            .collect()
+    };
+    let k = lasers.len();
+    let g = Geometry {
+        lasers: f32s(&lasers),
+        laser_shape: [k, 1],
+        spads: f32s(&spads),
+        spad_shape: [k, 1],
+        laser_origin: origin(r, "laser_origin")?,
+        sensor_origin: origin(r, "sensor_origin")?,
+        legs_in_time,
+        confocal: true,
+        nt: s[1],
+        dt: scalar::<f64>(r, path, "delta_t")?,
+        t0: scalar::<f64>(r, path, "t_start")?,
+    };
+    g.validate(path)?;
+    Ok(g)
+}
+
+/// The geometry of an archive whose `H` has shape `s` (checked against the grids), in
+/// vltm's layout or the per-histogram paired form (module docs).
 fn geometry(r: &mut NpzReader<File>, path: &Path, s: &[usize]) -> Result<Geometry> {
+    if per_histogram(r, path)? {
+        return paired_geometry(r, path, s);
+    }
     let (lasers, laser_shape) = grid(r, path, "laser_grid_xyz")?;
     let (spads, spad_shape) = grid(r, path, "sensor_grid_xyz")?;
     let confocal = scalar::<u8>(r, path, "confocal")? != 0;
@@ -562,6 +735,133 @@ mod tests {
 
     fn fixture() -> PathBuf {
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../fixtures/two_patches.npz")
+    }
+
+    /// A per-histogram paired archive as numpy writes it (`np.savez(H=..., laser_xyz=...,
+    /// sensor_xyz=..., ...)`), with `edit` applied to the arrays first.
+    fn write_paired(p: &Path, edit: impl FnOnce(&mut Vec<(&'static str, ArrayD<f64>)>)) {
+        let k = 5;
+        let nt = 7;
+        let pts = |dx: f64, dz: f64| {
+            ArrayD::from_shape_fn(IxDyn(&[k, 3]), move |i| match i[1] {
+                0 => 0.1 * i[0] as f64 + dx,
+                1 => -0.05,
+                _ => dz * (i[0] % 2) as f64,
+            })
+        };
+        let mut arrays: Vec<(&'static str, ArrayD<f64>)> = vec![
+            ("laser_xyz", pts(0.0, 0.03)),
+            ("sensor_xyz", pts(0.02, -0.04)),
+            (
+                "laser_normals",
+                ArrayD::from_shape_fn(IxDyn(&[k, 3]), |i| f64::from(u8::from(i[1] == 2))),
+            ),
+            ("delta_t", ndarray::arr0(0.01).into_dyn()),
+            ("t_start", ndarray::arr0(0.5).into_dyn()),
+        ];
+        edit(&mut arrays);
+        let mut w = NpzWriter::new(File::create(p).unwrap());
+        let h = ArrayD::from_shape_fn(IxDyn(&[k, nt]), |i| (i[0] * 100 + i[1]) as f32);
+        w.add_array("H", &h).unwrap();
+        for (name, a) in &arrays {
+            if name.starts_with("t_accounts") {
+                w.add_array(*name, &a.mapv(|x| x as u8)).unwrap();
+            } else {
+                w.add_array(*name, a).unwrap();
+            }
+        }
+        w.finish().unwrap();
+    }
+
+    /// The per-histogram paired form reads as a paired geometry (row `l` = pair `l`, its own
+    /// laser and SPAD spot, on a relay surface that is not flat), in memory and streamed;
+    /// vltm's own layout writes and reads it back unchanged.
+    #[test]
+    fn paired_per_histogram_form() {
+        let dir = std::env::temp_dir().join(format!("vltm-paired-npz-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("paired.npz");
+        write_paired(&p, |_| {});
+        let c = read(&p).unwrap();
+        let g = &c.geometry;
+        assert!(g.confocal && g.paired_apart());
+        assert_eq!((g.lasers.len(), g.spads.len(), g.nt), (5, 5, 7));
+        assert_eq!(g.lasers[3], [0.3, -0.05, 0.03]);
+        assert_eq!(g.spads[3], [0.32, -0.05, -0.04]);
+        assert_eq!((g.dt, g.t0, g.legs_in_time), (0.01, 0.5, false));
+        assert_eq!(c.row(3), &[300.0, 301.0, 302.0, 303.0, 304.0, 305.0, 306.0]);
+        let mut s = open_stream(&p).unwrap().expect("stored H streams");
+        let mut row = Vec::new();
+        assert_eq!(s.read_row(3, &mut row).unwrap(), g.lasers[3]);
+        assert_eq!(row, c.row(3));
+        // vltm's layout: confocal = 1 with two different grids of one shape.
+        let q = dir.join("vltm.npz");
+        write(&c, &q).unwrap();
+        assert_eq!(read(&q).unwrap(), c);
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    /// Bad paired input: one line naming the key, for lists of different lengths, NaN points,
+    /// zero-length normals, an H that does not hold one histogram per pair, and legs in time
+    /// without device positions.
+    #[test]
+    fn paired_bad_input_names_the_key() {
+        let dir = std::env::temp_dir().join(format!("vltm-paired-bad-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let set = |a: &mut Vec<(&'static str, ArrayD<f64>)>, k: &'static str, v: ArrayD<f64>| {
+            a.retain(|(n, _)| *n != k);
+            a.push((k, v));
+        };
+        type Edit = Box<dyn Fn(&mut Vec<(&'static str, ArrayD<f64>)>)>;
+        let cases: Vec<(&str, Edit, &str)> = vec![
+            (
+                "lengths",
+                Box::new(move |a| set(a, "sensor_xyz", ArrayD::zeros(IxDyn(&[4, 3])))),
+                "sensor_xyz",
+            ),
+            (
+                "nan",
+                Box::new(move |a| {
+                    let mut l = a.iter().find(|(n, _)| *n == "laser_xyz").unwrap().1.clone();
+                    l[&[2usize, 1][..]] = f64::NAN;
+                    set(a, "laser_xyz", l);
+                }),
+                "laser_xyz",
+            ),
+            (
+                "normal",
+                Box::new(move |a| set(a, "laser_normals", ArrayD::zeros(IxDyn(&[5, 3])))),
+                "laser_normals",
+            ),
+            (
+                "shape",
+                Box::new(move |a| set(a, "laser_xyz", ArrayD::zeros(IxDyn(&[5, 2])))),
+                "laser_xyz",
+            ),
+            (
+                "legs",
+                Box::new(move |a| {
+                    set(
+                        a,
+                        "t_accounts_first_and_last_bounces",
+                        ndarray::arr0(1.0).into_dyn(),
+                    );
+                }),
+                "t_accounts_first_and_last_bounces",
+            ),
+        ];
+        for (name, edit, key) in cases {
+            let p = dir.join(format!("{name}.npz"));
+            write_paired(&p, |a| edit(a));
+            let e = read(&p).unwrap_err();
+            let msg = e.to_string();
+            assert!(
+                matches!(&e, Error::Format { field, .. } if field == key),
+                "{name}: {msg}"
+            );
+            assert!(!msg.contains('\n'), "{name}: {msg}");
+        }
+        let _ = std::fs::remove_dir_all(dir);
     }
 
     /// An uncompressed archive streams the same rows as the in-memory reader; a compressed

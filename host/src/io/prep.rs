@@ -413,7 +413,7 @@ impl RowSource for Prepared<'_> {
                 *y = src[a..a + k].iter().sum();
             }
             let x_s = if self.geometry.confocal {
-                x_l
+                self.geometry.spads.get(l).copied().unwrap_or(x_l)
             } else {
                 self.geometry.spads[s]
             };

@@ -74,6 +74,10 @@ pub fn aligned_volume(g: &Geometry, volume: &Volume) -> Option<String> {
 /// [`aligned_volume`] when the FFT paths would take it: the wall is a regular lattice and the
 /// aligned grid lays out on it (lattice tolerance `1e-5·λ`, as the paths check).
 pub(super) fn fast_hint(g: &Geometry, volume: &Volume, wavelength: f64) -> Option<String> {
+    if g.paired_apart() {
+        // No FFT path takes a paired scan with laser and SPAD apart: no grid would be fast.
+        return None;
+    }
     let spec = aligned_volume(g, volume)?;
     let v = Volume::parse(&spec).ok()?;
     let wall = if g.confocal { &g.lasers } else { &g.spads };

@@ -338,12 +338,7 @@ fn column_acc_on(
                 Gate::Gaussian
             };
             let g = src.geometry();
-            if g.confocal {
-                return Err(Error::arg(
-                    "column",
-                    "a confocal capture has no separate camera aperture: columns need a SPAD grid",
-                ));
-            }
+            g.need_spad_grid("column", "columns need")?;
             // Deferred: `finish` decides (building the planar tables costs about as much as
             // imaging, so parts of a split scan leave it to the merged state).
             let decide = kgate == Gate::Gaussian && !(defer && exec.path == Path::Auto);
@@ -654,12 +649,7 @@ pub(super) fn factorised_columns(
 ) -> Result<Columns> {
     let cfg = job.cfg;
     let g = src.geometry().clone();
-    if g.confocal {
-        return Err(Error::arg(
-            "column",
-            "a confocal capture has no separate camera aperture: columns need a SPAD grid",
-        ));
-    }
+    g.need_spad_grid("column", "columns need")?;
     let ks = g.spads_per_row();
     let n_state = Probe::state_len(cfg, Target::Column(foci[0]), gate, 0, ks);
     let mut state = vec![0.0f64; n_state * foci.len()];

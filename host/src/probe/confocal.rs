@@ -1,6 +1,8 @@
-//! Direct light of confocal captures (one histogram per wall point, laser and SPAD together):
-//! the path choice among the confocal FFT convolution ([`crate::probe::fast::confocal`]),
-//! the baseband lookup and the kernel's band sum, and the convolution's row pass.
+//! Direct light of confocal and paired captures (one histogram per row): the path choice among
+//! the confocal FFT convolution ([`crate::probe::fast::confocal`], confocal scans only: laser
+//! and SPAD at the same wall point), the baseband lookup and the kernel's band sum (any paired
+//! scan, on any relay surface: each row is imaged with its own laser and SPAD spot), and the
+//! convolution's row pass.
 //!
 //! The convolution needs every row's band spectrum on the wall grid before it can image:
 //! rows are read in batches of `128·threads`, their stage 1 done as one `sgemm` per 128 rows
@@ -53,11 +55,16 @@ pub(super) fn choose(
     if matches!(path, Path::Band | Path::Lookup) {
         return Ok(None);
     }
-    let conv = if volume.axes.is_none() {
-        Err("the volume is a point list, not a grid".to_string())
-    } else {
-        Confocal::new(cfg, &g.lasers, &volume.points, volume.shape)
-    };
+    let conv =
+        if g.paired_apart() {
+            Err("it needs the laser and SPAD at the same wall point (a confocal scan); this paired \
+             scan has them apart, so each row's path is not a function of one wall point"
+            .to_string())
+        } else if volume.axes.is_none() {
+            Err("the volume is a point list, not a grid".to_string())
+        } else {
+            Confocal::new(cfg, &g.lasers, &volume.points, volume.shape)
+        };
     match (conv, path) {
         (Err(e), Path::Planar) => Err(Error::arg(
             "path",

@@ -62,7 +62,8 @@ pub(super) fn drive(
             let k = (1.0 / g.laser_falloff(x_l)) as f32;
             hist.iter_mut().for_each(|h| *h *= k);
         }
-        let spad = [x_l];
+        // Paired (and confocal) scans: the row's own SPAD spot.
+        let spad = [g.spads.get(l).copied().unwrap_or(x_l)];
         let per_row;
         let scan = match &fixed {
             Some(s) => s,
@@ -103,8 +104,8 @@ pub(super) fn load_row<'r>(
 
 /// Reads rows in batches and hands each to one of `workers` in parallel (one worker per
 /// thread, each with its own row buffer), so stage 1 and the per-row probe work use every
-/// core. `work` gets the row's scan: `scan` itself, or for a confocal capture (where `scan`
-/// only sizes the buffers: one SPAD) a scan of the row's own wall point. Memory:
+/// core. `work` gets the row's scan: `scan` itself, or for a paired or confocal capture (where
+/// `scan` only sizes the buffers: one SPAD) a scan of the row's own SPAD spot. Memory:
 /// `2·threads` rows of histograms, never the whole capture.
 pub(super) fn drive_rows<W: Send>(
     src: &mut dyn RowSource,
@@ -142,22 +143,24 @@ pub(super) fn drive_rows<W: Send>(
     let range = src.rows();
     let bar = Pass::start(exec, label, range.len());
     let batch = row_batch();
-    let mut rows: Vec<(Point, Vec<f32>)> = Vec::new();
+    // (laser spot, the row's own SPAD spot for paired scans, histograms)
+    let mut rows: Vec<(Point, Point, Vec<f32>)> = Vec::new();
     for start in range.clone().step_by(batch) {
         let end = (start + batch).min(range.end);
-        rows.resize_with(end - start, || ([0.0; 3], Vec::new()));
-        for (l, (x, hist)) in (start..end).zip(rows.iter_mut()) {
+        rows.resize_with(end - start, || ([0.0; 3], [0.0; 3], Vec::new()));
+        for (l, (x, s, hist)) in (start..end).zip(rows.iter_mut()) {
             *x = src.read_row(l, hist)?;
+            *s = g.spads.get(l).copied().unwrap_or(*x);
             if wave.compensate_laser {
                 let k = (1.0 / g.laser_falloff(*x)) as f32;
                 hist.iter_mut().for_each(|h| *h *= k);
             }
         }
-        rows.par_iter().try_for_each(|(x_l, hist)| {
+        rows.par_iter().try_for_each(|(x_l, x_s, hist)| {
             let i = rayon::current_thread_index().unwrap_or(0) % n_slots;
             let mut slot = slots[i].lock().unwrap_or_else(|e| e.into_inner());
             let (w, buf, clean, tables) = &mut *slot;
-            let spad = [*x_l];
+            let spad = [*x_s];
             let own;
             let scan = if g.confocal {
                 own = Scan::new(cfg, &spad, tables)?;

@@ -277,7 +277,7 @@ fn laser_legs(g: &Geometry, basis: &Basis, pts: &[Point], l: usize) -> Vec<(f64,
         .collect()
 }
 
-/// The SPADs of row `l` (the laser spot's own for confocal captures).
+/// The SPADs of row `l` (the row's own SPAD for paired and confocal captures).
 fn row_spads(g: &Geometry, l: usize) -> std::ops::Range<usize> {
     if g.confocal {
         l..l + 1
@@ -392,7 +392,8 @@ fn ret_any(
     s: usize,
 ) -> Option<(f64, f64)> {
     if g.confocal {
-        let (d, f) = leg(g.lasers[l], pts[v]);
+        // The row's own SPAD spot (the laser spot's for a confocal scan).
+        let (d, f) = leg(g.spads[l], pts[v]);
         ret(basis, tab, lrow, v, s, Some((d + basis.d4[l], f)))
     } else {
         ret(basis, tab, lrow, v, s, None)

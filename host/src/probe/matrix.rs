@@ -192,12 +192,7 @@ fn amplitude_pass(
 ) -> Result<Report> {
     let cfg = job.cfg;
     let g = src.geometry().clone();
-    if g.confocal {
-        return Err(Error::arg(
-            label,
-            "a confocal capture has no separate camera aperture: the matrix needs a SPAD grid",
-        ));
-    }
+    g.need_spad_grid(label, "the matrix needs")?;
     let ks = g.spads_per_row();
     let n_state = Probe::state_len(cfg, Target::Column(foci[0]), Gate::Gaussian, 0, ks);
     let mut states: Vec<Vec<f64>> = foci.iter().map(|_| vec![0.0; n_state]).collect();
@@ -248,12 +243,8 @@ pub(super) fn matrix_acc(
     check_set("to", to)?;
     let (nf, nt) = (from.len(), to.len());
     let out_bytes = check_result(nf, nt)?;
-    if src.geometry().confocal {
-        return Err(Error::arg(
-            "matrix",
-            "a confocal capture has no separate camera aperture: the matrix needs a SPAD grid",
-        ));
-    }
+    src.geometry()
+        .need_spad_grid("matrix", "the matrix needs")?;
     let base = wave.config(src.geometry())?;
     super::window::window_rule(
         src.geometry(),

@@ -18,7 +18,7 @@
 
 use super::drive::*;
 use super::wave::*;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::exec::{Exec, Path, chunk_len};
 use crate::io::capture::RowSource;
 use crate::volume::Volume;
@@ -43,12 +43,7 @@ pub fn row(
     super::column::check_focus(focus)?;
     let t = Instant::now();
     let g = src.geometry().clone();
-    if g.confocal {
-        return Err(Error::arg(
-            "row",
-            "a confocal capture has no separate camera aperture: rows need a SPAD grid",
-        ));
-    }
+    g.need_spad_grid("row", "rows need")?;
     let b = focus;
     let voxels = &volume.points;
     let base = wave.config(&g)?;

@@ -124,6 +124,12 @@
 //!   (`shape` defaults to `[K, 1]`; spots should be on the wall, z = 0, which the wall cosines
 //!   assume). `spads` may be left out for a confocal setup (it is then the laser grid, and must
 //!   equal it if given).
+//! * `scan` (optional): `"grid"` (every laser spot × every SPAD spot, the default),
+//!   `"confocal"` (as `confocal: true`) or `"paired"`: one histogram per pair, laser spot `l`
+//!   seen at SPAD spot `l` (`lasers` and `spads` of one length: a galvo-scanned non-confocal or
+//!   arbitrary scan; explicit spots may lie off z = 0, a relay surface that is not flat — the
+//!   wall cosines still take the normal +z). Written as a paired capture (`confocal = 1`
+//!   with the two grids apart in vltm's `.npz`).
 //! * `nt` ≥ 1 bins of `dt` > 0 metres, bin 0 at `t0` (default 0). `laser_origin` and
 //!   `sensor_origin` (default `[-0.5, 0, 0.25]`, tal's usual device position) only matter with
 //!   `legs_in_time` (default false).
@@ -193,7 +199,7 @@ pub use objects::{
     Cuboid, DEFAULT_SAMPLES, MAX_SAMPLES, Object, Patch, PointScatterer, SamplePoint,
 };
 pub use render::SceneSource;
-pub use scene::{Bounces, MAX_POINTS, MAX_POINTS_5, MAX_VALUES, Scene, Setup};
+pub use scene::{Bounces, MAX_POINTS, MAX_POINTS_5, MAX_VALUES, ScanKind, Scene, Setup};
 
 #[cfg(test)]
 mod tests;

@@ -35,7 +35,7 @@ impl Scene {
     fn check_memory(&self) -> Result<()> {
         let s = &self.setup;
         let kl = s.lasers.shape()[0].saturating_mul(s.lasers.shape()[1]);
-        let ks = match (&s.spads, s.confocal) {
+        let ks = match (&s.spads, s.one_per_row()) {
             (_, true) => 1,
             (Some(a), false) => a.shape()[0].saturating_mul(a.shape()[1]),
             (None, false) => 0,

@@ -91,6 +91,11 @@ pub struct Setup {
     /// Confocal capture: one histogram per laser row, SPAD at the laser spot.
     #[serde(default)]
     pub confocal: bool,
+    /// The scan (`"grid"`: every laser spot × every SPAD spot; `"confocal"`: as `confocal:
+    /// true`; `"paired"`: one histogram per pair, laser spot `l` seen at SPAD spot `l`, both
+    /// lists of one length). `None` (default): `"confocal"` if `confocal`, else `"grid"`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scan: Option<ScanKind>,
     /// Bins per histogram (≥ 1).
     pub nt: usize,
     /// Bin width (m of path) (> 0).
@@ -109,13 +114,47 @@ pub struct Setup {
     pub legs_in_time: bool,
 }
 
+/// The scan of a [`Setup`] (`"scan"` in a scene file).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ScanKind {
+    /// Every laser spot × every SPAD spot.
+    Grid,
+    /// One histogram per laser spot, SPAD at the laser spot.
+    Confocal,
+    /// One histogram per (laser spot `l`, SPAD spot `l`) pair: a galvo-scanned non-confocal
+    /// or arbitrary scan; the spots may lie off the plane z = 0 (a relay surface that is not
+    /// flat).
+    Paired,
+}
+
 impl Setup {
+    /// One histogram per row: a confocal or paired scan.
+    pub fn one_per_row(&self) -> bool {
+        self.confocal || matches!(self.scan, Some(ScanKind::Confocal | ScanKind::Paired))
+    }
+
+    /// A paired scan (`"scan": "paired"`).
+    pub fn paired(&self) -> bool {
+        self.scan == Some(ScanKind::Paired)
+    }
+
+    /// A paired setup: one histogram per (laser spot, SPAD spot) pair, otherwise as
+    /// [`Setup::new`].
+    pub fn paired_with(lasers: Aperture, spads: Aperture, nt: usize, dt: f64) -> Self {
+        Self {
+            scan: Some(ScanKind::Paired),
+            ..Self::new(lasers, spads, nt, dt)
+        }
+    }
+
     /// A non-confocal setup with `t0 = 0`, default device positions and no legs in time.
     pub fn new(lasers: Aperture, spads: Aperture, nt: usize, dt: f64) -> Self {
         Self {
             lasers,
             spads: Some(spads),
             confocal: false,
+            scan: None,
             nt,
             dt,
             t0: 0.0,
@@ -193,7 +232,37 @@ impl Scene {
     pub fn validate(&self, path: &Path) -> Result<()> {
         let s = &self.setup;
         s.lasers.validate(path, "setup.lasers")?;
-        match (&s.spads, s.confocal) {
+        if s.confocal && matches!(s.scan, Some(ScanKind::Grid | ScanKind::Paired)) {
+            return Err(Error::format(
+                path,
+                "setup.scan",
+                "\"confocal\" or no `scan` with `confocal: true`",
+                format!("{:?}", s.scan),
+            ));
+        }
+        if s.paired() {
+            let spads = s.spads.as_ref().ok_or_else(|| {
+                Error::format(
+                    path,
+                    "setup.spads",
+                    "one SPAD spot per laser spot (paired scan)",
+                    "none",
+                )
+            })?;
+            spads.validate(path, "setup.spads")?;
+            let (kl, ks) = (shape_len(s.lasers.shape()), shape_len(spads.shape()));
+            if kl != ks {
+                return Err(Error::format(
+                    path,
+                    "setup.spads",
+                    format!("one SPAD spot per laser spot (paired scan: {kl} laser spots)"),
+                    format!("{ks} SPAD spots"),
+                ));
+            }
+        }
+        let confocal = s.confocal || s.scan == Some(ScanKind::Confocal);
+        match (&s.spads, confocal) {
+            _ if s.paired() => {}
             (Some(spads), confocal) => {
                 spads.validate(path, "setup.spads")?;
                 if confocal
@@ -240,7 +309,7 @@ impl Scene {
             }
         }
         let kl = shape_len(s.lasers.shape());
-        let ks = if s.confocal {
+        let ks = if s.one_per_row() {
             1
         } else {
             s.spads.as_ref().map_or(0, |a| shape_len(a.shape()))
@@ -321,8 +390,9 @@ impl Scene {
         let to_f32 =
             |v: Vec<[f64; 3]>| -> Vec<Point> { v.iter().map(|p| p.map(|c| c as f32)).collect() };
         let lasers = to_f32(s.lasers.spots());
-        let (spads, spad_shape) = match (&s.spads, s.confocal) {
-            (Some(a), false) => (to_f32(a.spots()), a.shape()),
+        let grid_spads = !s.one_per_row() || s.paired();
+        let (spads, spad_shape) = match (&s.spads, grid_spads) {
+            (Some(a), true) => (to_f32(a.spots()), a.shape()),
             _ => (lasers.clone(), s.lasers.shape()),
         };
         Geometry {
@@ -333,7 +403,7 @@ impl Scene {
             laser_origin: s.laser_origin,
             sensor_origin: s.sensor_origin,
             legs_in_time: s.legs_in_time,
-            confocal: s.confocal,
+            confocal: s.one_per_row(),
             nt: s.nt,
             dt: s.dt,
             t0: s.t0,

@@ -97,4 +97,9 @@ pub enum ScanType {
     Single,
     /// The SPAD looks at the laser spot.
     Confocal,
+    /// One laser spot and one SPAD spot per histogram, apart (y-tal's
+    /// `is_laser_paired_to_sensor()` without `is_confocal()`): galvo-scanned non-confocal
+    /// systems, arbitrary scanning. Presented as a paired [`Geometry`](crate::io::Geometry)
+    /// (one histogram per row, [`Geometry::confocal`](crate::io::Geometry::confocal)).
+    Paired,
 }

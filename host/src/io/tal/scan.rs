@@ -81,19 +81,27 @@ pub(super) fn build(path: &Path, m: Meta, options: TalOptions) -> Result<Scan> {
             if allclose(&sgrid.points, &lgrid.points) {
                 let pts = sgrid.points;
                 (ScanType::Confocal, pts.clone(), s, pts, s)
-            } else if lgrid.points.len() == 1 {
+            } else if lgrid.points.len() == 1 && sgrid.points.len() != 1 {
                 (ScanType::Single, sgrid.points, s, lgrid.points, [1, 1])
+            } else if lgrid.xy == sgrid.xy && lgrid.shape == sgrid.shape {
+                // y-tal's `is_laser_paired_to_sensor()`: the same grid format and shape. One
+                // histogram per (laser point, sensor point) pair, both moving.
+                (ScanType::Paired, lgrid.points, s, sgrid.points, s)
             } else {
                 return Err(Error::format(
                     path,
                     lgrid.field,
                     format!(
-                        "one point (tal scan_type single) or the sensor grid (confocal) for H_format {}",
+                        "one point (tal scan_type single), or a grid of the sensor grid's format \
+                         and shape (paired, confocal when the points coincide) for H_format {}",
                         format.tal_name()
                     ),
                     format!(
-                        "{} points that differ from the sensor grid (a paired scan, not supported)",
-                        lgrid.points.len()
+                        "{} points {} against the sensor grid's {} points {}",
+                        lgrid.points.len(),
+                        grid_form(&lgrid),
+                        sgrid.points.len(),
+                        grid_form(&sgrid)
                     ),
                 ));
             }
@@ -113,7 +121,7 @@ pub(super) fn build(path: &Path, m: Meta, options: TalOptions) -> Result<Scan> {
         laser_origin,
         sensor_origin,
         legs_in_time,
-        confocal: scan == ScanType::Confocal,
+        confocal: matches!(scan, ScanType::Confocal | ScanType::Paired),
         nt,
         dt,
         t0: if options.bin_centre {
@@ -159,4 +167,13 @@ pub(super) fn build(path: &Path, m: Meta, options: TalOptions) -> Result<Scan> {
         geometry,
         single_falloff,
     })
+}
+
+/// A grid's stored form for messages: `(X, Y, 3)` or `(N, 3)`.
+fn grid_form(g: &Grid) -> String {
+    if g.xy {
+        format!("as ({}, {}, 3)", g.shape[0], g.shape[1])
+    } else {
+        format!("as ({}, 3)", g.points.len())
+    }
 }

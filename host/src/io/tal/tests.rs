@@ -497,6 +497,32 @@ fn synthetic_formats_stream_the_right_values() {
     assert_eq!(r.geometry().laser_shape, [6, 1]);
     check_rows(&mut r, |l, _| l);
 
+    // Paired scans (y-tal's `is_laser_paired_to_sensor()` without `is_confocal()`): T_Si with
+    // N_3 grids of one length, and T_Sx_Sy with X_Y_3 grids of one shape. Row `l` is the
+    // histogram of pair `l`, laser `lasers[l]`, SPAD `spads[l]`.
+    for (name, fmt, h_shape, n3) in [
+        ("paired_si", 3, vec![6, 6], true),
+        ("paired_sxsy", 1, vec![6, 3, 2], false),
+    ] {
+        let mut spec = Spec::exhaustive();
+        spec.h_shape = h_shape;
+        spec.h_format = fmt;
+        spec.sensor_grid = grid(3, 2, n3, 0.0);
+        spec.laser_grid = grid(3, 2, n3, 0.05);
+        let mut r = spec.open(&dir, name).unwrap();
+        assert_eq!(r.scan_type(), ScanType::Paired, "{name}");
+        let g = r.geometry().clone();
+        assert!(g.confocal && g.paired_apart() && !g.coincident());
+        assert_eq!(
+            (g.spads_per_row(), g.lasers.len(), g.spads.len()),
+            (1, 6, 6)
+        );
+        assert_eq!(g.lasers[4], [0.05, -0.1, 0.0], "{name}");
+        assert_eq!(g.spads[4], [0.0, -0.1, 0.0], "{name}");
+        assert_eq!(g.row_spads(4), &[[0.0, -0.1, 0.0]]);
+        check_rows(&mut r, |l, _| l);
+    }
+
     // T_Si single: one laser point → the sensor points become lasers, with the factor.
     spec.laser_grid = (vec![0.05, 0.02, 0.0], vec![1, 1, 3]);
     let mut r = spec.open(&dir, "single_si").unwrap();
@@ -578,15 +604,38 @@ fn malformed_fields_name_the_field() {
         case("grid_fmt", &|s| s.laser_grid_format = Some(1)),
         "laser_grid_format"
     );
-    // A paired, non-confocal T_Sx_Sy scan (each point its own shifted laser).
+    // A paired T_Si scan whose laser list is longer than its sensor list (y-tal's
+    // `is_laser_paired_to_sensor()` is false, and it is neither single nor confocal).
     assert_eq!(
-        case("paired", &|s| {
-            s.h_shape = vec![5, 3, 2];
-            s.h_format = 1;
-            s.sensor_grid = grid(3, 2, false, 0.0);
+        case("paired_lengths", &|s| {
+            s.h_shape = vec![5, 6];
+            s.h_format = 3;
+            s.sensor_grid = grid(6, 1, true, 0.0);
+            s.laser_grid = grid(7, 1, true, 0.05);
+        }),
+        "laser_grid_xyz"
+    );
+    // The same length but another grid format (X_Y_3 against N_3): not paired for y-tal.
+    assert_eq!(
+        case("paired_formats", &|s| {
+            s.h_shape = vec![5, 6];
+            s.h_format = 3;
+            s.sensor_grid = grid(6, 1, true, 0.0);
             s.laser_grid = grid(3, 2, false, 0.05);
         }),
         "laser_grid_xyz"
+    );
+    // NaN in a paired laser point.
+    assert_eq!(
+        case("paired_nan", &|s| {
+            s.h_shape = vec![5, 6];
+            s.h_format = 3;
+            s.sensor_grid = grid(6, 1, true, 0.0);
+            let mut l = grid(6, 1, true, 0.05);
+            l.0[4] = f32::NAN;
+            s.laser_grid = l;
+        }),
+        "laser_grid"
     );
     // The single-scan reciprocity factor needs both devices off the wall plane.
     let single = |s: &mut Spec| {

@@ -1,0 +1,639 @@
+//! Paired scans (one laser spot and one SPAD spot per histogram, both moving, on a relay
+//! surface that need not be flat) through the public API (`probe::direct`), against the `f64`
+//! time-domain reference (`reference/mod.rs`): the reference of a paired scan is the sum over
+//! its rows of one-pair references (laser `lasers[l]`, SPAD `spads[l]`), the diagonal
+//! `A(v) = Σ_l w(|x_l − v|)·w(|v − s_l|)·Z_l(d1_l + |x_l − v| + |v − s_l| + d4_l)`.
+//!
+//! Cases (fixed seeds, 48 of them): a flat wall (z = 0) and a bumpy one (z within ±5 cm),
+//! 3–7 × 2–5 pairs with the SPAD spot 2–9 cm from its laser spot, jittered; voxel grids of
+//! 1–5 per axis and 1–3 slices at z 0.3–1.1 m; Nt 48–220, λ 0.05–0.3 m, λ/Δt 7–14, σ = λ or
+//! 2λ/3, band half-width m 3–6, weights `1/d` or 1, device legs in the time axis or not;
+//! signed histograms (noise, 3-vertex returns of random voxels, spikes). The window either
+//! covers every path or only part of them (paths outside the guard).
+//!
+//! Tolerances as `tests/proptest_fast.rs` (module docs there): `|√I − |A|| ≤ ε·S(v)` with the
+//! scale `S(v) = Σ_l w w Σ_n |H_l[n]|`, `ε = u·(2πΦ + J + Nt + 64) + 8u·log₂L + erfc(m/√2) +
+//! 2e^{−c_g²/2}` vs the reference, plus `ε_interp = 2e-5` on the lookup path; band vs lookup
+//! within `u·(2πΦ_h + 2J + 16) + 8u·log₂L + ε_interp`. Measured: worst error/tolerance 0.20
+//! vs the reference (band, lookup, `Auto`), 0.04 lookup vs band. Teeth
+//! (`paired_is_not_confocal`): the same histograms with the SPAD spots moved onto the laser
+//! spots (a confocal reading of a paired file) fail the reference by 52–1200×, every SPAD
+//! spot moved by 1 cm by 1.7–147× (1.7× at λ = 0.26 m).
+
+mod reference;
+mod support;
+
+use reference::{Reference, p64};
+use std::process::Command;
+use vltm::io::{Capture, Geometry};
+use vltm::kernel::{Config, Legs, Params, Point, Weights};
+use vltm::probe::fast::Lookup;
+use vltm::probe::{self, Exec, Output, Path, Wave};
+use vltm::volume::Volume;
+
+const U32: f64 = f32::EPSILON as f64 / 2.0;
+const INTERP: f64 = 2e-5;
+
+/// A small deterministic generator (xorshift*).
+struct Rng(u64);
+impl Rng {
+    fn f(&mut self) -> f64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        (self.0.wrapping_mul(0x2545_f491_4f6c_dd1d) >> 11) as f64 / (1u64 << 53) as f64
+    }
+    fn range(&mut self, a: f64, b: f64) -> f64 {
+        a + (b - a) * self.f()
+    }
+    fn below(&mut self, n: usize) -> usize {
+        ((self.f() * n as f64) as usize).min(n - 1)
+    }
+}
+
+/// One paired case: the capture, its volume, the wave, the kernel parameters and one
+/// reference per row.
+struct Case {
+    capture: Capture,
+    volume: Volume,
+    wave: Wave,
+    params: Params,
+    rows: Vec<Reference>,
+}
+
+/// The bump of the relay surface at (x, y): within ±`amp` m.
+fn bump(amp: f64, x: f64, y: f64) -> f32 {
+    (amp * (7.0 * x).sin() * (5.0 * y + 0.3).cos()) as f32
+}
+
+fn build(seed: u64, bumpy: bool) -> Case {
+    let mut rng = Rng(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) | 1);
+    let amp = if bumpy { 0.05 } else { 0.0 };
+    let (nx, ny) = (3 + rng.below(5), 2 + rng.below(4));
+    let pitch = rng.range(0.06, 0.15);
+    let (ox, oy) = (rng.range(0.02, 0.09), rng.range(-0.05, 0.05));
+    let mut lasers = Vec::new();
+    let mut spads = Vec::new();
+    for i in 0..nx {
+        for j in 0..ny {
+            let x = (i as f64 - (nx - 1) as f64 / 2.0) * pitch + rng.range(-0.01, 0.01);
+            let y = (j as f64 - (ny - 1) as f64 / 2.0) * pitch + rng.range(-0.01, 0.01);
+            lasers.push([x as f32, y as f32, bump(amp, x, y)]);
+            let (sx, sy) = (x + ox, y + oy);
+            spads.push([sx as f32, sy as f32, bump(amp, sx, sy)]);
+        }
+    }
+    let k = lasers.len();
+    let vn = [1 + rng.below(5), 1 + rng.below(5), 1 + rng.below(3)];
+    let z0 = rng.range(0.3, 0.7) as f32;
+    let vh = rng.range(0.1, 0.4) as f32;
+    let volume = Volume::grid([-vh, -vh, z0], [vh, vh, z0 + 0.4], vn).expect("z > 0");
+    let lambda = rng.range(0.05, 0.3);
+    let nt = 48 + rng.below(173);
+    let dt = lambda / rng.range(7.0, 14.0);
+    let legs = (rng.f() < 0.5).then_some(([0.3, -0.2, 1.2], [-0.4, 0.1, 1.5]));
+    let params_at = |t0: f64| Params {
+        sigma: Some(if rng_sigma(seed) {
+            lambda
+        } else {
+            2.0 * lambda / 3.0
+        }),
+        band_half_width: 3.0 + (seed % 4) as f64,
+        t0,
+        legs: match legs {
+            None => Legs::WallToWall,
+            Some((laser_origin, sensor_origin)) => Legs::FirstAndLast {
+                laser_origin,
+                sensor_origin,
+            },
+        },
+        weights: if seed.is_multiple_of(3) {
+            Weights::One
+        } else {
+            Weights::Inv
+        },
+        ..Params::new(lambda, nt, dt)
+    };
+    let one =
+        |p: &Params, l: usize, h: Vec<f64>| Reference::new(p, &lasers[l..=l], &spads[l..=l], h);
+    // Place the window over the diagonal's path times (fully, or partly for a third).
+    let zero = vec![0.0; nt];
+    let p0 = params_at(0.0);
+    let (lo, hi) = (0..k)
+        .flat_map(|l| {
+            let r = one(&p0, l, zero.clone());
+            volume
+                .points
+                .iter()
+                .map(|v| r.tau_range(&p64(*v), &p64(*v)))
+                .collect::<Vec<_>>()
+        })
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |a, b| {
+            (a.0.min(b.0), a.1.max(b.1))
+        });
+    let window = (nt - 1) as f64 * dt;
+    let t0 = if seed % 3 != 1 && window >= hi - lo {
+        lo - rng.f() * (window - (hi - lo))
+    } else {
+        lo + rng.range(0.2, 0.6) * (hi - lo) - rng.f() * window
+    };
+    let params = params_at(t0);
+    let mut h: Vec<f64> = (0..k * nt).map(|_| 0.02 * (2.0 * rng.f() - 1.0)).collect();
+    for _ in 0..3 {
+        let v = p64(volume.points[rng.below(volume.points.len())]);
+        let amp = 0.3 + rng.f();
+        for l in 0..k {
+            let tau = one(&params, l, zero.clone()).tau(0, 0, &v, &v);
+            let bin = ((tau - t0) / dt).round();
+            if bin >= 0.0 && bin < nt as f64 {
+                h[l * nt + bin as usize] += amp;
+            }
+        }
+    }
+    for _ in 0..4 {
+        let i = rng.below(k * nt);
+        h[i] += rng.range(-1.0, 1.0);
+    }
+    let h: Vec<f64> = h.iter().map(|&x| f64::from(x as f32)).collect();
+    let rows = (0..k)
+        .map(|l| one(&params, l, h[l * nt..(l + 1) * nt].to_vec()))
+        .collect();
+    let (laser_origin, sensor_origin) = legs.unwrap_or(([0.0, 0.0, 1.0], [0.0; 3]));
+    let geometry = Geometry {
+        lasers: lasers.clone(),
+        laser_shape: [nx, ny],
+        spads: spads.clone(),
+        spad_shape: [nx, ny],
+        laser_origin,
+        sensor_origin,
+        legs_in_time: legs.is_some(),
+        confocal: true,
+        nt,
+        dt,
+        t0,
+    };
+    let data = h.iter().map(|&x| x as f32).collect();
+    let capture = Capture::new(geometry, data, std::path::Path::new("case")).expect("valid");
+    let wave = Wave {
+        wavelength: Some(lambda),
+        sigma: params.sigma,
+        weights: params.weights,
+        band_half_width: params.band_half_width,
+        compensate_laser: false,
+        auto_margin: false,
+        crop: false,
+    };
+    Case {
+        capture,
+        volume,
+        wave,
+        params,
+        rows,
+    }
+}
+
+fn rng_sigma(seed: u64) -> bool {
+    seed.is_multiple_of(2)
+}
+
+impl Case {
+    fn direct(&self, path: Path) -> vltm::Result<Output> {
+        probe::direct(
+            &mut self.capture.clone(),
+            &self.volume,
+            &self.wave,
+            Exec {
+                progress: None,
+                path,
+            },
+        )
+    }
+
+    fn truth(&self) -> Vec<f64> {
+        let g = reference::Gate::Gaussian;
+        let mut a = vec![num_complex::Complex64::new(0.0, 0.0); self.volume.len()];
+        for r in &self.rows {
+            for (x, y) in a.iter_mut().zip(r.diagonal(g, &self.volume.points)) {
+                *x += y;
+            }
+        }
+        a.iter().map(|a| a.norm()).collect()
+    }
+
+    fn scales(&self) -> Vec<f64> {
+        self.volume
+            .points
+            .iter()
+            .map(|v| self.rows.iter().map(|r| r.scale(&p64(*v), &p64(*v))).sum())
+            .collect()
+    }
+
+    /// (vs the reference, band vs lookup) tolerances relative to `S`.
+    fn tol(&self) -> (f64, f64) {
+        let cfg = Config::try_new(&self.params).expect("valid");
+        let nu_max = (0..cfg.bins())
+            .map(|j| cfg.nu(j).abs())
+            .fold(cfg.omega(), f64::max);
+        let span = |legs: bool| {
+            self.rows
+                .iter()
+                .flat_map(|r| {
+                    let r = if legs {
+                        r.clone()
+                    } else {
+                        Reference {
+                            legs: None,
+                            ..r.clone()
+                        }
+                    };
+                    self.volume
+                        .points
+                        .iter()
+                        .map(|v| r.tau_range(&p64(*v), &p64(*v)).1)
+                        .collect::<Vec<_>>()
+                })
+                .fold(0.0f64, f64::max)
+        };
+        let j = cfg.bins() as f64;
+        let t0 = self.capture.geometry.t0;
+        let eps32 = U32 * (nu_max * (span(true).abs() + t0.abs()) + j + cfg.nt() as f64 + 64.0);
+        let fft = U32 * 8.0 * (Lookup::new(&cfg).grid_len() as f64).log2();
+        let tail = (-cfg.params().gate_support.powi(2) / 2.0).exp();
+        let band = reference::erfc(cfg.params().band_half_width / 2f64.sqrt());
+        (
+            eps32 + fft + band + 2.0 * tail,
+            U32 * (nu_max * span(false) + 2.0 * j + 16.0) + fft + INTERP,
+        )
+    }
+}
+
+/// The worst `|√I − a| / (eps·S)` over the voxels.
+fn worst(values: &[f32], truth: &[f64], scale: &[f64], eps: f64) -> f64 {
+    values
+        .iter()
+        .zip(truth)
+        .zip(scale)
+        .map(|((&i, &a), &s)| {
+            let e = (f64::from(i).sqrt() - a).abs();
+            if e.is_nan() {
+                f64::INFINITY
+            } else if s > 0.0 {
+                e / (eps * s)
+            } else if e > 0.0 {
+                f64::INFINITY
+            } else {
+                0.0
+            }
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Band, lookup and `Auto` diagonals of paired scans on a flat and on a bumpy (±5 cm) wall
+/// against the sum of one-pair references; band against lookup; the forced FFT path is a
+/// one-line error naming `--path` and the reason.
+#[test]
+fn paired_diagonal_matches_reference_flat_and_bumpy() {
+    let mut worst_ref: f64 = 0.0;
+    let mut worst_pair: f64 = 0.0;
+    let mut bumpy_cases = 0;
+    for seed in 1..=48u64 {
+        let bumpy = seed.is_multiple_of(2);
+        let c = build(seed, bumpy);
+        let g = &c.capture.geometry;
+        assert!(g.paired_apart(), "seed {seed}");
+        if bumpy {
+            let z = g.spads.iter().map(|p| p[2].abs()).fold(0.0f32, f32::max);
+            assert!(z > 0.005 && z <= 0.05, "seed {seed}: bumps {z}");
+            bumpy_cases += 1;
+        }
+        let (eps, eps_pb) = c.tol();
+        let truth = c.truth();
+        let scale = c.scales();
+        let band = c.direct(Path::Band).expect("band");
+        let lookup = c.direct(Path::Lookup).expect("lookup");
+        let auto = c.direct(Path::Auto).expect("auto");
+        assert_eq!(band.path, Path::Band);
+        assert_eq!(lookup.path, Path::Lookup);
+        assert_ne!(auto.path, Path::Planar, "seed {seed}");
+        assert_eq!(band.report.rows, g.lasers.len() as u64);
+        let wb = worst(&band.values, &truth, &scale, eps);
+        let wl = worst(&lookup.values, &truth, &scale, eps + INTERP);
+        let wa = worst(&auto.values, &truth, &scale, eps + INTERP);
+        let b: Vec<f64> = band.values.iter().map(|&i| f64::from(i).sqrt()).collect();
+        let wlb = worst(&lookup.values, &b, &scale, eps_pb);
+        worst_ref = worst_ref.max(wb).max(wl).max(wa);
+        worst_pair = worst_pair.max(wlb);
+        assert!(
+            wb <= 1.0,
+            "seed {seed} (bumpy {bumpy}): band vs reference {wb}"
+        );
+        assert!(
+            wl <= 1.0,
+            "seed {seed} (bumpy {bumpy}): lookup vs reference {wl}"
+        );
+        assert!(
+            wa <= 1.0,
+            "seed {seed} (bumpy {bumpy}): auto vs reference {wa}"
+        );
+        assert!(
+            wlb <= 1.0,
+            "seed {seed} (bumpy {bumpy}): lookup vs band {wlb}"
+        );
+        let e = c
+            .direct(Path::Planar)
+            .expect_err("no FFT path for a paired scan");
+        let msg = e.to_string();
+        assert!(
+            msg.contains("path") && msg.contains("paired") && !msg.contains('\n'),
+            "{msg}"
+        );
+    }
+    assert!(bumpy_cases >= 20);
+    println!(
+        "paired: worst error/tolerance vs reference {worst_ref:.3}, lookup vs band {worst_pair:.3}"
+    );
+}
+
+/// Teeth: reading the same histograms as a confocal scan (SPADs on the laser spots) moves
+/// the result far outside the tolerance, and so does moving every SPAD spot by 1 cm.
+#[test]
+fn paired_is_not_confocal() {
+    for seed in [2u64, 5, 8] {
+        let c = build(seed, true);
+        let (eps, _) = c.tol();
+        let truth = c.truth();
+        let scale = c.scales();
+        for (what, shift) in [("confocal", None), ("1 cm", Some(0.01f32))] {
+            let mut moved = c.capture.clone();
+            let g = &mut moved.geometry;
+            match shift {
+                None => g.spads = g.lasers.clone(),
+                Some(d) => g.spads.iter_mut().for_each(|p| p[0] += d),
+            }
+            let out = probe::direct(
+                &mut moved,
+                &c.volume,
+                &c.wave,
+                Exec {
+                    progress: None,
+                    path: Path::Band,
+                },
+            )
+            .expect("band");
+            let w = worst(&out.values, &truth, &scale, eps);
+            println!("teeth seed {seed} {what}: error/tolerance {w:.2}");
+            assert!(w > 1.0, "seed {seed}: {what} passes ({w})");
+        }
+    }
+}
+
+/// Columns, rows and the matrix need a SPAD grid: one line that says why; a confocal
+/// capture keeps its own message.
+#[test]
+fn paired_columns_are_refused_with_one_line() {
+    let c = build(3, false);
+    let focus: Point = [0.0, 0.0, 0.6];
+    let e = probe::column(
+        &mut c.capture.clone(),
+        focus,
+        &c.volume,
+        probe::ColumnGate::TwoBounce,
+        probe::Shell::ALL,
+        &c.wave,
+        Exec {
+            progress: None,
+            path: Path::Auto,
+        },
+    )
+    .expect_err("columns need a SPAD grid");
+    let msg = e.to_string();
+    assert!(
+        msg.contains("paired scan") && msg.contains("SPAD grid") && !msg.contains('\n'),
+        "{msg}"
+    );
+}
+
+/// A paired scene on a flat or bumpy (±5 cm) wall: 10 × 10 laser spots over ±0.45 m, each
+/// SPAD spot 5 cm right of its laser spot; one patch facing the wall at (0.1, −0.05, 0.7).
+fn paired_scene(bumpy: bool) -> vltm::sim::Scene {
+    use vltm::sim::{Aperture, Patch, Scene, Setup};
+    let amp = if bumpy { 0.05 } else { 0.0 };
+    let mut lasers = Vec::new();
+    let mut spads = Vec::new();
+    for i in 0..10 {
+        for j in 0..10 {
+            let (x, y) = (-0.45 + 0.1 * i as f64, -0.45 + 0.1 * j as f64);
+            lasers.push([x, y, f64::from(bump(amp, x, y))]);
+            spads.push([x + 0.05, y, f64::from(bump(amp, x + 0.05, y))]);
+        }
+    }
+    let setup = Setup {
+        t0: 0.8,
+        ..Setup::paired_with(
+            Aperture::Points {
+                points: lasers,
+                shape: [10, 10],
+            },
+            Aperture::Points {
+                points: spads,
+                shape: [10, 10],
+            },
+            160,
+            0.01,
+        )
+    };
+    Scene::new(setup).with(Patch::new(
+        "P",
+        [0.1, -0.05, 0.7],
+        [0.0, 0.0, -1.0],
+        [0.1, 0.1],
+    ))
+}
+
+/// `vltm::sim` renders paired scenes (flat and bumpy wall): one histogram per pair; the
+/// direct light of the rendered capture (band and lookup) matches the `f64` reference on the
+/// same histograms, and peaks at the patch.
+#[test]
+fn simulated_paired_captures_match_reference() {
+    for bumpy in [false, true] {
+        let scene = paired_scene(bumpy);
+        let capture = scene.render().expect("render");
+        let g = capture.geometry.clone();
+        assert!(g.paired_apart() && g.spads_per_row() == 1);
+        assert_eq!(capture.data.len(), 100 * 160);
+        let volume = Volume::parse("-0.2:0.4:7,-0.35:0.25:7,0.5:0.9:5").unwrap();
+        let params = Params {
+            sigma: Some(0.1),
+            band_half_width: 5.0,
+            t0: g.t0,
+            weights: Weights::Inv,
+            ..Params::new(0.1, g.nt, g.dt)
+        };
+        let rows: Vec<Reference> = (0..g.lasers.len())
+            .map(|l| {
+                Reference::new(
+                    &params,
+                    &g.lasers[l..=l],
+                    &g.spads[l..=l],
+                    capture.row(l).iter().map(|&x| f64::from(x)).collect(),
+                )
+            })
+            .collect();
+        let case = Case {
+            capture,
+            volume,
+            wave: Wave {
+                wavelength: Some(0.1),
+                sigma: Some(0.1),
+                weights: Weights::Inv,
+                band_half_width: 5.0,
+                compensate_laser: false,
+                auto_margin: false,
+                crop: false,
+            },
+            params,
+            rows,
+        };
+        let (eps, _) = case.tol();
+        let truth = case.truth();
+        let scale = case.scales();
+        for path in [Path::Band, Path::Lookup] {
+            let o = case.direct(path).expect("direct");
+            let tol = if path == Path::Lookup {
+                eps + INTERP
+            } else {
+                eps
+            };
+            let w = worst(&o.values, &truth, &scale, tol);
+            assert!(w <= 1.0, "bumpy {bumpy} {path:?}: {w}");
+            let peak = (0..o.values.len())
+                .max_by(|&a, &b| o.values[a].total_cmp(&o.values[b]))
+                .unwrap();
+            let v = case.volume.points[peak];
+            let d = ((v[0] - 0.1).powi(2) + (v[1] + 0.05).powi(2) + (v[2] - 0.7).powi(2)).sqrt();
+            assert!(d < 0.11, "bumpy {bumpy} {path:?}: peak at {v:?}");
+        }
+    }
+}
+
+fn vltm_cmd(args: &[&str]) -> std::process::Output {
+    Command::new(support::vltm_bin())
+        .args(args)
+        .output()
+        .expect("run vltm")
+}
+
+/// The command line: `vltm simulate` writes a paired capture from a scene file with
+/// `"scan": "paired"`; `vltm info` names the scan, the relay surface and the paths that
+/// apply; `vltm direct` images it; `vltm column` refuses it in one line; a scene whose lists
+/// differ in length and a capture with NaN points are one-line errors naming the field, and
+/// nothing is written (an existing output is kept).
+#[test]
+fn cli_simulate_info_direct_paired() {
+    let dir = std::env::temp_dir().join(format!("vltm-paired-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut json = serde_json::to_value(paired_scene(true)).unwrap();
+    let scene = dir.join("paired.json");
+    std::fs::write(&scene, serde_json::to_string_pretty(&json).unwrap()).unwrap();
+    assert!(
+        std::fs::read_to_string(&scene)
+            .unwrap()
+            .contains("\"scan\": \"paired\"")
+    );
+    let cap = dir.join("paired.npz");
+    let o = vltm_cmd(&[
+        "simulate",
+        scene.to_str().unwrap(),
+        "--out",
+        cap.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let o = vltm_cmd(&["info", cap.to_str().unwrap()]);
+    let info = String::from_utf8_lossy(&o.stdout);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(
+        info.contains("paired (one laser spot and one SPAD spot per histogram)"),
+        "{info}"
+    );
+    assert!(info.contains("relay        not planar"), "{info}");
+    assert!(
+        info.contains("paths        direct: band or lookup"),
+        "{info}"
+    );
+    let out = dir.join("direct.npy");
+    let o = vltm_cmd(&[
+        "direct",
+        cap.to_str().unwrap(),
+        "--volume",
+        "-0.2:0.4:7,-0.35:0.25:7,0.5:0.9:5",
+        "--wavelength",
+        "0.1",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.is_file());
+    let o = vltm_cmd(&[
+        "column",
+        cap.to_str().unwrap(),
+        "--focus",
+        "0.1,-0.05,0.7",
+        "--volume",
+        "-0.2:0.4:7,-0.35:0.25:7,0.5:0.9:5",
+        "--wavelength",
+        "0.1",
+        "--out",
+        dir.join("column.npy").to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("paired scan") && err.trim().lines().count() == 1,
+        "{err}"
+    );
+    assert!(!dir.join("column.npy").exists());
+
+    // Lists of different lengths in the scene: nothing written, the old capture kept.
+    let before = std::fs::read(&cap).unwrap();
+    let spads = json["setup"]["spads"]["points"].as_array_mut().unwrap();
+    spads.pop();
+    json["setup"]["spads"]["shape"] = serde_json::json!([99, 1]);
+    std::fs::write(&scene, serde_json::to_string(&json).unwrap()).unwrap();
+    let o = vltm_cmd(&[
+        "simulate",
+        scene.to_str().unwrap(),
+        "--out",
+        cap.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("setup.spads") && err.trim().lines().count() == 1,
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&cap).unwrap(), before);
+
+    // A paired capture with a NaN laser point: `direct` fails naming the field; the old
+    // output is kept.
+    let mut c = vltm::io::open(&cap).unwrap();
+    c.geometry.lasers[7][1] = f32::NAN;
+    let bad = dir.join("nan.npz");
+    vltm::io::npz::write(&c, &bad).unwrap();
+    let old = std::fs::read(&out).unwrap();
+    let o = vltm_cmd(&[
+        "direct",
+        bad.to_str().unwrap(),
+        "--volume",
+        "-0.2:0.4:7,-0.35:0.25:7,0.5:0.9:5",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(!o.status.success());
+    assert!(
+        err.contains("laser_grid") && err.trim().lines().count() == 1,
+        "{err}"
+    );
+    assert_eq!(std::fs::read(&out).unwrap(), old);
+    let _ = std::fs::remove_dir_all(dir);
+}
