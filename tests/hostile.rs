@@ -609,7 +609,14 @@ fn empty_window_is_one_error_on_every_probe() {
     }
     // `live` (replayed, with and without a column): the same line, and no output written.
     for extra in [&["--no-indirect"][..], &["--focus", "0,0,0.8"]] {
-        let mut a = vec!["live", "early.npz", "--replay-rate", "1000", "--volume", VOLUME];
+        let mut a = vec![
+            "live",
+            "early.npz",
+            "--replay-rate",
+            "1000",
+            "--volume",
+            VOLUME,
+        ];
         a.extend(extra);
         a.extend(["--out", "live.npy"]);
         lines.push(fails(&t, &a, 2, &["volume", NO_PATH, "t_start"]));

@@ -321,7 +321,12 @@ fn capture_from_arrays(
     let hv = h.as_array();
     let nt = hv.shape()[2];
     vltm::budget::check(
-        || format!("the capture's histograms ({} f32)", vltm::budget::count(hv.len() as u128)),
+        || {
+            format!(
+                "the capture's histograms ({} f32)",
+                vltm::budget::count(hv.len() as u128)
+            )
+        },
         vltm::budget::bytes(hv.len(), 4),
     )
     .map_err(py_err)?;
@@ -391,7 +396,13 @@ fn info_text<'py>(
     rebin: usize,
     background: Option<&str>,
     png: Option<PathBuf>,
-) -> PyResult<(Vec<String>, Vec<String>, Bound<'py, PyArray1<f64>>, f64, f64)> {
+) -> PyResult<(
+    Vec<String>,
+    Vec<String>,
+    Bound<'py, PyArray1<f64>>,
+    f64,
+    f64,
+)> {
     use vltm::front::info::Stream;
     let prep = prep_of(t_min, t_max, rebin, background)?;
     let mat = io::mat::MatOptions {
