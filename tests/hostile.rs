@@ -607,6 +607,21 @@ fn empty_window_is_one_error_on_every_probe() {
         }
         lines.push(fails(&t, &a, 2, &["volume", NO_PATH, "t_start"]));
     }
+    // `live` (replayed, with and without a column): the same line, and no output written.
+    for extra in [&["--no-indirect"][..], &["--focus", "0,0,0.8"]] {
+        let mut a = vec![
+            "live",
+            "early.npz",
+            "--replay-rate",
+            "1000",
+            "--volume",
+            VOLUME,
+        ];
+        a.extend(extra);
+        a.extend(["--out", "live.npy"]);
+        lines.push(fails(&t, &a, 2, &["volume", NO_PATH, "t_start"]));
+        assert!(!t.path("live.npy").exists(), "{a:?} wrote an output");
+    }
     assert!(
         lines.iter().all(|l| *l == lines[0]),
         "one error for every probe: {lines:#?}"

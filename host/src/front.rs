@@ -3,7 +3,8 @@
 //! time window, rebinning and background of [`crate::io::prep`] with the imaged volume's
 //! reach, and the checks on what it removed), the near/middle/far shells ([`parse_shells`],
 //! [`cut`]), Γ with its emptiness check ([`gamma_of`]), the summed transient of `vltm info`
-//! ([`summed`]) and a source read into memory ([`read_all`], for `--swap-roles`).
+//! ([`summed`]), a source read into memory ([`read_all`], for `--swap-roles`), and the layout
+//! text of `vltm info` ([`info::info`]).
 //!
 //! Units: metres of optical path. Errors name the command line's flags (`--background`,
 //! `--shells`); front ends spell them as their own arguments. Cost: [`with_prep`] adds O(Nt)
@@ -14,6 +15,8 @@ use crate::io::capture::{Capture, RowSource};
 use crate::io::prep::{Prep, Prepared, Reach, Stats};
 use crate::probe::{Shell, gamma_mask};
 use vltm_kernel::Point;
+
+pub mod info;
 
 /// What the preprocessing of a run did.
 #[derive(Clone, Debug, PartialEq)]

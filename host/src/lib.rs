@@ -3,6 +3,7 @@
 pub mod aperture;
 pub mod atomic;
 pub mod budget;
+pub mod demo;
 pub mod error;
 pub mod exec;
 pub mod export;

@@ -11,7 +11,7 @@ use crate::args::{Command, DiagGateArg};
 use crate::console::{Failure, say};
 use crate::outputs::refuse_overwriting_inputs;
 use crate::summary::{Label, finish};
-use crate::{demo, input, ltm, partial, progress, split};
+use crate::{input, ltm, partial, progress, split};
 
 /// Runs one command.
 pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
@@ -21,7 +21,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
         Command::Row(a) => ltm::row(a),
         Command::Live(a) => crate::live::run(a),
         Command::Demo { out } => {
-            let table = demo::run(&out)?;
+            let table = vltm::demo::run(&out, Some(&progress::BARS))?;
             let _ = std::io::Write::write_all(&mut std::io::stdout(), table.as_bytes());
             Ok(())
         }

@@ -11,7 +11,6 @@ use vltm::atomic::Transaction;
 use vltm::export::figure::plot::Transient;
 use vltm::io::prep::{Background, Bound, Prep, Prepared, Reach};
 use vltm::io::{self, RowSource};
-use vltm::probe;
 use vltm_kernel::Point;
 
 /// How to read a capture and preprocess its counts.
@@ -147,68 +146,35 @@ fn check_stats(p: &Prepared<'_>) -> Result<(), Failure> {
     Ok(())
 }
 
-/// `vltm info`: what the file holds, the conventions assumed, counts after preprocessing,
-/// and with `--png` the summed transient.
+/// `vltm info`: what the file holds, the conventions assumed, counts after preprocessing
+/// (the library's [`vltm::front::info::info`], the text every front end prints), and with
+/// `--png` the summed transient.
 pub fn info(path: &Path, input: &Input, png: Option<&Path>) -> Result<(), Failure> {
+    use vltm::front::info::Stream;
     if let Some(p) = png {
         refuse_overwriting_inputs(&[path.to_path_buf()], &[p])?;
     }
-    let mut c = if io::extension(path).as_deref() == Some("mat") {
-        let m = io::mat::read(path, &input.mat_options())?;
-        say!("capture      {}", path.display());
-        say!("format       MATLAB {}", m.version);
-        say!("variables    {}", m.variables.join(", "));
-        say!("conventions:");
-        for line in &m.conventions {
+    let sum = vltm::front::info::info(
+        path,
+        &input.mat_options(),
+        input.prep()?,
+        &mut |stream, line| {
             // The library names the options that set a convention by parameter.
-            say!("  {}", vltm::error::respell(line, flag));
-        }
-        m.capture
-    } else {
-        input.refuse_overrides()?;
-        say!("capture      {}", path.display());
-        io::open(path)?
-    };
-    describe(path, &c)?;
-    say!("memory       budget {}", vltm::budget::describe());
-    let prep = input.prep()?;
-    let (g, sum) = match prep {
-        Some(p) => {
-            let mut pr = Prepared::new(&mut c, p, None)?;
-            let sum = summed(&mut pr)?;
-            let g = pr.geometry().clone();
-            say!(
-                "time window  {} bins x {} m from t0 = {} m (after preprocessing)",
-                g.nt,
-                g.dt,
-                g.t0
-            );
-            say!("preprocessing: {}", pr.summary());
-            check_stats(&pr)?;
-            (g, sum)
-        }
-        None => (c.geometry.clone(), summed(&mut c)?),
-    };
-    let total: f64 = sum.iter().sum();
-    let (peak, _) =
-        sum.iter().enumerate().fold(
-            (0, f64::NEG_INFINITY),
-            |a, (i, &x)| if x > a.1 { (i, x) } else { a },
-        );
-    say!(
-        "transient    summed over {} histograms: {total:.4e} counts; peak bin {peak} (path {:.4} m); first 10 % of the bins hold {:.1} % of the counts",
-        g.lasers.len() * g.spads_per_row(),
-        g.t0 + peak as f64 * g.dt,
-        100.0 * sum[..g.nt.div_ceil(10)].iter().sum::<f64>() / total.max(f64::MIN_POSITIVE)
-    );
+            let line = vltm::error::respell(line, flag);
+            match stream {
+                Stream::Out => say!("{line}"),
+                Stream::Warning => tell!("vltm: warning: {line}"),
+            }
+        },
+    )?;
     if let Some(p) = png {
         let name = path
             .file_name()
             .map_or(String::new(), |n| n.to_string_lossy().into_owned());
         let t = Transient {
-            counts: &sum,
-            t0: g.t0,
-            dt: g.dt,
+            counts: &sum.counts,
+            t0: sum.t0,
+            dt: sum.dt,
             title: format!("{name}: summed transient"),
             shade: None,
         };
@@ -217,174 +183,5 @@ pub fn info(path: &Path, input: &Input, png: Option<&Path>) -> Result<(), Failur
         tr.commit()?;
         say!("wrote {}", p.display());
     }
-    Ok(())
-}
-
-/// The histograms of every row summed bin by bin (non-finite samples skipped).
-fn summed(src: &mut dyn RowSource) -> vltm::Result<Vec<f64>> {
-    let g = src.geometry().clone();
-    let mut sum = vec![0.0f64; g.nt];
-    let mut row = Vec::new();
-    for l in 0..g.lasers.len() {
-        src.read_row(l, &mut row)?;
-        for h in row.chunks_exact(g.nt) {
-            for (s, &x) in sum.iter_mut().zip(h) {
-                if x.is_finite() {
-                    *s += f64::from(x);
-                }
-            }
-        }
-    }
-    Ok(sum)
-}
-
-/// The HDF5 layout of a capture for `vltm info`: `H_format` and scan type of an `HDF5_TAL`
-/// file; axis order, scan type and the conventions applied to a Z-NLOS file.
-pub fn describe_hdf5(path: &Path) -> vltm::Result<()> {
-    use io::tal::{Hdf5Layout, ScanType};
-    let scan = |s: ScanType| match s {
-        ScanType::Exhaustive => "exhaustive (every laser spot x every SPAD spot)",
-        ScanType::Confocal => "confocal (the SPAD looks at the laser spot)",
-        ScanType::Paired => {
-            "paired (one laser spot and one SPAD spot per histogram, apart: a non-confocal \
-             galvo or arbitrary scan)"
-        }
-        ScanType::Single => {
-            "single (one laser spot, the SPAD grid scanned): shown below by reciprocity \
-             as the SPAD grid's spots as lasers x one SPAD at the laser spot"
-        }
-    };
-    match io::tal::detect(path)? {
-        Hdf5Layout::Tal => {
-            let r = io::tal::open(path)?;
-            say!(
-                "format       y-tal HDF5_TAL, H_format {} (tal value {}), H shape {:?} (time first)",
-                r.h_format().tal_name(),
-                r.h_format().tal_value(),
-                r.h_shape()
-            );
-            say!("tal scan     {}", scan(r.scan_type()));
-        }
-        Hdf5Layout::Znlos => {
-            let r = io::tal::znlos::open(path)?;
-            say!(
-                "format       Zaragoza Z-NLOS HDF5 (y-tal HDF5_ZNLOS), data shape {:?}, layout {:?}",
-                r.data_shape(),
-                r.layout()
-            );
-            say!("tal scan     {}", scan(r.scan_type()));
-            say!("conventions (y-tal's Z-NLOS converter, tal/io/format.py):");
-            for line in r.conventions() {
-                say!("  {}", vltm::error::respell(line, flag));
-            }
-        }
-    }
-    Ok(())
-}
-
-/// The capture's format (HDF5), geometry, time axis and counts, for `vltm info`.
-fn describe(path: &Path, c: &io::Capture) -> Result<(), Failure> {
-    let g = &c.geometry;
-    let (kl, ks) = (g.lasers.len(), g.spads_per_row());
-    let span = |p: &[Point]| {
-        let lo: Vec<f32> = (0..3)
-            .map(|i| p.iter().map(|q| q[i]).fold(f32::INFINITY, f32::min))
-            .collect();
-        let hi: Vec<f32> = (0..3)
-            .map(|i| p.iter().map(|q| q[i]).fold(f32::NEG_INFINITY, f32::max))
-            .collect();
-        format!(
-            "x {:.3}..{:.3}, y {:.3}..{:.3}, z {:.3}..{:.3} m",
-            lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]
-        )
-    };
-    if io::is_hdf5(path) {
-        describe_hdf5(path)?;
-    }
-    say!(
-        "scan         {}",
-        if g.coincident() {
-            "confocal"
-        } else if g.confocal {
-            "paired (one laser spot and one SPAD spot per histogram)"
-        } else {
-            "non-confocal"
-        }
-    );
-    say!(
-        "lasers       {} = {}x{} ({})",
-        kl,
-        g.laser_shape[0],
-        g.laser_shape[1],
-        span(&g.lasers)
-    );
-    say!(
-        "SPADs        {} = {}x{} ({})",
-        g.spads.len(),
-        g.spad_shape[0],
-        g.spad_shape[1],
-        span(&g.spads)
-    );
-    if g.paired_apart() {
-        let z = g
-            .lasers
-            .iter()
-            .chain(&g.spads)
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), p| {
-                (a.min(p[2]), b.max(p[2]))
-            });
-        say!(
-            "relay        {}",
-            if z.1 - z.0 > 0.0 {
-                format!(
-                    "not planar (z spans {:.4} m): the FFT paths need a flat wall",
-                    z.1 - z.0
-                )
-            } else {
-                "planar (every point at one z)".to_string()
-            }
-        );
-        say!(
-            "paths        direct: band or lookup (each row imaged with its own laser and SPAD \
-             spot); no FFT path (the planar one needs a SPAD grid, the confocal one coincident \
-             points); columns, rows and the matrix need a SPAD grid"
-        );
-    }
-    say!(
-        "laser_xyz    {:?} m, sensor_xyz {:?} m",
-        g.laser_origin,
-        g.sensor_origin
-    );
-    say!(
-        "time axis    {} bins x {} m from t0 = {} m to {:.4} m; device legs {}",
-        g.nt,
-        g.dt,
-        g.t0,
-        g.t0 + (g.nt as f64 - 1.0) * g.dt,
-        if g.legs_in_time {
-            "included"
-        } else {
-            "not included (wall to wall)"
-        }
-    );
-    let (mut sum, mut max, mut nonzero, mut bad) = (0.0f64, f32::NEG_INFINITY, 0usize, 0usize);
-    for &h in &c.data {
-        if h.is_finite() {
-            sum += h as f64;
-            max = max.max(h);
-            nonzero += usize::from(h != 0.0);
-        } else {
-            bad += 1;
-        }
-    }
-    say!(
-        "histograms   {} = {kl} x {ks} x {} values; sum {sum:.4e}, max {max:.4e}, non-zero {nonzero}, non-finite {bad}",
-        c.data.len(),
-        g.nt
-    );
-    say!(
-        "default λ    {:.4} m (twice the aperture pitch)",
-        probe::default_wavelength(g)
-    );
     Ok(())
 }

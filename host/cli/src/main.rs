@@ -4,7 +4,7 @@
 //! and `ltm` run the commands, `split` writes the several outputs of one run (Γ masks,
 //! shells, `indirect`), `outputs` writes volumes, figures and matrices, `summary` prints the
 //! summary lines, `partial` runs parts of a scan and `vltm merge`, `input` reads captures with
-//! their options, `demo` is the built-in demo, `console` prints errors (library parameters
+//! their options (`demo` is the library's `vltm::demo`), `console` prints errors (library parameters
 //! spelled as flags) and `progress` draws the progress bars (indicatif). This file is the
 //! entry point only.
 //!
@@ -16,7 +16,6 @@ use std::process::ExitCode;
 mod args;
 mod commands;
 mod console;
-mod demo;
 mod input;
 mod live;
 mod ltm;

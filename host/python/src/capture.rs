@@ -320,6 +320,16 @@ fn capture_from_arrays(
     let spads = crate::volume::points_of(&spads, "sensor_grid_xyz")?;
     let hv = h.as_array();
     let nt = hv.shape()[2];
+    vltm::budget::check(
+        || {
+            format!(
+                "the capture's histograms ({} f32)",
+                vltm::budget::count(hv.len() as u128)
+            )
+        },
+        vltm::budget::bytes(hv.len(), 4),
+    )
+    .map_err(py_err)?;
     let data: Vec<f32> = hv.iter().copied().collect();
     let geometry = Geometry {
         lasers,
@@ -367,8 +377,96 @@ fn simulate(py: Python<'_>, scene: PathBuf) -> PyResult<NativeCapture> {
     })
 }
 
+/// `vltm info`'s layout text of a capture file, its warnings and the summed transient: the
+/// library's `front::info::info` (the lines the command line prints), with `.mat` overrides
+/// and preprocessing as `vltm info`'s options; `png` also draws the summed transient (as
+/// `--png`, adding the command line's `wrote F` line).
+#[pyfunction]
+#[pyo3(signature = (path, delta_t=None, t_start=None, grid_width=None, t_min=None, t_max=None,
+    rebin=1, background=None, png=None))]
+#[allow(clippy::too_many_arguments, clippy::type_complexity)]
+fn info_text<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    delta_t: Option<f64>,
+    t_start: Option<f64>,
+    grid_width: Option<f64>,
+    t_min: Option<&str>,
+    t_max: Option<&str>,
+    rebin: usize,
+    background: Option<&str>,
+    png: Option<PathBuf>,
+) -> PyResult<(
+    Vec<String>,
+    Vec<String>,
+    Bound<'py, PyArray1<f64>>,
+    f64,
+    f64,
+)> {
+    use vltm::front::info::Stream;
+    let prep = prep_of(t_min, t_max, rebin, background)?;
+    let mat = io::mat::MatOptions {
+        delta_t,
+        t_start,
+        grid_width,
+    };
+    if let Some(p) = &png
+        && same_file(p, &path)
+    {
+        return Err(arg(
+            "png",
+            format!("{} is the capture itself: choose another file", p.display()),
+        ));
+    }
+    let (lines, warnings, sum) = py
+        .detach(|| -> vltm::Result<_> {
+            let (mut lines, mut warnings) = (Vec::new(), Vec::new());
+            let sum = vltm::front::info::info(&path, &mat, prep, &mut |stream, line| {
+                let line = vltm::error::respell(line, crate::param);
+                match stream {
+                    Stream::Out => lines.push(line),
+                    Stream::Warning => warnings.push(line),
+                }
+            })?;
+            if let Some(p) = &png {
+                let t = vltm::export::figure::plot::Transient {
+                    counts: &sum.counts,
+                    t0: sum.t0,
+                    dt: sum.dt,
+                    title: format!("{}: summed transient", file_name(&path)),
+                    shade: None,
+                };
+                let mut tr = Transaction::new();
+                t.stage_png(&mut tr, p)?;
+                tr.commit()?;
+                lines.push(format!("wrote {}", p.display()));
+            }
+            Ok((lines, warnings, sum))
+        })
+        .map_err(py_err)?;
+    let (t0, dt) = (sum.t0, sum.dt);
+    Ok((lines, warnings, sum.counts.into_pyarray(py), t0, dt))
+}
+
+/// Whether two paths name the same file (an output must not replace its input).
+fn same_file(a: &Path, b: &Path) -> bool {
+    match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+        (Ok(x), Ok(y)) => x == y,
+        _ => a == b,
+    }
+}
+
+/// The built-in demo (`vltm demo`): renders the demo scene, runs every probe on it, writes
+/// the figures, volumes and `summary.txt` into `out`; returns the table.
+#[pyfunction]
+fn demo(py: Python<'_>, out: PathBuf) -> PyResult<String> {
+    py.detach(|| vltm::demo::run(&out, None)).map_err(py_err)
+}
+
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<NativeCapture>()?;
+    m.add_function(wrap_pyfunction!(info_text, m)?)?;
+    m.add_function(wrap_pyfunction!(demo, m)?)?;
     m.add_function(wrap_pyfunction!(open_capture, m)?)?;
     m.add_function(wrap_pyfunction!(capture_from_arrays, m)?)?;
     m.add_function(wrap_pyfunction!(simulate, m)?)?;

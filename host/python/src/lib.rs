@@ -64,7 +64,7 @@ pub(crate) fn python_message(e: &vltm::Error) -> String {
 
 /// A library parameter name (`max_memory`) as Python spells it (`vltm.set_max_memory()`; most
 /// keep their name).
-fn param(name: &str) -> String {
+pub(crate) fn param(name: &str) -> String {
     keyword(&format!("--{}", name.replace('_', "-")))
 }
 
@@ -121,8 +121,21 @@ fn respell(text: &str) -> String {
 
 /// Γ = {v : I_d(v) > ε·max I_d}, as vltm computes it.
 #[pyfunction]
-fn gamma_mask(direct: Vec<f32>, epsilon: f32) -> Vec<bool> {
-    vltm::probe::gamma_mask(&direct, epsilon)
+fn gamma_mask(direct: numpy::PyReadonlyArray1<'_, f32>, epsilon: f32) -> PyResult<Vec<bool>> {
+    let d = direct.as_slice().map_err(|e| arg("direct", e))?;
+    Ok(vltm::probe::gamma_mask(d, epsilon))
+}
+
+/// Checks buffers the Python side is about to make (`(name, bytes)` pairs, held at once)
+/// against the memory budget, as the library checks its own: the one-line error names
+/// `what`, the largest buffer and the budget.
+#[pyfunction]
+fn check_memory(what: &str, buffers: Vec<(String, u64)>) -> PyResult<()> {
+    let mut plan = vltm::budget::Plan::new();
+    for (name, bytes) in buffers {
+        plan.add(name, u128::from(bytes));
+    }
+    plan.check(|| what.to_string()).map_err(py_err)
 }
 
 /// Sets the number of worker threads (once per process, before the first probe): 1 to 4
@@ -173,6 +186,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     partial::register(m)?;
     run::register(m)?;
     m.add_function(wrap_pyfunction!(gamma_mask, m)?)?;
+    m.add_function(wrap_pyfunction!(check_memory, m)?)?;
     m.add_function(wrap_pyfunction!(set_threads, m)?)?;
     m.add_function(wrap_pyfunction!(set_max_memory, m)?)?;
     m.add_function(wrap_pyfunction!(max_memory, m)?)?;

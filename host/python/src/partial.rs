@@ -89,6 +89,10 @@ impl NativePartial {
 pub(crate) fn report<'py>(py: Python<'py>, o: &probe::Output) -> PyResult<Bound<'py, PyDict>> {
     let d = counters(py, &o.report, o.seconds, &o.config)?;
     d.set_item("path", o.path.name())?;
+    // The part of the time axis kept (the command line's `<probe>: time axis cropped to bins
+    // a..b of n` line); None when the whole axis was used (`crop=False`, or nothing to drop).
+    d.set_item("crop", o.crop.map(|c| c.to_string()))?;
+    d.set_item("crop_bins", o.crop.map(|c| (c.start, c.end, c.nt)))?;
     Ok(d)
 }
 

@@ -7,7 +7,7 @@ use crate::capture::{NativeCapture, prep_of};
 use crate::partial::{NativePartial, counters, report};
 use crate::volume::{NativeVolume, points_of};
 use crate::{arg, py_err};
-use numpy::{IntoPyArray, PyReadonlyArray2};
+use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use vltm::exec::{Exec, Path as EvalPath};
@@ -26,6 +26,7 @@ fn wave_of(
     weights: &str,
     band: f64,
     compensate_laser: bool,
+    crop: bool,
     path: &str,
 ) -> PyResult<(Wave, EvalPath)> {
     let weights = match weights {
@@ -52,7 +53,7 @@ fn wave_of(
         band_half_width: band,
         compensate_laser,
         auto_margin: true,
-        crop: true,
+        crop,
     };
     Ok((wave, path))
 }
@@ -166,7 +167,7 @@ enum Job {
 #[pyo3(signature = (capture, volume, kind, *, focus=None, gate="two-bounce", shell=None,
     shells=None, epsilon=0.1, direct=None, mask_epsilon=None, leak_correct=false,
     leak_epsilon=0.1, wavelength=None, sigma=None, weights="inv", band=5.0,
-    compensate_laser=false, path="auto", swap_roles=false, t_min=None, t_max=None, rebin=1,
+    compensate_laser=false, crop=true, path="auto", swap_roles=false, t_min=None, t_max=None, rebin=1,
     background=None, rows=None, amplitudes=false, from_points=None, pattern=None,
     pattern_spec=None))]
 #[allow(clippy::too_many_arguments)]
@@ -180,7 +181,7 @@ fn run<'py>(
     shell: Option<(f32, f32)>,
     shells: Option<&str>,
     epsilon: f32,
-    direct: Option<Vec<f32>>,
+    direct: Option<PyReadonlyArray1<'py, f32>>,
     mask_epsilon: Option<f32>,
     leak_correct: bool,
     leak_epsilon: f32,
@@ -189,6 +190,7 @@ fn run<'py>(
     weights: &str,
     band: f64,
     compensate_laser: bool,
+    crop: bool,
     path: &str,
     swap_roles: bool,
     t_min: Option<&str>,
@@ -201,7 +203,15 @@ fn run<'py>(
     pattern: Option<PyReadonlyArray2<'py, f64>>,
     pattern_spec: Option<&str>,
 ) -> PyResult<Py<PyAny>> {
-    let (wave, epath) = wave_of(wavelength, sigma, weights, band, compensate_laser, path)?;
+    let (wave, epath) = wave_of(
+        wavelength,
+        sigma,
+        weights,
+        band,
+        compensate_laser,
+        crop,
+        path,
+    )?;
     let prep = prep_of(t_min, t_max, rebin, background)?;
     let shell = shell_of("shell", shell)?;
     let cuts = shells
@@ -221,6 +231,7 @@ fn run<'py>(
         ));
     }
     let vol = &volume.volume;
+    let direct: Option<Vec<f32>> = direct.map(|d| d.as_array().iter().copied().collect());
     let need_focus = || -> PyResult<Point> {
         let a = focus.ok_or_else(|| arg("focus", "this probe needs a focus (x, y, z)"))?;
         probe::check_focus(a).map_err(py_err)?;
@@ -586,10 +597,12 @@ fn one_pass(
                     )
                 }
             };
-            let (values, parts, report, explained) = match shells {
+            // The report records the configuration pass 2 ran on (its band and DFT length
+            // cover every Γ pair), as the command line's summary line does.
+            let (values, parts, report, explained, config) = match shells {
                 None => {
                     let o = probe::indirect_over(rows, vol, &gamma, &opts, wave, exec)?;
-                    (o.values, None, o.report, o.explained)
+                    (o.values, None, o.report, o.explained, o.config)
                 }
                 Some(cuts) => {
                     let p = probe::indirect_shells(rows, vol, &gamma, &opts, &cuts, wave, exec)?;
@@ -597,10 +610,9 @@ fn one_pass(
                     let total: Vec<f32> = (0..vol.len())
                         .map(|i| s.iter().map(|v| v[i]).sum::<f32>())
                         .collect();
-                    (total, Some(s), r, None)
+                    (total, Some(s), r, None, p.config)
                 }
             };
-            let config = wave.config(rows.geometry())?;
             let mut d = Done::of(probe::Output {
                 values,
                 report,

@@ -81,33 +81,33 @@ D = np.ones(144, np.float32)  # stands for a direct-light volume over SMALL
 OPTIONS = {
     "direct": ((SMALL,), {
         "gate": "none", "wavelength": 0.3, "sigma": 0.2, "weights": "one", "band": 4.0,
-        "compensate_laser": True, "path": "band", "swap_roles": True, "t_min": 1.3,
+        "compensate_laser": True, "crop": False, "path": "band", "swap_roles": True, "t_min": 1.3,
         "t_max": "350b", "rebin": 2, "background": 1e-6, "amplitudes": True,
         "report": True, "as_xarray": True}),
     "column": ((SMALL, FOCUS), {
         "gate": "higher-order", "shell": (0.2, 0.9), "shells": (0.3, 0.6),
         "mask_epsilon": 0.3, "leak_correct": True, "leak_epsilon": 0.2, "wavelength": 0.3,
-        "sigma": 0.2, "weights": "one", "band": 4.0, "compensate_laser": True,
+        "sigma": 0.2, "weights": "one", "band": 4.0, "compensate_laser": True, "crop": False,
         "path": "band", "swap_roles": True, "t_min": 1.3, "t_max": "350b", "rebin": 2,
         "background": 1e-6, "amplitudes": True, "report": True, "as_xarray": True}),
     "indirect": ((SMALL,), {
         "epsilon": 0.3, "min_separation": 0.2, "shell": (0.2, 0.9), "shells": (0.3, 0.6),
         "gate": "higher-order", "direct": None, "leak_correct": False, "wavelength": 0.3,
-        "sigma": 0.2, "weights": "one", "band": 4.0, "compensate_laser": True,
+        "sigma": 0.2, "weights": "one", "band": 4.0, "compensate_laser": True, "crop": False,
         "path": "band", "swap_roles": True, "t_min": 1.3, "t_max": "350b", "rebin": 2,
         "background": 1e-6, "report": True, "as_xarray": True}),
     "relight": ((SMALL, "-0.25,0.15,0.7,1;0.25,0,0.9,0.5"), {
         "wavelength": 0.3, "sigma": 0.2, "weights": "one", "band": 4.0,
-        "compensate_laser": True, "path": "band", "swap_roles": True, "t_min": 1.3,
+        "compensate_laser": True, "crop": False, "path": "band", "swap_roles": True, "t_min": 1.3,
         "t_max": "350b", "rebin": 2, "background": 1e-6, "amplitudes": True,
         "report": True, "as_xarray": True}),
     "row": ((SMALL, (0.25, 0.0, 0.9)), {
         "wavelength": 0.3, "sigma": 0.2, "weights": "one", "band": 4.0,
-        "compensate_laser": True, "path": "band", "swap_roles": True, "t_min": 1.3, "t_max": "350b",
+        "compensate_laser": True, "crop": False, "path": "band", "swap_roles": True, "t_min": 1.3, "t_max": "350b",
         "rebin": 2, "background": 1e-6, "report": True, "as_xarray": True}),
     "matrix": (("-0.3:0.3:2,-0.3:0.3:2,0.6:0.8:2", "gamma"), {
         "volume": SMALL, "epsilon": 0.3, "direct": None, "wavelength": 0.3, "sigma": 0.2,
-        "weights": "one", "band": 4.0, "compensate_laser": True}),
+        "weights": "one", "band": 4.0, "compensate_laser": True, "crop": False}),
 }
 CASES = [(fn, opt) for fn, (_, kw) in OPTIONS.items() for opt in kw]
 

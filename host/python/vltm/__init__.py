@@ -48,9 +48,11 @@ __all__ = [
     "VltmError",
     "Volume",
     "column",
+    "demo",
     "direct",
     "gamma_mask",
     "indirect",
+    "info",
     "matrix",
     "max_memory",
     "merge",
@@ -160,7 +162,16 @@ class Capture:
         positions (y-tal's defaults). ``H`` must be real and finite (counts)."""
         lg = _check.array("laser_grid_xyz", laser_grid_xyz, last=3, ndim=(2, 3))
         sg = _check.array("sensor_grid_xyz", sensor_grid_xyz, last=3, ndim=(2, 3))
-        H = _check.array("H", H, ndim=(2, 3, 4, 5))
+        # What this call holds at once besides the caller's H, checked against the memory
+        # budget before any of it is made: H as float32 (a copy unless it is one already),
+        # its rows with time last, and the library's capture.
+        raw = np.asarray(H)
+        n = int(raw.size)
+        conv = 4 * n if not (raw.dtype == np.float32 and raw.flags.c_contiguous) else 0
+        _native.check_memory(f"a capture from arrays of {n} samples", [
+            ("H as float32", conv), ("the finiteness mask of H", n),
+            ("H's rows with time last (float32)", 4 * n), ("the library's capture (float32)", 4 * n)])
+        H = _check.array("H", raw, ndim=(2, 3, 4, 5))
         dt = _check.real("delta_t", delta_t)
         if dt <= 0:  # type: ignore[operator]
             raise _check.fail("delta_t", f"expected a bin width > 0 in metres, found {dt}")
@@ -282,6 +293,63 @@ def simulate(scene: PathLike, out: Optional[PathLike] = None, *,
     elif ptu is not None:
         raise _check.fail("ptu", "the PTU stream is written beside the capture: give out= too")
     return c
+
+
+class Text(str):
+    """Text the command line prints (:func:`info`, :func:`demo`): a ``str`` that a REPL or
+    notebook shows as its lines rather than as a quoted string."""
+
+    def __repr__(self) -> str:
+        return str(self)
+
+
+def info(capture: Union[Capture, PathLike], *, delta_t: Optional[float] = None,
+         t_start: Optional[float] = None, grid_width: Optional[float] = None,
+         t_min: Any = None, t_max: Any = None, rebin: int = 1, background: Any = None,
+         png: Optional[PathLike] = None) -> Text:
+    """The layout text of ``vltm info CAPTURE``, line for line: format, scan, laser and SPAD
+    spots, device positions, time axis, counts, default λ, the memory budget and where it
+    comes from, and the summed transient (after the preprocessing ``t_min``, ``t_max``,
+    ``rebin``, ``background``, as :func:`direct`). ``delta_t``, ``t_start``, ``grid_width``
+    override a ``.mat`` file's conventions (as :func:`open`); ``png`` also draws the summed
+    transient there (``--png``). Warnings (the background emptied most histograms) come as
+    ``RuntimeWarning`` (the command line writes them to stderr).
+
+    ``capture``: a file path, or a :class:`Capture` opened from one (its ``.mat`` options
+    are used). Returns a :class:`Text` (a ``str``) of newline-separated lines; for the same
+    facts as a dict see :meth:`Capture.info`."""
+    opts: Dict[str, Any] = {}
+    if isinstance(capture, Capture):
+        if capture.path is None:
+            raise _check.fail("capture", "info describes a capture file: this one was made from arrays (use Capture.info())")
+        p, opts = capture.path, dict(capture._open_options)
+    elif isinstance(capture, (str, os.PathLike)):
+        p = os.fspath(capture)
+    else:
+        raise _check.fail("capture", f"expected a path or a vltm.Capture, found {type(capture).__name__}")
+    for k, v in (("delta_t", delta_t), ("t_start", t_start), ("grid_width", grid_width)):
+        if v is not None:
+            opts[k] = _check.real(k, v)
+    lines, warnings, _counts, _t0, _dt = _native.info_text(
+        p, **opts, t_min=_check.time_bound("t_min", t_min),
+        t_max=_check.time_bound("t_max", t_max), rebin=_check.integer("rebin", rebin),
+        background=_check.background(background),
+        png=None if png is None else os.fspath(png))
+    for w in warnings:
+        _warn(w)
+    return Text("\n".join(lines) + "\n")
+
+
+def demo(out: PathLike = "vltm-demo") -> Text:
+    """The built-in demo (``vltm demo``), no input files: a scene like the paper's Fig. 5 (a
+    panel lighting a figure beside it, a box as distractor) is rendered with all light paths
+    and with direct light only, every probe runs on both, and ``out`` (created if needed)
+    receives each result's figure (``<result>.png``), volume (``<result>.npy``) and
+    ``summary.txt``. Returns the summary table (a :class:`Text`), the lines ``vltm demo``
+    prints. About a minute on two cores."""
+    if not isinstance(out, (str, os.PathLike)):
+        raise _check.fail("out", f"expected a directory path, found {type(out).__name__}")
+    return Text(_native.demo(os.fspath(out)))
 
 
 class Partial:
@@ -419,7 +487,7 @@ def gamma_mask(direct: np.ndarray, epsilon: float = 0.1) -> np.ndarray:
     ``direct``."""
     d = _check.array("direct", direct)
     e = _check.real("epsilon", epsilon)
-    return np.asarray(_native.gamma_mask(d.ravel().tolist(), e), dtype=bool).reshape(d.shape)
+    return np.asarray(_native.gamma_mask(d.ravel(), e), dtype=bool).reshape(d.shape)
 
 
 def set_threads(n: int) -> None:
@@ -502,13 +570,14 @@ def _capture(capture: Any) -> Capture:
     return open(capture)
 
 
-def _wave(wavelength, sigma, weights, band, compensate_laser, path) -> dict:
+def _wave(wavelength, sigma, weights, band, compensate_laser, crop, path) -> dict:
     """The wave options, checked (ranges are the library's checks)."""
     return dict(wavelength=_check.real("wavelength", wavelength, none=True),
                 sigma=_check.real("sigma", sigma, none=True),
                 weights=_check.text("weights", weights),
                 band=_check.real("band", band),
                 compensate_laser=_check.flag("compensate_laser", compensate_laser),
+                crop=_check.flag("crop", crop),
                 path=_check.text("path", path))
 
 
@@ -564,6 +633,7 @@ def direct(
     weights: str = "inv",
     band: float = 5.0,
     compensate_laser: bool = False,
+    crop: bool = True,
     path: str = "auto",
     swap_roles: bool = False,
     t_min: Any = None,
@@ -583,7 +653,10 @@ def direct(
     diagonal). ``wavelength`` λ (m, default twice the aperture pitch), ``sigma`` the gate
     std (m, default 2λ/3), ``weights`` ``"inv"`` (the paper's 1/d) or ``"one"`` (y-tal),
     ``band`` the band half-width in 1/σ, ``compensate_laser`` divides each row by the
-    laser's cos θ/d², ``path`` ``auto|band|planar|lookup``, ``swap_roles`` uses the SPADs
+    laser's cos θ/d², ``crop=False`` keeps the whole time axis (by default it is cropped to
+    the bins the probed voxels can reach, with the gate's support, before the band
+    transform: the command line's ``--no-crop``), ``path`` ``auto|band|planar|lookup``,
+    ``swap_roles`` uses the SPADs
     as the projector and the lasers as the camera (reciprocity; reads the capture into
     memory).
 
@@ -598,7 +671,7 @@ def direct(
     ``y``, ``z`` (m) and the parameters as attributes."""
     return _probe("direct", capture, volume, rows, amplitudes, report, as_xarray,
                   {"gate": gate}, gate=_check.text("gate", gate),
-                  **_wave(wavelength, sigma, weights, band, compensate_laser, path),
+                  **_wave(wavelength, sigma, weights, band, compensate_laser, crop, path),
                   **_input(swap_roles, t_min, t_max, rebin, background))
 
 
@@ -618,6 +691,7 @@ def column(
     weights: str = "inv",
     band: float = 5.0,
     compensate_laser: bool = False,
+    crop: bool = True,
     path: str = "auto",
     swap_roles: bool = False,
     t_min: Any = None,
@@ -653,7 +727,7 @@ def column(
                   _SHELLS if cut else None, focus=list(f), gate=_check.text("gate", gate),
                   shell=sh, shells=cut, mask_epsilon=me,
                   leak_correct=_check.flag("leak_correct", leak_correct), leak_epsilon=le,
-                  **_wave(wavelength, sigma, weights, band, compensate_laser, path),
+                  **_wave(wavelength, sigma, weights, band, compensate_laser, crop, path),
                   **_input(swap_roles, t_min, t_max, rebin, background))
 
 
@@ -673,6 +747,7 @@ def indirect(
     weights: str = "inv",
     band: float = 5.0,
     compensate_laser: bool = False,
+    crop: bool = True,
     path: str = "auto",
     swap_roles: bool = False,
     t_min: Any = None,
@@ -711,7 +786,7 @@ def indirect(
         raise ArgumentError("argument `shells`: cannot be used with shell or min_separation")
     d = None
     if direct is not None:
-        d = _check.array("direct", direct).ravel().tolist()
+        d = _check.array("direct", direct).ravel()
     cut = _shells(shells)
     attrs = {"gate": gate, "epsilon": eps, "shell": sh, "leak_correct": leak_correct,
              "shells": None if shells is None else list(_check.pair("shells", shells))}
@@ -719,7 +794,7 @@ def indirect(
                   _SHELLS if cut else None, epsilon=eps, shell=sh, shells=cut, direct=d,
                   gate=_check.text("gate", gate),
                   leak_correct=_check.flag("leak_correct", leak_correct),
-                  **_wave(wavelength, sigma, weights, band, compensate_laser, path),
+                  **_wave(wavelength, sigma, weights, band, compensate_laser, crop, path),
                   **_input(swap_roles, t_min, t_max, rebin, background))
 
 
@@ -733,6 +808,7 @@ def relight(
     weights: str = "inv",
     band: float = 5.0,
     compensate_laser: bool = False,
+    crop: bool = True,
     path: str = "auto",
     swap_roles: bool = False,
     t_min: Any = None,
@@ -779,7 +855,7 @@ def relight(
         pts = np.ascontiguousarray(pts, dtype=np.float64)
     return _probe("relight", capture, vol, None, amplitudes, report, as_xarray,
                   {"pattern": spec}, pattern=pts, pattern_spec=spec,
-                  **_wave(wavelength, sigma, weights, band, compensate_laser, path),
+                  **_wave(wavelength, sigma, weights, band, compensate_laser, crop, path),
                   **_input(swap_roles, t_min, t_max, rebin, background))
 
 
@@ -793,6 +869,7 @@ def row(
     weights: str = "inv",
     band: float = 5.0,
     compensate_laser: bool = False,
+    crop: bool = True,
     path: str = "auto",
     swap_roles: bool = False,
     t_min: Any = None,
@@ -809,7 +886,7 @@ def row(
     f = _check.point("focus", focus)
     return _probe("row", capture, volume, None, False, report, as_xarray,
                   {"gate": "two-bounce", "focus": list(f)}, focus=list(f),
-                  **_wave(wavelength, sigma, weights, band, compensate_laser, path),
+                  **_wave(wavelength, sigma, weights, band, compensate_laser, crop, path),
                   **_input(swap_roles, t_min, t_max, rebin, background))
 
 
@@ -888,6 +965,7 @@ def matrix(
     weights: str = "inv",
     band: float = 5.0,
     compensate_laser: bool = False,
+    crop: bool = True,
     rows: Optional[slice] = None,
 ) -> Any:
     """The two-bounce LTM (Eq. 14) between two voxel sets as a matrix — the same numbers as
@@ -905,7 +983,7 @@ def matrix(
     factorised column per focus; ``gamma`` then needs ``direct``). Wave options as
     :func:`direct`; the matrix is imaged on the band path."""
     cap = _capture(capture)
-    wave = _wave(wavelength, sigma, weights, band, compensate_laser, "auto")
+    wave = _wave(wavelength, sigma, weights, band, compensate_laser, crop, "auto")
     eps = _check.real("epsilon", epsilon)
     gamma = None
     if any(isinstance(x, str) and x.strip() == "gamma" for x in (from_, to)):
@@ -920,7 +998,7 @@ def matrix(
                     "argument `rows`: `gamma` over a part of the rows needs Γ: pass direct=, the finished direct light over volume"
                 )
             d = globals()["direct"](cap, vol, wavelength=wavelength, sigma=sigma, weights=weights,
-                                    band=band, compensate_laser=compensate_laser)
+                                    band=band, compensate_laser=compensate_laser, crop=crop)
         else:
             d = _check.array("direct", direct)
             if d.size != len(vol):

@@ -8,6 +8,7 @@ from typing import Any, Optional, Sequence, Tuple
 
 import numpy as np
 
+from . import _native
 from ._errors import ArgumentError
 
 
@@ -83,6 +84,11 @@ def array(name: str, x: Any, *, dtype: Any = np.float32, last: Optional[int] = N
         raise fail(name, f"expected shape (..., {last}), found {a.shape}")
     if a.size == 0 and not empty:
         raise fail(name, f"expected a non-empty array, found shape {a.shape}")
+    # The copy in ``dtype`` and the finiteness mask count against vltm's memory budget.
+    copy = a.size * np.dtype(dtype).itemsize if (a.dtype != dtype or not a.flags.c_contiguous) else 0
+    _native.check_memory(f"argument `{name}`: an array of {a.size} values", [
+        (f"`{name}` as {np.dtype(dtype).name}", copy),
+        (f"the finiteness mask of `{name}`", a.size if finite else 0)])
     a = np.ascontiguousarray(a, dtype=dtype)
     if finite and a.size and not np.all(np.isfinite(a)):
         n = int(np.size(a) - np.count_nonzero(np.isfinite(a)))

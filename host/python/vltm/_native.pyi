@@ -68,7 +68,26 @@ def volume_from_points(points: np.ndarray) -> Volume: ...
 def partial_from_bytes(data: bytes) -> NativePartial: ...
 def merge(parts: List[NativePartial]) -> NativePartial: ...
 def merge_bytes(parts: List[bytes]) -> bytes: ...
-def gamma_mask(direct: List[float], epsilon: float) -> List[bool]: ...
+def gamma_mask(direct: np.ndarray, epsilon: float) -> List[bool]: ...
+def check_memory(what: str, buffers: List[Tuple[str, int]]) -> None:
+    """Checks buffers about to be made against the memory budget (one-line DataError)."""
+    ...
+def info_text(
+    path: str,
+    delta_t: Optional[float] = ...,
+    t_start: Optional[float] = ...,
+    grid_width: Optional[float] = ...,
+    t_min: Optional[str] = ...,
+    t_max: Optional[str] = ...,
+    rebin: int = ...,
+    background: Optional[str] = ...,
+    png: Optional[str] = ...,
+) -> Tuple[List[str], List[str], np.ndarray, float, float]:
+    """`vltm info`'s lines, its warnings, the summed transient, t0 and dt."""
+    ...
+def demo(out: str) -> str:
+    """`vltm demo` into `out`; returns the table."""
+    ...
 def simulate(scene: str) -> NativeCapture: ...
 def run(
     capture: NativeCapture,
@@ -80,7 +99,7 @@ def run(
     shell: Optional[Tuple[float, float]] = ...,
     shells: Optional[str] = ...,
     epsilon: float = ...,
-    direct: Optional[List[float]] = ...,
+    direct: Optional[np.ndarray] = ...,
     mask_epsilon: Optional[float] = ...,
     leak_correct: bool = ...,
     leak_epsilon: float = ...,
@@ -89,6 +108,7 @@ def run(
     weights: str = ...,
     band: float = ...,
     compensate_laser: bool = ...,
+    crop: bool = ...,
     path: str = ...,
     swap_roles: bool = ...,
     t_min: Optional[str] = ...,

@@ -211,7 +211,7 @@ def indirect(capture: CaptureArg, volume: Any, *, client: Any = None,
     src = _source(capture)
     if not _splits(options, ("shells",)) or options.get("gate", "two-bounce") != "two-bounce":
         return _one_task("indirect", src, (volume,), client, options)
-    wave_keys = ("wavelength", "sigma", "weights", "band", "compensate_laser", "path",
+    wave_keys = ("wavelength", "sigma", "weights", "band", "compensate_laser", "crop", "path",
                  "swap_roles")
     direct_ = options.get("direct")
     if direct_ is None:
@@ -266,7 +266,7 @@ def matrix(capture: CaptureArg, from_: Any, to: Any, *, client: Any = None,
             raise vltm.ArgumentError("argument `volume`: `gamma` in from_/to needs the volume of Γ")
         vol = vltm._volume(volume)
         if direct_ is None:
-            wave_keys = ("wavelength", "sigma", "weights", "band", "compensate_laser")
+            wave_keys = ("wavelength", "sigma", "weights", "band", "compensate_laser", "crop")
             wave = {k: v for k, v in options.items() if k in wave_keys}
             direct_ = _run("direct", src, vol, client, rows_per_task, split_every, wave).finish()
         g = vltm.gamma_mask(np.asarray(direct_, dtype=np.float32).reshape(vol.shape), epsilon)

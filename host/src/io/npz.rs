@@ -77,11 +77,7 @@ fn write_to(c: &Capture, file: &mut File, path: &Path, compress: bool) -> Result
         inner: file,
         error: None,
     };
-    let mut w = if compress {
-        NpzWriter::new_compressed(latch)
-    } else {
-        NpzWriter::new(latch)
-    };
+    let mut w = NpzWriter::new_with_options(latch, member_options(compress, 0));
     let npz = |e: ndarray_npy::WriteNpzError| Error::io(path, std::io::Error::other(e.to_string()));
     let [lx, ly] = g.laser_shape;
     let [sx, sy] = g.spad_shape;
@@ -97,7 +93,9 @@ fn write_to(c: &Capture, file: &mut File, path: &Path, compress: bool) -> Result
     // A view of the capture's buffer: writing holds no second copy of H.
     let h = ndarray::ArrayView::from_shape(IxDyn(&h_shape), &c.data)
         .expect("shape checked by Capture::new");
-    w.add_array("H", &h).map_err(npz)?;
+    let h_bytes = budget::bytes(c.data.len(), 4);
+    w.add_array_with_options("H", &h, member_options(compress, h_bytes))
+        .map_err(npz)?;
     w.add_array("laser_grid_xyz", &arr(vec![lx, ly, 3], pts(&g.lasers)))
         .map_err(npz)?;
     w.add_array("sensor_grid_xyz", &arr(vec![sx, sy, 3], pts(&g.spads)))
@@ -120,6 +118,23 @@ fn write_to(c: &Capture, file: &mut File, path: &Path, compress: bool) -> Result
         return Err(Error::io(path, e));
     }
     Ok(())
+}
+
+/// The zip options of a member of `bytes` bytes: deflated or stored, with ZIP64 sizes
+/// (`large_file`) when the member or its `.npy` header could pass 4 GiB — the zip writer
+/// refuses such a member otherwise ("Large file option has not been set"), which made
+/// captures of more than 4 GiB unwritable. NumPy and vltm's reader read ZIP64 members.
+fn member_options(compress: bool, bytes: u128) -> zip::write::SimpleFileOptions {
+    let method = if compress {
+        zip::CompressionMethod::Deflated
+    } else {
+        zip::CompressionMethod::Stored
+    };
+    // Room for the `.npy` header (at most a few hundred bytes).
+    let large = bytes.saturating_add(1 << 16) >= u128::from(u32::MAX);
+    zip::write::SimpleFileOptions::default()
+        .compression_method(method)
+        .large_file(large)
 }
 
 /// A writer that remembers its first error and reports success from then on (see

@@ -1,0 +1,271 @@
+//! The layout text of `vltm info`: what a capture file holds (format, scan, spots, device
+//! positions, time axis, counts), the conventions assumed for it, the memory budget, and the
+//! summed transient after an optional preprocessing — one function for every front end, so
+//! that the command line and the Python package print the same lines.
+//!
+//! Units: metres (positions and paths). Cost: one pass over the capture's rows (the summed
+//! transient, O(Kl·Ks·Nt)); memory: the capture as [`crate::io::open`] reads it (the whole
+//! `H`) plus `Nt` f64.
+
+use std::path::Path;
+
+use crate::error::Result;
+use crate::front;
+use crate::io::prep::{Prep, Prepared};
+use crate::io::{self, Capture, RowSource};
+use crate::probe;
+use vltm_kernel::Point;
+
+/// Where a line of [`info`] goes: the report (stdout) or a warning (stderr).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stream {
+    /// A line of the layout text.
+    Out,
+    /// A warning (without the `vltm: warning: ` prefix).
+    Warning,
+}
+
+/// The summed transient [`info`] measured: every histogram summed bin by bin (non-finite
+/// samples skipped) after the preprocessing, over the path axis `t0 + n·dt` metres.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Summed {
+    /// Counts per bin.
+    pub counts: Vec<f64>,
+    /// Path length of bin 0 (m).
+    pub t0: f64,
+    /// Bin width (m of path).
+    pub dt: f64,
+}
+
+/// Writes `vltm info`'s layout text of the capture file `path` line by line to `say`, and
+/// returns the summed transient. `.mat` files are read with `mat`'s overrides (other formats
+/// refuse them: they record their time axis and grid); `prep` preprocesses the counts first
+/// (the time window, rebinning and background of [`crate::io::prep`]). Lines may name
+/// parameters as `$name` (a `.mat` file's conventions): front ends spell them as their own
+/// flags or arguments ([`crate::error::respell`]).
+///
+/// # Errors
+/// Read errors of the file; [`crate::Error::Argument`] for `mat` overrides on other formats
+/// and for a preprocessing that leaves nothing.
+pub fn info(
+    path: &Path,
+    mat: &io::mat::MatOptions,
+    prep: Option<Prep>,
+    say: &mut dyn FnMut(Stream, &str),
+) -> Result<Summed> {
+    let mut out = |s: String| say(Stream::Out, &s);
+    let mut c = if io::extension(path).as_deref() == Some("mat") {
+        let m = io::mat::read(path, mat)?;
+        out(format!("capture      {}", path.display()));
+        out(format!("format       MATLAB {}", m.version));
+        out(format!("variables    {}", m.variables.join(", ")));
+        out("conventions:".to_string());
+        for line in &m.conventions {
+            out(format!("  {line}"));
+        }
+        m.capture
+    } else {
+        for (set, arg) in [
+            (mat.delta_t.is_some(), "delta_t"),
+            (mat.t_start.is_some(), "t_start"),
+            (mat.grid_width.is_some(), "grid_width"),
+        ] {
+            if set {
+                return Err(crate::Error::arg(
+                    arg,
+                    "only for .mat captures (other formats record their time axis and grid)",
+                ));
+            }
+        }
+        out(format!("capture      {}", path.display()));
+        io::open(path)?
+    };
+    if io::is_hdf5(path) {
+        describe_hdf5(path, &mut out)?;
+    }
+    describe(&c, &mut out);
+    out(format!("memory       budget {}", crate::budget::describe()));
+    let (g, counts) = match prep {
+        Some(p) => {
+            let mut pr = Prepared::new(&mut c, p, None)?;
+            let sum = front::summed(&mut pr)?;
+            let g = pr.geometry().clone();
+            out(format!(
+                "time window  {} bins x {} m from t0 = {} m (after preprocessing)",
+                g.nt, g.dt, g.t0
+            ));
+            let r = front::check(&pr)?;
+            out(format!("preprocessing: {}", r.summary));
+            if let Some(w) = &r.warning {
+                say(Stream::Warning, w);
+            }
+            (g, sum)
+        }
+        None => (c.geometry.clone(), front::summed(&mut c)?),
+    };
+    let total: f64 = counts.iter().sum();
+    let (peak, _) =
+        counts.iter().enumerate().fold(
+            (0, f64::NEG_INFINITY),
+            |a, (i, &x)| if x > a.1 { (i, x) } else { a },
+        );
+    say(
+        Stream::Out,
+        &format!(
+            "transient    summed over {} histograms: {total:.4e} counts; peak bin {peak} (path {:.4} m); first 10 % of the bins hold {:.1} % of the counts",
+            g.lasers.len() * g.spads_per_row(),
+            g.t0 + peak as f64 * g.dt,
+            100.0 * counts[..g.nt.div_ceil(10)].iter().sum::<f64>() / total.max(f64::MIN_POSITIVE)
+        ),
+    );
+    Ok(Summed {
+        counts,
+        t0: g.t0,
+        dt: g.dt,
+    })
+}
+
+/// The HDF5 layout of a capture: `H_format` and scan type of an `HDF5_TAL` file; axis order,
+/// scan type and the conventions applied to a Z-NLOS file.
+fn describe_hdf5(path: &Path, out: &mut dyn FnMut(String)) -> Result<()> {
+    use io::tal::{Hdf5Layout, ScanType};
+    let scan = |s: ScanType| match s {
+        ScanType::Exhaustive => "exhaustive (every laser spot x every SPAD spot)",
+        ScanType::Confocal => "confocal (the SPAD looks at the laser spot)",
+        ScanType::Paired => {
+            "paired (one laser spot and one SPAD spot per histogram, apart: a non-confocal \
+             galvo or arbitrary scan)"
+        }
+        ScanType::Single => {
+            "single (one laser spot, the SPAD grid scanned): shown below by reciprocity \
+             as the SPAD grid's spots as lasers x one SPAD at the laser spot"
+        }
+    };
+    match io::tal::detect(path)? {
+        Hdf5Layout::Tal => {
+            let r = io::tal::open(path)?;
+            out(format!(
+                "format       y-tal HDF5_TAL, H_format {} (tal value {}), H shape {:?} (time first)",
+                r.h_format().tal_name(),
+                r.h_format().tal_value(),
+                r.h_shape()
+            ));
+            out(format!("tal scan     {}", scan(r.scan_type())));
+        }
+        Hdf5Layout::Znlos => {
+            let r = io::tal::znlos::open(path)?;
+            out(format!(
+                "format       Zaragoza Z-NLOS HDF5 (y-tal HDF5_ZNLOS), data shape {:?}, layout {:?}",
+                r.data_shape(),
+                r.layout()
+            ));
+            out(format!("tal scan     {}", scan(r.scan_type())));
+            out("conventions (y-tal's Z-NLOS converter, tal/io/format.py):".to_string());
+            for line in r.conventions() {
+                out(format!("  {line}"));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The capture's scan, geometry, time axis and counts.
+fn describe(c: &Capture, out: &mut dyn FnMut(String)) {
+    let g = &c.geometry;
+    let (kl, ks) = (g.lasers.len(), g.spads_per_row());
+    let span = |p: &[Point]| {
+        let lo: Vec<f32> = (0..3)
+            .map(|i| p.iter().map(|q| q[i]).fold(f32::INFINITY, f32::min))
+            .collect();
+        let hi: Vec<f32> = (0..3)
+            .map(|i| p.iter().map(|q| q[i]).fold(f32::NEG_INFINITY, f32::max))
+            .collect();
+        format!(
+            "x {:.3}..{:.3}, y {:.3}..{:.3}, z {:.3}..{:.3} m",
+            lo[0], hi[0], lo[1], hi[1], lo[2], hi[2]
+        )
+    };
+    out(format!(
+        "scan         {}",
+        if g.coincident() {
+            "confocal"
+        } else if g.confocal {
+            "paired (one laser spot and one SPAD spot per histogram)"
+        } else {
+            "non-confocal"
+        }
+    ));
+    out(format!(
+        "lasers       {} = {}x{} ({})",
+        kl,
+        g.laser_shape[0],
+        g.laser_shape[1],
+        span(&g.lasers)
+    ));
+    out(format!(
+        "SPADs        {} = {}x{} ({})",
+        g.spads.len(),
+        g.spad_shape[0],
+        g.spad_shape[1],
+        span(&g.spads)
+    ));
+    if g.paired_apart() {
+        let z = g
+            .lasers
+            .iter()
+            .chain(&g.spads)
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), p| {
+                (a.min(p[2]), b.max(p[2]))
+            });
+        out(format!(
+            "relay        {}",
+            if z.1 - z.0 > 0.0 {
+                format!(
+                    "not planar (z spans {:.4} m): the FFT paths need a flat wall",
+                    z.1 - z.0
+                )
+            } else {
+                "planar (every point at one z)".to_string()
+            }
+        ));
+        out("paths        direct: band or lookup (each row imaged with its own laser and SPAD \
+             spot); no FFT path (the planar one needs a SPAD grid, the confocal one coincident \
+             points); columns, rows and the matrix need a SPAD grid"
+            .to_string());
+    }
+    out(format!(
+        "laser_xyz    {:?} m, sensor_xyz {:?} m",
+        g.laser_origin, g.sensor_origin
+    ));
+    out(format!(
+        "time axis    {} bins x {} m from t0 = {} m to {:.4} m; device legs {}",
+        g.nt,
+        g.dt,
+        g.t0,
+        g.t0 + (g.nt as f64 - 1.0) * g.dt,
+        if g.legs_in_time {
+            "included"
+        } else {
+            "not included (wall to wall)"
+        }
+    ));
+    let (mut sum, mut max, mut nonzero, mut bad) = (0.0f64, f32::NEG_INFINITY, 0usize, 0usize);
+    for &h in &c.data {
+        if h.is_finite() {
+            sum += f64::from(h);
+            max = max.max(h);
+            nonzero += usize::from(h != 0.0);
+        } else {
+            bad += 1;
+        }
+    }
+    out(format!(
+        "histograms   {} = {kl} x {ks} x {} values; sum {sum:.4e}, max {max:.4e}, non-zero {nonzero}, non-finite {bad}",
+        c.data.len(),
+        g.nt
+    ));
+    out(format!(
+        "default λ    {:.4} m (twice the aperture pitch)",
+        probe::default_wavelength(g)
+    ));
+}
