@@ -1350,6 +1350,76 @@ fn slice_lookup_matches_general_path_and_validates() {
     let mut tables = vec![0.0f32; Scan::tables_len(&cfg, sc.spads.len())];
     let scan = Scan::new(&cfg, &sc.spads, &mut tables).unwrap();
     let layout = SliceLayout::try_new(&scan, &grid, &lattice, usize::MAX).unwrap();
+    // merge: the rows split over two probes, merged, equal one probe over all rows; a probe
+    // of another target is refused.
+    {
+        let mut lt = vec![0.0f32; Lookup::tables_len(&grid)];
+        let lookup = Lookup::new(&grid, &mut lt).unwrap();
+        let kv = lattice.len();
+        let ks = sc.spads.len();
+        let mut bufs: Vec<(Vec<f32>, Vec<f32>, Vec<f32>)> = (0..3)
+            .map(|_| {
+                (
+                    vec![0.0f32; layout.tables_len()],
+                    vec![0.0f32; LookupSlice::state_len(kv)],
+                    vec![0.0f32; LookupSlice::scratch_len(&grid, kv)],
+                )
+            })
+            .collect();
+        let mut probes: Vec<LookupSlice<'_>> = bufs
+            .iter_mut()
+            .enumerate()
+            .map(|(i, (t, st, scr))| {
+                let target = if i == 2 {
+                    Target::Column(sc.focus)
+                } else {
+                    Target::Diagonal
+                };
+                LookupSlice::new(&scan, &lookup, &layout, target, t, st, scr).unwrap()
+            })
+            .collect();
+        let mut rb = vec![0.0f32; RowBuffer::len(&cfg, ks)];
+        let mut rows = RowBuffer::new(&scan, &mut rb).unwrap();
+        let len = ks * cfg.nt();
+        let (mut whole, mut whole_st, mut whole_scr) = (
+            vec![0.0f32; layout.tables_len()],
+            vec![0.0f32; LookupSlice::state_len(kv)],
+            vec![0.0f32; LookupSlice::scratch_len(&grid, kv)],
+        );
+        let mut all = LookupSlice::new(
+            &scan,
+            &lookup,
+            &layout,
+            Target::Diagonal,
+            &mut whole,
+            &mut whole_st,
+            &mut whole_scr,
+        )
+        .unwrap();
+        for (l, laser) in sc.lasers.iter().enumerate() {
+            let row = rows
+                .load(&scan, *laser, &hists[l * len..(l + 1) * len])
+                .unwrap();
+            let half = usize::from(2 * l >= sc.lasers.len());
+            probes[half].push_row(&scan, &lookup, &row).unwrap();
+            all.push_row(&scan, &lookup, &row).unwrap();
+        }
+        let (first, rest) = probes.split_at_mut(1);
+        first[0].merge(&rest[0]).unwrap();
+        assert!(
+            first[0].merge(&rest[1]).is_err(),
+            "a column merged into a diagonal"
+        );
+        assert_eq!(first[0].report().rows, sc.lasers.len() as u64);
+        let peak = (0..kv).fold(0.0f64, |m, i| m.max(all.amplitude(i).norm()));
+        assert!(peak > 0.0);
+        for i in 0..kv {
+            let e = (first[0].amplitude(i) - all.amplitude(i)).norm() / peak;
+            assert!(e < 1e-6, "voxel {i}: merged vs whole {e:.2e} of the peak");
+        }
+        probes[0].reset();
+        assert_eq!(probes[0].amplitude(0), Complex64::new(0.0, 0.0));
+    }
     // 3 voxels + SPAD offsets −3..2 → 8 entries per row; 2 rows; 3 SPADs.
     assert_eq!(layout.width(), 8);
     assert_eq!(layout.tables_len(), 4 * (3 + 16));

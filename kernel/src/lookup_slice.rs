@@ -48,7 +48,7 @@
 //!
 //! Per row: `Ks` inverse FFTs of length `L` and at most `Ks·L` cell conversions (≈ 25 flops
 //! each; only the cells a SPAD reads), `Kv` lead distances and carriers, then `Kv·Ks` pairs
-//! of ≈ 20 flops with no square root, no carrier polynomial and no weight (≈ 31 instructions
+//! of ≈ 20 flops with no square root, no carrier polynomial and no weight (≈ 33 instructions
 //! per pair on a Cortex-M4F); the row's sums join the state as Kahan-compensated `f32` sums
 //! (no soft `f64` on a Cortex-M4F; error `≤ 2u·Σ_rows |row sum|` plus `O(n u²)`, far below
 //! the lookup tolerance). Memory, all caller-owned: the slice tables `4·Ks + 4·ny·width`
