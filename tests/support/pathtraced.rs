@@ -235,8 +235,8 @@ pub fn measure(c: &mut Captures, s: &Setup) -> SceneResult {
     let k =
         probe::indirect_over(&mut c.direct, &c.vol, &mask, &opts, &s.wave, EXEC).expect("control");
     let plain = IndirectOptions { leak: None, ..opts };
-    let t = probe::indirect_over(&mut c.indirect, &c.vol, &mask, &plain, &s.wave, EXEC)
-        .expect("truth");
+    let t =
+        probe::indirect_over(&mut c.indirect, &c.vol, &mask, &plain, &s.wave, EXEC).expect("truth");
     let tg = probe::indirect_over(&mut c.indirect, &c.vol, &mask, &opts, &s.wave, EXEC)
         .expect("truth, corrected");
     let g: Vec<usize> = (0..mask.len()).filter(|&i| mask[i]).collect();
