@@ -478,3 +478,28 @@ fn pathtraced_panel_figure_at_the_defaults() {
         0.831,
     );
 }
+
+/// The path-traced corner (fixtures/pathtraced: two panels at 90°, each lighting the other,
+/// the projector's foci on the left one): ≥ 19× the control on both, but kept ≤ 0.25 and the
+/// Pearson correlation with the truth only 0.4–0.6 (docs/indirect-light.md).
+#[test]
+fn pathtraced_corner_at_the_defaults() {
+    check_pathtraced(
+        "corner",
+        &[
+            Documented {
+                object: "left",
+                ratio: 19.15,
+                kept: 0.182,
+                pearson: 0.408,
+            },
+            Documented {
+                object: "right",
+                ratio: 28.13,
+                kept: 0.246,
+                pearson: 0.629,
+            },
+        ],
+        0.480,
+    );
+}
