@@ -363,6 +363,8 @@ pub fn run(out: &Path, progress: Option<&'static dyn Progress>) -> Result<String
         table,
         "\nindirect light on the figure: means over its {} voxels (its surface ± one voxel), beside the direct-only \
          control\n(same Γ and settings: λ = {:.3} m, σ = {:.3} m, ε = {}, r0 = {:.2} m; leak correction: the 3-vertex windows of Γ zeroed)\n\
+         these ratios come from vltm's built-in simulator (Lambertian patches, no occlusion, no thickness); on path-traced \
+         captures they are far lower (docs/indirect-light.md)\n\
          {:<34} {:>12} {:>12} {:>10}",
         fig.len(),
         d.config.wavelength(),

@@ -1,0 +1,290 @@
+//! Leak-corrected in-focus indirect light measured on the path-traced scenes of
+//! `fixtures/pathtraced` (mitransient 1.3.1, three captures per scene with the same seed: all
+//! paths, direct only, two hidden vertices only = the indirect-only truth).
+//!
+//! Shared by `tests/leak.rs` (which asserts the numbers in bands) and `benches/pathtraced.rs`
+//! (which prints the table of docs/indirect-light.md). Every figure is a mean over an
+//! object's voxels (its box surface sampled densely, ± one voxel: `Volume::surface_voxels`),
+//! and the same Γ (from the full capture's diagonal) serves the full capture, the control and
+//! the truth.
+
+#![allow(dead_code)]
+
+use std::path::{Path, PathBuf};
+use vltm::io::{self, Capture};
+use vltm::kernel::Point;
+use vltm::probe::{self, Exec, IndirectOptions, LeakOptions, Shell, Wave};
+use vltm::volume::Volume;
+
+const EXEC: Exec<'static> = Exec {
+    progress: None,
+    path: vltm::probe::Path::Auto,
+};
+
+/// The volume every path-traced scene is probed over (pitch 0.1 × 0.1 × 0.05 m).
+pub const VOLUME: &str = "-0.75:0.75:16,-0.75:0.75:16,0.5:1.4:19";
+
+/// The scenes of `fixtures/pathtraced`.
+pub const SCENES: [&str; 2] = ["panel_figure", "corner"];
+
+/// `fixtures/pathtraced`.
+pub fn dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fixtures/pathtraced")
+}
+
+/// One scene's three captures, its volume and its objects' voxels.
+pub struct Captures {
+    /// Scene name.
+    pub scene: String,
+    /// All paths.
+    pub all: Capture,
+    /// Direct only (one hidden vertex): the control.
+    pub direct: Capture,
+    /// Two hidden vertices only: the indirect-only truth.
+    pub indirect: Capture,
+    /// The probed volume.
+    pub vol: Volume,
+    /// (object name, its voxels), in `scene.json` order.
+    pub objects: Vec<(String, Vec<usize>)>,
+    /// The object the virtual projector focuses on (the "projector's own surface").
+    pub projector: String,
+}
+
+/// Points on the surface of a box (`scene.json`: centre, size along (r, u, −f), frame), `n`
+/// samples per unit length (at least 2 per edge).
+fn box_surface(o: &serde_json::Value, n: f64) -> Vec<Point> {
+    let v3 = |k: &str| -> [f64; 3] { core::array::from_fn(|i| o[k][i].as_f64().unwrap()) };
+    let (c, s) = (v3("centre"), v3("size_m"));
+    let (r, u, f) = (v3("right_r"), v3("up_u"), v3("front_normal_f"));
+    let axes = [r, u, f.map(|x| -x)];
+    let mut out = Vec::new();
+    for k in 0..3 {
+        let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+        let (ni, nj) = (
+            ((s[i] * n).ceil() as usize).max(2),
+            ((s[j] * n).ceil() as usize).max(2),
+        );
+        for side in [-0.5, 0.5] {
+            for a in 0..ni {
+                for b in 0..nj {
+                    let ca = (a as f64 + 0.5) / ni as f64 - 0.5;
+                    let cb = (b as f64 + 0.5) / nj as f64 - 0.5;
+                    let p: [f64; 3] = core::array::from_fn(|x| {
+                        c[x] + side * s[k] * axes[k][x]
+                            + ca * s[i] * axes[i][x]
+                            + cb * s[j] * axes[j][x]
+                    });
+                    out.push(p.map(|x| x as f32));
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Load `scene` from `fixtures/pathtraced` (`<scene>_{all,direct,indirect}/`).
+pub fn load(scene: &str) -> Captures {
+    load_from(&dir(), scene)
+}
+
+/// Load `scene` from `root`.
+pub fn load_from(root: &Path, scene: &str) -> Captures {
+    let open = |v: &str| {
+        let p = root
+            .join(format!("{scene}_{v}"))
+            .join(format!("{scene}_{v}.hdf5"));
+        io::open(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
+    };
+    let text = std::fs::read_to_string(root.join(format!("{scene}_all/scene.json"))).unwrap();
+    let j: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let vol = Volume::parse(VOLUME).unwrap();
+    let objects = j["objects"]
+        .as_object()
+        .unwrap()
+        .iter()
+        .map(|(name, o)| (name.clone(), vol.surface_voxels(&box_surface(o, 200.0))))
+        .collect();
+    Captures {
+        scene: scene.to_string(),
+        all: open("all"),
+        direct: open("direct"),
+        indirect: open("indirect"),
+        vol,
+        objects,
+        projector: j["projector_surface"].as_str().unwrap().to_string(),
+    }
+}
+
+/// Probe settings of one measurement.
+#[derive(Clone, Copy, Debug)]
+pub struct Setup {
+    /// λ, σ, weights, `compensate_laser`.
+    pub wave: Wave,
+    /// Γ threshold ε.
+    pub epsilon: f32,
+    /// Minimum pair separation r0 (None = 1.5σ, the default).
+    pub r0: Option<f32>,
+    /// Leak correction (None = the paper's Eq. 17).
+    pub leak: Option<LeakOptions>,
+}
+
+/// vltm indirect's defaults on a tal capture: λ = 2 × pitch, σ = 2λ/3, ε = 0.1, r0 = 1.5σ,
+/// leak correction by gating, `--compensate-laser` (the renders hold the laser's falloff).
+pub fn defaults() -> Setup {
+    Setup {
+        wave: Wave {
+            compensate_laser: true,
+            ..Wave::default()
+        },
+        epsilon: 0.1,
+        r0: None,
+        leak: Some(LeakOptions::default()),
+    }
+}
+
+/// One object's figures.
+#[derive(Clone, Debug)]
+pub struct ObjectRow {
+    /// Object name.
+    pub name: String,
+    /// Its voxels, and how many of them are in Γ.
+    pub voxels: usize,
+    /// Of which in Γ.
+    pub in_gamma: usize,
+    /// Mean I_i of the full capture (with the setup's correction).
+    pub full: f64,
+    /// Mean I_i of the direct-only control (the same correction, same Γ).
+    pub control: f64,
+    /// Mean I_i of the indirect-only truth (no correction).
+    pub truth: f64,
+    /// Mean I_i of the truth with the same correction as the full capture: the part of the
+    /// indirect light that arrives outside the zeroed windows.
+    pub truth_gated: f64,
+    /// Pearson correlation of the full capture's I_i with the truth's over the object's Γ
+    /// voxels.
+    pub pearson: f64,
+}
+
+impl ObjectRow {
+    /// Full / control.
+    pub fn ratio(&self) -> f64 {
+        self.full / self.control
+    }
+    /// Full / truth.
+    pub fn kept(&self) -> f64 {
+        self.full / self.truth
+    }
+}
+
+/// One scene's figures under one setup.
+#[derive(Clone, Debug)]
+pub struct SceneResult {
+    /// Γ's voxel count.
+    pub gamma: usize,
+    /// r0 used (m).
+    pub r0: f32,
+    /// Pearson correlation of the full capture's I_i with the truth's over Γ.
+    pub pearson: f64,
+    /// Fraction of the full capture's energy removed by the correction.
+    pub explained: Option<f64>,
+    /// Per object, in `scene.json` order.
+    pub rows: Vec<ObjectRow>,
+    /// I_i of the full capture, the control and the truth (per voxel).
+    pub maps: [Vec<f32>; 3],
+    /// Γ.
+    pub mask: Vec<bool>,
+}
+
+/// Pearson correlation of `x` and `y` over the indices `idx`.
+pub fn pearson(x: &[f32], y: &[f32], idx: &[usize]) -> f64 {
+    let n = idx.len() as f64;
+    if idx.len() < 2 {
+        return f64::NAN;
+    }
+    let mx = idx.iter().map(|&i| f64::from(x[i])).sum::<f64>() / n;
+    let my = idx.iter().map(|&i| f64::from(y[i])).sum::<f64>() / n;
+    let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+    for &i in idx {
+        let (a, b) = (f64::from(x[i]) - mx, f64::from(y[i]) - my);
+        sxy += a * b;
+        sxx += a * a;
+        syy += b * b;
+    }
+    sxy / (sxx * syy).sqrt()
+}
+
+fn mean(v: &[f32], idx: &[usize]) -> f64 {
+    idx.iter().map(|&i| f64::from(v[i])).sum::<f64>() / idx.len() as f64
+}
+
+/// Measure one scene under `s`: Γ from the full capture's diagonal; the full capture and the
+/// control with the setup's correction; the truth with none.
+pub fn measure(c: &mut Captures, s: &Setup) -> SceneResult {
+    let d = probe::direct(&mut c.all, &c.vol, &s.wave, EXEC).expect("direct");
+    let mask = probe::gamma_mask(&d.values, s.epsilon);
+    let opts = IndirectOptions {
+        epsilon: s.epsilon,
+        shell: s.r0.map(|r0| Shell {
+            r0,
+            r1: f32::INFINITY,
+        }),
+        leak: s.leak,
+        ..IndirectOptions::default()
+    };
+    let f = probe::indirect_over(&mut c.all, &c.vol, &mask, &opts, &s.wave, EXEC).expect("full");
+    let k =
+        probe::indirect_over(&mut c.direct, &c.vol, &mask, &opts, &s.wave, EXEC).expect("control");
+    let plain = IndirectOptions { leak: None, ..opts };
+    let t =
+        probe::indirect_over(&mut c.indirect, &c.vol, &mask, &plain, &s.wave, EXEC).expect("truth");
+    let tg = probe::indirect_over(&mut c.indirect, &c.vol, &mask, &opts, &s.wave, EXEC)
+        .expect("truth, corrected");
+    let g: Vec<usize> = (0..mask.len()).filter(|&i| mask[i]).collect();
+    let rows = c
+        .objects
+        .iter()
+        .map(|(name, idx)| {
+            let ig: Vec<usize> = idx.iter().copied().filter(|&i| mask[i]).collect();
+            ObjectRow {
+                name: name.clone(),
+                voxels: idx.len(),
+                in_gamma: ig.len(),
+                full: mean(&f.values, idx),
+                control: mean(&k.values, idx),
+                truth: mean(&t.values, idx),
+                truth_gated: mean(&tg.values, idx),
+                pearson: pearson(&f.values, &t.values, &ig),
+            }
+        })
+        .collect();
+    SceneResult {
+        gamma: g.len(),
+        r0: f.shell.r0,
+        pearson: pearson(&f.values, &t.values, &g),
+        explained: f.explained,
+        rows,
+        maps: [f.values, k.values, t.values],
+        mask,
+    }
+}
+
+/// Print one scene's result as table rows (markdown).
+pub fn print(scene: &str, label: &str, r: &SceneResult) {
+    for o in &r.rows {
+        println!(
+            "| {scene} | {label} | {} ({} voxels, {} in Γ) | {} | {:.4e} vs {:.4e}: {:.2}× | {:.3} (truth {:.4e}; the truth corrected keeps {:.3}) | {:.3} (object) / {:.3} (Γ) |",
+            o.name,
+            o.voxels,
+            o.in_gamma,
+            r.gamma,
+            o.full,
+            o.control,
+            o.ratio(),
+            o.kept(),
+            o.truth,
+            o.truth_gated / o.truth,
+            o.pearson,
+            r.pearson
+        );
+    }
+}
