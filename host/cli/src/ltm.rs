@@ -12,7 +12,7 @@ use crate::args::{MatrixArgs, RelightArgs, RowArgs};
 use crate::console::{Failure, say};
 use crate::outputs::{check_matrix_out, refuse_overwriting_inputs, write_matrix};
 use crate::summary::{Label, finish};
-use crate::{partial, progress};
+use crate::{input, partial, progress};
 
 fn exec() -> probe::Exec<'static> {
     probe::Exec {
@@ -132,8 +132,19 @@ pub(crate) fn relight(a: RelightArgs) -> Result<(), Failure> {
     } else {
         Pattern::parse(&a.pattern)?
     };
+    if partial::wanted(c)? {
+        return Err(vltm::Error::arg(
+            "partial",
+            "`relight` writes no partial state: split the scan with `vltm matrix $from FOCI $to SPEC $rows A:B $partial F` (relighting is a weighted sum of the matrix's rows)",
+        )
+        .into());
+    }
     let mut src = c.load(&a.capture)?;
-    let r = probe::relight(&mut *src, &pattern, &volume, &c.wave(), c.exec())?;
+    let sigma = c.wave().config(src.geometry())?.sigma();
+    let reach: Vec<Point> = volume.points.iter().chain(&pattern.foci).copied().collect();
+    let r = input::with_prep(&c.input, &mut *src, &reach, sigma, |rows| {
+        probe::relight(rows, &pattern, &volume, &c.wave(), c.exec())
+    })?;
     say!(
         "pattern: {} foci with non-zero weight, {} pass(es) over the capture",
         pattern.foci.len(),
@@ -168,8 +179,20 @@ pub(crate) fn row(a: RowArgs) -> Result<(), Failure> {
         .into());
     }
     let volume = Volume::parse(&c.volume)?;
+    if partial::wanted(c)? {
+        return Err(vltm::Error::arg(
+            "partial",
+            "`row` writes no partial state: split the scan with `vltm matrix $from SPEC $to X,Y,Z $rows A:B $partial F` (the row is the matrix's column at x_b)",
+        )
+        .into());
+    }
     let mut src = c.load(&a.capture)?;
-    let o = probe::row(&mut *src, b, &volume, &c.wave(), c.exec())?;
+    let sigma = c.wave().config(src.geometry())?.sigma();
+    let mut reach = volume.points.clone();
+    reach.push(b);
+    let o = input::with_prep(&c.input, &mut *src, &reach, sigma, |rows| {
+        probe::row(rows, b, &volume, &c.wave(), c.exec())
+    })?;
     let label = Label {
         probe: "row",
         title: "row T(., x_b), two-bounce gate".to_string(),
