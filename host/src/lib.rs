@@ -11,6 +11,7 @@ pub mod io;
 pub mod live;
 pub mod probe;
 pub mod sim;
+pub mod timings;
 pub mod volume;
 
 pub use error::{Error, Result};

@@ -8,7 +8,7 @@ use vltm::probe::{self, Gamma, Pattern};
 use vltm::volume::{Volume, parse_point};
 use vltm_kernel::Point;
 
-use crate::args::{MatrixArgs, RelightArgs, RowArgs};
+use crate::args::{Common, MatrixArgs, RelightArgs, RowArgs};
 use crate::console::{Failure, say};
 use crate::outputs::{check_matrix_out, refuse_overwriting_inputs, write_matrix};
 use crate::summary::{Label, finish};
@@ -132,13 +132,11 @@ pub(crate) fn relight(a: RelightArgs) -> Result<(), Failure> {
     } else {
         Pattern::parse(&a.pattern)?
     };
-    if partial::wanted(c)? {
-        return Err(vltm::Error::arg(
-            "partial",
-            "`relight` writes no partial state: split the scan with `vltm matrix $from FOCI $to SPEC $rows A:B $partial F` (relighting is a weighted sum of the matrix's rows)",
-        )
-        .into());
-    }
+    refuse_parts(
+        c,
+        "relight",
+        "split the scan with `vltm matrix $from FOCI $to SPEC $rows A:B $partial F` (relighting is a weighted sum of the matrix's rows)",
+    )?;
     let mut src = c.load(&a.capture)?;
     let sigma = c.wave().config(src.geometry())?.sigma();
     let reach: Vec<Point> = volume.points.iter().chain(&pattern.foci).copied().collect();
@@ -179,13 +177,11 @@ pub(crate) fn row(a: RowArgs) -> Result<(), Failure> {
         .into());
     }
     let volume = Volume::parse(&c.volume)?;
-    if partial::wanted(c)? {
-        return Err(vltm::Error::arg(
-            "partial",
-            "`row` writes no partial state: split the scan with `vltm matrix $from SPEC $to X,Y,Z $rows A:B $partial F` (the row is the matrix's column at x_b)",
-        )
-        .into());
-    }
+    refuse_parts(
+        c,
+        "row",
+        "split the scan with `vltm matrix $from SPEC $to X,Y,Z $rows A:B $partial F` (the row is the matrix's column at x_b)",
+    )?;
     let mut src = c.load(&a.capture)?;
     let sigma = c.wave().config(src.geometry())?.sigma();
     let mut reach = volume.points.clone();
@@ -200,4 +196,19 @@ pub(crate) fn row(a: RowArgs) -> Result<(), Failure> {
         marks: vec![(b, "x_b".to_string())],
     };
     finish(c, &a.capture, &o, &volume, label)
+}
+
+/// `relight` and `row` run over the whole scan: a part of one (`--rows`, `--partial`) is
+/// refused, naming the option given and the command that splits the same sums.
+fn refuse_parts(c: &Common, probe: &str, hint: &str) -> Result<(), Failure> {
+    let arg = match (&c.rows, &c.partial) {
+        (Some(_), _) => "rows",
+        (None, Some(_)) => "partial",
+        (None, None) => return Ok(()),
+    };
+    Err(vltm::Error::arg(
+        arg,
+        format!("`{probe}` runs over the whole scan and writes no partial state: {hint}"),
+    )
+    .into())
 }

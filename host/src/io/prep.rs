@@ -514,6 +514,26 @@ impl RowSource for Cropped<'_> {
         self.inner.rows()
     }
 
+    fn read_rows(&mut self, first: usize, out: &mut [(Point, Vec<f32>)]) -> Result<()> {
+        use rayon::prelude::*;
+        self.inner.read_rows(first, out)?;
+        let src_nt = self.inner.geometry().nt;
+        let (nt, n0) = (self.geometry.nt, self.start);
+        out.par_iter_mut().for_each(|(_, h)| {
+            let ks = h.len() / src_nt.max(1);
+            // In place, SPAD by SPAD: the destination never passes the source (nt <= src_nt).
+            for s in 0..ks {
+                h.copy_within(s * src_nt + n0..s * src_nt + n0 + nt, s * nt);
+            }
+            h.truncate(ks * nt);
+        });
+        Ok(())
+    }
+
+    fn reads_in_parallel(&self) -> bool {
+        self.inner.reads_in_parallel()
+    }
+
     fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
         let x_l = self.inner.read_row(l, &mut self.buf)?;
         let src_nt = self.inner.geometry().nt;
