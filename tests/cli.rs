@@ -1964,6 +1964,9 @@ fn relight_and_row_preprocess_and_refuse_parts() {
     ];
     let (cap, pre) = (s(&cap), s(&pre));
     let (a, b) = (t.path("a.npy"), t.path("b.npy"));
+    let (a_s, b_s) = (s(&a), s(&b));
+    let part = t.path("p.part");
+    let part_s = s(&part);
     for probe in ["relight", "row"] {
         let point = if probe == "row" {
             "--focus"
@@ -1972,16 +1975,14 @@ fn relight_and_row_preprocess_and_refuse_parts() {
         };
         let base = [probe, &cap, point, FOCUS, "--volume", SPEC, "--out"];
         let mut args = base.to_vec();
-        args.push(&s(&a));
-        let with = args.clone();
-        let mut with = with;
+        args.push(&a_s);
+        let mut with = args.clone();
         with.extend(flags);
         let out = ok(&t.0, &with);
         assert!(out.contains("preprocessing: window bins 10..174"), "{out}");
         let mut by_hand = base.to_vec();
         by_hand[1] = &pre;
-        let bp = s(&b);
-        by_hand.push(&bp);
+        by_hand.push(&b_s);
         ok(&t.0, &by_hand);
         let plain = npy(&b, SHAPE);
         let diff = rel_of_max(&npy(&a, SHAPE), &plain);
@@ -2002,11 +2003,10 @@ fn relight_and_row_preprocess_and_refuse_parts() {
         assert!(err.contains("--background"), "{err}");
         assert!(!a.exists(), "{probe}: an output was written");
         // A part of the scan: one line naming the option, nothing written.
-        let part = t.path("p.part");
         for (extra, named) in [
             (vec!["--rows", "0:4"], "--rows"),
-            (vec!["--rows", "0:4", "--partial", &s(&part)], "--rows"),
-            (vec!["--partial", &s(&part)], "--partial"),
+            (vec!["--rows", "0:4", "--partial", &part_s], "--rows"),
+            (vec!["--partial", &part_s], "--partial"),
         ] {
             let mut v = args.clone();
             v.extend(extra.iter().copied());

@@ -686,6 +686,29 @@ mod tests {
             let e = pass(&bad, order).unwrap_err().to_string();
             assert!(e.contains("CRC-32") && e.contains("bad.npz"), "{e}");
         }
+        // In batches (parallel positional reads): the same rows; the flipped byte caught.
+        let batches = |path: &Path, batch: usize| -> Result<Vec<f32>> {
+            let mut s = open_stream(path)?.expect("stored");
+            let mut all = Vec::new();
+            let mut rows: Vec<(vltm_kernel::Point, Vec<f32>)> = Vec::new();
+            for start in (0..kl).step_by(batch) {
+                rows.resize_with((start + batch).min(kl) - start, || ([0.0; 3], Vec::new()));
+                s.read_rows(start, &mut rows)?;
+                for (i, (x, h)) in rows.iter().enumerate() {
+                    assert_eq!(*x, c.geometry.lasers[start + i]);
+                    all.extend_from_slice(h);
+                }
+            }
+            Ok(all)
+        };
+        for batch in [1, 3, 8, kl] {
+            assert_eq!(batches(&p, batch).unwrap(), c.data, "batch {batch}");
+            let e = batches(&bad, batch).unwrap_err().to_string();
+            assert!(e.contains("CRC-32") && e.contains("bad.npz"), "{e}");
+        }
+        let mut s = open_stream(&p).unwrap().expect("stored");
+        let mut two = vec![([0.0; 3], Vec::new()); 2];
+        assert!(s.read_rows(kl - 1, &mut two).is_err(), "a row past the end");
         std::fs::remove_dir_all(&dir).ok();
     }
 }
