@@ -20,8 +20,10 @@
 # prints instead the parallel-efficiency table on exh16 itself: wall time of the whole command
 # for direct (auto path), column and indirect (defaults, leak correction) at each thread count
 # (best of REPEAT runs, default 2), the speed-up T1/Tn, the efficiency T1/(n·Tn) and Amdahl's
-# serial fraction f = (Tn/T1 − 1/n)/(1 − 1/n). Needs only bash, awk and the binary (set VLTM to a
-# prebuilt one to skip cargo, e.g. on a machine without a toolchain).
+# serial fraction f = (Tn/T1 − 1/n)/(1 − 1/n); then, from one run per probe at --threads 1 with
+# VLTM_TIMINGS=1 (vltm::timings), the serial fraction measured inside the command and the
+# speed-up on 16 threads it bounds. Needs only bash, awk and the binary (set VLTM to a prebuilt
+# one to skip cargo, e.g. on a machine without a toolchain).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 if [ "${1:-}" = "--efficiency" ]; then
@@ -33,7 +35,7 @@ if [ "${1:-}" = "--efficiency" ]; then
   fi
   vltm="${VLTM:-}"
   if [ -z "$vltm" ]; then
-    cargo build -q --release -p vltm --bin vltm
+    cargo build -q --release -p vltm-cli --bin vltm
     vltm="${CARGO_TARGET_DIR:-$PWD/target}/release/vltm"
   fi
   work="$(mktemp -d)"
@@ -78,6 +80,24 @@ if [ "${1:-}" = "--efficiency" ]; then
       fi
       printf '| %s | %s | %.3f | %.2f | %.0f %% | %s |\n' "$probe" "$n" "$t" "$sp" "$eff" "$f"
     done
+  done
+  # The serial fraction measured inside the command (vltm::timings, VLTM_TIMINGS=1) at one
+  # thread: time in serial sections, and with the time outside any section (start-up,
+  # planning, writing), over the whole command. Unlike the wall-clock table it does not
+  # depend on what else the machine runs.
+  echo
+  echo "| probe | threads | wall time [s] | serial sections | outside any section | serial fraction (at most) | Amdahl bound on 16 threads |"
+  echo "|---|---|---|---|---|---|---|"
+  for probe in direct column indirect; do
+    read -r -a args <<<"${cmd[$probe]}"
+    log=$(VLTM_TIMINGS=1 "$vltm" --threads 1 "${args[@]}" "$work/exh16.npz" "${common[@]}" 2>&1 >/dev/null)
+    total=$(grep -o 'timings (1 threads): [0-9.]* s' <<<"$log" | awk '{print $4}')
+    line=$(grep 'serial sections' <<<"$log")
+    ser=$(sed -E 's/.*serial sections ([0-9.]+) %.*/\1/' <<<"$line")
+    out=$(sed -E 's/.*outside any section ([0-9.]+) %.*/\1/' <<<"$line")
+    f=$(calc "($ser + $out) / 100")
+    printf '| %s | 1 | %.3f | %.1f %% | %.1f %% | %.1f %% | %.1fx |\n' "$probe" "$total" "$ser" "$out" \
+      "$(calc "100 * $f")" "$(calc "1 / ($f + (1 - $f) / 16)")"
   done
   exit 0
 fi

@@ -1923,3 +1923,104 @@ fn indirect_summary_gives_pass_two_configuration() {
     );
     assert_eq!(j("indirect:"), pass2.bins(), "J of the summary line");
 }
+
+/// `relight` and `row` preprocess the counts as every probe does (`--t-min`, `--t-max`,
+/// `--rebin`, `--background`): the same result as on a capture windowed, rebinned and
+/// floored by hand; a floor above every count is refused; a part of a scan (`--rows`,
+/// `--partial`) is refused in one line naming the option, nothing written.
+#[test]
+fn relight_and_row_preprocess_and_refuse_parts() {
+    let t = TempDir::new("rowprep");
+    let cap = fixture("two_patches");
+    let c = io::open(&cap).expect("fixture");
+    let g = c.geometry.clone();
+    // Bins 10..174, pairs summed, 1e-4 counts per source bin subtracted, clamped at 0.
+    let (n0, n1, k, floor) = (10usize, 174usize, 2usize, 1e-4f32);
+    let nt = (n1 - n0) / k;
+    let mut data = Vec::with_capacity(g.lasers.len() * g.spads_per_row() * nt);
+    for h in c.data.chunks_exact(g.nt) {
+        for b in 0..nt {
+            let sum: f32 = h[n0 + k * b..n0 + k * (b + 1)].iter().sum();
+            data.push((sum - k as f32 * floor).max(0.0));
+        }
+    }
+    let g2 = io::Geometry {
+        nt,
+        dt: g.dt * k as f64,
+        t0: g.t0 + n0 as f64 * g.dt + (k - 1) as f64 * g.dt / 2.0,
+        ..g
+    };
+    let pre = t.path("pre.npz");
+    io::npz::write(&io::Capture::new(g2, data, &pre).expect("capture"), &pre).expect("write");
+    let flags = [
+        "--t-min",
+        "10b",
+        "--t-max",
+        "174b",
+        "--rebin",
+        "2",
+        "--background",
+        "1e-4",
+    ];
+    let (cap, pre) = (s(&cap), s(&pre));
+    let (a, b) = (t.path("a.npy"), t.path("b.npy"));
+    let (a_s, b_s) = (s(&a), s(&b));
+    let part = t.path("p.part");
+    let part_s = s(&part);
+    for probe in ["relight", "row"] {
+        let point = if probe == "row" {
+            "--focus"
+        } else {
+            "--pattern"
+        };
+        let base = [probe, &cap, point, FOCUS, "--volume", SPEC, "--out"];
+        let mut args = base.to_vec();
+        args.push(&a_s);
+        let mut with = args.clone();
+        with.extend(flags);
+        let out = ok(&t.0, &with);
+        assert!(out.contains("preprocessing: window bins 10..174"), "{out}");
+        let mut by_hand = base.to_vec();
+        by_hand[1] = &pre;
+        by_hand.push(&b_s);
+        ok(&t.0, &by_hand);
+        let plain = npy(&b, SHAPE);
+        let diff = rel_of_max(&npy(&a, SHAPE), &plain);
+        println!("{probe} with the preprocessing flags vs a preprocessed capture: {diff:.1e}");
+        assert!(diff <= 1e-5, "{probe}: {diff:.3e}");
+        // The flags change the result (they are not ignored): the unprocessed capture differs.
+        ok(&t.0, &args);
+        let raw = rel_of_max(&npy(&a, SHAPE), &plain);
+        assert!(
+            raw > 1e-3,
+            "{probe}: the preprocessing changed nothing ({raw:.1e})"
+        );
+        // A floor above every count: refused, naming --background.
+        std::fs::remove_file(&a).expect("rm");
+        let mut dark = args.clone();
+        dark.extend(["--background", "1"]);
+        let err = fails(&t.0, &dark, 2);
+        assert!(err.contains("--background"), "{err}");
+        assert!(!a.exists(), "{probe}: an output was written");
+        // A part of the scan: one line naming the option, nothing written.
+        for (extra, named) in [
+            (vec!["--rows", "0:4"], "--rows"),
+            (vec!["--rows", "0:4", "--partial", &part_s], "--rows"),
+            (vec!["--partial", &part_s], "--partial"),
+        ] {
+            let mut v = args.clone();
+            v.extend(extra.iter().copied());
+            let err = fails(&t.0, &v, 2);
+            assert!(
+                err.contains(named)
+                    && err.contains("vltm matrix")
+                    && err.trim().lines().count() == 1,
+                "{probe}: {err}"
+            );
+            assert!(
+                !a.exists() && !part.exists(),
+                "{probe}: an output was written"
+            );
+        }
+    }
+}

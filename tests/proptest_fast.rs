@@ -24,7 +24,7 @@
 //! | `confocal_diagonal_matches_reference_and_band` (96) | confocal captures (the case's SPAD grid as the wall points, laser and SPAD together; a quarter with one point jittered off the lattice): the confocal FFT convolution (`Path::Planar`), band and lookup vs the sum of one-pair references (`ε·S`, lookup `(ε + ε_interp)·S`), the convolution vs band on every voxel (`ε_pb·S`, also under `compensate_laser`), `Auto` vs band (`(ε_pb + ε_interp)·S`); jittered walls: `Path::Planar` an error; coverage of paths outside the guard, legs and r = 3 |
 //! | `forced_paths_that_do_not_apply_are_errors` | `Path::Lookup` on a column and `Path::Planar` on a higher-order or un-gated column → `Error::Argument` naming `--path`; the paths that apply succeed (every diagonal path on a confocal grid) |
 //! | `planar_path_rejects_non_planar_inputs` | point list, pitch ratio 2/3 or 3/2, one SPAD moved 1 mm, L-shaped or tilted SPADs, a confocal wall point moved 1 mm, a confocal point-list volume: `Path::Planar` → `Error::Argument` naming `--path` and the reason (diagonal and, not confocal, column); `Path::Auto` succeeds and equals `Path::Band` (within `(ε_pb + ε_interp)·S`, as Auto may pick the lookup) |
-//! | `cropped_axis_matches_uncropped_and_reference` (64) | the automatic crop of the time axis (`Wave::crop`) on long axes (Nt × 8, up to 2,400 bins, the returns anywhere in the window): the cropped band and `Auto` diagonals vs the reference (`ε·S`, `Auto` `(ε + ε_interp)·S`) and vs the uncropped ones (`(2ε + ε_interp)·S`); the cropped two-bounce column vs the uncropped one on the alias-free voxels, equal alias counts; the crop recorded in `Output::crop` and its configuration of the kept bins; coverage: most cases cropped |
+//! | `cropped_axis_matches_uncropped_and_reference` (64) | the automatic crop of the time axis (`Wave::crop`) on long axes (Nt × 8, up to 2,400 bins, the returns anywhere in the window): the cropped band and `Auto` diagonals vs the reference (`ε·S`, `Auto` `(ε + ε_interp)·S`) and vs the uncropped ones (`(2ε + ε_interp)·S`); the cropped two-bounce column vs the uncropped one on the alias-free voxels, equal alias counts; `matrix` from the focus and `relight` by it, cropped and not, vs the uncropped column (`2ε·S`); the cropped `row` at the focus vs the uncropped one (`2ε·S` of its own elements); the crop recorded in `Output::crop` and its configuration of the kept bins; coverage: most cases cropped |
 //! | `tolerances_detect_small_mistakes` | the comparisons fail on small perturbations (below) |
 //! | `spad_order_does_not_matter`, `descending_voxel_axes` | edge cases of the grid detection |
 //!
@@ -466,6 +466,11 @@ impl Scan {
     /// Element scales `S(a, b) = Σ_l Σ_s w(|x_l − x_a|)·w(|x_b − x_s|)·Σ_n |H_ls[n]|`, with
     /// `H` as the probes see it (rows divided by the laser falloff under `compensate_laser`).
     fn scales(&self, kind: Kind) -> Vec<f64> {
+        self.scales_ab(|v| (self.a_of(kind, v), v))
+    }
+
+    /// [`Scan::scales`] of the elements `(a, b) = ab(v)` per voxel `v` (a row: `(v, focus)`).
+    fn scales_ab(&self, ab: impl Fn(Point) -> (Point, Point)) -> Vec<f64> {
         let r = self.reference();
         let (kl, ks) = (r.lasers.len(), r.spads.len());
         let g = &self.capture.geometry;
@@ -487,7 +492,8 @@ impl Scan {
             .points
             .iter()
             .map(|v| {
-                let (a, b) = (p64(self.a_of(kind, *v)), p64(*v));
+                let (a, b) = ab(*v);
+                let (a, b) = (p64(a), p64(b));
                 (0..kl)
                     .map(|l| {
                         let wl = k[l] * r.w(reference::dist(&r.lasers[l], &a));
@@ -504,13 +510,23 @@ impl Scan {
     /// Per voxel: `Some(true)` if some (l, s) path time `τ − t0` leaves `interval`,
     /// `Some(false)` if all are inside, `None` within `1e-3·σ` of an edge (either is right).
     fn outside(&self, kind: Kind, interval: (f64, f64)) -> Vec<Option<bool>> {
+        self.outside_ab(|v| (self.a_of(kind, v), v), interval)
+    }
+
+    /// [`Scan::outside`] of the elements `(a, b) = ab(v)` per voxel `v`.
+    fn outside_ab(
+        &self,
+        ab: impl Fn(Point) -> (Point, Point),
+        interval: (f64, f64),
+    ) -> Vec<Option<bool>> {
         let r = self.reference();
         let m = 1e-3 * self.config().sigma();
         self.volume
             .points
             .iter()
             .map(|v| {
-                let (lo, hi) = r.tau_range(&p64(self.a_of(kind, *v)), &p64(*v));
+                let (a, b) = ab(*v);
+                let (lo, hi) = r.tau_range(&p64(a), &p64(b));
                 let (lo, hi) = (lo - r.t0, hi - r.t0);
                 if lo < interval.0 - m || hi > interval.1 + m {
                     Some(true)
@@ -1733,6 +1749,68 @@ fn cropped_axis_matches_uncropped_and_reference() {
             "column cropped vs uncropped: {u:?}, {tol:?}"
         );
         prop_assert_eq!(a.report.aliased, b.report.aliased, "alias counts");
+        // The matrix from the focus and relighting by the focus alone are that column; the
+        // row at the focus swaps the roles (elements (v, focus)): each cropped vs uncropped.
+        let b_amp = amplitudes(&b);
+        let mut wave = croppedc.wave;
+        let from = [fullc.focus];
+        let pattern = probe::Pattern::new(&[(fullc.focus, 1.0)]).expect("pattern");
+        for crop in [true, false] {
+            wave.crop = crop;
+            let mut src = fullc.capture.clone();
+            let m = probe::matrix(
+                &mut src,
+                &from,
+                &fullc.volume.points,
+                &wave,
+                exec(Path::Band),
+            )
+            .expect("matrix");
+            prop_assert_eq!(m.crop.is_some(), crop && a.crop.is_some());
+            let r = probe::relight(&mut src, &pattern, &fullc.volume, &wave, exec(Path::Band))
+                .expect("relight");
+            prop_assert_eq!(r.output.crop, m.crop);
+            for (what, v) in [("matrix", m.intensities()), ("relight", r.output.values)] {
+                let u = compare(&v, &b_amp, &scale, 2.0 * tol.reference, &inside);
+                s.max("matrix/relight vs uncropped column err/tol", u.worst);
+                prop_assert!(u.worst <= 1.0, "{what} (crop {crop}) vs column: {u:?}");
+            }
+        }
+        let ab = |v: Point| (v, fullc.focus);
+        let row_inside: Vec<bool> = fullc
+            .outside_ab(ab, cfg.alias_free())
+            .iter()
+            .map(|o| *o == Some(false))
+            .collect();
+        let row_scale = fullc.scales_ab(ab);
+        let mut src = fullc.capture.clone();
+        let rc = probe::row(
+            &mut src,
+            fullc.focus,
+            &fullc.volume,
+            &croppedc.wave,
+            exec(Path::Band),
+        )
+        .expect("cropped row");
+        let ru = probe::row(
+            &mut src,
+            fullc.focus,
+            &fullc.volume,
+            &fullc.wave,
+            exec(Path::Band),
+        )
+        .expect("uncropped row");
+        prop_assert_eq!(ru.crop, None);
+        let u = compare(
+            &rc.values,
+            &amplitudes(&ru),
+            &row_scale,
+            2.0 * tol.reference,
+            &row_inside,
+        );
+        s.max("row cropped/uncropped err/tol", u.worst);
+        s.count("row cases cropped", rc.crop.is_some());
+        prop_assert!(u.worst <= 1.0, "row cropped vs uncropped: {u:?}, {tol:?}");
         Ok(())
     });
     if coverage_checked() {
@@ -1741,5 +1819,6 @@ fn cropped_axis_matches_uncropped_and_reference() {
             "crop coverage"
         );
         assert!(s.get("column cases cropped") >= 3, "column crop coverage");
+        assert!(s.get("row cases cropped") >= 3, "row crop coverage");
     }
 }

@@ -12,6 +12,7 @@ pub mod io;
 pub mod live;
 pub mod probe;
 pub mod sim;
+pub mod timings;
 pub mod volume;
 
 pub use error::{Error, Result};

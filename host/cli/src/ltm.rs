@@ -8,11 +8,11 @@ use vltm::probe::{self, Gamma, Pattern};
 use vltm::volume::{Volume, parse_point};
 use vltm_kernel::Point;
 
-use crate::args::{MatrixArgs, RelightArgs, RowArgs};
+use crate::args::{Common, MatrixArgs, RelightArgs, RowArgs};
 use crate::console::{Failure, say};
 use crate::outputs::{check_matrix_out, refuse_overwriting_inputs, write_matrix};
 use crate::summary::{Label, finish};
-use crate::{partial, progress};
+use crate::{input, partial, progress};
 
 fn exec() -> probe::Exec<'static> {
     probe::Exec {
@@ -132,8 +132,17 @@ pub(crate) fn relight(a: RelightArgs) -> Result<(), Failure> {
     } else {
         Pattern::parse(&a.pattern)?
     };
+    refuse_parts(
+        c,
+        "relight",
+        "split the scan with `vltm matrix $from FOCI $to SPEC $rows A:B $partial F` (relighting is a weighted sum of the matrix's rows)",
+    )?;
     let mut src = c.load(&a.capture)?;
-    let r = probe::relight(&mut *src, &pattern, &volume, &c.wave(), c.exec())?;
+    let sigma = c.wave().config(src.geometry())?.sigma();
+    let reach: Vec<Point> = volume.points.iter().chain(&pattern.foci).copied().collect();
+    let r = input::with_prep(&c.input, &mut *src, &reach, sigma, |rows| {
+        probe::relight(rows, &pattern, &volume, &c.wave(), c.exec())
+    })?;
     say!(
         "pattern: {} foci with non-zero weight, {} pass(es) over the capture",
         pattern.foci.len(),
@@ -168,8 +177,18 @@ pub(crate) fn row(a: RowArgs) -> Result<(), Failure> {
         .into());
     }
     let volume = Volume::parse(&c.volume)?;
+    refuse_parts(
+        c,
+        "row",
+        "split the scan with `vltm matrix $from SPEC $to X,Y,Z $rows A:B $partial F` (the row is the matrix's column at x_b)",
+    )?;
     let mut src = c.load(&a.capture)?;
-    let o = probe::row(&mut *src, b, &volume, &c.wave(), c.exec())?;
+    let sigma = c.wave().config(src.geometry())?.sigma();
+    let mut reach = volume.points.clone();
+    reach.push(b);
+    let o = input::with_prep(&c.input, &mut *src, &reach, sigma, |rows| {
+        probe::row(rows, b, &volume, &c.wave(), c.exec())
+    })?;
     let label = Label {
         probe: "row",
         title: "row T(., x_b), two-bounce gate".to_string(),
@@ -177,4 +196,19 @@ pub(crate) fn row(a: RowArgs) -> Result<(), Failure> {
         marks: vec![(b, "x_b".to_string())],
     };
     finish(c, &a.capture, &o, &volume, label)
+}
+
+/// `relight` and `row` run over the whole scan: a part of one (`--rows`, `--partial`) is
+/// refused, naming the option given and the command that splits the same sums.
+fn refuse_parts(c: &Common, probe: &str, hint: &str) -> Result<(), Failure> {
+    let arg = match (&c.rows, &c.partial) {
+        (Some(_), _) => "rows",
+        (None, Some(_)) => "partial",
+        (None, None) => return Ok(()),
+    };
+    Err(vltm::Error::arg(
+        arg,
+        format!("`{probe}` runs over the whole scan and writes no partial state: {hint}"),
+    )
+    .into())
 }

@@ -81,7 +81,12 @@ fn main() -> ExitCode {
             }
         }
     }
-    match commands::run(cli.command) {
+    vltm::timings::start();
+    let done = commands::run(cli.command);
+    if let Some(t) = vltm::timings::report() {
+        tell!("{t}");
+    }
+    match done {
         Ok(()) => ExitCode::SUCCESS,
         Err(f) => f.report(),
     }

@@ -171,6 +171,9 @@ pub(crate) fn write_matrix(
         tb[1],
         tb[2]
     );
+    if let Some(c) = m.crop {
+        say!("matrix: {c}");
+    }
     if m.report.aliased > 0 {
         tell!(
             "vltm: warning: {} elements have path lengths outside the capture's alias-free window",

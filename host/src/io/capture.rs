@@ -203,6 +203,27 @@ pub trait RowSource {
     /// I/O or format errors of the underlying file.
     fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point>;
 
+    /// Reads the rows `first..first + out.len()` into `out` (laser spot and histograms per
+    /// row, as [`RowSource::read_row`]): the probes read a batch of rows per pool of threads
+    /// this way. By default one after the other; an uncompressed `.npz` reads them in parallel
+    /// by positional reads, and the wrappers that crop or correct rows do their per-row work
+    /// in parallel, so that reading keeps up with many threads.
+    ///
+    /// # Errors
+    /// As [`RowSource::read_row`].
+    fn read_rows(&mut self, first: usize, out: &mut [(Point, Vec<f32>)]) -> Result<()> {
+        for (l, (x, h)) in (first..).zip(out.iter_mut()) {
+            *x = self.read_row(l, h)?;
+        }
+        Ok(())
+    }
+
+    /// Whether [`RowSource::read_rows`] reads a batch on several threads (for the section
+    /// timings of [`crate::timings`]).
+    fn reads_in_parallel(&self) -> bool {
+        false
+    }
+
     /// The laser rows a probe streams from this source: all of them unless the source is a
     /// [`RowRange`] (a part of a scan split by rows).
     fn rows(&self) -> std::ops::Range<usize> {
@@ -278,6 +299,23 @@ impl RowSource for RowRange<'_> {
             ));
         }
         self.src.read_row(l, out)
+    }
+    fn read_rows(&mut self, first: usize, out: &mut [(Point, Vec<f32>)]) -> Result<()> {
+        for l in [first, first + out.len().max(1) - 1] {
+            if !self.rows.contains(&l) {
+                return Err(Error::arg(
+                    "row",
+                    format!(
+                        "row {l} lies outside the rows {}:{} of this part",
+                        self.rows.start, self.rows.end
+                    ),
+                ));
+            }
+        }
+        self.src.read_rows(first, out)
+    }
+    fn reads_in_parallel(&self) -> bool {
+        self.src.reads_in_parallel()
     }
     fn rows(&self) -> std::ops::Range<usize> {
         self.rows.clone()

@@ -1,7 +1,7 @@
 //! Preprocessing of raw photon counts, as a [`RowSource`] wrapper ([`Prepared`]) that any
 //! reader's rows go through: a time window, rebinning and background subtraction. The CLI
-//! applies it to `direct`, `column` and `indirect` on every format (`--t-min`, `--t-max`,
-//! `--rebin`, `--background`).
+//! applies it to `direct`, `column`, `indirect`, `relight` and `row` on every format
+//! (`--t-min`, `--t-max`, `--rebin`, `--background`).
 //!
 //! Order, per histogram: **window**, then **rebin**, then **background**.
 //!
@@ -514,6 +514,26 @@ impl RowSource for Cropped<'_> {
         self.inner.rows()
     }
 
+    fn read_rows(&mut self, first: usize, out: &mut [(Point, Vec<f32>)]) -> Result<()> {
+        use rayon::prelude::*;
+        self.inner.read_rows(first, out)?;
+        let src_nt = self.inner.geometry().nt;
+        let (nt, n0) = (self.geometry.nt, self.start);
+        out.par_iter_mut().for_each(|(_, h)| {
+            let ks = h.len() / src_nt.max(1);
+            // In place, SPAD by SPAD: the destination never passes the source (nt <= src_nt).
+            for s in 0..ks {
+                h.copy_within(s * src_nt + n0..s * src_nt + n0 + nt, s * nt);
+            }
+            h.truncate(ks * nt);
+        });
+        Ok(())
+    }
+
+    fn reads_in_parallel(&self) -> bool {
+        self.inner.reads_in_parallel()
+    }
+
     fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
         let x_l = self.inner.read_row(l, &mut self.buf)?;
         let src_nt = self.inner.geometry().nt;
@@ -551,6 +571,38 @@ mod tests {
             .map(|(l, n)| f(l, n))
             .collect();
         Capture::new(g, data, std::path::Path::new("t")).unwrap()
+    }
+
+    /// A batch of cropped rows (the in-place, parallel crop) equals the rows cropped one by
+    /// one, and both are the kept bins of the source.
+    #[test]
+    fn cropped_batches_equal_cropped_rows() {
+        let mut c = capture(50, |l, n| (100 * l + n) as f32);
+        let mut one = Vec::new();
+        let mut singles = Vec::new();
+        {
+            let mut cr = Cropped::new(&mut c, 7..31).unwrap();
+            for l in 0..2 {
+                cr.read_row(l, &mut one).unwrap();
+                singles.push(one.clone());
+            }
+        }
+        let mut cr = Cropped::new(&mut c, 7..31).unwrap();
+        let mut batch = vec![([9.0; 3], vec![1.0; 3]); 2];
+        cr.read_rows(0, &mut batch).unwrap();
+        for (l, (x, h)) in batch.iter().enumerate() {
+            assert_eq!(h, &singles[l]);
+            assert_eq!(*x, cr.geometry().lasers[l]);
+            let src_nt = 50;
+            let ks = h.len() / 24;
+            assert_eq!(ks, cr.geometry().spads_per_row());
+            for s in 0..ks {
+                for n in 0..24 {
+                    let want = (100 * l + s * src_nt + 7 + n) as f32;
+                    assert_eq!(h[s * 24 + n], want, "row {l} SPAD {s} bin {n}");
+                }
+            }
+        }
     }
 
     #[test]

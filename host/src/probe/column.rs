@@ -690,10 +690,13 @@ impl Columns {
         let scan = Scan::new(cfg, spads, &mut tables)?;
         let n_state = Probe::state_len(cfg, Target::Column(foci[0]), gate, 0, ks);
         let report = self.report;
+        // In parallel over the foci (and within a focus over chunks of voxels): a column
+        // over few voxels is one chunk.
+        let _t = crate::timings::section("imaging columns", crate::timings::Kind::Parallel);
         self.state
-            .chunks_mut(n_state.max(1))
-            .zip(foci)
-            .zip(&self.legs)
+            .par_chunks_mut(n_state.max(1))
+            .zip(foci.par_iter())
+            .zip(self.legs.par_iter())
             .map(|((st, a), legs)| {
                 let p = Probe::resume(&scan, Target::Column(*a), gate, &[], st, report, *legs)?;
                 image_chunks(&p, &scan, voxels)

@@ -10,6 +10,7 @@ use crate::error::{Error, Result};
 use crate::exec::{Exec, Pass, chunk_len, row_batch};
 use crate::io::capture::{Geometry, RowSource};
 use crate::probe::fast::BandDft;
+use crate::timings::{self, Kind};
 use num_complex::Complex64;
 use rayon::prelude::*;
 use std::sync::Mutex;
@@ -24,6 +25,9 @@ pub(super) struct Job<'a> {
 }
 
 /// Streams every row of `src` through `push` with the row's spectra (computed once per row).
+/// Over a SPAD grid the rows are read in batches of one per pool thread and stage 1 of a
+/// batch runs in parallel (`threads` row buffers); `push` gets the rows in order. A confocal
+/// capture (a scan per row) goes row by row.
 pub(super) fn drive(
     src: &mut dyn RowSource,
     job: Job<'_>,
@@ -35,49 +39,95 @@ pub(super) fn drive(
     check_laser_falloff(&g, wave)?;
     check_memory(&g, cfg, 0, label)?;
     let dft = BandDft::new(cfg);
-    let mut clean = Vec::new();
     let ks = g.spads_per_row();
-    let mut tables = if g.confocal {
-        Vec::new()
-    } else {
-        vec![0.0f32; Scan::tables_len(cfg, ks)]
-    };
-    let mut buf = vec![0.0f32; RowBuffer::len(cfg, ks)];
-    let mut hist = Vec::new();
     let range = src.rows();
     let bar = Pass::start(exec, label, range.len());
-    let fixed: Option<Scan<'_>> = if g.confocal {
-        None
-    } else {
-        Some(Scan::new(cfg, &g.spads, &mut tables)?)
-    };
-    let mut confocal_tables = if g.confocal {
-        vec![0.0f32; Scan::tables_len(cfg, 1)]
-    } else {
-        Vec::new()
-    };
-    for l in range {
-        let x_l = src.read_row(l, &mut hist)?;
-        if wave.compensate_laser {
-            let k = (1.0 / g.laser_falloff(x_l)) as f32;
-            hist.iter_mut().for_each(|h| *h *= k);
+    if g.confocal {
+        // One wall point per row: each row has its own scan (its tables), rows one by one.
+        let mut clean = Vec::new();
+        let mut buf = vec![0.0f32; RowBuffer::len(cfg, ks)];
+        let mut hist = Vec::new();
+        let mut tables = vec![0.0f32; Scan::tables_len(cfg, 1)];
+        for l in range {
+            let x_l = {
+                let _t = timings::section("read rows", Kind::Serial);
+                let x_l = src.read_row(l, &mut hist)?;
+                compensate(&g, wave, x_l, &mut hist);
+                x_l
+            };
+            // Paired (and confocal) scans: the row's own SPAD spot.
+            let spad = [g.spads.get(l).copied().unwrap_or(x_l)];
+            let scan = Scan::new(cfg, &spad, &mut tables)?;
+            let mut rows = RowBuffer::new(&scan, &mut buf)?;
+            let row = {
+                let _t = timings::section("stage 1 (band spectra)", Kind::Serial);
+                load_row(&mut rows, &scan, &dft, x_l, &hist, &mut clean)?
+            };
+            push(&scan, &row)?;
+            bar.advance(1);
         }
-        // Paired (and confocal) scans: the row's own SPAD spot.
-        let spad = [g.spads.get(l).copied().unwrap_or(x_l)];
-        let per_row;
-        let scan = match &fixed {
-            Some(s) => s,
-            None => {
-                per_row = Scan::new(cfg, &spad, &mut confocal_tables)?;
-                &per_row
-            }
+        return Ok(());
+    }
+    // A grid of SPADs: rows read in batches of one per thread, stage 1 of a batch in
+    // parallel (one row buffer per row), then pushed in order.
+    let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
+    let scan = Scan::new(cfg, &g.spads, &mut tables)?;
+    let batch = rayon::current_num_threads().clamp(1, range.len().max(1));
+    let mut bufs: Vec<Vec<f32>> = (0..batch)
+        .map(|_| vec![0.0f32; RowBuffer::len(cfg, ks)])
+        .collect();
+    let mut hists: Vec<(Point, Vec<f32>)> = (0..batch).map(|_| ([0.0; 3], Vec::new())).collect();
+    let mut cleans: Vec<Vec<f32>> = (0..batch).map(|_| Vec::new()).collect();
+    for start in range.clone().step_by(batch) {
+        let n = (start + batch).min(range.end) - start;
+        {
+            let _t = timings::section("read rows", read_kind(src));
+            src.read_rows(start, &mut hists[..n])?;
+            compensate_all(&g, wave, &mut hists[..n]);
+        }
+        let mut rbs = bufs[..n]
+            .iter_mut()
+            .map(|b| RowBuffer::new(&scan, b))
+            .collect::<Result<Vec<_>, _>>()?;
+        let rows = {
+            let _t = timings::section("stage 1 (band spectra)", Kind::Parallel);
+            rbs.par_iter_mut()
+                .zip(hists[..n].par_iter())
+                .zip(cleans[..n].par_iter_mut())
+                .map(|((rb, (x_l, hist)), clean)| load_row(rb, &scan, &dft, *x_l, hist, clean))
+                .collect::<Result<Vec<_>>>()?
         };
-        let mut rows = RowBuffer::new(scan, &mut buf)?;
-        let row = load_row(&mut rows, scan, &dft, x_l, &hist, &mut clean)?;
-        push(scan, &row)?;
-        bar.advance(1);
+        for row in &rows {
+            push(&scan, row)?;
+            bar.advance(1);
+        }
     }
     Ok(())
+}
+
+/// Divides a row by the laser's falloff under `compensate_laser`.
+fn compensate(g: &Geometry, wave: &Wave, x_l: Point, hist: &mut [f32]) {
+    if wave.compensate_laser {
+        let k = (1.0 / g.laser_falloff(x_l)) as f32;
+        hist.iter_mut().for_each(|h| *h *= k);
+    }
+}
+
+/// [`compensate`] on a batch of rows, in parallel.
+fn compensate_all(g: &Geometry, wave: &Wave, rows: &mut [(Point, Vec<f32>)]) {
+    if wave.compensate_laser {
+        rows.par_iter_mut()
+            .for_each(|(x, h)| compensate(g, wave, *x, h));
+    }
+}
+
+/// How a source reads a batch of rows, for the section timings.
+fn read_kind(src: &dyn RowSource) -> Kind {
+    if src.reads_in_parallel() {
+        Kind::Parallel
+    } else {
+        Kind::Serial
+    }
 }
 
 /// Stage 1 of one row through the host's matrix product ([`BandDft`]); non-finite samples
@@ -143,24 +193,24 @@ pub(super) fn drive_rows<W: Send>(
     let range = src.rows();
     let bar = Pass::start(exec, label, range.len());
     let batch = row_batch();
-    // (laser spot, the row's own SPAD spot for paired scans, histograms)
-    let mut rows: Vec<(Point, Point, Vec<f32>)> = Vec::new();
+    // (laser spot, histograms); a paired row's own SPAD spot is `g.spads[l]`.
+    let mut rows: Vec<(Point, Vec<f32>)> = Vec::new();
     for start in range.clone().step_by(batch) {
         let end = (start + batch).min(range.end);
-        rows.resize_with(end - start, || ([0.0; 3], [0.0; 3], Vec::new()));
-        for (l, (x, s, hist)) in (start..end).zip(rows.iter_mut()) {
-            *x = src.read_row(l, hist)?;
-            *s = g.spads.get(l).copied().unwrap_or(*x);
-            if wave.compensate_laser {
-                let k = (1.0 / g.laser_falloff(*x)) as f32;
-                hist.iter_mut().for_each(|h| *h *= k);
-            }
+        rows.resize_with(end - start, || ([0.0; 3], Vec::new()));
+        {
+            let _t = timings::section("read rows", read_kind(src));
+            src.read_rows(start, &mut rows)?;
+            compensate_all(&g, wave, &mut rows);
         }
-        rows.par_iter().try_for_each(|(x_l, x_s, hist)| {
+        let _t = timings::section("rows: stage 1 and probes", Kind::Parallel);
+        rows.par_iter().enumerate().try_for_each(|(i_row, (x_l, hist))| {
+            // Paired (and confocal) scans: the row's own SPAD spot.
+            let x_s = g.spads.get(start + i_row).copied().unwrap_or(*x_l);
             let i = rayon::current_thread_index().unwrap_or(0) % n_slots;
             let mut slot = slots[i].lock().unwrap_or_else(|e| e.into_inner());
             let (w, buf, clean, tables) = &mut *slot;
-            let spad = [*x_s];
+            let spad = [x_s];
             let own;
             let scan = if g.confocal {
                 own = Scan::new(cfg, &spad, tables)?;
@@ -265,6 +315,7 @@ pub(super) fn drive_probes<'m>(
                 .map(|(k, s)| make(scan, k, s))
                 .collect::<Result<_, _>>()?;
         }
+        let _t = timings::section("probe pushes", Kind::Parallel);
         probes
             .par_iter_mut()
             .try_for_each(|p| p.push_row(scan, row))?;

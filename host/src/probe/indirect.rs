@@ -270,18 +270,12 @@ fn pair_sums(
                     .image(&cfg, &spads, &pts, kgate, &pts)
             }
         })?;
-        let mut sums = vec![vec![0.0f64; pts.len()]; shells.len()];
         report = summed_reports(&cols);
-        for (ai, (col, _)) in cols.iter().enumerate() {
-            for (bi, t) in col.iter().enumerate() {
-                let d = dist(pts[ai], pts[bi]);
-                for (sh, sum) in shells.iter().zip(sums.iter_mut()) {
-                    if ai != bi && sh.contains(d) {
-                        sum[bi] += t;
-                    }
-                }
-            }
-        }
+        let _t = crate::timings::section("pair sums", crate::timings::Kind::Parallel);
+        let sums = shells
+            .iter()
+            .map(|sh| pair_sum(&cols, &pts, |ai, bi, d| ai != bi && sh.contains(d)))
+            .collect::<Vec<_>>();
         for (v, sum) in values.iter_mut().zip(sums) {
             for (&i, s) in idx.iter().zip(sum) {
                 v[i] = s as f32;
@@ -295,6 +289,28 @@ fn pair_sums(
         explained,
         config: cfg,
     })
+}
+
+/// `Σ_a T(a, b)` per `b` over the pairs that `keep(a, b, |x_a − x_b|)` accepts, from one
+/// imaged column per focus (`cols[a][b]`), in parallel over `b` (each sum in the order of
+/// `a`, as a serial loop adds them: the same result for any thread count).
+fn pair_sum(
+    cols: &[(Vec<f64>, Report)],
+    pts: &[Point],
+    keep: impl Fn(usize, usize, f32) -> bool + Sync,
+) -> Vec<f64> {
+    (0..pts.len())
+        .into_par_iter()
+        .map(|bi| {
+            let mut s = 0.0f64;
+            for (ai, (col, _)) in cols.iter().enumerate() {
+                if keep(ai, bi, dist(pts[ai], pts[bi])) {
+                    s += col[bi];
+                }
+            }
+            s
+        })
+        .collect()
 }
 
 /// The counters of a pass that imaged one column per focus: the rows and samples of the pass
@@ -361,15 +377,8 @@ pub(super) fn indirect_sum(
         return Ok((values, report));
     }
     let imaged = cols.image(cfg, spads, pts, Gate::Gaussian, pts)?;
-    let mut sum = vec![0.0f64; pts.len()];
     report = summed_reports(&imaged);
-    for (ai, (col, _)) in imaged.iter().enumerate() {
-        for (bi, t) in col.iter().enumerate() {
-            if ai != bi && shell.contains(dist(pts[ai], pts[bi])) {
-                sum[bi] += t;
-            }
-        }
-    }
+    let sum = pair_sum(&imaged, pts, |ai, bi, d| ai != bi && shell.contains(d));
     for (&i, s) in idx.iter().zip(sum) {
         values[i] = s as f32;
     }

@@ -108,6 +108,7 @@ use super::wave::Wave;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Pass, row_batch};
 use crate::io::capture::{Geometry, RowSource};
+use crate::timings::{self, Kind};
 use crate::volume::Volume;
 use num_complex::Complex64;
 use rayon::prelude::*;
@@ -603,15 +604,40 @@ impl DirectModel {
         if opts.method == LeakMethod::Gate {
             let mut model = Self::gate(&g, points, cell, wave, opts)?;
             let bar = Pass::start(exec, "leak gate", g.lasers.len());
-            let mut row = Vec::new();
-            let mut kept = Vec::new();
             let mut energy = GateEnergy::default();
-            for l in 0..g.lasers.len() {
-                src.read_row(l, &mut row)?;
-                kept.clone_from(&row);
-                model.subtract_row(l, &mut kept);
-                energy.add(&row, &kept);
-                bar.advance(1);
+            // Batches of rows: read (in parallel where the source can), then each row's
+            // windows cut and its energy measured in parallel, the energies added in row order.
+            let batch = row_batch();
+            let mut rows: Vec<(Point, Vec<f32>)> = Vec::new();
+            for start in (0..g.lasers.len()).step_by(batch) {
+                let end = (start + batch).min(g.lasers.len());
+                rows.resize_with(end - start, || ([0.0; 3], Vec::new()));
+                {
+                    let kind = if src.reads_in_parallel() {
+                        Kind::Parallel
+                    } else {
+                        Kind::Serial
+                    };
+                    let _t = timings::section("read rows", kind);
+                    src.read_rows(start, &mut rows)?;
+                }
+                let _t = timings::section("leak windows", Kind::Parallel);
+                let per_row: Vec<GateEnergy> = rows
+                    .par_iter()
+                    .enumerate()
+                    .map(|(i, (_, row))| {
+                        let mut kept = row.clone();
+                        model.subtract_row(start + i, &mut kept);
+                        let mut e = GateEnergy::default();
+                        e.add(row, &kept);
+                        e
+                    })
+                    .collect();
+                for e in per_row {
+                    energy.total += e.total;
+                    energy.cut += e.cut;
+                }
+                bar.advance(end - start);
             }
             drop(bar);
             model.explained = energy.explained()?;
@@ -860,6 +886,26 @@ impl RowSource for LeakCorrected<'_> {
             None => self.model.subtract_row(l, out),
         }
         Ok(x)
+    }
+
+    fn read_rows(&mut self, first: usize, out: &mut [(Point, Vec<f32>)]) -> Result<()> {
+        if self.energy.is_some() {
+            // Measuring: the energies summed row by row, in order.
+            for (l, (x, h)) in (first..).zip(out.iter_mut()) {
+                *x = self.read_row(l, h)?;
+            }
+            return Ok(());
+        }
+        self.src.read_rows(first, out)?;
+        let model = self.model;
+        out.par_iter_mut()
+            .enumerate()
+            .for_each(|(i, (_, h))| model.subtract_row(first + i, h));
+        Ok(())
+    }
+
+    fn reads_in_parallel(&self) -> bool {
+        self.energy.is_none()
     }
 
     fn rows(&self) -> std::ops::Range<usize> {

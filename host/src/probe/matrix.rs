@@ -35,6 +35,7 @@
 //! `--pattern` (relight). Per-thread row buffers: `2·threads` rows of histograms, as every probe.
 
 use super::column::{Columns, column_aliased, column_amplitudes, factorised_columns};
+use super::crop::{Reach, with_crop};
 use super::drive::*;
 use super::wave::*;
 use crate::budget;
@@ -75,8 +76,11 @@ pub struct Matrix {
     pub passes: usize,
     /// Wall-clock seconds.
     pub seconds: f64,
-    /// The kernel configuration (λ, σ, J, margin).
+    /// The kernel configuration (λ, σ, J, margin), of the cropped time axis.
     pub config: Config,
+    /// The part of the time axis kept ([`Wave::crop`]: the paths between the two sets);
+    /// `None`: all of it.
+    pub crop: Option<Crop>,
 }
 
 impl Matrix {
@@ -254,27 +258,34 @@ pub(super) fn matrix_acc(
         super::wave::ColumnGate::TwoBounce,
         exec,
     )?;
-    let cfg = wave.column_config(src.geometry(), from, to)?;
-    let ks = src.geometry().spads_per_row();
-    let per =
-        Probe::state_bytes(&cfg, Target::Column([0.0, 0.0, 1.0]), Gate::Gaussian, 0, ks) as u128;
-    budget::check(
-        || {
-            format!(
-                "argument `$from`: the accumulators of all {nf} foci (a partial state holds them all) and the matrix"
-            )
-        },
-        out_bytes
-            .saturating_add(imaging_bytes(nt))
-            .saturating_add(per.saturating_mul(nf as u128)),
-    )?;
-    let job = Job {
-        cfg: &cfg,
-        wave,
-        exec,
+    let reach = Reach {
+        foci: Some(from),
+        voxels: to,
+        late: false,
     };
-    let cols = factorised_columns(src, job, from, Gate::Gaussian, "matrix")?;
-    Ok((cols, cfg))
+    with_crop(src, wave, exec, reach, |src, exec, _| {
+        let cfg = wave.column_config(src.geometry(), from, to)?;
+        let ks = src.geometry().spads_per_row();
+        let per = Probe::state_bytes(&cfg, Target::Column([0.0, 0.0, 1.0]), Gate::Gaussian, 0, ks)
+            as u128;
+        budget::check(
+            || {
+                format!(
+                    "argument `$from`: the accumulators of all {nf} foci (a partial state holds them all) and the matrix"
+                )
+            },
+            out_bytes
+                .saturating_add(imaging_bytes(nt))
+                .saturating_add(per.saturating_mul(nf as u128)),
+        )?;
+        let job = Job {
+            cfg: &cfg,
+            wave,
+            exec,
+        };
+        let cols = factorised_columns(src, job, from, Gate::Gaussian, "matrix")?;
+        Ok((cols, cfg))
+    })
 }
 
 /// The matrix from the accumulated columns of [`matrix_acc`] (a merged, complete partial
@@ -332,6 +343,7 @@ pub(super) fn matrix_of_columns(
         passes: 1,
         seconds: t.elapsed().as_secs_f64(),
         config: *cfg,
+        crop: None,
     })
 }
 
@@ -364,37 +376,46 @@ pub fn matrix(
         super::wave::ColumnGate::TwoBounce,
         exec,
     )?;
-    let cfg = wave.column_config(src.geometry(), from, to)?;
-    let ks = src.geometry().spads_per_row();
-    let fixed = out_bytes.saturating_add(imaging_bytes(nt));
-    let per_pass = foci_per_pass(&cfg, ks, nf, fixed, "from", "the matrix")?;
-    let mut amplitudes = vec![Complex32::new(0.0, 0.0); nf * nt];
-    let mut report = Report::default();
-    let mut passes = 0;
-    for (c, foci) in from.chunks(per_pass).enumerate() {
-        let rows = &mut amplitudes[c * per_pass * nt..];
-        let r = amplitude_pass(
-            src,
-            Job {
-                cfg: &cfg,
-                wave,
-                exec,
-            },
-            foci,
-            to,
-            "matrix",
-            |i, amp| {
-                for (o, z) in rows[i * nt..(i + 1) * nt].iter_mut().zip(amp) {
-                    *o = Complex32::new(z.re as f32, z.im as f32);
-                }
-            },
-        )?;
-        report = Report {
-            aliased: report.aliased + r.aliased,
-            ..r
-        };
-        passes += 1;
-    }
+    let reach = Reach {
+        foci: Some(from),
+        voxels: to,
+        late: false,
+    };
+    let (amplitudes, report, passes, cfg, crop) =
+        with_crop(src, wave, exec, reach, |src, exec, crop| {
+            let cfg = wave.column_config(src.geometry(), from, to)?;
+            let ks = src.geometry().spads_per_row();
+            let fixed = out_bytes.saturating_add(imaging_bytes(nt));
+            let per_pass = foci_per_pass(&cfg, ks, nf, fixed, "from", "the matrix")?;
+            let mut amplitudes = vec![Complex32::new(0.0, 0.0); nf * nt];
+            let mut report = Report::default();
+            let mut passes = 0;
+            for (c, foci) in from.chunks(per_pass).enumerate() {
+                let rows = &mut amplitudes[c * per_pass * nt..];
+                let r = amplitude_pass(
+                    src,
+                    Job {
+                        cfg: &cfg,
+                        wave,
+                        exec,
+                    },
+                    foci,
+                    to,
+                    "matrix",
+                    |i, amp| {
+                        for (o, z) in rows[i * nt..(i + 1) * nt].iter_mut().zip(amp) {
+                            *o = Complex32::new(z.re as f32, z.im as f32);
+                        }
+                    },
+                )?;
+                report = Report {
+                    aliased: report.aliased + r.aliased,
+                    ..r
+                };
+                passes += 1;
+            }
+            Ok((amplitudes, report, passes, cfg, crop))
+        })?;
     Ok(Matrix {
         amplitudes,
         n_from: nf,
@@ -403,6 +424,7 @@ pub fn matrix(
         passes,
         seconds: t.elapsed().as_secs_f64(),
         config: cfg,
+        crop,
     })
 }
 
@@ -528,46 +550,54 @@ pub fn relight(
         super::wave::ColumnGate::TwoBounce,
         exec,
     )?;
-    let cfg = wave.column_config(src.geometry(), &pattern.foci, &volume.points)?;
-    let ks = src.geometry().spads_per_row();
-    let per_pass = foci_per_pass(
-        &cfg,
-        ks,
-        pattern.foci.len(),
-        fixed,
-        "pattern",
-        "the relit image",
-    )?;
-    let mut acc = vec![Complex64::new(0.0, 0.0); nb];
-    let mut report = Report::default();
-    let mut passes = 0;
-    for (foci, weights) in pattern
-        .foci
-        .chunks(per_pass)
-        .zip(pattern.weights.chunks(per_pass))
-    {
-        let r = amplitude_pass(
-            src,
-            Job {
-                cfg: &cfg,
-                wave,
-                exec,
-            },
-            foci,
-            &volume.points,
-            "relight",
-            |i, amp| {
-                for (o, z) in acc.iter_mut().zip(amp) {
-                    *o += z * weights[i];
-                }
-            },
+    let reach = Reach {
+        foci: Some(&pattern.foci),
+        voxels: &volume.points,
+        late: false,
+    };
+    let (acc, report, passes, cfg, crop) = with_crop(src, wave, exec, reach, |src, exec, crop| {
+        let cfg = wave.column_config(src.geometry(), &pattern.foci, &volume.points)?;
+        let ks = src.geometry().spads_per_row();
+        let per_pass = foci_per_pass(
+            &cfg,
+            ks,
+            pattern.foci.len(),
+            fixed,
+            "pattern",
+            "the relit image",
         )?;
-        report = Report {
-            aliased: report.aliased + r.aliased,
-            ..r
-        };
-        passes += 1;
-    }
+        let mut acc = vec![Complex64::new(0.0, 0.0); nb];
+        let mut report = Report::default();
+        let mut passes = 0;
+        for (foci, weights) in pattern
+            .foci
+            .chunks(per_pass)
+            .zip(pattern.weights.chunks(per_pass))
+        {
+            let r = amplitude_pass(
+                src,
+                Job {
+                    cfg: &cfg,
+                    wave,
+                    exec,
+                },
+                foci,
+                &volume.points,
+                "relight",
+                |i, amp| {
+                    for (o, z) in acc.iter_mut().zip(amp) {
+                        *o += z * weights[i];
+                    }
+                },
+            )?;
+            report = Report {
+                aliased: report.aliased + r.aliased,
+                ..r
+            };
+            passes += 1;
+        }
+        Ok((acc, report, passes, cfg, crop))
+    })?;
     let amplitudes = acc;
     let values = amplitudes.iter().map(|z| z.norm_sqr() as f32).collect();
     Ok(Relit {
@@ -578,7 +608,7 @@ pub fn relight(
             seconds: t.elapsed().as_secs_f64(),
             config: cfg,
             path: crate::exec::Path::Band,
-            crop: None,
+            crop,
             aligned: None,
         },
         passes,

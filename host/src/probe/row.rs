@@ -16,6 +16,7 @@
 //! spectra (`Ks·(Nt + 2J + 3)` f32) — never the capture; the transposing `--swap-roles`
 //! holds all of it (`4·Kl·Ks·Nt` bytes).
 
+use super::crop::{Reach, with_crop};
 use super::drive::*;
 use super::wave::*;
 use crate::error::Result;
@@ -56,98 +57,109 @@ pub fn row(
         super::wave::ColumnGate::TwoBounce,
         exec,
     )?;
-    let cfg = wave.column_config(&g, voxels, &to)?;
-    let j = cfg.bins().max(1);
-    let span = cfg.span();
-    let (klo, inv) = ((cfg.k_lo() as f64 / span) as f32, (1.0 / span) as f32);
-    let (d1, d4) = legs(&g, &cfg);
-    // The camera leg of every SPAD: weight and phase seeds (fixed for the whole scan).
-    let cam: Vec<(f32, Complex32, Complex32)> = g
-        .spads
-        .iter()
-        .map(|s| {
-            let d_bs = dist(b, *s);
-            (
-                cfg.weight(d_bs),
-                cis_turns(klo * d_bs),
-                cis_turns(inv * d_bs),
-            )
-        })
-        .collect();
-    let d_ab: Vec<f32> = voxels.iter().map(|a| dist(*a, b)).collect();
-    let mut acc = vec![Complex64::new(0.0, 0.0); voxels.len()];
-    let mut v = vec![Complex64::new(0.0, 0.0); j];
-    let mut report = Report::default();
-    let cl = chunk_len(voxels.len());
-    drive(
-        src,
-        Job {
-            cfg: &cfg,
-            wave,
-            exec,
-        },
-        "row",
-        |_, row| {
-            v.fill(Complex64::new(0.0, 0.0));
-            for ((w, p0, step), hg) in cam.iter().zip(row.band().chunks_exact(j)) {
-                let mut p = *p0 * *w;
-                for (o, h) in v.iter_mut().zip(hg) {
-                    let x = *h * p;
-                    *o += Complex64::new(f64::from(x.re), f64::from(x.im));
-                    p *= *step;
-                }
-            }
-            let laser = row.laser();
-            let vr = &v;
-            voxels
-                .par_chunks(cl)
-                .zip(acc.par_chunks_mut(cl))
-                .zip(d_ab.par_chunks(cl))
-                .for_each(|((vs, os), ds)| {
-                    for ((a, o), dab) in vs.iter().zip(os.iter_mut()).zip(ds) {
-                        let d_la = dist(laser, *a);
-                        let tau = d_la + dab;
-                        let mut ph = cis_turns(klo * tau);
-                        let step = cis_turns(inv * tau);
-                        let mut z = Complex64::new(0.0, 0.0);
-                        for x in vr {
-                            z += *x * Complex64::new(f64::from(ph.re), f64::from(ph.im));
-                            ph *= step;
-                        }
-                        *o += z * f64::from(cfg.weight(d_la));
-                    }
-                });
-            report.rows += 1;
-            report.non_finite += u64::from(row.non_finite());
-            Ok(())
-        },
-    )?;
-    // Elements whose path times leave the alias-free window (0 under the automatic margin).
-    let window = geometry::alias_window(&cfg);
-    let span_of = |pts: &[Point], legs: &[f64], x: Point| {
-        pts.iter()
-            .zip(legs)
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |r, (p, d)| {
-                geometry::widen(r, f64::from(dist(*p, x)) + d)
-            })
+    // The time axis cropped to the paths' reach: the laser leg ends at the volume's x_a, the
+    // camera leg starts at x_b.
+    let reach = Reach {
+        foci: Some(voxels),
+        voxels: &to,
+        late: false,
     };
-    let (c_lo, c_hi) = span_of(&g.spads, &d4, b);
-    report.aliased = voxels
-        .par_iter()
-        .zip(&d_ab)
-        .filter(|(a, dab)| {
-            let legs = span_of(&g.lasers, &d1, **a);
-            let d = f64::from(**dab);
-            geometry::leaves_window(window, legs, (d + c_lo, d + c_hi))
-        })
-        .count();
+    let (acc, report, cfg, crop) = with_crop(src, wave, exec, reach, |src, exec, crop| {
+        let g = src.geometry().clone();
+        let cfg = wave.column_config(&g, voxels, &to)?;
+        let j = cfg.bins().max(1);
+        let span = cfg.span();
+        let (klo, inv) = ((cfg.k_lo() as f64 / span) as f32, (1.0 / span) as f32);
+        let (d1, d4) = legs(&g, &cfg);
+        // The camera leg of every SPAD: weight and phase seeds (fixed for the whole scan).
+        let cam: Vec<(f32, Complex32, Complex32)> = g
+            .spads
+            .iter()
+            .map(|s| {
+                let d_bs = dist(b, *s);
+                (
+                    cfg.weight(d_bs),
+                    cis_turns(klo * d_bs),
+                    cis_turns(inv * d_bs),
+                )
+            })
+            .collect();
+        let d_ab: Vec<f32> = voxels.iter().map(|a| dist(*a, b)).collect();
+        let mut acc = vec![Complex64::new(0.0, 0.0); voxels.len()];
+        let mut v = vec![Complex64::new(0.0, 0.0); j];
+        let mut report = Report::default();
+        let cl = chunk_len(voxels.len());
+        drive(
+            src,
+            Job {
+                cfg: &cfg,
+                wave,
+                exec,
+            },
+            "row",
+            |_, row| {
+                v.fill(Complex64::new(0.0, 0.0));
+                for ((w, p0, step), hg) in cam.iter().zip(row.band().chunks_exact(j)) {
+                    let mut p = *p0 * *w;
+                    for (o, h) in v.iter_mut().zip(hg) {
+                        let x = *h * p;
+                        *o += Complex64::new(f64::from(x.re), f64::from(x.im));
+                        p *= *step;
+                    }
+                }
+                let laser = row.laser();
+                let vr = &v;
+                voxels
+                    .par_chunks(cl)
+                    .zip(acc.par_chunks_mut(cl))
+                    .zip(d_ab.par_chunks(cl))
+                    .for_each(|((vs, os), ds)| {
+                        for ((a, o), dab) in vs.iter().zip(os.iter_mut()).zip(ds) {
+                            let d_la = dist(laser, *a);
+                            let tau = d_la + dab;
+                            let mut ph = cis_turns(klo * tau);
+                            let step = cis_turns(inv * tau);
+                            let mut z = Complex64::new(0.0, 0.0);
+                            for x in vr {
+                                z += *x * Complex64::new(f64::from(ph.re), f64::from(ph.im));
+                                ph *= step;
+                            }
+                            *o += z * f64::from(cfg.weight(d_la));
+                        }
+                    });
+                report.rows += 1;
+                report.non_finite += u64::from(row.non_finite());
+                Ok(())
+            },
+        )?;
+        // Elements whose path times leave the alias-free window (0 under the automatic margin).
+        let window = geometry::alias_window(&cfg);
+        let span_of = |pts: &[Point], legs: &[f64], x: Point| {
+            pts.iter()
+                .zip(legs)
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |r, (p, d)| {
+                    geometry::widen(r, f64::from(dist(*p, x)) + d)
+                })
+        };
+        let (c_lo, c_hi) = span_of(&g.spads, &d4, b);
+        report.aliased = voxels
+            .par_iter()
+            .zip(&d_ab)
+            .filter(|(a, dab)| {
+                let legs = span_of(&g.lasers, &d1, **a);
+                let d = f64::from(**dab);
+                geometry::leaves_window(window, legs, (d + c_lo, d + c_hi))
+            })
+            .count();
+        Ok((acc, report, cfg, crop))
+    })?;
     Ok(Output {
         values: acc.iter().map(|z| z.norm_sqr() as f32).collect(),
         report,
         seconds: t.elapsed().as_secs_f64(),
         config: cfg,
         path: Path::Band,
-        crop: None,
+        crop,
         aligned: None,
     })
 }
