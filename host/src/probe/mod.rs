@@ -33,6 +33,7 @@ mod indirect;
 mod leak;
 mod matrix;
 pub mod partial;
+pub mod resample;
 mod row;
 mod wave;
 pub mod window;

@@ -119,6 +119,25 @@ fn spad_grid(spads: &[Point], tol: f64) -> Result<SpadGrid, String> {
     Ok(SpadGrid { x, y, z: z0, index })
 }
 
+/// A regular wall lattice in a plane `z = const` (the SPADs, or a confocal capture's wall
+/// points): origin and pitch along x and y (m; pitch 0 along an axis of one point), points
+/// per axis and the plane's z, or why the points are not one (lattice tolerance `tol`, m).
+///
+/// # Errors
+/// A one-line reason, as [`layout`] gives it.
+pub(crate) fn wall_lattice(
+    wall: &[Point],
+    tol: f64,
+) -> Result<([f64; 2], [f64; 2], [usize; 2], f64), String> {
+    let g = spad_grid(wall, tol)?;
+    Ok((
+        [g.x.origin, g.y.origin],
+        [g.x.pitch, g.y.pitch],
+        [g.x.n, g.y.n],
+        g.z,
+    ))
+}
+
 /// How a voxel axis maps onto a SPAD axis: polyphase factor, offsets, sub-grid lengths.
 #[derive(Clone, Debug)]
 struct AxisMap {
@@ -190,6 +209,13 @@ pub(crate) struct Layout {
     pub(super) cell: Vec<usize>,
     /// The (depth, phase) sub-grids, depth-major.
     pub(super) subgrids: Vec<SubGrid>,
+}
+
+impl Layout {
+    /// FFT size `(Mx, My)` and number of (depth, phase) sub-grids.
+    pub(crate) fn size(&self) -> (usize, usize, usize) {
+        (self.mx, self.my, self.subgrids.len())
+    }
 }
 
 /// Lays out `voxels` (C order over `shape`) against the wall lattice `wall`, or says why
