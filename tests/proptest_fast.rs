@@ -1783,7 +1783,12 @@ fn off_lattice_volume(c: &Case, f: [f32; 2]) -> Volume {
 fn resampled_volumes_match_reference_and_band() {
     use vltm::probe::resample::{MAX_ERROR, Resample};
     let factor = prop_oneof![0.36f32..=0.45, 0.55f32..=0.95, 1.05f32..=1.7];
-    let strategy = (case(), [factor.clone(), factor], 0.12f64..=0.6, any::<bool>());
+    let strategy = (
+        case(),
+        [factor.clone(), factor],
+        0.12f64..=0.6,
+        any::<bool>(),
+    );
     let s = property(
         "resampled off-lattice volumes vs reference and band",
         SEED ^ 6,
@@ -1833,7 +1838,10 @@ fn resampled_volumes_match_reference_and_band() {
             prop_assert_eq!(out.path, Path::Planar);
             // The support grid is named, unless the wall is one point along every axis the
             // grid spans (then the exact path applies and nothing is resampled).
-            prop_assert!(out.aligned.is_some() || bound == 0.0, "the support grid is named");
+            prop_assert!(
+                out.aligned.is_some() || bound == 0.0,
+                "the support grid is named"
+            );
             // The support grid's FFT rounding (its transform is larger than the asked grid's).
             let sup = &plan.support;
             let m = if *confocal {
@@ -1845,9 +1853,21 @@ fn resampled_volumes_match_reference_and_band() {
             }
             .expect("the support grid is on the lattice");
             let fft = U32 * 8.0 * (m as f64).log2();
-            let pr = compare(&out.values, &truth, &scale, tol.reference + fft + bound, &all);
+            let pr = compare(
+                &out.values,
+                &truth,
+                &scale,
+                tol.reference + fft + bound,
+                &all,
+            );
             let pb = compare(&out.values, &b, &scale, tol.pb + fft + bound, &all);
-            let ab = compare(&auto.values, &b, &scale, tol.pb + fft + bound + tol.interp, &all);
+            let ab = compare(
+                &auto.values,
+                &b,
+                &scale,
+                tol.pb + fft + bound + tol.interp,
+                &all,
+            );
             s.max("resampled/ref err/tol", pr.worst);
             s.max("resampled/band err/tol", pb.worst);
             s.max("resampled/band err/S", pb.rel);
@@ -1855,10 +1875,19 @@ fn resampled_volumes_match_reference_and_band() {
             s.max("stated bound", bound);
             s.count("resampled", true);
             s.count("resampled, confocal", *confocal);
-            s.count("resampled, refined k ≥ 2", plan.refine().iter().any(|&k| k >= 2));
+            s.count(
+                "resampled, refined k ≥ 2",
+                plan.refine().iter().any(|&k| k >= 2),
+            );
             s.count("resampled, legs in time", c.legs.is_some());
-            prop_assert!(pr.worst <= 1.0, "resampled vs reference: {pr:?}, bound {bound:e}, {tol:?}");
-            prop_assert!(pb.worst <= 1.0, "resampled vs band: {pb:?}, bound {bound:e}, {tol:?}");
+            prop_assert!(
+                pr.worst <= 1.0,
+                "resampled vs reference: {pr:?}, bound {bound:e}, {tol:?}"
+            );
+            prop_assert!(
+                pb.worst <= 1.0,
+                "resampled vs band: {pb:?}, bound {bound:e}, {tol:?}"
+            );
             prop_assert!(ab.worst <= 1.0, "auto vs band: {ab:?}");
             Ok(())
         },

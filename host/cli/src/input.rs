@@ -149,10 +149,16 @@ fn check_stats(p: &Prepared<'_>) -> Result<(), Failure> {
 
 /// `vltm info`: what the file holds, the conventions assumed, counts after preprocessing,
 /// and with `--png` the summed transient.
-pub fn info(path: &Path, input: &Input, png: Option<&Path>) -> Result<(), Failure> {
+pub fn info(
+    path: &Path,
+    input: &Input,
+    png: Option<&Path>,
+    volume: Option<&str>,
+) -> Result<(), Failure> {
     if let Some(p) = png {
         refuse_overwriting_inputs(&[path.to_path_buf()], &[p])?;
     }
+    let volume = volume.map(vltm::volume::Volume::parse).transpose()?;
     let mut c = if io::extension(path).as_deref() == Some("mat") {
         let m = io::mat::read(path, &input.mat_options())?;
         say!("capture      {}", path.display());
@@ -189,6 +195,7 @@ pub fn info(path: &Path, input: &Input, png: Option<&Path>) -> Result<(), Failur
         }
         None => (c.geometry.clone(), summed(&mut c)?),
     };
+    say!("fast paths   {}", probe::fft_note(&g, volume.as_ref()));
     let total: f64 = sum.iter().sum();
     let (peak, _) =
         sum.iter().enumerate().fold(

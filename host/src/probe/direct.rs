@@ -119,7 +119,11 @@ fn direct_acc_on(
     // Off the wall's lattice: the FFT path on a support grid, resampled, when it applies and
     // is cheaper than the rivals (whole-scan flops).
     let rival = if g.confocal {
-        confocal::band_total(g, &cfg, volume.len()).min(confocal::lookup_flops(g, &cfg, volume.len()))
+        confocal::band_total(g, &cfg, volume.len()).min(confocal::lookup_flops(
+            g,
+            &cfg,
+            volume.len(),
+        ))
     } else {
         let band = band_flops(g, &cfg, volume.len());
         let lookup = lookup_plan(g, &cfg, volume.len())
@@ -168,22 +172,28 @@ fn direct_acc_on(
         PlanarUse::Diagonal,
         rival,
     )? {
-        let (acc, report) = direct_planar(src, job, volume, &planar)?;
+        let (acc, report) = with_note(job, path_note(g, volume, &cfg, Path::Planar), |job| {
+            direct_planar(src, job, volume, &planar)
+        })?;
         (acc, report, Path::Planar)
     } else if exec.path == Path::Lookup
         || (exec.path == Path::Auto && lookup_cost.is_some_and(|l| l < band_cost))
     {
-        let (acc, report) = direct_lookup(src, job, volume)?;
+        let (acc, report) = with_note(job, path_note(g, volume, &cfg, Path::Lookup), |job| {
+            direct_lookup(src, job, volume)
+        })?;
         (acc, report, Path::Lookup)
     } else {
-        let (acc, report) = elementwise(
-            src,
-            job,
-            Target::Diagonal,
-            Gate::Gaussian,
-            &volume.points,
-            "direct",
-        )?;
+        let (acc, report) = with_note(job, path_note(g, volume, &cfg, Path::Band), |job| {
+            elementwise(
+                src,
+                job,
+                Target::Diagonal,
+                Gate::Gaussian,
+                &volume.points,
+                "direct",
+            )
+        })?;
         (acc, report, Path::Band)
     };
     Ok((
@@ -212,24 +222,30 @@ fn direct_confocal(
     let lookup = confocal::lookup_flops(g, cfg, volume.len());
     let conv = confocal::choose(g, cfg, volume, job.exec.path, band.min(lookup))?;
     let (values, report, path) = if let Some(c) = conv {
-        let (v, r) = confocal::direct_convolution(src, job, volume, c)?;
+        let (v, r) = with_note(job, path_note(g, volume, cfg, Path::Planar), |job| {
+            confocal::direct_convolution(src, job, volume, c)
+        })?;
         (v, r, Path::Planar)
     } else if job.exec.path == Path::Lookup
         || (job.exec.path == Path::Auto
             && lookup < band
             && lookup_plan(g, cfg, volume.len()).fits())
     {
-        let (v, r) = direct_lookup(src, job, volume)?;
+        let (v, r) = with_note(job, path_note(g, volume, cfg, Path::Lookup), |job| {
+            direct_lookup(src, job, volume)
+        })?;
         (v, r, Path::Lookup)
     } else {
-        let (v, r) = elementwise(
-            src,
-            job,
-            Target::Diagonal,
-            Gate::Gaussian,
-            &volume.points,
-            "direct",
-        )?;
+        let (v, r) = with_note(job, path_note(g, volume, cfg, Path::Band), |job| {
+            elementwise(
+                src,
+                job,
+                Target::Diagonal,
+                Gate::Gaussian,
+                &volume.points,
+                "direct",
+            )
+        })?;
         (v, r, Path::Band)
     };
     Ok((values, report, path))
@@ -469,7 +485,11 @@ pub(super) fn planar_core(
         }
     }
     let fb_acc = merged.map_or_else(Vec::new, |m| {
-        m.accumulators().iter().take(fb_pts.len()).copied().collect()
+        m.accumulators()
+            .iter()
+            .take(fb_pts.len())
+            .copied()
+            .collect()
     });
     Ok((acc, fb_acc, report))
 }
@@ -539,7 +559,9 @@ fn choose_resampled(
         if forced {
             Err(Error::arg(
                 "path",
-                format!("the planar FFT path does not apply: {exact}; nor on a resampled grid: {why}"),
+                format!(
+                    "the planar FFT path does not apply: {exact}; nor on a resampled grid: {why}"
+                ),
             ))
         } else {
             Ok(None)
@@ -630,20 +652,22 @@ fn direct_resampled(
     rs: &Resample,
     engine: Engine,
 ) -> Result<(Vec<Complex64>, Report)> {
+    let note = format!("path planar, resampled from --volume {}", rs.support_spec());
+    with_note(job, note, |job| {
+        direct_resampled_on(src, job, volume, rs, engine)
+    })
+}
+
+/// [`direct_resampled`] with its progress label set.
+fn direct_resampled_on(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    volume: &Volume,
+    rs: &Resample,
+    engine: Engine,
+) -> Result<(Vec<Complex64>, Report)> {
     let g = src.geometry().clone();
     let cfg = job.cfg;
-    let note = format!(
-        "path planar, resampled from --volume {}",
-        rs.support_spec()
-    );
-    let labelled = job.exec.progress.map(|p| super::crop::Labelled { inner: p, note });
-    let job = Job {
-        exec: Exec {
-            progress: labelled.as_ref().map(|l| l as &dyn crate::exec::Progress),
-            ..job.exec
-        },
-        ..job
-    };
     let sup = &rs.support;
     let none = vec![false; sup.len()];
     let outside = match &engine {
@@ -661,4 +685,31 @@ fn direct_resampled(
         acc[i] = a;
     }
     Ok((acc, report))
+}
+
+/// Runs `f` with `job`'s progress labels carrying `note` (`direct (path lookup; …)`).
+fn with_note<T>(job: Job<'_>, note: String, f: impl FnOnce(Job<'_>) -> Result<T>) -> Result<T> {
+    let labelled = job
+        .exec
+        .progress
+        .map(|p| super::crop::Labelled { inner: p, note });
+    f(Job {
+        exec: Exec {
+            progress: labelled.as_ref().map(|l| l as &dyn crate::exec::Progress),
+            ..job.exec
+        },
+        ..job
+    })
+}
+
+/// The progress note of the diagonal's path: `path planar`, or for a slower path on a grid
+/// the aligned `--volume` the FFT path would take.
+fn path_note(g: &Geometry, volume: &Volume, cfg: &Config, path: Path) -> String {
+    let hint = (path != Path::Planar && volume.axes.is_some())
+        .then(|| fast_hint(g, volume, cfg.wavelength()))
+        .flatten();
+    match hint {
+        Some(v) => format!("path {}; the FFT path would take --volume {v}", path.name()),
+        None => format!("path {}", path.name()),
+    }
 }

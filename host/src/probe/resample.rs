@@ -235,7 +235,9 @@ impl Resample {
             let sine = |pts: &[Point]| {
                 pts.iter()
                     .map(|p| {
-                        let dx = (blo - f64::from(p[i])).abs().max((bhi - f64::from(p[i])).abs());
+                        let dx = (blo - f64::from(p[i]))
+                            .abs()
+                            .max((bhi - f64::from(p[i])).abs());
                         let dz = zs
                             .iter()
                             .map(|z| (z - f64::from(p[2])).abs())
