@@ -670,8 +670,22 @@ fn direct_resampled_on(
     let cfg = job.cfg;
     let sup = &rs.support;
     let none = vec![false; sup.len()];
+    // A confocal capture whose rows share one leg offset (wall-to-wall time axes): the guard
+    // in the convolution's kernel, as on the aligned path, no band-path voxels.
+    let (legs1, legs4) = legs(&g, cfg);
+    let offsets: Vec<f32> = legs1
+        .iter()
+        .zip(&legs4)
+        .map(|(a, b)| (a + b - cfg.t0()) as f32)
+        .collect();
+    let uniform = offsets.iter().all(|&x| x == offsets[0]);
+    let engine = match engine {
+        Engine::Confocal(c) if uniform => Engine::Confocal(c.with_guard(offsets[0])),
+        e => e,
+    };
     let outside = match &engine {
         Engine::Planar(_) => outside_guard(&g, cfg, &volume.points),
+        Engine::Confocal(_) if uniform => vec![false; volume.len()],
         Engine::Confocal(_) => confocal::outside_guard(&g, cfg, &volume.points),
     };
     let fb_idx: Vec<usize> = (0..outside.len()).filter(|&i| outside[i]).collect();
