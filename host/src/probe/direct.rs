@@ -436,7 +436,7 @@ pub(super) fn planar_core(
                 &scan,
                 Target::Diagonal,
                 Gate::Gaussian,
-                &fb_pts,
+                fb_pts,
                 st,
             )?)
         };
@@ -526,7 +526,7 @@ fn lookup_row_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
 /// The FFT engine of a resampled volume: the planar convolution per row, or the confocal one.
 enum Engine {
     Planar(Box<Planar>),
-    Confocal(Confocal),
+    Confocal(Box<Confocal>),
 }
 
 /// The resampled FFT path ([`crate::probe::resample`]) for `volume`: `None` when it is not the
@@ -628,7 +628,7 @@ fn choose_resampled(
         if !forced && c.flops() + rs.flops() >= rival {
             return Ok(None);
         }
-        Engine::Confocal(c)
+        Engine::Confocal(Box::new(c))
     } else {
         let rows = g.lasers.len() as f64;
         let cost = planar_flops((mx, my, slices), cfg, sup.len(), PlanarUse::Diagonal) * rows;
@@ -680,7 +680,7 @@ fn direct_resampled_on(
         .collect();
     let uniform = offsets.iter().all(|&x| x == offsets[0]);
     let engine = match engine {
-        Engine::Confocal(c) if uniform => Engine::Confocal(c.with_guard(offsets[0])),
+        Engine::Confocal(c) if uniform => Engine::Confocal(Box::new((*c).with_guard(offsets[0]))),
         e => e,
     };
     let outside = match &engine {

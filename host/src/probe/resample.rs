@@ -277,7 +277,7 @@ impl Resample {
                 let t = (c - origin[i]) / h;
                 let i0 = t.floor();
                 let u = t - i0;
-                if u < 1e-6 || u > 1.0 - 1e-6 {
+                if !(1e-6..=1.0 - 1e-6).contains(&u) {
                     raw.push((t.round() as i64, vec![1.0]));
                 } else {
                     any_off = true;

@@ -119,16 +119,16 @@ fn spad_grid(spads: &[Point], tol: f64) -> Result<SpadGrid, String> {
     Ok(SpadGrid { x, y, z: z0, index })
 }
 
+/// Origin (m), pitch (m), points per axis (x, y) and the plane's z (m) of a wall lattice.
+pub(crate) type WallLattice = ([f64; 2], [f64; 2], [usize; 2], f64);
+
 /// A regular wall lattice in a plane `z = const` (the SPADs, or a confocal capture's wall
 /// points): origin and pitch along x and y (m; pitch 0 along an axis of one point), points
 /// per axis and the plane's z, or why the points are not one (lattice tolerance `tol`, m).
 ///
 /// # Errors
 /// A one-line reason, as [`layout`] gives it.
-pub(crate) fn wall_lattice(
-    wall: &[Point],
-    tol: f64,
-) -> Result<([f64; 2], [f64; 2], [usize; 2], f64), String> {
+pub(crate) fn wall_lattice(wall: &[Point], tol: f64) -> Result<WallLattice, String> {
     let g = spad_grid(wall, tol)?;
     Ok((
         [g.x.origin, g.y.origin],
@@ -588,10 +588,10 @@ mod tests {
     #[test]
     fn fft_lengths() {
         let smooth = |mut m: usize| {
-            while m % 2 == 0 {
+            while m.is_multiple_of(2) {
                 m /= 2;
             }
-            while m % 3 == 0 {
+            while m.is_multiple_of(3) {
                 m /= 3;
             }
             m == 1
