@@ -195,6 +195,69 @@ fn info_describes_a_capture() {
     }
 }
 
+/// `info --volume` says which path a grid takes and the aligned grid; `direct` on that
+/// off-lattice grid with the planar path forced runs it resampled and names the support grid.
+#[test]
+fn off_lattice_volume_is_named_and_resampled() {
+    let t = TempDir::new("offgrid");
+    let cap = fixture("two_patches");
+    let cap = cap.to_str().expect("utf-8");
+    let vol = "-0.7:0.7:15,-0.7:0.7:15,0.4:1.3:4";
+    let out = ok(&t.0, &["info", cap, "--volume", vol]);
+    for want in [
+        "fast paths   FFT path for wall-parallel grids of x-y pitch 0.1428571 x 0.1428571 m",
+        "the volume   off the wall's lattice",
+        "the nearest aligned grid is --volume -0.7:0.7285714:11,-0.7:0.7285714:11,0.4:1.3:4",
+    ] {
+        assert!(
+            out.contains(want),
+            "`vltm info --volume` lacks `{want}`:\n{out}"
+        );
+    }
+    let out = ok(
+        &t.0,
+        &[
+            "direct",
+            cap,
+            "--volume",
+            vol,
+            "--wavelength",
+            "0.8",
+            "--sigma",
+            "0.4",
+            "--path",
+            "planar",
+            "--out",
+            "d.npy",
+        ],
+    );
+    assert!(
+        out.contains("path planar, resampled") && out.contains("computed on --volume"),
+        "{out}"
+    );
+    let err = fails(
+        &t.0,
+        &[
+            "direct",
+            cap,
+            "--volume",
+            vol,
+            "--wavelength",
+            "0.2",
+            "--path",
+            "planar",
+            "--out",
+            "e.npy",
+        ],
+        2,
+    );
+    assert!(err.contains("nor on a resampled grid"), "{err}");
+    assert!(
+        !t.0.join("e.npy").exists(),
+        "nothing written on a refused path"
+    );
+}
+
 /// `simulate` renders a scene file to the same capture as the committed fixture.
 #[test]
 fn simulate_writes_the_committed_capture() {

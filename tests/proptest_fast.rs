@@ -25,6 +25,7 @@
 //! | `forced_paths_that_do_not_apply_are_errors` | `Path::Lookup` on a column and `Path::Planar` on a higher-order or un-gated column → `Error::Argument` naming `--path`; the paths that apply succeed (every diagonal path on a confocal grid) |
 //! | `planar_path_rejects_non_planar_inputs` | point list, pitch ratio 2/3 or 3/2, one SPAD moved 1 mm, L-shaped or tilted SPADs, a confocal wall point moved 1 mm, a confocal point-list volume: `Path::Planar` → `Error::Argument` naming `--path` and the reason (diagonal and, not confocal, column); `Path::Auto` succeeds and equals `Path::Band` (within `(ε_pb + ε_interp)·S`, as Auto may pick the lookup) |
 //! | `cropped_axis_matches_uncropped_and_reference` (64) | the automatic crop of the time axis (`Wave::crop`) on long axes (Nt × 8, up to 2,400 bins, the returns anywhere in the window): the cropped band and `Auto` diagonals vs the reference (`ε·S`, `Auto` `(ε + ε_interp)·S`) and vs the uncropped ones (`(2ε + ε_interp)·S`); the cropped two-bounce column vs the uncropped one on the alias-free voxels, equal alias counts; `matrix` from the focus and `relight` by it, cropped and not, vs the uncropped column (`2ε·S`); the cropped `row` at the focus vs the uncropped one (`2ε·S` of its own elements); the crop recorded in `Output::crop` and its configuration of the kept bins; coverage: most cases cropped |
+//! | `resampled_volumes_match_reference_and_band` (96) | off-lattice grids (pitch 0.36–1.7 × a wall pitch of 0.12–0.6 λ) on planar and confocal scans, `Path::Planar` forced: resampled from a support grid (`vltm::probe::resample`) vs the reference `(ε + e_rs)·S` and vs band `(ε_pb + e_rs)·S`, `e_rs` the plan's stated bound; a bound above `MAX_ERROR` → `Error::Argument` naming `--path`; `Auto` vs band. 1,000 cases: 0.26 of the reference tolerance, 0.060 of the band one; a 0.003-pitch shift of the interpolator fails it |
 //! | `tolerances_detect_small_mistakes` | the comparisons fail on small perturbations (below) |
 //! | `spad_order_does_not_matter`, `descending_voxel_axes` | edge cases of the grid detection |
 //!
@@ -998,7 +999,10 @@ struct Confocal {
 
 impl Case {
     fn build_confocal(&self, jitter: f32) -> Confocal {
-        let volume = self.volume();
+        self.build_confocal_with(jitter, self.volume())
+    }
+
+    fn build_confocal_with(&self, jitter: f32, volume: Volume) -> Confocal {
         let mut wall = wall_grid(self.spad_n, self.spad_origin, self.spad_pitch);
         if jitter != 0.0 && wall.len() > 1 {
             let mid = wall.len() / 2;
@@ -1820,5 +1824,164 @@ fn cropped_axis_matches_uncropped_and_reference() {
         );
         assert!(s.get("column cases cropped") >= 3, "column crop coverage");
         assert!(s.get("row cases cropped") >= 3, "row crop coverage");
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Property 6: off-lattice grids on the FFT paths (support grid + resampling)
+// ---------------------------------------------------------------------------------------------
+
+/// A voxel grid whose x–y pitch is `f` × the wall's (per axis), not a divisor of it, at the
+/// case's offset, slices and counts (at least 2 voxels along an axis with > 1 wall point).
+fn off_lattice_volume(c: &Case, f: [f32; 2]) -> Volume {
+    let nz = c.voxel_n[2];
+    let n = [0, 1].map(|i| {
+        if c.spad_n[i] > 1 {
+            c.voxel_n[i].max(2)
+        } else {
+            c.voxel_n[i]
+        }
+    });
+    let pv = [0, 1].map(|i| c.spad_pitch[i] * f[i]);
+    let lo = [c.voxel_origin[0], c.voxel_origin[1], c.z0];
+    let hi = [
+        lo[0] + (n[0] - 1) as f32 * pv[0],
+        lo[1] + (n[1] - 1) as f32 * pv[1],
+        lo[2] + (nz - 1) as f32 * c.dz,
+    ];
+    Volume::grid(lo, hi, [n[0], n[1], nz]).expect("z > 0 by construction")
+}
+
+/// Off-lattice voxel grids (pitch 0.36–1.7 × the wall's, away from its divisors) on planar and
+/// confocal scans whose wall pitch is 0.12–0.6 λ: with the planar path forced, either the
+/// resampled FFT path runs (`Output::aligned` names its support grid) and matches the `f64`
+/// reference within `(ε + e_rs)·S` and the band path within `(ε_pb + e_rs)·S` (`e_rs` the
+/// plan's stated bound, [`vltm::probe::resample::Resample::bound`]), or the plan's bound
+/// exceeds [`vltm::probe::resample::MAX_ERROR`] and the forced path is an `Error::Argument`
+/// naming `--path`; `Path::Auto` is within `(ε_pb + e_rs + ε_interp)·S` of the band path.
+#[test]
+fn resampled_volumes_match_reference_and_band() {
+    use vltm::probe::resample::{MAX_ERROR, Resample};
+    let factor = prop_oneof![0.36f32..=0.45, 0.55f32..=0.95, 1.05f32..=1.7];
+    let strategy = (
+        case(),
+        [factor.clone(), factor],
+        0.12f64..=0.6,
+        any::<bool>(),
+    );
+    let s = property(
+        "resampled off-lattice volumes vs reference and band",
+        SEED ^ 6,
+        96,
+        strategy,
+        |(c, f, q, confocal), s| {
+            let pitch = (c.lambda * q) as f32;
+            let c = Case {
+                spad_pitch: [pitch; 2],
+                ..c.clone()
+            };
+            let volume = off_lattice_volume(&c, *f);
+            let (sc, truth, scale, tol) = if *confocal {
+                let cc = c.build_confocal_with(0.0, volume);
+                let (t, sc) = (cc.truth(), cc.scales());
+                let tol = cc.tol();
+                (cc.scan, t, sc, tol)
+            } else {
+                let sc = c.build_with(Kind::Diagonal, volume);
+                let t = sc.reference_amplitudes(Kind::Diagonal);
+                let scale = sc.scales(Kind::Diagonal);
+                let tol = sc.tol(Kind::Diagonal);
+                (sc, t, scale, tol)
+            };
+            let cfg = sc.config();
+            let g = &sc.capture.geometry;
+            let plan = Resample::new(g, &cfg, &sc.volume);
+            let forced = sc.direct(Path::Planar);
+            let band = sc.direct(Path::Band).expect("band");
+            let b = amplitudes(&band);
+            let all = vec![true; scale.len()];
+            let auto = sc.direct(Path::Auto).expect("auto");
+            let plan = match plan {
+                Err(why) => {
+                    let msg = path_error(forced, "off-lattice, not resampled");
+                    prop_assert!(msg.contains("resampled"), "{} ({})", msg, why);
+                    s.count("bound too large: forced planar an error", true);
+                    let ab = compare(&auto.values, &b, &scale, tol.pb + tol.interp, &all);
+                    prop_assert!(ab.worst <= 1.0, "auto vs band: {ab:?}");
+                    return Ok(());
+                }
+                Ok(p) => p,
+            };
+            let bound = plan.bound();
+            prop_assert!(bound <= MAX_ERROR, "bound {bound:e}");
+            let out = forced.expect("the resampled FFT path applies");
+            prop_assert_eq!(out.path, Path::Planar);
+            // The support grid is named, unless the wall is one point along every axis the
+            // grid spans (then the exact path applies and nothing is resampled).
+            prop_assert!(
+                out.aligned.is_some() || bound == 0.0,
+                "the support grid is named"
+            );
+            // The support grid's FFT rounding (its transform is larger than the asked grid's).
+            let sup = &plan.support;
+            let m = if *confocal {
+                ConfocalFft::new(&cfg, &g.lasers, &sup.points, sup.shape)
+                    .map(|p| p.shape().0 * p.shape().1)
+            } else {
+                Planar::new(&cfg, &g.spads, &sup.points, sup.shape)
+                    .map(|p| p.shape().0 * p.shape().1)
+            }
+            .expect("the support grid is on the lattice");
+            let fft = U32 * 8.0 * (m as f64).log2();
+            let pr = compare(
+                &out.values,
+                &truth,
+                &scale,
+                tol.reference + fft + bound,
+                &all,
+            );
+            let pb = compare(&out.values, &b, &scale, tol.pb + fft + bound, &all);
+            let ab = compare(
+                &auto.values,
+                &b,
+                &scale,
+                tol.pb + fft + bound + tol.interp,
+                &all,
+            );
+            s.max("resampled/ref err/tol", pr.worst);
+            s.max("resampled/band err/tol", pb.worst);
+            s.max("resampled/band err/S", pb.rel);
+            s.max("resampled/band |ΔI|/max I", pb.int);
+            s.max("stated bound", bound);
+            s.count("resampled", true);
+            s.count("resampled, confocal", *confocal);
+            s.count(
+                "resampled, refined k ≥ 2",
+                plan.refine().iter().any(|&k| k >= 2),
+            );
+            s.count("resampled, legs in time", c.legs.is_some());
+            prop_assert!(
+                pr.worst <= 1.0,
+                "resampled vs reference: {pr:?}, bound {bound:e}, {tol:?}"
+            );
+            prop_assert!(
+                pb.worst <= 1.0,
+                "resampled vs band: {pb:?}, bound {bound:e}, {tol:?}"
+            );
+            prop_assert!(ab.worst <= 1.0, "auto vs band: {ab:?}");
+            Ok(())
+        },
+    );
+    if !coverage_checked() {
+        return;
+    }
+    for k in [
+        "resampled",
+        "resampled, confocal",
+        "resampled, refined k ≥ 2",
+        "resampled, legs in time",
+        "bound too large: forced planar an error",
+    ] {
+        assert!(s.get(k) >= 3, "coverage: only {} cases with {k}", s.get(k));
     }
 }

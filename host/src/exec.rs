@@ -33,15 +33,19 @@ pub trait Progress: Sync {
 pub enum Path {
     /// The cheapest applicable path by the flop model of DESIGN §B.8: for the diagonal the
     /// least of planar (when the SPADs — for a confocal capture the scanned wall points — form
-    /// a regular grid and the volume is a wall-parallel grid whose pitch divides its pitch),
-    /// lookup and band; for Gaussian-gated columns planar or band.
+    /// a regular grid and the volume is a wall-parallel grid whose pitch divides its pitch, or
+    /// any other regular wall-parallel grid resampled from such a grid within its stated
+    /// bound, [`crate::probe::resample`]), lookup and band; for Gaussian-gated columns planar
+    /// or band.
     #[default]
     Auto,
     /// The kernel's band sum per (voxel, SPAD) (DESIGN §B.2.3): any geometry, every probe.
     Band,
     /// The planar FFT convolution ([`crate::probe::fast::planar`]; for confocal captures
-    /// [`crate::probe::fast::confocal`]) for the diagonal and Gaussian-gated columns; an
-    /// error if it does not apply (another geometry, another gate).
+    /// [`crate::probe::fast::confocal`]) for the diagonal and Gaussian-gated columns (the
+    /// diagonal also on grids off the wall's lattice, resampled: [`crate::probe::resample`]);
+    /// an error if it does not apply (another geometry, another gate, a resampling bound
+    /// above [`crate::probe::resample::MAX_ERROR`]).
     Planar,
     /// Diagonal only: the gated baseband + cubic lookup ([`crate::probe::fast::lookup`]), any
     /// geometry (confocal captures included); an error for columns.

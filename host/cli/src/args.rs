@@ -50,6 +50,10 @@ pub(crate) enum Command {
         /// Plot the summed transient (counts against path length, log scale) to this PNG.
         #[arg(long, value_name = "F.png")]
         png: Option<PathBuf>,
+        /// Also say which evaluation path direct light over this volume takes (the FFT path,
+        /// resampled or not, or the lookup) and the aligned grid the FFT path would take.
+        #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
+        volume: Option<String>,
         #[command(flatten)]
         input: Input,
     },

@@ -28,8 +28,9 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
         Command::Info {
             capture,
             png,
+            volume,
             input,
-        } => input::info(&capture, &input, png.as_deref()),
+        } => input::info(&capture, &input, png.as_deref(), volume.as_deref()),
         Command::Simulate {
             scene,
             out,

@@ -149,15 +149,22 @@ fn check_stats(p: &Prepared<'_>) -> Result<(), Failure> {
 /// `vltm info`: what the file holds, the conventions assumed, counts after preprocessing
 /// (the library's [`vltm::front::info::info`], the text every front end prints), and with
 /// `--png` the summed transient.
-pub fn info(path: &Path, input: &Input, png: Option<&Path>) -> Result<(), Failure> {
+pub fn info(
+    path: &Path,
+    input: &Input,
+    png: Option<&Path>,
+    volume: Option<&str>,
+) -> Result<(), Failure> {
     use vltm::front::info::Stream;
     if let Some(p) = png {
         refuse_overwriting_inputs(&[path.to_path_buf()], &[p])?;
     }
+    let volume = volume.map(vltm::volume::Volume::parse).transpose()?;
     let sum = vltm::front::info::info(
         path,
         &input.mat_options(),
         input.prep()?,
+        volume.as_ref(),
         &mut |stream, line| {
             // The library names the options that set a convention by parameter.
             let line = vltm::error::respell(line, flag);

@@ -24,7 +24,7 @@ impl Progress for Bars {
             ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} rows, {eta} left")
                 .unwrap_or_else(|_| ProgressStyle::default_bar()),
         );
-        bar.set_message(label.to_string());
+        bar.set_message(vltm::error::respell(label, crate::console::flag));
         if let Some(old) = self.bar().replace(bar) {
             old.finish_and_clear();
         }
@@ -37,6 +37,7 @@ impl Progress for Bars {
     }
 
     fn warn(&self, message: &str) {
+        let message = vltm::error::respell(message, crate::console::flag);
         let line = || crate::console::tell!("vltm: warning: {message}");
         match self.bar().as_ref() {
             Some(b) => b.suspend(line),

@@ -88,12 +88,18 @@ pub(crate) fn finish(
     if let Some(c) = o.crop {
         say!("{}: {c}", label.probe);
     }
-    if let Some(v) = &o.aligned {
-        say!(
+    match (&o.aligned, o.path) {
+        (Some(v), probe::Path::Planar) => say!(
+            "{}: path planar, resampled (the volume's x-y pitch does not divide the wall's: computed on --volume {v}, then interpolated within {:.0e} of the scale)",
+            label.probe,
+            probe::resample::MAX_ERROR
+        ),
+        (Some(v), p) => say!(
             "{}: path {} (the FFT path needs an x-y pitch dividing the wall's; it would take --volume {v})",
             label.probe,
-            o.path.name()
-        );
+            p.name()
+        ),
+        (None, _) => {}
     }
     let meta = Provenance {
         probe: label.probe,

@@ -421,7 +421,7 @@ fn info_text<'py>(
     let (lines, warnings, sum) = py
         .detach(|| -> vltm::Result<_> {
             let (mut lines, mut warnings) = (Vec::new(), Vec::new());
-            let sum = vltm::front::info::info(&path, &mat, prep, &mut |stream, line| {
+            let sum = vltm::front::info::info(&path, &mat, prep, None, &mut |stream, line| {
                 let line = vltm::error::respell(line, crate::param);
                 match stream {
                     Stream::Out => lines.push(line),

@@ -40,7 +40,8 @@ pub struct Summed {
 /// Writes `vltm info`'s layout text of the capture file `path` line by line to `say`, and
 /// returns the summed transient. `.mat` files are read with `mat`'s overrides (other formats
 /// refuse them: they record their time axis and grid); `prep` preprocesses the counts first
-/// (the time window, rebinning and background of [`crate::io::prep`]). Lines may name
+/// (the time window, rebinning and background of [`crate::io::prep`]); `volume`, when given,
+/// is named in the `fast paths` line (the path it takes, or the aligned grid that is fast). Lines may name
 /// parameters as `$name` (a `.mat` file's conventions): front ends spell them as their own
 /// flags or arguments ([`crate::error::respell`]).
 ///
@@ -51,6 +52,7 @@ pub fn info(
     path: &Path,
     mat: &io::mat::MatOptions,
     prep: Option<Prep>,
+    volume: Option<&crate::volume::Volume>,
     say: &mut dyn FnMut(Stream, &str),
 ) -> Result<Summed> {
     let mut out = |s: String| say(Stream::Out, &s);
@@ -103,6 +105,10 @@ pub fn info(
         }
         None => (c.geometry.clone(), front::summed(&mut c)?),
     };
+    out(format!(
+        "fast paths   {}",
+        crate::probe::fft_note(&g, volume)
+    ));
     let total: f64 = counts.iter().sum();
     let (peak, _) =
         counts.iter().enumerate().fold(
@@ -228,10 +234,12 @@ fn describe(c: &Capture, out: &mut dyn FnMut(String)) {
                 "planar (every point at one z)".to_string()
             }
         ));
-        out("paths        direct: band or lookup (each row imaged with its own laser and SPAD \
+        out(
+            "paths        direct: band or lookup (each row imaged with its own laser and SPAD \
              spot); no FFT path (the planar one needs a SPAD grid, the confocal one coincident \
              points); columns, rows and the matrix need a SPAD grid"
-            .to_string());
+                .to_string(),
+        );
     }
     out(format!(
         "laser_xyz    {:?} m, sensor_xyz {:?} m",

@@ -152,9 +152,8 @@ pub(super) fn direct_convolution(
     volume: &Volume,
     conv: Confocal,
 ) -> Result<(Vec<Complex64>, Report)> {
-    let Job { cfg, wave, exec } = job;
+    let cfg = job.cfg;
     let g = src.geometry().clone();
-    check_laser_falloff(&g, wave)?;
     let (legs1, legs4) = legs(&g, cfg);
     let offsets: Vec<f32> = legs1
         .iter()
@@ -168,6 +167,26 @@ pub(super) fn direct_convolution(
     };
     let fb_idx: Vec<usize> = (0..skip.len()).filter(|&i| skip[i]).collect();
     let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| volume.points[i]).collect();
+    let (mut acc, fb_acc, report) = convolution_core(src, job, &conv, &skip, &fb_pts)?;
+    for (&i, a) in fb_idx.iter().zip(fb_acc) {
+        acc[i] = a;
+    }
+    Ok((acc, report))
+}
+
+/// The confocal convolution `conv` over its voxel grid (voxels with `skip` left at 0), and
+/// the band path's accumulators of the points `fb_pts`, in one pass over the rows.
+pub(super) fn convolution_core(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    conv: &Confocal,
+    skip: &[bool],
+    fb_pts: &[Point],
+) -> Result<(Vec<Complex64>, Vec<Complex64>, Report)> {
+    let Job { cfg, wave, exec } = job;
+    let g = src.geometry().clone();
+    check_laser_falloff(&g, wave)?;
+    let (legs1, legs4) = legs(&g, cfg);
     let cl = chunk_len(fb_pts.len());
     let chunks: Vec<&[Point]> = fb_pts.chunks(cl).collect();
     let mut states: Vec<Vec<f64>> = chunks
@@ -246,16 +265,14 @@ pub(super) fn direct_convolution(
     }
     drop(bar);
     conv.forward(&mut spectra);
-    let mut acc = vec![Complex64::new(0.0, 0.0); volume.len()];
-    conv.image(&spectra, &skip, &mut acc);
+    let mut acc = vec![Complex64::new(0.0, 0.0); skip.len()];
+    conv.image(&spectra, skip, &mut acc);
     drop(spectra);
-    // The voxels on the band path: their accumulators are their amplitudes.
+    // The points on the band path: their accumulators are their amplitudes.
     let fb_acc = probes
         .iter()
         .zip(&chunks)
-        .flat_map(|(p, c)| p.accumulators().iter().take(c.len()));
-    for (&i, a) in fb_idx.iter().zip(fb_acc) {
-        acc[i] = *a;
-    }
-    Ok((acc, report))
+        .flat_map(|(p, c)| p.accumulators().iter().take(c.len()).copied())
+        .collect();
+    Ok((acc, fb_acc, report))
 }

@@ -177,10 +177,13 @@ pub(super) fn cropped_geometry(g: &Geometry, bins: &Option<Range<usize>>) -> Geo
     }
 }
 
-/// Progress labels with the crop appended (`direct (time axis cropped to …)`).
-struct Labelled<'p> {
-    inner: &'p dyn Progress,
-    note: String,
+/// Progress labels with a note appended (`direct (time axis cropped to …)`, `direct (path
+/// planar)`).
+pub(super) struct Labelled<'p> {
+    /// Where the labelled progress goes.
+    pub(super) inner: &'p dyn Progress,
+    /// The note.
+    pub(super) note: String,
 }
 
 impl Progress for Labelled<'_> {

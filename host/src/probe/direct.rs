@@ -10,7 +10,8 @@ use crate::budget;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path};
 use crate::io::capture::{Geometry, RowSource};
-use crate::probe::fast::{Lookup, Planar, planar};
+use crate::probe::fast::{Confocal, Lookup, Planar, planar};
+use crate::probe::resample::Resample;
 use crate::volume::Volume;
 use num_complex::Complex64;
 use rayon::prelude::*;
@@ -34,9 +35,13 @@ pub fn direct(
     let (a, config) = direct_acc(src, volume, wave, exec)?;
     let values = intensities(&a.acc);
     check_finite(&values, &volume.points, "direct light")?;
-    let aligned = (a.path != Path::Planar && volume.axes.is_some())
-        .then(|| fast_hint(src.geometry(), volume, config.wavelength()))
-        .flatten();
+    let aligned = if a.support.is_some() {
+        a.support.clone()
+    } else {
+        (a.path != Path::Planar && volume.axes.is_some())
+            .then(|| fast_hint(src.geometry(), volume, config.wavelength()))
+            .flatten()
+    };
     Ok(Output {
         values,
         report: a.report,
@@ -56,6 +61,9 @@ pub(super) struct Amplitudes {
     pub(super) path: Path,
     /// The part of the time axis kept.
     pub(super) crop: Option<Crop>,
+    /// When the FFT path computed an off-lattice grid on a support grid and resampled it
+    /// ([`crate::probe::resample`]): the support grid's `--volume` SPEC.
+    pub(super) support: Option<String>,
 }
 
 /// The accumulators of [`direct`] over the source's rows ([`RowSource::rows`]), with the
@@ -107,6 +115,35 @@ fn direct_acc_on(
         exec,
     };
     let g = src.geometry();
+    let rows = g.lasers.len() as f64;
+    // Off the wall's lattice: the FFT path on a support grid, resampled, when it applies and
+    // is cheaper than the rivals (whole-scan flops).
+    let rival = if g.confocal {
+        confocal::band_total(g, &cfg, volume.len()).min(confocal::lookup_flops(
+            g,
+            &cfg,
+            volume.len(),
+        ))
+    } else {
+        let band = band_flops(g, &cfg, volume.len());
+        let lookup = lookup_plan(g, &cfg, volume.len())
+            .fits()
+            .then(|| lookup_row_flops(g, &cfg, volume.len()));
+        lookup.map_or(band, |l| l.min(band)) * rows
+    };
+    if let Some((rs, engine)) = choose_resampled(g, &cfg, volume, exec.path, rival)? {
+        let (acc, report) = direct_resampled(src, job, volume, &rs, engine)?;
+        return Ok((
+            Amplitudes {
+                acc,
+                report,
+                path: Path::Planar,
+                crop: None,
+                support: Some(rs.support_spec()),
+            },
+            cfg,
+        ));
+    }
     if g.confocal {
         let (acc, report, path) = direct_confocal(src, job, volume)?;
         return Ok((
@@ -115,6 +152,7 @@ fn direct_acc_on(
                 report,
                 path,
                 crop: None,
+                support: None,
             },
             cfg,
         ));
@@ -123,12 +161,7 @@ fn direct_acc_on(
     // The lookup competes only when its grid fits the budget (at large σ its carrier and
     // tables grow with N; the band sum then runs in bounded memory).
     let lookup_fits = lookup_plan(g, &cfg, volume.len()).fits();
-    let lookup_cost = lookup_fits.then(|| {
-        let l = Lookup::plan_len(&cfg) as f64;
-        let ks = g.spads_per_row() as f64;
-        // One complex inverse FFT per SPAD, then E0 + 16 flops per (voxel, SPAD) (§B.8).
-        ks * 5.0 * l * l.log2() + volume.len() as f64 * ks * 76.0
-    });
+    let lookup_cost = lookup_fits.then(|| lookup_row_flops(g, &cfg, volume.len()));
     // Planar competes with the cheaper of band and lookup under `Auto`.
     let rival = lookup_cost.map_or(band_cost, |l| l.min(band_cost));
     let (acc, report, path) = if let Some(planar) = choose_planar(
@@ -139,22 +172,28 @@ fn direct_acc_on(
         PlanarUse::Diagonal,
         rival,
     )? {
-        let (acc, report) = direct_planar(src, job, volume, &planar)?;
+        let (acc, report) = with_note(job, path_note(g, volume, &cfg, Path::Planar), |job| {
+            direct_planar(src, job, volume, &planar)
+        })?;
         (acc, report, Path::Planar)
     } else if exec.path == Path::Lookup
         || (exec.path == Path::Auto && lookup_cost.is_some_and(|l| l < band_cost))
     {
-        let (acc, report) = direct_lookup(src, job, volume)?;
+        let (acc, report) = with_note(job, path_note(g, volume, &cfg, Path::Lookup), |job| {
+            direct_lookup(src, job, volume)
+        })?;
         (acc, report, Path::Lookup)
     } else {
-        let (acc, report) = elementwise(
-            src,
-            job,
-            Target::Diagonal,
-            Gate::Gaussian,
-            &volume.points,
-            "direct",
-        )?;
+        let (acc, report) = with_note(job, path_note(g, volume, &cfg, Path::Band), |job| {
+            elementwise(
+                src,
+                job,
+                Target::Diagonal,
+                Gate::Gaussian,
+                &volume.points,
+                "direct",
+            )
+        })?;
         (acc, report, Path::Band)
     };
     Ok((
@@ -163,6 +202,7 @@ fn direct_acc_on(
             report,
             path,
             crop: None,
+            support: None,
         },
         cfg,
     ))
@@ -182,24 +222,30 @@ fn direct_confocal(
     let lookup = confocal::lookup_flops(g, cfg, volume.len());
     let conv = confocal::choose(g, cfg, volume, job.exec.path, band.min(lookup))?;
     let (values, report, path) = if let Some(c) = conv {
-        let (v, r) = confocal::direct_convolution(src, job, volume, c)?;
+        let (v, r) = with_note(job, path_note(g, volume, cfg, Path::Planar), |job| {
+            confocal::direct_convolution(src, job, volume, c)
+        })?;
         (v, r, Path::Planar)
     } else if job.exec.path == Path::Lookup
         || (job.exec.path == Path::Auto
             && lookup < band
             && lookup_plan(g, cfg, volume.len()).fits())
     {
-        let (v, r) = direct_lookup(src, job, volume)?;
+        let (v, r) = with_note(job, path_note(g, volume, cfg, Path::Lookup), |job| {
+            direct_lookup(src, job, volume)
+        })?;
         (v, r, Path::Lookup)
     } else {
-        let (v, r) = elementwise(
-            src,
-            job,
-            Target::Diagonal,
-            Gate::Gaussian,
-            &volume.points,
-            "direct",
-        )?;
+        let (v, r) = with_note(job, path_note(g, volume, cfg, Path::Band), |job| {
+            elementwise(
+                src,
+                job,
+                Target::Diagonal,
+                Gate::Gaussian,
+                &volume.points,
+                "direct",
+            )
+        })?;
         (v, r, Path::Band)
     };
     Ok((values, report, path))
@@ -244,18 +290,7 @@ pub(super) fn choose_planar(
         (Err(_), _) => Ok(None),
         (Ok(p), Path::Planar) => Ok(Some(p)),
         (Ok(p), _) => {
-            let (mx, my, slices) = p.shape();
-            let m = (mx * my) as f64;
-            let j = cfg.bins() as f64;
-            // Complex FFTs of M points, 5·M·log₂M (§B.8), pruned inverse ones about half that.
-            let f = 5.0 * m * m.log2();
-            let per_row =
-                j * (f + slices as f64 * (6.0 * m + 0.75 * f)) + volume.len() as f64 * 8.0 * j;
-            // The column images once; its table costs `slices·J` forward FFTs.
-            let planar = match usage {
-                PlanarUse::Diagonal => per_row,
-                PlanarUse::Column => per_row + slices as f64 * j * f,
-            };
+            let planar = planar_flops(p.shape(), cfg, volume.len(), usage);
             Ok((planar < rival).then_some(p))
         }
     }
@@ -364,11 +399,28 @@ pub(super) fn direct_planar(
     volume: &Volume,
     planar: &Planar,
 ) -> Result<(Vec<Complex64>, Report)> {
-    let cfg = job.cfg;
-    let g = src.geometry().clone();
-    let skip = outside_guard(&g, cfg, &volume.points);
+    let skip = outside_guard(src.geometry(), job.cfg, &volume.points);
     let fb_idx: Vec<usize> = (0..skip.len()).filter(|&i| skip[i]).collect();
     let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| volume.points[i]).collect();
+    let (mut acc, fb_acc, report) = planar_core(src, job, &volume.points, planar, &skip, &fb_pts)?;
+    for (&i, a) in fb_idx.iter().zip(fb_acc) {
+        acc[i] = a;
+    }
+    Ok((acc, report))
+}
+
+/// The planar convolution over the voxels `pts` (its grid; those with `skip` left at 0) and
+/// the band path's accumulators of the points `fb_pts`, in one pass over the rows.
+pub(super) fn planar_core(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    pts: &[Point],
+    planar: &Planar,
+    skip: &[bool],
+    fb_pts: &[Point],
+) -> Result<(Vec<Complex64>, Vec<Complex64>, Report)> {
+    let cfg = job.cfg;
+    let g = src.geometry().clone();
     let ks = g.spads.len();
     let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
     let scan = Scan::new(cfg, &g.spads, &mut tables)?;
@@ -384,19 +436,18 @@ pub(super) fn direct_planar(
                 &scan,
                 Target::Diagonal,
                 Gate::Gaussian,
-                &fb_pts,
+                fb_pts,
                 st,
             )?)
         };
         workers.push(DiagWorker {
             scratch: planar.scratch(),
-            acc: vec![Complex64::new(0.0, 0.0); volume.len()],
+            acc: vec![Complex64::new(0.0, 0.0); pts.len()],
             fallback,
             rows: 0,
             non_finite: 0,
         });
     }
-    let pts = &volume.points;
     let workers = drive_rows(src, job, &scan, "direct", workers, |w, _, row| {
         let laser = row.laser();
         planar.apply(
@@ -406,7 +457,7 @@ pub(super) fn direct_planar(
                 let d = dist(laser, *v);
                 (d, cfg.weight(d))
             },
-            &skip,
+            skip,
             &mut w.scratch,
             &mut w.acc,
         );
@@ -417,7 +468,7 @@ pub(super) fn direct_planar(
         w.non_finite += u64::from(row.non_finite());
         Ok(())
     })?;
-    let mut acc = vec![Complex64::new(0.0, 0.0); volume.len()];
+    let mut acc = vec![Complex64::new(0.0, 0.0); pts.len()];
     let mut report = Report::default();
     let mut merged: Option<Probe<'_>> = None;
     for w in workers {
@@ -433,10 +484,246 @@ pub(super) fn direct_planar(
             }
         }
     }
-    if let Some(m) = merged {
-        for (&i, a) in fb_idx.iter().zip(m.accumulators()) {
-            acc[i] = *a;
+    let fb_acc = merged.map_or_else(Vec::new, |m| {
+        m.accumulators()
+            .iter()
+            .take(fb_pts.len())
+            .copied()
+            .collect()
+    });
+    Ok((acc, fb_acc, report))
+}
+
+/// Flops of the planar convolution of FFT size `(Mx, My)` over `slices` sub-grids of
+/// `n_voxels` voxels (DESIGN §B.8 cost model): per row for the diagonal, once for a column's
+/// imaging.
+fn planar_flops(
+    (mx, my, slices): (usize, usize, usize),
+    cfg: &Config,
+    n_voxels: usize,
+    usage: PlanarUse,
+) -> f64 {
+    let m = (mx * my) as f64;
+    let j = cfg.bins() as f64;
+    // Complex FFTs of M points, 5·M·log₂M (§B.8), pruned inverse ones about half that.
+    let f = 5.0 * m * m.log2();
+    let per_row = j * (f + slices as f64 * (6.0 * m + 0.75 * f)) + n_voxels as f64 * 8.0 * j;
+    // The column images once; its table costs `slices·J` forward FFTs.
+    match usage {
+        PlanarUse::Diagonal => per_row,
+        PlanarUse::Column => per_row + slices as f64 * j * f,
+    }
+}
+
+/// Flops of the lookup diagonal per row: one complex inverse FFT per SPAD, then `E0 + 16`
+/// flops per (voxel, SPAD) (§B.8).
+fn lookup_row_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
+    let l = Lookup::plan_len(cfg) as f64;
+    let ks = g.spads_per_row() as f64;
+    ks * 5.0 * l * l.log2() + n_voxels as f64 * ks * 76.0
+}
+
+/// The FFT engine of a resampled volume: the planar convolution per row, or the confocal one.
+enum Engine {
+    Planar(Box<Planar>),
+    Confocal(Box<Confocal>),
+}
+
+/// The resampled FFT path ([`crate::probe::resample`]) for `volume`: `None` when it is not the
+/// one to take — a forced band or lookup path, a point list, a volume on the wall's lattice
+/// (the exact FFT path's case) or, under [`Path::Auto`], when resampling does not apply, its
+/// buffers do not fit the budget or it costs more than `rival` (flops of the whole scan).
+///
+/// # Errors
+/// With the planar path forced: [`Error::Argument`] (`path`) naming why neither the exact nor
+/// the resampled FFT path applies; [`Error::Memory`] naming the largest buffer when the
+/// support grid's do not fit the budget.
+fn choose_resampled(
+    g: &Geometry,
+    cfg: &Config,
+    volume: &Volume,
+    path: Path,
+    rival: f64,
+) -> Result<Option<(Resample, Engine)>> {
+    if matches!(path, Path::Band | Path::Lookup) || volume.axes.is_none() {
+        return Ok(None);
+    }
+    let wall = if g.confocal { &g.lasers } else { &g.spads };
+    let tol = 1e-5 * cfg.wavelength();
+    let exact = match planar::layout(wall, &volume.points, volume.shape, tol) {
+        Ok(_) => return Ok(None),
+        Err(e) => e,
+    };
+    let forced = path == Path::Planar;
+    let fail = |why: String| -> Result<Option<(Resample, Engine)>> {
+        if forced {
+            Err(Error::arg(
+                "path",
+                format!(
+                    "the planar FFT path does not apply: {exact}; nor on a resampled grid: {why}"
+                ),
+            ))
+        } else {
+            Ok(None)
         }
+    };
+    let rs = match Resample::new(g, cfg, volume) {
+        Ok(r) => r,
+        Err(e) => return fail(e),
+    };
+    let sup = &rs.support;
+    let lay = match planar::layout(wall, &sup.points, sup.shape, tol) {
+        Ok(l) => l,
+        Err(e) => return fail(e),
+    };
+    let (mx, my, slices) = lay.size();
+    let (m, j) = (mx * my, cfg.bins());
+    let threads = rayon::current_num_threads().max(1);
+    let [sx, sy, nz] = sup.shape;
+    let mut plan = budget::Plan::new();
+    if g.confocal {
+        plan.add(
+            format!("the support grid's wall spectra ({j} × {mx} × {my} complex f32)"),
+            budget::bytes(j, 8).saturating_mul(m as u128),
+        )
+        .add(
+            format!("the support grid's amplitudes ({sx} × {sy} × {nz})"),
+            budget::bytes(sup.len(), 16),
+        );
+    } else {
+        plan.add(
+            format!("the support grid's kernel table ({slices} × {j} × {mx} × {my} complex f32)"),
+            budget::bytes(slices, 8)
+                .saturating_mul(j as u128)
+                .saturating_mul(m as u128),
+        )
+        .add(
+            format!("{threads} planar scratch buffers (3 × {j} × {mx} × {my} complex f32 each)"),
+            budget::bytes(threads, 24)
+                .saturating_mul(j as u128)
+                .saturating_mul(m as u128),
+        )
+        .add(
+            format!("{threads} support-grid accumulators ({sx} × {sy} × {nz} each)"),
+            budget::bytes(threads, 16).saturating_mul(sup.len() as u128),
+        );
+    }
+    plan.add(
+        "the resampling's intermediate and output",
+        budget::bytes(sx * volume.shape[1] * nz + volume.len(), 16),
+    );
+    if let Err(e) = plan.check(|| {
+        format!(
+            "direct light on the FFT path over the support grid {} (resampled to the volume)",
+            rs.support_spec()
+        )
+    }) {
+        return if forced { Err(e) } else { Ok(None) };
+    }
+    let engine = if g.confocal {
+        let c = match Confocal::new(cfg, &g.lasers, &sup.points, sup.shape) {
+            Ok(c) => c,
+            Err(e) => return fail(e),
+        };
+        if !forced && c.flops() + rs.flops() >= rival {
+            return Ok(None);
+        }
+        Engine::Confocal(Box::new(c))
+    } else {
+        let rows = g.lasers.len() as f64;
+        let cost = planar_flops((mx, my, slices), cfg, sup.len(), PlanarUse::Diagonal) * rows;
+        if !forced && cost + rs.flops() >= rival {
+            return Ok(None);
+        }
+        match Planar::new(cfg, &g.spads, &sup.points, sup.shape) {
+            Ok(p) => Engine::Planar(Box::new(p)),
+            Err(e) => return fail(e),
+        }
+    };
+    Ok(Some((rs, engine)))
+}
+
+/// The diagonal over `volume` by the FFT path on the support grid of `rs`, resampled; the
+/// asked voxels with a path outside the guard on the band path (their exact band sums).
+fn direct_resampled(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    volume: &Volume,
+    rs: &Resample,
+    engine: Engine,
+) -> Result<(Vec<Complex64>, Report)> {
+    let note = format!("path planar, resampled from $volume {}", rs.support_spec());
+    with_note(job, note, |job| {
+        direct_resampled_on(src, job, volume, rs, engine)
+    })
+}
+
+/// [`direct_resampled`] with its progress label set.
+fn direct_resampled_on(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    volume: &Volume,
+    rs: &Resample,
+    engine: Engine,
+) -> Result<(Vec<Complex64>, Report)> {
+    let g = src.geometry().clone();
+    let cfg = job.cfg;
+    let sup = &rs.support;
+    let none = vec![false; sup.len()];
+    // A confocal capture whose rows share one leg offset (wall-to-wall time axes): the guard
+    // in the convolution's kernel, as on the aligned path, no band-path voxels.
+    let (legs1, legs4) = legs(&g, cfg);
+    let offsets: Vec<f32> = legs1
+        .iter()
+        .zip(&legs4)
+        .map(|(a, b)| (a + b - cfg.t0()) as f32)
+        .collect();
+    let uniform = offsets.iter().all(|&x| x == offsets[0]);
+    let engine = match engine {
+        Engine::Confocal(c) if uniform => Engine::Confocal(Box::new((*c).with_guard(offsets[0]))),
+        e => e,
+    };
+    let outside = match &engine {
+        Engine::Planar(_) => outside_guard(&g, cfg, &volume.points),
+        Engine::Confocal(_) if uniform => vec![false; volume.len()],
+        Engine::Confocal(_) => confocal::outside_guard(&g, cfg, &volume.points),
+    };
+    let fb_idx: Vec<usize> = (0..outside.len()).filter(|&i| outside[i]).collect();
+    let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| volume.points[i]).collect();
+    let (sup_acc, fb_acc, report) = match &engine {
+        Engine::Planar(p) => planar_core(src, job, &sup.points, p, &none, &fb_pts)?,
+        Engine::Confocal(c) => confocal::convolution_core(src, job, c, &none, &fb_pts)?,
+    };
+    let mut acc = rs.apply(&sup_acc);
+    for (&i, a) in fb_idx.iter().zip(fb_acc) {
+        acc[i] = a;
     }
     Ok((acc, report))
+}
+
+/// Runs `f` with `job`'s progress labels carrying `note` (`direct (path lookup; …)`).
+fn with_note<T>(job: Job<'_>, note: String, f: impl FnOnce(Job<'_>) -> Result<T>) -> Result<T> {
+    let labelled = job
+        .exec
+        .progress
+        .map(|p| super::crop::Labelled { inner: p, note });
+    f(Job {
+        exec: Exec {
+            progress: labelled.as_ref().map(|l| l as &dyn crate::exec::Progress),
+            ..job.exec
+        },
+        ..job
+    })
+}
+
+/// The progress note of the diagonal's path: `path planar`, or for a slower path on a grid
+/// the aligned `--volume` the FFT path would take.
+fn path_note(g: &Geometry, volume: &Volume, cfg: &Config, path: Path) -> String {
+    let hint = (path != Path::Planar && volume.axes.is_some())
+        .then(|| fast_hint(g, volume, cfg.wavelength()))
+        .flatten();
+    match hint {
+        Some(v) => format!("path {}; the FFT path would take $volume {v}", path.name()),
+        None => format!("path {}", path.name()),
+    }
 }

@@ -204,24 +204,26 @@ pub(super) fn drive_rows<W: Send>(
             compensate_all(&g, wave, &mut rows);
         }
         let _t = timings::section("rows: stage 1 and probes", Kind::Parallel);
-        rows.par_iter().enumerate().try_for_each(|(i_row, (x_l, hist))| {
-            // Paired (and confocal) scans: the row's own SPAD spot.
-            let x_s = g.spads.get(start + i_row).copied().unwrap_or(*x_l);
-            let i = rayon::current_thread_index().unwrap_or(0) % n_slots;
-            let mut slot = slots[i].lock().unwrap_or_else(|e| e.into_inner());
-            let (w, buf, clean, tables) = &mut *slot;
-            let spad = [x_s];
-            let own;
-            let scan = if g.confocal {
-                own = Scan::new(cfg, &spad, tables)?;
-                &own
-            } else {
-                scan
-            };
-            let mut rb = RowBuffer::new(scan, buf)?;
-            let row = load_row(&mut rb, scan, &dft, *x_l, hist, clean)?;
-            work(w, scan, &row)
-        })?;
+        rows.par_iter()
+            .enumerate()
+            .try_for_each(|(i_row, (x_l, hist))| {
+                // Paired (and confocal) scans: the row's own SPAD spot.
+                let x_s = g.spads.get(start + i_row).copied().unwrap_or(*x_l);
+                let i = rayon::current_thread_index().unwrap_or(0) % n_slots;
+                let mut slot = slots[i].lock().unwrap_or_else(|e| e.into_inner());
+                let (w, buf, clean, tables) = &mut *slot;
+                let spad = [x_s];
+                let own;
+                let scan = if g.confocal {
+                    own = Scan::new(cfg, &spad, tables)?;
+                    &own
+                } else {
+                    scan
+                };
+                let mut rb = RowBuffer::new(scan, buf)?;
+                let row = load_row(&mut rb, scan, &dft, *x_l, hist, clean)?;
+                work(w, scan, &row)
+            })?;
         bar.advance(end - start);
     }
     Ok(slots

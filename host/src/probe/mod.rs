@@ -33,12 +33,13 @@ mod indirect;
 mod leak;
 mod matrix;
 pub mod partial;
+pub mod resample;
 mod row;
 mod wave;
 pub mod window;
 
 pub use crate::exec::{Exec, Path};
-pub use aligned::aligned_volume;
+pub use aligned::{aligned_volume, fft_note};
 pub use column::{ColumnGate, Shell, check_focus, column, diagonal};
 pub use crop::Crop;
 pub use direct::direct;

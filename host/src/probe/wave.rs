@@ -213,6 +213,8 @@ pub struct Output {
     pub crop: Option<Crop>,
     /// When a slower path than the FFT convolution ran on a grid because of its x–y pitch:
     /// the `--volume` SPEC of the nearest grid the FFT path takes (`probe::aligned_volume`).
+    /// When the FFT path ([`crate::exec::Path::Planar`]) ran on a grid off the wall's lattice: the SPEC of
+    /// the support grid it computed on before resampling ([`crate::probe::resample`]).
     pub aligned: Option<String>,
 }
 

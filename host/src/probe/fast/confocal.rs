@@ -21,7 +21,7 @@
 //!   FFT (pruned to the output rows) ([`Confocal::image`]).
 //!
 //! `κ̂` is never stored: memory does not grow with the number of slices. The padding is as in
-//! [`super::planar`] (`Mx × My ≥ (n_w + n_v − 1)` per axis, powers of two), as is the
+//! [`super::planar`] (`Mx × My ≥ (n_w + n_v − 1)` per axis, lengths `2^a·3^b`), as is the
 //! polyphase split of voxel grids finer than the wall grid by an integer factor per axis
 //! (each phase a sub-grid with its own kernel offsets). Point lists, other pitch ratios and
 //! irregular or tilted wall points do not apply ([`Confocal::new`] says why; the caller uses
