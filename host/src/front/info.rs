@@ -105,10 +105,10 @@ pub fn info(
         }
         None => (c.geometry.clone(), front::summed(&mut c)?),
     };
-    out(format!(
-        "fast paths   {}",
-        crate::probe::fft_note(&g, volume)
-    ));
+    say(
+        Stream::Out,
+        &format!("fast paths   {}", crate::probe::fft_note(&g, volume)),
+    );
     let total: f64 = counts.iter().sum();
     let (peak, _) =
         counts.iter().enumerate().fold(
