@@ -238,6 +238,7 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
                 &name,
                 sc,
                 side,
+                opts_follow,
             )?)
         }
         Kind::Replay(rate) => {
@@ -267,11 +268,21 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
         capture_name: name
             .file_name()
             .map_or_else(String::new, |f| f.to_string_lossy().into_owned()),
+        // A replayed capture is a finished file: its size is part of the states' identity
+        // (they then merge with `--partial` states of the same file); a followed stream has
+        // no final size yet (0, which matches any).
+        file_bytes: match &kind {
+            Kind::Replay(_) => std::fs::metadata(&a.source).map_or(0, |m| m.len()),
+            Kind::Follow(_) | Kind::Stdin(_) => 0,
+        },
     };
     let mut run = LiveRun::new(&g, opts, resume)?;
+    for w in run.warnings() {
+        crate::console::tell!("vltm: warning: {w}");
+    }
     if run.folded() > 0 {
         say!(
-            "live: resuming after row {} of {}",
+            "live: resuming with {} of {} rows in the states",
             run.folded(),
             run.total_rows()
         );
@@ -333,7 +344,7 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
         }
         if run.folded() > 0 {
             eprintln!(
-                "vltm: note: the states of rows 0:{} are in {} (continue with --resume)",
+                "vltm: note: the states of {} rows are in {} (continue with --resume)",
                 run.folded(),
                 outputs.state("direct").display()
             );

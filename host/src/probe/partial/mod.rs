@@ -99,6 +99,35 @@ struct Identity {
     geometry_fnv64: String,
 }
 
+/// The first top-level field in which `a` and `b` (serialised) differ, as
+/// `prefix.field: a vs b`, skipping the fields `skip` says match; `None` when none does.
+fn first_difference<T: Serialize + PartialEq>(
+    prefix: &str,
+    a: &T,
+    b: &T,
+    skip: impl Fn(&str) -> bool,
+) -> Option<String> {
+    let (Ok(serde_json::Value::Object(x)), Ok(serde_json::Value::Object(y))) =
+        (serde_json::to_value(a), serde_json::to_value(b))
+    else {
+        return (a != b).then(|| prefix.to_string());
+    };
+    x.iter().find_map(|(k, v)| {
+        let w = y.get(k).unwrap_or(&serde_json::Value::Null);
+        (v != w && !skip(k)).then(|| format!("{prefix}.{k}: {v} vs {w}"))
+    })
+}
+
+impl Identity {
+    /// The first field in which `b` is another capture than `self`, with both values
+    /// (`capture.nt: 128 vs 64`); `None` for the same capture. A `file_bytes` of 0 (a
+    /// stream's state, written before its final size was known) matches any size.
+    fn differs(&self, b: &Self) -> Option<String> {
+        let unknown = self.file_bytes == 0 || b.file_bytes == 0;
+        first_difference("capture", self, b, |k| k == "file_bytes" && unknown)
+    }
+}
+
 /// The probe's kind and parameters: parts with other parameters do not merge.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 struct ProbeHead {
@@ -219,7 +248,8 @@ fn config_head(cfg: &Config) -> ConfigHead {
 }
 
 /// Runs `task` over the laser rows `rows` of `src` and returns its accumulator state.
-/// `file_bytes` is the capture file's size (0 for a capture made in memory) and
+/// `file_bytes` is the capture file's size (0 for a capture made in memory or a stream whose
+/// final size is not known yet: it then matches any size when parts merge) and
 /// `capture_name` its name (recorded, not compared). Every parameter is derived from the whole
 /// capture's geometry, exactly as one pass over all rows derives it.
 ///
@@ -578,11 +608,13 @@ impl Partial {
                     ),
                 ))
             };
-            if a.head.capture != b.head.capture {
-                return differ("come from different captures");
+            if let Some(d) = a.head.capture.differs(&b.head.capture) {
+                return differ(&format!("come from different captures ({d})"));
             }
-            if a.head.probe != b.head.probe
-                || a.spads != b.spads
+            if let Some(d) = first_difference("probe", &a.head.probe, &b.head.probe, |_| false) {
+                return differ(&format!("have different probes or parameters ({d})"));
+            }
+            if a.spads != b.spads
                 || a.points != b.points
                 || a.from != b.from
                 || a.acc.len() != b.acc.len()
@@ -649,6 +681,12 @@ impl Partial {
             }
         }
         out.head.rows = rows;
+        // A stream's state (size 0) merged with a finished file's records the size.
+        out.head.capture.file_bytes = order
+            .iter()
+            .map(|&i| parts[i].head.capture.file_bytes)
+            .max()
+            .unwrap_or(0);
         Ok(out)
     }
 
