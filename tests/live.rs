@@ -115,7 +115,8 @@ fn close(a: &[f32], b: &[f32], what: &str) -> usize {
         .count()
 }
 
-/// A small PTU capture: `two_patches_single` (64 rows, one SPAD) scaled to whole photons.
+/// A small PTU capture: `two_patches_single` (64 rows, one SPAD) scaled to whole photons,
+/// its rows [`DWELL_MS`] apart on the sync clock, as the paper's scan.
 fn make_ptu(dir: &TempDir) -> (PathBuf, PathBuf) {
     let mut c = vltm::io::open(&fixture("two_patches_single")).expect("fixture");
     let max = c.data.iter().fold(0f32, |m, &x| m.max(x));
@@ -123,7 +124,18 @@ fn make_ptu(dir: &TempDir) -> (PathBuf, PathBuf) {
         *x = (*x / max * 400.0).round();
     }
     let p = dir.path("scan.ptu");
-    ptu::write_t3(&c, &p, &T3WriteOptions::default()).expect("write ptu");
+    let o = T3WriteOptions::default();
+    // 87 ms per row on the sync clock: the gap after a row's photons (one sync each).
+    let per_row = (DWELL_MS as f64 * 1e-3 / o.sync_period).round() as u64;
+    let photons = (0..c.geometry.lasers.len())
+        .map(|l| c.row(l).iter().map(|&x| x as u64).sum::<u64>())
+        .max()
+        .unwrap_or(0);
+    let o = T3WriteOptions {
+        syncs_between_rows: per_row - photons * u64::from(o.syncs_per_photon),
+        ..o
+    };
+    ptu::write_t3(&c, &p, &o).expect("write ptu");
     (p.clone(), p.with_extension("json"))
 }
 
@@ -402,10 +414,15 @@ fn follows_a_ptu_file_written_by_another_process() {
         "the rows should appear while the file is written: {seen:?}"
     );
     assert_eq!(seen.last(), Some(&64), "{seen:?}");
-    // The progress line shows the dwell read from the sync clock: not far from 87 ms.
+    // The progress line shows the dwell read from the sync clock: 87 ms per row.
     let err = text(&o.stderr);
-    assert!(err.contains("ms dwell"), "{err}");
     let last = err.lines().rfind(|l| l.starts_with("live: rows"));
+    let dwell: f64 = last
+        .and_then(|l| l.split(" vs ").nth(1))
+        .and_then(|l| l.split(" ms dwell").next())
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no dwell in {last:?}"));
+    assert!((dwell - DWELL_MS as f64).abs() < 2.0, "dwell {dwell} ms: {last:?}");
     eprintln!("followed at {DWELL_MS} ms per row: {last:?}; rows seen by the server: {seen:?}");
     // The finished file, offline.
     let p = |n: &str| d.path(n).to_str().expect("utf-8").to_string();
@@ -959,4 +976,112 @@ fn live_applies_the_window_rule_of_every_probe() {
     ]);
     ok(&o);
     assert_eq!(warn(&o), Some(want), "{}", text(&o.stderr));
+}
+
+/// The firmware's voxels (`vltm-firmware-gen volume`), focus and wavelength.
+const FW_VOLUME: &str = "-0.225,-0.225,0.5;-0.075,-0.225,0.5;0.075,-0.225,0.5;0.225,-0.225,0.5;\
+-0.225,-0.075,0.5;-0.075,-0.075,0.5;0.075,-0.075,0.5;0.225,-0.075,0.5;-0.225,0.075,0.5;\
+-0.075,0.075,0.5;0.075,0.075,0.5;0.225,0.075,0.5;-0.225,0.225,0.5;-0.075,0.225,0.5;\
+0.075,0.225,0.5;0.225,0.225,0.5;-0.075,-0.075,0.35;-0.075,-0.075,0.65";
+const FW_FOCUS: &str = "-0.075,-0.075,0.5";
+
+/// The states the QEMU firmware wrote after folding the scan's last rows (8..16) of
+/// `kernel/firmware/fixture/scene.json`'s capture (`fixtures/firmware/`): `vltm live` on that
+/// capture resumes from them, folds rows 0..8 itself, and equals the offline commands within
+/// the kernel's f32 tolerance (10⁻⁶ of the peak); a state of another capture or other
+/// parameters is refused with one line naming the field.
+#[test]
+fn resumes_from_the_firmwares_state() {
+    let d = TempDir::new("firmware");
+    let scene = root().join("kernel/firmware/fixture/scene.json");
+    let cap = d.path("scene.npz");
+    let c = cap.to_str().expect("utf-8");
+    ok(&vltm(&[
+        "simulate",
+        scene.to_str().expect("utf-8"),
+        "--out",
+        c,
+        "--uncompressed",
+    ]));
+    let fw = |n: &str| root().join("fixtures/firmware").join(n);
+    let (fd, fc) = (fw("fw_direct.vltmpart"), fw("fw_column.vltmpart"));
+    let held = vltm::probe::Partial::read(&fd).expect("firmware state");
+    assert_eq!(
+        held.rows(),
+        vec![8..16],
+        "the firmware folds the scan's last rows"
+    );
+    let p = |n: &str| d.path(n).to_str().expect("utf-8").to_string();
+    let live = |cap: &str, extra: &[&str], out: &str| {
+        let mut a = vec![
+            "live",
+            cap,
+            "--replay-rate",
+            "1000",
+            "--volume",
+            FW_VOLUME,
+            "--wavelength",
+            "0.1",
+            "--focus",
+            FW_FOCUS,
+            "--resume",
+            fd.to_str().expect("utf-8"),
+            "--resume",
+            fc.to_str().expect("utf-8"),
+        ];
+        a.extend(extra);
+        let out = p(out);
+        a.extend(["--out", &out]);
+        vltm(&a)
+    };
+    let o = live(c, &[], "live.npy");
+    ok(&o);
+    assert!(
+        text(&o.stdout).contains("resuming with 8 of 16 rows"),
+        "{}",
+        text(&o.stdout)
+    );
+    let offline = |args: &[&str], name: &str| {
+        let mut a = args.to_vec();
+        let q = p(name);
+        a.extend(["--volume", FW_VOLUME, "--wavelength", "0.1", "--out", &q]);
+        ok(&vltm(&a));
+        npy(&d.path(name))
+    };
+    close(
+        &npy(&d.path("live.npy")),
+        &offline(&["direct", c], "d.npy"),
+        "direct light",
+    );
+    close(
+        &npy(&d.path("live.column0.npy")),
+        &offline(&["column", c, "--focus", FW_FOCUS], "c.npy"),
+        "column",
+    );
+    close(
+        &npy(&d.path("live.indirect.npy")),
+        &offline(&["indirect", c], "i.npy"),
+        "in-focus indirect light",
+    );
+    // The final states hold every row: the firmware's and the host's.
+    let s = vltm::probe::Partial::read(&d.path("live.direct.part")).expect("state");
+    assert_eq!(s.rows(), vec![0..16]);
+    // Another capture, other parameters: one line naming the field.
+    let other = fixture("two_patches");
+    let o = live(other.to_str().expect("utf-8"), &[], "x.npy");
+    fails_with(
+        &o,
+        &[
+            "--resume",
+            "fw_direct.vltmpart",
+            "different captures",
+            "capture.",
+        ],
+    );
+    let o = live(c, &["--sigma", "0.08"], "y.npy");
+    fails_with(
+        &o,
+        &["--resume", "fw_direct.vltmpart", "sigma: 0.08 vs null"],
+    );
+    assert!(!d.path("y.npy").exists() && !d.path("y.direct.part").exists());
 }

@@ -99,23 +99,37 @@ struct Identity {
     geometry_fnv64: String,
 }
 
-/// The first top-level field in which `a` and `b` (serialised) differ, as
-/// `prefix.field: a vs b`, skipping the fields `skip` says match; `None` when none does.
+/// The first field in which `a` and `b` (serialised) differ, as `prefix.field: a vs b`
+/// (nested objects down to the first differing leaf, `probe.wave.sigma: 0.08 vs null`),
+/// skipping the top-level fields `skip` says match; `None` when none does.
 fn first_difference<T: Serialize + PartialEq>(
     prefix: &str,
     a: &T,
     b: &T,
     skip: impl Fn(&str) -> bool,
 ) -> Option<String> {
-    let (Ok(serde_json::Value::Object(x)), Ok(serde_json::Value::Object(y))) =
-        (serde_json::to_value(a), serde_json::to_value(b))
-    else {
-        return (a != b).then(|| prefix.to_string());
-    };
-    x.iter().find_map(|(k, v)| {
-        let w = y.get(k).unwrap_or(&serde_json::Value::Null);
-        (v != w && !skip(k)).then(|| format!("{prefix}.{k}: {v} vs {w}"))
-    })
+    fn walk(
+        path: &str,
+        x: &serde_json::Value,
+        y: &serde_json::Value,
+        skip: &dyn Fn(&str) -> bool,
+    ) -> Option<String> {
+        use serde_json::Value::Object;
+        match (x, y) {
+            (Object(x), Object(y)) => x.iter().find_map(|(k, v)| {
+                let w = y.get(k).unwrap_or(&serde_json::Value::Null);
+                if skip(k) {
+                    return None;
+                }
+                walk(&format!("{path}.{k}"), v, w, &|_| false)
+            }),
+            _ => (x != y).then(|| format!("{path}: {x} vs {y}")),
+        }
+    }
+    match (serde_json::to_value(a), serde_json::to_value(b)) {
+        (Ok(x), Ok(y)) => walk(prefix, &x, &y, &skip),
+        _ => (a != b).then(|| prefix.to_string()),
+    }
 }
 
 impl Identity {
