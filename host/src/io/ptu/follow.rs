@@ -178,7 +178,7 @@ impl Tail {
             && h.num_records > 0
             && h.data_offset == start
         {
-            self.end = Some(start + 4 * h.num_records);
+            self.end = records_end(&h);
         }
     }
 }
@@ -241,6 +241,13 @@ impl Read for Tail {
             std::thread::sleep(self.opts.poll);
         }
     }
+}
+
+/// Where the header's counted records end (`None`: past byte 2^64, a corrupt count).
+fn records_end(h: &Header) -> Option<u64> {
+    h.num_records
+        .checked_mul(4)
+        .and_then(|b| b.checked_add(h.data_offset))
 }
 
 /// One laser row handed out by a [`Follower`].
@@ -393,7 +400,14 @@ impl Follower {
         let t = reader.get_mut();
         t.data_start = Some(header.data_offset);
         if header.num_records > 0 {
-            t.end = Some(header.data_offset + 4 * header.num_records);
+            t.end = Some(records_end(&header).ok_or_else(|| {
+                Error::format(
+                    name,
+                    "TTResult_NumberOfRecords",
+                    "a record count whose 4-byte records end before byte 2^64",
+                    header.num_records,
+                )
+            })?);
         }
         Ok(Self {
             name: name.to_path_buf(),
