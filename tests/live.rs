@@ -422,7 +422,10 @@ fn follows_a_ptu_file_written_by_another_process() {
         .and_then(|l| l.split(" ms dwell").next())
         .and_then(|v| v.trim().parse().ok())
         .unwrap_or_else(|| panic!("no dwell in {last:?}"));
-    assert!((dwell - DWELL_MS as f64).abs() < 2.0, "dwell {dwell} ms: {last:?}");
+    assert!(
+        (dwell - DWELL_MS as f64).abs() < 2.0,
+        "dwell {dwell} ms: {last:?}"
+    );
     eprintln!("followed at {DWELL_MS} ms per row: {last:?}; rows seen by the server: {seen:?}");
     // The finished file, offline.
     let p = |n: &str| d.path(n).to_str().expect("utf-8").to_string();

@@ -583,6 +583,11 @@ impl LiveRun {
         Ok(())
     }
 
+    /// Rows received but not folded yet (waiting for the next fold).
+    pub fn pending(&self) -> usize {
+        self.received.saturating_sub(self.next)
+    }
+
     /// Rows below this were passed over and are not stored (0 once every row is).
     pub fn stored_from(&self) -> usize {
         self.stored_from

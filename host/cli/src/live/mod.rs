@@ -43,13 +43,15 @@ impl Progress {
         } else {
             0.0
         };
-        // The dwell from the source (sync clock, replay rate), else the arrival interval.
-        let arrival = el / run.received().max(1) as f64;
+        // The dwell from the source (sync clock, replay rate), else the arrival interval of
+        // the rows that arrived in this run (not those a resumed run passed over).
+        let arrived = run.received().saturating_sub(run.stored_from());
+        let arrival = el / arrived.max(1) as f64;
         let dwell = run.dwell().unwrap_or(arrival);
         // Rows come no faster than they are acquired, nor than they arrive.
         let pace = dwell.max(arrival);
-        let left = total.saturating_sub(done) as f64;
-        let eta = left * pace.max(per_row);
+        let left = total.saturating_sub(run.received()) as f64;
+        let eta = left * pace.max(per_row) + run.pending() as f64 * per_row;
         format!(
             "live: rows {done}/{total}, {:.3e} photons/s, {:.1} ms/row folded vs {:.1} ms dwell{}, ETA {:.1} s",
             run.photons() / el,
