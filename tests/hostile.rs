@@ -587,8 +587,9 @@ fn empty_window_is_one_error_on_every_probe() {
     c.geometry.t0 = -3.0;
     vltm::io::npz::write_with(&c, &t.path("early.npz"), false).unwrap();
     let vol = ["--volume", VOLUME];
-    let probes: [&[&str]; 6] = [
+    let probes: [&[&str]; 7] = [
         &["direct"],
+        &["live", "--replay-rate", "1000"],
         &["indirect"],
         &["column", "--focus", "0,0,0.8"],
         &["row", "--focus", "0,0,0.8"],
@@ -629,7 +630,11 @@ fn empty_window_is_one_error_on_every_probe() {
     // One voxel of six in the window: the probes run, and warn that few paths are.
     valid_npz(&t, "c.npz", false);
     let pts = "0,0,0.8;0,0,30;0,0,31;0,0,32;0,0,33;0,0,34";
-    for p in [&["direct"][..], &["column", "--focus", "0,0,0.8"]] {
+    for p in [
+        &["direct"][..],
+        &["column", "--focus", "0,0,0.8"],
+        &["live", "--replay-rate", "1000", "--no-indirect"],
+    ] {
         let mut a = vec![p[0], "c.npz"];
         a.extend(&p[1..]);
         a.extend(["--volume", pts, "--out", "o.npy"]);
@@ -770,8 +775,9 @@ fn measured_peak_stays_in_the_budget() {
     let f = fixture.to_str().unwrap();
     let vol = "-0.5:0.5:5,-0.5:0.5:5,0.5:1:5";
     let budget = 150u64 << 20;
-    let probes: [&[&str]; 6] = [
+    let probes: [&[&str]; 7] = [
         &["direct"],
+        &["live", "--replay-rate", "1000"],
         &["indirect"],
         &["column", "--focus", "0,0,0.8"],
         &["row", "--focus", "0,0,0.8"],

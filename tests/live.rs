@@ -23,7 +23,7 @@ use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 use vltm::io::RowSource;
-use vltm::io::ptu::{self, Follower, PtuSource, Sidecar, T3WriteOptions};
+use vltm::io::ptu::{self, FollowOptions, Follower, PtuSource, Sidecar, T3WriteOptions};
 
 const SPEC: &str = "-0.6:0.6:13,-0.1:0.1:3,0.5:1.2:8";
 const FOCUS: &str = "-0.45,0,0.8";
@@ -115,7 +115,8 @@ fn close(a: &[f32], b: &[f32], what: &str) -> usize {
         .count()
 }
 
-/// A small PTU capture: `two_patches_single` (64 rows, one SPAD) scaled to whole photons.
+/// A small PTU capture: `two_patches_single` (64 rows, one SPAD) scaled to whole photons,
+/// its rows [`DWELL_MS`] apart on the sync clock, as the paper's scan.
 fn make_ptu(dir: &TempDir) -> (PathBuf, PathBuf) {
     let mut c = vltm::io::open(&fixture("two_patches_single")).expect("fixture");
     let max = c.data.iter().fold(0f32, |m, &x| m.max(x));
@@ -123,7 +124,18 @@ fn make_ptu(dir: &TempDir) -> (PathBuf, PathBuf) {
         *x = (*x / max * 400.0).round();
     }
     let p = dir.path("scan.ptu");
-    ptu::write_t3(&c, &p, &T3WriteOptions::default()).expect("write ptu");
+    let o = T3WriteOptions::default();
+    // 87 ms per row on the sync clock: the gap after a row's photons (one sync each).
+    let per_row = (DWELL_MS as f64 * 1e-3 / o.sync_period).round() as u64;
+    let photons = (0..c.geometry.lasers.len())
+        .map(|l| c.row(l).iter().map(|&x| x as u64).sum::<u64>())
+        .max()
+        .unwrap_or(0);
+    let o = T3WriteOptions {
+        syncs_between_rows: per_row - photons * u64::from(o.syncs_per_photon),
+        ..o
+    };
+    ptu::write_t3(&c, &p, &o).expect("write ptu");
     (p.clone(), p.with_extension("json"))
 }
 
@@ -402,10 +414,18 @@ fn follows_a_ptu_file_written_by_another_process() {
         "the rows should appear while the file is written: {seen:?}"
     );
     assert_eq!(seen.last(), Some(&64), "{seen:?}");
-    // The progress line shows the dwell read from the sync clock: not far from 87 ms.
+    // The progress line shows the dwell read from the sync clock: 87 ms per row.
     let err = text(&o.stderr);
-    assert!(err.contains("ms dwell"), "{err}");
     let last = err.lines().rfind(|l| l.starts_with("live: rows"));
+    let dwell: f64 = last
+        .and_then(|l| l.split(" vs ").nth(1))
+        .and_then(|l| l.split(" ms dwell").next())
+        .and_then(|v| v.trim().parse().ok())
+        .unwrap_or_else(|| panic!("no dwell in {last:?}"));
+    assert!(
+        (dwell - DWELL_MS as f64).abs() < 2.0,
+        "dwell {dwell} ms: {last:?}"
+    );
     eprintln!("followed at {DWELL_MS} ms per row: {last:?}; rows seen by the server: {seen:?}");
     // The finished file, offline.
     let p = |n: &str| d.path(n).to_str().expect("utf-8").to_string();
@@ -498,7 +518,7 @@ fn a_marker_that_never_comes_keeps_the_rows_before_it_and_resumes() {
         out.to_str().expect("utf-8"),
     ]);
     ok(&o);
-    assert!(text(&o.stdout).contains("resuming after row 39"));
+    assert!(text(&o.stdout).contains("resuming with 39 of 64 rows"));
     let off = d.path("d.npy");
     ok(&vltm(&[
         "direct",
@@ -633,6 +653,7 @@ fn follower_equals_ptu_source_and_truncations_fail_cleanly() {
         Path::new("s"),
         sc.clone(),
         &side,
+        FollowOptions::default(),
     )
     .expect("follower");
     let mut row = Vec::new();
@@ -659,6 +680,7 @@ fn follower_equals_ptu_source_and_truncations_fail_cleanly() {
             Path::new("s"),
             sc.clone(),
             &side,
+            FollowOptions::default(),
         );
         if let Ok(mut f) = r {
             let mut n = 0;
@@ -678,4 +700,391 @@ fn follower_equals_ptu_source_and_truncations_fail_cleanly() {
         }
         cut += bytes.len() / 97 + 1;
     }
+}
+
+/// Follows `bytes` as a pipe, passing over rows `0..skip`: the rows it hands out.
+fn follow_bytes(bytes: &[u8], side: &Path, skip: usize) -> (Vec<ptu::FollowedRow>, ptu::Counts) {
+    let sc = Sidecar::load(side).expect("sidecar");
+    let mut f = Follower::stream(
+        Box::new(std::io::Cursor::new(bytes.to_vec())),
+        Path::new("s"),
+        sc,
+        side,
+        FollowOptions::default(),
+    )
+    .expect("follower");
+    f.skip_rows(skip);
+    let mut rows = Vec::new();
+    while let Some(r) = f.next_row().expect("row") {
+        rows.push(r);
+    }
+    (rows, f.counts())
+}
+
+/// A resumed run passes over the rows its states hold: the follower hands out the same rows
+/// after them as without skipping, and counts the photons it passed over; `vltm live` on a
+/// file resumed from `--partial` states of rows 0:20 (made from the finished file: its size
+/// in their identity, where the followed file's states say 0) passes over those rows, reads
+/// them again for the in-focus indirect light at the end, and equals the offline commands.
+#[test]
+fn resume_passes_over_the_rows_the_states_hold() {
+    let d = TempDir::new("skip");
+    let (src, side) = make_ptu(&d);
+    let bytes = std::fs::read(&src).expect("read");
+    let (all, c0) = follow_bytes(&bytes, &side, 0);
+    let (rest, c) = follow_bytes(&bytes, &side, 20);
+    assert_eq!(all.len(), 64);
+    assert_eq!(rest.len(), 44);
+    assert_eq!(rest[0].index, 20);
+    for (a, b) in all[20..].iter().zip(&rest) {
+        assert_eq!((a.index, &a.data, a.photons), (b.index, &b.data, b.photons));
+    }
+    let before: u64 = all[..20].iter().map(|r| r.photons).sum();
+    assert!(before > 0);
+    assert_eq!(c.skipped_rows, before, "the photons passed over");
+    assert_eq!(c.binned + c.skipped_rows, c0.binned);
+    // The CLI: states of rows 0:20 from the finished file, then live on it.
+    let f = src.to_str().expect("utf-8");
+    let p = |n: &str| d.path(n).to_str().expect("utf-8").to_string();
+    ok(&vltm(&[
+        "direct",
+        f,
+        "--volume",
+        SPEC,
+        "--rows",
+        "0:20",
+        "--partial",
+        &p("d.part"),
+    ]));
+    ok(&vltm(&[
+        "column",
+        f,
+        "--focus",
+        FOCUS,
+        "--volume",
+        SPEC,
+        "--rows",
+        "0:20",
+        "--partial",
+        &p("c.part"),
+    ]));
+    let out = d.path("live.npy");
+    let o = vltm(&[
+        "live",
+        f,
+        "--volume",
+        SPEC,
+        "--focus",
+        FOCUS,
+        "--every",
+        "0",
+        "--resume",
+        &p("d.part"),
+        "--resume",
+        &p("c.part"),
+        "--out",
+        out.to_str().expect("utf-8"),
+    ]);
+    ok(&o);
+    assert!(
+        text(&o.stdout).contains("resuming with 20 of 64 rows"),
+        "{}",
+        text(&o.stdout)
+    );
+    // The first progress line comes after 44 rows at most: rows 0:20 were not folded again.
+    let offline = |args: &[&str], name: &str| {
+        let mut a = args.to_vec();
+        let q = p(name);
+        a.extend(["--volume", SPEC, "--out", &q]);
+        ok(&vltm(&a));
+        npy(&d.path(name))
+    };
+    close(
+        &npy(&out),
+        &offline(&["direct", f], "od.npy"),
+        "resumed direct light",
+    );
+    close(
+        &npy(&d.path("live.column0.npy")),
+        &offline(&["column", f, "--focus", FOCUS], "oc.npy"),
+        "resumed column",
+    );
+    close(
+        &npy(&d.path("live.indirect.npy")),
+        &offline(&["indirect", f], "oi.npy"),
+        "in-focus indirect light of a resumed run (rows 0:20 read again)",
+    );
+    let merged = vltm::probe::Partial::read(&d.path("live.direct.part")).expect("state");
+    assert_eq!(merged.rows(), vec![0..64]);
+}
+
+/// Standard input that stops sending without closing: `--idle-timeout` ends it, with one
+/// line naming `<stdin>` and the byte position, and the rows before it kept as states; the
+/// whole stream then resumes from them (the rows the states hold passed over unbinned).
+#[test]
+fn stdin_that_stops_sending_times_out_and_resumes() {
+    let d = TempDir::new("stdin-idle");
+    let (src, side) = make_ptu(&d);
+    let bytes = std::fs::read(&src).expect("read");
+    let (_, rows) = row_offsets(&bytes, &side);
+    let at = count_offset(&bytes);
+    let mut head = bytes.clone();
+    head[at..at + 8].copy_from_slice(&0i64.to_le_bytes());
+    let out = d.path("live.npy");
+    let args = |extra: &[&str]| {
+        let mut a = vec![
+            "live".to_string(),
+            "-".into(),
+            "--sidecar".into(),
+            side.to_str().expect("utf-8").into(),
+            "--volume".into(),
+            SPEC.into(),
+            "--no-indirect".into(),
+            "--every".into(),
+            "8".into(),
+            "--out".into(),
+            out.to_str().expect("utf-8").into(),
+        ];
+        a.extend(extra.iter().map(|s| s.to_string()));
+        a
+    };
+    let mut child = Command::new(support::vltm_bin())
+        .args(args(&["--idle-timeout", "1"]))
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    let mut stdin = child.stdin.take().expect("stdin");
+    // The header and 30 rows (up to the 31st row marker, which closes row 29), then silence.
+    stdin.write_all(&head[..rows[30] + 4]).expect("write");
+    stdin.flush().expect("flush");
+    let t = Instant::now();
+    let o = loop {
+        if let Some(_s) = child.try_wait().expect("wait") {
+            break child.wait_with_output().expect("output");
+        }
+        assert!(
+            t.elapsed() < Duration::from_secs(60),
+            "vltm live did not give up on a silent pipe"
+        );
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    drop(stdin);
+    let line = fails_with(
+        &o,
+        &[
+            "<stdin>",
+            "stream sent nothing for 1.0 s",
+            "byte",
+            "markers",
+        ],
+    );
+    assert!(line.contains("31 before"), "{line}");
+    assert!(
+        line.contains(&format!("at byte {}", rows[30] + 4)),
+        "{line}"
+    );
+    let state = d.path("live.direct.part");
+    let part = vltm::probe::Partial::read(&state).expect("the last good state is kept");
+    assert_eq!(part.rows(), vec![0..30]);
+    // The relay sends the whole stream again: resume.
+    let mut child = Command::new(support::vltm_bin())
+        .args(args(&["--resume", state.to_str().expect("utf-8")]))
+        .stdin(Stdio::piped())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("spawn");
+    let mut stdin = child.stdin.take().expect("stdin");
+    stdin.write_all(&head).expect("write");
+    drop(stdin);
+    let o = child.wait_with_output().expect("output");
+    ok(&o);
+    assert!(text(&o.stdout).contains("resuming with 30 of 64 rows"));
+    let off = d.path("d.npy");
+    ok(&vltm(&[
+        "direct",
+        src.to_str().expect("utf-8"),
+        "--volume",
+        SPEC,
+        "--out",
+        off.to_str().expect("utf-8"),
+    ]));
+    close(
+        &npy(&out),
+        &npy(&off),
+        "direct light resumed from standard input",
+    );
+}
+
+/// The probes' window rule: a volume with no path in the capture's window is the same one
+/// line as `vltm direct`'s; one with few paths in it warns as `direct` does.
+#[test]
+fn live_applies_the_window_rule_of_every_probe() {
+    let d = TempDir::new("window");
+    let cap = fixture("two_patches");
+    let cap = cap.to_str().expect("utf-8");
+    let far = "-0.2:0.2:3,-0.2:0.2:3,30:31:2";
+    let o = vltm(&[
+        "direct",
+        cap,
+        "--volume",
+        far,
+        "--out",
+        d.path("d.npy").to_str().expect("utf-8"),
+    ]);
+    let want = fails_with(&o, &["volume", "no path through the probed points"]);
+    let o = vltm(&[
+        "live",
+        cap,
+        "--replay-rate",
+        "1000",
+        "--volume",
+        far,
+        "--out",
+        d.path("l.npy").to_str().expect("utf-8"),
+    ]);
+    assert_eq!(o.status.code(), Some(2), "{}", text(&o.stderr));
+    assert_eq!(fails_with(&o, &[]), want, "live and direct say the same");
+    assert!(!d.path("l.npy").exists() && !d.path("l.direct.part").exists());
+    // One voxel of six in the window: live runs and warns as direct does.
+    let pts = "-0.45,0,0.8;0,0,30;0,0,31;0,0,32;0,0,33;0,0,34";
+    let o = vltm(&[
+        "direct",
+        cap,
+        "--volume",
+        pts,
+        "--out",
+        d.path("d.npy").to_str().expect("utf-8"),
+    ]);
+    ok(&o);
+    let warn = |o: &Output| {
+        text(&o.stderr)
+            .lines()
+            .find(|l| l.starts_with("vltm: warning: only"))
+            .map(str::to_string)
+    };
+    let want = warn(&o).expect("direct warns");
+    let o = vltm(&[
+        "live",
+        cap,
+        "--replay-rate",
+        "1000",
+        "--no-indirect",
+        "--volume",
+        pts,
+        "--out",
+        d.path("l.npy").to_str().expect("utf-8"),
+    ]);
+    ok(&o);
+    assert_eq!(warn(&o), Some(want), "{}", text(&o.stderr));
+}
+
+/// The firmware's voxels (`vltm-firmware-gen volume`), focus and wavelength.
+const FW_VOLUME: &str = "-0.225,-0.225,0.5;-0.075,-0.225,0.5;0.075,-0.225,0.5;0.225,-0.225,0.5;\
+-0.225,-0.075,0.5;-0.075,-0.075,0.5;0.075,-0.075,0.5;0.225,-0.075,0.5;-0.225,0.075,0.5;\
+-0.075,0.075,0.5;0.075,0.075,0.5;0.225,0.075,0.5;-0.225,0.225,0.5;-0.075,0.225,0.5;\
+0.075,0.225,0.5;0.225,0.225,0.5;-0.075,-0.075,0.35;-0.075,-0.075,0.65";
+const FW_FOCUS: &str = "-0.075,-0.075,0.5";
+
+/// The states the QEMU firmware wrote after folding the scan's last rows (8..16) of
+/// `kernel/firmware/fixture/scene.json`'s capture (`fixtures/firmware/`): `vltm live` on that
+/// capture resumes from them, folds rows 0..8 itself, and equals the offline commands within
+/// the kernel's f32 tolerance (10⁻⁶ of the peak); a state of another capture or other
+/// parameters is refused with one line naming the field.
+#[test]
+fn resumes_from_the_firmwares_state() {
+    let d = TempDir::new("firmware");
+    let scene = root().join("kernel/firmware/fixture/scene.json");
+    let cap = d.path("scene.npz");
+    let c = cap.to_str().expect("utf-8");
+    ok(&vltm(&[
+        "simulate",
+        scene.to_str().expect("utf-8"),
+        "--out",
+        c,
+        "--uncompressed",
+    ]));
+    let fw = |n: &str| root().join("fixtures/firmware").join(n);
+    let (fd, fc) = (fw("fw_direct.vltmpart"), fw("fw_column.vltmpart"));
+    let held = vltm::probe::Partial::read(&fd).expect("firmware state");
+    assert_eq!(
+        held.rows(),
+        vec![8..16],
+        "the firmware folds the scan's last rows"
+    );
+    let p = |n: &str| d.path(n).to_str().expect("utf-8").to_string();
+    let live = |cap: &str, extra: &[&str], out: &str| {
+        let mut a = vec![
+            "live",
+            cap,
+            "--replay-rate",
+            "1000",
+            "--volume",
+            FW_VOLUME,
+            "--wavelength",
+            "0.1",
+            "--focus",
+            FW_FOCUS,
+            "--resume",
+            fd.to_str().expect("utf-8"),
+            "--resume",
+            fc.to_str().expect("utf-8"),
+        ];
+        a.extend(extra);
+        let out = p(out);
+        a.extend(["--out", &out]);
+        vltm(&a)
+    };
+    let o = live(c, &[], "live.npy");
+    ok(&o);
+    assert!(
+        text(&o.stdout).contains("resuming with 8 of 16 rows"),
+        "{}",
+        text(&o.stdout)
+    );
+    let offline = |args: &[&str], name: &str| {
+        let mut a = args.to_vec();
+        let q = p(name);
+        a.extend(["--volume", FW_VOLUME, "--wavelength", "0.1", "--out", &q]);
+        ok(&vltm(&a));
+        npy(&d.path(name))
+    };
+    close(
+        &npy(&d.path("live.npy")),
+        &offline(&["direct", c], "d.npy"),
+        "direct light",
+    );
+    close(
+        &npy(&d.path("live.column0.npy")),
+        &offline(&["column", c, "--focus", FW_FOCUS], "c.npy"),
+        "column",
+    );
+    close(
+        &npy(&d.path("live.indirect.npy")),
+        &offline(&["indirect", c], "i.npy"),
+        "in-focus indirect light",
+    );
+    // The final states hold every row: the firmware's and the host's.
+    let s = vltm::probe::Partial::read(&d.path("live.direct.part")).expect("state");
+    assert_eq!(s.rows(), vec![0..16]);
+    // Another capture, other parameters: one line naming the field.
+    let other = fixture("two_patches");
+    let o = live(other.to_str().expect("utf-8"), &[], "x.npy");
+    fails_with(
+        &o,
+        &[
+            "--resume",
+            "fw_direct.vltmpart",
+            "different captures",
+            "capture.",
+        ],
+    );
+    let o = live(c, &["--sigma", "0.08"], "y.npy");
+    fails_with(
+        &o,
+        &["--resume", "fw_direct.vltmpart", "sigma: 0.08 vs null"],
+    );
+    assert!(!d.path("y.npy").exists() && !d.path("y.direct.part").exists());
 }

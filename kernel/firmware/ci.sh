@@ -234,12 +234,20 @@ state_merge() { # state_merge MACHINE ELF
     ! "$vltm_bin" merge "$t/other.part" "$fw" --out "$t/x.npy" >/dev/null 2>&1 || { echo "other parameters merged"; ok=1; }
     unset -n args
   done
+  # `vltm live --resume` on the firmware's states: the host folds rows 0..8 as they are
+  # replayed, and the result equals the host's whole run.
+  "$vltm_bin" live "$t/scene.npz" --replay-rate 1000 --volume "$pts" --wavelength "$wl" \
+      --focus="$focus" --resume "$t/fw_direct.vltmpart" --resume "$t/fw_column.vltmpart" \
+      --no-indirect --out "$t/live.npy" >/dev/null 2>&1 &&
+    gen compare "$t/live.npy" "$t/whole_d.npy" 1e-6 &&
+    gen compare "$t/live.column0.npy" "$t/whole_c.npy" 1e-6 ||
+    { echo "vltm live --resume from the firmware's states failed or differs"; ok=1; }
   rm -rf "$t"; return $ok
 }
 for t in $M4 $M0; do
   m=$([ $t = $M4 ] && echo m4f || echo m0)
   step "state firmware $t: build" fw --target $t --features state --bin vltm-firmware-state
-  step "firmware state (rows 8..16, $m) + host part (rows 0..8) merged = host's whole run" \
+  step "firmware state (rows 8..16, $m) + host part (rows 0..8) merged, and live --resume, = host's whole run" \
     state_merge $m "$(elf $t vltm-firmware-state)"
 done
 

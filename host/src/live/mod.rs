@@ -26,11 +26,17 @@
 //!
 //! # Resuming
 //!
-//! A run started with the states a previous run wrote ([`LiveRun::new`]'s `resume`) reads the
-//! stream from its start again (the rows are needed for the indirect pass) but folds only the
-//! rows after the states' rows. A state of another capture, probe or configuration is refused
-//! (the checks of [`Partial::merge`]).
+//! A run started with the states a previous run wrote ([`LiveRun::new`]'s `resume`: a live
+//! run's states of rows `0..k`, or any states of the same rows, such as a `--partial` part or
+//! the firmware's state of the scan's last rows) folds only the rows the states do not hold.
+//! Rows `0..k` at the start of the scan are passed over by the source without binning
+//! ([`LiveSource::skip_rows`]); the in-focus indirect light, which needs every row, then reads
+//! them again from the finished file at the end ([`LiveSource::reread`]). A stream on
+//! standard input cannot be read again: with the indirect light on, its rows are binned and
+//! stored as they come, and only the folding is skipped. A state of another capture, probe
+//! or configuration is refused (the checks of [`Partial::merge`], naming the field).
 
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
@@ -46,6 +52,7 @@ use crate::io::ptu::{FollowedRow, Follower};
 use crate::probe::partial::{self, Finished, Partial, Task};
 use crate::probe::{
     ColumnGate, IndirectOptions, IndirectOutput, Shell, Wave, gamma_mask, indirect_over,
+    window_coverage,
 };
 use crate::volume::Volume;
 use vltm_kernel::Point;
@@ -86,6 +93,26 @@ pub trait LiveSource: Send {
     /// # Errors
     /// The source's read and format errors.
     fn next_row(&mut self) -> Result<Option<Arrival>>;
+    /// Passes over rows `0..k` (before the first row is read): the next row is row `k`.
+    /// Returns whether the source did (the default: it cannot, every row is read).
+    fn skip_rows(&mut self, k: usize) -> bool {
+        let _ = k;
+        false
+    }
+    /// Whether [`LiveSource::reread`] can read rows again (a file; not a pipe).
+    fn can_reread(&self) -> bool {
+        false
+    }
+    /// Rows `rows` again, after the stream's end (the rows skipped by a resumed run, for the
+    /// in-focus indirect light).
+    ///
+    /// # Errors
+    /// [`Error::Argument`] for a source that cannot ([`LiveSource::can_reread`]); the
+    /// source's read and format errors.
+    fn reread(&mut self, rows: Range<usize>) -> Result<Vec<Arrival>> {
+        let _ = rows;
+        Err(Error::arg("resume", "this source cannot be read again"))
+    }
 }
 
 impl LiveSource for Follower {
@@ -95,6 +122,30 @@ impl LiveSource for Follower {
     fn next_row(&mut self) -> Result<Option<Arrival>> {
         Ok(Self::next_row(self)?.map(Arrival::from))
     }
+    fn skip_rows(&mut self, k: usize) -> bool {
+        Self::skip_rows(self, k);
+        true
+    }
+    fn can_reread(&self) -> bool {
+        matches!(self.reopen(), Ok(Some(_)))
+    }
+    fn reread(&mut self, rows: Range<usize>) -> Result<Vec<Arrival>> {
+        let Some(mut f) = self.reopen()? else {
+            return Err(Error::arg(
+                "resume",
+                "a stream on standard input cannot be read again",
+            ));
+        };
+        f.skip_rows(rows.start);
+        let mut out = Vec::with_capacity(rows.len());
+        while out.len() < rows.len() {
+            match f.next_row()? {
+                Some(r) => out.push(Arrival::from(r)),
+                None => break,
+            }
+        }
+        Ok(out)
+    }
 }
 
 /// A capture replayed row by row at a fixed rate (demos and tests).
@@ -103,6 +154,7 @@ pub struct Replay {
     capture: Capture,
     interval: Duration,
     next: usize,
+    skipped: usize,
     start: Option<Instant>,
 }
 
@@ -123,6 +175,7 @@ impl Replay {
             capture,
             interval,
             next: 0,
+            skipped: 0,
             start: None,
         })
     }
@@ -159,11 +212,11 @@ impl LiveSource for Replay {
             return Ok(None);
         }
         let start = *self.start.get_or_insert_with(Instant::now);
-        // Row l is complete at (l + 1) intervals after the start.
+        // Row l is complete at (l + 1) intervals after the start (of the rows replayed).
         let due = start
             + self
                 .interval
-                .saturating_mul(u32::try_from(l + 1).unwrap_or(u32::MAX));
+                .saturating_mul(u32::try_from(l + 1 - self.skipped).unwrap_or(u32::MAX));
         let now = Instant::now();
         if due > now {
             std::thread::sleep(due - now);
@@ -177,6 +230,31 @@ impl LiveSource for Replay {
             dwell: Some(self.interval.as_secs_f64()),
             position: None,
         }))
+    }
+    fn skip_rows(&mut self, k: usize) -> bool {
+        if self.next == 0 {
+            self.next = k.min(self.capture.geometry.lasers.len());
+            self.skipped = self.next;
+        }
+        true
+    }
+    fn can_reread(&self) -> bool {
+        true
+    }
+    fn reread(&mut self, rows: Range<usize>) -> Result<Vec<Arrival>> {
+        let n = self.capture.geometry.lasers.len();
+        Ok((rows.start.min(n)..rows.end.min(n))
+            .map(|l| {
+                let data = self.capture.row(l).to_vec();
+                Arrival {
+                    index: l,
+                    photons: data.iter().map(|&x| f64::from(x)).sum(),
+                    data,
+                    dwell: None,
+                    position: None,
+                }
+            })
+            .collect())
     }
 }
 
@@ -208,6 +286,11 @@ pub struct LiveOptions {
     pub indirect: Option<IndirectOptions>,
     /// The capture's name, recorded in the states (informational).
     pub capture_name: String,
+    /// The capture file's size in bytes, recorded in the states' capture identity: a
+    /// finished file's size (a replayed capture), 0 for a stream whose final size is not
+    /// known when a state is written (a followed file, standard input). 0 matches any size
+    /// when states merge ([`Partial::merge`]).
+    pub file_bytes: u64,
 }
 
 /// The state of a live run: the rows received, the probes' states, the summed transient.
@@ -216,11 +299,19 @@ pub struct LiveRun {
     opts: LiveOptions,
     capture: Capture,
     received: usize,
+    /// Rows in the probes' states (the resumed states' rows included).
     folded: usize,
+    /// The rows the resumed states hold (ascending, disjoint).
+    held: Vec<Range<usize>>,
+    /// Rows below this are folded or held.
+    next: usize,
+    /// Rows below this were not stored (passed over by a resumed run).
+    stored_from: usize,
     probes: Vec<LiveProbe>,
     transient: Vec<f64>,
     photons: f64,
     dwell: Vec<f64>,
+    warnings: Vec<String>,
 }
 
 fn exec(path: EvalPath) -> Exec<'static> {
@@ -232,12 +323,14 @@ fn exec(path: EvalPath) -> Exec<'static> {
 
 impl LiveRun {
     /// A run over a capture of geometry `g`; `resume`: the states of an interrupted run, one
-    /// per probe (direct light first, then the columns), each over rows `0..k` (the same `k`).
+    /// per probe (direct light first, then the columns), all over the same rows: rows `0..k`
+    /// for a live run's states, any rows for the states of `--partial` or of the firmware
+    /// (e.g. the scan's last rows). The rows the states hold are not folded again.
     ///
     /// # Errors
     /// [`Error::Argument`] (`--resume`) for states that do not match the probes, the capture
-    /// or the parameters, or hold other rows; the probes' configuration errors; the memory
-    /// budget for the stored rows.
+    /// or the parameters, or hold different rows; the probes' configuration errors; the
+    /// memory budget for the stored rows.
     pub fn new(g: &Geometry, opts: LiveOptions, resume: Vec<(PathBuf, Partial)>) -> Result<Self> {
         let n = g.lasers.len() * g.spads_per_row() * g.nt;
         budget::check(
@@ -266,11 +359,11 @@ impl LiveRun {
         }
         let mut resume: Vec<Option<(PathBuf, Partial)>> = resume.into_iter().map(Some).collect();
         let mut probes = Vec::new();
-        let mut folded = None;
+        let mut held: Option<Vec<Range<usize>>> = None;
         for (tag, title, task) in tasks {
             let empty = partial::accumulate(
                 &mut capture,
-                0,
+                opts.file_bytes,
                 &opts.capture_name,
                 &opts.volume,
                 &task,
@@ -287,48 +380,37 @@ impl LiveRun {
                     .is_some_and(|(_, p)| p.kind() == empty.kind() && p.focus() == focus)
             });
             let state = match found.and_then(Option::take) {
-                None if folded.is_some_and(|k| k > 0) => {
+                None if held.as_ref().is_some_and(|h| !h.is_empty()) => {
                     return Err(Error::arg(
                         "resume",
                         format!("no state given for the {title}"),
                     ));
                 }
                 None => {
-                    folded = Some(0);
+                    held = Some(Vec::new());
                     empty
                 }
                 Some((path, p)) => {
                     let rows = p.rows();
-                    let k = match rows.as_slice() {
-                        [] => 0,
-                        [r] if r.start == 0 => r.end,
-                        _ => {
-                            return Err(Error::arg(
-                                "resume",
-                                format!(
-                                    "{} holds rows {rows:?}: a live run's state holds rows 0:k",
-                                    path.display()
-                                ),
-                            ));
-                        }
-                    };
-                    if folded.is_some_and(|f| f != k) {
+                    if held.as_ref().is_some_and(|h| *h != rows) {
                         return Err(Error::arg(
                             "resume",
                             format!(
-                                "{} holds rows 0:{k}, the other states another number: give the states of one run",
-                                path.display()
+                                "{} holds rows {}, the other states other rows: give the states of one run",
+                                path.display(),
+                                show_rows(&rows)
                             ),
                         ));
                     }
-                    folded = Some(k);
+                    held = Some(rows);
                     let names = [path.display().to_string(), "this run".to_string()];
                     Partial::merge(vec![p, empty], &names).map_err(|e| {
                         Error::arg(
                             "resume",
                             format!(
-                                "{} is not a state of this capture and these parameters: {e}",
-                                path.display()
+                                "{} is not a state of this capture and these parameters: {}",
+                                path.display(),
+                                e.to_string().trim_start_matches("argument `merge`: ")
                             ),
                         )
                     })?
@@ -345,23 +427,51 @@ impl LiveRun {
             return Err(Error::arg(
                 "resume",
                 format!(
-                    "{} is a {} state that matches no probe of this run (check $focus)",
+                    "{} is a {} state that matches no probe of this run (check --focus)",
                     path.display(),
                     p.kind()
                 ),
             ));
+        }
+        let held = held.unwrap_or_default();
+        // The probes' window rule (an empty window already failed above, in the probes' own
+        // set-up, with the one line every probe gives): the warnings for few paths in it.
+        let base = opts.wave.config(g)?;
+        let mut warnings = Vec::new();
+        let mut warn = |foci: Option<&[Point]>| -> Result<()> {
+            let c = window_coverage(g, &base, foci, &opts.volume.points, ColumnGate::TwoBounce)?;
+            if let Some(w) = c.warning()
+                && !warnings.contains(&w)
+            {
+                warnings.push(w);
+            }
+            Ok(())
+        };
+        warn(None)?;
+        for a in &opts.focus {
+            warn(Some(std::slice::from_ref(a)))?;
         }
         let nt = g.nt;
         Ok(Self {
             opts,
             capture,
             received: 0,
-            folded: folded.unwrap_or(0),
+            folded: held.iter().map(ExactSizeIterator::len).sum(),
+            held,
+            next: 0,
+            stored_from: 0,
             probes,
             transient: vec![0.0; nt],
             photons: 0.0,
             dwell: Vec::new(),
+            warnings,
         })
+    }
+
+    /// The probes' warnings of the window rule ([`window_coverage`]: few of the paths through
+    /// the volume lie in the capture's time window), as `direct` and `column` give them.
+    pub fn warnings(&self) -> &[String] {
+        &self.warnings
     }
 
     /// The geometry.
@@ -433,13 +543,7 @@ impl LiveRun {
                 format!("row {} of {} values", a.index, a.data.len()),
             ));
         }
-        let nt = self.capture.geometry.nt;
-        for h in a.data.chunks(nt) {
-            for (t, &x) in self.transient.iter_mut().zip(h) {
-                *t += f64::from(x);
-            }
-        }
-        self.capture.data[a.index * per_row..(a.index + 1) * per_row].copy_from_slice(&a.data);
+        self.store(&a);
         self.photons += a.photons;
         if let Some(d) = a.dwell.filter(|d| d.is_finite() && *d > 0.0) {
             self.dwell.push(d);
@@ -448,31 +552,135 @@ impl LiveRun {
         Ok(())
     }
 
-    /// Folds the rows received but not yet folded into every probe; returns how many.
+    /// The rows at the start of the scan that the resumed states hold (`0..k`: `k`, else 0):
+    /// a source may pass over them ([`LiveRun::skip_received`]).
+    pub fn held_prefix(&self) -> usize {
+        match self.held.first() {
+            Some(r) if r.start == 0 => r.end,
+            _ => 0,
+        }
+    }
+
+    /// Rows `0..k` (held by the resumed states, `k ≤` [`LiveRun::held_prefix`]) will not
+    /// arrive: the next row received is row `k`. Their values are not stored until
+    /// [`LiveRun::refill`].
+    ///
+    /// # Errors
+    /// [`Error::Argument`] (`resume`) after rows arrived, or for rows the states do not hold.
+    pub fn skip_received(&mut self, k: usize) -> Result<()> {
+        if self.received > 0 || k > self.held_prefix() {
+            return Err(Error::arg(
+                "resume",
+                format!(
+                    "cannot pass over rows 0:{k} (the states hold 0:{})",
+                    self.held_prefix()
+                ),
+            ));
+        }
+        self.received = k;
+        self.next = k;
+        self.stored_from = k;
+        Ok(())
+    }
+
+    /// Rows received but not folded yet (waiting for the next fold).
+    pub fn pending(&self) -> usize {
+        self.received.saturating_sub(self.next)
+    }
+
+    /// Rows below this were passed over and are not stored (0 once every row is).
+    pub fn stored_from(&self) -> usize {
+        self.stored_from
+    }
+
+    /// Stores rows passed over by [`LiveRun::skip_received`] (read again after the stream's
+    /// end), for the in-focus indirect light; adds them to the summed transient.
+    ///
+    /// # Errors
+    /// [`Error::Format`] (`rows`) unless `rows` are exactly rows `0..stored_from`, in order.
+    pub fn refill(&mut self, rows: Vec<Arrival>) -> Result<()> {
+        let per_row = self.capture.geometry.spads_per_row() * self.capture.geometry.nt;
+        let k = self.stored_from;
+        if rows.len() != k
+            || rows
+                .iter()
+                .enumerate()
+                .any(|(i, a)| a.index != i || a.data.len() != per_row)
+        {
+            return Err(Error::format(
+                Path::new(&self.opts.capture_name),
+                "rows",
+                format!("rows 0:{k} read again, of {per_row} values"),
+                format!("{} rows", rows.len()),
+            ));
+        }
+        for a in rows {
+            self.store(&a);
+        }
+        self.stored_from = 0;
+        Ok(())
+    }
+
+    fn store(&mut self, a: &Arrival) {
+        let per_row = self.capture.geometry.spads_per_row() * self.capture.geometry.nt;
+        let nt = self.capture.geometry.nt;
+        for h in a.data.chunks(nt) {
+            for (t, &x) in self.transient.iter_mut().zip(h) {
+                *t += f64::from(x);
+            }
+        }
+        self.capture.data[a.index * per_row..(a.index + 1) * per_row].copy_from_slice(&a.data);
+    }
+
+    /// Folds the rows received but neither folded nor held into every probe; returns how
+    /// many.
     ///
     /// # Errors
     /// The probes' errors.
     pub fn fold(&mut self) -> Result<usize> {
-        if self.received <= self.folded {
+        let upto = self.received;
+        if upto <= self.next {
             return Ok(0);
         }
-        let rows = self.folded..self.received;
-        for p in &mut self.probes {
-            let part = partial::accumulate(
-                &mut self.capture,
-                0,
-                &self.opts.capture_name,
-                &self.opts.volume,
-                &p.task,
-                &self.opts.wave,
-                exec(self.opts.path),
-                rows.clone(),
-            )?;
-            let state = std::mem::replace(&mut p.state, part.clone());
-            p.state = Partial::merge(vec![state, part], &[])?;
+        // next..upto less the held rows.
+        let mut ranges = Vec::new();
+        let mut a = self.next;
+        for h in &self.held {
+            if h.end <= a {
+                continue;
+            }
+            if h.start >= upto {
+                break;
+            }
+            if h.start > a {
+                ranges.push(a..h.start);
+            }
+            a = a.max(h.end);
         }
-        self.folded = rows.end;
-        Ok(rows.len())
+        if a < upto {
+            ranges.push(a..upto);
+        }
+        let mut n = 0;
+        for rows in ranges {
+            for p in &mut self.probes {
+                let part = partial::accumulate(
+                    &mut self.capture,
+                    self.opts.file_bytes,
+                    &self.opts.capture_name,
+                    &self.opts.volume,
+                    &p.task,
+                    &self.opts.wave,
+                    exec(self.opts.path),
+                    rows.clone(),
+                )?;
+                let state = std::mem::replace(&mut p.state, part.clone());
+                p.state = Partial::merge(vec![state, part], &[])?;
+            }
+            n += rows.len();
+        }
+        self.next = upto;
+        self.folded += n;
+        Ok(n)
     }
 
     /// Whether every row is folded.
@@ -494,12 +702,12 @@ impl LiveRun {
     /// # Errors
     /// [`Error::Argument`] before every row is in; the probe's errors.
     pub fn indirect(&mut self, direct: &[f32], opts: &IndirectOptions) -> Result<IndirectOutput> {
-        if self.received < self.total_rows() {
+        if self.received < self.total_rows() || self.stored_from > 0 {
             return Err(Error::arg(
                 "indirect",
                 format!(
                     "the in-focus indirect light needs the whole scan: {} of {} rows are in",
-                    self.received,
+                    self.received - self.stored_from,
                     self.total_rows()
                 ),
             ));
@@ -516,6 +724,15 @@ impl LiveRun {
         o.direct = direct.to_vec();
         Ok(o)
     }
+}
+
+/// `[0:8, 12:16]`-style row ranges.
+fn show_rows(rows: &[Range<usize>]) -> String {
+    let r: Vec<String> = rows
+        .iter()
+        .map(|r| format!("{}:{}", r.start, r.end))
+        .collect();
+    format!("[{}]", r.join(", "))
 }
 
 /// One volume to show and write: a probe's preview (or final) volume.
@@ -600,9 +817,16 @@ impl LiveRun {
             };
             let title = if self.complete() {
                 p.title.clone()
-            } else {
+            } else if self.held.iter().all(|h| h.start == 0) {
                 format!(
                     "{} (rows 0:{} of {})",
+                    p.title,
+                    self.folded,
+                    self.total_rows()
+                )
+            } else {
+                format!(
+                    "{} ({} of {} rows)",
                     p.title,
                     self.folded,
                     self.total_rows()
@@ -787,9 +1011,20 @@ pub fn drive(
     capture: &Path,
     observe: &mut dyn FnMut(Update<'_>),
 ) -> Result<()> {
+    let mut source = source;
+    // A resumed run passes over the rows its states hold at the start of the scan, unless
+    // they are needed for the in-focus indirect light and the source cannot read them again
+    // at the end (standard input).
+    let k = run.held_prefix();
+    if k > 0
+        && run.received() == 0
+        && (run.opts.indirect.is_none() || source.can_reread())
+        && source.skip_rows(k)
+    {
+        run.skip_received(k)?;
+    }
     let (tx, rx) = mpsc::sync_channel::<Result<Arrival>>(1024);
     let reader = std::thread::spawn(move || {
-        let mut source = source;
         loop {
             let r = source.next_row();
             let stop = !matches!(r, Ok(Some(_)));
@@ -797,10 +1032,10 @@ pub fn drive(
             if let Some(item) = item
                 && tx.send(item).is_err()
             {
-                return;
+                return source;
             }
             if stop {
-                return;
+                return source;
             }
         }
     });
@@ -850,7 +1085,7 @@ pub fn drive(
         });
     }
     drop(rx);
-    let _ = reader.join();
+    let source = reader.join().ok();
     if let Some(e) = failure {
         return Err(e);
     }
@@ -866,6 +1101,13 @@ pub fn drive(
     }
     let mut views = run.views()?;
     if let Some(opts) = run.opts.indirect {
+        if run.stored_from() > 0 {
+            // The rows passed over at the start, read again from the finished file.
+            let mut source = source
+                .ok_or_else(|| Error::arg("live", "the reader thread of the source panicked"))?;
+            let rows = source.reread(0..run.stored_from())?;
+            run.refill(rows)?;
+        }
         let direct = views[0].values.clone();
         let o = run.indirect(&direct, &opts)?;
         let title = format!(

@@ -43,13 +43,15 @@ impl Progress {
         } else {
             0.0
         };
-        // The dwell from the source (sync clock, replay rate), else the arrival interval.
-        let arrival = el / run.received().max(1) as f64;
+        // The dwell from the source (sync clock, replay rate), else the arrival interval of
+        // the rows that arrived in this run (not those a resumed run passed over).
+        let arrived = run.received().saturating_sub(run.stored_from());
+        let arrival = el / arrived.max(1) as f64;
         let dwell = run.dwell().unwrap_or(arrival);
         // Rows come no faster than they are acquired, nor than they arrive.
         let pace = dwell.max(arrival);
-        let left = total.saturating_sub(done) as f64;
-        let eta = left * pace.max(per_row);
+        let left = total.saturating_sub(run.received()) as f64;
+        let eta = left * pace.max(per_row) + run.pending() as f64 * per_row;
         format!(
             "live: rows {done}/{total}, {:.3e} photons/s, {:.1} ms/row folded vs {:.1} ms dwell{}, ETA {:.1} s",
             run.photons() / el,
@@ -238,6 +240,7 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
                 &name,
                 sc,
                 side,
+                opts_follow,
             )?)
         }
         Kind::Replay(rate) => {
@@ -267,11 +270,21 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
         capture_name: name
             .file_name()
             .map_or_else(String::new, |f| f.to_string_lossy().into_owned()),
+        // A replayed capture is a finished file: its size is part of the states' identity
+        // (they then merge with `--partial` states of the same file); a followed stream has
+        // no final size yet (0, which matches any).
+        file_bytes: match &kind {
+            Kind::Replay(_) => std::fs::metadata(&a.source).map_or(0, |m| m.len()),
+            Kind::Follow(_) | Kind::Stdin(_) => 0,
+        },
     };
     let mut run = LiveRun::new(&g, opts, resume)?;
+    for w in run.warnings() {
+        crate::console::tell!("vltm: warning: {w}");
+    }
     if run.folded() > 0 {
         say!(
-            "live: resuming after row {} of {}",
+            "live: resuming with {} of {} rows in the states",
             run.folded(),
             run.total_rows()
         );
@@ -333,7 +346,7 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
         }
         if run.folded() > 0 {
             eprintln!(
-                "vltm: note: the states of rows 0:{} are in {} (continue with --resume)",
+                "vltm: note: the states of {} rows are in {} (continue with --resume)",
                 run.folded(),
                 outputs.state("direct").display()
             );

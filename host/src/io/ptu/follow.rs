@@ -16,6 +16,18 @@
 //!   poll: once the count is patched in, the records end at that count. A file that stops
 //!   growing for the idle timeout ends the stream where it stands.
 //!
+//! A pipe that stops sending without closing (a relay that hangs) is read on a thread of its
+//! own ([`Follower::stream`]): when nothing arrives for the idle timeout the stream ends
+//! there too ([`Ended::Idle`]), and the rows it did not complete are an error naming the byte
+//! position. (A reader given to [`Follower::reader`] says so by returning
+//! [`io::ErrorKind::TimedOut`].)
+//!
+//! # Resuming
+//!
+//! [`Follower::skip_rows`] passes over the first rows of the scan without binning them
+//! (their records are decoded, only to count the row markers), for a run that resumes from
+//! states that already hold them.
+//!
 //! The scan's last row is every photon after its row marker up to the end of the records; a
 //! stream that ends (or stops growing) before the last row marker is an error (field
 //! `markers`, naming the byte position), and so is one that stops inside a 4-byte record
@@ -65,8 +77,78 @@ pub enum Ended {
     Count,
     /// A pipe (or other stream) reached its end of file.
     Eof,
-    /// A file stopped growing for the idle timeout.
+    /// A file stopped growing, or a pipe stopped sending, for the idle timeout.
     Idle,
+}
+
+/// A pipe read on a thread of its own, so that a read can give up after the idle timeout:
+/// a read that waits longer than `timeout` for the next chunk returns
+/// [`io::ErrorKind::TimedOut`]. Holds at most four 64 KiB chunks in flight.
+struct Relay {
+    rx: std::sync::mpsc::Receiver<io::Result<Vec<u8>>>,
+    chunk: Vec<u8>,
+    at: usize,
+    timeout: Duration,
+    done: bool,
+}
+
+impl Relay {
+    fn spawn(mut inner: Box<dyn Read + Send>, timeout: Duration) -> Self {
+        let (tx, rx) = std::sync::mpsc::sync_channel(4);
+        // The thread ends at the end of the stream, on an error, or when the follower is
+        // dropped (the next send fails); a pipe that never sends again keeps it blocked in
+        // `read` until the process ends.
+        std::thread::spawn(move || {
+            loop {
+                let mut buf = vec![0u8; 1 << 16];
+                let r = match inner.read(&mut buf) {
+                    Ok(n) => {
+                        buf.truncate(n);
+                        Ok(buf)
+                    }
+                    Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                    Err(e) => Err(e),
+                };
+                let stop = !matches!(&r, Ok(b) if !b.is_empty());
+                if tx.send(r).is_err() || stop {
+                    return;
+                }
+            }
+        });
+        Self {
+            rx,
+            chunk: Vec::new(),
+            at: 0,
+            timeout,
+            done: false,
+        }
+    }
+}
+
+impl Read for Relay {
+    fn read(&mut self, buf: &mut [u8]) -> io::Result<usize> {
+        while self.at >= self.chunk.len() {
+            if self.done {
+                return Ok(0);
+            }
+            match self.rx.recv_timeout(self.timeout) {
+                Ok(Ok(c)) if c.is_empty() => self.done = true,
+                Ok(Ok(c)) => (self.chunk, self.at) = (c, 0),
+                Ok(Err(e)) => {
+                    self.done = true;
+                    return Err(e);
+                }
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {
+                    return Err(io::ErrorKind::TimedOut.into());
+                }
+                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => self.done = true,
+            }
+        }
+        let n = buf.len().min(self.chunk.len() - self.at);
+        buf[..n].copy_from_slice(&self.chunk[self.at..self.at + n]);
+        self.at += n;
+        Ok(n)
+    }
 }
 
 /// The bytes of a growing file or a stream, counting the position; at the end of a growing
@@ -96,7 +178,7 @@ impl Tail {
             && h.num_records > 0
             && h.data_offset == start
         {
-            self.end = Some(start + 4 * h.num_records);
+            self.end = records_end(&h);
         }
     }
 }
@@ -121,6 +203,11 @@ impl Read for Tail {
             let n = match self.inner.read(&mut buf[..want]) {
                 Ok(n) => n,
                 Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
+                // The source waited the idle timeout for data (a pipe that stopped sending).
+                Err(e) if e.kind() == io::ErrorKind::TimedOut => {
+                    self.ended = Ended::Idle;
+                    return Ok(0);
+                }
                 Err(e) => return Err(e),
             };
             if n > 0 {
@@ -156,6 +243,13 @@ impl Read for Tail {
     }
 }
 
+/// Where the header's counted records end (`None`: past byte 2^64, a corrupt count).
+fn records_end(h: &Header) -> Option<u64> {
+    h.num_records
+        .checked_mul(4)
+        .and_then(|b| b.checked_add(h.data_offset))
+}
+
 /// One laser row handed out by a [`Follower`].
 #[derive(Clone, Debug, PartialEq)]
 pub struct FollowedRow {
@@ -189,6 +283,9 @@ pub struct Follower {
     counts: Counts,
     hist: Vec<u32>,
     finished: bool,
+    /// Rows `0..skip` are passed over without binning ([`Follower::skip_rows`]).
+    skip: usize,
+    sidecar_path: PathBuf,
 }
 
 impl std::fmt::Debug for Follower {
@@ -226,8 +323,9 @@ impl Follower {
     }
 
     /// Follows a T3 record stream (header first) read from `stream`, e.g. standard input;
-    /// `name` names it in errors. The stream ends at its end of file or at the header's
-    /// record count.
+    /// `name` names it in errors. The stream ends at its end of file, at the header's record
+    /// count, or when it sends nothing for `opts.idle_timeout` (it is read on a thread of its
+    /// own, so a pipe that stops sending without closing cannot hang the follower).
     ///
     /// # Errors
     /// As [`Follower::file`].
@@ -236,11 +334,36 @@ impl Follower {
         name: &Path,
         sidecar: Sidecar,
         sidecar_path: &Path,
+        opts: FollowOptions,
+    ) -> Result<Self> {
+        let relay = Relay::spawn(stream, opts.idle_timeout);
+        Self::reader(Box::new(relay), None, name, sidecar, sidecar_path, opts)
+    }
+
+    /// Follows the bytes `source` gives, as they come, on the calling thread (the building
+    /// block of [`Follower::file`] and [`Follower::stream`], and of tests and fuzzing):
+    ///
+    /// * `file: None` — a pipe: `Ok(0)` is its end;
+    /// * `file: Some(path)` — a growing file: `Ok(0)` is its current end, more may come
+    ///   (polled every `opts.poll`, the header re-read from `path` for a patched record
+    ///   count, the stream ended after `opts.idle_timeout` without growth);
+    /// * either way, an [`io::ErrorKind::TimedOut`] error means the source waited the idle
+    ///   timeout itself: the stream ends there ([`Ended::Idle`]).
+    ///
+    /// # Errors
+    /// As [`Follower::file`].
+    pub fn reader(
+        source: Box<dyn Read + Send>,
+        file: Option<&Path>,
+        name: &Path,
+        sidecar: Sidecar,
+        sidecar_path: &Path,
+        opts: FollowOptions,
     ) -> Result<Self> {
         let tail = Tail {
-            inner: stream,
-            file: None,
-            opts: FollowOptions::default(),
+            inner: source,
+            file: file.map(Path::to_path_buf),
+            opts,
             pos: 0,
             end: None,
             data_start: None,
@@ -248,6 +371,13 @@ impl Follower {
             last_header_check: None,
         };
         Self::new(tail, name, sidecar, sidecar_path)
+    }
+
+    /// Passes over rows `0..k` without binning them (their records are decoded, to count the
+    /// row markers and check them): [`Follower::next_row`] then hands out row `k` first. For
+    /// a run resuming from states that hold those rows. Call it before the first row.
+    pub fn skip_rows(&mut self, k: usize) {
+        self.skip = k.min(self.plan.rows);
     }
 
     fn new(tail: Tail, name: &Path, sidecar: Sidecar, sidecar_path: &Path) -> Result<Self> {
@@ -270,7 +400,14 @@ impl Follower {
         let t = reader.get_mut();
         t.data_start = Some(header.data_offset);
         if header.num_records > 0 {
-            t.end = Some(header.data_offset + 4 * header.num_records);
+            t.end = Some(records_end(&header).ok_or_else(|| {
+                Error::format(
+                    name,
+                    "TTResult_NumberOfRecords",
+                    "a record count whose 4-byte records end before byte 2^64",
+                    header.num_records,
+                )
+            })?);
         }
         Ok(Self {
             name: name.to_path_buf(),
@@ -287,7 +424,22 @@ impl Follower {
             counts: Counts::default(),
             hist: vec![0; row],
             finished: false,
+            skip: 0,
+            sidecar_path: sidecar_path.to_path_buf(),
         })
+    }
+
+    /// A new follower of the same file from its start (the same sidecar and options);
+    /// `None` for a pipe, which cannot be read again.
+    ///
+    /// # Errors
+    /// As [`Follower::file`].
+    pub fn reopen(&self) -> Result<Option<Self>> {
+        let t = self.reader.get_ref();
+        match &t.file {
+            Some(f) => Self::file(f, &self.sidecar_path, t.opts).map(Some),
+            None => Ok(None),
+        }
     }
 
     /// The capture's geometry (from the sidecar and the header).
@@ -310,7 +462,8 @@ impl Follower {
         self.plan.rows
     }
 
-    /// Counts of the records read so far (`skipped_rows` stays 0: every row is binned).
+    /// Counts of the records read so far (`skipped_rows`: the photons of the rows passed
+    /// over by [`Follower::skip_rows`]).
     pub fn counts(&self) -> Counts {
         self.counts
     }
@@ -335,7 +488,12 @@ impl Follower {
             Ended::No | Ended::Count => "the end of the records".to_string(),
             Ended::Eof => "the end of the stream".to_string(),
             Ended::Idle => format!(
-                "the file stopped growing for {:.1} s",
+                "the {} for {:.1} s",
+                if self.reader.get_ref().file.is_some() {
+                    "file stopped growing"
+                } else {
+                    "stream sent nothing"
+                },
                 self.reader.get_ref().opts.idle_timeout.as_secs_f64()
             ),
         };
@@ -455,6 +613,17 @@ impl Follower {
     }
 
     fn bin_next(&mut self) -> Result<Option<FollowedRow>> {
+        loop {
+            let skipped = self.handed < self.skip;
+            let r = self.bin_row(!skipped)?;
+            if !skipped || r.is_none() {
+                return Ok(r);
+            }
+        }
+    }
+
+    /// The next row; `bin: false` passes over its photons (the row is returned empty).
+    fn bin_row(&mut self, bin: bool) -> Result<Option<FollowedRow>> {
         let bits = self.plan.row_bits;
         let rows = self.plan.rows;
         if self.handed >= rows {
@@ -474,7 +643,9 @@ impl Follower {
             }
         }
         let l = self.markers_seen - 1;
-        self.hist.fill(0);
+        if bin {
+            self.hist.fill(0);
+        }
         let nt = self.plan.geometry.nt;
         let mut photons = 0u64;
         let seconds = loop {
@@ -517,6 +688,10 @@ impl Follower {
                     sync,
                 }) => {
                     self.last_sync = self.last_sync.max(sync);
+                    if !bin {
+                        self.counts.skipped_rows += 1;
+                        continue;
+                    }
                     let Some(s) = self.plan.spad_of_channel[usize::from(channel) % CHANNELS] else {
                         if self.plan.unmapped_error {
                             return Err(Error::format(
@@ -556,7 +731,11 @@ impl Follower {
         self.handed += 1;
         Ok(Some(FollowedRow {
             index: l,
-            data: self.hist.iter().map(|&c| c as f32).collect(),
+            data: if bin {
+                self.hist.iter().map(|&c| c as f32).collect()
+            } else {
+                Vec::new()
+            },
             photons,
             seconds: Some(seconds),
             position: self.position(),

@@ -1244,3 +1244,42 @@ fn ptu_writer_rejects_bad_captures() {
     .unwrap_err();
     assert_eq!(field(&e), "H");
 }
+
+/// Found by the `follow` fuzz target: a record count whose records would end past byte
+/// 2^64 (4·count overflowed: a panic under overflow checks, a wrapped end otherwise) is a
+/// one-line error on the count, for a pipe and for a growing file, never a panic.
+#[test]
+fn follower_refuses_a_record_count_past_2_64_bytes() {
+    for n in [i64::MAX, 1 << 62, (1 << 62) + 7] {
+        let mut h = H::new(0x0101_0304, 0);
+        h.n = n;
+        let bytes = file(&h, &[]);
+        for file in [None, Some(Path::new("/nonexistent/t.ptu"))] {
+            let e = super::Follower::reader(
+                Box::new(Cursor::new(bytes.clone())),
+                file,
+                Path::new("t.ptu"),
+                sidecar(1, 1, 4),
+                Path::new("t.json"),
+                super::FollowOptions::default(),
+            )
+            .unwrap_err();
+            assert_eq!(field(&e), "TTResult_NumberOfRecords", "{e}");
+            assert!(e.to_string().contains(&n.to_string()), "{e}");
+        }
+    }
+    // A count just inside the limit is accepted (the stream then ends early: an error on
+    // the records or markers, not the count).
+    let mut h = H::new(0x0101_0304, 0);
+    h.n = (1 << 61) - 100;
+    let mut f = super::Follower::reader(
+        Box::new(Cursor::new(file(&h, &[]))),
+        None,
+        Path::new("t.ptu"),
+        sidecar(1, 1, 4),
+        Path::new("t.json"),
+        super::FollowOptions::default(),
+    )
+    .unwrap();
+    assert_eq!(field(&f.next_row().unwrap_err()), "markers");
+}

@@ -99,6 +99,49 @@ struct Identity {
     geometry_fnv64: String,
 }
 
+/// The first field in which `a` and `b` (serialised) differ, as `prefix.field: a vs b`
+/// (nested objects down to the first differing leaf, `probe.wave.sigma: 0.08 vs null`),
+/// skipping the top-level fields `skip` says match; `None` when none does.
+fn first_difference<T: Serialize + PartialEq>(
+    prefix: &str,
+    a: &T,
+    b: &T,
+    skip: impl Fn(&str) -> bool,
+) -> Option<String> {
+    fn walk(
+        path: &str,
+        x: &serde_json::Value,
+        y: &serde_json::Value,
+        skip: &dyn Fn(&str) -> bool,
+    ) -> Option<String> {
+        use serde_json::Value::Object;
+        match (x, y) {
+            (Object(x), Object(y)) => x.iter().find_map(|(k, v)| {
+                let w = y.get(k).unwrap_or(&serde_json::Value::Null);
+                if skip(k) {
+                    return None;
+                }
+                walk(&format!("{path}.{k}"), v, w, &|_| false)
+            }),
+            _ => (x != y).then(|| format!("{path}: {x} vs {y}")),
+        }
+    }
+    match (serde_json::to_value(a), serde_json::to_value(b)) {
+        (Ok(x), Ok(y)) => walk(prefix, &x, &y, &skip),
+        _ => (a != b).then(|| prefix.to_string()),
+    }
+}
+
+impl Identity {
+    /// The first field in which `b` is another capture than `self`, with both values
+    /// (`capture.nt: 128 vs 64`); `None` for the same capture. A `file_bytes` of 0 (a
+    /// stream's state, written before its final size was known) matches any size.
+    fn differs(&self, b: &Self) -> Option<String> {
+        let unknown = self.file_bytes == 0 || b.file_bytes == 0;
+        first_difference("capture", self, b, |k| k == "file_bytes" && unknown)
+    }
+}
+
 /// The probe's kind and parameters: parts with other parameters do not merge.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 struct ProbeHead {
@@ -219,7 +262,8 @@ fn config_head(cfg: &Config) -> ConfigHead {
 }
 
 /// Runs `task` over the laser rows `rows` of `src` and returns its accumulator state.
-/// `file_bytes` is the capture file's size (0 for a capture made in memory) and
+/// `file_bytes` is the capture file's size (0 for a capture made in memory or a stream whose
+/// final size is not known yet: it then matches any size when parts merge) and
 /// `capture_name` its name (recorded, not compared). Every parameter is derived from the whole
 /// capture's geometry, exactly as one pass over all rows derives it.
 ///
@@ -578,11 +622,13 @@ impl Partial {
                     ),
                 ))
             };
-            if a.head.capture != b.head.capture {
-                return differ("come from different captures");
+            if let Some(d) = a.head.capture.differs(&b.head.capture) {
+                return differ(&format!("come from different captures ({d})"));
             }
-            if a.head.probe != b.head.probe
-                || a.spads != b.spads
+            if let Some(d) = first_difference("probe", &a.head.probe, &b.head.probe, |_| false) {
+                return differ(&format!("have different probes or parameters ({d})"));
+            }
+            if a.spads != b.spads
                 || a.points != b.points
                 || a.from != b.from
                 || a.acc.len() != b.acc.len()
@@ -649,6 +695,12 @@ impl Partial {
             }
         }
         out.head.rows = rows;
+        // A stream's state (size 0) merged with a finished file's records the size.
+        out.head.capture.file_bytes = order
+            .iter()
+            .map(|&i| parts[i].head.capture.file_bytes)
+            .max()
+            .unwrap_or(0);
         Ok(out)
     }
 
