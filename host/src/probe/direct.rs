@@ -545,7 +545,9 @@ fn choose_resampled(
     path: Path,
     rival: f64,
 ) -> Result<Option<(Resample, Engine)>> {
-    if matches!(path, Path::Band | Path::Lookup) || volume.axes.is_none() {
+    // A paired scan (laser and SPAD apart) has no FFT path, exact or resampled: the
+    // confocal path's choice names why.
+    if matches!(path, Path::Band | Path::Lookup) || volume.axes.is_none() || g.paired_apart() {
         return Ok(None);
     }
     let wall = if g.confocal { &g.lasers } else { &g.spads };
