@@ -321,7 +321,7 @@ impl<'m> LookupSlice<'m> {
     ) -> Result<Self, Error> {
         let grid = *lookup.grid();
         let cfg = scan.config();
-        if grid != layout.grid || grid.config() != cfg {
+        if !grid.same(&layout.grid) || !grid.config().same(cfg) {
             return Err(Error::Incompatible("lookup grid of another configuration"));
         }
         let lat = layout.lattice;
@@ -464,7 +464,10 @@ impl<'m> LookupSlice<'m> {
     ) -> Result<(), Error> {
         let grid = self.layout.grid;
         let cfg = scan.config();
-        if *lookup.grid() != grid || cfg != grid.config() || scan.spads().len() != self.layout.ks {
+        if !lookup.grid().same(&grid)
+            || !cfg.same(grid.config())
+            || scan.spads().len() != self.layout.ks
+        {
             return Err(Error::Incompatible("lookup grid of another configuration"));
         }
         let ks = scan.spads().len();
