@@ -253,7 +253,11 @@ if [ -x "$size" ]; then
   for t in $M4 $M0; do
     for b in vltm-firmware vltm-firmware-defmt vltm-firmware-nopanic vltm-firmware-fixed vltm-firmware-fixed-nopanic \
              vltm-firmware-lookup vltm-firmware-lookup-nopanic; do
-      [ -f "$(elf $t $b)" ] && "$size" "$(elf $t $b)" | tail -1 | awk -v t=$t -v b=$b '{printf "   %-22s %-22s text %7d data %5d bss %6d\n", t, b, $1, $2, $3}'
+      e="$(elf $t $b)"
+      # The M0's lookup bin is linked for the mps2-an386 memory map only (a microbit ELF
+      # left in the target dir by an older build would be stale).
+      [ $t = $M0 ] && [ $b = vltm-firmware-lookup ] && e="$(m0big_elf $b)" && b="$b (an386)"
+      [ -f "$e" ] && "$size" "$e" | tail -1 | awk -v t=$t -v b="$b" '{printf "   %-22s %-22s text %7d data %5d bss %6d\n", t, b, $1, $2, $3}'
     done
   done
 else
