@@ -197,6 +197,27 @@ fn eta(cfg: &Config, len: usize, k_d: i64) -> f64 {
 }
 
 impl LookupGrid {
+    /// `self == other` without `f64` arithmetic (bitwise on the `f64` fields, through
+    /// [`Config::same`]): the check the per-row paths make that a grid belongs to their probe,
+    /// with no soft-double compare on a Cortex-M4F. Every field is destructured, so a new
+    /// field cannot be forgotten here.
+    pub(crate) fn same(&self, other: &Self) -> bool {
+        let Self {
+            cfg,
+            len,
+            bits,
+            k_d,
+            first,
+            bound,
+        } = self;
+        cfg.same(&other.cfg)
+            && *len == other.len
+            && *bits == other.bits
+            && *k_d == other.k_d
+            && *first == other.first
+            && bound.to_bits() == other.bound.to_bits()
+    }
+
     /// Validates `p` for `cfg` and derives the grid.
     ///
     /// # Errors
@@ -568,7 +589,7 @@ impl<'m> LookupProbe<'m> {
         scratch: &'m mut [f32],
     ) -> Result<Self, Error> {
         let grid = lookup.grid;
-        if grid.cfg != *scan.config() {
+        if !grid.cfg.same(scan.config()) {
             return Err(Error::Incompatible("lookup grid of another configuration"));
         }
         let kv = voxels.len();
@@ -643,7 +664,7 @@ impl<'m> LookupProbe<'m> {
         row: &Row<'_, T>,
     ) -> Result<(), Error> {
         let cfg = scan.config();
-        if lookup.grid != self.grid || *cfg != self.grid.cfg {
+        if !lookup.grid.same(&self.grid) || !cfg.same(&self.grid.cfg) {
             return Err(Error::Incompatible("lookup grid of another configuration"));
         }
         let ks = scan.spads().len();
@@ -742,7 +763,10 @@ impl<'m> LookupProbe<'m> {
     /// # Errors
     /// [`Error::Incompatible`] if the probes differ; nothing is changed then.
     pub fn merge(&mut self, other: &LookupProbe<'_>) -> Result<(), Error> {
-        if self.target != other.target || self.voxels != other.voxels || self.grid != other.grid {
+        if self.target != other.target
+            || self.voxels != other.voxels
+            || !self.grid.same(&other.grid)
+        {
             return Err(Error::Incompatible("different target, voxels or grid"));
         }
         for (a, b) in self.acc.iter_mut().zip(other.acc.iter()) {
@@ -780,6 +804,31 @@ mod tests {
 
     fn cfg() -> Config {
         Config::try_new(&Params::new(0.2, 64, 0.01)).unwrap()
+    }
+
+    /// `LookupGrid::same` (bitwise, what the per-row paths compare) agrees with `==`: equal
+    /// grids, another length, another tolerance's grid of the same length (`bound` differs
+    /// only if the configuration does), another configuration.
+    #[test]
+    fn grid_same_is_equality() {
+        let c = cfg();
+        let g = |cfg: &Config, grid_len| {
+            LookupGrid::try_new(
+                cfg,
+                &LookupParams {
+                    tolerance: 1.0,
+                    grid_len,
+                },
+            )
+            .unwrap()
+        };
+        let a = g(&c, Some(256));
+        assert!(a.same(&a) && a.same(&g(&c, Some(256))) && a == g(&c, Some(256)));
+        let other = Config::try_new(&Params::new(0.21, 64, 0.01)).unwrap();
+        for b in [g(&c, Some(512)), g(&other, Some(256))] {
+            assert_eq!(a.same(&b), a == b);
+            assert!(!a.same(&b), "{b:?}");
+        }
     }
 
     #[test]

@@ -288,6 +288,15 @@ pub struct LookupSlice<'m> {
     /// Per voxel: `[sum.re, sum.im, x_lead, 0]`, this row's sum over the SPADs and the lead
     /// path in grid units.
     voxel: &'m mut [[f32; 4]],
+    /// Per-row constants, rounded to `f32` once here (no soft `f64` per row on a
+    /// Cortex-M4F): grid points per metre of path `L/span`, the carrier `θ = k_d/L`, and the
+    /// guard interval in metres (`Config::guard`), metres of path per grid point `span/L`
+    /// and the weights' `d_min`.
+    per_m: f32,
+    theta: f32,
+    guard_m: (f32, f32),
+    per_grid: f32,
+    d_min: f32,
     report: Report,
 }
 
@@ -321,7 +330,7 @@ impl<'m> LookupSlice<'m> {
     ) -> Result<Self, Error> {
         let grid = *lookup.grid();
         let cfg = scan.config();
-        if grid != layout.grid || grid.config() != cfg {
+        if !grid.same(&layout.grid) || !grid.config().same(cfg) {
             return Err(Error::Incompatible("lookup grid of another configuration"));
         }
         let lat = layout.lattice;
@@ -414,7 +423,14 @@ impl<'m> LookupSlice<'m> {
             .ok_or(short("scratch", sl, found))?;
         let voxel = bytemuck::try_cast_slice_mut(rest).map_err(|_| short("scratch", sl, found))?;
         acc.fill([0.0; 4]);
+        let l = grid.len();
+        let (g_lo, g_hi) = cfg.guard();
         Ok(Self {
+            per_m: (l as f64 / cfg.span()) as f32,
+            theta: (grid.carrier_bin() as f64 / l as f64) as f32,
+            guard_m: (g_lo as f32, g_hi as f32),
+            per_grid: (cfg.span() / l as f64) as f32,
+            d_min: cfg.params().d_min as f32,
             target,
             layout: *layout,
             spad_info: info,
@@ -464,7 +480,10 @@ impl<'m> LookupSlice<'m> {
     ) -> Result<(), Error> {
         let grid = self.layout.grid;
         let cfg = scan.config();
-        if *lookup.grid() != grid || cfg != grid.config() || scan.spads().len() != self.layout.ks {
+        if !lookup.grid().same(&grid)
+            || !cfg.same(grid.config())
+            || scan.spads().len() != self.layout.ks
+        {
             return Err(Error::Incompatible("lookup grid of another configuration"));
         }
         let ks = scan.spads().len();
@@ -474,8 +493,7 @@ impl<'m> LookupSlice<'m> {
         check_len("row offsets", ks, row.offsets().len())?;
         let l = grid.len();
         let mask = l - 1;
-        let per_m = (l as f64 / cfg.span()) as f32;
-        let theta = (grid.carrier_bin() as f64 / l as f64) as f32;
+        let (per_m, theta) = (self.per_m, self.theta);
         let lat = self.layout.lattice;
         let nx = lat.nx.max(1);
         // Leads in grid units, and their extremes.
@@ -498,8 +516,7 @@ impl<'m> LookupSlice<'m> {
                 *g = [0.0, 0.0, x, 0.0];
             }
         }
-        let (g_lo, g_hi) = cfg.guard();
-        let (g_lo, g_hi) = ((g_lo as f32) * per_m, (g_hi as f32) * per_m);
+        let (g_lo, g_hi) = (self.guard_m.0 * per_m, self.guard_m.1 * per_m);
         let width = self.layout.width.max(1);
         let Some((cells_a, cells_b)) = self.cells.split_at_mut_checked(l) else {
             return Ok(());
@@ -566,10 +583,15 @@ impl<'m> LookupSlice<'m> {
         // Per voxel: the lead's carrier e^{2πiθ x_lead} (exact table at the integer part,
         // small-phase polynomial for the fraction) and weight.
         let carrier = lookup.carrier_table();
-        let d_min = cfg.params().d_min as f32;
+        let (d_min, per_grid) = (self.d_min, self.per_grid);
         let inv = matches!(cfg.weights(), Weights::Inv);
-        let w_col = cfg.weight(d_la);
-        let per_grid = (cfg.span() / l as f64) as f32;
+        // `Config::weight(d_la)` with the hoisted `d_min` (`max` by comparison: the same bits,
+        // a NaN gives `d_min` either way).
+        let w_col = if inv {
+            1.0 / if d_la > d_min { d_la } else { d_min }
+        } else {
+            1.0
+        };
         for (a, &[s_re, s_im, x, _]) in self.acc.iter_mut().zip(self.voxel.iter()) {
             let s = Complex32::new(s_re, s_im);
             let i = x as u32 as usize;

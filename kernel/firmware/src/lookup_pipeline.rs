@@ -9,7 +9,13 @@
 //! lookup column `T(FOCUS, ·)`, then its finish; last [`ColumnF32::finish_lookup`] (the
 //! factorised column's lookup finish). Each probe sees the same rows in the same order as in
 //! one pass, so the results are the same bits. The grid is made for the tolerance
-//! [`LOOKUP_TOLERANCE`] (1e-4 here: `L` = 256, so that the M0's 16 KB of RAM holds it).
+//! [`LOOKUP_TOLERANCE`] (1e-4 here: `L` = 256).
+//!
+//! Then the **structured slice** ([`LookupSlice`]) on the same grid: a lattice of voxels
+//! ([`SLICE_LATTICE`], 10 × 4 at z = 0.5 m, 5 cm along the SPAD line so that the fixture's SPADs
+//! (10 cm apart) lie on it, 15 cm across; P1 and P2 are lattice voxels) as a diagonal and the
+//! column `T(FOCUS, ·)`, one more pass over the scan each, in the same shared scratch
+//! ([`SCRATCH_LEN`], the slice's: 18.7 KB).
 
 use crate::fixture::{
     BINS, FOCUS, LASERS, N_FFT, N_LASERS, N_VOXELS, P1_VOXEL, P2_VOXEL, ROW, ROWBUF_LEN, SLICE,
@@ -17,8 +23,8 @@ use crate::fixture::{
 };
 use crate::pipeline::{Failure, argmax};
 use vltm_kernel::{
-    ColumnF32, Config, Lookup, LookupGrid, LookupParams, LookupProbe, Report, RowBuffer, Scan,
-    Target,
+    ColumnF32, Config, Lattice, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice, Report,
+    RowBuffer, Scan, SliceLayout, Target,
 };
 
 /// Interpolation tolerance `η` of the fixture's grid.
@@ -37,6 +43,36 @@ pub const COLUMN32_STATE_LEN: usize = (4 * SPADS.len() + 2) * BINS;
 /// `ColumnF32::lookup_scratch_len`: `2(L + 3) + 2Kv` `f32` (a prefix of the column's
 /// [`LOOKUP_SCRATCH_LEN`]).
 pub const COLUMN32_SCRATCH_LEN: usize = 2 * (LOOKUP_GRID + 3) + 2 * N_VOXELS;
+
+/// The structured slice: 10 × 4 voxels at z = 0.5 m, `x` from −0.225 m in 5 cm steps (the
+/// SPADs, at x = −0.15 … 0.15 m every 10 cm, are lattice offsets 0, 2, 4, 6), `y` from
+/// −0.225 m in 15 cm steps. Voxel `iy·10 + ix`; P1 is voxel [`SLICE_P1`], P2 [`SLICE_P2`].
+pub const SLICE_LATTICE: Lattice = Lattice {
+    origin: [-0.225, -0.225, 0.5],
+    step_x: [0.05, 0.0, 0.0],
+    step_y: [0.0, 0.15, 0.0],
+    nx: 10,
+    ny: 4,
+};
+/// Voxels of [`SLICE_LATTICE`].
+pub const N_SLICE: usize = 40;
+/// P1 in the slice: `(ix, iy) = (3, 1)`.
+pub const SLICE_P1: usize = 13;
+/// P2 in the slice: `(ix, iy) = (9, 2)`.
+pub const SLICE_P2: usize = 29;
+/// `SliceLayout::tables_len`: `4Ks + 4·ny·width` `f32`, `width = nx + 6` (checked at run
+/// time).
+pub const SLICE_TABLES_LEN: usize = 4 * SPADS.len() + 4 * 4 * (10 + 6);
+/// `LookupSlice::state_len`: `4Kv` `f32`.
+pub const SLICE_STATE_LEN: usize = 4 * N_SLICE;
+/// `LookupSlice::scratch_len`: `2(L + 3) + 16L + 4Kv` `f32`.
+pub const SLICE_SCRATCH_LEN: usize = 2 * (LOOKUP_GRID + 3) + 16 * LOOKUP_GRID + 4 * N_SLICE;
+/// The shared scratch: the larger of [`LOOKUP_SCRATCH_LEN`] and [`SLICE_SCRATCH_LEN`].
+pub const SCRATCH_LEN: usize = if SLICE_SCRATCH_LEN > LOOKUP_SCRATCH_LEN {
+    SLICE_SCRATCH_LEN
+} else {
+    LOOKUP_SCRATCH_LEN
+};
 
 /// The lookup parameters of the fixture.
 pub const fn lookup_params() -> LookupParams {
@@ -59,10 +95,14 @@ pub struct LookupBuffers<'a> {
     /// Column state.
     pub column: &'a mut [f64],
     /// Scratch of the diagonal, then of the column, then of the factorised column's
-    /// `finish_lookup` ([`LOOKUP_SCRATCH_LEN`]).
+    /// `finish_lookup`, then of the slice's diagonal and column ([`SCRATCH_LEN`]).
     pub scratch: &'a mut [f32],
     /// Factorised `f32` column state ([`COLUMN32_STATE_LEN`]).
     pub column32: &'a mut [f32],
+    /// The slice tables ([`SLICE_TABLES_LEN`]), filled by each slice probe.
+    pub slice_tables: &'a mut [f32],
+    /// The slice state ([`SLICE_STATE_LEN`]), the diagonal's then the column's.
+    pub slice_state: &'a mut [f32],
 }
 
 /// Intensities `T = |A|²` per voxel from the lookup path, and the reports.
@@ -80,6 +120,14 @@ pub struct LookupResults {
     pub col32: [f32; N_VOXELS],
     /// Its report.
     pub report_col32: Report,
+    /// Slice diagonal `T(v, v)` over [`SLICE_LATTICE`] ([`LookupSlice`]).
+    pub slice_diag: [f64; N_SLICE],
+    /// Slice column `T(FOCUS, v)` over [`SLICE_LATTICE`].
+    pub slice_col: [f64; N_SLICE],
+    /// Report of the slice diagonal.
+    pub report_slice_diag: Report,
+    /// Report of the slice column.
+    pub report_slice_col: Report,
 }
 
 const ZERO_REPORT: Report = Report {
@@ -98,6 +146,10 @@ impl LookupResults {
         report_col: ZERO_REPORT,
         col32: [0.0; N_VOXELS],
         report_col32: ZERO_REPORT,
+        slice_diag: [0.0; N_SLICE],
+        slice_col: [0.0; N_SLICE],
+        report_slice_diag: ZERO_REPORT,
+        report_slice_col: ZERO_REPORT,
     };
 }
 
@@ -122,16 +174,25 @@ pub fn run_lookup(
         return Err(Failure::ScanData);
     }
     let scan = Scan::new(&cfg, &SPADS, b.tables)?;
+    let layout =
+        SliceLayout::try_new(&scan, &grid, &SLICE_LATTICE, usize::MAX).map_err(Failure::Config)?;
+    if layout.tables_len() != SLICE_TABLES_LEN || SLICE_LATTICE.len() != N_SLICE {
+        return Err(Failure::Sizes);
+    }
     let lookup = Lookup::new(&grid, b.lookup)?;
     let mut rows = RowBuffer::new(&scan, b.row)?;
     let mut col32 = ColumnF32::new(&scan, FOCUS, b.column32)?;
+    let scratch = b
+        .scratch
+        .get_mut(..LOOKUP_SCRATCH_LEN)
+        .ok_or(Failure::Sizes)?;
     let mut diag = LookupProbe::new(
         &scan,
         &lookup,
         Target::Diagonal,
         &VOXELS,
         b.diag,
-        &mut *b.scratch,
+        &mut *scratch,
     )?;
     for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
         let row = rows.load(&scan, laser, hists)?;
@@ -146,7 +207,7 @@ pub fn run_lookup(
         Target::Column(FOCUS),
         &VOXELS,
         b.column,
-        &mut *b.scratch,
+        &mut *scratch,
     )?;
     for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
         let row = rows.load(&scan, laser, hists)?;
@@ -154,17 +215,48 @@ pub fn run_lookup(
     }
     out.report_col = col.finish(&mut out.col)?;
     drop(col);
-    let scratch = b
-        .scratch
+    let scratch32 = scratch
         .get_mut(..COLUMN32_SCRATCH_LEN)
         .ok_or(Failure::Sizes)?;
-    out.report_col32 = col32.finish_lookup(&scan, &lookup, &VOXELS, scratch, &mut out.col32)?;
+    out.report_col32 = col32.finish_lookup(&scan, &lookup, &VOXELS, scratch32, &mut out.col32)?;
+    // The structured slice: one pass per target, each with fresh tables, state and scratch.
+    let scratch = b
+        .scratch
+        .get_mut(..SLICE_SCRATCH_LEN)
+        .ok_or(Failure::Sizes)?;
+    for (target, values, report) in [
+        (
+            Target::Diagonal,
+            &mut out.slice_diag,
+            &mut out.report_slice_diag,
+        ),
+        (
+            Target::Column(FOCUS),
+            &mut out.slice_col,
+            &mut out.report_slice_col,
+        ),
+    ] {
+        let mut slice = LookupSlice::new(
+            &scan,
+            &lookup,
+            &layout,
+            target,
+            &mut *b.slice_tables,
+            &mut *b.slice_state,
+            &mut *scratch,
+        )?;
+        for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
+            let row = rows.load(&scan, laser, hists)?;
+            slice.push_row(&scan, &lookup, &row)?;
+        }
+        *report = slice.finish(values)?;
+    }
     Ok(())
 }
 
-/// The lookup firmware's own checks (the exit status); 0 = passed. 3: the diagonal does not
-/// peak at P1; 4: in the z = 0.5 m slice without P1 the column does not peak at P2; 6: a
-/// report is off.
+/// The lookup firmware's own checks (the exit status); 0 = passed. 3: a diagonal (the voxel
+/// list's or the slice's) does not peak at P1; 4: in the z = 0.5 m plane without P1 (and, on
+/// the slice, its neighbours within 10 cm) a column does not peak at P2; 6: a report is off.
 pub fn verdict_lookup(r: &LookupResults) -> i32 {
     if argmax(&r.diag) != P1_VOXEL {
         return 3;
@@ -183,7 +275,28 @@ pub fn verdict_lookup(r: &LookupResults) -> i32 {
     if argmax(&slice32) != P2_VOXEL {
         return 4;
     }
-    for rep in [r.report_diag, r.report_col, r.report_col32] {
+    if argmax(&r.slice_diag) != SLICE_P1 {
+        return 3;
+    }
+    // On the slice's 5 cm pitch the voxels within 10 cm of P1 along x (lattice row 1, ix 1..=5)
+    // see P1's direct light through the column's gate (σ = 2λ/3 ≈ 6.7 cm): left out.
+    let mut plane = r.slice_col;
+    for (i, p) in plane.iter_mut().enumerate() {
+        let (ix, iy) = (i % SLICE_LATTICE.nx, i / SLICE_LATTICE.nx);
+        if iy == SLICE_P1 / SLICE_LATTICE.nx && ix.abs_diff(SLICE_P1 % SLICE_LATTICE.nx) <= 2 {
+            *p = 0.0;
+        }
+    }
+    if argmax(&plane) != SLICE_P2 {
+        return 4;
+    }
+    for rep in [
+        r.report_diag,
+        r.report_col,
+        r.report_col32,
+        r.report_slice_diag,
+        r.report_slice_col,
+    ] {
         if rep.rows != N_LASERS as u64 || rep.non_finite != 0 || rep.dropped != 0 {
             return 6;
         }

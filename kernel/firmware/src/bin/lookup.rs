@@ -1,11 +1,11 @@
 //! The lookup-path firmware: the fixture through the kernel's lookup diagonal and column and
-//! the factorised `f32` column's lookup finish (`src/lookup_pipeline.rs`),
-//! `RESULT voxel=i lookup_diag=… lookup_col=… lookup_col32=…` and `REPORT`
+//! the factorised `f32` column's lookup finish, then the structured slice's diagonal and column
+//! (`src/lookup_pipeline.rs`), `RESULT voxel=i lookup_diag=… lookup_col=… lookup_col32=…`,
+//! `RESULT voxel=i slice_diag=… slice_col=…` (`i` the slice lattice's voxel) and `REPORT`
 //! lines compared by `run-qemu.sh` with `fixture/expected_lookup.txt` (the host's numbers,
 //! bit for bit), exit status = `verdict_lookup` (1 = panic, 2 = rejected, 7 = a static
 //! buffer taken twice). Runs on the M4F and, linked for the mps2-an386 memory map, as M0 code
-//! (14.3 KB of `.bss` on the M0: it links for the microbit, but its 16 KB leave 2 KB of stack,
-//! too little for the band transform and the lookup frames).
+//! (about 33 KB of `.bss`, most of it the slice's scratch: more than the microbit's 16 KB).
 #![no_std]
 #![no_main]
 
@@ -15,8 +15,8 @@ use panic_semihosting as _;
 use semihosting::{println, process};
 use vltm_firmware::fixture::{N_VOXELS, ROWBUF_LEN, TABLES_LEN};
 use vltm_firmware::lookup_pipeline::{
-    self, COLUMN32_STATE_LEN, LOOKUP_SCRATCH_LEN, LOOKUP_STATE_LEN, LOOKUP_TABLES_LEN,
-    LookupBuffers, LookupResults,
+    self, COLUMN32_STATE_LEN, LOOKUP_STATE_LEN, LOOKUP_TABLES_LEN, LookupBuffers, LookupResults,
+    N_SLICE, SCRATCH_LEN, SLICE_STATE_LEN, SLICE_TABLES_LEN,
 };
 
 #[entry]
@@ -31,9 +31,11 @@ fn main() -> ! {
     ) else {
         process::exit(7)
     };
-    let (Some(scratch), Some(column32)) = (
-        singleton!(: [f32; LOOKUP_SCRATCH_LEN] = [0.0; LOOKUP_SCRATCH_LEN]),
+    let (Some(scratch), Some(column32), Some(slice_tables), Some(slice_state)) = (
+        singleton!(: [f32; SCRATCH_LEN] = [0.0; SCRATCH_LEN]),
         singleton!(: [f32; COLUMN32_STATE_LEN] = [0.0; COLUMN32_STATE_LEN]),
+        singleton!(: [f32; SLICE_TABLES_LEN] = [0.0; SLICE_TABLES_LEN]),
+        singleton!(: [f32; SLICE_STATE_LEN] = [0.0; SLICE_STATE_LEN]),
     ) else {
         process::exit(7)
     };
@@ -48,6 +50,8 @@ fn main() -> ! {
         column,
         scratch,
         column32,
+        slice_tables,
+        slice_state,
     };
     if let Err(e) = lookup_pipeline::run_lookup(scan, bufs, out) {
         println!("ERROR {e:?}");
@@ -59,10 +63,18 @@ fn main() -> ! {
             out.diag[i], out.col[i], out.col32[i]
         );
     }
+    for i in 0..N_SLICE {
+        println!(
+            "RESULT voxel={i} slice_diag={:e} slice_col={:e}",
+            out.slice_diag[i], out.slice_col[i]
+        );
+    }
     for (name, r) in [
         ("lookup_diag", out.report_diag),
         ("lookup_col", out.report_col),
         ("lookup_col32", out.report_col32),
+        ("slice_diag", out.report_slice_diag),
+        ("slice_col", out.report_slice_col),
     ] {
         println!(
             "REPORT {name} rows={} non_finite={} dropped={} aliased={}",

@@ -32,8 +32,8 @@ use vltm_firmware::lookup_pipeline::{
 };
 use vltm_firmware::pipeline::argmax;
 use vltm_kernel::{
-    Config, Lattice, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice, Params, RowBuffer,
-    Scan, SliceLayout, Target, ColumnF32,
+    ColumnF32, Config, Lattice, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice, Params,
+    RowBuffer, Scan, SliceLayout, Target,
 };
 
 /// SPADs used here.

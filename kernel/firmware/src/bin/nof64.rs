@@ -2,7 +2,9 @@
 //! `vltm-firmware-nof64`, feature `nopanic`, so it is also a panic-never link of them): the
 //! set-up (configuration, tables — `f64` `libm` by design) runs in `main`; the per-row path
 //! (`RowBuffer::load`, `ColumnF32::push_row`, the photon row `begin_photons` /
-//! `push_photon` / `end_photons`) and the per-scan path (`ColumnF32::finish`,
+//! `push_photon` / `end_photons`, the structured slice's `LookupSlice::push_row`, its target
+//! through `black_box` so both the diagonal's and the column's code are reachable) and the
+//! per-scan path (`ColumnF32::finish`,
 //! `ColumnF32::finish_lookup`) run in two `#[inline(never)]` functions, [`per_row`] and
 //! [`per_scan`]. `no-f64.sh` disassembles the ELF, follows every call and branch from those
 //! two functions, and fails if a soft-double routine (`__aeabi_d*`, `__*df*`) or an `f64`
@@ -18,8 +20,14 @@ use semihosting::process;
 use vltm_firmware::fixture::{
     BINS, FOCUS, LASERS, N_FFT, N_VOXELS, NT, ROW, SPADS, VOXELS, params,
 };
-use vltm_firmware::lookup_pipeline::{LOOKUP_GRID, LOOKUP_TABLES_LEN, lookup_params};
-use vltm_kernel::{ColumnF32, Config, Lookup, LookupGrid, Point, Report, RowBuffer, Scan};
+use vltm_firmware::lookup_pipeline::{
+    LOOKUP_GRID, LOOKUP_TABLES_LEN, SLICE_LATTICE, SLICE_SCRATCH_LEN, SLICE_STATE_LEN,
+    SLICE_TABLES_LEN, lookup_params,
+};
+use vltm_kernel::{
+    ColumnF32, Config, Lookup, LookupGrid, LookupSlice, Point, Report, RowBuffer, Scan,
+    SliceLayout, Target,
+};
 
 /// SPADs used here (the fixture's four).
 const KS: usize = 4;
@@ -29,19 +37,22 @@ const COLUMN32: usize = (4 * KS + 2) * BINS;
 /// `ColumnF32::lookup_scratch_len`.
 const SCRATCH: usize = 2 * (LOOKUP_GRID + 3) + 2 * N_VOXELS;
 
-/// One laser row into the column, from histograms and again from photon events.
+/// One laser row into the column, from histograms and again from photon events, and into
+/// the structured slice (histogram row).
 #[inline(never)]
 fn per_row(
     scan: &Scan<'_>,
+    lookup: &Lookup<'_>,
     rows: &mut RowBuffer<'_>,
     col: &mut ColumnF32<'_>,
+    slice: &mut LookupSlice<'_>,
     hists: &[u16],
     laser: Point,
 ) -> bool {
     let Ok(row) = rows.load(scan, laser, hists) else {
         return false;
     };
-    if col.push_row(scan, &row).is_err() {
+    if col.push_row(scan, &row).is_err() || slice.push_row(scan, lookup, &row).is_err() {
         return false;
     }
     rows.begin_photons();
@@ -89,6 +100,13 @@ fn run() -> i32 {
     ) else {
         return 7;
     };
+    let (Some(st), Some(ss), Some(sc)) = (
+        singleton!(: [f32; SLICE_TABLES_LEN] = [0.0; SLICE_TABLES_LEN]),
+        singleton!(: [f32; SLICE_STATE_LEN] = [0.0; SLICE_STATE_LEN]),
+        singleton!(: [f32; SLICE_SCRATCH_LEN] = [0.0; SLICE_SCRATCH_LEN]),
+    ) else {
+        return 7;
+    };
     let Some(data) = vltm_firmware::scan_data() else {
         return 2;
     };
@@ -110,10 +128,31 @@ fn run() -> i32 {
     ) else {
         return 2;
     };
+    let Ok(layout) = SliceLayout::try_new(&scan, &grid, &black_box(SLICE_LATTICE), usize::MAX)
+    else {
+        return 2;
+    };
+    let target = black_box(Target::Column(FOCUS));
+    let Ok(mut slice) = LookupSlice::new(
+        &scan,
+        &lookup,
+        &layout,
+        target,
+        &mut st[..],
+        &mut ss[..],
+        &mut sc[..],
+    ) else {
+        return 2;
+    };
     for (hists, laser) in data.chunks_exact(ROW).zip(black_box(&LASERS[..])) {
-        if !per_row(&scan, &mut rows, &mut col, hists, *laser) {
+        if !per_row(
+            &scan, &lookup, &mut rows, &mut col, &mut slice, hists, *laser,
+        ) {
             return 2;
         }
+    }
+    if slice.report().rows != LASERS.len() as u64 {
+        return 3;
     }
     let voxels = black_box(&VOXELS[..]);
     match per_scan(&scan, &lookup, &col, voxels, &mut scratch[..], &mut out[..]) {
