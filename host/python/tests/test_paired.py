@@ -122,3 +122,19 @@ def test_bad_paired_arrays_are_one_line_errors_naming_the_argument():
     g = {k: f[k] for k in ("H", "laser_xyz", "sensor_xyz")}
     with pytest.raises(vltm.ArgumentError, match="argument `delta_t`: missing"):
         vltm.Capture.from_arrays(**g)
+
+
+def test_ytal_fields_with_scan_type_paired_equal_the_file(tmp_path):
+    """y-tal's own fields (time first, grids, device positions) with `scan_type="paired"`."""
+    with h5py.File(PAIRED, "r") as f:
+        c = vltm.Capture.from_arrays(
+            f["H"][()], f["laser_grid_xyz"][()], f["sensor_grid_xyz"][()],
+            float(f["delta_t"][()]), float(f["t_start"][()]), laser_xyz=f["laser_xyz"][()],
+            sensor_xyz=f["sensor_xyz"][()], scan_type="paired")
+        lg, sg = f["laser_grid_xyz"][()], f["sensor_grid_xyz"][()]
+        h = f["H"][()]
+    assert c.info()["scan"] == "paired"
+    want = run_cli(tmp_path, "direct", str(PAIRED), "--volume", VOL, *FLAGS)
+    np.testing.assert_array_equal(vltm.direct(c, VOL, **OPTS), want)
+    with pytest.raises(vltm.ArgumentError, match="argument `sensor_grid_xyz`: expected one SPAD"):
+        vltm.Capture.from_arrays(h[:, :143], lg, sg[:143], 0.01, scan_type="paired")

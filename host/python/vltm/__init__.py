@@ -160,7 +160,9 @@ class Capture:
         ``scan_type="exhaustive"``: ``H`` of shape ``(nt, Lx, Ly, Sx, Sy)`` with grids
         ``(Lx, Ly, 3)`` and ``(Sx, Sy, 3)``, or ``(nt, L, S)`` with point lists ``(L, 3)``,
         ``(S, 3)``. ``scan_type="confocal"``: ``H`` of shape ``(nt, Sx, Sy)`` (or ``(nt, S)``)
-        and ``laser_grid_xyz`` = ``sensor_grid_xyz``. ``laser_xyz``/``sensor_xyz``: the device
+        and ``laser_grid_xyz`` = ``sensor_grid_xyz``. ``scan_type="paired"`` (y-tal's paired
+        ``T_Si``/``T_Sx_Sy``): as confocal, with a laser grid of the sensor grid's shape, pair
+        ``k`` lit at ``laser_grid_xyz[k]``. ``laser_xyz``/``sensor_xyz``: the device
         positions (y-tal's defaults). ``H`` must be real and finite (counts).
 
         **Paired scans** (a galvo-scanned non-confocal or arbitrary scan; the ``.npz`` reader's
@@ -210,11 +212,14 @@ class Capture:
 
         ls, ss = grid_shape(lg), grid_shape(sg)
         nl, ns = ls[0] * ls[1], ss[0] * ss[1]
-        confocal = scan_type == "confocal"
-        if scan_type not in ("exhaustive", "confocal"):
+        confocal = scan_type in ("confocal", "paired")
+        if scan_type not in ("exhaustive", "confocal", "paired"):
             raise ArgumentError(
-                f"argument `scan_type`: expected exhaustive or confocal, found `{scan_type}`"
+                f"argument `scan_type`: expected exhaustive, confocal or paired, found `{scan_type}`"
             )
+        if scan_type == "paired" and lg.shape != sg.shape:
+            raise _check.fail("sensor_grid_xyz", f"expected one SPAD point per laser point "
+                              f"(laser_grid_xyz has shape {lg.shape}), found shape {sg.shape}")
         nt = H.shape[0]
         per = ns if not confocal else 1
         rows = nl if not confocal else ns
@@ -223,7 +228,7 @@ class Capture:
                 f"argument `H`: expected {nt} x {rows} x {per} values for these grids, found shape {H.shape}"
             )
         h = np.ascontiguousarray(np.moveaxis(H.reshape(nt, rows, per), 0, -1), dtype=np.float32)
-        if confocal:
+        if scan_type == "confocal":
             lg, ls = sg, ss
         native = _native.capture_from_arrays(
             h, np.ascontiguousarray(lg.reshape(-1, 3)), ls,
