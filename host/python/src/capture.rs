@@ -70,6 +70,19 @@ impl NativeCapture {
     }
 }
 
+/// The kind of scan as `vltm info` names it: `"confocal"` (laser and SPAD at the same wall
+/// point), `"paired"` (one laser and one SPAD spot per histogram, apart) or `"non-confocal"`
+/// (a laser grid × a SPAD grid).
+pub(crate) fn scan_name(g: &Geometry) -> &'static str {
+    if g.coincident() {
+        "confocal"
+    } else if g.confocal {
+        "paired"
+    } else {
+        "non-confocal"
+    }
+}
+
 fn file_name(p: &Path) -> String {
     p.file_name()
         .map_or_else(String::new, |f| f.to_string_lossy().into_owned())
@@ -146,7 +159,12 @@ impl NativeCapture {
         d.set_item("spads", g.spads.len())?;
         d.set_item("spad_shape", (g.spad_shape[0], g.spad_shape[1]))?;
         d.set_item("spads_per_row", g.spads_per_row())?;
-        d.set_item("confocal", g.confocal)?;
+        // `confocal`: laser and SPAD at the same wall point (what a Python user means by
+        // it); `paired`: one histogram per row, confocal or apart; `scan`: the kind as
+        // `vltm info` names it.
+        d.set_item("confocal", g.coincident())?;
+        d.set_item("paired", g.confocal)?;
+        d.set_item("scan", scan_name(g))?;
         d.set_item("nt", g.nt)?;
         d.set_item("delta_t", g.dt)?;
         d.set_item("t_start", g.t0)?;

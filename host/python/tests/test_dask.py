@@ -46,6 +46,16 @@ def test_dask_direct_and_column(two_patches, client):
                                   vltm.dask.direct(vltm.open(two_patches), GRID, client=client))
 
 
+def test_dask_direct_on_a_paired_scan(client):
+    """A paired scan (one laser and one SPAD spot per row) split over the workers by rows."""
+    from conftest import REPO
+
+    paired = REPO / "fixtures" / "tal" / "paired.hdf5"
+    vol = "-0.4:0.4:9,-0.4:0.4:9,0.4:1.0:7"
+    close(vltm.direct(paired, vol, wavelength=0.15),
+          vltm.dask.direct(paired, vol, client=client, wavelength=0.15, rows_per_task=40))
+
+
 def test_dask_indirect(two_patches, client):
     vol = "-0.6:0.6:10,-0.6:0.6:10,0.5:1.2:8"
     # Leak-corrected (the default): each task corrects its own rows.

@@ -133,13 +133,22 @@ PREP = [("--t-min", "1.3", "t_min", 1.3), ("--t-max", "350b", "t_max", "350b"),
         ("--rebin", "2", "rebin", 2), ("--background", "0.000001", "background", 1e-6)]
 
 
-@pytest.mark.parametrize("probe", ["direct", "column", "indirect"])
+PAT2 = "-0.25,0.15,0.7,1;0.25,0,0.9,0.5"
+PREP_ARGS = {
+    "direct": ((), []), "indirect": ((), []), "column": ((FOCUS,), ["--focus", F]),
+    "relight": ((PAT2,), ["--pattern", PAT2]),
+    "row": (((0.25, 0.0, 0.9),), ["--focus", "0.25,0,0.9"]),
+}
+
+
+@pytest.mark.parametrize("probe", sorted(PREP_ARGS))
 def test_preprocessing(two_patches, tmp_path, probe):
+    """Every probe applies the preprocessing as the command line does (relight and row
+    included), each option changing the result."""
     flags = [x for f, v, _, _ in PREP for x in (f, v)]
     kw = {k: v for _, _, k, v in PREP}
-    extra = ["--focus", F] if probe == "column" else []
+    args, extra = PREP_ARGS[probe]
     want = cli_volume(tmp_path, probe, str(two_patches), "--volume", SMALL, *extra, *flags)
-    args = (FOCUS,) if probe == "column" else ()
     got, rep = getattr(vltm, probe)(two_patches, SMALL, *args, report=True, **kw)
     close(want, got)
     assert rep["preprocessing"].startswith("window bins")

@@ -144,22 +144,48 @@ class Capture:
     def from_arrays(
         cls,
         H: np.ndarray,
-        laser_grid_xyz: np.ndarray,
-        sensor_grid_xyz: np.ndarray,
-        delta_t: float,
+        laser_grid_xyz: Optional[np.ndarray] = None,
+        sensor_grid_xyz: Optional[np.ndarray] = None,
+        delta_t: Optional[float] = None,
         t_start: float = 0.0,
-        laser_xyz: Sequence[float] = (-0.5, 0.0, 0.25),
-        sensor_xyz: Sequence[float] = (-0.5, 0.0, 0.25),
+        laser_xyz: Any = (-0.5, 0.0, 0.25),
+        sensor_xyz: Any = (-0.5, 0.0, 0.25),
         t_accounts_first_and_last_bounces: bool = False,
         scan_type: str = "exhaustive",
+        laser_origin: Optional[Sequence[float]] = None,
+        sensor_origin: Optional[Sequence[float]] = None,
     ) -> "Capture":
-        """A capture from y-tal's fields (metres, time first).
+        """A capture from y-tal's fields (metres, time first), or a paired scan per histogram.
 
         ``scan_type="exhaustive"``: ``H`` of shape ``(nt, Lx, Ly, Sx, Sy)`` with grids
         ``(Lx, Ly, 3)`` and ``(Sx, Sy, 3)``, or ``(nt, L, S)`` with point lists ``(L, 3)``,
         ``(S, 3)``. ``scan_type="confocal"``: ``H`` of shape ``(nt, Sx, Sy)`` (or ``(nt, S)``)
-        and ``laser_grid_xyz`` = ``sensor_grid_xyz``. ``laser_xyz``/``sensor_xyz``: the device
-        positions (y-tal's defaults). ``H`` must be real and finite (counts)."""
+        and ``laser_grid_xyz`` = ``sensor_grid_xyz``. ``scan_type="paired"`` (y-tal's paired
+        ``T_Si``/``T_Sx_Sy``): as confocal, with a laser grid of the sensor grid's shape, pair
+        ``k`` lit at ``laser_grid_xyz[k]``. ``laser_xyz``/``sensor_xyz``: the device
+        positions (y-tal's defaults). ``H`` must be real and finite (counts).
+
+        **Paired scans** (a galvo-scanned non-confocal or arbitrary scan; the ``.npz`` reader's
+        per-histogram form, same names): no grids, ``H`` of shape ``(K, nt)`` (time last),
+        ``laser_xyz`` and ``sensor_xyz`` of shape ``(K, 3)``: histogram ``k`` lit at
+        ``laser_xyz[k]`` and seen at ``sensor_xyz[k]`` (equal points make a confocal capture).
+        ``laser_origin``/``sensor_origin``: the device positions (default the origin; both
+        needed with ``t_accounts_first_and_last_bounces``)."""
+        if laser_grid_xyz is None and sensor_grid_xyz is None and np.ndim(laser_xyz) == 2:
+            return cls._from_pairs(H, laser_xyz, sensor_xyz, delta_t, t_start,
+                                   t_accounts_first_and_last_bounces, laser_origin,
+                                   sensor_origin)
+        for name, v in (("laser_grid_xyz", laser_grid_xyz), ("sensor_grid_xyz", sensor_grid_xyz),
+                        ("delta_t", delta_t)):
+            if v is None:
+                raise _check.fail(name, "missing (a paired scan gives `laser_xyz` and "
+                                  "`sensor_xyz` of shape (K, 3) instead of the grids)"
+                                  if name != "delta_t" else "missing: the bin width in metres")
+        for name, v in (("laser_origin", laser_origin), ("sensor_origin", sensor_origin)):
+            if v is not None:
+                raise _check.fail(name, "only for paired scans (`laser_xyz`, `sensor_xyz` "
+                                  "of shape (K, 3)); grid scans take the device positions "
+                                  "as `laser_xyz`, `sensor_xyz`")
         lg = _check.array("laser_grid_xyz", laser_grid_xyz, last=3, ndim=(2, 3))
         sg = _check.array("sensor_grid_xyz", sensor_grid_xyz, last=3, ndim=(2, 3))
         # What this call holds at once besides the caller's H, checked against the memory
@@ -186,11 +212,14 @@ class Capture:
 
         ls, ss = grid_shape(lg), grid_shape(sg)
         nl, ns = ls[0] * ls[1], ss[0] * ss[1]
-        confocal = scan_type == "confocal"
-        if scan_type not in ("exhaustive", "confocal"):
+        confocal = scan_type in ("confocal", "paired")
+        if scan_type not in ("exhaustive", "confocal", "paired"):
             raise ArgumentError(
-                f"argument `scan_type`: expected exhaustive or confocal, found `{scan_type}`"
+                f"argument `scan_type`: expected exhaustive, confocal or paired, found `{scan_type}`"
             )
+        if scan_type == "paired" and lg.shape != sg.shape:
+            raise _check.fail("sensor_grid_xyz", f"expected one SPAD point per laser point "
+                              f"(laser_grid_xyz has shape {lg.shape}), found shape {sg.shape}")
         nt = H.shape[0]
         per = ns if not confocal else 1
         rows = nl if not confocal else ns
@@ -199,7 +228,7 @@ class Capture:
                 f"argument `H`: expected {nt} x {rows} x {per} values for these grids, found shape {H.shape}"
             )
         h = np.ascontiguousarray(np.moveaxis(H.reshape(nt, rows, per), 0, -1), dtype=np.float32)
-        if confocal:
+        if scan_type == "confocal":
             lg, ls = sg, ss
         native = _native.capture_from_arrays(
             h, np.ascontiguousarray(lg.reshape(-1, 3)), ls,
@@ -208,9 +237,64 @@ class Capture:
         )
         return cls(native)
 
+    @classmethod
+    def _from_pairs(cls, H: Any, laser_xyz: Any, sensor_xyz: Any, delta_t: Any, t_start: Any,
+                    legs: Any, laser_origin: Any, sensor_origin: Any) -> "Capture":
+        """A paired scan per histogram (:meth:`from_arrays`); the ``.npz`` reader's checks
+        and wording."""
+        if delta_t is None:
+            raise _check.fail("delta_t", "missing: the bin width in metres")
+
+        def pts(name: str, x: Any) -> np.ndarray:
+            a = _check.array(name, x, dtype=np.float64, finite=False)
+            if a.ndim != 2 or a.shape[1] != 3:
+                raise _check.fail(name, f"expected shape (K, 3): one point per histogram, "
+                                  f"found {list(a.shape)}")
+            bad = ~np.isfinite(a).all(axis=1)
+            if bad.any():
+                i = int(np.argmax(bad))
+                p = ", ".join("NaN" if c != c else repr(float(c)) for c in a[i])
+                raise _check.fail(name, f"expected finite coordinates, found [{p}] at index {i}")
+            return a
+
+        lp = pts("laser_xyz", laser_xyz)
+        sp = pts("sensor_xyz", sensor_xyz)
+        if len(sp) != len(lp):
+            raise _check.fail("sensor_xyz", f"expected one SPAD point per laser point "
+                              f"(laser_xyz has {len(lp)}), found {len(sp)} points")
+        raw = np.asarray(H)
+        n = int(raw.size)
+        _native.check_memory(f"a capture from arrays of {n} samples", [
+            ("H as float32", 4 * n), ("the finiteness mask of H", n),
+            ("the library's capture (float32)", 4 * n)])
+        h = _check.array("H", raw)
+        if h.ndim != 2 or h.shape[0] != len(lp):
+            raise _check.fail("H", f"expected shape ({len(lp)}, Nt): one histogram per pair, "
+                              f"found {list(h.shape)}")
+        dt = _check.real("delta_t", delta_t)
+        if dt <= 0:  # type: ignore[operator]
+            raise _check.fail("delta_t", f"expected a bin width > 0 in metres, found {dt}")
+        t0 = _check.real("t_start", t_start)
+        legs = _check.flag("t_accounts_first_and_last_bounces", legs)
+        if legs and (laser_origin is None or sensor_origin is None):
+            raise _check.fail("t_accounts_first_and_last_bounces",
+                              "expected laser_origin and sensor_origin (the device legs need "
+                              "the device positions), found True without them")
+        lo = (0.0, 0.0, 0.0) if laser_origin is None else _check.point("laser_origin", laser_origin)
+        so = (0.0, 0.0, 0.0) if sensor_origin is None else _check.point("sensor_origin", sensor_origin)
+        k = len(lp)
+        native = _native.capture_from_arrays(
+            h.reshape(k, 1, -1), lp.astype(np.float32), (k, 1), sp.astype(np.float32), (k, 1),
+            dt, t0, list(lo), list(so), legs, True)
+        return cls(native)
+
     def info(self) -> dict:
         """Dimensions, geometry and time axis: ``lasers``, ``spads``, ``nt``, ``delta_t``,
-        ``t_start``, ``confocal``, shapes, device positions, ``default_wavelength``…"""
+        ``t_start``, shapes, device positions, ``default_wavelength``… ``scan`` names the
+        scan as ``vltm info`` does: ``"confocal"`` (laser and SPAD at the same wall point),
+        ``"paired"`` (one laser and one SPAD spot per histogram, apart) or
+        ``"non-confocal"`` (a laser grid × a SPAD grid); ``confocal`` is true for the first
+        only, ``paired`` (one histogram per row) for the first two."""
         return self._native.info()
 
     def transient(self, *, t_min: Any = None, t_max: Any = None, rebin: int = 1,
