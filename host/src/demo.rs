@@ -10,13 +10,13 @@
 //! needs no input file. Cost: two renders of 144 × 144 × 300 bins and eleven probes over
 //! 3003 voxels (about a minute on two cores); memory: two captures of 25 MB.
 
+use crate::error::{Error, Result};
 use crate::exec::{Exec, Progress};
 use crate::export::figure::Figure;
 use crate::io::{Capture, RowSource};
 use crate::probe::{self, ColumnGate, IndirectOptions, LeakOptions, Shell, Wave};
 use crate::sim::{Aperture, Bounces, Cuboid, Object, Patch, Scene, Setup};
 use crate::volume::Volume;
-use crate::{Error, Result};
 use std::fmt::Write as _;
 use std::path::Path;
 use std::time::Instant;

@@ -46,7 +46,7 @@ pub struct Summed {
 /// flags or arguments ([`crate::error::respell`]).
 ///
 /// # Errors
-/// Read errors of the file; [`crate::Error::Argument`] for `mat` overrides on other formats
+/// Read errors of the file; [`crate::error::Error::Argument`] for `mat` overrides on other formats
 /// and for a preprocessing that leaves nothing.
 pub fn info(
     path: &Path,
@@ -73,7 +73,7 @@ pub fn info(
             (mat.grid_width.is_some(), "grid_width"),
         ] {
             if set {
-                return Err(crate::Error::arg(
+                return Err(crate::error::Error::arg(
                     arg,
                     "only for .mat captures (other formats record their time axis and grid)",
                 ));

@@ -91,7 +91,7 @@ pub(super) fn fast_hint(g: &Geometry, volume: &Volume, wavelength: f64) -> Optio
 /// `1e-5·λ` at the default wavelength.
 pub fn fft_note(g: &Geometry, volume: Option<&Volume>) -> String {
     let wall = if g.confocal { &g.lasers } else { &g.spads };
-    let tol = 1e-5 * crate::probe::default_wavelength(g);
+    let tol = 1e-5 * crate::probe::wave::default_wavelength(g);
     let (origin, pitch, n, _) = match crate::probe::fast::planar::wall_lattice(wall, tol) {
         Ok(l) => l,
         Err(e) => {
