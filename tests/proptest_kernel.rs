@@ -542,7 +542,9 @@ impl Scene {
         self.compare_lookup_run(hists, kernel, truth, target, tol, false, lattice)
     }
 
-    /// `factorised`: the column through `ColumnF32::finish_lookup` instead of `LookupProbe`.
+    /// `factorised`: the column through `ColumnF32::finish_lookup` instead of `LookupProbe`;
+    /// `lattice`: the structured slice [`LookupSlice`] over it.
+    #[allow(clippy::too_many_arguments)]
     fn compare_lookup_run<T: Sample>(
         &self,
         hists: &[T],

@@ -398,10 +398,11 @@ fn simulate(py: Python<'_>, scene: PathBuf) -> PyResult<NativeCapture> {
 /// `vltm info`'s layout text of a capture file, its warnings and the summed transient: the
 /// library's `front::info::info` (the lines the command line prints), with `.mat` overrides
 /// and preprocessing as `vltm info`'s options; `png` also draws the summed transient (as
-/// `--png`, adding the command line's `wrote F` line).
+/// `--png`, adding the command line's `wrote F` line); `volume` (a SPEC) is named in the
+/// `fast paths` line as `--volume` is.
 #[pyfunction]
 #[pyo3(signature = (path, delta_t=None, t_start=None, grid_width=None, t_min=None, t_max=None,
-    rebin=1, background=None, png=None))]
+    rebin=1, background=None, png=None, volume=None))]
 #[allow(clippy::too_many_arguments, clippy::type_complexity)]
 fn info_text<'py>(
     py: Python<'py>,
@@ -414,6 +415,7 @@ fn info_text<'py>(
     rebin: usize,
     background: Option<&str>,
     png: Option<PathBuf>,
+    volume: Option<&str>,
 ) -> PyResult<(
     Vec<String>,
     Vec<String>,
@@ -423,6 +425,10 @@ fn info_text<'py>(
 )> {
     use vltm::front::info::Stream;
     let prep = prep_of(t_min, t_max, rebin, background)?;
+    let volume = volume
+        .map(vltm::volume::Volume::parse)
+        .transpose()
+        .map_err(py_err)?;
     let mat = io::mat::MatOptions {
         delta_t,
         t_start,
@@ -439,13 +445,19 @@ fn info_text<'py>(
     let (lines, warnings, sum) = py
         .detach(|| -> vltm::Result<_> {
             let (mut lines, mut warnings) = (Vec::new(), Vec::new());
-            let sum = vltm::front::info::info(&path, &mat, prep, None, &mut |stream, line| {
-                let line = vltm::error::respell(line, crate::param);
-                match stream {
-                    Stream::Out => lines.push(line),
-                    Stream::Warning => warnings.push(line),
-                }
-            })?;
+            let sum = vltm::front::info::info(
+                &path,
+                &mat,
+                prep,
+                volume.as_ref(),
+                &mut |stream, line| {
+                    let line = vltm::error::respell(line, crate::param);
+                    match stream {
+                        Stream::Out => lines.push(line),
+                        Stream::Warning => warnings.push(line),
+                    }
+                },
+            )?;
             if let Some(p) = &png {
                 let t = vltm::export::figure::plot::Transient {
                     counts: &sum.counts,

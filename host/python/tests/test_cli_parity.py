@@ -105,6 +105,17 @@ def test_info_is_the_command_lines_text(two_patches, tmp_path):
         assert "e.g. volume -0.7:0.7:8" in want
         assert isinstance(text, str) and text == want
         assert repr(text) == want  # shown as its lines in a REPL
+    # --volume: the path a grid takes (an off-lattice grid: the nearest aligned one), as a SPEC
+    # or a vltm.Volume; a point list is refused.
+    spec = "-0.6:0.6:7,-0.6:0.6:7,0.5:1.0:3"
+    r = cli("info", str(two_patches), "--volume", spec)
+    assert r.returncode == 0, r.stderr
+    want = keywords(r.stdout)
+    assert want != keywords(cli("info", str(two_patches)).stdout)
+    assert vltm.info(two_patches, volume=spec) == want
+    assert vltm.info(two_patches, volume=vltm.Volume(spec)) == want
+    with pytest.raises(vltm.ArgumentError, match="argument `volume`"):
+        vltm.info(two_patches, volume=vltm.Volume(np.zeros((2, 3)) + 0.5))
     # A Capture opened from a file is described by its file; .mat overrides as on the CLI.
     assert vltm.info(vltm.open(two_patches)) == keywords(cli("info", str(two_patches)).stdout)
     r = cli("info", str(MAT), "--delta-t", "0.002", "--t-start", "0.1", "--grid-width", "0.5")

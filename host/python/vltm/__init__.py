@@ -390,13 +390,15 @@ class Text(str):
 def info(capture: Union[Capture, PathLike], *, delta_t: Optional[float] = None,
          t_start: Optional[float] = None, grid_width: Optional[float] = None,
          t_min: Any = None, t_max: Any = None, rebin: int = 1, background: Any = None,
-         png: Optional[PathLike] = None) -> Text:
+         png: Optional[PathLike] = None, volume: Any = None) -> Text:
     """The layout text of ``vltm info CAPTURE``, line for line: format, scan, laser and SPAD
     spots, device positions, time axis, counts, default λ, the memory budget and where it
     comes from, and the summed transient (after the preprocessing ``t_min``, ``t_max``,
     ``rebin``, ``background``, as :func:`direct`). ``delta_t``, ``t_start``, ``grid_width``
     override a ``.mat`` file's conventions (as :func:`open`); ``png`` also draws the summed
-    transient there (``--png``). Warnings (the background emptied most histograms) come as
+    transient there (``--png``); ``volume`` (a SPEC string or a grid :class:`Volume`, as
+    ``--volume``) is named in the ``fast paths`` line: the path it takes, or the aligned grid
+    that is fast. Warnings (the background emptied most histograms) come as
     ``RuntimeWarning`` (the command line writes them to stderr).
 
     ``capture``: a file path, or a :class:`Capture` opened from one (its ``.mat`` options
@@ -414,11 +416,17 @@ def info(capture: Union[Capture, PathLike], *, delta_t: Optional[float] = None,
     for k, v in (("delta_t", delta_t), ("t_start", t_start), ("grid_width", grid_width)):
         if v is not None:
             opts[k] = _check.real(k, v)
+    if isinstance(volume, Volume):
+        if volume.spec is None:
+            raise _check.fail("volume", "info names the path of a grid: give its SPEC, not points")
+        volume = volume.spec
+    elif volume is not None and not isinstance(volume, str):
+        raise _check.fail("volume", f"expected a SPEC string or a vltm.Volume, found {type(volume).__name__}")
     lines, warnings, _counts, _t0, _dt = _native.info_text(
         p, **opts, t_min=_check.time_bound("t_min", t_min),
         t_max=_check.time_bound("t_max", t_max), rebin=_check.integer("rebin", rebin),
         background=_check.background(background),
-        png=None if png is None else os.fspath(png))
+        png=None if png is None else os.fspath(png), volume=volume)
     for w in warnings:
         _warn(w)
     return Text("\n".join(lines) + "\n")
