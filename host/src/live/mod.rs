@@ -1,6 +1,6 @@
 //! Following a scan while it is acquired (`vltm live`): rows arrive one at a time from a
-//! [`LiveSource`] (a PTU file still being written or a pipe, [`Follower`]; any capture
-//! replayed at a fixed rate, [`Replay`]), are folded into the direct light and the columns at
+//! [`LiveSource`] (a PTU file still being written or a pipe,
+//! [`Follower`](crate::io::ptu::Follower); any capture replayed at a fixed rate, [`Replay`]), are folded into the direct light and the columns at
 //! the focus points as they come, and every `K` rows the current volumes, their figures and
 //! the partial states are written at once ([`crate::atomic`]). When the last row is in, the
 //! in-focus indirect light (whose Γ needs the whole diagonal) is computed over the whole scan.

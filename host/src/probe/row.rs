@@ -32,7 +32,7 @@ use vltm_kernel::{Point, Report, cis_turns, geometry};
 /// laser rows (see the module docs).
 ///
 /// # Errors
-/// Focus on or behind the wall ([`Error::Argument`] `--focus`), a confocal capture,
+/// Focus on or behind the wall ([`Error::Argument`](crate::error::Error::Argument) `focus`), a confocal capture,
 /// configuration, read and kernel errors.
 pub fn row(
     src: &mut dyn RowSource,
