@@ -261,9 +261,7 @@ impl<'m> ColumnF32<'m> {
                 kahan(&mut u.im, &mut c.im, t.im);
             }
         }
-        self.report.rows += 1;
-        self.report.non_finite += u64::from(row.non_finite());
-        self.report.dropped += u64::from(row.dropped());
+        self.report.count_row(row);
         Ok(())
     }
 

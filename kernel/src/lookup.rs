@@ -752,9 +752,7 @@ impl<'m> LookupProbe<'m> {
             };
             *a += c64(*s * w);
         }
-        self.report.rows += 1;
-        self.report.non_finite += u64::from(row.non_finite());
-        self.report.dropped += u64::from(row.dropped());
+        self.report.count_row(row);
         Ok(())
     }
 
@@ -772,9 +770,7 @@ impl<'m> LookupProbe<'m> {
         for (a, b) in self.acc.iter_mut().zip(other.acc.iter()) {
             *a += *b;
         }
-        self.report.rows += other.report.rows;
-        self.report.non_finite += other.report.non_finite;
-        self.report.dropped += other.report.dropped;
+        self.report.add_part(&other.report);
         Ok(())
     }
 

@@ -610,9 +610,7 @@ impl<'m> LookupSlice<'m> {
             };
             kahan(a, s * (c * cis_small_turns(theta * t)) * w);
         }
-        self.report.rows += 1;
-        self.report.non_finite += u64::from(row.non_finite());
-        self.report.dropped += u64::from(row.dropped());
+        self.report.count_row(row);
         Ok(())
     }
 
@@ -627,9 +625,7 @@ impl<'m> LookupSlice<'m> {
         for (a, b) in self.acc.iter_mut().zip(other.acc.iter()) {
             kahan(a, Complex32::new(b[0] - b[2], b[1] - b[3]));
         }
-        self.report.rows += other.report.rows;
-        self.report.non_finite += other.report.non_finite;
-        self.report.dropped += other.report.dropped;
+        self.report.add_part(&other.report);
         Ok(())
     }
 

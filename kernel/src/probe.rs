@@ -72,6 +72,25 @@ pub struct Report {
     pub aliased: usize,
 }
 
+impl Report {
+    /// Counts one folded row: one more row, its non-finite samples and dropped photon events.
+    #[inline]
+    pub(crate) fn count_row<T: Sample>(&mut self, row: &Row<'_, T>) {
+        self.rows += 1;
+        self.non_finite += u64::from(row.non_finite());
+        self.dropped += u64::from(row.dropped());
+    }
+
+    /// Adds the rows, non-finite samples and dropped events of another part (a merge;
+    /// `aliased` is counted when a probe finishes).
+    #[inline]
+    pub(crate) fn add_part(&mut self, other: &Report) {
+        self.rows += other.rows;
+        self.non_finite += other.non_finite;
+        self.dropped += other.dropped;
+    }
+}
+
 /// A probe: a [`Target`], a [`Gate`], a voxel list and caller-owned accumulator state.
 ///
 /// ```
@@ -291,9 +310,7 @@ impl<'m> Probe<'m> {
                 higher_order(scan, row, target, self.voxels, acc, scratch);
             }
         }
-        self.report.rows += 1;
-        self.report.non_finite += u64::from(row.non_finite());
-        self.report.dropped += u64::from(row.dropped());
+        self.report.count_row(row);
         Ok(())
     }
 
@@ -319,9 +336,7 @@ impl<'m> Probe<'m> {
         for (a, b) in self.state.iter_mut().zip(other.state.iter()).take(n) {
             *a += *b;
         }
-        self.report.rows += other.report.rows;
-        self.report.non_finite += other.report.non_finite;
-        self.report.dropped += other.report.dropped;
+        self.report.add_part(&other.report);
         // Union of the two ranges; an empty one is (+∞, −∞) and must leave the other as is.
         let (lo, hi) = other.leg_range;
         self.leg_range = (self.leg_range.0.min(lo), self.leg_range.1.max(hi));
