@@ -228,7 +228,7 @@ impl LiveRun {
             return Err(Error::arg(
                 "resume",
                 format!(
-                    "{} is a {} state that matches no probe of this run (check --focus)",
+                    "{} is a {} state that matches no probe of this run (check $focus)",
                     path.display(),
                     p.kind()
                 ),
