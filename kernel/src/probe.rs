@@ -84,7 +84,7 @@ impl Report {
     /// Adds the rows, non-finite samples and dropped events of another part (a merge;
     /// `aliased` is counted when a probe finishes).
     #[inline]
-    pub(crate) fn add_part(&mut self, other: &Report) {
+    pub(crate) fn add_part(&mut self, other: &Self) {
         self.rows += other.rows;
         self.non_finite += other.non_finite;
         self.dropped += other.dropped;
