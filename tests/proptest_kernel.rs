@@ -63,8 +63,9 @@ use proptest::test_runner::{FileFailurePersistence, RngAlgorithm, RngSeed};
 use reference::{Reference, p64};
 use support::{Data, all_rows, run};
 use vltm_kernel::{
-    ColumnF32, Config, Gate, Lattice, Legs, Lookup, LookupGrid, LookupParams, LookupProbe,
-    LookupSlice, Params, Point, Report, RowBuffer, Sample, Scan, SliceLayout, Target, Weights,
+    ColumnF32, Config, Gate, Interpolant, Lattice, Legs, Lookup, LookupGrid, LookupParams,
+    LookupProbe, LookupSlice, Params, Point, Report, RowBuffer, Sample, Scan, SliceLayout, Target,
+    Weights,
 };
 
 const SEED: u64 = 0x7a11_5eed_0f1b_7e00;
@@ -477,11 +478,12 @@ impl Scene {
         target: Target,
         tol: f64,
     ) -> Outcome {
-        self.compare_lookup_on(kernel, truth, target, tol, None)
+        self.compare_lookup_on(kernel, truth, target, tol, None, Interpolant::Lagrange)
     }
 
     /// [`Self::compare_lookup`] on the general path (`lattice = None`, the voxel list) or
-    /// on the structured slice [`LookupSlice`] over `lattice` (whose points are the voxels).
+    /// on the structured slice [`LookupSlice`] over `lattice` (whose points are the voxels),
+    /// with the grid picked for `interp` (the slice reads both).
     fn compare_lookup_on(
         &self,
         kernel: &Params,
@@ -489,7 +491,9 @@ impl Scene {
         target: Target,
         tol: f64,
         lattice: Option<&Lattice>,
+        interp: Interpolant,
     ) -> Outcome {
+        let tol = (tol, interp);
         if self.counts {
             let hists: Vec<u16> = self.h.iter().map(|&x| x as u16).collect();
             self.compare_lookup_with(&hists, kernel, truth, target, tol, lattice)
@@ -512,7 +516,7 @@ impl Scene {
                 &kernel,
                 truth,
                 Target::Column(self.focus),
-                tol,
+                (tol, Interpolant::Lagrange),
                 true,
                 None,
             )
@@ -523,7 +527,7 @@ impl Scene {
                 &kernel,
                 truth,
                 Target::Column(self.focus),
-                tol,
+                (tol, Interpolant::Lagrange),
                 true,
                 None,
             )
@@ -536,7 +540,7 @@ impl Scene {
         kernel: &Params,
         truth: &Reference,
         target: Target,
-        tol: f64,
+        tol: (f64, Interpolant),
         lattice: Option<&Lattice>,
     ) -> Outcome {
         self.compare_lookup_run(hists, kernel, truth, target, tol, false, lattice)
@@ -551,7 +555,7 @@ impl Scene {
         kernel: &Params,
         truth: &Reference,
         target: Target,
-        tol: f64,
+        (tol, interpolant): (f64, Interpolant),
         factorised: bool,
         lattice: Option<&Lattice>,
     ) -> Outcome {
@@ -561,6 +565,7 @@ impl Scene {
             &LookupParams {
                 tolerance: tol,
                 grid_len: None,
+                interpolant,
             },
         )
         .expect("a grid for every tolerance");
@@ -623,7 +628,12 @@ impl Scene {
             (Target::Diagonal, Some(_), _) => "lookup slice diagonal",
         };
         let mut out = Outcome {
-            probe: format!("{kind} (L = {}, η = {:.1e})", grid.len(), grid.bound()),
+            probe: format!(
+                "{kind} ({:?}, L = {}, η = {:.1e})",
+                grid.interpolant(),
+                grid.len(),
+                grid.bound()
+            ),
             worst: 0.0,
             worst_rel: 0.0,
             signal: 0.0,
@@ -695,7 +705,7 @@ fn run_lookup<T: Sample>(
     let scan = Scan::new(cfg, spads, &mut tables).expect("scan");
     let mut lt = vec![0.0f32; Lookup::tables_len(grid)];
     let lookup = Lookup::new(grid, &mut lt).expect("lookup tables");
-    let mut state = vec![0.0f64; LookupProbe::state_len(voxels.len())];
+    let mut state = vec![0.0f32; LookupProbe::state_len(voxels.len())];
     let mut scratch = vec![0.0f32; LookupProbe::scratch_len(grid, voxels.len())];
     let mut probe =
         LookupProbe::new(&scan, &lookup, target, voxels, &mut state, &mut scratch).expect("probe");
@@ -1174,6 +1184,7 @@ fn lookup_tolerance_detects_half_step_error() {
             &LookupParams {
                 tolerance: tol,
                 grid_len: None,
+                ..LookupParams::new()
             },
         )
         .unwrap();
@@ -1230,8 +1241,12 @@ fn slice_case() -> impl Strategy<Value = (Case, Lattice)> {
 fn check_slice(case: &Case, lattice: &Lattice) -> Result<(), TestCaseError> {
     let (scene, p) = case.prepare();
     let truth = scene.reference(&p);
-    for t in [Target::Diagonal, Target::Column(scene.focus)] {
-        let o = scene.compare_lookup_on(&p, &truth, t, lookup_tolerance(case), Some(lattice));
+    for (t, interp) in [Target::Diagonal, Target::Column(scene.focus)]
+        .into_iter()
+        .flat_map(|t| [(t, Interpolant::Lagrange), (t, Interpolant::Hermite)])
+    {
+        let tol = lookup_tolerance(case);
+        let o = scene.compare_lookup_on(&p, &truth, t, tol, Some(lattice), interp);
         prop_assert!(
             o.worst <= 1.0,
             "{}: error {:.3}× the tolerance ({o:?})",
@@ -1303,12 +1318,16 @@ fn slice_lookup_tolerance_detects_half_step_error() {
     let (sc, lattice) = slice_scene(&p);
     let truth = sc.reference(&p);
     let cfg = Config::try_new(&p).unwrap();
-    for tol in [1e-6, 1e-5, 1e-4, 1e-3] {
+    for (tol, interpolant) in [1e-6, 1e-5, 1e-4, 1e-3]
+        .into_iter()
+        .flat_map(|t| [(t, Interpolant::Lagrange), (t, Interpolant::Hermite)])
+    {
         let grid = LookupGrid::try_new(
             &cfg,
             &LookupParams {
                 tolerance: tol,
                 grid_len: None,
+                interpolant,
             },
         )
         .unwrap();
@@ -1317,10 +1336,11 @@ fn slice_lookup_tolerance_detects_half_step_error() {
             ..p
         };
         for t in [Target::Diagonal, Target::Column(sc.focus)] {
-            let o = sc.compare_lookup_on(&p, &truth, t, tol, Some(&lattice));
+            let lat = Some(&lattice);
+            let o = sc.compare_lookup_on(&p, &truth, t, tol, lat, interpolant);
             println!("{}: correct, err/tol {:.3}", o.probe, o.worst);
             assert!(o.worst <= 1.0, "{o:?}");
-            let o = sc.compare_lookup_on(&half_step, &truth, t, tol, Some(&lattice));
+            let o = sc.compare_lookup_on(&half_step, &truth, t, tol, lat, interpolant);
             println!("{}: half a grid step off, err/tol {:.3}", o.probe, o.worst);
             assert!(o.worst > 3.0, "{}: mistake not detected ({o:?})", o.probe);
         }

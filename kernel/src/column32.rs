@@ -391,6 +391,11 @@ impl ColumnF32<'_> {
         if !grid.config().same(&self.cfg) {
             return Err(Error::Incompatible("lookup grid of another configuration"));
         }
+        if grid.interpolant() != crate::Interpolant::Lagrange {
+            return Err(Error::Incompatible(
+                "a Hermite lookup grid (finish_lookup reads the Lagrange cubic)",
+            ));
+        }
         let kv = voxels.len();
         check_len("out", kv, out.len())?;
         let need = Self::lookup_scratch_len(grid, kv);
@@ -566,6 +571,7 @@ mod lookup_finish {
                 &LookupParams {
                     tolerance: 1.0,
                     grid_len: Some(len),
+                    ..LookupParams::new()
                 },
             )
             .unwrap();

@@ -22,7 +22,9 @@ pub use ::fixed::types::I1F15;
 pub use column32::ColumnF32;
 pub use config::{Config, Legs, Params, Point, Weights};
 pub use error::{ConfigError, Error};
-pub use lookup::{GridReader, Lookup, LookupGrid, LookupParams, LookupProbe, lagrange4};
+pub use lookup::{
+    GridReader, Interpolant, Lookup, LookupGrid, LookupParams, LookupProbe, lagrange4,
+};
 pub use lookup_slice::{Lattice, LookupSlice, SliceLayout};
 pub use num_complex;
 pub use phase::{cis_small_turns, cis_turns, cis_turns_f64};

@@ -31,8 +31,11 @@
 //! The pair adds `w(d_vs)·Z_s(τ)` to its voxel's row sum (`Complex32`) when `τ + x_s` lies in
 //! the guard interval [`Config::guard`] (the same `f32` test as the band diagonal); once per
 //! row the sum times the lead weight (`w(d_lv)`, or `w(d_la)` on a column) is added to the
-//! `Complex64` accumulator. A column is imaged pair by pair like the diagonal (not
-//! factorised), so every path gets the guard and nothing aliases.
+//! voxel's accumulator, a Kahan-compensated `f32` complex sum (error `≤ 2u·Σ_rows |row sum|`
+//! plus `O(n u²)`, far below the lookup tolerance; no `f64` anywhere per row, so no soft
+//! double on a Cortex-M4F: the constants are rounded to `f32` once by [`LookupProbe::new`]).
+//! A column is imaged pair by pair like the diagonal (not factorised), so every path gets the
+//! guard and nothing aliases.
 //!
 //! # Error bound
 //!
@@ -69,13 +72,14 @@
 //! pairs of O(1) work (a distance, the guard test, four Lagrange weights, four complex
 //! loads, one table carrier, one small-phase polynomial, one weight), against the band
 //! path's `Kv·Ks·14J` flops. Memory, all caller-owned: shared tables `3L` `f32`
-//! ([`Lookup::tables_len`]: twiddles and carrier); per probe the state `2Kv` `f64` (as the band
-//! diagonal's) and the scratch `2(L + 3) + 3Kv` `f32` ([`LookupProbe::scratch_len`]: the
+//! ([`Lookup::tables_len`]: twiddles and carrier); per probe the state `4Kv` `f32` (the
+//! bytes of the band diagonal's `2Kv` `f64`) and the scratch `2(L + 3) + 3Kv` `f32` ([`LookupProbe::scratch_len`]: the
 //! SPAD's grid, the voxels' row sums and lead distances). SPAD-outer: one grid in memory at a
 //! time. No allocation, no panic on data; configuration checked once.
 
 use crate::config::{Config, Point, Weights};
 use crate::error::{ConfigError, Error, check_len, check_points};
+use crate::lookup_slice::{kahan, value};
 use crate::phase::cis_small_turns;
 use crate::probe::{Report, Target};
 use crate::sample::Sample;
@@ -131,6 +135,27 @@ pub fn lagrange4(t: f32) -> [f32; 4] {
     ]
 }
 
+/// How a grid cell is interpolated between its nodes `n` and `n + 1` (module docs, "Error
+/// bound"). Both are cubics in the cell's fraction `t`, so a precomputed cell costs the same
+/// per read (four complex coefficients, a Horner step).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+#[cfg_attr(feature = "defmt", derive(defmt::Format))]
+pub enum Interpolant {
+    /// The 4-point cubic Lagrange interpolant on the nodes `n − 1 … n + 2` ([`lagrange4`]):
+    /// `η = (3/128)·Σ_j Ĝ_j ω_j⁴`. Read by every lookup path.
+    #[default]
+    Lagrange,
+    /// The cubic Hermite interpolant on the nodes `n`, `n + 1` with slopes from the
+    /// sixth-order central difference of the nodes `n − 3 … n + 4`:
+    /// `η = Σ_j Ĝ_j·(ω_j⁴/384 + ε(ω_j)/4)`, about 9× below [`Interpolant::Lagrange`] on the
+    /// same grid, so a grid half as long meets the same tolerance whenever
+    /// `ε` is small (the band well inside the grid's Nyquist range). Read only by the
+    /// structured slice ([`LookupSlice`](crate::LookupSlice)), which converts each grid cell
+    /// to a cubic once per row; [`LookupProbe`], [`Lookup::baseband`] and
+    /// [`ColumnF32::finish_lookup`](crate::ColumnF32::finish_lookup) refuse it.
+    Hermite,
+}
+
 /// What the lookup path must achieve, validated by [`LookupGrid::try_new`].
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
@@ -139,14 +164,27 @@ pub struct LookupParams {
     pub tolerance: f64,
     /// Grid length `L` (a power of two); `None` = the smallest that meets `tolerance`.
     pub grid_len: Option<usize>,
+    /// The interpolant whose bound picks (or checks) `L` (default [`Interpolant::Lagrange`]).
+    pub interpolant: Interpolant,
 }
 
 impl LookupParams {
-    /// Tolerance 1e-5, grid chosen from it.
+    /// Tolerance 1e-5, grid chosen from it, [`Interpolant::Lagrange`].
     pub const fn new() -> Self {
         Self {
             tolerance: 1e-5,
             grid_len: None,
+            interpolant: Interpolant::Lagrange,
+        }
+    }
+
+    /// Tolerance 1e-5, grid chosen from it, [`Interpolant::Hermite`]: the structured slice's
+    /// choice (for the paper's setup `L` = 512 instead of 1024 at the same tolerance).
+    pub const fn hermite() -> Self {
+        Self {
+            tolerance: 1e-5,
+            grid_len: None,
+            interpolant: Interpolant::Hermite,
         }
     }
 }
@@ -181,19 +219,42 @@ pub struct LookupGrid {
     first: usize,
     /// η.
     bound: f64,
+    /// The interpolant `bound` is for.
+    interp: Interpolant,
 }
 
-/// `η(L) = (3/128)·(span/L)⁴·Σ_j Ĝ_j (ν_j − Ω_d)⁴`.
-fn eta(cfg: &Config, len: usize, k_d: i64) -> f64 {
+/// `η(L)` of the interpolant: with `ω_j = 2π(k_lo + j − k_d)/L` (radians per grid step),
+/// Lagrange `(3/128)·Σ_j Ĝ_j ω_j⁴`, Hermite `Σ_j Ĝ_j·(ω_j⁴/384 + ε(ω_j)/4)` with the
+/// central difference's slope error `ε(ω) = |ω − (3/2 sin ω − 3/10 sin 2ω + 1/30 sin 3ω)|`.
+fn eta(cfg: &Config, len: usize, k_d: i64, interp: Interpolant) -> f64 {
     let span = cfg.span();
     let dnu = cfg.dnu();
-    let mut m4 = 0.0;
+    let delta = span / len as f64;
+    let mut sum = 0.0;
     for j in 0..cfg.bins() {
         let d = (cfg.k_lo() + j as i64 - k_d) as f64 * dnu;
-        m4 += cfg.gate_weight(j) * d * d * d * d;
+        sum += cfg.gate_weight(j)
+            * match interp {
+                // (ν_j − Ω_d)⁴, times δ⁴ below: `(3/128)·δ⁴·M₄` as the module docs write it.
+                Interpolant::Lagrange => d * d * d * d,
+                Interpolant::Hermite => {
+                    let w = d * delta;
+                    w * w * w * w / 384.0 + slope_error(w) / 4.0
+                }
+            };
     }
-    let delta = span / len as f64;
-    3.0 / 128.0 * delta * delta * delta * delta * m4
+    match interp {
+        Interpolant::Lagrange => 3.0 / 128.0 * delta * delta * delta * delta * sum,
+        Interpolant::Hermite => sum,
+    }
+}
+
+/// `ε(ω)`: the error of the sixth-order central difference
+/// `D y(0) = (45(y₁ − y₋₁) − 9(y₂ − y₋₂) + (y₃ − y₋₃))/60` on `e^{iωx}`, relative to the
+/// exact slope `iω` (≈ `ω⁷/140` for small `ω`).
+fn slope_error(w: f64) -> f64 {
+    let d = 1.5 * libm::sin(w) - 0.3 * libm::sin(2.0 * w) + libm::sin(3.0 * w) / 30.0;
+    libm::fabs(w - d)
 }
 
 impl LookupGrid {
@@ -209,6 +270,7 @@ impl LookupGrid {
             k_d,
             first,
             bound,
+            interp,
         } = self;
         cfg.same(&other.cfg)
             && *len == other.len
@@ -216,6 +278,7 @@ impl LookupGrid {
             && *k_d == other.k_d
             && *first == other.first
             && bound.to_bits() == other.bound.to_bits()
+            && *interp == other.interp
     }
 
     /// Validates `p` for `cfg` and derives the grid.
@@ -246,14 +309,14 @@ impl LookupGrid {
                 if l > MAX_LEN {
                     return Err(ConfigError::SizeOverflow("grid_len"));
                 }
-                if l < floor || eta(cfg, l, k_d) > tol {
+                if l < floor || eta(cfg, l, k_d, p.interpolant) > tol {
                     return Err(ConfigError::TooCoarse("grid_len"));
                 }
                 l
             }
             None => {
                 let mut l = floor.next_power_of_two();
-                while eta(cfg, l, k_d) > tol {
+                while eta(cfg, l, k_d, p.interpolant) > tol {
                     if l >= MAX_LEN {
                         return Err(ConfigError::SizeOverflow("grid_len"));
                     }
@@ -271,7 +334,8 @@ impl LookupGrid {
             bits: len.trailing_zeros(),
             k_d,
             first: (cfg.k_lo() - k_d).rem_euclid(len.max(1) as i64) as usize,
-            bound: eta(cfg, len, k_d),
+            bound: eta(cfg, len, k_d, p.interpolant),
+            interp: p.interpolant,
         })
     }
 
@@ -295,6 +359,10 @@ impl LookupGrid {
     /// The interpolation error bound `η` (per count of `‖h_s‖₁`, see the module docs).
     pub const fn bound(&self) -> f64 {
         self.bound
+    }
+    /// The interpolant the grid is made for.
+    pub const fn interpolant(&self) -> Interpolant {
+        self.interp
     }
 }
 
@@ -477,8 +545,14 @@ impl Lookup<'_> {
     ///
     /// # Errors
     /// [`Error::Length`] if `hg` does not have `J` values or `y` not
-    /// [`Lookup::grid_buf_len`]; `y` is unchanged then.
+    /// [`Lookup::grid_buf_len`]; [`Error::Incompatible`] for an [`Interpolant::Hermite`] grid
+    /// (the reader is the Lagrange cubic); `y` is unchanged then.
     pub fn baseband(&self, hg: &[Complex32], y: &mut [Complex32]) -> Result<(), Error> {
+        if self.grid.interp != Interpolant::Lagrange {
+            return Err(Error::Incompatible(
+                "a Hermite lookup grid (the reader is the Lagrange cubic)",
+            ));
+        }
         check_len("band spectrum", self.grid.cfg.bins(), hg.len())?;
         check_len("grid buffer", Self::grid_buf_len(&self.grid), y.len())?;
         self.synthesise(hg, y);
@@ -520,8 +594,9 @@ pub(crate) fn dist_fast(a: &Point, b: &Point) -> f32 {
 
 /// A Gaussian-gated diagonal or column on the lookup path: the [`Probe`](crate::Probe) of
 /// [`Target`] × [`Gate::Gaussian`](crate::Gate::Gaussian) with an O(1) cost per pair (module
-/// docs). Same accumulators (`2Kv` `f64`, complex per voxel), merge and `finish` as the band
-/// diagonal; the result equals the band path's within [`LookupGrid::bound`].
+/// docs). Accumulators of the same size as the band diagonal's (`4Kv` `f32`: a Kahan-compensated
+/// complex sum per voxel), merge and `finish` like it; the result equals the band path's within
+/// [`LookupGrid::bound`].
 ///
 /// ```
 /// use vltm_kernel::{Config, Lookup, LookupGrid, LookupParams, LookupProbe, Params, RowBuffer, Scan, Target};
@@ -552,7 +627,8 @@ pub(crate) fn dist_fast(a: &Point, b: &Point) -> f32 {
 pub struct LookupProbe<'m> {
     target: Target,
     voxels: &'m [Point],
-    acc: &'m mut [Complex64],
+    /// Per voxel: the amplitude as a Kahan-compensated `f32` sum `[s.re, s.im, c.re, c.im]`.
+    acc: &'m mut [[f32; 4]],
     /// One SPAD's grid, `L + EXTRA`.
     grid_buf: &'m mut [Complex32],
     /// Per voxel: this row's sum over the SPADs.
@@ -561,12 +637,21 @@ pub struct LookupProbe<'m> {
     lead: &'m mut [f32],
     report: Report,
     grid: LookupGrid,
+    /// Per-row constants, rounded to `f32` once by [`LookupProbe::new`] (no soft `f64` per
+    /// row on a Cortex-M4F): grid points per metre of path `L/span`, the carrier
+    /// `θ = k_d/L`, the guard interval (m) and the weights' `d_min` (m).
+    per_m: f32,
+    theta: f32,
+    guard_m: (f32, f32),
+    d_min: f32,
 }
 
 impl<'m> LookupProbe<'m> {
-    /// Length in `f64` of the state: `2Kv` (as the band diagonal's [`Probe::state_len`](crate::Probe::state_len)).
+    /// Length in `f32` of the state: `4Kv` (per voxel a Kahan-compensated complex sum: the
+    /// bytes of the band diagonal's `2Kv` `f64`, with no soft `f64` per row on a
+    /// Cortex-M4F).
     pub const fn state_len(n_voxels: usize) -> usize {
-        n_voxels.saturating_mul(2)
+        n_voxels.saturating_mul(4)
     }
 
     /// Length in `f32` of the scratch: `2(L + 3) + 3Kv`.
@@ -579,18 +664,24 @@ impl<'m> LookupProbe<'m> {
     /// # Errors
     /// [`Error::Length`] if `state` or `scratch` does not have [`Self::state_len`] /
     /// [`Self::scratch_len`] elements; [`Error::Incompatible`] if `lookup` was made for
-    /// another configuration than `scan`; [`Error::NonFinite`] for a non-finite voxel or focus.
+    /// another configuration than `scan` or for [`Interpolant::Hermite`];
+    /// [`Error::NonFinite`] for a non-finite voxel or focus.
     pub fn new(
         scan: &Scan<'_>,
         lookup: &Lookup<'_>,
         target: Target,
         voxels: &'m [Point],
-        state: &'m mut [f64],
+        state: &'m mut [f32],
         scratch: &'m mut [f32],
     ) -> Result<Self, Error> {
         let grid = lookup.grid;
         if !grid.cfg.same(scan.config()) {
             return Err(Error::Incompatible("lookup grid of another configuration"));
+        }
+        if grid.interp != Interpolant::Lagrange {
+            return Err(Error::Incompatible(
+                "a Hermite lookup grid (the voxel list reads the Lagrange cubic)",
+            ));
         }
         let kv = voxels.len();
         check_len("state", Self::state_len(kv), state.len())?;
@@ -600,10 +691,10 @@ impl<'m> LookupProbe<'m> {
             check_points("focus", &[a])?;
         }
         let found = state.len();
-        let acc: &mut [Complex64] =
+        let acc: &mut [[f32; 4]] =
             bytemuck::try_cast_slice_mut(state).map_err(|_| Error::Length {
                 what: "state",
-                expected: 2 * kv,
+                expected: 4 * kv,
                 found,
             })?;
         let short = Error::Length {
@@ -615,7 +706,9 @@ impl<'m> LookupProbe<'m> {
             .split_at_mut_checked(2 * (grid.len + EXTRA))
             .ok_or(short)?;
         let (sums, lead) = rest.split_at_mut_checked(2 * kv).ok_or(short)?;
-        acc.fill(Complex64::new(0.0, 0.0));
+        acc.fill([0.0; 4]);
+        let cfg = &grid.cfg;
+        let (g_lo, g_hi) = cfg.guard();
         Ok(Self {
             target,
             voxels,
@@ -625,6 +718,10 @@ impl<'m> LookupProbe<'m> {
             lead,
             report: Report::default(),
             grid,
+            per_m: (grid.len as f64 / cfg.span()) as f32,
+            theta: (grid.k_d as f64 / grid.len as f64) as f32,
+            guard_m: (g_lo as f32, g_hi as f32),
+            d_min: cfg.params().d_min as f32,
         })
     }
 
@@ -640,13 +737,14 @@ impl<'m> LookupProbe<'m> {
     pub const fn report(&self) -> Report {
         self.report
     }
-    /// The complex amplitudes accumulated so far, one per voxel.
-    pub fn accumulators(&self) -> &[Complex64] {
-        self.acc
+    /// The complex amplitude accumulated so far at voxel `i` (0 past the end), the
+    /// compensated sum's value `s − c` in `f64`.
+    pub fn amplitude(&self, i: usize) -> Complex64 {
+        self.acc.get(i).map_or(Complex64::new(0.0, 0.0), value)
     }
     /// Zeroes the accumulators and counters.
     pub fn reset(&mut self) {
-        self.acc.fill(Complex64::new(0.0, 0.0));
+        self.acc.fill([0.0; 4]);
         self.report = Report::default();
     }
 
@@ -673,6 +771,18 @@ impl<'m> LookupProbe<'m> {
         check_len("row histograms", ks * cfg.nt(), ks * row.nt())?;
         check_len("row offsets", ks, row.offsets().len())?;
         let laser = row.laser();
+        // The weight w(d) = 1/max(d, d_min) or 1 (`Config::weight` with the hoisted `d_min`:
+        // it converts d_min from f64 per call, soft float on a Cortex-M4F; same bits. `max`
+        // by comparison: `f32::max` is an out-of-line `fmaxf` on a Cortex-M).
+        let d_min = self.d_min;
+        let inv = matches!(cfg.weights(), Weights::Inv);
+        let weight = |d: f32| {
+            if inv {
+                1.0 / if d > d_min { d } else { d_min }
+            } else {
+                1.0
+            }
+        };
         let w_lead = match self.target {
             Target::Diagonal => {
                 for (d, v) in self.lead.iter_mut().zip(self.voxels) {
@@ -685,19 +795,13 @@ impl<'m> LookupProbe<'m> {
                 for (d, v) in self.lead.iter_mut().zip(self.voxels) {
                     *d = d_la + dist_nr(&a, v);
                 }
-                Some(cfg.weight(d_la))
+                Some(weight(d_la))
             }
         };
         self.sums.fill(Complex32::new(0.0, 0.0));
-        let (g_lo, g_hi) = cfg.guard();
-        let (g_lo, g_hi) = (g_lo as f32, g_hi as f32);
-        let per_m = (self.grid.len as f64 / cfg.span()) as f32;
-        let theta = (self.grid.k_d as f64 / self.grid.len as f64) as f32;
+        let (g_lo, g_hi) = self.guard_m;
+        let (per_m, theta) = (self.per_m, self.theta);
         let mask = self.grid.len - 1;
-        // The leg weight w(d) = 1/max(d, d_min) or 1, hoisted (`Config::weight` converts
-        // d_min from f64 per call: soft float on a Cortex-M4F). Same bits.
-        let d_min = cfg.params().d_min as f32;
-        let inv = matches!(cfg.weights(), Weights::Inv);
         for ((sp, hg), off) in scan
             .spads()
             .iter()
@@ -731,13 +835,7 @@ impl<'m> LookupProbe<'m> {
                 };
                 let w = lagrange4(t);
                 let base = q[0] * w[0] + q[1] * w[1] + q[2] * w[2] + q[3] * w[3];
-                // `max` by comparison: `f32::max` is an out-of-line `fmaxf` on a Cortex-M.
-                let w = if inv {
-                    1.0 / if d_vs > d_min { d_vs } else { d_min }
-                } else {
-                    1.0
-                };
-                *sum += base * (*c * cis_small_turns(theta * t)) * w;
+                *sum += base * (*c * cis_small_turns(theta * t)) * weight(d_vs);
             }
         }
         for ((a, s), d) in self
@@ -748,9 +846,9 @@ impl<'m> LookupProbe<'m> {
         {
             let w = match w_lead {
                 Some(w) => w,
-                None => cfg.weight(*d),
+                None => weight(*d),
             };
-            *a += c64(*s * w);
+            kahan(a, *s * w);
         }
         self.report.count_row(row);
         Ok(())
@@ -768,7 +866,7 @@ impl<'m> LookupProbe<'m> {
             return Err(Error::Incompatible("different target, voxels or grid"));
         }
         for (a, b) in self.acc.iter_mut().zip(other.acc.iter()) {
-            *a += *b;
+            kahan(a, Complex32::new(b[0] - b[2], b[1] - b[3]));
         }
         self.report.add_part(&other.report);
         Ok(())
@@ -782,15 +880,23 @@ impl<'m> LookupProbe<'m> {
     pub fn finish(&self, out: &mut [f64]) -> Result<Report, Error> {
         check_len("out", self.voxels.len(), out.len())?;
         for (o, a) in out.iter_mut().zip(self.acc.iter()) {
-            *o = a.norm_sqr();
+            *o = value(a).norm_sqr();
         }
         Ok(self.report)
     }
-}
 
-#[inline]
-fn c64(z: Complex32) -> Complex64 {
-    Complex64::new(z.re as f64, z.im as f64)
+    /// [`LookupProbe::finish`] in `f32` (no `f64` on a Cortex-M4F): `T = |s − c|²` with the
+    /// compensated sum's value rounded once to `f32` (a relative `2u` more than `finish`).
+    ///
+    /// # Errors
+    /// [`Error::Length`] if `out` has the wrong length.
+    pub fn finish_f32(&self, out: &mut [f32]) -> Result<Report, Error> {
+        check_len("out", self.voxels.len(), out.len())?;
+        for (o, a) in out.iter_mut().zip(self.acc.iter()) {
+            *o = Complex32::new(a[0] - a[2], a[1] - a[3]).norm_sqr();
+        }
+        Ok(self.report)
+    }
 }
 
 #[cfg(test)]
@@ -814,6 +920,7 @@ mod tests {
                 &LookupParams {
                     tolerance: 1.0,
                     grid_len,
+                    ..LookupParams::new()
                 },
             )
             .unwrap()
@@ -833,12 +940,16 @@ mod tests {
         let p = |tolerance, grid_len| LookupParams {
             tolerance,
             grid_len,
+            ..LookupParams::new()
         };
         let g = LookupGrid::try_new(&c, &LookupParams::new()).unwrap();
         assert!(g.len().is_power_of_two() && g.len() >= c.bins() && g.bound() <= 1e-5);
         // The smallest grid that meets the tolerance: at the floor, or half of it does not.
         let floor = c.bins().max(8 * g.carrier_bin() as usize).max(4);
-        assert!(g.len() == floor.next_power_of_two() || eta(&c, g.len() / 2, g.k_d) > 1e-5);
+        assert!(
+            g.len() == floor.next_power_of_two()
+                || eta(&c, g.len() / 2, g.k_d, Interpolant::Lagrange) > 1e-5
+        );
         for (params, err) in [
             (p(f64::NAN, None), ConfigError::NotFinite("tolerance")),
             (p(0.0, None), ConfigError::NotPositive("tolerance")),
@@ -858,6 +969,46 @@ mod tests {
             assert_eq!(LookupGrid::try_new(&c, &params), Err(err), "{params:?}");
         }
         assert_eq!(LookupGrid::try_new(&c, &p(1e-5, Some(g.len()))), Ok(g));
+    }
+
+    /// The Hermite interpolant's bound: about 9× below Lagrange's on one grid (its slope
+    /// term small), so the paper's setup meets 1e-5 with `L` = 512 instead of 1024; the
+    /// slope error `ε(ω)` is `ω⁷/140` to leading order; grids of the two interpolants differ.
+    #[test]
+    fn hermite_bound_halves_the_grid() {
+        let c = Config::try_new(&Params::new(0.13, 255, 0.0255)).unwrap();
+        let lag = LookupGrid::try_new(&c, &LookupParams::new()).unwrap();
+        let her = LookupGrid::try_new(&c, &LookupParams::hermite()).unwrap();
+        assert_eq!((lag.len(), her.len()), (1024, 512));
+        assert!(her.bound() <= 1e-5 && her.bound() > 5e-6, "{}", her.bound());
+        let lag512 = eta(&c, 512, lag.k_d, Interpolant::Lagrange);
+        let ratio = lag512 / her.bound();
+        assert!((8.0..9.0).contains(&ratio), "{ratio}");
+        for w in [0.05f64, 0.1, 0.2] {
+            let e = slope_error(w);
+            let lead = w.powi(7) / 140.0;
+            assert!((e - lead).abs() < 0.05 * lead, "{w}: {e} vs {lead}");
+        }
+        assert!(
+            !lag.same(
+                &LookupGrid::try_new(
+                    &c,
+                    &LookupParams {
+                        grid_len: Some(1024),
+                        ..LookupParams::hermite()
+                    }
+                )
+                .unwrap()
+            )
+        );
+        let mut t = [0.0f32; 4 * 512];
+        let lookup = Lookup::new(&her, &mut t).unwrap();
+        let hg = [Complex32::new(0.0, 0.0); 137];
+        let mut y = [Complex32::new(0.0, 0.0); 512 + EXTRA];
+        assert!(matches!(
+            lookup.baseband(&hg[..c.bins()], &mut y),
+            Err(Error::Incompatible(_))
+        ));
     }
 
     /// `reader_f32` (no `f64`) has the same constants as `reader`.

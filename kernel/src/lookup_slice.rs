@@ -59,12 +59,17 @@
 
 use crate::config::{Point, Weights};
 use crate::error::{ConfigError, Error, check_len};
-use crate::lookup::{EXTRA, Lookup, LookupGrid, dist_nr};
+use crate::lookup::{Interpolant, Lookup, LookupGrid, dist_nr};
 use crate::phase::cis_small_turns;
 use crate::probe::{Report, Target};
 use crate::sample::Sample;
 use crate::scan::{Row, Scan, as_complex};
 use num_complex::{Complex32, Complex64};
+
+/// Wrapped grid values kept before node 0 (`y[−3 .. 0]`) and after node `L − 1`
+/// (`y[L .. L + 5]`): a cell's Hermite slopes read three nodes before it and four after.
+const PRE: usize = 3;
+const POST: usize = 5;
 
 /// A plane of voxels on a regular lattice: voxel `(ix, iy)`, index `iy·nx + ix`, at
 /// `origin + ix·step_x + iy·step_y` (m).
@@ -281,7 +286,7 @@ pub struct LookupSlice<'m> {
     table: &'m [[f32; 4]],
     /// Per voxel: the amplitude as a Kahan-compensated `f32` sum `[s.re, s.im, c.re, c.im]`.
     acc: &'m mut [[f32; 4]],
-    /// One SPAD's grid, `L + EXTRA`.
+    /// One SPAD's grid with wrapped copies, `PRE + L + POST`: `y[−3 .. L + 5]`.
     grid_buf: &'m mut [Complex32],
     /// Two SPADs' cubic cells `[a₀, a₁, a₂, a₃]` (re, im interleaved), `2L`.
     cells: &'m mut [[f32; 8]],
@@ -307,9 +312,9 @@ impl<'m> LookupSlice<'m> {
         n_voxels.saturating_mul(4)
     }
 
-    /// Length in `f32` of the scratch: `2(L + 3) + 16L + 4Kv`.
+    /// Length in `f32` of the scratch: `2(L + 8) + 16L + 4Kv`.
     pub const fn scratch_len(grid: &LookupGrid, n_voxels: usize) -> usize {
-        (2 * (grid.len() + EXTRA) + 16 * grid.len()).saturating_add(n_voxels.saturating_mul(4))
+        (2 * (PRE + grid.len() + POST) + 16 * grid.len()).saturating_add(n_voxels.saturating_mul(4))
     }
 
     /// Fills the slice tables (once, in `f64`) and returns a zeroed probe.
@@ -416,7 +421,7 @@ impl<'m> LookupSlice<'m> {
         let sl = Self::scratch_len(&grid, kv);
         let found = scratch.len();
         let (g, rest) = scratch
-            .split_at_mut_checked(2 * (l + EXTRA))
+            .split_at_mut_checked(2 * (PRE + l + POST))
             .ok_or(short("scratch", sl, found))?;
         let (cells, rest) = rest
             .split_at_mut_checked(16 * l)
@@ -736,38 +741,70 @@ fn synthesise_fused(lookup: &Lookup<'_>, hg: &[Complex32], y: &mut [Complex32]) 
     }
 }
 
-/// The cubic of [`lagrange4`](crate::lagrange4) on cell `n` (nodes `n − 1 … n + 2`) in power
-/// form, `p(t) = a₀ + a₁t + a₂t² + a₃t³`, for the `count` cells from `first` on (wrapping at
-/// `L`; all `L` when `count ≥ L`); `y` holds `L + EXTRA` values (wrapped copies at the end),
-/// `y[L − 1]` stands for `y[−1]`. Cells outside the range keep their values.
-fn cubic_cells(y: &[Complex32], cells: &mut [[f32; 8]], first: usize, count: usize) {
+/// The cubic of cell `n` (between the nodes `n` and `n + 1`) in power form,
+/// `p(t) = a₀ + a₁t + a₂t² + a₃t³`, for the `count` cells from `first` on (wrapping at `L`;
+/// all `L` when `count ≥ L`): the cubic of [`lagrange4`](crate::lagrange4) (nodes
+/// `n − 1 … n + 2`) or the Hermite cubic with central-difference slopes (nodes `n − 3 … n + 4`;
+/// [`Interpolant`]). `pad` holds `y[−PRE .. L + POST]` (wrapped copies at both ends). Cells
+/// outside the range keep their values.
+fn cubic_cells(
+    pad: &[Complex32],
+    cells: &mut [[f32; 8]],
+    first: usize,
+    count: usize,
+    interp: Interpolant,
+) {
     let l = cells.len();
     let (first, count) = if count >= l { (0, l) } else { (first, count) };
     // The range as at most two runs: first .. min(first + count, L), then 0 .. the rest.
     let head = count.min(l.saturating_sub(first));
     for (from, n) in [(first, head), (0, count - head)] {
-        let ym = y
-            .get(from.wrapping_sub(1).min(l.wrapping_sub(1)))
-            .copied()
-            .unwrap_or(Complex32::new(0.0, 0.0));
-        let (Some(c), Some(w)) = (cells.get_mut(from..), y.get(from..)) else {
+        // Cell k reads pad[k .. k + 8] = y[k − 3 .. k + 5].
+        let (Some(c), Some(w)) = (cells.get_mut(from..), pad.get(from..)) else {
             continue;
         };
-        cubic_run(ym, w, c, n);
+        match interp {
+            Interpolant::Lagrange => lagrange_run(w, c, n),
+            Interpolant::Hermite => hermite_run(w, c, n),
+        }
     }
 }
 
-/// [`cubic_cells`] over one run of `n` cells: `cells[k]` from `ym` (the node before) and
-/// `y[k], y[k + 1], y[k + 2]`.
+/// [`cubic_cells`] over one run of `n` Lagrange cells: `cells[k]` from
+/// `y[k − 1], y[k], y[k + 1], y[k + 2]` (= `pad[k + 2 .. k + 6]`).
 #[inline(always)]
-fn cubic_run(mut ym: Complex32, y: &[Complex32], cells: &mut [[f32; 8]], n: usize) {
-    for (c, w) in cells.iter_mut().zip(y.windows(3)).take(n) {
-        let [y0, y1, y2] = [w[0], w[1], w[2]];
+fn lagrange_run(pad: &[Complex32], cells: &mut [[f32; 8]], n: usize) {
+    for (c, w) in cells.iter_mut().zip(pad.windows(8)).take(n) {
+        let [ym, y0, y1, y2] = [w[2], w[3], w[4], w[5]];
         let a1 = y1 - ym * (1.0 / 3.0) - y0 * 0.5 - y2 * (1.0 / 6.0);
         let a2 = (ym + y1) * 0.5 - y0;
         let a3 = (y2 - ym) * (1.0 / 6.0) + (y0 - y1) * 0.5;
         *c = [y0.re, y0.im, a1.re, a1.im, a2.re, a2.im, a3.re, a3.im];
-        ym = y0;
+    }
+}
+
+/// The sixth-order central difference at the middle of `s` (7 nodes, grid units):
+/// `(45(s₄ − s₂) − 9(s₅ − s₁) + (s₆ − s₀))/60`.
+#[inline(always)]
+fn slope(s: &[Complex32]) -> Complex32 {
+    match s.first_chunk::<7>() {
+        Some(&[a, b, c, _, e, f, g]) => (e - c) * 0.75 - (f - b) * 0.15 + (g - a) * (1.0 / 60.0),
+        None => Complex32::new(0.0, 0.0),
+    }
+}
+
+/// [`cubic_cells`] over one run of `n` Hermite cells: `cells[k]` from `y[k]`, `y[k + 1]` and
+/// their slopes (the slope of node `k + 1` is carried to the next cell).
+#[inline(always)]
+fn hermite_run(pad: &[Complex32], cells: &mut [[f32; 8]], n: usize) {
+    let mut d0 = slope(pad);
+    for (c, w) in cells.iter_mut().zip(pad.windows(8)).take(n) {
+        let d1 = slope(&w[1..]);
+        let (y0, dy) = (w[3], w[4] - w[3]);
+        let a2 = dy * 3.0 - d0 * 2.0 - d1;
+        let a3 = d0 + d1 - dy * 2.0;
+        *c = [y0.re, y0.im, d0.re, d0.im, a2.re, a2.im, a3.re, a3.im];
+        d0 = d1;
     }
 }
 
@@ -786,11 +823,21 @@ fn prepare(
     guard: (f32, f32, f32, f32, f32, usize),
 ) -> (usize, f32, bool) {
     let (lo, hi, g_lo, g_hi, per_m, mask) = guard;
-    synthesise_fused(lookup, hg, y);
+    let l = mask + 1;
+    if let Some((pre, grid)) = y.split_at_mut_checked(PRE) {
+        // grid = y[0 .. L + POST]: the synthesis writes the wrapped copies after L.
+        synthesise_fused(lookup, hg, grid);
+        for (p, v) in pre
+            .iter_mut()
+            .zip(grid.get(l.saturating_sub(PRE)..).unwrap_or(&[]))
+        {
+            *p = *v;
+        }
+    }
     let first = (lo + info[1]) as u32 as usize;
     let last = (hi + info[2]) as u32 as usize;
     let count = last.wrapping_sub(first).saturating_add(1);
-    cubic_cells(y, cells, first & mask, count);
+    cubic_cells(y, cells, first & mask, count, lookup.grid().interpolant());
     let off = off * per_m;
     let proved = lo + info[1] + off >= g_lo && hi + info[2] + off <= g_hi;
     (info[0] as usize, off, proved)
@@ -896,7 +943,7 @@ fn mac<const GUARD: bool>(
 /// Kahan step: `acc = [s.re, s.im, c.re, c.im]` += `z` (`c` the running compensation, the
 /// rounding error still to subtract).
 #[inline(always)]
-fn kahan(acc: &mut [f32; 4], z: Complex32) {
+pub(crate) fn kahan(acc: &mut [f32; 4], z: Complex32) {
     let [s_re, s_im, c_re, c_im] = *acc;
     let (y_re, y_im) = (z.re - c_re, z.im - c_im);
     let (t_re, t_im) = (s_re + y_re, s_im + y_im);
@@ -905,7 +952,7 @@ fn kahan(acc: &mut [f32; 4], z: Complex32) {
 
 /// The compensated sum's value `s − c`, in `f64`.
 #[inline]
-fn value(a: &[f32; 4]) -> Complex64 {
+pub(crate) fn value(a: &[f32; 4]) -> Complex64 {
     Complex64::new(
         f64::from(a[0]) - f64::from(a[2]),
         f64::from(a[1]) - f64::from(a[3]),
@@ -916,7 +963,7 @@ fn value(a: &[f32; 4]) -> Complex64 {
 mod tests {
     use super::*;
     use crate::config::{Config, Params};
-    use crate::lookup::LookupParams;
+    use crate::lookup::{EXTRA, LookupParams};
 
     /// The fused synthesis equals [`Lookup::synthesise`] to `f32` rounding, for grids with
     /// an even and an odd number of radix-2 stages after the radix-4 pass.
@@ -927,6 +974,7 @@ mod tests {
             let p = LookupParams {
                 tolerance: 1.0,
                 grid_len: Some(len),
+                ..LookupParams::new()
             };
             let grid = LookupGrid::try_new(&c, &p).unwrap();
             let mut tables = [0.0f32; 4 * 1024];

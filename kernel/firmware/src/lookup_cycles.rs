@@ -7,8 +7,8 @@
 use cortex_m::singleton;
 use semihosting::println;
 use vltm_kernel::{
-    Lattice, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice, Point, RowBuffer, Scan,
-    SliceLayout, Target,
+    Interpolant, Lattice, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice, Point,
+    RowBuffer, Scan, SliceLayout, Target,
 };
 
 /// Largest grid measured.
@@ -28,7 +28,7 @@ pub fn run(
     const KV_MAX: usize = 64 * 64;
     let (Some(tables), Some(state), Some(scratch)) = (
         singleton!(: [f32; 4 * L_MAX] = [0.0; 4 * L_MAX]),
-        singleton!(: [f64; 2 * KV_MAX] = [0.0; 2 * KV_MAX]),
+        singleton!(: [f32; 4 * KV_MAX] = [0.0; 4 * KV_MAX]),
         singleton!(: [f32; 2 * (L_MAX + 3) + 3 * KV_MAX] = [0.0; 2 * (L_MAX + 3) + 3 * KV_MAX]),
     ) else {
         return None;
@@ -46,6 +46,7 @@ pub fn run(
         let p = LookupParams {
             tolerance: tol,
             grid_len: None,
+            ..LookupParams::new()
         };
         let Ok(grid) = LookupGrid::try_new(cfg, &p) else {
             return None;
@@ -132,19 +133,20 @@ pub const SLICE: Lattice = Lattice {
 const SLICE_TABLES: usize = 4 * (28 + 64 * 91);
 
 /// The structured slice ([`LookupSlice`]) over [`SLICE`]: the diagonal and the column per
-/// row at tolerances 1e-5 (`L` = 1024) and 1e-4 (`L` = 512), plus the per-row fixed part (a
-/// 1 × 1 slice: the `Ks` syntheses and cubic cells). Prints `CYCLES lookup_slice_…` lines and
-/// returns `[diag, column]` instructions per row at each tolerance, `None` if a kernel call
-/// was rejected.
+/// row at tolerance 1e-5 with the Hermite interpolant (`L` = 512), at 1e-4 with the Lagrange
+/// one (`L` = 512) and at 1e-5 with the Lagrange one (`L` = 1024, the former default), plus
+/// the per-row fixed part (a 1 × 1 slice: the `Ks` syntheses and cubic cells). Prints
+/// `CYCLES lookup_slice_…` lines and returns `[diag, column]` instructions per row for each,
+/// in that order, `None` if a kernel call was rejected.
 pub fn run_slice(
     scan: &Scan<'_>,
     rows: &mut RowBuffer<'_>,
     hists: &[u16],
     measure: &mut dyn FnMut(&mut dyn FnMut()) -> u64,
     per_tick: f64,
-) -> Option<[[f64; 2]; 2]> {
+) -> Option<[[f64; 2]; 3]> {
     const KV: usize = 64 * 64;
-    const SCRATCH: usize = 2 * (L_MAX + 3) + 16 * L_MAX + 4 * KV;
+    const SCRATCH: usize = 2 * (L_MAX + 8) + 16 * L_MAX + 4 * KV;
     let (Some(tables), Some(st), Some(state), Some(scratch)) = (
         singleton!(: [f32; 4 * L_MAX] = [0.0; 4 * L_MAX]),
         singleton!(: [f32; SLICE_TABLES] = [0.0; SLICE_TABLES]),
@@ -156,11 +158,19 @@ pub fn run_slice(
     let cfg = scan.config();
     let ks = scan.spads().len();
     let laser = [-0.45f32, -0.5, 0.0];
-    let mut result = [[0.0; 2]; 2];
-    for (slot, tol) in [1e-5, 1e-4].into_iter().enumerate() {
+    let mut result = [[0.0; 2]; 3];
+    for (slot, (tol, interpolant)) in [
+        (1e-5, Interpolant::Hermite),
+        (1e-4, Interpolant::Lagrange),
+        (1e-5, Interpolant::Lagrange),
+    ]
+    .into_iter()
+    .enumerate()
+    {
         let p = LookupParams {
             tolerance: tol,
             grid_len: None,
+            interpolant,
         };
         let Ok(grid) = LookupGrid::try_new(cfg, &p) else {
             return None;
@@ -217,18 +227,19 @@ pub fn run_slice(
         let pairs = (KV * ks) as f64;
         let [t_fixed, t_diag, t_col] = counts;
         println!(
-            "CYCLES lookup_slice_grid tolerance={tol:e} L={l} fixed_instructions={:.0} per_spad={:.0} (synthesis + cubic cells)",
+            "CYCLES lookup_slice_grid tolerance={tol:e} interpolant={interpolant:?} L={l} bound={:.2e} fixed_instructions={:.0} per_spad={:.0} (synthesis + cubic cells)",
+            grid.bound(),
             i(t_fixed),
             i(t_fixed) / ks as f64
         );
         println!(
-            "CYCLES lookup_slice_diag64x64 L={l} instructions={:.0} per_pair={:.1} lookups_per_pair={:.1}",
+            "CYCLES lookup_slice_diag64x64 {interpolant:?} L={l} instructions={:.0} per_pair={:.1} lookups_per_pair={:.1}",
             i(t_diag),
             i(t_diag) / pairs,
             (i(t_diag) - i(t_fixed)) / pairs
         );
         println!(
-            "CYCLES lookup_slice_column64x64 L={l} instructions={:.0} per_pair={:.1}",
+            "CYCLES lookup_slice_column64x64 {interpolant:?} L={l} instructions={:.0} per_pair={:.1}",
             i(t_col),
             i(t_col) / pairs
         );

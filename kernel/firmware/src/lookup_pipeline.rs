@@ -33,8 +33,8 @@ pub const LOOKUP_TOLERANCE: f64 = 1e-4;
 pub const LOOKUP_GRID: usize = 256;
 /// `Lookup::tables_len`: `4L` `f32`.
 pub const LOOKUP_TABLES_LEN: usize = 4 * LOOKUP_GRID;
-/// `LookupProbe::state_len`: `2Kv` `f64`.
-pub const LOOKUP_STATE_LEN: usize = 2 * N_VOXELS;
+/// `LookupProbe::state_len`: `4Kv` `f32`.
+pub const LOOKUP_STATE_LEN: usize = 4 * N_VOXELS;
 /// `LookupProbe::scratch_len`: `2(L + 3) + 3Kv` `f32`.
 pub const LOOKUP_SCRATCH_LEN: usize = 2 * (LOOKUP_GRID + 3) + 3 * N_VOXELS;
 
@@ -65,8 +65,8 @@ pub const SLICE_P2: usize = 29;
 pub const SLICE_TABLES_LEN: usize = 4 * SPADS.len() + 4 * 4 * (10 + 6);
 /// `LookupSlice::state_len`: `4Kv` `f32`.
 pub const SLICE_STATE_LEN: usize = 4 * N_SLICE;
-/// `LookupSlice::scratch_len`: `2(L + 3) + 16L + 4Kv` `f32`.
-pub const SLICE_SCRATCH_LEN: usize = 2 * (LOOKUP_GRID + 3) + 16 * LOOKUP_GRID + 4 * N_SLICE;
+/// `LookupSlice::scratch_len`: `2(L + 8) + 16L + 4Kv` `f32`.
+pub const SLICE_SCRATCH_LEN: usize = 2 * (LOOKUP_GRID + 8) + 16 * LOOKUP_GRID + 4 * N_SLICE;
 /// The shared scratch: the larger of [`LOOKUP_SCRATCH_LEN`] and [`SLICE_SCRATCH_LEN`].
 pub const SCRATCH_LEN: usize = if SLICE_SCRATCH_LEN > LOOKUP_SCRATCH_LEN {
     SLICE_SCRATCH_LEN
@@ -79,6 +79,7 @@ pub const fn lookup_params() -> LookupParams {
     LookupParams {
         tolerance: LOOKUP_TOLERANCE,
         grid_len: None,
+        ..LookupParams::new()
     }
 }
 
@@ -91,9 +92,9 @@ pub struct LookupBuffers<'a> {
     /// `Lookup::tables_len` `f32`.
     pub lookup: &'a mut [f32],
     /// Diagonal state.
-    pub diag: &'a mut [f64],
+    pub diag: &'a mut [f32],
     /// Column state.
-    pub column: &'a mut [f64],
+    pub column: &'a mut [f32],
     /// Scratch of the diagonal, then of the column, then of the factorised column's
     /// `finish_lookup`, then of the slice's diagonal and column ([`SCRATCH_LEN`]).
     pub scratch: &'a mut [f32],

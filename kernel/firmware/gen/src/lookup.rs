@@ -24,7 +24,7 @@ fn slice_references(scan_data: &[u16], target: Target) -> (Vec<f64>, Vec<f64>) {
     let lookup = Lookup::new(&grid, &mut lt).expect("lookup");
     let mut buf = vec![0.0f32; RowBuffer::len(&cfg, N_SPADS)];
     let mut rows = RowBuffer::new(&scan, &mut buf).expect("rows");
-    let mut st = vec![0.0f64; LookupProbe::state_len(N_SLICE)];
+    let mut st = vec![0.0f32; LookupProbe::state_len(N_SLICE)];
     let mut sc = vec![0.0f32; LookupProbe::scratch_len(&grid, N_SLICE)];
     let mut lp = LookupProbe::new(&scan, &lookup, target, &voxels, &mut st, &mut sc).expect("lp");
     let mut bst = vec![0.0f64; Probe::state_len(&cfg, target, Gate::Gaussian, N_SLICE, N_SPADS)];
@@ -50,8 +50,8 @@ pub fn lookup_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results
         vec![0.0f32; LOOKUP_TABLES_LEN],
     );
     let (mut d, mut c) = (
-        vec![0.0f64; LOOKUP_STATE_LEN],
-        vec![0.0f64; LOOKUP_STATE_LEN],
+        vec![0.0f32; LOOKUP_STATE_LEN],
+        vec![0.0f32; LOOKUP_STATE_LEN],
     );
     let (mut sc, mut c32) = (vec![0.0f32; SCRATCH_LEN], vec![0.0f32; COLUMN32_STATE_LEN]);
     let (mut stab, mut sst) = (

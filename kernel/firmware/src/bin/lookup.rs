@@ -25,8 +25,8 @@ fn main() -> ! {
         singleton!(: [f32; TABLES_LEN] = [0.0; TABLES_LEN]),
         singleton!(: [f32; ROWBUF_LEN] = [0.0; ROWBUF_LEN]),
         singleton!(: [f32; LOOKUP_TABLES_LEN] = [0.0; LOOKUP_TABLES_LEN]),
-        singleton!(: [f64; LOOKUP_STATE_LEN] = [0.0; LOOKUP_STATE_LEN]),
-        singleton!(: [f64; LOOKUP_STATE_LEN] = [0.0; LOOKUP_STATE_LEN]),
+        singleton!(: [f32; LOOKUP_STATE_LEN] = [0.0; LOOKUP_STATE_LEN]),
+        singleton!(: [f32; LOOKUP_STATE_LEN] = [0.0; LOOKUP_STATE_LEN]),
         singleton!(: LookupResults = LookupResults::ZERO),
     ) else {
         process::exit(7)

@@ -32,8 +32,8 @@ use vltm_firmware::lookup_pipeline::{
 };
 use vltm_firmware::pipeline::argmax;
 use vltm_kernel::{
-    ColumnF32, Config, Lattice, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice, Params,
-    RowBuffer, Scan, SliceLayout, Target,
+    ColumnF32, Config, Interpolant, Lattice, Lookup, LookupGrid, LookupParams, LookupProbe,
+    LookupSlice, Params, RowBuffer, Scan, SliceLayout, Target,
 };
 
 /// SPADs used here.
@@ -64,13 +64,19 @@ const S_LATTICE: Lattice = Lattice {
 const S_KV: usize = 6;
 const S_SLICE_TABLES: usize = 4 * (KS + 2 * (3 + 1));
 const S_STATE: usize = 4 * S_KV;
-const S_SCRATCH: usize = 2 * (S_L + 3) + 16 * S_L + 4 * S_KV;
+const S_SCRATCH: usize = 2 * (S_L + 8) + 16 * S_L + 4 * S_KV;
 const _: () = assert!(4 * S_L + S_SLICE_TABLES + S_STATE + S_SCRATCH <= LOOKUP_TABLES_LEN);
 
 /// The structured slice on the buffers of [`run`] (its probes are done with them): the
 /// fixture's scan tables and row buffer, and its lookup tables split into the small grid's
 /// tables, the slice tables, the state and the scratch.
-fn run_slice(tables: &mut [f32], rowbuf: &mut [f32], lt: &mut [f32], out: &mut [f64]) -> i32 {
+fn run_slice(
+    tables: &mut [f32],
+    rowbuf: &mut [f32],
+    lt: &mut [f32],
+    out: &mut [f64],
+    interpolant: Interpolant,
+) -> i32 {
     let Some((lt, rest)) = lt.split_at_mut_checked(4 * S_L) else {
         return 20;
     };
@@ -94,6 +100,7 @@ fn run_slice(tables: &mut [f32], rowbuf: &mut [f32], lt: &mut [f32], out: &mut [
     let p = LookupParams {
         tolerance: 1e-2,
         grid_len: None,
+        interpolant,
     };
     let Ok(grid) = LookupGrid::try_new(&cfg, &black_box(p)) else {
         return 22;
@@ -175,8 +182,8 @@ fn run() -> i32 {
         singleton!(: [f32; TABLES] = [0.0; TABLES]),
         singleton!(: [f32; ROWBUF] = [0.0; ROWBUF]),
         singleton!(: [f32; LOOKUP_TABLES_LEN] = [0.0; LOOKUP_TABLES_LEN]),
-        singleton!(: [f64; LOOKUP_STATE_LEN] = [0.0; LOOKUP_STATE_LEN]),
-        singleton!(: [f64; LOOKUP_STATE_LEN] = [0.0; LOOKUP_STATE_LEN]),
+        singleton!(: [f32; LOOKUP_STATE_LEN] = [0.0; LOOKUP_STATE_LEN]),
+        singleton!(: [f32; LOOKUP_STATE_LEN] = [0.0; LOOKUP_STATE_LEN]),
         singleton!(: [f64; N_VOXELS] = [0.0; N_VOXELS]),
     ) else {
         return 7;
@@ -317,5 +324,18 @@ fn run() -> i32 {
     if out32.iter().any(|x| !x.is_finite()) {
         return 5;
     }
-    run_slice(&mut tables[..], &mut rowbuf[..], &mut lt[..], &mut out[..])
+    // The slice with both interpolants (the Hermite cells are a path of their own).
+    for i in [Interpolant::Lagrange, Interpolant::Hermite] {
+        let r = run_slice(
+            &mut tables[..],
+            &mut rowbuf[..],
+            &mut lt[..],
+            &mut out[..],
+            i,
+        );
+        if r != 0 {
+            return r;
+        }
+    }
+    0
 }
