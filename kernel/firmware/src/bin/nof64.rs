@@ -2,10 +2,11 @@
 //! `vltm-firmware-nof64`, feature `nopanic`, so it is also a panic-never link of them): the
 //! set-up (configuration, tables — `f64` `libm` by design) runs in `main`; the per-row path
 //! (`RowBuffer::load`, `ColumnF32::push_row`, the photon row `begin_photons` /
-//! `push_photon` / `end_photons`, the structured slice's `LookupSlice::push_row`, its target
-//! through `black_box` so both the diagonal's and the column's code are reachable) and the
-//! per-scan path (`ColumnF32::finish`,
-//! `ColumnF32::finish_lookup`) run in two `#[inline(never)]` functions, [`per_row`] and
+//! `push_photon` / `end_photons`, the structured slice's `LookupSlice::push_row` and the
+//! general lookup path's `LookupProbe::push_row`, their targets through `black_box` so both
+//! the diagonal's and the column's code are reachable) and the per-scan path
+//! (`ColumnF32::finish`, `ColumnF32::finish_lookup`, `LookupProbe::finish_f32`) run in two
+//! `#[inline(never)]` functions, [`per_row`] and
 //! [`per_scan`]. `no-f64.sh` disassembles the ELF, follows every call and branch from those
 //! two functions, and fails if a soft-double routine (`__aeabi_d*`, `__*df*`) or an `f64`
 //! `libm` function is reachable. Exit status 0 = every call succeeded.
@@ -21,12 +22,12 @@ use vltm_firmware::fixture::{
     BINS, FOCUS, LASERS, N_FFT, N_VOXELS, NT, ROW, SPADS, VOXELS, params,
 };
 use vltm_firmware::lookup_pipeline::{
-    LOOKUP_GRID, LOOKUP_TABLES_LEN, SLICE_LATTICE, SLICE_SCRATCH_LEN, SLICE_STATE_LEN,
-    SLICE_TABLES_LEN, lookup_params,
+    LOOKUP_GRID, LOOKUP_SCRATCH_LEN, LOOKUP_STATE_LEN, LOOKUP_TABLES_LEN, SLICE_LATTICE,
+    SLICE_SCRATCH_LEN, SLICE_STATE_LEN, SLICE_TABLES_LEN, lookup_params,
 };
 use vltm_kernel::{
-    ColumnF32, Config, Lookup, LookupGrid, LookupSlice, Point, Report, RowBuffer, Scan,
-    SliceLayout, Target,
+    ColumnF32, Config, Lookup, LookupGrid, LookupProbe, LookupSlice, Point, Report, RowBuffer,
+    Scan, SliceLayout, Target,
 };
 
 /// SPADs used here (the fixture's four).
@@ -38,21 +39,26 @@ const COLUMN32: usize = (4 * KS + 2) * BINS;
 const SCRATCH: usize = 2 * (LOOKUP_GRID + 3) + 2 * N_VOXELS;
 
 /// One laser row into the column, from histograms and again from photon events, and into
-/// the structured slice (histogram row).
+/// the structured slice and the general lookup probe (histogram row).
 #[inline(never)]
+#[allow(clippy::too_many_arguments)]
 fn per_row(
     scan: &Scan<'_>,
     lookup: &Lookup<'_>,
     rows: &mut RowBuffer<'_>,
     col: &mut ColumnF32<'_>,
     slice: &mut LookupSlice<'_>,
+    probe: &mut LookupProbe<'_>,
     hists: &[u16],
     laser: Point,
 ) -> bool {
     let Ok(row) = rows.load(scan, laser, hists) else {
         return false;
     };
-    if col.push_row(scan, &row).is_err() || slice.push_row(scan, lookup, &row).is_err() {
+    if col.push_row(scan, &row).is_err()
+        || slice.push_row(scan, lookup, &row).is_err()
+        || probe.push_row(scan, lookup, &row).is_err()
+    {
         return false;
     }
     rows.begin_photons();
@@ -69,19 +75,21 @@ fn per_row(
     col.push_row(scan, &row).is_ok()
 }
 
-/// The column's two finishes over the voxels.
+/// The column's two finishes over the voxels, and the general lookup probe's `f32` finish.
 #[inline(never)]
 fn per_scan(
     scan: &Scan<'_>,
     lookup: &Lookup<'_>,
     col: &ColumnF32<'_>,
+    probe: &LookupProbe<'_>,
     voxels: &[Point],
     scratch: &mut [f32],
     out: &mut [f32],
-) -> Option<(Report, Report)> {
+) -> Option<(Report, Report, Report)> {
     let band = col.finish(scan, voxels, out).ok()?;
     let fast = col.finish_lookup(scan, lookup, voxels, scratch, out).ok()?;
-    Some((band, fast))
+    let general = probe.finish_f32(out).ok()?;
+    Some((band, fast, general))
 }
 
 #[entry]
@@ -104,6 +112,12 @@ fn run() -> i32 {
         singleton!(: [f32; SLICE_TABLES_LEN] = [0.0; SLICE_TABLES_LEN]),
         singleton!(: [f32; SLICE_STATE_LEN] = [0.0; SLICE_STATE_LEN]),
         singleton!(: [f32; SLICE_SCRATCH_LEN] = [0.0; SLICE_SCRATCH_LEN]),
+    ) else {
+        return 7;
+    };
+    let (Some(ps), Some(pc)) = (
+        singleton!(: [f32; LOOKUP_STATE_LEN] = [0.0; LOOKUP_STATE_LEN]),
+        singleton!(: [f32; LOOKUP_SCRATCH_LEN] = [0.0; LOOKUP_SCRATCH_LEN]),
     ) else {
         return 7;
     };
@@ -144,9 +158,15 @@ fn run() -> i32 {
     ) else {
         return 2;
     };
+    let voxels = black_box(&VOXELS[..]);
+    let target = black_box(Target::Diagonal);
+    let Ok(mut probe) = LookupProbe::new(&scan, &lookup, target, voxels, &mut ps[..], &mut pc[..])
+    else {
+        return 2;
+    };
     for (hists, laser) in data.chunks_exact(ROW).zip(black_box(&LASERS[..])) {
         if !per_row(
-            &scan, &lookup, &mut rows, &mut col, &mut slice, hists, *laser,
+            &scan, &lookup, &mut rows, &mut col, &mut slice, &mut probe, hists, *laser,
         ) {
             return 2;
         }
@@ -154,9 +174,20 @@ fn run() -> i32 {
     if slice.report().rows != LASERS.len() as u64 {
         return 3;
     }
-    let voxels = black_box(&VOXELS[..]);
-    match per_scan(&scan, &lookup, &col, voxels, &mut scratch[..], &mut out[..]) {
-        Some((a, b)) if a == b && a.rows == 2 * LASERS.len() as u64 => 0,
+    match per_scan(
+        &scan,
+        &lookup,
+        &col,
+        &probe,
+        voxels,
+        &mut scratch[..],
+        &mut out[..],
+    ) {
+        Some((a, b, c))
+            if a == b && a.rows == 2 * LASERS.len() as u64 && c.rows == LASERS.len() as u64 =>
+        {
+            0
+        }
         _ => 3,
     }
 }
