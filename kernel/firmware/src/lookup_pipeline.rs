@@ -23,8 +23,8 @@ use crate::fixture::{
 };
 use crate::pipeline::{Failure, argmax};
 use vltm_kernel::{
-    ColumnF32, Config, Lattice, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice, Report,
-    RowBuffer, Scan, SliceLayout, Target,
+    ColumnF32, Config, Interpolant, Lattice, Lookup, LookupGrid, LookupParams, LookupProbe,
+    LookupSlice, Report, RowBuffer, Scan, SliceLayout, Target,
 };
 
 /// Interpolation tolerance `η` of the fixture's grid.
@@ -129,6 +129,15 @@ pub struct LookupResults {
     pub report_slice_diag: Report,
     /// Report of the slice column.
     pub report_slice_col: Report,
+    /// Slice diagonal with Hermite cells (`Interpolant::Hermite`, its own grid for the same
+    /// tolerance).
+    pub slice_diag_h: [f64; N_SLICE],
+    /// Slice column with Hermite cells.
+    pub slice_col_h: [f64; N_SLICE],
+    /// Report of the Hermite slice diagonal.
+    pub report_slice_diag_h: Report,
+    /// Report of the Hermite slice column.
+    pub report_slice_col_h: Report,
 }
 
 const ZERO_REPORT: Report = Report {
@@ -151,6 +160,10 @@ impl LookupResults {
         slice_col: [0.0; N_SLICE],
         report_slice_diag: ZERO_REPORT,
         report_slice_col: ZERO_REPORT,
+        slice_diag_h: [0.0; N_SLICE],
+        slice_col_h: [0.0; N_SLICE],
+        report_slice_diag_h: ZERO_REPORT,
+        report_slice_col_h: ZERO_REPORT,
     };
 }
 
@@ -180,7 +193,7 @@ pub fn run_lookup(
     if layout.tables_len() != SLICE_TABLES_LEN || SLICE_LATTICE.len() != N_SLICE {
         return Err(Failure::Sizes);
     }
-    let lookup = Lookup::new(&grid, b.lookup)?;
+    let lookup = Lookup::new(&grid, &mut *b.lookup)?;
     let mut rows = RowBuffer::new(&scan, b.row)?;
     let mut col32 = ColumnF32::new(&scan, FOCUS, b.column32)?;
     let scratch = b
@@ -252,6 +265,51 @@ pub fn run_lookup(
         }
         *report = slice.finish(values)?;
     }
+    // The slice again with Hermite cells, on the grid they need for the same tolerance (the
+    // lookup tables rebuilt in the same buffer).
+    drop(lookup);
+    let p = LookupParams {
+        interpolant: Interpolant::Hermite,
+        ..lookup_params()
+    };
+    let grid = LookupGrid::try_new(&cfg, &p).map_err(Failure::Config)?;
+    let tables = b
+        .lookup
+        .get_mut(..Lookup::tables_len(&grid))
+        .ok_or(Failure::Sizes)?;
+    let lookup = Lookup::new(&grid, tables)?;
+    let layout = SliceLayout::try_new(&scan, &grid, &SLICE_LATTICE, SLICE_TABLES_LEN)
+        .map_err(Failure::Config)?;
+    let scratch = scratch
+        .get_mut(..LookupSlice::scratch_len(&grid, N_SLICE))
+        .ok_or(Failure::Sizes)?;
+    for (target, values, report) in [
+        (
+            Target::Diagonal,
+            &mut out.slice_diag_h,
+            &mut out.report_slice_diag_h,
+        ),
+        (
+            Target::Column(FOCUS),
+            &mut out.slice_col_h,
+            &mut out.report_slice_col_h,
+        ),
+    ] {
+        let mut slice = LookupSlice::new(
+            &scan,
+            &lookup,
+            &layout,
+            target,
+            &mut *b.slice_tables,
+            &mut *b.slice_state,
+            &mut *scratch,
+        )?;
+        for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
+            let row = rows.load(&scan, laser, hists)?;
+            slice.push_row(&scan, &lookup, &row)?;
+        }
+        *report = slice.finish(values)?;
+    }
     Ok(())
 }
 
@@ -276,20 +334,26 @@ pub fn verdict_lookup(r: &LookupResults) -> i32 {
     if argmax(&slice32) != P2_VOXEL {
         return 4;
     }
-    if argmax(&r.slice_diag) != SLICE_P1 {
-        return 3;
-    }
-    // On the slice's 5 cm pitch the voxels within 10 cm of P1 along x (lattice row 1, ix 1..=5)
-    // see P1's direct light through the column's gate (σ = 2λ/3 ≈ 6.7 cm): left out.
-    let mut plane = r.slice_col;
-    for (i, p) in plane.iter_mut().enumerate() {
-        let (ix, iy) = (i % SLICE_LATTICE.nx, i / SLICE_LATTICE.nx);
-        if iy == SLICE_P1 / SLICE_LATTICE.nx && ix.abs_diff(SLICE_P1 % SLICE_LATTICE.nx) <= 2 {
-            *p = 0.0;
+    for (diag, col) in [
+        (&r.slice_diag, &r.slice_col),
+        (&r.slice_diag_h, &r.slice_col_h),
+    ] {
+        if argmax(diag) != SLICE_P1 {
+            return 3;
         }
-    }
-    if argmax(&plane) != SLICE_P2 {
-        return 4;
+        // On the slice's 5 cm pitch the voxels within 10 cm of P1 along x (lattice row 1,
+        // ix 1..=5) see P1's direct light through the column's gate (σ = 2λ/3 ≈ 6.7 cm):
+        // left out.
+        let mut plane = *col;
+        for (i, p) in plane.iter_mut().enumerate() {
+            let (ix, iy) = (i % SLICE_LATTICE.nx, i / SLICE_LATTICE.nx);
+            if iy == SLICE_P1 / SLICE_LATTICE.nx && ix.abs_diff(SLICE_P1 % SLICE_LATTICE.nx) <= 2 {
+                *p = 0.0;
+            }
+        }
+        if argmax(&plane) != SLICE_P2 {
+            return 4;
+        }
     }
     for rep in [
         r.report_diag,
@@ -297,6 +361,8 @@ pub fn verdict_lookup(r: &LookupResults) -> i32 {
         r.report_col32,
         r.report_slice_diag,
         r.report_slice_col,
+        r.report_slice_diag_h,
+        r.report_slice_col_h,
     ] {
         if rep.rows != N_LASERS as u64 || rep.non_finite != 0 || rep.dropped != 0 {
             return 6;

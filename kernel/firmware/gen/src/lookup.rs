@@ -115,6 +115,16 @@ pub fn lookup_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results
     eprintln!(
         "slice vs LookupProbe: diag {sd_lp:.2e}, col {sc_lp:.2e}; vs band: diag {sd_band:.2e}, col {sc_band:.2e}"
     );
+    // The Hermite slice (its own grid; no LookupProbe reads it): against the band path.
+    let (hd_band, hc_band) = (
+        rel(&f.slice_diag_h, &band_diag),
+        rel(&f.slice_col_h, &band_col),
+    );
+    assert!(
+        hd_band < 1e-3 && hc_band < 1e-2,
+        "Hermite slice vs band: diag {hd_band:e}, col {hc_band:e}"
+    );
+    eprintln!("Hermite slice vs band: diag {hd_band:.2e}, col {hc_band:.2e}");
     eprintln!(
         "lookup vs band, max |√T_lookup − √T_band| / max √T_band: diag {ed:.2e}, col {ec:.2e}, col32 {e32:.2e}"
     );
@@ -136,6 +146,12 @@ pub fn lookup_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results
          same max relative amplitude difference vs LookupProbe over the same voxels: diag {sd_lp:.2e}, col {sc_lp:.2e}; vs the band path: diag {sd_band:.2e}, col {sc_band:.2e}"
     )
     .unwrap();
+    writeln!(
+        txt,
+        "# slice_*_h: the same slice with Hermite cells (L = {}); vs the band path: diag {hd_band:.2e}, col {hc_band:.2e}",
+        hermite_len()
+    )
+    .unwrap();
     for i in 0..N_VOXELS {
         writeln!(
             txt,
@@ -147,8 +163,8 @@ pub fn lookup_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results
     for i in 0..N_SLICE {
         writeln!(
             txt,
-            "RESULT voxel={i} slice_diag={:e} slice_col={:e}",
-            f.slice_diag[i], f.slice_col[i]
+            "RESULT voxel={i} slice_diag={:e} slice_col={:e} slice_diag_h={:e} slice_col_h={:e}",
+            f.slice_diag[i], f.slice_col[i], f.slice_diag_h[i], f.slice_col_h[i]
         )
         .unwrap();
     }
@@ -158,6 +174,8 @@ pub fn lookup_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results
         ("lookup_col32", f.report_col32),
         ("slice_diag", f.report_slice_diag),
         ("slice_col", f.report_slice_col),
+        ("slice_diag_h", f.report_slice_diag_h),
+        ("slice_col_h", f.report_slice_col_h),
     ] {
         writeln!(
             txt,
@@ -167,4 +185,14 @@ pub fn lookup_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results
         .unwrap();
     }
     std::fs::write(dir.join("expected_lookup.txt"), &txt).expect("write expected_lookup.txt");
+}
+
+/// `L` of the Hermite slice's grid at the fixture's tolerance.
+fn hermite_len() -> usize {
+    let cfg = Config::try_new(&params()).expect("config");
+    let p = vltm_kernel::LookupParams {
+        interpolant: vltm_kernel::Interpolant::Hermite,
+        ..lookup_params()
+    };
+    LookupGrid::try_new(&cfg, &p).expect("grid").len()
 }

@@ -65,8 +65,8 @@ fn main() -> ! {
     }
     for i in 0..N_SLICE {
         println!(
-            "RESULT voxel={i} slice_diag={:e} slice_col={:e}",
-            out.slice_diag[i], out.slice_col[i]
+            "RESULT voxel={i} slice_diag={:e} slice_col={:e} slice_diag_h={:e} slice_col_h={:e}",
+            out.slice_diag[i], out.slice_col[i], out.slice_diag_h[i], out.slice_col_h[i]
         );
     }
     for (name, r) in [
@@ -75,6 +75,8 @@ fn main() -> ! {
         ("lookup_col32", out.report_col32),
         ("slice_diag", out.report_slice_diag),
         ("slice_col", out.report_slice_col),
+        ("slice_diag_h", out.report_slice_diag_h),
+        ("slice_col_h", out.report_slice_col_h),
     ] {
         println!(
             "REPORT {name} rows={} non_finite={} dropped={} aliased={}",
