@@ -65,6 +65,15 @@
 //! span = 7.37 m, J = 137, k_d = 57): `L = 512` (δ = 1.44 cm = σ/6.0) gives η = 5.5e-5;
 //! `L = 1024` (δ = σ/12) gives η = 3.4e-6 (the default tolerance 1e-5 picks 1024).
 //!
+//! **The Hermite interpolant** ([`Interpolant::Hermite`], read only by the structured slice
+//! [`LookupSlice`](crate::LookupSlice), which converts every cell it reads to a cubic once per
+//! row): the cubic Hermite interpolant of the cell's two nodes with sixth-order
+//! central-difference slopes has the bound
+//! `η = Σ_j Ĝ_j·(ω_j⁴/384 + ε(ω_j)/4)`, `ω_j = δ·(ν_j − Ω_d)` (derived in the module docs of
+//! `lookup_slice.rs`), about 9× below the Lagrange bound `(3/128)·Σ_j Ĝ_j ω_j⁴` on the same
+//! grid: the paper's setup meets 1e-5 with `L = 512` (η = 6.2e-6). [`LookupGrid::try_new`]
+//! picks `L` with the bound of [`LookupParams::interpolant`].
+//!
 //! # Cost and memory
 //!
 //! Per row: `Ks` inverse FFTs of length `L` (`(L/2)·log₂L` butterflies each; the band is

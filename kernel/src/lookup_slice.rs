@@ -23,8 +23,10 @@
 //! `P = w(d_vs)·e^{2πiθ x_vs}` that does not depend on the laser: it is stored in the table
 //! with `x_vs`, computed once in `f64`. Per row and SPAD, the baseband grid is synthesised
 //! ([`Lookup`]) and turned into the cubic's power-basis coefficients per grid cell
-//! (`p(t) = a₀ + a₁t + a₂t² + a₃t³`, the same cubic as the Lagrange form of
-//! [`lagrange4`](crate::lagrange4)), so a pair is: one add (`x`), the floor and fraction, one
+//! (`p(t) = a₀ + a₁t + a₂t² + a₃t³`: the same cubic as the Lagrange form of
+//! [`lagrange4`](crate::lagrange4), or with [`Interpolant::Hermite`] the cubic Hermite
+//! interpolant of the cell's two nodes with sixth-order central-difference slopes
+//! `(45(y₁ − y₋₁) − 9(y₂ − y₋₂) + (y₃ − y₋₃))/60`), so a pair is: one add (`x`), the floor and fraction, one
 //! bounds-checked cell read, a complex Horner step of three multiply-adds, the complex product
 //! with `P` and the row sum. The guard interval ([`Config::guard`](crate::Config::guard)) is
 //! proved once per SPAD and row from the extreme lead and leg values (`f32`, in grid units);
@@ -35,14 +37,24 @@
 //!
 //! # Error bound
 //!
-//! The interpolated function, grid and carrier are those of [`LookupProbe`](crate::LookupProbe),
-//! so its module's bound holds unchanged: `|Z_slice − Z_band| ≤ η·‖h_s‖₁` per pair with
-//! `η` = [`LookupGrid::bound`], plus `f32` rounding: the power-basis coefficients are sums of
-//! at most four grid values with weights ≤ 1 (`|a_q| ≤ 2·max|Y|`), Horner at `0 ≤ t < 1` adds
-//! ≈ 6u of `max|Y|`; the carrier phases are `θ·x_lead` in `f32` (a relative `u` of the path
-//! in grid units, as the general path's grid position) and `θ·x_vs` rounded once from `f64`.
-//! The lattice positions are computed in `f64` from the `f32` origin and steps, and the SPADs
-//! are taken at `s_0 + m_k·a` (within a few `f32` ulps of the given ones, checked).
+//! With [`Interpolant::Lagrange`] the interpolated function, grid and carrier are those of
+//! [`LookupProbe`](crate::LookupProbe), so its module's bound holds unchanged:
+//! `|Z_slice − Z_band| ≤ η·‖h_s‖₁` per pair with `η` = [`LookupGrid::bound`]. With
+//! [`Interpolant::Hermite`], `η` = [`LookupGrid::bound`] is the Hermite bound: with exact
+//! slopes the remainder is `|Y⁽⁴⁾|·t²(1 − t)²/4! ≤ max|Y⁽⁴⁾|/384` (Hermite–Genocchi with
+//! the nodes 0, 0, 1, 1; per band bin `|Y⁽⁴⁾| ≤ ω_j⁴` in grid units), and a slope error `e`
+//! at the nodes adds `|h₁₀(t)e₀ + h₁₁(t)e₁| ≤ t(1 − t)·max|e| ≤ max|e|/4`; the central
+//! difference on `e^{iωx}` errs by exactly `ε(ω) = |ω − (3/2 sin ω − 3/10 sin 2ω + 1/30 sin 3ω)|`
+//! (`≈ ω⁷/140`), so `η = Σ_j Ĝ_j·(ω_j⁴/384 + ε(ω_j)/4)`, 9× below the Lagrange bound on the
+//! same grid when `ε` is negligible. Plus `f32` rounding in both: the power-basis
+//! coefficients are combinations of four (Lagrange) or eight (Hermite) grid values
+//! (`|a_q| ≤ 2·max|Y|`, resp. `≤ 12·max|Y|`), so the conversion and the Horner step at
+//! `0 ≤ t < 1` add ≈ 6u, resp. ≈ 30u, of `max|Y|` (inside the property test's `f32`
+//! allowance, which also covers the FFT's `u·log₂L` per stage); the carrier phases are
+//! `θ·x_lead` in `f32` (a relative `u` of the path in grid units, as the general path's grid
+//! position) and `θ·x_vs` rounded once from `f64`. The lattice positions are computed in
+//! `f64` from the `f32` origin and steps, and the SPADs are taken at `s_0 + m_k·a` (within a
+//! few `f32` ulps of the given ones, checked).
 //!
 //! # Cost and memory
 //!
@@ -53,8 +65,9 @@
 //! (no soft `f64` on a Cortex-M4F; error `≤ 2u·Σ_rows |row sum|` plus `O(n u²)`, far below
 //! the lookup tolerance). Memory, all caller-owned: the slice tables `4·Ks + 4·ny·width`
 //! `f32` ([`SliceLayout::tables_len`]; `width = nx + max m − min m`), the state `4Kv` `f32`
-//! (the bytes of `2Kv` `f64`), the scratch `2(L + 3) + 16L + 4Kv` `f32`
-//! ([`LookupSlice::scratch_len`]: one SPAD's grid, two SPADs' cubic cells, the voxels' row
+//! (the bytes of `2Kv` `f64`), the scratch `2(L + 8) + 16L + 4Kv` `f32`
+//! ([`LookupSlice::scratch_len`]: one SPAD's grid with three wrapped values before and five
+//! after, two SPADs' cubic cells, the voxels' row
 //! sums and leads). No allocation, no panic on data; configuration and geometry checked once.
 
 use crate::config::{Point, Weights};
