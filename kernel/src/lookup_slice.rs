@@ -661,13 +661,14 @@ impl<'m> LookupSlice<'m> {
     }
 }
 
-/// One SPAD's baseband grid as [`Lookup::synthesise`] computes it (the same inverse FFT of
-/// the band placed in bit-reversed order), with the radix-2 stages after the first radix-4
+/// One SPAD's baseband grid `Y[n]` (`n < L`, then wrapped copies up to `y.len()`, at most
+/// `L`) from its band spectrum `hg`: the inverse FFT of the band placed in bit-reversed
+/// order (the unit tests' radix-2 `Lookup::synthesise`), with the radix-2 stages after the first radix-4
 /// pass fused in pairs (`h`, `2h`): each group of four values is loaded and stored once per
 /// two stages, and the second stage's odd twiddle `e^{iπ(k+h)/2h} = i·e^{iπk/2h}` is a
 /// rotation, so three complex products per four butterflies instead of four. Same sums,
 /// other rounding (within the FFT's `f32` error).
-fn synthesise_fused(lookup: &Lookup<'_>, hg: &[Complex32], y: &mut [Complex32]) {
+pub(crate) fn synthesise_fused(lookup: &Lookup<'_>, hg: &[Complex32], y: &mut [Complex32]) {
     let grid = lookup.grid();
     let l = grid.len();
     let bits = l.trailing_zeros();

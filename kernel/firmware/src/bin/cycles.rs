@@ -428,8 +428,8 @@ fn main() -> ! {
             7_300_000,
             true,
         ),
-        ("diag64x64_lookup_regression", t_lk_diag, 21_000_000, true),
-        ("column64x64_lookup_regression", t_lk_col, 21_000_000, true),
+        ("diag64x64_lookup_regression", t_lk_diag, 19_950_000, true),
+        ("column64x64_lookup_regression", t_lk_col, 19_950_000, true),
     ];
     let mut over = false;
     for (name, got, limit, enforced) in checks {
