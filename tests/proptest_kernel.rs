@@ -1533,3 +1533,97 @@ fn calibrate() {
         by_m[0], by_m[1], by_m[2], by_m[3]
     );
 }
+
+/// The general lookup path reads the Lagrange cubic from the raw grid: it refuses a Hermite
+/// grid, as the factorised column's lookup finish and `Lookup::baseband` do. Its `f32`
+/// finish (no `f64` on a Cortex-M4F) equals its `f64` finish to `f32` rounding, and split
+/// rows merged equal one probe over all rows (Kahan state).
+#[test]
+fn general_lookup_refuses_hermite_and_finishes_in_f32() {
+    use vltm_kernel::Error;
+    let p = Params {
+        t0: 1.0,
+        ..Params::new(0.1, 300, 0.01)
+    };
+    let (sc, _) = slice_scene(&p);
+    let cfg = Config::try_new(&p).unwrap();
+    let ks = sc.spads.len();
+    let kv = sc.voxels.len();
+    let mut tables = vec![0.0f32; Scan::tables_len(&cfg, ks)];
+    let scan = Scan::new(&cfg, &sc.spads, &mut tables).unwrap();
+    let her = LookupGrid::try_new(&cfg, &LookupParams::hermite()).unwrap();
+    let mut lt = vec![0.0f32; Lookup::tables_len(&her)];
+    let lookup = Lookup::new(&her, &mut lt).unwrap();
+    let mut state = vec![0.0f32; LookupProbe::state_len(kv)];
+    let mut scratch = vec![0.0f32; LookupProbe::scratch_len(&her, kv)];
+    let refused = LookupProbe::new(
+        &scan,
+        &lookup,
+        Target::Diagonal,
+        &sc.voxels,
+        &mut state,
+        &mut scratch,
+    );
+    assert!(
+        matches!(refused, Err(Error::Incompatible(_))),
+        "{refused:?}"
+    );
+    let mut c32 = vec![0.0f32; ColumnF32::state_len(&cfg, ks)];
+    let col = ColumnF32::new(&scan, sc.focus, &mut c32).unwrap();
+    let mut s2 = vec![0.0f32; ColumnF32::lookup_scratch_len(&her, kv)];
+    let mut o32 = vec![0.0f32; kv];
+    let refused = col.finish_lookup(&scan, &lookup, &sc.voxels, &mut s2, &mut o32);
+    assert!(
+        matches!(refused, Err(Error::Incompatible(_))),
+        "{refused:?}"
+    );
+
+    let grid = LookupGrid::try_new(&cfg, &LookupParams::new()).unwrap();
+    let mut lt = vec![0.0f32; Lookup::tables_len(&grid)];
+    let lookup = Lookup::new(&grid, &mut lt).unwrap();
+    let mut bufs: Vec<(Vec<f32>, Vec<f32>)> = (0..3)
+        .map(|_| {
+            (
+                vec![0.0f32; LookupProbe::state_len(kv)],
+                vec![0.0f32; LookupProbe::scratch_len(&grid, kv)],
+            )
+        })
+        .collect();
+    let mut probes: Vec<LookupProbe<'_>> = bufs
+        .iter_mut()
+        .map(|(st, scr)| {
+            LookupProbe::new(&scan, &lookup, Target::Diagonal, &sc.voxels, st, scr).unwrap()
+        })
+        .collect();
+    let hists: Vec<f32> = sc.h.iter().map(|&x| x as f32).collect();
+    let mut rb = vec![0.0f32; RowBuffer::len(&cfg, ks)];
+    let mut rows = RowBuffer::new(&scan, &mut rb).unwrap();
+    let len = ks * cfg.nt();
+    for (l, laser) in sc.lasers.iter().enumerate() {
+        let row = rows
+            .load(&scan, *laser, &hists[l * len..(l + 1) * len])
+            .unwrap();
+        probes[usize::from(2 * l >= sc.lasers.len())]
+            .push_row(&scan, &lookup, &row)
+            .unwrap();
+        probes[2].push_row(&scan, &lookup, &row).unwrap();
+    }
+    let (first, rest) = probes.split_at_mut(1);
+    first[0].merge(&rest[0]).unwrap();
+    let mut t64 = vec![0.0f64; kv];
+    let mut t32 = vec![0.0f32; kv];
+    let r64 = rest[1].finish(&mut t64).unwrap();
+    let r32 = rest[1].finish_f32(&mut t32).unwrap();
+    assert_eq!(r64, r32);
+    assert_eq!(r64.rows, sc.lasers.len() as u64);
+    let peak = t64.iter().fold(0.0f64, |m, x| m.max(*x));
+    assert!(peak > 0.0);
+    for (i, (a, b)) in t64.iter().zip(&t32).enumerate() {
+        assert!((a - f64::from(*b)).abs() <= 1e-6 * peak, "{a} vs {b}");
+        assert_eq!(rest[1].amplitude(i).norm_sqr(), *a);
+        // Merged halves vs one probe: the same sums in another order (f32 rounding).
+        let m = first[0].amplitude(i).norm_sqr();
+        assert!((m - a).abs() <= 1e-5 * peak, "{m} vs {a}");
+    }
+    assert_eq!(first[0].report().rows, sc.lasers.len() as u64);
+}
