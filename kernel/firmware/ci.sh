@@ -113,9 +113,9 @@ done
 
 # No soft f64 in the M4F's per-row and per-scan paths (src/bin/nof64.rs, no-f64.sh): no
 # __aeabi_d* / f64 libm routine reachable from RowBuffer::load, the photon row, ColumnF32's
-# push_row, finish and finish_lookup, LookupSlice::push_row (the set-up must reach some: teeth).
-# Not LookupProbe::push_row: its state is f64 by design. Also a panic-never link.
-step "no soft f64 reachable from load/push_row/finish, slice push_row (M4F disassembly), no-panic link" ./no-f64.sh $M4
+# push_row, finish and finish_lookup, LookupSlice::push_row, LookupProbe::push_row and
+# finish_f32 (the set-up must reach some: teeth). Also a panic-never link.
+step "no soft f64 reachable from load/push_row/finish, lookup slice and probe push_row (M4F disassembly), no-panic link" ./no-f64.sh $M4
 step "no-f64 firmware on m4f: exit 0" ./run-qemu.sh m4f status "$(elf $M4 vltm-firmware-nof64)"
 
 negative() { # a host value changed by 1.1e-6 of its maximum must be reported

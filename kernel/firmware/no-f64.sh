@@ -2,7 +2,8 @@
 # No soft f64 in the M4F's per-row and per-scan paths: builds bin vltm-firmware-nof64
 # (src/bin/nof64.rs: the set-up in main, the paths in the #[inline(never)] functions per_row
 # and per_scan), disassembles it and follows every direct call, branch and address literal
-# (`<symbol>` operands) from those two functions (per_row includes LookupSlice::push_row).
+# (`<symbol>` operands) from those two functions (per_row includes LookupSlice::push_row and
+# LookupProbe::push_row, per_scan LookupProbe::finish_f32).
 # Fails if a soft-double routine (`__aeabi_d*`, `__aeabi_*2d`, `__*df2`/`__*df3`, …) or an
 # f64 libm function (a `libm::math::` symbol whose name does not end in `f`) is reachable,
 # printing the call chain;
