@@ -100,6 +100,7 @@ mod arith;
 mod column;
 mod config;
 mod diagonal;
+mod lookup;
 mod nco;
 mod photons;
 mod row;
@@ -108,6 +109,9 @@ mod scan;
 pub use column::FixedColumn;
 pub use config::{FixedConfig, FixedLimits};
 pub use diagonal::FixedDiagonal;
+pub use lookup::{
+    FixedLookup, FixedLookupDiagonal, FixedLookupGrid, LAGRANGE_Q15_ERR, lagrange4_q15,
+};
 pub use nco::{CIS_ERR, cis_q15};
 pub use photons::FixedPhotons;
 pub use row::{FixedRow, FixedRowBuffer};
