@@ -11,8 +11,8 @@ use crate::fixture::{BINS, N_FFT};
 use crate::fixture::{FOCUS, LASERS, N_LASERS, N_SPADS, N_VOXELS, ROW, SPADS, VOXELS, params};
 use crate::pipeline::Failure;
 use vltm_kernel::{
-    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedPhotons, FixedRowBuffer,
-    FixedScan, I1F15,
+    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedLookup, FixedLookupDiagonal,
+    FixedLookupGrid, FixedPhotons, FixedRowBuffer, FixedScan, I1F15, LookupParams,
 };
 
 /// Headroom budget of the fixture: its 16 rows, 4 SPADs, legs ≥ 0.3 m (voxels at z ≥ 0.35 m).
@@ -28,6 +28,23 @@ pub const FIXED_COLUMN_LEN: usize = 2 * N_SPADS * BINS;
 /// `FixedPhotons::len`: `Ks·(2J + 1)` `i64`.
 pub const FIXED_PHOTONS_LEN: usize = N_SPADS * (2 * BINS + 1);
 
+/// Grid tolerance of the fixed-point lookup diagonal (`LookupParams::tolerance`).
+pub const FIXED_LOOKUP_TOLERANCE: f64 = 1e-4;
+/// Its grid length `L` (checked at run time).
+pub const FIXED_LOOKUP_GRID: usize = 256;
+/// `FixedLookup::tables_len`: `L` Q1.15.
+pub const FIXED_LOOKUP_TABLES_LEN: usize = FIXED_LOOKUP_GRID;
+/// `FixedLookupDiagonal::scratch_len`: `2(L + 3) + 2Kv` `i32`.
+pub const FIXED_LOOKUP_SCRATCH_LEN: usize = 2 * (FIXED_LOOKUP_GRID + 3) + 2 * N_VOXELS;
+
+/// The fixture's fixed-point lookup grid.
+pub fn fixed_lookup_params() -> LookupParams {
+    LookupParams {
+        tolerance: FIXED_LOOKUP_TOLERANCE,
+        grid_len: None,
+    }
+}
+
 /// Caller-owned buffers of the fixed-point pipeline.
 pub struct FixedBuffers<'a> {
     /// Q1.15 tables.
@@ -42,6 +59,12 @@ pub struct FixedBuffers<'a> {
     pub photons: &'a mut [i64],
     /// Diagonal accumulators of the photon-event rows.
     pub diag_photons: &'a mut [i64],
+    /// Q1.15 twiddles of the lookup path.
+    pub lookup_tables: &'a mut [I1F15],
+    /// Lookup diagonal accumulators (`2Kv` `i64`).
+    pub lookup_diag: &'a mut [i64],
+    /// Lookup diagonal scratch.
+    pub lookup_scratch: &'a mut [i32],
 }
 
 /// Intensities `T = |A|²` of the fixed-point pipeline.
@@ -53,6 +76,8 @@ pub struct FixedResults {
     pub col: [f64; N_VOXELS],
     /// Gaussian diagonal from photon events (bit-identical to `diag`).
     pub diag_photons: [f64; N_VOXELS],
+    /// Gaussian diagonal on the fixed-point lookup path.
+    pub lookup_diag: [f64; N_VOXELS],
     /// Photon events dropped (none expected).
     pub dropped: u64,
     /// Rows accumulated by each probe; aliased voxels of the column.
@@ -67,6 +92,7 @@ impl FixedResults {
         diag: [0.0; N_VOXELS],
         col: [0.0; N_VOXELS],
         diag_photons: [0.0; N_VOXELS],
+        lookup_diag: [0.0; N_VOXELS],
         dropped: 0,
         rows: [0; 2],
         aliased: 0,
@@ -96,11 +122,18 @@ pub fn run_fixed(
     let mut col = FixedColumn::new(&scan, FOCUS, b.column)?;
     let mut photons = FixedPhotons::new(&scan, b.photons)?;
     let mut diag_p = FixedDiagonal::new(&VOXELS, b.diag_photons)?;
+    let grid = FixedLookupGrid::try_new(&fc, &fixed_lookup_params()).map_err(Failure::Config)?;
+    if grid.grid().len() != FIXED_LOOKUP_GRID {
+        return Err(Failure::Sizes);
+    }
+    let lookup = FixedLookup::new(&grid, b.lookup_tables)?;
+    let mut diag_l = FixedLookupDiagonal::new(&lookup, &VOXELS, b.lookup_diag, b.lookup_scratch)?;
     let nt = cfg.nt();
     for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
         let row = rows.load(&scan, laser, hists)?;
         diag.push_row(&scan, &row)?;
         col.push_row(&scan, &row)?;
+        diag_l.push_row(&scan, &lookup, &row)?;
         // The same counts as photon events, as a TCSPC would deliver them.
         photons.reset();
         for (i, &c) in hists.iter().enumerate() {
@@ -114,6 +147,7 @@ pub fn run_fixed(
     }
     diag.finish(&fc, &mut out.diag)?;
     diag_p.finish(&fc, &mut out.diag_photons)?;
+    diag_l.finish(&mut out.lookup_diag)?;
     out.aliased = col.finish(&scan, &VOXELS, &mut out.col)?;
     out.rows = [diag.rows(), col.rows()];
     Ok(())
@@ -121,7 +155,10 @@ pub fn run_fixed(
 
 /// The fixed-point firmware's own checks (0 = passed): 3 / 4 as `pipeline::verdict` (the
 /// diagonal peaks at P1, the column in the slice at P2), 5 if the photon-event diagonal is not
-/// bit-identical to the histogram one, 6 if rows ≠ 16, photons were dropped or voxels aliased.
+/// bit-identical to the histogram one, 6 if rows ≠ 16, photons were dropped or voxels aliased,
+/// 8 if the lookup diagonal does not peak at P1 or its intensities differ from the band
+/// diagonal's by more than 2e-3 of the largest (amplitudes within 1e-3: its derived bound is
+/// ~1e-3 of the element's scale).
 pub fn verdict_fixed(r: &FixedResults) -> i32 {
     use crate::fixture::{P1_VOXEL, P2_VOXEL, SLICE};
     use crate::pipeline::argmax;
@@ -145,5 +182,20 @@ pub fn verdict_fixed(r: &FixedResults) -> i32 {
     if r.rows != [N_LASERS as u32; 2] || r.aliased != 0 || r.dropped != 0 {
         return 6;
     }
+    if argmax(&r.lookup_diag) != P1_VOXEL || lookup_vs_band(r) > 2e-3 {
+        return 8;
+    }
     0
+}
+
+/// `max |T_lookup − T_band| / max T_band` over the fixed-point diagonals (no square root in
+/// `core`: an amplitude error `≤ ε·max|A|` gives `≤ (2ε + ε²)·max T` here).
+pub fn lookup_vs_band(r: &FixedResults) -> f64 {
+    let big = r.diag.iter().fold(0.0f64, |m, x| m.max(*x));
+    let worst = r
+        .lookup_diag
+        .iter()
+        .zip(r.diag)
+        .fold(0.0f64, |m, (l, b)| m.max((l - b).abs()));
+    worst / big
 }
