@@ -18,7 +18,7 @@ use panic_semihosting as _;
 use semihosting::{println, process};
 use vltm_firmware::icount::{self, measure};
 use vltm_kernel::{
-    Config, FixedColumn, FixedConfig, FixedLimits, FixedLookup, FixedLookupDiagonal,
+    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedLookup, FixedLookupDiagonal,
     FixedLookupGrid, FixedRowBuffer, FixedScan, I1F15, LookupParams, Params, Point,
 };
 
@@ -153,10 +153,43 @@ fn main() -> ! {
     if d.is_err() {
         process::exit(3)
     }
+    // The same row over the slice's first 64 voxels: the `Ks` grid syntheses and 64·Ks pairs,
+    // which separates the per-row synthesis from the per-pair cost.
+    let (Some(ld64), Some(ls64), Some(bd64)) = (
+        singleton!(: [i64; 128] = [0; 128]),
+        singleton!(: [i32; 2 * (L + 3) + 128] = [0; 2 * (L + 3) + 128]),
+        singleton!(: [i64; 128] = [0; 128]),
+    ) else {
+        process::exit(7)
+    };
+    let Ok(mut d64) = FixedLookupDiagonal::new(&lookup, &VOXELS[..64], ld64, ls64) else {
+        process::exit(2)
+    };
+    let (t_64, d) = measure(|| d64.push_row(&scan, &lookup, &row));
+    if d.is_err() {
+        process::exit(3)
+    }
+    // The fixed band diagonal (`J` MACs per pair) over the same 64 voxels, for comparison.
+    let Ok(mut b64) = FixedDiagonal::new(&VOXELS[..64], bd64) else {
+        process::exit(2)
+    };
+    let (t_b64, d) = measure(|| b64.push_row(&scan, &row));
+    if d.is_err() {
+        process::exit(3)
+    }
+    let per_pair = (i(t_diag) - i(t_64)) / (KS * (KV - 64)) as f64;
     println!(
-        "CYCLES m0_fixed lookup_diag64x64 L={L} instructions={:.0} per_pair={:.1}",
+        "CYCLES m0_fixed lookup_synthesis L={L} instructions={:.0} per_spad={:.0}",
+        i(t_64) - per_pair * (KS * 64) as f64,
+        (i(t_64) - per_pair * (KS * 64) as f64) / KS as f64
+    );
+    println!(
+        "CYCLES m0_fixed band_diag per_pair={:.1}",
+        i(t_b64) / (KS * 64) as f64
+    );
+    println!(
+        "CYCLES m0_fixed lookup_diag64x64 L={L} instructions={:.0} per_pair={per_pair:.1}",
         i(t_diag),
-        i(t_diag) / (KS * KV) as f64
     );
     process::exit(0)
 }
