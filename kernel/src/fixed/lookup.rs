@@ -50,16 +50,21 @@
 //! | accumulator rounding | `(√2/2)·diag_lsb` |
 //!
 //! with `u ≤ max(S₁·2⁻²⁸, 2⁻¹⁶)`. Per pair, relative to `‖h‖₁`:
-//! `ε = η + 1.25·ε_band + G·(1.25(m−1)·√2·2⁻¹⁶ + 4.002·LAGRANGE_Q15_ERR + 1.251·√2·CIS_ERR)
-//! + √2·G·2⁻²⁸·(1.25(J + L/2)·0.71 + 1.42)`, plus absolute terms in `hg_lsb` and
-//! `diag_lsb`; `ε_band` is the band path's relative terms that reach `HG` (twiddles, gate
-//! weights, one NCO factor, phase steps: `tests/fixed_point.rs`). For the paper's setup
-//! (L = 1024, J = 137) the lookup's own terms come to `G·(2.4e-4 + 1.7e-4 + 6.5e-5) +
-//! G·3.0e-6`, the same class as the band path's `≈ 1.9e-4·G` (`2⁻¹²` of the element's
-//! scale), far above the `f32` lookup's `η + 1e-6`. `tests/fixed_point.rs` checks the bound
-//! against the `f64` time-domain reference (`fixed_lookup_matches_reference`, saturated
-//! histograms included; measured errors ≤ 5 % of it), and that it catches half a grid step
-//! of path time (13.6× over) and a one-bit wrong shift (740× over).
+//!
+//! ```text
+//! ε = η + 1.25·ε_band + G·(1.25(m−1)·√2·2⁻¹⁶ + 4.002·LAGRANGE_Q15_ERR + 1.251·√2·CIS_ERR)
+//!       + √2·G·2⁻²⁸·(1.25(J + L/2)·0.71 + 1.42)
+//! ```
+//!
+//! plus absolute terms in `hg_lsb` and `diag_lsb`; `ε_band` is the band path's relative
+//! terms that reach `HG` (twiddles, gate weights, one NCO factor, phase steps:
+//! `tests/fixed_point.rs`). For the paper's setup (L = 1024, J = 137) the lookup's own terms
+//! come to `G·(2.4e-4 + 1.7e-4 + 6.5e-5) + G·3.0e-6`, the same class as the band path's
+//! `≈ 1.9e-4·G` (`2⁻¹²` of the element's scale), far above the `f32` lookup's `η + 1e-6`.
+//! `tests/fixed_point.rs` checks the bound against the `f64` time-domain reference
+//! (`fixed_lookup_matches_reference`, saturated histograms included; measured errors ≤ 5 %
+//! of it), and that it catches half a grid step of path time (13.6× over) and a one-bit
+//! wrong shift (740× over).
 //!
 //! # Cost and memory
 //!
