@@ -45,7 +45,7 @@ use reference::{Reference, p64};
 use support::{Data, all_rows, run};
 use vltm_kernel::{
     CIS_ERR, Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedLookup,
-    FixedLookupDiagonal, FixedLookupGrid, FixedPhotons, FixedRowBuffer, FixedScan, Gate, I1F15,
+    FixedLookupGrid, FixedLookupProbe, FixedPhotons, FixedRowBuffer, FixedScan, Gate, I1F15,
     LAGRANGE_Q15_ERR, LookupParams, Params, Point, Target, Weights,
 };
 
@@ -556,9 +556,9 @@ fn fixed_photons_equal_histograms_bit_for_bit() {
 }
 
 // ---------------------------------------------------------------------------------------
-// The fixed-point lookup diagonal (`FixedLookupDiagonal`, kernel/src/fixed/lookup.rs).
+// The fixed-point lookup diagonal (`FixedLookupProbe`, kernel/src/fixed/lookup.rs).
 //
-// Tolerance (module docs of `FixedLookupDiagonal`): per (l, s), the band path's relative
+// Tolerance (module docs of `FixedLookupProbe`): per (l, s), the band path's relative
 // terms `ε_q` × 1.25 (the interpolant's `Σ|ℓ_q|`), plus the grid's interpolation bound `η`,
 // plus the block-floating terms
 // `ε_blk = √2·G·(1.25(m−1)·2⁻¹⁵ + 4.002·LAGRANGE_Q15_ERR + 1.77·CIS_ERR + 2⁻²⁸(1.25(J + L/2)·0.71 + 1.42))`,
@@ -577,10 +577,12 @@ enum Mistake {
     Shift,
 }
 
-/// Amplitudes `|A|` of the fixed lookup diagonal and its grid.
+/// Amplitudes `|A|` of the fixed lookup probe for `target`.
+#[allow(clippy::too_many_arguments)]
 fn run_fixed_lookup(
     fc: &FixedConfig,
     g: &FixedLookupGrid,
+    target: Target,
     lasers: &[Point],
     spads: &[Point],
     hists: &[u16],
@@ -594,9 +596,9 @@ fn run_fixed_lookup(
     let lookup = FixedLookup::new(g, &mut lt).unwrap();
     let mut buf = vec![0i32; FixedRowBuffer::len(fc, spads.len())];
     let mut rows = FixedRowBuffer::new(&scan, &mut buf).unwrap();
-    let mut st = vec![0i64; FixedLookupDiagonal::state_len(voxels.len())];
-    let mut sc = vec![0i32; FixedLookupDiagonal::scratch_len(g, voxels.len())];
-    let mut d = FixedLookupDiagonal::new(&lookup, voxels, &mut st, &mut sc).unwrap();
+    let mut st = vec![0i64; FixedLookupProbe::state_len(voxels.len())];
+    let mut sc = vec![0i32; FixedLookupProbe::scratch_len(g, voxels.len())];
+    let mut d = FixedLookupProbe::new(&lookup, target, voxels, &mut st, &mut sc).unwrap();
     let len = spads.len() * nt;
     for (l, x_l) in lasers.iter().enumerate() {
         let row = rows
@@ -615,11 +617,38 @@ fn run_fixed_lookup(
     out.iter().map(|t| t.sqrt() * lsb_factor).collect()
 }
 
-/// The fixed lookup diagonal against the reference; `(err, tol, S)` per voxel.
+/// The fixed lookup diagonal, then the column `T(focus, ·)`, against the reference;
+/// `(err, tol, S)` per voxel (diagonal first).
 fn compare_lookup(case: &Case, tolerance: f64, mistake: Mistake) -> Vec<(f64, f64, f64)> {
     let (p, hists) = case.prepare();
     let h64: Vec<f64> = hists.iter().map(|&x| f64::from(x)).collect();
     let truth = Reference::new(&p, &case.lasers, &case.spads, h64);
+    let mut out = compare_lookup_target(case, &truth, p, &hists, None, tolerance, mistake);
+    // The column with the band test's alias-free window (the reference sums every path).
+    let pc = alias_free(p, &truth, case.focus, &case.voxels);
+    out.extend(compare_lookup_target(
+        case,
+        &truth,
+        pc,
+        &hists,
+        Some(case.focus),
+        tolerance,
+        mistake,
+    ));
+    out
+}
+
+/// [`compare_lookup`] for one target (`focus`: None = the diagonal) under `p`.
+fn compare_lookup_target(
+    case: &Case,
+    truth: &Reference,
+    p: Params,
+    hists: &[u16],
+    focus: Option<Point>,
+    tolerance: f64,
+    mistake: Mistake,
+) -> Vec<(f64, f64, f64)> {
+    let target = focus.map_or(Target::Diagonal, Target::Column);
     let lp = LookupParams {
         tolerance,
         grid_len: None,
@@ -650,13 +679,17 @@ fn compare_lookup(case: &Case, tolerance: f64, mistake: Mistake) -> Vec<(f64, f6
     let fixed = run_fixed_lookup(
         &fc,
         &g,
+        target,
         &case.lasers,
         &case.spads,
-        &hists,
+        hists,
         &case.voxels,
         factor,
     );
-    let amps = truth.diagonal(reference::Gate::Gaussian, &case.voxels);
+    let amps = match focus {
+        None => truth.diagonal(reference::Gate::Gaussian, &case.voxels),
+        Some(a) => truth.column(reference::Gate::Gaussian, a, &case.voxels),
+    };
     let j = cfg.bins() as f64;
     let len = g.grid().len() as f64;
     let m_bits = len.log2();
@@ -683,15 +716,15 @@ fn compare_lookup(case: &Case, tolerance: f64, mistake: Mistake) -> Vec<(f64, f6
     let (kl, ks) = (case.lasers.len() as f64, case.spads.len() as f64);
     let mut out = Vec::new();
     for (i, v) in case.voxels.iter().enumerate() {
-        let pv = p64(*v);
-        let s_ab = truth.scale(&pv, &pv);
+        let (pa, pv) = (p64(focus.unwrap_or(*v)), p64(*v));
+        let s_ab = truth.scale(&pa, &pv);
         let w_sum: f64 = truth
             .lasers
             .iter()
             .flat_map(|xl| truth.spads.iter().map(move |xs| (xl, xs)))
-            .map(|(xl, xs)| truth.w(reference::dist(xl, &pv)) * truth.w(reference::dist(&pv, xs)))
+            .map(|(xl, xs)| truth.w(reference::dist(xl, &pa)) * truth.w(reference::dist(&pv, xs)))
             .sum();
-        let (_, tau_max) = truth.tau_range(&pv, &pv);
+        let (_, tau_max) = truth.tau_range(&pa, &pv);
         let turns = nu_max * (tau_max.abs() + p.t0.abs()) / (2.0 * std::f64::consts::PI);
         let eps_f32 = U32
             * (2.0 * std::f64::consts::PI * turns * (1.0 + 2.0 * gsum.max(1.0))
@@ -799,14 +832,22 @@ fn fixed_lookup_tolerance_detects_half_step_and_wrong_shift() {
     let worst = |c: &[(f64, f64, f64)]| c.iter().fold(0.0f64, |m, c| m.max(c.0 / c.1));
     // (Here both tolerances get the same grid: L = 8·k_d rounded up to a power of two.)
     for tol in [1e-5, 1e-3] {
-        let ok = worst(&compare_lookup(&case, tol, Mistake::None));
-        let half = worst(&compare_lookup(&case, tol, Mistake::HalfStep));
-        let shift = worst(&compare_lookup(&case, tol, Mistake::Shift));
-        println!(
-            "grid tolerance {tol}: err/tol correct {ok:.3}, half step {half:.3}, shift {shift:.3}"
-        );
-        assert!(ok <= 1.0, "{ok}");
-        assert!(half > 3.0, "half a grid step not detected: {half}");
-        assert!(shift > 3.0, "a wrong shift not detected: {shift}");
+        let kv = case.voxels.len();
+        let ok = compare_lookup(&case, tol, Mistake::None);
+        let half = compare_lookup(&case, tol, Mistake::HalfStep);
+        let shift = compare_lookup(&case, tol, Mistake::Shift);
+        for (what, lo, hi) in [("diagonal", 0, kv), ("column", kv, 2 * kv)] {
+            let (ok, half, shift) = (
+                worst(&ok[lo..hi]),
+                worst(&half[lo..hi]),
+                worst(&shift[lo..hi]),
+            );
+            println!(
+                "{what}, grid tolerance {tol}: err/tol correct {ok:.3}, half step {half:.3}, shift {shift:.3}"
+            );
+            assert!(ok <= 1.0, "{what}: {ok}");
+            assert!(half > 3.0, "{what}: half a grid step not detected: {half}");
+            assert!(shift > 3.0, "{what}: a wrong shift not detected: {shift}");
+        }
     }
 }

@@ -11,7 +11,7 @@ use crate::fixture::{BINS, N_FFT};
 use crate::fixture::{FOCUS, LASERS, N_LASERS, N_SPADS, N_VOXELS, ROW, SPADS, VOXELS, params};
 use crate::pipeline::Failure;
 use vltm_kernel::{
-    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedLookup, FixedLookupDiagonal,
+    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedLookup, FixedLookupProbe,
     FixedLookupGrid, FixedPhotons, FixedRowBuffer, FixedScan, I1F15, LookupParams,
 };
 
@@ -34,7 +34,7 @@ pub const FIXED_LOOKUP_TOLERANCE: f64 = 1e-4;
 pub const FIXED_LOOKUP_GRID: usize = 256;
 /// `FixedLookup::tables_len`: `L` Q1.15.
 pub const FIXED_LOOKUP_TABLES_LEN: usize = FIXED_LOOKUP_GRID;
-/// `FixedLookupDiagonal::scratch_len`: `2(L + 3) + 2Kv` `i32`.
+/// `FixedLookupProbe::scratch_len`: `2(L + 3) + 2Kv` `i32`.
 pub const FIXED_LOOKUP_SCRATCH_LEN: usize = 2 * (FIXED_LOOKUP_GRID + 3) + 2 * N_VOXELS;
 
 /// The fixture's fixed-point lookup grid.
@@ -127,7 +127,7 @@ pub fn run_fixed(
         return Err(Failure::Sizes);
     }
     let lookup = FixedLookup::new(&grid, b.lookup_tables)?;
-    let mut diag_l = FixedLookupDiagonal::new(&lookup, &VOXELS, b.lookup_diag, b.lookup_scratch)?;
+    let mut diag_l = FixedLookupProbe::new(&lookup, &VOXELS, b.lookup_diag, b.lookup_scratch)?;
     let nt = cfg.nt();
     for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
         let row = rows.load(&scan, laser, hists)?;

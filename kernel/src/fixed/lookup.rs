@@ -1,5 +1,5 @@
-//! [`FixedLookupGrid`], [`FixedLookup`], [`FixedLookupDiagonal`]: the lookup path's Gaussian
-//! diagonal in integer arithmetic, for MCUs without an FPU (module docs of [`crate::fixed`]
+//! [`FixedLookupGrid`], [`FixedLookup`], [`FixedLookupProbe`]: the lookup path's Gaussian
+//! diagonal and column in integer arithmetic, for MCUs without an FPU (module docs of [`crate::fixed`]
 //! for the band path it shares its row spectra and accumulator scale with; module docs of
 //! [`LookupProbe`](crate::LookupProbe) for the method in `f32` and its interpolation bound `η`).
 //!
@@ -20,17 +20,21 @@
 //!    multiplies only: no 64-bit multiply on an M0); `w = 1` (stage 1, and `k = 0` of every
 //!    stage) is not multiplied. Every node is a partial sum of the `X_j` times unit
 //!    twiddles, so `|Re|, |Im| ≤ Σ|X_j|·(1 + 2⁻¹⁵)^log₂L + L < 2³⁰`: no overflow, no scaling.
-//! 3. **Per pair** (voxel `v`, SPAD `s`; `τ = d_lv + d_vs`, `f32` distances as in the band
-//!    path): the phase `φ = ⌊τ·(2³²/NΔt)⌋ mod 2³²` (one `f32` product, a `u64` conversion):
+//! 3. **Per pair** (voxel `v`, SPAD `s`; `τ = d_lv + d_vs` on the diagonal,
+//!    `d_la + d_av + d_vs` on a column `T(a, ·)`, `f32` distances as in the band path; the
+//!    lead distance and weight are made once per row and voxel): the phase `φ = ⌊τ·(2³²/NΔt)⌋ mod 2³²` (one `f32` product, a `u64` conversion):
 //!    its top `log₂L` bits are the grid index `i`, the next 16 the fraction `t` (Q16), and
 //!    `k_d·φ` (wrapping) the carrier's phase in turns for [`cis_q15`]: the index is
 //!    integer, and the carrier needs no table of its own.
 //! 4. **Cubic Lagrange weights** `ℓ_q(t)` in Q15 from `t` by `u32` products
 //!    ([`lagrange4_q15`]; `Σ_q ℓ_q = 2¹⁵` exactly), `Z₀ = Σ_q ℓ_q·Y[i+q−1]` rounded once
 //!    (exact through 15-bit halves), `Z = Z₀·cis_q15(k_d·φ)` rounded once: `|Z| < 1.26·2²⁹`.
-//! 5. The pair adds `round(Z·w_l·w_s·2^(ad+e))` (`w = 1/max(d, d_w)` in `f32`, entering by
+//! 5. The pair adds `round(Z·w_lead·w_s·2^(ad+e))` (`w = 1/max(d, d_w)` in `f32`, `w_lead =
+//!    w(d_lv)`, or `w(d_la)` on a column, entering by
 //!    its mantissa and exponent, `i64` product) to the voxel's `i64` accumulator when
-//!    `τ + x_s` lies in the guard interval (the band path's `f32` test). The accumulator LSB
+//!    `τ + x_s` lies in the guard interval (the band path's `f32` test; a column is imaged
+//!    pair by pair like the diagonal, so every path gets the guard and nothing aliases, as in
+//!    the `f32` [`LookupProbe`](crate::LookupProbe)). The accumulator LSB
 //!    is the band diagonal's, [`FixedConfig::diag_lsb`], and so is the headroom: a term is
 //!    `≤ 1.26·2²⁹·√2·G1·Wl²` `HG` LSB against the band budget's `2³¹·G1·Wl²`.
 //!
@@ -77,7 +81,7 @@
 //! complex MACs per SPAD (140,288 at the paper's L = 1024, J = 137) against 5,120
 //! butterflies. Memory, caller-owned: tables `L` [`I1F15`] ([`FixedLookup::tables_len`]);
 //! per probe the state `2Kv` `i64` (as [`FixedDiagonal`](crate::FixedDiagonal)) and the
-//! scratch `2(L + 3) + 2Kv` `i32` ([`FixedLookupDiagonal::scratch_len`]: one SPAD's grid,
+//! scratch `2(L + 3) + 2Kv` `i32` ([`FixedLookupProbe::scratch_len`]: one SPAD's grid,
 //! the voxels' lead distances and weights). No allocation, no panic, no `unsafe`; configuration checked
 //! once ([`FixedLookupGrid::try_new`]).
 
@@ -89,6 +93,7 @@ use crate::config::{Point, Weights};
 use crate::error::{ConfigError, Error, check_len, check_points};
 use crate::geometry::dist;
 use crate::lookup::{EXTRA, LookupGrid, LookupParams};
+use crate::probe::Target;
 use ::fixed::types::I1F15;
 
 /// Largest grid of the fixed-point path: `2¹⁶` points (index bits + 16 fraction bits ≤ 32).
@@ -362,11 +367,12 @@ fn block(h: i32, e: i32) -> i32 {
     }
 }
 
-/// The Gaussian diagonal `T(x_v, x_v)` on the fixed-point lookup path: `i64` complex
-/// accumulators (`2Kv`), LSB [`FixedConfig::diag_lsb`] (the band diagonal's). Per row: `Ks`
-/// integer syntheses, then `Kv·Ks` O(1) integer reads (module docs).
+/// The Gaussian diagonal `T(x_v, x_v)` or column `T(x_a, ·)` on the fixed-point lookup path:
+/// `i64` complex accumulators (`2Kv`), LSB [`FixedConfig::diag_lsb`] (the band diagonal's).
+/// Per row: `Ks` integer syntheses, then `Kv·Ks` O(1) integer reads (module docs).
 #[derive(Debug)]
-pub struct FixedLookupDiagonal<'m> {
+pub struct FixedLookupProbe<'m> {
+    target: Target,
     voxels: &'m [Point],
     acc: &'m mut [i64],
     grid_buf: &'m mut [i32],
@@ -375,24 +381,26 @@ pub struct FixedLookupDiagonal<'m> {
     g: FixedLookupGrid,
 }
 
-impl<'m> FixedLookupDiagonal<'m> {
+impl<'m> FixedLookupProbe<'m> {
     /// State length in `i64`: `2Kv`.
     pub const fn state_len(n_voxels: usize) -> usize {
         n_voxels.saturating_mul(2)
     }
 
-    /// Scratch length in `i32`: `2(L + 3) + 2Kv`.
+    /// Scratch length in `i32`: `2(L + 3) + 2Kv` (one SPAD's grid; per voxel the lead distance
+    /// and weight).
     pub const fn scratch_len(g: &FixedLookupGrid, n_voxels: usize) -> usize {
         (2 * (g.grid.len() + EXTRA)).saturating_add(n_voxels.saturating_mul(2))
     }
 
-    /// A diagonal probe over `voxels` with zeroed `state`.
+    /// A probe for `target` over `voxels` with zeroed `state`.
     ///
     /// # Errors
     /// [`Error::Length`] for a wrong `state` or `scratch` length; [`Error::NonFinite`] for a
-    /// non-finite voxel.
+    /// non-finite voxel or focus.
     pub fn new(
         lookup: &FixedLookup<'_>,
+        target: Target,
         voxels: &'m [Point],
         state: &'m mut [i64],
         scratch: &'m mut [i32],
@@ -402,6 +410,9 @@ impl<'m> FixedLookupDiagonal<'m> {
         check_len("state", Self::state_len(kv), state.len())?;
         check_len("scratch", Self::scratch_len(&g, kv), scratch.len())?;
         check_points("voxels", voxels)?;
+        if let Target::Column(a) = target {
+            check_points("focus", &[a])?;
+        }
         let (grid_buf, lead) = scratch
             .split_at_mut_checked(2 * (g.grid.len() + EXTRA))
             .ok_or(Error::Length {
@@ -411,6 +422,7 @@ impl<'m> FixedLookupDiagonal<'m> {
             })?;
         state.fill(0);
         Ok(Self {
+            target,
             voxels,
             acc: state,
             grid_buf,
@@ -461,10 +473,22 @@ impl<'m> FixedLookupDiagonal<'m> {
                 1.0
             }
         };
+        // The lead per voxel: (d_lv, w(d_lv)) on the diagonal, (d_la + d_av, w(d_la)) on a
+        // column.
+        let d_la = match self.target {
+            Target::Diagonal => None,
+            Target::Column(a) => Some((a, dist(&laser, &a))),
+        };
         for ([d, w], v) in self.lead.as_chunks_mut::<2>().0.iter_mut().zip(self.voxels) {
-            let d_lv = dist(&laser, v);
-            *d = d_lv.to_bits() as i32;
-            *w = weight(d_lv).to_bits() as i32;
+            let (lead, w_lead) = match d_la {
+                None => {
+                    let d_lv = dist(&laser, v);
+                    (d_lv, weight(d_lv))
+                }
+                Some((a, d_la)) => (d_la + dist(&a, v), weight(d_la)),
+            };
+            *d = lead.to_bits() as i32;
+            *w = w_lead.to_bits() as i32;
         }
         for (s, sp) in scan.spads.iter().enumerate() {
             let Some(hg) = row.hg.get(2 * s * j..2 * (s + 1) * j) else {
@@ -502,6 +526,11 @@ impl<'m> FixedLookupDiagonal<'m> {
     /// Rows accumulated.
     pub const fn rows(&self) -> u32 {
         self.rows
+    }
+
+    /// The target.
+    pub const fn target(&self) -> Target {
+        self.target
     }
 
     /// The raw accumulators `[re, im]` per voxel (LSB [`FixedConfig::diag_lsb`]).

@@ -109,9 +109,7 @@ mod scan;
 pub use column::FixedColumn;
 pub use config::{FixedConfig, FixedLimits};
 pub use diagonal::FixedDiagonal;
-pub use lookup::{
-    FixedLookup, FixedLookupDiagonal, FixedLookupGrid, LAGRANGE_Q15_ERR, lagrange4_q15,
-};
+pub use lookup::{FixedLookup, FixedLookupGrid, FixedLookupProbe, LAGRANGE_Q15_ERR, lagrange4_q15};
 pub use nco::{CIS_ERR, cis_q15};
 pub use photons::FixedPhotons;
 pub use row::{FixedRow, FixedRowBuffer};

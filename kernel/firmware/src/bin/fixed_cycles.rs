@@ -1,7 +1,7 @@
 //! Instruction counts per laser row of the kernel's **fixed-point** path (the Cortex-M0's,
 //! `thumbv6m-none-eabi`) for the paper's real setup (24 × 24 lasers, 28 SPADs, Nt = 255,
 //! λ = 0.13 m → N = 289, J = 137): `FixedRowBuffer::load`, one `FixedColumn::push_row`, and
-//! the fixed-point lookup diagonal (`FixedLookupDiagonal::push_row`, L = 1024) over a 64 × 64
+//! the fixed-point lookup diagonal (`FixedLookupProbe::push_row`, L = 1024) over a 64 × 64
 //! slice (2 m × 2 m at z = 1 m, as `cycles.rs`).
 //!
 //! The microbit's 16 KB of RAM cannot hold this setup (the row buffer alone is 30 KB), so the
@@ -18,8 +18,8 @@ use panic_semihosting as _;
 use semihosting::{println, process};
 use vltm_firmware::icount::{self, measure};
 use vltm_kernel::{
-    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedLookup, FixedLookupDiagonal,
-    FixedLookupGrid, FixedRowBuffer, FixedScan, I1F15, LookupParams, Params, Point,
+    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedLookup, FixedLookupProbe,
+    FixedLookupGrid, FixedRowBuffer, FixedScan, I1F15, LookupParams, Params, Point, Target,
 };
 
 const KS: usize = 28;
@@ -146,7 +146,7 @@ fn main() -> ! {
     let Ok(lookup) = FixedLookup::new(&grid, lt) else {
         process::exit(2)
     };
-    let Ok(mut diag) = FixedLookupDiagonal::new(&lookup, &VOXELS, ld, ls) else {
+    let Ok(mut diag) = FixedLookupProbe::new(&lookup, Target::Diagonal, &VOXELS, ld, ls) else {
         process::exit(2)
     };
     let (t_diag, d) = measure(|| diag.push_row(&scan, &lookup, &row));
@@ -162,7 +162,7 @@ fn main() -> ! {
     ) else {
         process::exit(7)
     };
-    let Ok(mut d64) = FixedLookupDiagonal::new(&lookup, &VOXELS[..64], ld64, ls64) else {
+    let Ok(mut d64) = FixedLookupProbe::new(&lookup, Target::Diagonal, &VOXELS[..64], ld64, ls64) else {
         process::exit(2)
     };
     let (t_64, d) = measure(|| d64.push_row(&scan, &lookup, &row));

@@ -3,7 +3,7 @@
 //! `FixedDiagonal`/`FixedColumn` `new`/`push_row` (including a refused row past the budget)/
 //! `finish`, `FixedPhotons` `new`/`reset`/`push` (with out-of-range events)/`load_photons`,
 //! the fixed-point lookup path (`FixedLookupGrid::try_new`, `FixedLookup::new`,
-//! `FixedLookupDiagonal` `new`/`push_row` (with the refused row)/`finish`),
+//! `FixedLookupProbe` `new`/`push_row` (with the refused row)/`finish`),
 //! with inputs through `black_box`. Exit status 0 = every call succeeded, the
 //! diagonals (band and lookup) peak at P1 and the extra row was refused.
 #![no_std]
@@ -28,7 +28,7 @@ use vltm_firmware::fixed_pipeline::{
 use vltm_firmware::fixture::{FOCUS, LASERS, N_VOXELS, P1_VOXEL, ROW, SPADS, VOXELS, params};
 use vltm_firmware::pipeline::argmax;
 use vltm_kernel::{
-    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLookup, FixedLookupDiagonal,
+    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLookup, FixedLookupProbe,
     FixedLookupGrid, FixedPhotons, FixedRowBuffer, FixedScan, I1F15,
 };
 
@@ -86,7 +86,7 @@ fn run() -> i32 {
     let Ok(lookup) = FixedLookup::new(&grid, black_box(&mut lt[..])) else {
         return 2;
     };
-    let Ok(mut ldiag) = FixedLookupDiagonal::new(
+    let Ok(mut ldiag) = FixedLookupProbe::new(
         &lookup,
         voxels,
         black_box(&mut ld[..]),
