@@ -360,10 +360,7 @@ fn fixed_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results) {
     );
     let (mut ph, mut dp) = (vec![0i64; FIXED_PHOTONS_LEN], vec![0i64; FIXED_DIAG_LEN]);
     let mut lt = vec![vltm_kernel::I1F15::ZERO; FIXED_LOOKUP_TABLES_LEN];
-    let (mut ld, mut ls) = (
-        vec![0i64; FIXED_DIAG_LEN],
-        vec![0i32; FIXED_LOOKUP_SCRATCH_LEN],
-    );
+    let mut ld = vec![0i64; FIXED_DIAG_LEN];
     let mut f = FixedResults::ZERO;
     let bufs = FixedBuffers {
         tables: &mut tables,
@@ -373,8 +370,7 @@ fn fixed_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results) {
         photons: &mut ph,
         diag_photons: &mut dp,
         lookup_tables: &mut lt,
-        lookup_diag: &mut ld,
-        lookup_scratch: &mut ls,
+        lookup_state: &mut ld,
     };
     run_fixed(scan, bufs, &mut f).expect("fixed pipeline");
     assert_eq!(
@@ -392,13 +388,13 @@ fn fixed_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results) {
     };
     let (ed, ec) = (rel(&f.diag, &r.diag), rel(&f.col, &r.col));
     // The fixed-point lookup diagonal against the float band diagonal.
-    let el = rel(&f.lookup_diag, &r.diag);
+    let (el, elc) = (rel(&f.lookup_diag, &r.diag), rel(&f.lookup_col, &r.col));
     assert!(
-        ed < 1e-3 && ec < 1e-3 && el < 1e-3,
-        "fixed vs float: diag {ed:e}, col {ec:e}, lookup diag {el:e}"
+        ed < 1e-3 && ec < 1e-3 && el < 1e-3 && elc < 1e-3,
+        "fixed vs float: diag {ed:e}, col {ec:e}, lookup diag {el:e}, lookup col {elc:e}"
     );
     eprintln!(
-        "fixed-point vs float, max |√T_fixed − √T_float| / max √T_float: diag {ed:.2e}, col {ec:.2e}, lookup diag {el:.2e}"
+        "fixed-point vs float, max |√T_fixed − √T_float| / max √T_float: diag {ed:.2e}, col {ec:.2e}, lookup diag {el:.2e}, lookup col {elc:.2e}"
     );
     let mut txt = String::new();
     writeln!(
@@ -409,14 +405,14 @@ fn fixed_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results) {
     .unwrap();
     writeln!(
         txt,
-        "# same scan.bin; max |sqrt(T_fixed) - sqrt(T_float)| / max sqrt(T_float): diag {ed:.2e}, col {ec:.2e}, lookup_diag (fixed-point lookup path, L = {FIXED_LOOKUP_GRID}) {el:.2e}"
+        "# same scan.bin; max |sqrt(T_fixed) - sqrt(T_float)| / max sqrt(T_float): diag {ed:.2e}, col {ec:.2e}, lookup_diag, lookup_col (fixed-point lookup path, L = {FIXED_LOOKUP_GRID}) {el:.2e}, {elc:.2e}"
     )
     .unwrap();
     for i in 0..N_VOXELS {
         writeln!(
             txt,
-            "RESULT voxel={i} diag={:e} col={:e} diag_photons={:e} lookup_diag={:e}",
-            f.diag[i], f.col[i], f.diag_photons[i], f.lookup_diag[i]
+            "RESULT voxel={i} diag={:e} col={:e} diag_photons={:e} lookup_diag={:e} lookup_col={:e}",
+            f.diag[i], f.col[i], f.diag_photons[i], f.lookup_diag[i], f.lookup_col[i]
         )
         .unwrap();
     }

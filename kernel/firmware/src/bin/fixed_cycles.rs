@@ -18,8 +18,8 @@ use panic_semihosting as _;
 use semihosting::{println, process};
 use vltm_firmware::icount::{self, measure};
 use vltm_kernel::{
-    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedLookup, FixedLookupProbe,
-    FixedLookupGrid, FixedRowBuffer, FixedScan, I1F15, LookupParams, Params, Point, Target,
+    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedLookup, FixedLookupGrid,
+    FixedLookupProbe, FixedRowBuffer, FixedScan, I1F15, LookupParams, Params, Point, Target,
 };
 
 const KS: usize = 28;
@@ -146,7 +146,9 @@ fn main() -> ! {
     let Ok(lookup) = FixedLookup::new(&grid, lt) else {
         process::exit(2)
     };
-    let Ok(mut diag) = FixedLookupProbe::new(&lookup, Target::Diagonal, &VOXELS, ld, ls) else {
+    let Ok(mut diag) =
+        FixedLookupProbe::new(&lookup, Target::Diagonal, &VOXELS, &mut ld[..], &mut ls[..])
+    else {
         process::exit(2)
     };
     let (t_diag, d) = measure(|| diag.push_row(&scan, &lookup, &row));
@@ -162,7 +164,8 @@ fn main() -> ! {
     ) else {
         process::exit(7)
     };
-    let Ok(mut d64) = FixedLookupProbe::new(&lookup, Target::Diagonal, &VOXELS[..64], ld64, ls64) else {
+    let Ok(mut d64) = FixedLookupProbe::new(&lookup, Target::Diagonal, &VOXELS[..64], ld64, ls64)
+    else {
         process::exit(2)
     };
     let (t_64, d) = measure(|| d64.push_row(&scan, &lookup, &row));
@@ -190,6 +193,21 @@ fn main() -> ! {
     println!(
         "CYCLES m0_fixed lookup_diag64x64 L={L} instructions={:.0} per_pair={per_pair:.1}",
         i(t_diag),
+    );
+    // The column T(a, ·) over the same slice on the same buffers (its lead d_la + d_av per
+    // voxel and row; the same per-pair work).
+    let Ok(mut col) =
+        FixedLookupProbe::new(&lookup, Target::Column([0.1, 0.2, 1.0]), &VOXELS, ld, ls)
+    else {
+        process::exit(2)
+    };
+    let (t_lcol, c) = measure(|| col.push_row(&scan, &lookup, &row));
+    if c.is_err() {
+        process::exit(3)
+    }
+    println!(
+        "CYCLES m0_fixed lookup_col64x64 L={L} instructions={:.0}",
+        i(t_lcol)
     );
     process::exit(0)
 }

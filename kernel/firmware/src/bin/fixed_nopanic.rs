@@ -3,7 +3,7 @@
 //! `FixedDiagonal`/`FixedColumn` `new`/`push_row` (including a refused row past the budget)/
 //! `finish`, `FixedPhotons` `new`/`reset`/`push` (with out-of-range events)/`load_photons`,
 //! the fixed-point lookup path (`FixedLookupGrid::try_new`, `FixedLookup::new`,
-//! `FixedLookupProbe` `new`/`push_row` (with the refused row)/`finish`),
+//! `FixedLookupProbe` `new`/`push_row` (with the refused row)/`finish`, diagonal and column),
 //! with inputs through `black_box`. Exit status 0 = every call succeeded, the
 //! diagonals (band and lookup) peak at P1 and the extra row was refused.
 #![no_std]
@@ -28,8 +28,8 @@ use vltm_firmware::fixed_pipeline::{
 use vltm_firmware::fixture::{FOCUS, LASERS, N_VOXELS, P1_VOXEL, ROW, SPADS, VOXELS, params};
 use vltm_firmware::pipeline::argmax;
 use vltm_kernel::{
-    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLookup, FixedLookupProbe,
-    FixedLookupGrid, FixedPhotons, FixedRowBuffer, FixedScan, I1F15,
+    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLookup, FixedLookupGrid,
+    FixedLookupProbe, FixedPhotons, FixedRowBuffer, FixedScan, I1F15, Target,
 };
 
 #[entry]
@@ -88,6 +88,7 @@ fn run() -> i32 {
     };
     let Ok(mut ldiag) = FixedLookupProbe::new(
         &lookup,
+        black_box(Target::Diagonal),
         voxels,
         black_box(&mut ld[..]),
         black_box(&mut ls[..]),
@@ -153,6 +154,19 @@ fn run() -> i32 {
     }
     if argmax(&out[..]) != P1_VOXEL {
         return 3;
+    }
+    // The lookup column on the same buffers (one row): covers its per-row path.
+    let Ok(mut lcol) = FixedLookupProbe::new(
+        &lookup,
+        black_box(Target::Column(FOCUS)),
+        voxels,
+        black_box(&mut ld[..]),
+        black_box(&mut ls[..]),
+    ) else {
+        return 2;
+    };
+    if lcol.push_row(&scan, &lookup, &row).is_err() || lcol.finish(&mut out[..]).is_err() {
+        return 2;
     }
     if diag.finish(&fc, &mut out[..]).is_err() {
         return 2;
