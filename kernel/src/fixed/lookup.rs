@@ -74,7 +74,7 @@
 //!
 //! Per row: `Ks` syntheses of `(L/2)·log₂L` butterflies (`L/2 + L/4 + …` of them without a
 //! multiply) plus `J` block-exponent steps, then `Kv·Ks` pairs: one `f32` distance (`sqrtf`),
-//! one `f32` weight division and product, one `f32→u64` conversion, integer weights (6 `u32`
+//! one `f32` weight division and product, one `f32→u64` conversion, integer weights (7 `u32`
 //! multiplies), 16 `i32` multiplies for the interpolation, 8 for the carrier, one table
 //! read, two `i64` products into the accumulators — against the band diagonal's `J` complex
 //! `i64` MACs per pair. Why an FFT and not a direct sum over `J`: the direct sum costs `L·J`
