@@ -44,8 +44,9 @@ use proptest::test_runner::{FileFailurePersistence, RngAlgorithm, RngSeed};
 use reference::{Reference, p64};
 use support::{Data, all_rows, run};
 use vltm_kernel::{
-    CIS_ERR, Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedPhotons,
-    FixedRowBuffer, FixedScan, Gate, I1F15, Params, Point, Target, Weights,
+    CIS_ERR, Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedLookup,
+    FixedLookupGrid, FixedLookupProbe, FixedPhotons, FixedRowBuffer, FixedScan, Gate, I1F15,
+    LAGRANGE_Q15_ERR, LookupParams, Params, Point, Target, Weights,
 };
 
 const SEED: u64 = 0xf1ed_0015_c0de_0005;
@@ -552,4 +553,301 @@ fn fixed_photons_equal_histograms_bit_for_bit() {
     }
     assert!(photons_total > 100_000, "only {photons_total} photons");
     println!("{photons_total} photons, every row bit-identical to its histogram");
+}
+
+// ---------------------------------------------------------------------------------------
+// The fixed-point lookup diagonal (`FixedLookupProbe`, kernel/src/fixed/lookup.rs).
+//
+// Tolerance (module docs of `FixedLookupProbe`): per (l, s), the band path's relative
+// terms `ε_q` × 1.25 (the interpolant's `Σ|ℓ_q|`), plus the grid's interpolation bound `η`,
+// plus the block-floating terms
+// `ε_blk = √2·G·(1.25(m−1)·2⁻¹⁵ + 4.002·LAGRANGE_Q15_ERR + 1.77·CIS_ERR + 2⁻²⁸(1.25(J + L/2)·0.71 + 1.42))`,
+// all × `S`; the `f32` terms of the band path plus `2u·2π·turns` (the phase product
+// `τ·2³²/NΔt` in `f32`); absolute terms `W·(1.25(J + 1)·0.71 + 2⁻¹⁶(1.25(J + L/2)·0.71 + 1.42)
+// + √2·J·ε_blk)·hg_lsb + Kl·Ks·0.71·diag_lsb`.
+// ---------------------------------------------------------------------------------------
+
+/// How the fixed lookup run is perturbed (teeth).
+#[derive(Clone, Copy, PartialEq)]
+enum Mistake {
+    None,
+    /// The kernel's `t0` off by half a grid step.
+    HalfStep,
+    /// The accumulators read one bit off (`diag_lsb·2`).
+    Shift,
+}
+
+/// Amplitudes `|A|` of the fixed lookup probe for `target`.
+#[allow(clippy::too_many_arguments)]
+fn run_fixed_lookup(
+    fc: &FixedConfig,
+    g: &FixedLookupGrid,
+    target: Target,
+    lasers: &[Point],
+    spads: &[Point],
+    hists: &[u16],
+    voxels: &[Point],
+    lsb_factor: f64,
+) -> Vec<f64> {
+    let nt = fc.config().nt();
+    let mut tables = vec![I1F15::ZERO; FixedScan::tables_len(fc)];
+    let scan = FixedScan::new(fc, spads, &mut tables).unwrap();
+    let mut lt = vec![I1F15::ZERO; FixedLookup::tables_len(g)];
+    let lookup = FixedLookup::new(g, &mut lt).unwrap();
+    let mut buf = vec![0i32; FixedRowBuffer::len(fc, spads.len())];
+    let mut rows = FixedRowBuffer::new(&scan, &mut buf).unwrap();
+    let mut st = vec![0i64; FixedLookupProbe::state_len(voxels.len())];
+    let mut sc = vec![0i32; FixedLookupProbe::scratch_len(g, voxels.len())];
+    let mut d = FixedLookupProbe::new(&lookup, target, voxels, &mut st, &mut sc).unwrap();
+    let len = spads.len() * nt;
+    for (l, x_l) in lasers.iter().enumerate() {
+        let row = rows
+            .load(&scan, *x_l, &hists[l * len..(l + 1) * len])
+            .unwrap();
+        d.push_row(&scan, &lookup, &row).unwrap();
+    }
+    // The budget is exhausted: one more row is refused, and nothing changes.
+    let before = d.raw().to_vec();
+    let row = rows.load(&scan, lasers[0], &hists[..len]).unwrap();
+    assert!(d.push_row(&scan, &lookup, &row).is_err());
+    assert_eq!(d.raw(), &before[..]);
+    assert_eq!(d.rows(), lasers.len() as u32);
+    let mut out = vec![0.0; voxels.len()];
+    d.finish(&mut out).unwrap();
+    out.iter().map(|t| t.sqrt() * lsb_factor).collect()
+}
+
+/// The fixed lookup diagonal, then the column `T(focus, ·)`, against the reference;
+/// `(err, tol, S)` per voxel (diagonal first).
+fn compare_lookup(case: &Case, tolerance: f64, mistake: Mistake) -> Vec<(f64, f64, f64)> {
+    let (p, hists) = case.prepare();
+    let h64: Vec<f64> = hists.iter().map(|&x| f64::from(x)).collect();
+    let truth = Reference::new(&p, &case.lasers, &case.spads, h64);
+    let mut out = compare_lookup_target(case, &truth, p, &hists, None, tolerance, mistake);
+    // The column with the band test's alias-free window (the reference sums every path).
+    let pc = alias_free(p, &truth, case.focus, &case.voxels);
+    out.extend(compare_lookup_target(
+        case,
+        &truth,
+        pc,
+        &hists,
+        Some(case.focus),
+        tolerance,
+        mistake,
+    ));
+    out
+}
+
+/// [`compare_lookup`] for one target (`focus`: None = the diagonal) under `p`.
+fn compare_lookup_target(
+    case: &Case,
+    truth: &Reference,
+    p: Params,
+    hists: &[u16],
+    focus: Option<Point>,
+    tolerance: f64,
+    mistake: Mistake,
+) -> Vec<(f64, f64, f64)> {
+    let target = focus.map_or(Target::Diagonal, Target::Column);
+    let lp = LookupParams {
+        tolerance,
+        grid_len: None,
+    };
+    let limits = FixedLimits::new(
+        case.lasers.len() as u32,
+        case.spads.len() as u32,
+        MIN_DISTANCE,
+    );
+    let cfg0 = Config::try_new(&p).unwrap();
+    let step = FixedLookupGrid::try_new(&FixedConfig::try_new(&cfg0, &limits).unwrap(), &lp)
+        .unwrap()
+        .grid()
+        .step();
+    let p_k = Params {
+        t0: p.t0
+            + if mistake == Mistake::HalfStep {
+                step / 2.0
+            } else {
+                0.0
+            },
+        ..p
+    };
+    let cfg = Config::try_new(&p_k).unwrap();
+    let fc = FixedConfig::try_new(&cfg, &limits).unwrap();
+    let g = FixedLookupGrid::try_new(&fc, &lp).unwrap();
+    let factor = if mistake == Mistake::Shift { 2.0 } else { 1.0 };
+    let fixed = run_fixed_lookup(
+        &fc,
+        &g,
+        target,
+        &case.lasers,
+        &case.spads,
+        hists,
+        &case.voxels,
+        factor,
+    );
+    let amps = match focus {
+        None => truth.diagonal(reference::Gate::Gaussian, &case.voxels),
+        Some(a) => truth.column(reference::Gate::Gaussian, a, &case.voxels),
+    };
+    let j = cfg.bins() as f64;
+    let len = g.grid().len() as f64;
+    let m_bits = len.log2();
+    let gsum: f64 = (0..cfg.bins()).map(|j| cfg.gate_weight(j)).sum();
+    let k_max = cfg.k_lo().abs().max(cfg.k_hi().abs()) as f64;
+    let sq2 = std::f64::consts::SQRT_2;
+    // The band path's terms that reach HG (twiddles, gate weights, one NCO factor: the leg
+    // phase) and the phase steps (leg phase and carrier).
+    let eps_q = sq2 * 2f64.powi(-15) * gsum
+        + j * fc.gate_max() * 2f64.powi(-15)
+        + sq2 * CIS_ERR * gsum
+        + 3.0 * std::f64::consts::PI * k_max * 2f64.powi(-32) * gsum;
+    let h_half = std::f64::consts::FRAC_1_SQRT_2;
+    let blk_abs = 1.25 * (j + len / 2.0) * h_half + 1.42;
+    let eps_blk = gsum
+        * (1.25 * (m_bits - 1.0) * sq2 * 2f64.powi(-16)
+            + 4.002 * LAGRANGE_Q15_ERR
+            + 1.251 * sq2 * CIS_ERR)
+        + sq2 * gsum * 2f64.powi(-28) * blk_abs;
+    let eps = 1.25 * eps_q + eps_blk + g.grid().bound();
+    let nu_max = (0..cfg.bins())
+        .map(|j| cfg.nu(j).abs())
+        .fold(cfg.omega(), f64::max);
+    let (kl, ks) = (case.lasers.len() as f64, case.spads.len() as f64);
+    let mut out = Vec::new();
+    for (i, v) in case.voxels.iter().enumerate() {
+        let (pa, pv) = (p64(focus.unwrap_or(*v)), p64(*v));
+        let s_ab = truth.scale(&pa, &pv);
+        let w_sum: f64 = truth
+            .lasers
+            .iter()
+            .flat_map(|xl| truth.spads.iter().map(move |xs| (xl, xs)))
+            .map(|(xl, xs)| truth.w(reference::dist(xl, &pa)) * truth.w(reference::dist(&pv, xs)))
+            .sum();
+        let (_, tau_max) = truth.tau_range(&pa, &pv);
+        let turns = nu_max * (tau_max.abs() + p.t0.abs()) / (2.0 * std::f64::consts::PI);
+        let eps_f32 = U32
+            * (2.0 * std::f64::consts::PI * turns * (1.0 + 2.0 * gsum.max(1.0))
+                + j
+                + cfg.nt() as f64
+                + 64.0);
+        let tail = reference::erfc(p.band_half_width / 2f64.sqrt())
+            + 2.0 * (-p.gate_support.powi(2) / 2.0).exp();
+        let atol = w_sum
+            * (1.25 * (j + 1.0) * h_half + 2f64.powi(-16) * blk_abs + sq2 * j * eps_blk)
+            * fc.hg_lsb()
+            + kl * ks * h_half * fc.diag_lsb();
+        out.push((
+            support::nan_is_inf((fixed[i] - amps[i].norm()).abs()),
+            (eps + eps_f32 + tail) * s_ab + atol,
+            s_ab,
+        ));
+    }
+    out
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig {
+        cases: 128,
+        rng_algorithm: RngAlgorithm::ChaCha,
+        rng_seed: RngSeed::Fixed(SEED ^ 0x100c),
+        failure_persistence: Some(Box::new(FileFailurePersistence::WithSource("proptest-regressions"))),
+        ..ProptestConfig::default()
+    })]
+
+    /// The fixed-point lookup diagonal within its derived tolerance of the reference (grids
+    /// for tolerances 1e-5 and 1e-3; 10 % of the cases at the budget's edge, every bin 65535).
+    #[test]
+    fn fixed_lookup_matches_reference(case in case()) {
+        for tol in [1e-5, 1e-3] {
+            for (err, t, s) in compare_lookup(&case, tol, Mistake::None) {
+                prop_assert!(err <= t, "tolerance {tol}: err {err:e} > tol {t:e} (S {s:e})");
+            }
+        }
+    }
+}
+
+/// Error statistics of the fixed lookup diagonal (printed; `cargo test -- --nocapture`): the
+/// worst and RMS `err/tol` over a sweep, with the worst error relative to `S`.
+#[test]
+fn fixed_lookup_error_statistics() {
+    use proptest::strategy::ValueTree;
+    use proptest::test_runner::{Config as PtConfig, TestRng, TestRunner};
+    let rng = TestRng::from_seed(
+        RngAlgorithm::ChaCha,
+        &[(SEED ^ 7).to_le_bytes(); 4].concat(),
+    );
+    let mut runner = TestRunner::new_with_rng(PtConfig::default(), rng);
+    let (mut n, mut sq, mut worst, mut rel) = (0usize, 0.0, 0.0f64, 0.0f64);
+    for _ in 0..100 {
+        let case = case().new_tree(&mut runner).unwrap().current();
+        for (err, tol, s) in compare_lookup(&case, 1e-5, Mistake::None) {
+            let r = err / tol;
+            sq += r * r;
+            worst = worst.max(r);
+            rel = rel.max(err / s);
+            n += 1;
+        }
+    }
+    let rms = (sq / n as f64).sqrt();
+    println!(
+        "fixed lookup, {n} elements: err/tol RMS {rms:.3e} max {worst:.3e}; max err/S {rel:.3e}"
+    );
+    assert!(worst <= 1.0);
+    assert!(rms <= 1.0 / 3f64.sqrt(), "RMS {rms}");
+}
+
+/// The fixed lookup tolerance has teeth: half a grid step off in path time, or the
+/// accumulators read one bit off, fail it by > 3×.
+#[test]
+fn fixed_lookup_tolerance_detects_half_step_and_wrong_shift() {
+    let grid = |n: usize, half: f32, z: f32| -> Vec<Point> {
+        let c = |i: usize| -half + 2.0 * half * i as f32 / (n - 1) as f32;
+        (0..n)
+            .flat_map(|i| (0..n).map(move |j| [c(i), c(j), z]))
+            .collect()
+    };
+    let case = Case {
+        lasers: grid(3, 0.4, 0.0),
+        spads: grid(2, 0.3, 0.0),
+        // The second voxel lies on the flank of the first one's return (its path ≈ σ/2
+        // longer), where a shift of the path time changes |A| to first order.
+        voxels: vec![
+            [0.1, 0.0, 0.8],
+            [0.1, 0.0, 0.815],
+            [-0.2, 0.1, 0.6],
+            [0.3, -0.3, 1.0],
+        ],
+        focus: [0.0, 0.0, 0.7],
+        nt: 300,
+        dt: 0.01,
+        lambda_over_dt: 10.0,
+        m: 5.0,
+        cg: 5.0,
+        inv: true,
+        saturated: false,
+        seed: 7,
+        pos: 0.5,
+    };
+    let worst = |c: &[(f64, f64, f64)]| c.iter().fold(0.0f64, |m, c| m.max(c.0 / c.1));
+    // (Here both tolerances get the same grid: L = 8·k_d rounded up to a power of two.)
+    for tol in [1e-5, 1e-3] {
+        let kv = case.voxels.len();
+        let ok = compare_lookup(&case, tol, Mistake::None);
+        let half = compare_lookup(&case, tol, Mistake::HalfStep);
+        let shift = compare_lookup(&case, tol, Mistake::Shift);
+        for (what, lo, hi) in [("diagonal", 0, kv), ("column", kv, 2 * kv)] {
+            let (ok, half, shift) = (
+                worst(&ok[lo..hi]),
+                worst(&half[lo..hi]),
+                worst(&shift[lo..hi]),
+            );
+            println!(
+                "{what}, grid tolerance {tol}: err/tol correct {ok:.3}, half step {half:.3}, shift {shift:.3}"
+            );
+            assert!(ok <= 1.0, "{what}: {ok}");
+            assert!(half > 3.0, "{what}: half a grid step not detected: {half}");
+            assert!(shift > 3.0, "{what}: a wrong shift not detected: {shift}");
+        }
+    }
 }

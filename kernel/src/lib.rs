@@ -14,8 +14,9 @@ mod sample;
 mod scan;
 
 pub use self::fixed::{
-    CIS_ERR, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedPhotons, FixedRow,
-    FixedRowBuffer, FixedScan, cis_q15,
+    CIS_ERR, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedLookup, FixedLookupGrid,
+    FixedLookupProbe, FixedPhotons, FixedRow, FixedRowBuffer, FixedScan, LAGRANGE_Q15_ERR, cis_q15,
+    lagrange4_q15,
 };
 /// The Q1.15 type of the fixed-point tables (from the `fixed` crate 1.31).
 pub use ::fixed::types::I1F15;

@@ -93,6 +93,14 @@
 //! with the same code as [`FixedRowBuffer::load`]. Integer sums are exact in any order, so a
 //! row of photons is **bit-identical** to the row of their histogram (`tests/fixed_point.rs`).
 //!
+//! # Lookup path
+//!
+//! [`FixedLookupProbe`] images the diagonal or a column from the same [`FixedRow`]s at O(1)
+//! per (voxel, SPAD) pair: a block-exponent `i32` inverse FFT per SPAD, an integer grid
+//! index, Q15 cubic weights and the NCO carrier, into accumulators of the diagonal's LSB
+//! [`FixedConfig::diag_lsb`] within the same headroom budget (module `lookup`'s docs derive
+//! its error bound).
+//!
 //! Not in fixed point (use the float path): the un-gated and higher-order gates, `f32`
 //! histograms.
 
@@ -100,6 +108,7 @@ mod arith;
 mod column;
 mod config;
 mod diagonal;
+mod lookup;
 mod nco;
 mod photons;
 mod row;
@@ -108,6 +117,7 @@ mod scan;
 pub use column::FixedColumn;
 pub use config::{FixedConfig, FixedLimits};
 pub use diagonal::FixedDiagonal;
+pub use lookup::{FixedLookup, FixedLookupGrid, FixedLookupProbe, LAGRANGE_Q15_ERR, lagrange4_q15};
 pub use nco::{CIS_ERR, cis_q15};
 pub use photons::FixedPhotons;
 pub use row::{FixedRow, FixedRowBuffer};

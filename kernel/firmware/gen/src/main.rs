@@ -359,6 +359,8 @@ fn fixed_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results) {
         vec![0i64; FIXED_COLUMN_LEN],
     );
     let (mut ph, mut dp) = (vec![0i64; FIXED_PHOTONS_LEN], vec![0i64; FIXED_DIAG_LEN]);
+    let mut lt = vec![vltm_kernel::I1F15::ZERO; FIXED_LOOKUP_TABLES_LEN];
+    let mut ld = vec![0i64; FIXED_DIAG_LEN];
     let mut f = FixedResults::ZERO;
     let bufs = FixedBuffers {
         tables: &mut tables,
@@ -367,6 +369,8 @@ fn fixed_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results) {
         column: &mut c,
         photons: &mut ph,
         diag_photons: &mut dp,
+        lookup_tables: &mut lt,
+        lookup_state: &mut ld,
     };
     run_fixed(scan, bufs, &mut f).expect("fixed pipeline");
     assert_eq!(
@@ -383,12 +387,14 @@ fn fixed_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results) {
             .fold(0.0f64, |m, (x, y)| m.max((x.sqrt() - y.sqrt()).abs() / big))
     };
     let (ed, ec) = (rel(&f.diag, &r.diag), rel(&f.col, &r.col));
+    // The fixed-point lookup diagonal against the float band diagonal.
+    let (el, elc) = (rel(&f.lookup_diag, &r.diag), rel(&f.lookup_col, &r.col));
     assert!(
-        ed < 1e-3 && ec < 1e-3,
-        "fixed vs float: diag {ed:e}, col {ec:e}"
+        ed < 1e-3 && ec < 1e-3 && el < 1e-3 && elc < 1e-3,
+        "fixed vs float: diag {ed:e}, col {ec:e}, lookup diag {el:e}, lookup col {elc:e}"
     );
     eprintln!(
-        "fixed-point vs float, max |√T_fixed − √T_float| / max √T_float: diag {ed:.2e}, col {ec:.2e}"
+        "fixed-point vs float, max |√T_fixed − √T_float| / max √T_float: diag {ed:.2e}, col {ec:.2e}, lookup diag {el:.2e}, lookup col {elc:.2e}"
     );
     let mut txt = String::new();
     writeln!(
@@ -399,14 +405,14 @@ fn fixed_fixture(dir: &std::path::Path, scan: &[u16], r: &pipeline::Results) {
     .unwrap();
     writeln!(
         txt,
-        "# same scan.bin; max |sqrt(T_fixed) - sqrt(T_float)| / max sqrt(T_float): diag {ed:.2e}, col {ec:.2e}"
+        "# same scan.bin; max |sqrt(T_fixed) - sqrt(T_float)| / max sqrt(T_float): diag {ed:.2e}, col {ec:.2e}, lookup_diag, lookup_col (fixed-point lookup path, L = {FIXED_LOOKUP_GRID}) {el:.2e}, {elc:.2e}"
     )
     .unwrap();
     for i in 0..N_VOXELS {
         writeln!(
             txt,
-            "RESULT voxel={i} diag={:e} col={:e} diag_photons={:e}",
-            f.diag[i], f.col[i], f.diag_photons[i]
+            "RESULT voxel={i} diag={:e} col={:e} diag_photons={:e} lookup_diag={:e} lookup_col={:e}",
+            f.diag[i], f.col[i], f.diag_photons[i], f.lookup_diag[i], f.lookup_col[i]
         )
         .unwrap();
     }

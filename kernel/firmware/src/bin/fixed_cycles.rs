@@ -1,6 +1,8 @@
 //! Instruction counts per laser row of the kernel's **fixed-point** path (the Cortex-M0's,
 //! `thumbv6m-none-eabi`) for the paper's real setup (24 × 24 lasers, 28 SPADs, Nt = 255,
-//! λ = 0.13 m → N = 289, J = 137): `FixedRowBuffer::load` and one `FixedColumn::push_row`.
+//! λ = 0.13 m → N = 289, J = 137): `FixedRowBuffer::load`, one `FixedColumn::push_row`, and
+//! the fixed-point lookup diagonal (`FixedLookupProbe::push_row`, L = 1024) over a 64 × 64
+//! slice (2 m × 2 m at z = 1 m, as `cycles.rs`).
 //!
 //! The microbit's 16 KB of RAM cannot hold this setup (the row buffer alone is 30 KB), so the
 //! M0 build runs on the mps2-an386 machine, whose Cortex-M4 executes the ARMv6-M instruction
@@ -16,7 +18,8 @@ use panic_semihosting as _;
 use semihosting::{println, process};
 use vltm_firmware::icount::{self, measure};
 use vltm_kernel::{
-    Config, FixedColumn, FixedConfig, FixedLimits, FixedRowBuffer, FixedScan, I1F15, Params, Point,
+    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedLookup, FixedLookupGrid,
+    FixedLookupProbe, FixedRowBuffer, FixedScan, I1F15, LookupParams, Params, Point, Target,
 };
 
 const KS: usize = 28;
@@ -26,6 +29,25 @@ const J: usize = 137;
 const TABLES: usize = 2 * N_FFT + J;
 const ROWBUF: usize = KS * (2 * J + 1);
 const COLUMN: usize = 2 * KS * J;
+/// The lookup grid at the default tolerance 1e-5.
+const L: usize = 1024;
+const KV: usize = 64 * 64;
+const LOOKUP_SCRATCH: usize = 2 * (L + 3) + 2 * KV;
+
+/// A 64 × 64 slice, 2 m × 2 m at z = 1 m (as `cycles.rs`).
+static VOXELS: [Point; KV] = {
+    let mut v = [[0.0f32; 3]; KV];
+    let mut i = 0;
+    while i < KV {
+        v[i] = [
+            -1.0 + 2.0 * (i % 64) as f32 / 63.0,
+            -1.0 + 2.0 * (i / 64) as f32 / 63.0,
+            1.0,
+        ];
+        i += 1;
+    }
+    v
+};
 
 /// 28 SPADs on a line along x, 2.5 cm pitch (as `cycles.rs`).
 static SPADS: [Point; KS] = {
@@ -107,6 +129,85 @@ fn main() -> ! {
     println!(
         "CYCLES m0_fixed row_to_column instructions={:.0}",
         i(t_load + t_col)
+    );
+    let (Some(lt), Some(ld), Some(ls)) = (
+        singleton!(: [I1F15; L] = [I1F15::ZERO; L]),
+        singleton!(: [i64; 2 * KV] = [0; 2 * KV]),
+        singleton!(: [i32; LOOKUP_SCRATCH] = [0; LOOKUP_SCRATCH]),
+    ) else {
+        process::exit(7)
+    };
+    let Ok(grid) = FixedLookupGrid::try_new(&fc, &LookupParams::new()) else {
+        process::exit(2)
+    };
+    if grid.grid().len() != L {
+        process::exit(2)
+    }
+    let Ok(lookup) = FixedLookup::new(&grid, lt) else {
+        process::exit(2)
+    };
+    let Ok(mut diag) =
+        FixedLookupProbe::new(&lookup, Target::Diagonal, &VOXELS, &mut ld[..], &mut ls[..])
+    else {
+        process::exit(2)
+    };
+    let (t_diag, d) = measure(|| diag.push_row(&scan, &lookup, &row));
+    if d.is_err() {
+        process::exit(3)
+    }
+    // The same row over the slice's first 64 voxels: the `Ks` grid syntheses and 64·Ks pairs,
+    // which separates the per-row synthesis from the per-pair cost.
+    let (Some(ld64), Some(ls64), Some(bd64)) = (
+        singleton!(: [i64; 128] = [0; 128]),
+        singleton!(: [i32; 2 * (L + 3) + 128] = [0; 2 * (L + 3) + 128]),
+        singleton!(: [i64; 128] = [0; 128]),
+    ) else {
+        process::exit(7)
+    };
+    let Ok(mut d64) = FixedLookupProbe::new(&lookup, Target::Diagonal, &VOXELS[..64], ld64, ls64)
+    else {
+        process::exit(2)
+    };
+    let (t_64, d) = measure(|| d64.push_row(&scan, &lookup, &row));
+    if d.is_err() {
+        process::exit(3)
+    }
+    // The fixed band diagonal (`J` MACs per pair) over the same 64 voxels, for comparison.
+    let Ok(mut b64) = FixedDiagonal::new(&VOXELS[..64], bd64) else {
+        process::exit(2)
+    };
+    let (t_b64, d) = measure(|| b64.push_row(&scan, &row));
+    if d.is_err() {
+        process::exit(3)
+    }
+    let per_pair = (i(t_diag) - i(t_64)) / (KS * (KV - 64)) as f64;
+    println!(
+        "CYCLES m0_fixed lookup_synthesis L={L} instructions={:.0} per_spad={:.0}",
+        i(t_64) - per_pair * (KS * 64) as f64,
+        (i(t_64) - per_pair * (KS * 64) as f64) / KS as f64
+    );
+    println!(
+        "CYCLES m0_fixed band_diag per_pair={:.1}",
+        i(t_b64) / (KS * 64) as f64
+    );
+    println!(
+        "CYCLES m0_fixed lookup_diag64x64 L={L} instructions={:.0} per_pair={per_pair:.1}",
+        i(t_diag),
+    );
+    // The column T(a, ·) over the same slice on the same buffers (its lead d_la + d_av per
+    // voxel and row; the same per-pair work).
+    let Ok(mut col) =
+        FixedLookupProbe::new(&lookup, Target::Column([0.1, 0.2, 1.0]), &VOXELS, ld, ls)
+    else {
+        process::exit(2)
+    };
+    let (t_lcol, c) = measure(|| col.push_row(&scan, &lookup, &row));
+    if c.is_err() {
+        process::exit(3)
+    }
+    println!(
+        "CYCLES m0_fixed lookup_col64x64 L={L} instructions={:.0}",
+        i(t_lcol)
     );
     process::exit(0)
 }

@@ -2,8 +2,10 @@
 //! panic: `FixedConfig::try_new`, `FixedScan::new`, `FixedRowBuffer::new`/`load`,
 //! `FixedDiagonal`/`FixedColumn` `new`/`push_row` (including a refused row past the budget)/
 //! `finish`, `FixedPhotons` `new`/`reset`/`push` (with out-of-range events)/`load_photons`,
+//! the fixed-point lookup path (`FixedLookupGrid::try_new`, `FixedLookup::new`,
+//! `FixedLookupProbe` `new`/`push_row` (with the refused row)/`finish`, diagonal and column),
 //! with inputs through `black_box`. Exit status 0 = every call succeeded, the
-//! diagonal peaks at P1 and the extra row was refused.
+//! diagonals (band and lookup) peak at P1 and the extra row was refused.
 #![no_std]
 #![no_main]
 
@@ -20,12 +22,14 @@ fn panic(_: &core::panic::PanicInfo<'_>) -> ! {
 }
 use semihosting::process;
 use vltm_firmware::fixed_pipeline::{
-    FIXED_COLUMN_LEN, FIXED_DIAG_LEN, FIXED_PHOTONS_LEN, FIXED_ROW_LEN, FIXED_TABLES_LEN, LIMITS,
+    FIXED_COLUMN_LEN, FIXED_DIAG_LEN, FIXED_LOOKUP_SCRATCH_LEN, FIXED_LOOKUP_TABLES_LEN,
+    FIXED_PHOTONS_LEN, FIXED_ROW_LEN, FIXED_TABLES_LEN, LIMITS, fixed_lookup_params,
 };
 use vltm_firmware::fixture::{FOCUS, LASERS, N_VOXELS, P1_VOXEL, ROW, SPADS, VOXELS, params};
 use vltm_firmware::pipeline::argmax;
 use vltm_kernel::{
-    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedPhotons, FixedRowBuffer, FixedScan, I1F15,
+    Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLookup, FixedLookupGrid,
+    FixedLookupProbe, FixedPhotons, FixedRowBuffer, FixedScan, I1F15, Target,
 };
 
 #[entry]
@@ -49,6 +53,13 @@ fn run() -> i32 {
     let Some(pbuf) = singleton!(: [i64; FIXED_PHOTONS_LEN] = [0; FIXED_PHOTONS_LEN]) else {
         return 7;
     };
+    let (Some(lt), Some(ld), Some(ls)) = (
+        singleton!(: [I1F15; FIXED_LOOKUP_TABLES_LEN] = [I1F15::ZERO; FIXED_LOOKUP_TABLES_LEN]),
+        singleton!(: [i64; FIXED_DIAG_LEN] = [0; FIXED_DIAG_LEN]),
+        singleton!(: [i32; FIXED_LOOKUP_SCRATCH_LEN] = [0; FIXED_LOOKUP_SCRATCH_LEN]),
+    ) else {
+        return 7;
+    };
     let Ok(cfg) = Config::try_new(&black_box(params())) else {
         return 2;
     };
@@ -69,6 +80,21 @@ fn run() -> i32 {
     let Ok(mut col) = FixedColumn::new(&scan, black_box(FOCUS), black_box(&mut sc[..])) else {
         return 2;
     };
+    let Ok(grid) = FixedLookupGrid::try_new(&fc, &black_box(fixed_lookup_params())) else {
+        return 2;
+    };
+    let Ok(lookup) = FixedLookup::new(&grid, black_box(&mut lt[..])) else {
+        return 2;
+    };
+    let Ok(mut ldiag) = FixedLookupProbe::new(
+        &lookup,
+        black_box(Target::Diagonal),
+        voxels,
+        black_box(&mut ld[..]),
+        black_box(&mut ls[..]),
+    ) else {
+        return 2;
+    };
     let row_len = black_box(ROW);
     for (hists, laser) in data
         .chunks_exact(row_len.max(1))
@@ -77,7 +103,10 @@ fn run() -> i32 {
         let Ok(row) = rows.load(&scan, *laser, hists) else {
             return 2;
         };
-        if diag.push_row(&scan, &row).is_err() || col.push_row(&scan, &row).is_err() {
+        if diag.push_row(&scan, &row).is_err()
+            || col.push_row(&scan, &row).is_err()
+            || ldiag.push_row(&scan, &lookup, &row).is_err()
+        {
             return 2;
         }
     }
@@ -117,8 +146,27 @@ fn run() -> i32 {
     if row.band().iter().zip(band).any(|(a, b)| *a != b) {
         return 5;
     }
-    if diag.push_row(&scan, &row).is_ok() {
+    if diag.push_row(&scan, &row).is_ok() || ldiag.push_row(&scan, &lookup, &row).is_ok() {
         return 6;
+    }
+    if ldiag.finish(&mut out[..]).is_err() {
+        return 2;
+    }
+    if argmax(&out[..]) != P1_VOXEL {
+        return 3;
+    }
+    // The lookup column on the same buffers (one row): covers its per-row path.
+    let Ok(mut lcol) = FixedLookupProbe::new(
+        &lookup,
+        black_box(Target::Column(FOCUS)),
+        voxels,
+        black_box(&mut ld[..]),
+        black_box(&mut ls[..]),
+    ) else {
+        return 2;
+    };
+    if lcol.push_row(&scan, &lookup, &row).is_err() || lcol.finish(&mut out[..]).is_err() {
+        return 2;
     }
     if diag.finish(&fc, &mut out[..]).is_err() {
         return 2;
