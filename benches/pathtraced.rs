@@ -6,6 +6,12 @@
 //! truth's `I_i` that survives) and the Pearson correlation with the truth's `I_i` (over the
 //! object's Γ voxels and over Γ). `cargo bench --bench pathtraced -- diagnose` adds the
 //! measurements of the leak's candidate causes (`vltm::probe::leak`'s module doc).
+//! A second table gives the ceilings of a window-based correction (the truth put through the
+//! same windows: kept and Pearson with the truth) and the oracle subtraction
+//! `H_all − H_control` with no windows, which validates the measuring chain. With
+//! `PATHTRACED_SEED1=<dir>` (a folder holding `<scene>_all/<scene>_all.hdf5` rendered with
+//! another seed: `SEED=1 fixtures/pathtraced/render.sh`), a third table gives the figures of
+//! that render and the `I_i` of the noise-only capture `(H_seed0 − H_seed1)/√2`.
 //! Not a timing benchmark: it measures fidelity. Takes about a minute per setup and scene.
 
 #[path = "../tests/support/pathtraced.rs"]
@@ -23,6 +29,8 @@ fn main() {
     let named: Vec<String> = std::env::args()
         .filter(|a| SCENES.contains(&a.as_str()))
         .collect();
+    let mut ceilings = Vec::new();
+    let mut seed1 = Vec::new();
     for scene in SCENES {
         if !named.is_empty() && !named.iter().any(|n| n == scene) {
             continue;
@@ -30,6 +38,16 @@ fn main() {
         let mut c = load(scene);
         let r = measure(&mut c, &defaults());
         print(scene, "defaults", &r);
+        ceilings.push((scene, r.clone()));
+        if let Some(dir) = std::env::var_os("PATHTRACED_SEED1") {
+            let p = std::path::Path::new(&dir)
+                .join(format!("{scene}_all"))
+                .join(format!("{scene}_all.hdf5"));
+            match vltm::io::open(&p) {
+                Ok(other) => seed1.push((scene, r.clone(), seed_one(&mut c, other))),
+                Err(e) => eprintln!("{}: {e} (no seed-1 figures for {scene})", p.display()),
+            }
+        }
         if !diagnose {
             continue;
         }
@@ -89,6 +107,56 @@ fn main() {
             );
         }
     }
+    println!();
+    println!("Ceilings of a window-based correction and the oracle subtraction (defaults):");
+    println!();
+    println!(
+        "| scene | object | kept ceiling | Pearson ceiling: object (Γ) | oracle kept | oracle Pearson: object (Γ) |"
+    );
+    println!("|---|---|---|---|---|---|");
+    for (scene, r) in &ceilings {
+        print_ceilings(scene, r);
+    }
+    if seed1.is_empty() {
+        return;
+    }
+    println!();
+    println!(
+        "Second seed (the same scene rendered with seed 1; control and truth of seed 0) and the noise-only capture (H_seed0 − H_seed1)/√2:"
+    );
+    println!();
+    println!(
+        "| scene | object | seed 0: vs control / kept / Pearson | seed 1: vs control / kept / Pearson | noise I_i corrected: vs full / vs control / vs truth | noise I_i, Eq. 17: vs truth |"
+    );
+    println!("|---|---|---|---|---|---|");
+    for (scene, r0, (r1, noise)) in &seed1 {
+        for ((a, b), n) in r0.rows.iter().zip(&r1.rows).zip(noise) {
+            println!(
+                "| {scene} | {} | {:.2}× / {:.3} / {:.3} | {:.2}× / {:.3} / {:.3} | {:.3} / {:.3} / {:.4} | {:.4} |",
+                a.name,
+                a.ratio(),
+                a.kept(),
+                a.pearson,
+                b.ratio(),
+                b.kept(),
+                b.pearson,
+                n.corrected / a.full,
+                n.corrected / a.control,
+                n.corrected / a.truth,
+                n.plain / a.truth
+            );
+        }
+    }
+}
+
+/// The figures with `other` (the same scene rendered with another seed) as the full capture,
+/// and the noise-only capture's I_i.
+fn seed_one(c: &mut Captures, other: vltm::io::Capture) -> (SceneResult, Vec<NoiseRow>) {
+    let n = noise(c, &other, &defaults());
+    let seed0 = std::mem::replace(&mut c.all, other);
+    let r = measure(c, &defaults());
+    c.all = seed0;
+    (r, n)
 }
 
 /// Means over `idx` of I_i of the full capture, the control and the truth, summed over the
