@@ -91,6 +91,7 @@ fn main() {
             let r = measure(&mut c, &s);
             print(scene, label, &r);
         }
+        pearson_breakdown(&c, &r);
         // Pairs on one object only: Γ restricted to each object in turn; its share of the
         // object's I_i under the defaults.
         for (name, idx) in c.objects.clone() {
@@ -144,6 +145,49 @@ fn main() {
                 n.corrected / a.control,
                 n.corrected / a.truth,
                 n.plain / a.truth
+            );
+        }
+    }
+}
+
+/// Where the Pearson correlation with the truth is lost, per object over its Γ voxels: the
+/// corrected I_i against the windowed truth (what the windows let through), the corrected I_i
+/// minus the corrected control (the residual direct light taken out) against the truth, and
+/// the voxels near (< 0.2 m) and far from the other object: their share of the truth, kept
+/// ceiling, Pearson and Pearson ceiling.
+fn pearson_breakdown(c: &Captures, r: &SceneResult) {
+    let [f, k, t, tg, _] = &r.maps;
+    let fk: Vec<f32> = f.iter().zip(k).map(|(a, b)| a - b).collect();
+    for (j, (name, idx)) in c.objects.iter().enumerate() {
+        let ig: Vec<usize> = idx.iter().copied().filter(|&i| r.mask[i]).collect();
+        let d = distance_to_others(c, j, &ig);
+        let sum = |v: &[f32], s: &[usize]| s.iter().map(|&i| f64::from(v[i])).sum::<f64>();
+        println!(
+            "Pearson breakdown, {}/{name} ({} Γ voxels): corrected vs windowed truth {:.3}; corrected − control vs truth {:.3}; windowed truth vs truth {:.3}",
+            c.scene,
+            ig.len(),
+            pearson(f, tg, &ig),
+            pearson(&fk, t, &ig),
+            pearson(tg, t, &ig)
+        );
+        for (label, near) in [
+            ("near the other object (< 0.2 m)", true),
+            ("far from it", false),
+        ] {
+            let s: Vec<usize> = ig
+                .iter()
+                .zip(&d)
+                .filter(|&(_, &x)| (x < 0.2) == near)
+                .map(|(&i, _)| i)
+                .collect();
+            println!(
+                "  {label}: {} voxels, {:.2} of the truth, kept ceiling {:.3}, kept {:.3}, Pearson {:.3}, Pearson ceiling {:.3}",
+                s.len(),
+                sum(t, &s) / sum(t, &ig),
+                sum(tg, &s) / sum(t, &s),
+                sum(f, &s) / sum(t, &s),
+                pearson(f, t, &s),
+                pearson(tg, t, &s)
             );
         }
     }

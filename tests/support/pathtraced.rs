@@ -48,6 +48,8 @@ pub struct Captures {
     pub objects: Vec<(String, Vec<usize>)>,
     /// The object the virtual projector focuses on (the "projector's own surface").
     pub projector: String,
+    /// Points on each object's box surface (50 per metre), in `objects` order.
+    pub surfaces: Vec<Vec<Point>>,
 }
 
 /// Points on the surface of a box (`scene.json`: centre, size along (r, u, −f), frame), `n`
@@ -104,6 +106,12 @@ pub fn load_from(root: &Path, scene: &str) -> Captures {
         .iter()
         .map(|(name, o)| (name.clone(), vol.surface_voxels(&box_surface(o, 200.0))))
         .collect();
+    let surfaces = j["objects"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|o| box_surface(o, 50.0))
+        .collect();
     Captures {
         scene: scene.to_string(),
         all: open("all"),
@@ -112,6 +120,7 @@ pub fn load_from(root: &Path, scene: &str) -> Captures {
         vol,
         objects,
         projector: j["projector_surface"].as_str().unwrap().to_string(),
+        surfaces,
     }
 }
 
@@ -309,6 +318,28 @@ pub fn subtract(a: &Capture, b: &Capture, scale: f32) -> Capture {
         .map(|(x, y)| (x - y) * scale)
         .collect();
     Capture::new(a.geometry.clone(), data, Path::new("difference")).unwrap()
+}
+
+/// Distance (m) from each voxel of `idx` to the nearest surface point of the objects other
+/// than object `k`.
+pub fn distance_to_others(c: &Captures, k: usize, idx: &[usize]) -> Vec<f64> {
+    idx.iter()
+        .map(|&i| {
+            let v = c.vol.points[i];
+            c.surfaces
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != k)
+                .flat_map(|(_, s)| s.iter())
+                .map(|p| {
+                    (0..3)
+                        .map(|x| f64::from(p[x] - v[x]).powi(2))
+                        .sum::<f64>()
+                        .sqrt()
+                })
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect()
 }
 
 /// Monte Carlo noise of the full capture, measured from a second render with another seed.
