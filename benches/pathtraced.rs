@@ -119,9 +119,9 @@ fn main() {
     println!("Ceilings of a window-based correction and the oracle subtraction (defaults):");
     println!();
     println!(
-        "| scene | object | kept ceiling | Pearson ceiling: object (Γ) | oracle kept | oracle Pearson: object (Γ) |"
+        "| scene | object | kept ceiling | Pearson ceiling: object (Γ) | Pearson of the corrected I_i with the windowed truth | oracle kept | oracle Pearson: object (Γ) |"
     );
-    println!("|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|");
     for (scene, r) in &ceilings {
         print_ceilings(scene, r);
     }

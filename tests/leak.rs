@@ -460,6 +460,13 @@ fn check_pathtraced(scene: &str, want: &[Documented], pearson_gamma: f64) {
             o.pearson_ceiling,
             w.pearson_ceiling
         );
+        // The correction reproduces what the windows let through of the truth: the gap to
+        // the truth is the windows', not a residual of direct light.
+        assert!(
+            o.pearson_windowed >= 0.9,
+            "{what}: Pearson of the corrected I_i with the windowed truth {:.3}",
+            o.pearson_windowed
+        );
         // The oracle subtraction H_all − H_control with no windows validates the measuring
         // chain: it is the truth plus the light of three or more bounces (a few %).
         assert!(

@@ -176,6 +176,9 @@ pub struct ObjectRow {
     /// truth itself over the object's Γ voxels. A window-based correction of the full capture
     /// can at best reproduce the windowed truth, so its Pearson cannot be expected above this.
     pub pearson_ceiling: f64,
+    /// Pearson correlation of the full capture's corrected I_i with the windowed truth over
+    /// the object's Γ voxels: how close the correction comes to what the windows let through.
+    pub pearson_windowed: f64,
     /// Mean I_i of the oracle subtraction `H_all − H_control` with no windows (same Γ): it
     /// validates the measuring chain (≈ the truth when the renders add up).
     pub oracle: f64,
@@ -290,6 +293,7 @@ pub fn measure(c: &mut Captures, s: &Setup) -> SceneResult {
                 truth_gated: mean(&tg.values, idx),
                 pearson: pearson(&f.values, &t.values, &ig),
                 pearson_ceiling: pearson(&tg.values, &t.values, &ig),
+                pearson_windowed: pearson(&f.values, &tg.values, &ig),
                 oracle: mean(&o.values, idx),
                 pearson_oracle: pearson(&o.values, &t.values, &ig),
             }
@@ -406,15 +410,16 @@ pub fn print(scene: &str, label: &str, r: &SceneResult) {
 
 /// Print one scene's ceilings and oracle (markdown rows): per object the kept ceiling (the
 /// truth through the same windows / the truth), the Pearson ceiling (the windowed truth with
-/// the truth), and the oracle subtraction `H_all − H_control` with no windows (kept, Pearson).
+/// the truth), the corrected I_i's Pearson with the windowed truth, and the oracle subtraction `H_all − H_control` with no windows (kept, Pearson).
 pub fn print_ceilings(scene: &str, r: &SceneResult) {
     for o in &r.rows {
         println!(
-            "| {scene} | {} | {:.3} | {:.3} (Γ {:.3}) | {:.3} | {:.3} (Γ {:.3}) |",
+            "| {scene} | {} | {:.3} | {:.3} (Γ {:.3}) | {:.3} | {:.3} | {:.3} (Γ {:.3}) |",
             o.name,
             o.kept_ceiling(),
             o.pearson_ceiling,
             r.pearson_ceiling,
+            o.pearson_windowed,
             o.kept_oracle(),
             o.pearson_oracle,
             r.pearson_oracle
