@@ -13,6 +13,8 @@
 //! `PATHTRACED_SEED1=<dir>` (a folder holding `<scene>_all/<scene>_all.hdf5` rendered with
 //! another seed: `SEED=1 fixtures/pathtraced/render.sh`), a third table gives the figures of
 //! that render and the `I_i` of the noise-only capture `(H_seed0 − H_seed1)/√2`.
+//! `PATHTRACED_DIR=<dir>` measures another set of the same scenes' captures instead (for
+//! example all three rendered with seed 1).
 //! Not a timing benchmark: it measures fidelity. Takes about a minute per setup and scene.
 
 #[path = "../tests/support/pathtraced.rs"]
@@ -37,7 +39,10 @@ fn main() {
         if !named.is_empty() && !named.iter().any(|n| n == scene) {
             continue;
         }
-        let mut c = load(scene);
+        let mut c = match std::env::var_os("PATHTRACED_DIR") {
+            Some(d) => load_from(std::path::Path::new(&d), scene),
+            None => load(scene),
+        };
         let r = measure(&mut c, &defaults());
         print(scene, "defaults", &r);
         ceilings.push((scene, r.clone()));
