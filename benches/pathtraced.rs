@@ -5,7 +5,16 @@
 //! object's voxels: the corrected `I_i` vs its control (ratio), `kept` (the fraction of the
 //! truth's `I_i` that survives) and the Pearson correlation with the truth's `I_i` (over the
 //! object's Γ voxels and over Γ). `cargo bench --bench pathtraced -- diagnose` adds the
-//! measurements of the leak's candidate causes (`vltm::probe::leak`'s module doc).
+//! measurements of the leak's candidate causes (`vltm::probe::leak`'s module doc); `-- pearson`
+//! only the breakdown of where the Pearson correlation with the truth is lost.
+//! A second table gives the ceilings of a window-based correction (the truth put through the
+//! same windows: kept and Pearson with the truth) and the oracle subtraction
+//! `H_all − H_control` with no windows, which validates the measuring chain. With
+//! `PATHTRACED_SEED1=<dir>` (a folder holding `<scene>_all/<scene>_all.hdf5` rendered with
+//! another seed: `SEED=1 fixtures/pathtraced/render.sh`), a third table gives the figures of
+//! that render and the `I_i` of the noise-only capture `(H_seed0 − H_seed1)/√2`.
+//! `PATHTRACED_DIR=<dir>` measures another set of the same scenes' captures instead (for
+//! example all three rendered with seed 1).
 //! Not a timing benchmark: it measures fidelity. Takes about a minute per setup and scene.
 
 #[path = "../tests/support/pathtraced.rs"]
@@ -16,6 +25,7 @@ use vltm::probe::{LeakOptions, Wave};
 
 fn main() {
     let diagnose = std::env::args().any(|a| a == "diagnose");
+    let breakdown = diagnose || std::env::args().any(|a| a == "pearson");
     println!(
         "| scene | setup | object | Γ | corrected I_i vs control | kept | Pearson with the truth |"
     );
@@ -23,13 +33,34 @@ fn main() {
     let named: Vec<String> = std::env::args()
         .filter(|a| SCENES.contains(&a.as_str()))
         .collect();
+    let mut ceilings = Vec::new();
+    let mut seed1 = Vec::new();
     for scene in SCENES {
         if !named.is_empty() && !named.iter().any(|n| n == scene) {
             continue;
         }
-        let mut c = load(scene);
+        let mut c = match std::env::var_os("PATHTRACED_DIR") {
+            Some(d) => load_from(std::path::Path::new(&d), scene),
+            None => load(scene),
+        };
         let r = measure(&mut c, &defaults());
         print(scene, "defaults", &r);
+        ceilings.push((scene, r.clone()));
+        if let Some(dir) = std::env::var_os("PATHTRACED_SEED1") {
+            let p = std::path::Path::new(&dir)
+                .join(format!("{scene}_all"))
+                .join(format!("{scene}_all.hdf5"));
+            match vltm::io::open(&p) {
+                Ok(other) => {
+                    let (r1, n, avg) = seed_one(&mut c, other);
+                    seed1.push((scene, r.clone(), r1, n, avg, c.objects.clone()));
+                }
+                Err(e) => eprintln!("{}: {e} (no seed-1 figures for {scene})", p.display()),
+            }
+        }
+        if breakdown {
+            pearson_breakdown(&c, &r);
+        }
         if !diagnose {
             continue;
         }
@@ -89,6 +120,145 @@ fn main() {
             );
         }
     }
+    println!();
+    println!("Ceilings of a window-based correction and the oracle subtraction (defaults):");
+    println!();
+    println!(
+        "| scene | object | kept ceiling | Pearson ceiling: object (Γ) | Pearson of the corrected I_i with the windowed truth | oracle kept | oracle Pearson: object (Γ) |"
+    );
+    println!("|---|---|---|---|---|---|---|");
+    for (scene, r) in &ceilings {
+        print_ceilings(scene, r);
+    }
+    if seed1.is_empty() {
+        return;
+    }
+    println!();
+    println!(
+        "Second seed (the same scene rendered with seed 1; control and truth of seed 0) and the noise-only capture (H_seed0 − H_seed1)/√2:"
+    );
+    println!();
+    println!(
+        "| scene | object | seed 0: vs control / kept / Pearson | seed 1: vs control / kept / Pearson | mean of both seeds (60 000 samples): vs control / kept / Pearson | Pearson seed 0 vs seed 1 | noise I_i corrected: vs full / vs control / vs truth | noise I_i, Eq. 17: vs truth |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    for (scene, r0, r1, noise, avg, objects) in &seed1 {
+        for (((a, b), n), m) in r0.rows.iter().zip(&r1.rows).zip(noise).zip(&avg.rows) {
+            let idx = &objects.iter().find(|o| o.0 == a.name).unwrap().1;
+            let ig: Vec<usize> = idx
+                .iter()
+                .copied()
+                .filter(|&i| r0.mask[i] && r1.mask[i])
+                .collect();
+            println!(
+                "| {scene} | {} | {:.2}× / {:.3} / {:.3} | {:.2}× / {:.3} / {:.3} | {:.2}× / {:.3} / {:.3} | {:.3} | {:.3} / {:.3} / {:.4} | {:.4} |",
+                a.name,
+                a.ratio(),
+                a.kept(),
+                a.pearson,
+                b.ratio(),
+                b.kept(),
+                b.pearson,
+                m.ratio(),
+                m.kept(),
+                m.pearson,
+                pearson(&r0.maps[0], &r1.maps[0], &ig),
+                n.corrected / a.full,
+                n.corrected / a.control,
+                n.corrected / a.truth,
+                n.plain / a.truth
+            );
+        }
+        println!(
+            "| {scene} | all of Γ: Pearson | {:.3} | {:.3} | {:.3} | | | |",
+            r0.pearson, r1.pearson, avg.pearson
+        );
+    }
+}
+
+/// Where the Pearson correlation with the truth is lost, per object over its Γ voxels: the
+/// corrected I_i against the windowed truth (what the windows let through), the corrected I_i
+/// minus the corrected control (the residual direct light taken out) against the truth, and
+/// the Γ voxels nearer and farther from the other object: their share of the truth, kept
+/// ceiling, Pearson and Pearson ceiling (split at the median distance), and where Γ lies.
+fn pearson_breakdown(c: &Captures, r: &SceneResult) {
+    let [f, k, t, tg, _] = &r.maps;
+    let fk: Vec<f32> = f.iter().zip(k).map(|(a, b)| a - b).collect();
+    for (j, (name, idx)) in c.objects.iter().enumerate() {
+        let ig: Vec<usize> = idx.iter().copied().filter(|&i| r.mask[i]).collect();
+        let d = distance_to_others(c, j, &ig);
+        let da = distance_to_others(c, j, idx);
+        let z = |s: &[usize]| {
+            s.iter()
+                .map(|&i| c.vol.points[i][2])
+                .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), z| {
+                    (a.min(z), b.max(z))
+                })
+        };
+        let mut sorted = d.clone();
+        sorted.sort_by(f64::total_cmp);
+        let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0.0);
+        let sum = |v: &[f32], s: &[usize]| s.iter().map(|&i| f64::from(v[i])).sum::<f64>();
+        let (zg, za) = (z(&ig), z(idx));
+        println!(
+            "Pearson breakdown, {}/{name} ({} Γ voxels, z {:.2}–{:.2} m of the object's {:.2}–{:.2} m; {:.2}–{:.2} m from the other object, the object's voxels {:.2}–{:.2} m): corrected vs windowed truth {:.3}; corrected − control vs truth {:.3}; windowed truth vs truth {:.3}",
+            c.scene,
+            ig.len(),
+            zg.0,
+            zg.1,
+            za.0,
+            za.1,
+            sorted.first().copied().unwrap_or(f64::NAN),
+            sorted.last().copied().unwrap_or(f64::NAN),
+            da.iter().copied().fold(f64::INFINITY, f64::min),
+            da.iter().copied().fold(0.0, f64::max),
+            pearson(f, tg, &ig),
+            pearson(&fk, t, &ig),
+            pearson(tg, t, &ig)
+        );
+        for (label, near) in [
+            ("Γ voxels nearer the other object than the median", true),
+            ("the farther half", false),
+        ] {
+            let s: Vec<usize> = ig
+                .iter()
+                .zip(&d)
+                .filter(|&(_, &x)| (x < median) == near)
+                .map(|(&i, _)| i)
+                .collect();
+            println!(
+                "  {label}: {} voxels, {:.2} of the truth, kept ceiling {:.3}, kept {:.3}, Pearson {:.3}, Pearson ceiling {:.3}",
+                s.len(),
+                sum(t, &s) / sum(t, &ig),
+                sum(tg, &s) / sum(t, &s),
+                sum(f, &s) / sum(t, &s),
+                pearson(f, t, &s),
+                pearson(tg, t, &s)
+            );
+        }
+    }
+}
+
+/// The figures with `other` (the same scene rendered with another seed) as the full capture,
+/// and the noise-only capture's I_i.
+fn seed_one(
+    c: &mut Captures,
+    other: vltm::io::Capture,
+) -> (SceneResult, Vec<NoiseRow>, SceneResult) {
+    let n = noise(c, &other, &defaults());
+    let mean = {
+        let mut m = subtract(&c.all, &other, 0.5);
+        for (x, (a, b)) in m.data.iter_mut().zip(c.all.data.iter().zip(&other.data)) {
+            *x = 0.5 * (a + b);
+        }
+        m
+    };
+    let seed0 = std::mem::replace(&mut c.all, other);
+    let r = measure(c, &defaults());
+    c.all = mean;
+    let avg = measure(c, &defaults());
+    c.all = seed0;
+    (r, n, avg)
 }
 
 /// Means over `idx` of I_i of the full capture, the control and the truth, summed over the

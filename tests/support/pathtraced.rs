@@ -48,6 +48,8 @@ pub struct Captures {
     pub objects: Vec<(String, Vec<usize>)>,
     /// The object the virtual projector focuses on (the "projector's own surface").
     pub projector: String,
+    /// Points on each object's box surface (50 per metre), in `objects` order.
+    pub surfaces: Vec<Vec<Point>>,
 }
 
 /// Points on the surface of a box (`scene.json`: centre, size along (r, u, −f), frame), `n`
@@ -104,6 +106,12 @@ pub fn load_from(root: &Path, scene: &str) -> Captures {
         .iter()
         .map(|(name, o)| (name.clone(), vol.surface_voxels(&box_surface(o, 200.0))))
         .collect();
+    let surfaces = j["objects"]
+        .as_object()
+        .unwrap()
+        .values()
+        .map(|o| box_surface(o, 50.0))
+        .collect();
     Captures {
         scene: scene.to_string(),
         all: open("all"),
@@ -112,6 +120,7 @@ pub fn load_from(root: &Path, scene: &str) -> Captures {
         vol,
         objects,
         projector: j["projector_surface"].as_str().unwrap().to_string(),
+        surfaces,
     }
 }
 
@@ -163,6 +172,18 @@ pub struct ObjectRow {
     /// Pearson correlation of the full capture's I_i with the truth's over the object's Γ
     /// voxels.
     pub pearson: f64,
+    /// Pearson ceiling: the correlation of the truth put through the same windows with the
+    /// truth itself over the object's Γ voxels. A window-based correction of the full capture
+    /// can at best reproduce the windowed truth, so its Pearson cannot be expected above this.
+    pub pearson_ceiling: f64,
+    /// Pearson correlation of the full capture's corrected I_i with the windowed truth over
+    /// the object's Γ voxels: how close the correction comes to what the windows let through.
+    pub pearson_windowed: f64,
+    /// Mean I_i of the oracle subtraction `H_all − H_control` with no windows (same Γ): it
+    /// validates the measuring chain (≈ the truth when the renders add up).
+    pub oracle: f64,
+    /// Pearson correlation of the oracle's I_i with the truth's over the object's Γ voxels.
+    pub pearson_oracle: f64,
 }
 
 impl ObjectRow {
@@ -173,6 +194,15 @@ impl ObjectRow {
     /// Full / truth.
     pub fn kept(&self) -> f64 {
         self.full / self.truth
+    }
+    /// Kept ceiling: the windowed truth / the truth (what a window-based correction can keep
+    /// at best).
+    pub fn kept_ceiling(&self) -> f64 {
+        self.truth_gated / self.truth
+    }
+    /// Oracle / truth.
+    pub fn kept_oracle(&self) -> f64 {
+        self.oracle / self.truth
     }
 }
 
@@ -185,12 +215,17 @@ pub struct SceneResult {
     pub r0: f32,
     /// Pearson correlation of the full capture's I_i with the truth's over Γ.
     pub pearson: f64,
+    /// Pearson of the windowed truth with the truth over Γ (the ceiling).
+    pub pearson_ceiling: f64,
+    /// Pearson of the oracle subtraction's I_i with the truth's over Γ.
+    pub pearson_oracle: f64,
     /// Fraction of the full capture's energy removed by the correction.
     pub explained: Option<f64>,
     /// Per object, in `scene.json` order.
     pub rows: Vec<ObjectRow>,
-    /// I_i of the full capture, the control and the truth (per voxel).
-    pub maps: [Vec<f32>; 3],
+    /// I_i of the full capture, the control, the truth, the windowed truth and the oracle
+    /// subtraction (per voxel).
+    pub maps: [Vec<f32>; 5],
     /// Γ.
     pub mask: Vec<bool>,
 }
@@ -239,6 +274,9 @@ pub fn measure(c: &mut Captures, s: &Setup) -> SceneResult {
         probe::indirect_over(&mut c.indirect, &c.vol, &mask, &plain, &s.wave, EXEC).expect("truth");
     let tg = probe::indirect_over(&mut c.indirect, &c.vol, &mask, &opts, &s.wave, EXEC)
         .expect("truth, corrected");
+    let mut diff = subtract(&c.all, &c.direct, 1.0);
+    let o = probe::indirect_over(&mut diff, &c.vol, &mask, &plain, &s.wave, EXEC)
+        .expect("oracle subtraction");
     let g: Vec<usize> = (0..mask.len()).filter(|&i| mask[i]).collect();
     let rows = c
         .objects
@@ -254,6 +292,10 @@ pub fn measure(c: &mut Captures, s: &Setup) -> SceneResult {
                 truth: mean(&t.values, idx),
                 truth_gated: mean(&tg.values, idx),
                 pearson: pearson(&f.values, &t.values, &ig),
+                pearson_ceiling: pearson(&tg.values, &t.values, &ig),
+                pearson_windowed: pearson(&f.values, &tg.values, &ig),
+                oracle: mean(&o.values, idx),
+                pearson_oracle: pearson(&o.values, &t.values, &ig),
             }
         })
         .collect();
@@ -261,11 +303,88 @@ pub fn measure(c: &mut Captures, s: &Setup) -> SceneResult {
         gamma: g.len(),
         r0: f.shell.r0,
         pearson: pearson(&f.values, &t.values, &g),
+        pearson_ceiling: pearson(&tg.values, &t.values, &g),
+        pearson_oracle: pearson(&o.values, &t.values, &g),
         explained: f.explained,
         rows,
-        maps: [f.values, k.values, t.values],
+        maps: [f.values, k.values, t.values, tg.values, o.values],
         mask,
     }
+}
+
+/// `(a − b)·scale`, bin by bin, with `a`'s geometry (the two must share it).
+pub fn subtract(a: &Capture, b: &Capture, scale: f32) -> Capture {
+    assert_eq!(a.geometry, b.geometry, "captures of different geometry");
+    let data = a
+        .data
+        .iter()
+        .zip(&b.data)
+        .map(|(x, y)| (x - y) * scale)
+        .collect();
+    Capture::new(a.geometry.clone(), data, Path::new("difference")).unwrap()
+}
+
+/// Distance (m) from each voxel of `idx` to the nearest surface point of the objects other
+/// than object `k`.
+pub fn distance_to_others(c: &Captures, k: usize, idx: &[usize]) -> Vec<f64> {
+    idx.iter()
+        .map(|&i| {
+            let v = c.vol.points[i];
+            c.surfaces
+                .iter()
+                .enumerate()
+                .filter(|&(j, _)| j != k)
+                .flat_map(|(_, s)| s.iter())
+                .map(|p| {
+                    (0..3)
+                        .map(|x| f64::from(p[x] - v[x]).powi(2))
+                        .sum::<f64>()
+                        .sqrt()
+                })
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect()
+}
+
+/// Monte Carlo noise of the full capture, measured from a second render with another seed.
+#[derive(Clone, Debug)]
+pub struct NoiseRow {
+    /// Object name.
+    pub name: String,
+    /// Mean I_i of the noise-only capture `(H_all,seed0 − H_all,seed1)/√2` with the setup's
+    /// correction (the windows of the seed-0 Γ).
+    pub corrected: f64,
+    /// The same without windows (the paper's Eq. 17 on the noise).
+    pub plain: f64,
+}
+
+/// I_i of the noise-only capture `(c.all − other)/√2` per object: with `s`'s correction over
+/// the Γ of `c.all`, and without correction. `(a − b)/√2` of two independent renders has the
+/// variance of one render's noise and none of its signal.
+pub fn noise(c: &mut Captures, other: &Capture, s: &Setup) -> Vec<NoiseRow> {
+    let d = probe::direct(&mut c.all, &c.vol, &s.wave, EXEC).expect("direct");
+    let mask = probe::gamma_mask(&d.values, s.epsilon);
+    let opts = IndirectOptions {
+        epsilon: s.epsilon,
+        shell: s.r0.map(|r0| Shell {
+            r0,
+            r1: f32::INFINITY,
+        }),
+        leak: s.leak,
+        ..IndirectOptions::default()
+    };
+    let mut n = subtract(&c.all, other, core::f32::consts::FRAC_1_SQRT_2);
+    let f = probe::indirect_over(&mut n, &c.vol, &mask, &opts, &s.wave, EXEC).expect("noise");
+    let plain = IndirectOptions { leak: None, ..opts };
+    let p = probe::indirect_over(&mut n, &c.vol, &mask, &plain, &s.wave, EXEC).expect("noise");
+    c.objects
+        .iter()
+        .map(|(name, idx)| NoiseRow {
+            name: name.clone(),
+            corrected: mean(&f.values, idx),
+            plain: mean(&p.values, idx),
+        })
+        .collect()
 }
 
 /// Print one scene's result as table rows (markdown).
@@ -285,6 +404,25 @@ pub fn print(scene: &str, label: &str, r: &SceneResult) {
             o.truth_gated / o.truth,
             o.pearson,
             r.pearson
+        );
+    }
+}
+
+/// Print one scene's ceilings and oracle (markdown rows): per object the kept ceiling (the
+/// truth through the same windows / the truth), the Pearson ceiling (the windowed truth with
+/// the truth), the corrected I_i's Pearson with the windowed truth, and the oracle subtraction `H_all − H_control` with no windows (kept, Pearson).
+pub fn print_ceilings(scene: &str, r: &SceneResult) {
+    for o in &r.rows {
+        println!(
+            "| {scene} | {} | {:.3} | {:.3} (Γ {:.3}) | {:.3} | {:.3} | {:.3} (Γ {:.3}) |",
+            o.name,
+            o.kept_ceiling(),
+            o.pearson_ceiling,
+            r.pearson_ceiling,
+            o.pearson_windowed,
+            o.kept_oracle(),
+            o.pearson_oracle,
+            r.pearson_oracle
         );
     }
 }
