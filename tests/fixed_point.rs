@@ -652,6 +652,7 @@ fn compare_lookup_target(
     let lp = LookupParams {
         tolerance,
         grid_len: None,
+        ..LookupParams::new()
     };
     let limits = FixedLimits::new(
         case.lasers.len() as u32,
@@ -850,4 +851,17 @@ fn fixed_lookup_tolerance_detects_half_step_and_wrong_shift() {
             assert!(shift > 3.0, "{what}: a wrong shift not detected: {shift}");
         }
     }
+}
+
+/// The fixed-point reader is the Lagrange cubic: a grid sized for the Hermite interpolant's
+/// (smaller) bound is refused by name rather than read with the wrong weights.
+#[test]
+fn fixed_lookup_refuses_a_hermite_grid() {
+    let cfg = Config::try_new(&Params::new(0.13, 255, 0.0255)).unwrap();
+    let fc = FixedConfig::try_new(&cfg, &FixedLimits::new(576, 28, 0.5)).unwrap();
+    assert!(FixedLookupGrid::try_new(&fc, &LookupParams::new()).is_ok());
+    assert_eq!(
+        FixedLookupGrid::try_new(&fc, &LookupParams::hermite()).err(),
+        Some(vltm_kernel::ConfigError::OutOfRange("interpolant"))
+    );
 }

@@ -92,7 +92,7 @@ use super::scan::FixedScan;
 use crate::config::{Point, Weights};
 use crate::error::{ConfigError, Error, check_len, check_points};
 use crate::geometry::dist;
-use crate::lookup::{EXTRA, LookupGrid, LookupParams};
+use crate::lookup::{EXTRA, Interpolant, LookupGrid, LookupParams};
 use crate::probe::Target;
 use ::fixed::types::I1F15;
 
@@ -208,8 +208,13 @@ impl FixedLookupGrid {
     /// # Errors
     /// [`LookupGrid::try_new`]'s ([`ConfigError::TooCoarse`] for a grid whose bound `η`
     /// exceeds `tolerance`, …); [`ConfigError::SizeOverflow`]`("grid_len")` for a grid over
-    /// 2¹⁶ points (the Q16 fraction of the integer index).
+    /// 2¹⁶ points (the Q16 fraction of the integer index); [`ConfigError::OutOfRange`]`
+    /// ("interpolant")` for [`Interpolant::Hermite`] (the fixed-point reader is the Lagrange
+    /// cubic, whose bound the grid's length must be chosen for).
     pub fn try_new(fc: &FixedConfig, p: &LookupParams) -> Result<Self, ConfigError> {
+        if p.interpolant != Interpolant::Lagrange {
+            return Err(ConfigError::OutOfRange("interpolant"));
+        }
         let grid = LookupGrid::try_new(&fc.cfg, p)?;
         let len = grid.len();
         if len > MAX_LEN {
