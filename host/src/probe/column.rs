@@ -530,6 +530,7 @@ pub(super) fn image_column(
             .iter()
             .map(|z| Complex32::new(z.re as f32, z.im as f32))
             .collect();
+        let _t = crate::timings::section("imaging the column", crate::timings::Kind::Serial);
         let skip = vec![false; voxels.len()];
         // One pass over the slices (milliseconds; the rows were the parallel part).
         let mut acc = vec![Complex64::new(0.0, 0.0); voxels.len()];

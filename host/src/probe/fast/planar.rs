@@ -34,6 +34,7 @@
 //! `3·J·M` complex scratch.
 
 use num_complex::{Complex32, Complex64};
+use rayon::prelude::*;
 use rustfft::{Fft, FftPlanner};
 use std::sync::Arc;
 use vltm_kernel::{Config, Point, cis_turns};
@@ -335,7 +336,7 @@ pub struct Planar {
     spad_cell: Vec<usize>,
     slices: Vec<Slice>,
     /// `κ̂[slice][j][ky][kx]` (transposed spectrum layout), scaled by 1/(Mx·My).
-    khat: Vec<Complex32>,
+    khat: Vec<[f32; 2]>,
     klo_per_span: f32,
     inv_span: f32,
     fy: Arc<dyn Fft<f32>>,
@@ -419,7 +420,9 @@ impl Planar {
         let iy = planner.plan_fft_inverse(my);
         let span = cfg.span();
         let scale = 1.0 / m as f64;
-        let mut khat = vec![Complex32::new(0.0, 0.0); n_slices * bins * m];
+        // `[f32; 2]` zeros: allocated zeroed by the system (pages mapped as the threads below
+        // write them), where a `Complex32` fill would be one serial pass over the table.
+        let mut khat = vec![[0.0f32; 2]; n_slices * bins * m];
         let specs: Vec<_> = lay
             .subgrids
             .iter()
@@ -433,14 +436,23 @@ impl Planar {
         let spad_cell = lay.cell;
         let (nsx, nsy) = (lay.nsx, lay.nsy);
         let (px, py) = (lay.px, lay.py);
-        let mut scratch = vec![
-            Complex32::new(0.0, 0.0);
-            fy.get_inplace_scratch_len()
-                .max(fx.get_inplace_scratch_len())
-        ];
-        let mut img = vec![Complex32::new(0.0, 0.0); m];
-        for (si, &(dz, dx, dy, cx, cy)) in specs.iter().enumerate() {
-            for j in 0..bins {
+        // One FFT table per (slice, bin), each its own chunk of `khat`: built in parallel (one
+        // image and scratch per thread), every chunk by the same operations as on one thread.
+        let scratch_len = fy
+            .get_inplace_scratch_len()
+            .max(fx.get_inplace_scratch_len());
+        let _t = crate::timings::section("planar tables", crate::timings::Kind::Parallel);
+        let table: &mut [Complex32] = bytemuck::cast_slice_mut(&mut khat);
+        table.par_chunks_mut(m).enumerate().for_each_init(
+            || {
+                (
+                    vec![Complex32::new(0.0, 0.0); m],
+                    vec![Complex32::new(0.0, 0.0); scratch_len],
+                )
+            },
+            |(img, scratch), (i, out)| {
+                let (dz, dx, dy, cx, cy) = specs[i / bins];
+                let j = i % bins;
                 img.fill(Complex32::new(0.0, 0.0));
                 let k = (cfg.k_lo() + j as i64) as f64;
                 for ax in -(nsx as i64 - 1)..cx as i64 {
@@ -457,12 +469,12 @@ impl Planar {
                             Complex32::new((w * a.cos()) as f32, (w * a.sin()) as f32);
                     }
                 }
-                fy.process_with_scratch(&mut img, &mut scratch);
-                let out = &mut khat[(si * bins + j) * m..(si * bins + j + 1) * m];
-                transpose(&img, mx, my, out, mx);
-                fx.process_with_scratch(out, &mut scratch);
-            }
-        }
+                fy.process_with_scratch(img, scratch);
+                transpose(img, mx, my, out, mx);
+                fx.process_with_scratch(out, scratch);
+            },
+        );
+        drop(_t);
         let rows_out = lay.rows_out;
         Ok(Self {
             bins,
@@ -543,7 +555,8 @@ impl Planar {
         self.fx.process_with_scratch(&mut s.x, &mut s.fft);
         let (klo, inv) = (self.klo_per_span, self.inv_span);
         for (si, slice) in self.slices.iter().enumerate() {
-            let kh = &self.khat[si * j_n * m..(si + 1) * j_n * m];
+            let kh: &[Complex32] =
+                bytemuck::cast_slice(&self.khat[si * j_n * m..(si + 1) * j_n * m]);
             for ((y, x), k) in s.y.iter_mut().zip(&s.x).zip(kh) {
                 *y = x * k;
             }
