@@ -2128,8 +2128,8 @@ fn timings_name_the_sections_and_threads_change_no_byte() {
             "serial   opening the capture",
             "parallel planar tables",
             "parallel read rows",
-            "serial   imaging the column",
-            "serial   writing outputs",
+            "parallel imaging the column",
+            "serial   writing outputs (and fsync)",
             "outside any section",
         ] {
             assert!(err.contains(line), "no `{line}` in:\n{err}");
