@@ -32,6 +32,12 @@
 //! (S = slices × phases, F(M) = 2.5·M·log₂M per pruned half), against the band path's
 //! `Kv·Ks·(14J + 60)`. Memory: `κ̂` = S·J·M complex `f32` (shared, read-only) and per worker
 //! `3·J·M` complex scratch.
+//!
+//! Threads: [`Planar::new`] builds `κ̂` on the thread pool, one (slice, bin) table per task;
+//! [`Planar::apply`] runs on the caller's thread (the probes call it once per row, rows in
+//! parallel), and [`Planar::apply_parallel`] (an image made once: a factorised column's) runs
+//! the slices in parallel. Every value is computed by the same operations whatever the
+//! number of threads: the results are bit-identical.
 
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
