@@ -2087,3 +2087,54 @@ fn relight_and_row_preprocess_and_refuse_parts() {
         }
     }
 }
+
+/// `VLTM_TIMINGS=1` names the serial and parallel parts of a column on the planar path
+/// (opening, the planar tables, reading rows, imaging, writing) and the serial fraction; and
+/// the column is byte-identical on 1, 2 and 3 threads (the planar tables, the planning and
+/// the reads split over the pool compute every value the same way).
+#[test]
+fn timings_name_the_sections_and_threads_change_no_byte() {
+    let t = TempDir::new("timings");
+    let cap = s(&fixture("two_patches"));
+    let mut outputs = Vec::new();
+    for threads in ["1", "2", "3"] {
+        let out = t.path(&format!("column{threads}.npy"));
+        let o = Command::new(bin())
+            .current_dir(&t.0)
+            .env("VLTM_TIMINGS", "1")
+            .args([
+                "--threads",
+                threads,
+                "column",
+                &cap,
+                "--focus",
+                FOCUS,
+                "--volume",
+                "-0.5:0.5:8,-0.5:0.5:8,0.5:1.2:8",
+                "--out",
+                &s(&out),
+            ])
+            .output()
+            .expect("run vltm");
+        let err = text(&o.stderr);
+        assert!(o.status.success(), "{err}");
+        assert!(
+            text(&o.stdout).contains("path planar"),
+            "{}",
+            text(&o.stdout)
+        );
+        for line in [
+            &format!("timings ({threads} threads)"),
+            "serial   opening the capture",
+            "parallel planar tables",
+            "parallel read rows",
+            "parallel imaging the column",
+            "serial   writing outputs (and fsync)",
+            "outside any section",
+        ] {
+            assert!(err.contains(line), "no `{line}` in:\n{err}");
+        }
+        outputs.push(std::fs::read(&out).expect("read the column"));
+    }
+    assert!(outputs[0].len() > 128 && outputs.iter().all(|o| *o == outputs[0]));
+}

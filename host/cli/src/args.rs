@@ -286,6 +286,7 @@ impl Common {
     /// uncompressed `.npz` captures are streamed row by row (memory O(Ks·Nt)); compressed
     /// `.npz`, and `--swap-roles` (a transpose), are read into memory.
     pub(crate) fn load(&self, path: &Path) -> vltm::Result<Box<dyn RowSource>> {
+        let _t = vltm::timings::section("opening the capture", vltm::timings::Kind::Serial);
         let mut inputs = vec![path.to_path_buf()];
         if io::extension(path).as_deref() == Some("ptu") {
             inputs.push(path.with_extension("json"));

@@ -70,6 +70,7 @@ pub(crate) fn write_parts(
     volume: &Volume,
     marks: &[(Point, String)],
 ) -> Result<(), Failure> {
+    let _t = vltm::timings::section("writing outputs (and fsync)", vltm::timings::Kind::Serial);
     let stem = meta.probe;
     let (out, png) = match (c_out, c_png) {
         (None, None) => (

@@ -206,8 +206,10 @@ pub trait RowSource {
     /// Reads the rows `first..first + out.len()` into `out` (laser spot and histograms per
     /// row, as [`RowSource::read_row`]): the probes read a batch of rows per pool of threads
     /// this way. By default one after the other; an uncompressed `.npz` reads them in parallel
-    /// by positional reads, and the wrappers that crop or correct rows do their per-row work
-    /// in parallel, so that reading keeps up with many threads.
+    /// by positional reads, a capture in memory copies them in parallel, a gzip-chunked tal
+    /// file inflates its chunks on the pool's threads (ahead, in a background reader), and the
+    /// wrappers that crop or correct rows do their per-row work in parallel, so that reading
+    /// keeps up with many threads.
     ///
     /// # Errors
     /// As [`RowSource::read_row`].
@@ -416,6 +418,26 @@ impl RowSource for Capture {
         out.clear();
         out.extend_from_slice(self.row(l));
         Ok(self.geometry.lasers[l])
+    }
+    /// The rows of a batch copied out of memory in parallel (one row per task).
+    fn read_rows(&mut self, first: usize, out: &mut [(Point, Vec<f32>)]) -> Result<()> {
+        use rayon::prelude::*;
+        if out.is_empty() {
+            return Ok(());
+        }
+        let rows = self.geometry.lasers.len();
+        check_row(first, rows)?;
+        check_row(first + out.len().max(1) - 1, rows)?;
+        let this = &*self;
+        out.par_iter_mut().enumerate().for_each(|(i, (x, h))| {
+            h.clear();
+            h.extend_from_slice(this.row(first + i));
+            *x = this.geometry.lasers[first + i];
+        });
+        Ok(())
+    }
+    fn reads_in_parallel(&self) -> bool {
+        true
     }
 }
 

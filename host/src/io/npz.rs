@@ -741,20 +741,21 @@ impl RowSource for Stream {
             .enumerate()
             .map(|(i, (x, h))| {
                 let l = first + i;
-                let mut bytes = vec![0u8; 4 * n];
-                file.read_exact_at(&mut bytes, start + (4 * n * l) as u64)
+                // Straight into the row's buffer (kept from the batch before: no fill, no
+                // copy), the stored little-endian bytes hashed as read.
+                h.resize(n, 0.0);
+                let bytes: &mut [u8] = bytemuck::cast_slice_mut(&mut h[..]);
+                file.read_exact_at(bytes, start + (4 * n * l) as u64)
                     .map_err(|e| Error::io(path, e))?;
                 let hs = hash.then(|| {
                     let mut hs = crc32fast::Hasher::new();
-                    hs.update(&bytes);
+                    hs.update(bytes);
                     hs
                 });
-                h.clear();
-                h.extend(
-                    bytes
-                        .chunks_exact(4)
-                        .map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])),
-                );
+                if cfg!(target_endian = "big") {
+                    h.iter_mut()
+                        .for_each(|v| *v = f32::from_bits(v.to_bits().swap_bytes()));
+                }
                 *x = g.lasers[l];
                 Ok(hs)
             })

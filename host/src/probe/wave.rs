@@ -104,6 +104,7 @@ impl Wave {
         if !self.auto_margin || foci.is_empty() || voxels.is_empty() {
             return Ok(cfg);
         }
+        let _t = crate::timings::section("planning: time window", crate::timings::Kind::Parallel);
         let (d1, d4) = legs(g, &cfg);
         let span = |pts: &[Point], legs: &[f64], v: &Point| {
             pts.iter()
@@ -114,7 +115,7 @@ impl Wave {
                 })
         };
         let proj: Vec<(f64, f64)> = foci.iter().map(|a| span(&g.lasers, &d1, a)).collect();
-        let cam: Vec<(f64, f64)> = voxels.iter().map(|b| span(&g.spads, &d4, b)).collect();
+        let cam: Vec<(f64, f64)> = voxels.par_iter().map(|b| span(&g.spads, &d4, b)).collect();
         let (lo, hi) = foci
             .par_iter()
             .zip(&proj)

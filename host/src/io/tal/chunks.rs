@@ -16,8 +16,10 @@
 //!
 //! Units: values are `f32` histogram samples as stored (`f64` rounded to `f32`), bit-identical
 //! to the crate's reading. Cost: one read, one inflate and one scatter per chunk, the band's
-//! chunks split by time between [`WORKERS`] threads (each writes its own half of every row's
-//! time axis). Memory: the band being filled (at most [`BAND_BYTES`]), per worker one stored
+//! chunks split by time between [`ChunkMap::workers`] threads, as many as the thread pool
+//! that opened the file has (`--threads`), at most one per time chunk: each inflates its own
+//! time chunks and writes its own part of every row's time axis, so the rows are the same
+//! bytes whatever the number of workers. Memory: the band being filled (at most [`BAND_BYTES`]), per worker one stored
 //! chunk and two decoded-chunk buffers (each at most the chunk's size, itself at most
 //! [`BAND_BYTES`]), and the index: 24 bytes per chunk (at most [`MAX_CHUNKS`]).
 //!
@@ -42,9 +44,6 @@ pub const BAND_BYTES: usize = 64 << 20;
 
 /// Most chunks indexed by this path (the index takes 24 bytes per chunk).
 pub const MAX_CHUNKS: usize = 1 << 20;
-
-/// Threads decoding a band (the reader thread and one helper).
-pub const WORKERS: usize = 2;
 
 /// A filter of the pipeline this path decodes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -78,6 +77,8 @@ pub(super) struct ChunkMap {
     filters: Vec<Filter>,
     /// Bytes of one decoded (whole, unclipped) chunk.
     chunk_bytes: usize,
+    /// Threads decoding a band: the opening thread pool's size, at most one per time chunk.
+    workers: usize,
 }
 
 impl ChunkMap {
@@ -334,6 +335,7 @@ impl ChunkMap {
             elem,
             filters,
             chunk_bytes,
+            workers: rayon::current_num_threads().clamp(1, grid[0].max(1)),
         }))
     }
 
@@ -353,8 +355,15 @@ impl ChunkMap {
         self.chunk_bytes
     }
 
+    /// Threads that decode a band ([`ChunkMap::read_band`]): the size of the thread pool that
+    /// opened the file (the reader thread and `workers − 1` helpers), at most one per chunk
+    /// along the time axis.
+    pub(super) fn workers(&self) -> usize {
+        self.workers
+    }
+
     /// Fills `rows` (band `band`'s rows, each `Ks·Nt` values, SPAD-major) from its chunks,
-    /// split by time between up to [`WORKERS`] threads.
+    /// split by time between [`ChunkMap::workers`] threads.
     ///
     /// # Errors
     /// [`Error::Io`] if the file cannot be read, [`Error::Format`] on `H` for a chunk that
@@ -362,10 +371,7 @@ impl ChunkMap {
     pub(super) fn read_band(&self, path: &Path, band: usize, rows: &mut [Vec<f32>]) -> Result<()> {
         let [nt, _, _, c, d] = self.dims;
         let ks = c * d;
-        let workers = std::thread::available_parallelism()
-            .map_or(1, |n| n.get())
-            .min(WORKERS)
-            .min(self.grid[0]);
+        let workers = self.workers.clamp(1, self.grid[0].max(1));
         // Worker w owns time chunks tc[w]..tc[w + 1], i.e. bins tc[w]·ct.., of every row.
         let tc: Vec<usize> = (0..=workers).map(|w| w * self.grid[0] / workers).collect();
         let cut: Vec<usize> = tc.iter().map(|&t| (t * self.chunk[0]).min(nt)).collect();

@@ -22,7 +22,9 @@
 //! collectors) and every entry checked against the chunk grid and the file's length; the
 //! reader then decodes one **band** at a time, the rows whose laser lies in one chunk along
 //! the first row axis (each chunk read once, with one positional read, inflated with
-//! libdeflate, unshuffled), on two threads (each owns half of the time chunks), writing each
+//! libdeflate, unshuffled), on as many threads as the thread pool that opened the file has
+//! (`--threads`; each owns its share of the time chunks, so the rows are the same bytes for
+//! any number of threads), writing each
 //! run of decoded chunks straight into the band's SPAD-major rows in tiles of 16 bins × 16
 //! SPADs, and keeps the band while its blocks (cut as above, inside the band) are copied out
 //! of it into the background reader's recycled row buffers. The exh16 copy with chunks of
@@ -475,7 +477,7 @@ impl TalReader {
         if let Some(c) = &chunks {
             let band = c.band_rows() as u128 * row as u128 * 4;
             let need =
-                band + 3 * BLOCK_BYTES as u128 + 4 * WORKERS as u128 * c.chunk_bytes() as u128;
+                band + 3 * BLOCK_BYTES as u128 + 4 * c.workers() as u128 * c.chunk_bytes() as u128;
             budget::check(
                 || {
                     format!(
@@ -660,6 +662,13 @@ impl RowSource for TalReader {
         }
         Ok(x_l)
     }
+
+    /// A chunked `H` decoded chunk by chunk is inflated on the opening pool's threads
+    /// ([`ChunkMap::workers`]); a contiguous `H` or one read through the crate is read by one
+    /// thread.
+    fn reads_in_parallel(&self) -> bool {
+        self.chunks.is_some()
+    }
 }
 
 mod block;
@@ -671,7 +680,7 @@ pub mod znlos;
 
 pub use block::BLOCK_BYTES;
 use block::{Cursor, Plan, Reader, block_range};
-use chunks::{ChunkMap, WORKERS};
+use chunks::ChunkMap;
 
 pub use format::{HFormat, ScanType, TalOptions};
 

@@ -867,3 +867,82 @@ fn h5py_v1_btree_chunks() {
         }
     }
 }
+
+/// Reads every row of the file at `path`, opened inside a pool of `threads` threads (the
+/// number of threads that decode a band of chunks), with the number of decoding threads.
+fn rows_with_threads(path: &Path, threads: usize) -> Result<(usize, Vec<Vec<f32>>)> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let mut r = pool.install(|| open(path))?;
+    let workers = r.chunks.as_ref().map_or(0, |c| c.workers());
+    assert!(r.reads_in_parallel() == r.chunks.is_some());
+    let mut rows = Vec::new();
+    for l in 0..kl_of(&r) {
+        let mut row = Vec::new();
+        r.read_row(l, &mut row)?;
+        rows.push(row);
+    }
+    Ok((workers, rows))
+}
+
+/// A gzip-chunked `H` (the path-traced fixtures: tal files rewritten with shuffle + gzip 9)
+/// decodes each band on as many threads as the pool that opened it: 1, 2 or 3 threads give
+/// the same rows, bit for bit; and on a synthetic file with 9 time chunks, a corrupt chunk
+/// that a helper thread (not the reader thread) decodes is still an error naming `H` and the
+/// chunk.
+#[test]
+fn chunked_rows_identical_on_any_number_of_decoding_threads() {
+    let fixture = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../fixtures/pathtraced/corner_all/corner_all.hdf5");
+    let (w1, one) = rows_with_threads(&fixture, 1).unwrap();
+    assert_eq!(w1, 1, "a pool of one thread decodes on one");
+    for threads in [2, 3] {
+        let (w, rows) = rows_with_threads(&fixture, threads).unwrap();
+        assert!(w > 1 && w <= threads, "{threads} threads: {w} workers");
+        assert_eq!(rows.len(), one.len());
+        for (l, (a, b)) in rows.iter().zip(&one).enumerate() {
+            let same =
+                a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.to_bits() == y.to_bits());
+            assert!(same, "{threads} threads: row {l} differs from one thread's");
+        }
+    }
+    assert!(one.iter().flatten().any(|&x| x != 0.0));
+
+    let dir = scratch("chunk_threads");
+    let mut spec = Spec::exhaustive();
+    spec.h_shape = vec![33, 12, 5, 10, 20];
+    spec.laser_grid = grid(12, 5, false, 0.0);
+    spec.sensor_grid = grid(10, 20, false, 0.0);
+    spec.chunks = Some(vec![4, 4, 5, 10, 20]);
+    let good = dir.join("good.hdf5");
+    spec.write(&good);
+    let (w1, want) = rows_with_threads(&good, 1).unwrap();
+    let (w4, got) = rows_with_threads(&good, 4).unwrap();
+    assert_eq!((w1, w4), (1, 4));
+    assert!(
+        want.iter()
+            .flatten()
+            .zip(got.iter().flatten())
+            .all(|(x, y)| x.to_bits() == y.to_bits())
+    );
+    // Chunks in C order of the grid (9 time chunks × 3 bands): the last time chunk of band
+    // 0 is decoded by the last of 4 workers.
+    let spans = open(&good).unwrap().chunks.as_ref().unwrap().stored_spans();
+    assert_eq!(spans.len(), 9 * 3);
+    let (address, len) = spans[8 * 3];
+    let mut b = std::fs::read(&good).unwrap();
+    let mid = address as usize + len / 2;
+    b[mid..mid + 16].iter_mut().for_each(|x| *x ^= 0x5a);
+    let bad = dir.join("bad_late_chunk.hdf5");
+    std::fs::write(&bad, &b).unwrap();
+    let text = rows_with_threads(&bad, 4).unwrap_err().to_string();
+    assert!(
+        text.contains("bad_late_chunk.hdf5")
+            && text.contains("`H`")
+            && text.contains("chunk at [32, 0, 0, 0, 0]"),
+        "{text}"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -32,8 +32,15 @@
 //! (S = slices × phases, F(M) = 2.5·M·log₂M per pruned half), against the band path's
 //! `Kv·Ks·(14J + 60)`. Memory: `κ̂` = S·J·M complex `f32` (shared, read-only) and per worker
 //! `3·J·M` complex scratch.
+//!
+//! Threads: [`Planar::new`] builds `κ̂` on the thread pool, one (slice, bin) table per task;
+//! [`Planar::apply`] runs on the caller's thread (the probes call it once per row, rows in
+//! parallel), and [`Planar::apply_parallel`] (an image made once: a factorised column's) runs
+//! the slices in parallel. Every value is computed by the same operations whatever the
+//! number of threads: the results are bit-identical.
 
 use num_complex::{Complex32, Complex64};
+use rayon::prelude::*;
 use rustfft::{Fft, FftPlanner};
 use std::sync::Arc;
 use vltm_kernel::{Config, Point, cis_turns};
@@ -335,7 +342,7 @@ pub struct Planar {
     spad_cell: Vec<usize>,
     slices: Vec<Slice>,
     /// `κ̂[slice][j][ky][kx]` (transposed spectrum layout), scaled by 1/(Mx·My).
-    khat: Vec<Complex32>,
+    khat: Vec<[f32; 2]>,
     klo_per_span: f32,
     inv_span: f32,
     fy: Arc<dyn Fft<f32>>,
@@ -419,7 +426,9 @@ impl Planar {
         let iy = planner.plan_fft_inverse(my);
         let span = cfg.span();
         let scale = 1.0 / m as f64;
-        let mut khat = vec![Complex32::new(0.0, 0.0); n_slices * bins * m];
+        // `[f32; 2]` zeros: allocated zeroed by the system (pages mapped as the threads below
+        // write them), where a `Complex32` fill would be one serial pass over the table.
+        let mut khat = vec![[0.0f32; 2]; n_slices * bins * m];
         let specs: Vec<_> = lay
             .subgrids
             .iter()
@@ -433,14 +442,23 @@ impl Planar {
         let spad_cell = lay.cell;
         let (nsx, nsy) = (lay.nsx, lay.nsy);
         let (px, py) = (lay.px, lay.py);
-        let mut scratch = vec![
-            Complex32::new(0.0, 0.0);
-            fy.get_inplace_scratch_len()
-                .max(fx.get_inplace_scratch_len())
-        ];
-        let mut img = vec![Complex32::new(0.0, 0.0); m];
-        for (si, &(dz, dx, dy, cx, cy)) in specs.iter().enumerate() {
-            for j in 0..bins {
+        // One FFT table per (slice, bin), each its own chunk of `khat`: built in parallel (one
+        // image and scratch per thread), every chunk by the same operations as on one thread.
+        let scratch_len = fy
+            .get_inplace_scratch_len()
+            .max(fx.get_inplace_scratch_len());
+        let _t = crate::timings::section("planar tables", crate::timings::Kind::Parallel);
+        let table: &mut [Complex32] = bytemuck::cast_slice_mut(&mut khat);
+        table.par_chunks_mut(m).enumerate().for_each_init(
+            || {
+                (
+                    vec![Complex32::new(0.0, 0.0); m],
+                    vec![Complex32::new(0.0, 0.0); scratch_len],
+                )
+            },
+            |(img, scratch), (i, out)| {
+                let (dz, dx, dy, cx, cy) = specs[i / bins];
+                let j = i % bins;
                 img.fill(Complex32::new(0.0, 0.0));
                 let k = (cfg.k_lo() + j as i64) as f64;
                 for ax in -(nsx as i64 - 1)..cx as i64 {
@@ -457,12 +475,12 @@ impl Planar {
                             Complex32::new((w * a.cos()) as f32, (w * a.sin()) as f32);
                     }
                 }
-                fy.process_with_scratch(&mut img, &mut scratch);
-                let out = &mut khat[(si * bins + j) * m..(si * bins + j + 1) * m];
-                transpose(&img, mx, my, out, mx);
-                fx.process_with_scratch(out, &mut scratch);
-            }
-        }
+                fy.process_with_scratch(img, scratch);
+                transpose(img, mx, my, out, mx);
+                fx.process_with_scratch(out, scratch);
+            },
+        );
+        drop(_t);
         let rows_out = lay.rows_out;
         Ok(Self {
             bins,
@@ -543,7 +561,8 @@ impl Planar {
         self.fx.process_with_scratch(&mut s.x, &mut s.fft);
         let (klo, inv) = (self.klo_per_span, self.inv_span);
         for (si, slice) in self.slices.iter().enumerate() {
-            let kh = &self.khat[si * j_n * m..(si + 1) * j_n * m];
+            let kh: &[Complex32] =
+                bytemuck::cast_slice(&self.khat[si * j_n * m..(si + 1) * j_n * m]);
             for ((y, x), k) in s.y.iter_mut().zip(&s.x).zip(kh) {
                 *y = x * k;
             }
@@ -578,11 +597,151 @@ impl Planar {
             }
         }
     }
+
+    /// [`Planar::apply`] of one spectrum with the slices in parallel, for an image made once
+    /// (a factorised column's): the forward transforms as there, then each slice on a pool
+    /// thread (its own scratch) into a list of `(voxel, term)`, and the lists added to `acc`
+    /// in slice order, so that `acc` is bit-identical to [`Planar::apply`]'s (the same
+    /// operations on every value, in the same order; checked by a test). Memory: per
+    /// thread `2·J·M` complex scratch, and one complex per output until the lists are added.
+    pub fn apply_parallel(
+        &self,
+        spectra: &[Complex32],
+        voxels: &[Point],
+        leg: impl Fn(&Point) -> (f32, f32) + Sync,
+        skip: &[bool],
+        acc: &mut [Complex64],
+    ) {
+        let (mx, my, j_n) = (self.mx, self.my, self.bins);
+        let m = mx * my;
+        let mut s = self.scratch();
+        // Forward, as in `apply`.
+        for j in 0..j_n {
+            let img = &mut s.y[j * m..(j + 1) * m];
+            img[..self.nsx * my].fill(Complex32::new(0.0, 0.0));
+            for (cell, h) in self
+                .spad_cell
+                .iter()
+                .zip(spectra.iter().skip(j).step_by(j_n))
+            {
+                img[*cell] = *h;
+            }
+            self.fy
+                .process_with_scratch(&mut img[..self.nsx * my], &mut s.fft);
+            let img = &s.y[j * m..j * m + self.nsx * my];
+            let xt = &mut s.x[j * m..(j + 1) * m];
+            xt.fill(Complex32::new(0.0, 0.0));
+            transpose(img, self.nsx, my, xt, mx);
+        }
+        self.fx.process_with_scratch(&mut s.x, &mut s.fft);
+        let (klo, inv) = (self.klo_per_span, self.inv_span);
+        let x = &s.x;
+        let fft_len = s.fft.len();
+        let terms: Vec<Vec<(usize, Complex64)>> = (0..self.slices.len())
+            .into_par_iter()
+            .map_init(
+                || {
+                    (
+                        vec![Complex32::new(0.0, 0.0); j_n * m],
+                        vec![Complex32::new(0.0, 0.0); j_n * m],
+                        vec![Complex32::new(0.0, 0.0); fft_len],
+                    )
+                },
+                |(y, z, fft), si| {
+                    let slice = &self.slices[si];
+                    let kh: &[Complex32] =
+                        bytemuck::cast_slice(&self.khat[si * j_n * m..(si + 1) * j_n * m]);
+                    for ((y, x), k) in y.iter_mut().zip(x).zip(kh) {
+                        *y = x * k;
+                    }
+                    self.ix.process_with_scratch(y, fft);
+                    for j in 0..j_n {
+                        let src = &y[j * m..(j + 1) * m];
+                        let dst = &mut z[j * m..(j + 1) * m];
+                        for r in 0..my {
+                            for c in 0..self.rows_out {
+                                dst[c * my + r] = src[r * mx + c];
+                            }
+                        }
+                        self.iy
+                            .process_with_scratch(&mut dst[..self.rows_out * my], fft);
+                    }
+                    let mut out = Vec::with_capacity(slice.outputs.len());
+                    for &(cell, v) in &slice.outputs {
+                        let (cell, v) = (cell as usize, v as usize);
+                        if skip.get(v).copied().unwrap_or(true) {
+                            continue;
+                        }
+                        let (d, w) = leg(&voxels[v]);
+                        let step = cis_turns(inv * d);
+                        let mut p = cis_turns(klo * d);
+                        let mut sum = Complex32::new(0.0, 0.0);
+                        for j in 0..j_n {
+                            sum += z[j * m + cell] * p;
+                            p *= step;
+                        }
+                        let sum = sum * w;
+                        out.push((v, Complex64::new(sum.re as f64, sum.im as f64)));
+                    }
+                    out
+                },
+            )
+            .collect();
+        for (v, t) in terms.into_iter().flatten() {
+            acc[v] += t;
+        }
+    }
 }
 
 #[cfg(test)]
 mod tests {
     use super::fft_len;
+
+    /// `apply_parallel` (the slices on 1, 2 or 3 threads) gives `apply`'s accumulators bit
+    /// for bit, with some voxels skipped, over a volume of 6 slices of the two-patches wall.
+    #[test]
+    fn parallel_slices_equal_apply() {
+        use super::Planar;
+        use num_complex::{Complex32, Complex64};
+        let path =
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/two_patches.npz");
+        let c = crate::io::open(&path).unwrap();
+        let wave = crate::probe::Wave {
+            wavelength: Some(0.3),
+            sigma: Some(0.3),
+            ..crate::probe::Wave::default()
+        };
+        let cfg = wave.config(&c.geometry).unwrap();
+        let vol = crate::volume::Volume::parse("-0.5:0.5:8,-0.5:0.5:8,0.5:1.2:6").unwrap();
+        let p = Planar::new(&cfg, &c.geometry.spads, &vol.points, vol.shape).unwrap();
+        let n = c.geometry.spads.len() * cfg.bins();
+        let spectra: Vec<Complex32> = (0..n)
+            .map(|i| {
+                let t = i as f32 * 0.618_034;
+                Complex32::new((t * 1.3).sin(), (t * 0.7).cos() - 0.25)
+            })
+            .collect();
+        let skip: Vec<bool> = (0..vol.len()).map(|v| v % 7 == 3).collect();
+        let focus = [-0.45f32, 0.0, 0.8];
+        let leg = |b: &[f32; 3]| (crate::probe::wave::dist(focus, *b), 1.0);
+        let mut want = vec![Complex64::new(0.5, -0.25); vol.len()];
+        let mut s = p.scratch();
+        p.apply(&spectra, &vol.points, leg, &skip, &mut s, &mut want);
+        assert!(want.iter().any(|a| a.norm() > 1e-6));
+        for threads in [1, 2, 3] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            let mut got = vec![Complex64::new(0.5, -0.25); vol.len()];
+            pool.install(|| p.apply_parallel(&spectra, &vol.points, leg, &skip, &mut got));
+            let same = got
+                .iter()
+                .zip(&want)
+                .all(|(a, b)| a.re.to_bits() == b.re.to_bits() && a.im.to_bits() == b.im.to_bits());
+            assert!(same, "{threads} threads");
+        }
+    }
 
     /// The smallest 3-smooth-times-power-of-two length, checked by brute force.
     #[test]
