@@ -21,8 +21,8 @@
 //! Cost: the existence test takes the span of path lengths per (focus, voxel) pair from the
 //! per-point spans over lasers and SPADs, `O(F·Kl + V·Ks + F·V)` at worst, and stops at the
 //! first pair that meets the window. The per-point spans are exact but prune the lasers and
-//! SPADs by tiles (`SpanIndex`): on a 64×64 confocal scan, a few hundred of the 4,096 wall
-//! points are visited per voxel. The fraction is counted exactly on a strided sample of at most 32
+//! SPADs by a k-d tree (`SpanIndex`): on a 64×64 confocal scan, a few leaves of the 4,096
+//! wall points are visited per voxel. The fraction is counted exactly on a strided sample of at most 32
 //! lasers × 32 SPADs × 32 foci × 1024 voxels (sorted legs, `O(n log n)` per pair).
 
 use super::wave::{ColumnGate, dist, legs};
@@ -62,34 +62,36 @@ impl Coverage {
     }
 }
 
-/// Points per tile of a [`SpanIndex`].
-const TILE: usize = 32;
+/// Most points in a leaf of a [`SpanIndex`].
+const LEAF: usize = 16;
 
-/// One tile of a [`SpanIndex`]: the bounding box of its points (m) and the range of their
-/// legs (m).
+/// One node of a [`SpanIndex`]: the bounding box of its points (m), the range of their legs
+/// (m), their range in the index's order, and its children (none for a leaf).
 #[derive(Clone, Copy, Debug)]
-struct Tile {
+struct Node {
     lo: [f64; 3],
     hi: [f64; 3],
     legs: (f64, f64),
     start: usize,
     end: usize,
+    kids: Option<(u32, u32)>,
 }
 
 /// The span `(min, max)` over a point set of `|p − v| + leg_p` (`|p − v|` in `f32` as
 /// [`dist`] takes it, the leg in `f64`) for any query point `v`, equal to the brute-force
-/// fold over every point, at a fraction of its cost: the points are cut into tiles of
-/// [`TILE`] (median splits along the widest axis); a query bounds every tile by its box
-/// (the nearest and farthest box points, widened by a relative `1e-6` for the `f32`
-/// distances, plus the tile's leg range) and visits only the tiles that can hold the
-/// minimum or the maximum. Cost: `O(n log n)` to build, per query `O(n/TILE)` bounds plus
-/// the points of the few tiles visited (all `n` at worst).
+/// fold over every point, at a fraction of its cost: a k-d tree (median splits along the
+/// widest axis, leaves of at most [`LEAF`] points) whose nodes are bounded by their box (the
+/// nearest and farthest box points, widened by a relative `1e-6` for the `f32` distances,
+/// plus the node's leg range); a query descends only into nodes that can still lower the
+/// minimum or raise the maximum. Cost: `O(n log n)` to build; per query a few dozen nodes
+/// and leaves on a wall lattice (all `n` points at worst). Memory: ~100 bytes per leaf.
 pub(crate) struct SpanIndex<'a> {
     pts: &'a [Point],
     legs: &'a [f64],
-    /// Point indices, tile by tile.
+    /// Point indices, leaf by leaf.
     order: Vec<u32>,
-    tiles: Vec<Tile>,
+    /// The nodes, the root first.
+    nodes: Vec<Node>,
 }
 
 impl<'a> SpanIndex<'a> {
@@ -100,56 +102,65 @@ impl<'a> SpanIndex<'a> {
     pub(crate) fn new(pts: &'a [Point], legs: &'a [f64]) -> Self {
         assert_eq!(pts.len(), legs.len(), "one leg per point");
         let mut order: Vec<u32> = (0..pts.len() as u32).collect();
-        let mut tiles = Vec::with_capacity(pts.len().div_ceil(TILE / 2).max(1));
-        let mut stack = vec![(0, pts.len())];
-        while let Some((start, end)) = stack.pop() {
-            if end == start {
+        let mut nodes: Vec<Node> = Vec::with_capacity(4 * pts.len().div_ceil(LEAF) + 1);
+        // (node, start, end): the node is pushed with its box, its children filled later.
+        let mut stack = vec![(0usize, 0usize, pts.len())];
+        nodes.push(Self::node(pts, legs, &order, 0, pts.len()));
+        while let Some((n, start, end)) = stack.pop() {
+            if end - start <= LEAF {
                 continue;
             }
-            let idx = &mut order[start..end];
-            let mut lo = [f64::INFINITY; 3];
-            let mut hi = [f64::NEG_INFINITY; 3];
-            let mut lg = (f64::INFINITY, f64::NEG_INFINITY);
-            for &i in idx.iter() {
-                let p = pts[i as usize];
-                for c in 0..3 {
-                    lo[c] = lo[c].min(f64::from(p[c]));
-                    hi[c] = hi[c].max(f64::from(p[c]));
-                }
-                let l = legs[i as usize];
-                lg = (lg.0.min(l), lg.1.max(l));
-            }
-            if idx.len() <= TILE {
-                tiles.push(Tile {
-                    lo,
-                    hi,
-                    legs: lg,
-                    start,
-                    end,
-                });
-                continue;
-            }
+            let (lo, hi) = (nodes[n].lo, nodes[n].hi);
             let axis = (0..3)
                 .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
                 .unwrap_or(0);
-            let mid = idx.len() / 2;
-            idx.select_nth_unstable_by(mid, |&a, &b| {
+            let mid = start + (end - start) / 2;
+            order[start..end].select_nth_unstable_by(mid - start, |&a, &b| {
                 pts[a as usize][axis].total_cmp(&pts[b as usize][axis])
             });
-            stack.push((start, start + mid));
-            stack.push((start + mid, end));
+            let k = nodes.len();
+            nodes.push(Self::node(pts, legs, &order, start, mid));
+            nodes.push(Self::node(pts, legs, &order, mid, end));
+            nodes[n].kids = Some((k as u32, k as u32 + 1));
+            stack.push((k, start, mid));
+            stack.push((k + 1, mid, end));
         }
         Self {
             pts,
             legs,
             order,
-            tiles,
+            nodes,
+        }
+    }
+
+    /// The node over `order[start..end]`, without children.
+    fn node(pts: &[Point], legs: &[f64], order: &[u32], start: usize, end: usize) -> Node {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        let mut lg = (f64::INFINITY, f64::NEG_INFINITY);
+        for &i in &order[start..end] {
+            let p = pts[i as usize];
+            for c in 0..3 {
+                lo[c] = lo[c].min(f64::from(p[c]));
+                hi[c] = hi[c].max(f64::from(p[c]));
+            }
+            let l = legs[i as usize];
+            lg = (lg.0.min(l), lg.1.max(l));
+        }
+        Node {
+            lo,
+            hi,
+            legs: lg,
+            start,
+            end,
+            kids: None,
         }
     }
 
     /// Lower bound of the minimum and upper bound of the maximum of `|p − v| + leg` over
-    /// the tile's points.
-    fn bounds(t: &Tile, v: [f64; 3]) -> (f64, f64) {
+    /// the node's points.
+    #[inline]
+    fn bounds(t: &Node, v: [f64; 3]) -> (f64, f64) {
         let (mut near, mut far) = (0.0, 0.0);
         for c in 0..3 {
             let n = v[c] - v[c].clamp(t.lo[c], t.hi[c]);
@@ -164,8 +175,8 @@ impl<'a> SpanIndex<'a> {
         )
     }
 
-    /// The exact fold over the tile's points, widening `span`.
-    fn visit(&self, t: &Tile, v: &Point, span: &mut (f64, f64)) {
+    /// The exact fold over the leaf's points, widening `span`.
+    fn visit(&self, t: &Node, v: &Point, span: &mut (f64, f64)) {
         for &i in &self.order[t.start..t.end] {
             let x = f64::from(dist(self.pts[i as usize], *v)) + self.legs[i as usize];
             *span = (span.0.min(x), span.1.max(x));
@@ -175,31 +186,41 @@ impl<'a> SpanIndex<'a> {
     /// `(min, max)` over the points of `|p − v| + leg_p`; `(+∞, −∞)` for no points.
     pub(crate) fn span(&self, v: &Point) -> (f64, f64) {
         let mut span = (f64::INFINITY, f64::NEG_INFINITY);
+        if self.pts.is_empty() {
+            return span;
+        }
         let q = v.map(f64::from);
-        let mut first = (f64::INFINITY, usize::MAX);
-        let mut last = (f64::NEG_INFINITY, usize::MAX);
-        for (k, t) in self.tiles.iter().enumerate() {
-            let (a, b) = Self::bounds(t, q);
-            if a < first.0 {
-                first = (a, k);
-            }
-            if b > last.0 {
-                last = (b, k);
-            }
-        }
-        // The likeliest tiles first, then every tile that could still widen the span.
-        for k in [first.1, last.1] {
-            if let Some(t) = self.tiles.get(k) {
-                self.visit(t, v, &mut span);
-            }
-        }
-        for (k, t) in self.tiles.iter().enumerate() {
-            if k == first.1 || k == last.1 {
+        // Depth-first; each entry a node and its bounds. The tree is balanced: its depth
+        // is log₂(n/LEAF) + 1 < 60, and the stack holds at most one sibling per level.
+        let mut stack: Vec<(u32, (f64, f64))> = Vec::with_capacity(64);
+        stack.push((0, Self::bounds(&self.nodes[0], q)));
+        while let Some((n, (a, b))) = stack.pop() {
+            // NaN bounds are visited (the comparison fails).
+            if a >= span.0 && b <= span.1 {
                 continue;
             }
-            let (a, b) = Self::bounds(t, q);
-            if !(a >= span.0 && b <= span.1) {
+            let t = &self.nodes[n as usize];
+            let Some((k1, k2)) = t.kids else {
                 self.visit(t, v, &mut span);
+                continue;
+            };
+            let (b1, b2) = (
+                Self::bounds(&self.nodes[k1 as usize], q),
+                Self::bounds(&self.nodes[k2 as usize], q),
+            );
+            // The child popped first: the nearer while the minimum may still fall, else
+            // the one reaching farther.
+            let first_is_1 = if a < span.0 {
+                b1.0 <= b2.0
+            } else {
+                b1.1 >= b2.1
+            };
+            if first_is_1 {
+                stack.push((k2, b2));
+                stack.push((k1, b1));
+            } else {
+                stack.push((k1, b1));
+                stack.push((k2, b2));
             }
         }
         span
@@ -256,7 +277,12 @@ pub fn window_coverage(
     };
     let (found, all) = match foci {
         None => {
-            let proj: Vec<(f64, f64)> = voxels.par_iter().map(|v| laser_spans.span(v)).collect();
+            // A confocal scan with equal legs: the projector spans are the camera's.
+            let proj: Vec<(f64, f64)> = if g.lasers == g.spads && d1 == d4 {
+                cam.clone()
+            } else {
+                voxels.par_iter().map(|v| laser_spans.span(v)).collect()
+            };
             let spans: Vec<(f64, f64)> = proj
                 .iter()
                 .zip(&cam)
@@ -457,7 +483,7 @@ mod tests {
     }
 
     /// The tiled spans equal the brute-force fold exactly, on a regular wall, a random
-    /// cloud with random legs (tiles of mixed legs), a single point and repeated points,
+    /// cloud with random legs (leaves of mixed legs), a single point and repeated points,
     /// for queries over, beside and far from the points; and a missed tile would show.
     #[test]
     fn span_index_equals_the_brute_force_fold() {
@@ -515,16 +541,19 @@ mod tests {
                 assert_eq!(idx.span(&v), brute, "query {v:?}");
             }
         }
-        // Dropping the tiles that hold the nearest and the farthest wall corner from the
-        // index changes a far query's span: the answer does come from the tiles visited.
+        // Removing the leaves that hold the nearest and the farthest wall corner changes a
+        // far query's span: the answer does come from the leaves visited.
         let lg = vec![0.0; wall.len()];
         let mut idx = SpanIndex::new(&wall, &lg);
         let v = [5.0, 5.0, 0.5];
         let full = idx.span(&v);
         let holds =
-            |t: &Tile, c: f64| (t.lo[0]..=t.hi[0]).contains(&c) && (t.lo[1]..=t.hi[1]).contains(&c);
-        idx.tiles
-            .retain(|t| !holds(t, f64::from(0.2f32)) && !holds(t, f64::from(-0.2f32)));
+            |t: &Node, c: f64| (t.lo[0]..=t.hi[0]).contains(&c) && (t.lo[1]..=t.hi[1]).contains(&c);
+        for t in &mut idx.nodes {
+            if t.kids.is_none() && (holds(t, f64::from(0.2f32)) || holds(t, f64::from(-0.2f32))) {
+                t.end = t.start;
+            }
+        }
         let cut = idx.span(&v);
         assert!(cut.0 > full.0 && cut.1 < full.1, "{cut:?} {full:?}");
     }
