@@ -162,9 +162,10 @@ impl<'a> SpanIndex<'a> {
     #[inline]
     fn bounds(t: &Node, v: [f64; 3]) -> (f64, f64) {
         let (mut near, mut far) = (0.0, 0.0);
-        for c in 0..3 {
-            let n = v[c] - v[c].clamp(t.lo[c], t.hi[c]);
-            let f = (v[c] - t.lo[c]).abs().max((v[c] - t.hi[c]).abs());
+        // Not `clamp`: it panics on an empty box (lo = +∞, hi = −∞).
+        for ((&x, &lo), &hi) in v.iter().zip(&t.lo).zip(&t.hi) {
+            let n = (lo - x).max(x - hi).max(0.0);
+            let f = (x - lo).abs().max((x - hi).abs());
             near += n * n;
             far += f * f;
         }
