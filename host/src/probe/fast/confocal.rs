@@ -34,7 +34,7 @@
 //! Cost: `J·F(M)/2` (forward) `+ S·J·(F(M) + 12M) + S·F(M)/2` flops (S = slices × phases,
 //! `F(M) = 5M·log₂M`), against the band path's `Kv·K·(14J + 60)` over K rows. Memory: the
 //! spectra `J·M` complex `f32` (shared, [`Confocal::spectra_bytes`]), per worker `3M`
-//! complex `f32` and `~N_off` seeds (`N_off ≤ M` kernel offsets, 40 bytes each), the output.
+//! complex `f32` and `~N_off` seeds (`N_off ≤ M` kernel offsets, 36 bytes each), the output.
 
 use super::planar::{Layout, MAX_TABLE_BYTES, SubGrid, layout, transpose};
 use num_complex::{Complex32, Complex64};
@@ -69,8 +69,13 @@ impl std::fmt::Debug for Confocal {
 
 /// One worker's state while it sums `Σ_j X̂_j·κ̂_j` over a run of bins of one slice.
 struct BinSum {
-    /// Kernel offsets: (cell, `w²/M·e^{iν_j 2d}` at the next bin, `e^{iΔν 2d}`, 2d).
-    offsets: Vec<(usize, Complex64, Complex64, f64)>,
+    /// Kernel offsets, as columns (the recurrence vectorises): the cell of each offset,
+    /// `w²/M·e^{iν_j 2d}` at the next bin (real, imaginary parts) and the step `e^{iΔν 2d}`.
+    cells: Vec<u32>,
+    pr: Vec<f64>,
+    pi: Vec<f64>,
+    sr: Vec<f64>,
+    si: Vec<f64>,
     /// The bin the seeds are at (`usize::MAX`: not seeded).
     next: usize,
     img: Vec<Complex32>,
@@ -245,7 +250,11 @@ impl Confocal {
             .max(1);
         let zero = Complex32::new(0.0, 0.0);
         BinSum {
-            offsets: Vec::new(),
+            cells: Vec::new(),
+            pr: Vec::new(),
+            pi: Vec::new(),
+            sr: Vec::new(),
+            si: Vec::new(),
             next: usize::MAX,
             img: vec![zero; m],
             spec: vec![zero; m],
@@ -273,7 +282,11 @@ impl Confocal {
             let a = std::f64::consts::TAU * (turns - turns.round());
             Complex64::new(a.cos(), a.sin())
         };
-        b.offsets.clear();
+        b.cells.clear();
+        b.pr.clear();
+        b.pi.clear();
+        b.sr.clear();
+        b.si.clear();
         for ax in -(self.lay.nsx as i64 - 1)..sg.cx as i64 {
             for ay in -(self.lay.nsy as i64 - 1)..sg.cy as i64 {
                 let ex = sg.dx + ax as f64 * px;
@@ -284,13 +297,14 @@ impl Confocal {
                 }
                 let w = self.cfg.weight(d as f32) as f64;
                 let tau = 2.0 * d;
-                let cell = (ax.rem_euclid(mx) * my + ay.rem_euclid(my)) as usize;
-                b.offsets.push((
-                    cell,
-                    cis(k * tau / span) * (w * w * scale),
-                    cis(tau / span),
-                    tau,
-                ));
+                let cell = ax.rem_euclid(mx) * my + ay.rem_euclid(my);
+                let p = cis(k * tau / span) * (w * w * scale);
+                let step = cis(tau / span);
+                b.cells.push(cell as u32);
+                b.pr.push(p.re);
+                b.pi.push(p.im);
+                b.sr.push(step.re);
+                b.si.push(step.im);
             }
         }
         b.next = j;
@@ -304,9 +318,13 @@ impl Confocal {
             self.seed(sg, j, b);
         }
         b.img.fill(Complex32::new(0.0, 0.0));
-        for (cell, p, step, _) in &mut b.offsets {
-            b.img[*cell] = Complex32::new(p.re as f32, p.im as f32);
-            *p *= *step;
+        for ((&cell, &re), &im) in b.cells.iter().zip(&b.pr).zip(&b.pi) {
+            b.img[cell as usize] = Complex32::new(re as f32, im as f32);
+        }
+        for (((re, im), &c), &d) in b.pr.iter_mut().zip(&mut b.pi).zip(&b.sr).zip(&b.si) {
+            let (a, e) = (*re, *im);
+            *re = a * c - e * d;
+            *im = a * d + e * c;
         }
         b.next = j + 1;
         self.fy.process_with_scratch(&mut b.img, &mut b.fft);
