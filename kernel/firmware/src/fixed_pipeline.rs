@@ -47,6 +47,7 @@ pub fn fixed_lookup_params() -> LookupParams {
     LookupParams {
         tolerance: FIXED_LOOKUP_TOLERANCE,
         grid_len: None,
+        ..LookupParams::new()
     }
 }
 
