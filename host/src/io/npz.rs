@@ -11,6 +11,7 @@
 //! | `laser_xyz`, `sensor_xyz` | f64 `(3,)` | device positions |
 //! | `delta_t`, `t_start` | f64 `()` | bin width, time of bin 0 (m) |
 //! | `t_accounts_first_and_last_bounces`, `confocal` | u8 `()` | flags |
+//! | `laser_grid_normals`, `sensor_grid_normals` (optional) | f32 `(Lx, Ly, 3)`, `(Sx, Sy, 3)` | relay-surface normals at the spots (absent: +z; written only when some normal is not +z) |
 //!
 //! `confocal = 1` means one histogram per row: a **paired** scan, row `l` lit at
 //! `laser_grid_xyz[l]` and seen at `sensor_grid_xyz[l]` (the two grids have one shape; a
@@ -24,7 +25,7 @@
 //! | `H` | f32 `(K, Nt)` | histogram `k`, time last |
 //! | `laser_xyz`, `sensor_xyz` | f32 or f64 `(K, 3)` | the laser and SPAD spot of histogram `k` (m) |
 //! | `delta_t`, `t_start` | f64 `()` | bin width, time of bin 0 (m) |
-//! | `laser_normals`, `sensor_normals` (optional) | f32 or f64 `(K, 3)` | relay-surface normals at the spots: checked (finite, non-zero length) |
+//! | `laser_normals`, `sensor_normals` (optional) | f32 or f64 `(K, 3)` | relay-surface normals at the spots (absent: +z): checked (finite, non-zero length), used by `--compensate-laser` and `--weights cos` |
 //! | `laser_origin`, `sensor_origin` (optional) | f64 `(3,)` | device positions (default the origin) |
 //! | `t_accounts_first_and_last_bounces` (optional) | u8 `()` | device legs in the time axis (needs both origins) |
 //!
@@ -34,7 +35,7 @@
 use crate::atomic::Transaction;
 use crate::budget;
 use crate::error::{Error, Result};
-use crate::io::capture::{Capture, Geometry, RowSource, check_row};
+use crate::io::capture::{Capture, Geometry, Normals, RowSource, check_row};
 use ndarray::{Array, ArrayD, IxDyn};
 use ndarray_npy::{NpzReader, NpzWriter, ReadableElement};
 use std::fs::File;
@@ -100,6 +101,21 @@ fn write_to(c: &Capture, file: &mut File, path: &Path, compress: bool) -> Result
         .map_err(npz)?;
     w.add_array("sensor_grid_xyz", &arr(vec![sx, sy, 3], pts(&g.spads)))
         .map_err(npz)?;
+    // Normals only where the relay surface has some that are not +z (the default).
+    if !g.normals.lasers.is_empty() {
+        w.add_array(
+            "laser_grid_normals",
+            &arr(vec![lx, ly, 3], pts(&g.normals.lasers)),
+        )
+        .map_err(npz)?;
+    }
+    if !g.normals.spads.is_empty() {
+        w.add_array(
+            "sensor_grid_normals",
+            &arr(vec![sx, sy, 3], pts(&g.normals.spads)),
+        )
+        .map_err(npz)?;
+    }
     w.add_array("laser_xyz", &ndarray::arr1(&g.laser_origin))
         .map_err(npz)?;
     w.add_array("sensor_xyz", &ndarray::arr1(&g.sensor_origin))
@@ -217,6 +233,32 @@ fn grid(
         v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
         [s[0], s[1]],
     ))
+}
+
+/// The optional normals of vltm's grid layout: `(nx, ny, 3)` of the grid's shape, or empty
+/// when the key is absent (+z). Their values are checked by [`Geometry::validate`].
+fn grid_normals(
+    r: &mut NpzReader<File>,
+    path: &Path,
+    key: &str,
+    shape: [usize; 2],
+) -> Result<Vec<vltm_kernel::Point>> {
+    let names = r
+        .names()
+        .map_err(|e| Error::format(path, "(archive)", "a NumPy .npz archive", e.to_string()))?;
+    if !names.iter().any(|n| n.trim_end_matches(".npy") == key) {
+        return Ok(Vec::new());
+    }
+    let (n, s) = grid(r, path, key)?;
+    if s != shape {
+        return Err(Error::format(
+            path,
+            key,
+            format!("shape ({}, {}, 3): one normal per spot", shape[0], shape[1]),
+            format!("({}, {}, 3)", s[0], s[1]),
+        ));
+    }
+    Ok(n)
 }
 
 fn xyz(r: &mut NpzReader<File>, path: &Path, key: &str) -> Result<[f64; 3]> {
@@ -416,7 +458,8 @@ fn paired_geometry(r: &mut NpzReader<File>, path: &Path, s: &[usize]) -> Result<
             format!("{s:?}"),
         ));
     }
-    for key in ["laser_normals", "sensor_normals"] {
+    let mut normals = [Vec::new(), Vec::new()];
+    for (key, out) in ["laser_normals", "sensor_normals"].into_iter().zip(&mut normals) {
         if let Some(n) = points(r, path, key)? {
             if n.len() != lasers.len() {
                 return Err(Error::format(
@@ -437,6 +480,7 @@ fn paired_geometry(r: &mut NpzReader<File>, path: &Path, s: &[usize]) -> Result<
                     format!("{:?} at index {i}", n[i]),
                 ));
             }
+            *out = n;
         }
     }
     let names = r
@@ -487,6 +531,7 @@ fn paired_geometry(r: &mut NpzReader<File>, path: &Path, s: &[usize]) -> Result<
         nt: s[1],
         dt: scalar::<f64>(r, path, "delta_t")?,
         t0: scalar::<f64>(r, path, "t_start")?,
+        normals: Normals::from_lists(f32s(&normals[0]), f32s(&normals[1])),
     };
     g.validate(path)?;
     Ok(g)
@@ -526,6 +571,10 @@ fn geometry(r: &mut NpzReader<File>, path: &Path, s: &[usize]) -> Result<Geometr
         nt: s[s.len() - 1],
         dt: scalar::<f64>(r, path, "delta_t")?,
         t0: scalar::<f64>(r, path, "t_start")?,
+        normals: Normals::from_lists(
+            grid_normals(r, path, "laser_grid_normals", laser_shape)?,
+            grid_normals(r, path, "sensor_grid_normals", spad_shape)?,
+        ),
     };
     g.validate(path)?;
     Ok(g)

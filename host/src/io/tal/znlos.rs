@@ -355,6 +355,8 @@ impl ZnlosReader {
             t_start: f.float_scalar("t0")?,
             legs_in_time: true,
             xyz_names: ["laserPosition", "cameraPosition"],
+            // Z-NLOS files' `cameraGridNormals`/`laserGridNormals` are not read: +z.
+            normals: [None, None],
         };
         let (dt, t_start) = (meta.dt, meta.t_start);
         let scan::Scan {
