@@ -171,6 +171,7 @@ fn build(seed: u64, bumpy: bool) -> Case {
         nt,
         dt,
         t0,
+        normals: Default::default(),
     };
     let data = h.iter().map(|&x| x as f32).collect();
     let capture = Capture::new(geometry, data, std::path::Path::new("case")).expect("valid");
@@ -182,6 +183,7 @@ fn build(seed: u64, bumpy: bool) -> Case {
         compensate_laser: false,
         auto_margin: false,
         crop: false,
+        cosine: false,
     };
     Case {
         capture,
@@ -490,6 +492,7 @@ fn simulated_paired_captures_match_reference() {
                 compensate_laser: false,
                 auto_margin: false,
                 crop: false,
+                cosine: false,
             },
             params,
             rows,

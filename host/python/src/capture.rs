@@ -361,6 +361,7 @@ fn capture_from_arrays(
         nt,
         dt: delta_t,
         t0: t_start,
+        normals: Default::default(),
     };
     let c = py
         .detach(|| Capture::new(geometry, data, Path::new("H")))
