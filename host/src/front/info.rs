@@ -257,8 +257,16 @@ fn describe(c: &Capture, out: &mut dyn FnMut(String)) {
         } else {
             format!(
                 "per point from the file (laser spots {}, SPAD spots {}; tilted up to {:.1}° from +z): used by --compensate-laser and --weights cos",
-                if g.normals.lasers.is_empty() { "+z" } else { "per point" },
-                if g.normals.spads.is_empty() { "+z" } else { "per point" },
+                if g.normals.lasers.is_empty() {
+                    "+z"
+                } else {
+                    "per point"
+                },
+                if g.normals.spads.is_empty() {
+                    "+z"
+                } else {
+                    "per point"
+                },
                 tilt(&g.normals.lasers).max(tilt(&g.normals.spads))
             )
         }

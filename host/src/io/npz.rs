@@ -459,7 +459,10 @@ fn paired_geometry(r: &mut NpzReader<File>, path: &Path, s: &[usize]) -> Result<
         ));
     }
     let mut normals = [Vec::new(), Vec::new()];
-    for (key, out) in ["laser_normals", "sensor_normals"].into_iter().zip(&mut normals) {
+    for (key, out) in ["laser_normals", "sensor_normals"]
+        .into_iter()
+        .zip(&mut normals)
+    {
         if let Some(n) = points(r, path, key)? {
             if n.len() != lasers.len() {
                 return Err(Error::format(

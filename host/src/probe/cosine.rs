@@ -73,8 +73,8 @@ pub(super) fn direct(
     let band = confocal::band_total(&g, cfg, n);
     let lookup = confocal::lookup_flops(&g, cfg, n);
     let fits = lookup_plan(&g, cfg, n).fits();
-    let use_lookup = job.exec.path == Path::Lookup
-        || (job.exec.path == Path::Auto && lookup < band && fits);
+    let use_lookup =
+        job.exec.path == Path::Lookup || (job.exec.path == Path::Auto && lookup < band && fits);
     let threads = rayon::current_num_threads().max(1);
     check_memory(
         &g,
@@ -98,7 +98,14 @@ pub(super) fn direct(
         lookup_plan(&g, cfg, n).check(|| pass_name(&g, cfg, "direct light (lookup)"))?;
         let lk = Lookup::new(cfg);
         let workers: Vec<_> = (0..threads)
-            .map(|_| (lk.scratch(1), vec![zero; n], vec![zero; n], Report::default()))
+            .map(|_| {
+                (
+                    lk.scratch(1),
+                    vec![zero; n],
+                    vec![zero; n],
+                    Report::default(),
+                )
+            })
             .collect();
         let workers = drive_rows_indexed(
             src,

@@ -346,11 +346,7 @@ pub fn read_any(path: &Path) -> Result<Capture> {
 /// [`Error::Format`] on `(file)` when it is not HDF5 (or cannot be read), on `(root group)`
 /// when its root group cannot be listed.
 /// A grid-shaped dataset the file may lack (`laser_grid_normals`): `None` when absent.
-fn optional_grid(
-    f: &Fields<'_>,
-    name: &'static str,
-    format_name: &str,
-) -> Result<Option<Grid>> {
+fn optional_grid(f: &Fields<'_>, name: &'static str, format_name: &str) -> Result<Option<Grid>> {
     if f.has(name) {
         f.grid(name, format_name).map(Some)
     } else {

@@ -7,8 +7,8 @@ use super::fields::{Grid, allclose};
 use super::{HFormat, ScanType, TalOptions};
 use crate::error::{Error, Result};
 use crate::io::capture::{Geometry, Normals, unit};
-use vltm_kernel::Point;
 use std::path::Path;
+use vltm_kernel::Point;
 
 /// A capture's description in tal's terms.
 pub(super) struct Meta {
@@ -116,9 +116,17 @@ pub(super) fn build(path: &Path, m: Meta, options: TalOptions) -> Result<Scan> {
     };
     let single = scan == ScanType::Single;
     let (laser_origin, sensor_origin, normals) = if single {
-        (sensor_xyz, laser_xyz, Normals::from_lists(snormals, lnormals))
+        (
+            sensor_xyz,
+            laser_xyz,
+            Normals::from_lists(snormals, lnormals),
+        )
     } else {
-        (laser_xyz, sensor_xyz, Normals::from_lists(lnormals, snormals))
+        (
+            laser_xyz,
+            sensor_xyz,
+            Normals::from_lists(lnormals, snormals),
+        )
     };
     let geometry = Geometry {
         lasers,
@@ -196,7 +204,11 @@ fn checked_normals(path: &Path, normals: Option<Grid>, grid: &Grid) -> Result<Ve
         return Err(Error::format(
             path,
             n.field,
-            format!("one normal per point of {} ({})", grid.field, grid_form(grid)),
+            format!(
+                "one normal per point of {} ({})",
+                grid.field,
+                grid_form(grid)
+            ),
             grid_form(&n),
         ));
     }
