@@ -930,6 +930,49 @@ mod tests {
         let _ = std::fs::remove_dir_all(dir);
     }
 
+    /// Per-pair normals (`laser_normals`, `sensor_normals`) that are not all +z are kept per
+    /// point in the geometry (all-+z ones are the flat default), and vltm's layout writes them
+    /// as `laser_grid_normals` / `sensor_grid_normals` and reads them back unchanged; a NaN
+    /// normal is a one-line error naming its key.
+    #[test]
+    fn paired_normals_are_kept_and_written() {
+        let dir = std::env::temp_dir().join(format!("vltm-paired-nrm-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("paired.npz");
+        let tilt = |a: f64| {
+            ArrayD::from_shape_fn(IxDyn(&[5, 3]), move |i| match i[1] {
+                0 => a * i[0] as f64,
+                1 => 0.0,
+                _ => 1.0,
+            })
+        };
+        write_paired(&p, |a| {
+            a.retain(|(n, _)| *n != "laser_normals");
+            a.push(("laser_normals", tilt(0.1)));
+            a.push(("sensor_normals", tilt(-0.2)));
+        });
+        let c = read(&p).unwrap();
+        let g = &c.geometry;
+        assert_eq!(g.normals.lasers[3], [0.3f32, 0.0, 1.0]);
+        assert_eq!(g.normals.spads[3], [-0.6f32, 0.0, 1.0]);
+        assert!(g.not_flat().is_some());
+        let q = dir.join("vltm.npz");
+        write(&c, &q).unwrap();
+        assert_eq!(read(&q).unwrap(), c);
+        // The layout without normals (+z) reads back with none, as before.
+        write_paired(&p, |_| {});
+        assert!(read(&p).unwrap().geometry.normals.flat());
+        write_paired(&p, |a| {
+            a.retain(|(n, _)| *n != "laser_normals");
+            let mut t = tilt(0.1);
+            t[&[1usize, 2][..]] = f64::NAN;
+            a.push(("sensor_normals", t));
+        });
+        let e = read(&p).unwrap_err().to_string();
+        assert!(e.contains("sensor_normals") && !e.contains('\n'), "{e}");
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
     /// Bad paired input: one line naming the key, for lists of different lengths, NaN points,
     /// zero-length normals, an H that does not hold one histogram per pair, and legs in time
     /// without device positions.
