@@ -551,8 +551,14 @@ fn cli_simulate_info_direct_paired() {
         cap.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("100 pairs (laser spot, SPAD spot) x "),
+        "{said}"
+    );
     let o = vltm_cmd(&["info", cap.to_str().unwrap()]);
     let info = String::from_utf8_lossy(&o.stdout);
+    assert!(info.contains("normals      +z at every spot"), "{info}");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(
         info.contains("paired (one laser spot and one SPAD spot per histogram)"),
@@ -576,6 +582,55 @@ fn cli_simulate_info_direct_paired() {
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(out.is_file());
+    // `--swap-roles` exchanges the pairs' spots: the same direct light (summary without the
+    // time); `--weights cos` runs on a paired scan.
+    let summary = |o: &std::process::Output| {
+        let s = String::from_utf8_lossy(&o.stdout).into_owned();
+        let line = s
+            .lines()
+            .find(|l| l.starts_with("direct:"))
+            .unwrap_or("")
+            .to_string();
+        let (a, b) = line.split_once(" in ").unwrap_or((&line, ""));
+        let b = b.split_once(" s (").map_or("", |x| x.1);
+        format!("{a} {b}")
+    };
+    let flags = |extra: &'static str| {
+        let mut v = vec![
+            "direct".to_string(),
+            cap.to_str().unwrap().to_string(),
+            "--volume".into(),
+            "-0.2:0.4:7,-0.35:0.25:7,0.5:0.9:5".into(),
+            "--wavelength".into(),
+            "0.1".into(),
+            "--path".into(),
+            "band".into(),
+            "--out".into(),
+            dir.join("swapped.npy").to_str().unwrap().to_string(),
+        ];
+        if !extra.is_empty() {
+            v.extend(extra.split(' ').map(String::from));
+        }
+        v
+    };
+    let run = |extra| {
+        let o = Command::new(support::vltm_bin())
+            .args(flags(extra))
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{extra}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        o
+    };
+    let (plain, swapped) = (run(""), run("--swap-roles"));
+    assert!(summary(&plain).contains("peak"), "{}", summary(&plain));
+    assert_eq!(summary(&plain), summary(&swapped));
+    let cos = run("--weights cos");
+    assert!(summary(&cos).contains("peak"));
+    assert_ne!(summary(&plain), summary(&cos));
     let o = vltm_cmd(&[
         "column",
         cap.to_str().unwrap(),

@@ -231,7 +231,8 @@ pub(crate) struct Common {
     #[command(flatten)]
     pub(crate) wave: WaveArgs,
     /// Use the SPADs as the virtual projector and the lasers as the camera (reciprocity;
-    /// 1-D SPAD arrays focus illumination along their axis).
+    /// 1-D SPAD arrays focus illumination along their axis; a paired scan exchanges its
+    /// laser and SPAD spots).
     #[arg(long)]
     pub(crate) swap_roles: bool,
     /// Evaluation path: auto (the cheapest that applies), band (the kernel's band sum, any

@@ -256,16 +256,11 @@ fn describe(c: &Capture, out: &mut dyn FnMut(String)) {
             "+z at every spot (none in the file, or all +z)".to_string()
         } else {
             format!(
-                "per point from the file (laser spots {}, SPAD spots {}; tilted up to {:.1}° from +z): used by --compensate-laser and --weights cos",
-                if g.normals.lasers.is_empty() {
-                    "+z"
-                } else {
-                    "per point"
-                },
-                if g.normals.spads.is_empty() {
-                    "+z"
-                } else {
-                    "per point"
+                "per point from the file ({}; tilted up to {:.1}° from +z): used by --compensate-laser and --weights cos",
+                match (g.normals.lasers.is_empty(), g.normals.spads.is_empty()) {
+                    (false, false) => "at the laser and SPAD spots",
+                    (false, true) => "at the laser spots; +z at the SPAD spots",
+                    _ => "at the SPAD spots; +z at the laser spots",
                 },
                 tilt(&g.normals.lasers).max(tilt(&g.normals.spads))
             )
@@ -278,22 +273,18 @@ fn describe(c: &Capture, out: &mut dyn FnMut(String)) {
              confocal one coincident points); columns, rows and the matrix need a SPAD grid"
                 .to_string(),
         );
-    } else if g.confocal {
+    } else if !flat_conv {
         out(format!(
-            "paths        direct: {}band or lookup (--weights cos too); columns, rows and the matrix need a SPAD grid",
-            if flat_conv {
-                "the confocal FFT path on a regular grid of spots, else "
+            "paths        band or lookup: no FFT path ({}){}",
+            if g.confocal {
+                "the wall is not flat"
             } else {
-                "no FFT path (the wall is not flat); "
-            }
-        ));
-    } else {
-        out(format!(
-            "paths        {}band or lookup; --weights cos needs one SPAD per row (a paired or confocal scan)",
-            if flat_conv {
-                "the planar FFT path where the SPADs form a regular lattice and the volume a wall-parallel grid, else "
+                "the SPADs are not in one plane"
+            },
+            if g.confocal {
+                "; --weights cos too"
             } else {
-                "no FFT path (the SPADs are not in one plane); "
+                ""
             }
         ));
     }
