@@ -44,8 +44,8 @@ pub struct Geometry {
     pub normals: Normals,
 }
 
-/// Relay-surface normals at the spots of a [`Geometry`]: unit-free directions (any length
-/// > 0; [`Geometry::laser_normal`] normalises), pointing toward the hidden scene (+z on the
+/// Relay-surface normals at the spots of a [`Geometry`]: directions of any non-zero length
+/// ([`Geometry::laser_normal`] normalises), pointing toward the hidden scene (+z on the
 /// wall z = 0 of DESIGN §B.0). An empty list means +z at every spot of that list (formats
 /// without normals, and every file whose normals are all +z); otherwise one normal per spot,
 /// in the order of [`Geometry::lasers`] / [`Geometry::spads`]. Only the sign-free direction
