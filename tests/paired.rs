@@ -734,11 +734,14 @@ fn cos_at(x: [f32; 3], n: [f32; 3], v: [f32; 3]) -> f64 {
     (d[0] * n[0] + d[1] * n[1] + d[2] * n[2]).abs() / (nn * dd)
 }
 
+/// Normals per row, `(laser spots, SPAD spots)`.
+type RowNormals<'a> = (&'a [[f32; 3]], &'a [[f32; 3]]);
+
 impl Case {
     /// The reference under `cos` weights with the normals `(laser, SPAD)` per row (`None`:
     /// +z): `A(v) = Σ_l cos_l(v)·cos_s(v)·A_l(v)`, each one-pair `A_l` the time-domain
     /// reference with its distance weights.
-    fn truth_cos(&self, normals: Option<(&[[f32; 3]], &[[f32; 3]])>) -> Vec<f64> {
+    fn truth_cos(&self, normals: Option<RowNormals<'_>>) -> Vec<f64> {
         let g = &self.capture.geometry;
         let up = [0.0f32, 0.0, 1.0];
         let mut a = vec![num_complex::Complex64::new(0.0, 0.0); self.volume.len()];
