@@ -120,7 +120,9 @@ impl Geometry {
         self.falloff(self.lasers[l], self.laser_normal(l))
     }
 
-    fn falloff(&self, x_l: Point, n: [f64; 3]) -> f64 {
+    /// The physical laser's falloff `|v·n| / d³` to wall point `x_l` with unit normal `n`
+    /// (`v = laser_xyz − x_l`, `d = |v|`).
+    pub fn falloff(&self, x_l: Point, n: [f64; 3]) -> f64 {
         let v: [f64; 3] = core::array::from_fn(|i| self.laser_origin[i] - f64::from(x_l[i]));
         let d2 = v.iter().map(|c| c * c).sum::<f64>();
         let dot = v[0] * n[0] + v[1] * n[1] + v[2] * n[2];

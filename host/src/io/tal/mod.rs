@@ -99,7 +99,8 @@
 //!   `c(x) = cos θ / |laser_xyz − x|²` at its spot `x0` and by nothing on the SPAD side, while a
 //!   laser scan of the swapped setup would carry the falloff at each new laser spot. Row `l` is
 //!   therefore `H[:, l] · c'(S_l) / c(x0)`, with `c'` the falloff from the swapped laser origin
-//!   ([`Geometry::laser_falloff`] of the returned geometry). Then
+//!   ([`Geometry::laser_falloff_at`] of the returned geometry; both falloffs take the spots'
+//!   normals where the file has `*_grid_normals`, +z otherwise). Then
 //!   `--compensate-laser` (÷ `c'(S_l)`) gives exactly y-tal's `compensate_laser_cos_dsqr` result
 //!   `H / c(x0)` (`../shared/data/single/README.md`; there `c(x0)` = 0.47982 m⁻²).
 //! * `T_Sx_Sy`, `T_Si` with any other laser grid (a paired, non-confocal custom scan): not
@@ -669,7 +670,7 @@ impl RowSource for TalReader {
         taken?;
         let x_l = self.geometry.lasers[l];
         if let Some(c0) = self.single_falloff {
-            let k = self.geometry.laser_falloff(x_l) / c0;
+            let k = self.geometry.laser_falloff_at(l) / c0;
             out.iter_mut().for_each(|h| *h = (f64::from(*h) * k) as f32);
         }
         Ok(x_l)

@@ -153,7 +153,8 @@ pub(super) fn build(path: &Path, m: Meta, options: TalOptions) -> Result<Scan> {
             laser_origin: laser_xyz,
             ..geometry.clone()
         };
-        let c0 = physical.laser_falloff(geometry.spads[0]);
+        // The one laser spot x0 with its own normal (now the capture's SPAD spot).
+        let c0 = physical.falloff(geometry.spads[0], geometry.spad_normal(0));
         if !(c0.is_finite() && c0 > 0.0) {
             return Err(Error::format(
                 path,
@@ -162,8 +163,8 @@ pub(super) fn build(path: &Path, m: Meta, options: TalOptions) -> Result<Scan> {
                 format!("{laser_xyz:?}"),
             ));
         }
-        let sensor_ok = geometry.lasers.iter().all(|&x| {
-            let c = geometry.laser_falloff(x);
+        let sensor_ok = (0..geometry.lasers.len()).all(|l| {
+            let c = geometry.laser_falloff_at(l);
             c.is_finite() && c > 0.0
         });
         if !sensor_ok {

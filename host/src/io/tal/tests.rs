@@ -920,9 +920,37 @@ fn grid_normals_are_read_and_checked() {
     ];
     let r = single.open(&dir, "single").unwrap();
     assert_eq!(r.scan_type(), ScanType::Single);
-    let g = r.geometry();
+    let g = r.geometry().clone();
     assert_eq!(g.normals.lasers[5], [0.5, -0.05, 1.0]);
     assert_eq!(g.normals.spads, vec![[0.0, 0.3, 1.0]]);
+    // The reciprocity factor c'(S_l)/c(x0) takes the spots' own normals (so that
+    // `--compensate-laser`, which divides by c'(S_l) with the same normal, leaves H/c(x0)):
+    // computed here from the definition, |v·n̂|/d³.
+    let f = |o: [f64; 3], x: Point, n: [f64; 3]| {
+        let v: Vec<f64> = (0..3).map(|i| o[i] - f64::from(x[i])).collect();
+        let d = v.iter().map(|c| c * c).sum::<f64>().sqrt();
+        let nn = n.iter().map(|c| c * c).sum::<f64>().sqrt();
+        (v[0] * n[0] + v[1] * n[1] + v[2] * n[2]).abs() / nn / d.powi(3)
+    };
+    let c0 = f([-0.5, 0.0, 0.25], [0.05, 0.02, 0.0], [0.0, 0.3, 1.0]);
+    let mut r = r;
+    let mut row = Vec::new();
+    let mut worst = 0.0f64;
+    for l in 0..6 {
+        r.read_row(l, &mut row).unwrap();
+        let n = [0.1 * l as f64, -0.05, 1.0];
+        let k = f([0.5, 0.125, 0.375], g.lasers[l], n) / c0;
+        let flat = g.laser_falloff(g.lasers[l]) / c0;
+        assert!(
+            (k / flat - 1.0).abs() > 1e-3 || l == 0,
+            "row {l}: normals change k"
+        );
+        for (n, &h) in row.iter().enumerate() {
+            let want = (n * 10_000 + l) as f64 * k;
+            worst = worst.max((f64::from(h) - want).abs() / want.abs().max(1.0));
+        }
+    }
+    assert!(worst < 1e-6, "{worst}");
     // Bad normals: one line naming the field.
     for (name, v, shape, why) in [
         (
