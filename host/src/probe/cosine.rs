@@ -28,7 +28,6 @@ use crate::error::{Error, Result};
 use crate::exec::Path;
 use crate::io::capture::{Geometry, RowSource, wall_cosine};
 use crate::probe::confocal;
-use crate::probe::direct::lookup_plan;
 use crate::probe::fast::Lookup;
 use crate::volume::Volume;
 use num_complex::Complex64;
@@ -62,10 +61,12 @@ pub(super) fn check(g: &Geometry, path: Path) -> Result<()> {
 /// The diagonal's accumulators under the wall cosines, on the lookup or band path (the
 /// cheaper by the flop model under [`Path::Auto`]), rows in parallel. `job.cfg` has the
 /// distance weights of the wave.
+/// `lookup_plan`: what the lookup path holds at once (the diagonal's plan of `direct`).
 pub(super) fn direct(
     src: &mut dyn RowSource,
     job: Job<'_>,
     volume: &Volume,
+    lookup_plan: &budget::Plan,
 ) -> Result<(Vec<Complex64>, Report, Path)> {
     let g = src.geometry().clone();
     check(&g, job.exec.path)?;
@@ -73,7 +74,7 @@ pub(super) fn direct(
     let n = volume.len();
     let band = confocal::band_total(&g, cfg, n);
     let lookup = confocal::lookup_flops(&g, cfg, n);
-    let fits = lookup_plan(&g, cfg, n).fits();
+    let fits = lookup_plan.fits();
     let use_lookup =
         job.exec.path == Path::Lookup || (job.exec.path == Path::Auto && lookup < band && fits);
     let threads = rayon::current_num_threads().max(1);
@@ -96,7 +97,7 @@ pub(super) fn direct(
     };
     let zero = Complex64::new(0.0, 0.0);
     let (acc_parts, report, path) = if use_lookup {
-        lookup_plan(&g, cfg, n).check(|| pass_name(&g, cfg, "direct light (lookup)"))?;
+        lookup_plan.check(|| pass_name(&g, cfg, "direct light (lookup)"))?;
         let lk = Lookup::new(cfg);
         let workers: Vec<_> = (0..threads)
             .map(|_| {

@@ -134,8 +134,10 @@ fn direct_acc_on(
     };
     if cosine {
         let note = "cos weights (the wall's cosine per leg)".to_string();
-        let (acc, report, path) =
-            with_note(job, note, |job| super::cosine::direct(src, job, volume))?;
+        let (acc, report, path) = with_note(job, note, |job| {
+            let plan = lookup_plan(src.geometry(), job.cfg, volume.len());
+            super::cosine::direct(src, job, volume, &plan)
+        })?;
         return Ok((
             Amplitudes {
                 acc,

@@ -83,7 +83,7 @@ impl Wave {
     /// [`Error::Argument`](crate::Error::Argument) (`weights`) with one line that says why.
     pub fn refuse_cosine(&self, probe: &str) -> Result<()> {
         if self.cosine {
-            return Err(crate::Error::arg(
+            return Err(crate::error::Error::arg(
                 "weights",
                 format!(
                     "`cos` weights (the wall's cosine per leg) are computed by `direct` only, \
