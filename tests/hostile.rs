@@ -303,6 +303,7 @@ fn many_bins_need_no_quadratic_table() {
         nt: 100_000,
         dt: 0.0005,
         t0: 0.0,
+        normals: Default::default(),
     };
     // One pulse at 2 m of path: the voxel at (0.05, 0, 0.99) is about 1 m from both spots.
     let data: Vec<f32> = (0..g.nt)

@@ -171,6 +171,7 @@ fn build(seed: u64, bumpy: bool) -> Case {
         nt,
         dt,
         t0,
+        normals: Default::default(),
     };
     let data = h.iter().map(|&x| x as f32).collect();
     let capture = Capture::new(geometry, data, std::path::Path::new("case")).expect("valid");
@@ -182,6 +183,7 @@ fn build(seed: u64, bumpy: bool) -> Case {
         compensate_laser: false,
         auto_margin: false,
         crop: false,
+        cosine: false,
     };
     Case {
         capture,
@@ -490,6 +492,7 @@ fn simulated_paired_captures_match_reference() {
                 compensate_laser: false,
                 auto_margin: false,
                 crop: false,
+                cosine: false,
             },
             params,
             rows,
@@ -548,8 +551,14 @@ fn cli_simulate_info_direct_paired() {
         cap.to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let said = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        said.contains("100 pairs (laser spot, SPAD spot) x "),
+        "{said}"
+    );
     let o = vltm_cmd(&["info", cap.to_str().unwrap()]);
     let info = String::from_utf8_lossy(&o.stdout);
+    assert!(info.contains("normals      +z at every spot"), "{info}");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(
         info.contains("paired (one laser spot and one SPAD spot per histogram)"),
@@ -573,6 +582,55 @@ fn cli_simulate_info_direct_paired() {
     ]);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(out.is_file());
+    // `--swap-roles` exchanges the pairs' spots: the same direct light (summary without the
+    // time); `--weights cos` runs on a paired scan.
+    let summary = |o: &std::process::Output| {
+        let s = String::from_utf8_lossy(&o.stdout).into_owned();
+        let line = s
+            .lines()
+            .find(|l| l.starts_with("direct:"))
+            .unwrap_or("")
+            .to_string();
+        let (a, b) = line.split_once(" in ").unwrap_or((&line, ""));
+        let b = b.split_once(" s (").map_or("", |x| x.1);
+        format!("{a} {b}")
+    };
+    let flags = |extra: &'static str| {
+        let mut v = vec![
+            "direct".to_string(),
+            cap.to_str().unwrap().to_string(),
+            "--volume".into(),
+            "-0.2:0.4:7,-0.35:0.25:7,0.5:0.9:5".into(),
+            "--wavelength".into(),
+            "0.1".into(),
+            "--path".into(),
+            "band".into(),
+            "--out".into(),
+            dir.join("swapped.npy").to_str().unwrap().to_string(),
+        ];
+        if !extra.is_empty() {
+            v.extend(extra.split(' ').map(String::from));
+        }
+        v
+    };
+    let run = |extra| {
+        let o = Command::new(support::vltm_bin())
+            .args(flags(extra))
+            .output()
+            .unwrap();
+        assert!(
+            o.status.success(),
+            "{extra}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        o
+    };
+    let (plain, swapped) = (run(""), run("--swap-roles"));
+    assert!(summary(&plain).contains("peak"), "{}", summary(&plain));
+    assert_eq!(summary(&plain), summary(&swapped));
+    let cos = run("--weights cos");
+    assert!(summary(&cos).contains("peak"));
+    assert_ne!(summary(&plain), summary(&cos));
     let o = vltm_cmd(&[
         "column",
         cap.to_str().unwrap(),
@@ -636,4 +694,265 @@ fn cli_simulate_info_direct_paired() {
     );
     assert_eq!(std::fs::read(&out).unwrap(), old);
     let _ = std::fs::remove_dir_all(dir);
+}
+
+// ---- Per-point normals: `--weights cos` and `--compensate-laser` --------------------------
+
+/// The unit normal of the bump surface `z = bump(amp, x, y)` at (x, y), `(−∂z/∂x, −∂z/∂y, 1)`
+/// normalised (tilted up to ~23° at ±5 cm).
+fn bump_normal(amp: f64, p: [f32; 3]) -> [f32; 3] {
+    let (x, y) = (f64::from(p[0]), f64::from(p[1]));
+    let zx = amp * 7.0 * (7.0 * x).cos() * (5.0 * y + 0.3).cos();
+    let zy = -amp * 5.0 * (7.0 * x).sin() * (5.0 * y + 0.3).sin();
+    let n = [-zx, -zy, 1.0];
+    let len = (n[0] * n[0] + n[1] * n[1] + 1.0f64).sqrt();
+    n.map(|c| (c / len) as f32)
+}
+
+/// A case whose geometry carries the bump's normals at every laser and SPAD spot (bumpy
+/// walls; a flat wall keeps +z, the default) and whose wave asks for `cos` weights.
+fn build_cos(seed: u64) -> (Case, bool) {
+    let bumpy = seed.is_multiple_of(2);
+    let mut c = build(seed, bumpy);
+    if bumpy {
+        let g = &mut c.capture.geometry;
+        g.normals = vltm::io::Normals {
+            lasers: g.lasers.iter().map(|&p| bump_normal(0.05, p)).collect(),
+            spads: g.spads.iter().map(|&p| bump_normal(0.05, p)).collect(),
+        };
+    }
+    c.wave.cosine = true;
+    (c, bumpy)
+}
+
+/// `|n̂·(v − x)| / |v − x|` in `f64`, written here from the definition (not vltm's helper).
+fn cos_at(x: [f32; 3], n: [f32; 3], v: [f32; 3]) -> f64 {
+    let (x, n, v) = (p64(x), p64(n), p64(v));
+    let d = [v[0] - x[0], v[1] - x[1], v[2] - x[2]];
+    let nn = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+    let dd = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    (d[0] * n[0] + d[1] * n[1] + d[2] * n[2]).abs() / (nn * dd)
+}
+
+/// Normals per row, `(laser spots, SPAD spots)`.
+type RowNormals<'a> = (&'a [[f32; 3]], &'a [[f32; 3]]);
+
+impl Case {
+    /// The reference under `cos` weights with the normals `(laser, SPAD)` per row (`None`:
+    /// +z): `A(v) = Σ_l cos_l(v)·cos_s(v)·A_l(v)`, each one-pair `A_l` the time-domain
+    /// reference with its distance weights.
+    fn truth_cos(&self, normals: Option<RowNormals<'_>>) -> Vec<f64> {
+        let g = &self.capture.geometry;
+        let up = [0.0f32, 0.0, 1.0];
+        let mut a = vec![num_complex::Complex64::new(0.0, 0.0); self.volume.len()];
+        for (l, r) in self.rows.iter().enumerate() {
+            let (nl, ns) = normals.map_or((up, up), |(nl, ns)| (nl[l], ns[l]));
+            let d = r.diagonal(reference::Gate::Gaussian, &self.volume.points);
+            for ((x, y), v) in a.iter_mut().zip(d).zip(&self.volume.points) {
+                *x += y * (cos_at(g.lasers[l], nl, *v) * cos_at(g.spads[l], ns, *v));
+            }
+        }
+        a.iter().map(|a| a.norm()).collect()
+    }
+}
+
+/// `cos` weights (the wall's cosine per leg, from the per-point normals) on paired scans on a
+/// flat and a ±5 cm bumpy wall: band, lookup and `auto` against the `f64` reference within the
+/// tolerance of the distance-only weights (the cosines are ≤ 1, so `S` still bounds the
+/// error). Teeth: the reference with the normals ignored (+z everywhere) fails every bumpy
+/// case, and distance-only weights fail every case; the FFT path is refused in one line.
+#[test]
+fn cos_weights_match_reference_flat_and_bumpy() {
+    let (mut worst_ok, mut least_teeth, mut least_inv) = (0.0f64, f64::INFINITY, f64::INFINITY);
+    for seed in 1..=24u64 {
+        let (c, bumpy) = build_cos(seed);
+        let g = &c.capture.geometry;
+        let (eps, _) = c.tol();
+        let scale = c.scales();
+        let normals = (!g.normals.flat()).then(|| (&g.normals.lasers[..], &g.normals.spads[..]));
+        assert_eq!(normals.is_some(), bumpy);
+        let truth = c.truth_cos(normals);
+        for path in [Path::Band, Path::Lookup, Path::Auto] {
+            let out = c.direct(path).expect("cos weights");
+            assert_ne!(out.path, Path::Planar);
+            let tol = if path == Path::Band {
+                eps
+            } else {
+                eps + INTERP
+            };
+            let w = worst(&out.values, &truth, &scale, tol);
+            assert!(w <= 1.0, "seed {seed} (bumpy {bumpy}) {path:?}: {w}");
+            worst_ok = worst_ok.max(w);
+            if path == Path::Band {
+                if bumpy {
+                    let flat = c.truth_cos(None);
+                    let t = worst(&out.values, &flat, &scale, eps);
+                    assert!(t > 1.0, "seed {seed}: normals ignored passes ({t})");
+                    least_teeth = least_teeth.min(t);
+                }
+                let inv = c.truth();
+                let t = worst(&out.values, &inv, &scale, eps);
+                assert!(t > 1.0, "seed {seed}: distance-only weights pass ({t})");
+                least_inv = least_inv.min(t);
+            }
+        }
+        let e = c.direct(Path::Planar).expect_err("no FFT path");
+        let msg = e.to_string();
+        assert!(msg.contains("path") && !msg.contains('\n'), "{msg}");
+    }
+    println!(
+        "cos weights: worst error/tolerance {worst_ok:.3}; teeth: normals ignored ≥ {least_teeth:.1}×, distance-only ≥ {least_inv:.1}×"
+    );
+}
+
+/// `cos` weights are refused in one line by the probes and scans that do not compute them
+/// (a SPAD grid, columns), before any pass.
+#[test]
+fn cos_weights_refused_where_they_do_not_apply() {
+    let (c, _) = build_cos(2);
+    let e = probe::column(
+        &mut c.capture.clone(),
+        c.volume.points[0],
+        &c.volume,
+        probe::ColumnGate::TwoBounce,
+        probe::Shell::ALL,
+        &c.wave,
+        Exec {
+            progress: None,
+            path: Path::Auto,
+        },
+    )
+    .expect_err("columns do not take cos weights");
+    let msg = e.to_string();
+    assert!(msg.contains("weights") && !msg.contains('\n'), "{msg}");
+    // The same histograms read as a grid scan of one SPAD: refused (a SPAD grid).
+    let mut grid = c.capture.clone();
+    let g = &mut grid.geometry;
+    g.confocal = false;
+    g.spads.truncate(1);
+    g.spad_shape = [1, 1];
+    g.normals.spads.truncate(1);
+    let e = probe::direct(
+        &mut grid,
+        &c.volume,
+        &c.wave,
+        Exec {
+            progress: None,
+            path: Path::Auto,
+        },
+    )
+    .expect_err("a SPAD grid does not take cos weights");
+    let msg = e.to_string();
+    assert!(
+        msg.contains("weights") && msg.contains("one SPAD per row") && !msg.contains('\n'),
+        "{msg}"
+    );
+}
+
+/// `--compensate-laser` divides each row by the falloff to its spot with the spot's own
+/// normal, `|v·n̂|/d³` (y-tal's `compensate_laser_cos_dsqr`): on a bumpy wall the result
+/// equals the distance-only image of rows divided by that falloff computed here in `f64`,
+/// and differs from the rows divided by the flat wall's `|v_z|/d³` (what it did before
+/// normals). Flat wall: the two agree.
+#[test]
+fn compensate_laser_uses_each_spots_normal() {
+    for (seed, bumpy) in [(2u64, true), (4, true), (3, false)] {
+        let (mut c, b) = build_cos(seed);
+        assert_eq!(b, bumpy);
+        c.wave.cosine = false;
+        c.capture.geometry.laser_origin = [0.3, -0.4, 1.1];
+        let g = c.capture.geometry.clone();
+        let falloff = |l: usize, n: [f32; 3]| {
+            let (x, n) = (p64(g.lasers[l]), p64(n));
+            let v = [0.3 - x[0], -0.4 - x[1], 1.1 - x[2]];
+            let d = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+            let nn = (n[0] * n[0] + n[1] * n[1] + n[2] * n[2]).sqrt();
+            (v[0] * n[0] + v[1] * n[1] + v[2] * n[2]).abs() / nn / d.powi(3)
+        };
+        let divided = |f: &dyn Fn(usize) -> f64| {
+            let mut cap = c.capture.clone();
+            let nt = g.nt;
+            for (l, row) in cap.data.chunks_exact_mut(nt).enumerate() {
+                let k = (1.0 / f(l)) as f32;
+                row.iter_mut().for_each(|h| *h *= k);
+            }
+            cap
+        };
+        let run = |cap: &mut Capture, compensate: bool| {
+            let wave = Wave {
+                compensate_laser: compensate,
+                ..c.wave
+            };
+            let ex = Exec {
+                progress: None,
+                path: Path::Band,
+            };
+            probe::direct(cap, &c.volume, &wave, ex)
+                .expect("direct")
+                .values
+        };
+        let own = run(&mut c.capture.clone(), true);
+        let normals = if bumpy {
+            g.normals.lasers.clone()
+        } else {
+            vec![[0.0, 0.0, 1.0]; g.lasers.len()]
+        };
+        let want = run(&mut divided(&|l| falloff(l, normals[l])), false);
+        let flat = run(&mut divided(&|l| falloff(l, [0.0, 0.0, 1.0])), false);
+        let max = want.iter().fold(0.0f32, |a, &b| a.max(b));
+        let err = |a: &[f32], b: &[f32]| {
+            a.iter()
+                .zip(b)
+                .map(|(x, y)| (x - y).abs())
+                .fold(0.0f32, f32::max)
+                / max
+        };
+        let (e_own, e_flat) = (err(&own, &want), err(&own, &flat));
+        println!(
+            "compensate-laser seed {seed} bumpy {bumpy}: vs own normals {e_own:.2e}, vs +z {e_flat:.2e}"
+        );
+        assert!(e_own < 1e-4, "seed {seed}: {e_own}");
+        if bumpy {
+            assert!(
+                e_flat > 1e-2,
+                "seed {seed}: +z falloff is as good ({e_flat})"
+            );
+        } else {
+            assert!(e_flat < 1e-4, "seed {seed}: {e_flat}");
+        }
+    }
+}
+
+/// Reciprocity on a paired scan: `swap_roles` exchanges the laser and SPAD lists (with their
+/// normals and devices), keeps the histograms, and the direct light is unchanged (the
+/// diagonal's path `d1 + |x_l − v| + |v − x_s| + d4` and weights are symmetric); swapping twice
+/// is the identity. A confocal capture still has nothing to swap.
+#[test]
+fn swap_roles_on_paired_scans() {
+    let (c, _) = build_cos(4);
+    let s = vltm::io::swap_roles(&c.capture).expect("paired scans swap");
+    let (g, h) = (&c.capture.geometry, &s.geometry);
+    assert_eq!((&h.lasers, &h.spads), (&g.spads, &g.lasers));
+    assert_eq!(h.normals.lasers, g.normals.spads);
+    assert_eq!(
+        (h.laser_origin, h.sensor_origin),
+        (g.sensor_origin, g.laser_origin)
+    );
+    assert_eq!(s.data, c.capture.data);
+    assert_eq!(vltm::io::swap_roles(&s).unwrap(), c.capture);
+    let ex = || Exec {
+        progress: None,
+        path: Path::Band,
+    };
+    let a = probe::direct(&mut c.capture.clone(), &c.volume, &c.wave, ex()).unwrap();
+    let b = probe::direct(&mut s.clone(), &c.volume, &c.wave, ex()).unwrap();
+    let max = a.values.iter().fold(0.0f32, |x, &y| x.max(y));
+    for (x, y) in a.values.iter().zip(&b.values) {
+        assert!((x - y).abs() <= 1e-5 * max, "{x} vs {y}");
+    }
+    let mut conf = c.capture.clone();
+    conf.geometry.spads = conf.geometry.lasers.clone();
+    conf.geometry.normals = Default::default();
+    let e = vltm::io::swap_roles(&conf).expect_err("confocal: nothing to swap");
+    assert!(e.to_string().contains("nothing to swap"), "{e}");
 }

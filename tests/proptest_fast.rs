@@ -340,6 +340,7 @@ impl Case {
             nt: self.nt,
             dt: params.dt,
             t0,
+            normals: Default::default(),
         };
         let data = h.iter().map(|&x| x as f32).collect();
         let capture =
@@ -356,6 +357,7 @@ impl Case {
             // And under its configuration: the time axis is cropped only in
             // `cropped_axis_matches_uncropped_and_reference`.
             crop: false,
+            cosine: false,
         };
         Scan {
             capture,
@@ -1071,6 +1073,7 @@ impl Case {
             nt,
             dt,
             t0,
+            normals: Default::default(),
         };
         let data = h.iter().map(|&x| x as f32).collect();
         let capture =
@@ -1083,6 +1086,7 @@ impl Case {
             compensate_laser: false,
             auto_margin: false,
             crop: false,
+            cosine: false,
         };
         Confocal {
             scan: Scan {

@@ -101,6 +101,7 @@ fn wave(wl: f64) -> Wave {
         compensate_laser: true,
         auto_margin: true,
         crop: true,
+        cosine: false,
     }
 }
 

@@ -216,6 +216,10 @@ pub(crate) enum WeightsArg {
     Inv,
     /// No weights (y-tal's default).
     One,
+    /// The paper's 1/d per leg times the cosine at the leg's wall point, |n·(x_v − x)|/d with
+    /// the relay surface's normal n there (+z where the capture has none): `direct` on paired
+    /// and confocal scans.
+    Cos,
 }
 
 /// Options shared by every probe.
@@ -227,7 +231,8 @@ pub(crate) struct Common {
     #[command(flatten)]
     pub(crate) wave: WaveArgs,
     /// Use the SPADs as the virtual projector and the lasers as the camera (reciprocity;
-    /// 1-D SPAD arrays focus illumination along their axis).
+    /// 1-D SPAD arrays focus illumination along their axis; a paired scan exchanges its
+    /// laser and SPAD spots).
     #[arg(long)]
     pub(crate) swap_roles: bool,
     /// Evaluation path: auto (the cheapest that applies), band (the kernel's band sum, any
@@ -359,7 +364,8 @@ pub(crate) struct WaveArgs {
     /// Std of the Gaussian time gate in metres of path (default 2λ/3).
     #[arg(long, value_name = "M")]
     pub(crate) sigma: Option<f64>,
-    /// Lens weights per leg: inv = the paper's 1/d, one = none (y-tal).
+    /// Lens weights per leg: inv = the paper's 1/d, one = none (y-tal), cos = 1/d times the
+    /// wall's cosine at the leg's spot (per-point normals; `direct` on paired and confocal scans).
     #[arg(long, value_enum, default_value_t = WeightsArg::Inv)]
     pub(crate) weights: WeightsArg,
     /// Frequency band half-width in units of 1/σ (truncation error ≈ erfc(m/√2)).
@@ -381,9 +387,10 @@ impl WaveArgs {
             wavelength: self.wavelength,
             sigma: self.sigma,
             weights: match self.weights {
-                WeightsArg::Inv => Weights::Inv,
+                WeightsArg::Inv | WeightsArg::Cos => Weights::Inv,
                 WeightsArg::One => Weights::One,
             },
+            cosine: matches!(self.weights, WeightsArg::Cos),
             band_half_width: self.band,
             compensate_laser: self.compensate_laser,
             auto_margin: true,

@@ -62,11 +62,16 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                 say!("wrote {} and its sidecar {}", p.display(), side.display());
             }
             let g = &c.geometry;
+            let scan = if g.paired_apart() {
+                format!("{} pairs (laser spot, SPAD spot)", g.lasers.len())
+            } else if g.coincident() {
+                format!("{} confocal spots", g.lasers.len())
+            } else {
+                format!("{} lasers x {} SPADs", g.lasers.len(), g.spads.len())
+            };
             say!(
-                "wrote {}: {} lasers x {} SPADs x {} bins (dt {} m, t0 {} m)",
+                "wrote {}: {scan} x {} bins (dt {} m, t0 {} m)",
                 out.display(),
-                g.lasers.len(),
-                g.spads_per_row(),
                 g.nt,
                 g.dt,
                 g.t0

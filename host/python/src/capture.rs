@@ -171,6 +171,14 @@ impl NativeCapture {
         d.set_item("laser_xyz", g.laser_origin.to_vec())?;
         d.set_item("sensor_xyz", g.sensor_origin.to_vec())?;
         d.set_item("t_accounts_first_and_last_bounces", g.legs_in_time)?;
+        d.set_item(
+            "normals",
+            if g.normals.flat() { "+z" } else { "per point" },
+        )?;
+        d.set_item(
+            "relay",
+            g.not_flat().unwrap_or_else(|| "planar".to_string()),
+        )?;
         d.set_item("default_wavelength", probe::default_wavelength(g))?;
         Ok(d)
     }
@@ -317,8 +325,10 @@ fn open_capture(
     Ok(NativeCapture { store, geometry })
 }
 
-/// A capture from arrays: `h` as (rows, spads_per_row, nt) float32, spots as (n, 3).
+/// A capture from arrays: `h` as (rows, spads_per_row, nt) float32, spots as (n, 3), normals
+/// (optional) as (n, 3) per list of spots.
 #[pyfunction]
+#[pyo3(signature = (h, lasers, laser_shape, spads, spad_shape, delta_t, t_start, laser_xyz, sensor_xyz, legs_in_time, confocal, laser_normals=None, sensor_normals=None))]
 #[allow(clippy::too_many_arguments)]
 fn capture_from_arrays(
     py: Python<'_>,
@@ -333,9 +343,18 @@ fn capture_from_arrays(
     sensor_xyz: [f64; 3],
     legs_in_time: bool,
     confocal: bool,
+    laser_normals: Option<PyReadonlyArray2<'_, f32>>,
+    sensor_normals: Option<PyReadonlyArray2<'_, f32>>,
 ) -> PyResult<NativeCapture> {
     let lasers = crate::volume::points_of(&lasers, "laser_grid_xyz")?;
     let spads = crate::volume::points_of(&spads, "sensor_grid_xyz")?;
+    let normals = |a: Option<PyReadonlyArray2<'_, f32>>, name| -> PyResult<Vec<_>> {
+        a.map_or(Ok(Vec::new()), |a| crate::volume::points_of(&a, name))
+    };
+    let normals = vltm::io::Normals::from_lists(
+        normals(laser_normals, "laser_normals")?,
+        normals(sensor_normals, "sensor_normals")?,
+    );
     let hv = h.as_array();
     let nt = hv.shape()[2];
     vltm::budget::check(
@@ -361,6 +380,7 @@ fn capture_from_arrays(
         nt,
         dt: delta_t,
         t0: t_start,
+        normals,
     };
     let c = py
         .detach(|| Capture::new(geometry, data, Path::new("H")))

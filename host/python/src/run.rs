@@ -29,10 +29,16 @@ fn wave_of(
     crop: bool,
     path: &str,
 ) -> PyResult<(Wave, EvalPath)> {
-    let weights = match weights {
-        "inv" => Weights::Inv,
-        "one" => Weights::One,
-        w => return Err(arg("weights", format!("expected inv or one, found `{w}`"))),
+    let (weights, cosine) = match weights {
+        "inv" => (Weights::Inv, false),
+        "one" => (Weights::One, false),
+        "cos" => (Weights::Inv, true),
+        w => {
+            return Err(arg(
+                "weights",
+                format!("expected inv, one or cos, found `{w}`"),
+            ));
+        }
     };
     let path = match path {
         "auto" => EvalPath::Auto,
@@ -50,6 +56,7 @@ fn wave_of(
         wavelength,
         sigma,
         weights,
+        cosine,
         band_half_width: band,
         compensate_laser,
         auto_margin: true,

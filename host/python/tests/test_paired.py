@@ -28,6 +28,8 @@ def fields():
             t_start=float(f["t_start"][()]),
             laser_origin=f["laser_xyz"][()].tolist(),
             sensor_origin=f["sensor_xyz"][()].tolist(),
+            laser_normals=f["laser_grid_normals"][()],
+            sensor_normals=f["sensor_grid_normals"][()],
         )
 
 
@@ -73,6 +75,11 @@ def test_from_arrays_round_trip_equals_the_file(tmp_path):
     np.testing.assert_array_equal(c.spad_points, vltm.open(PAIRED).spad_points)
     want = run_cli(tmp_path, "direct", str(PAIRED), "--volume", VOL, *FLAGS)
     np.testing.assert_array_equal(vltm.direct(c, VOL, **OPTS), want)
+    # The file's normals came through: the cos-weighted volumes agree too.
+    cos = run_cli(tmp_path, "direct", str(PAIRED), "--volume", VOL, "--wavelength", "0.15",
+                  "--sigma", "0.15", "--weights", "cos")
+    np.testing.assert_array_equal(vltm.direct(c, VOL, wavelength=0.15, sigma=0.15,
+                                              weights="cos"), cos)
     # Saved as vltm's .npz and read back by the command line: the same volume again.
     npz = tmp_path / "paired.npz"
     c.save(npz)
@@ -138,3 +145,46 @@ def test_ytal_fields_with_scan_type_paired_equal_the_file(tmp_path):
     np.testing.assert_array_equal(vltm.direct(c, VOL, **OPTS), want)
     with pytest.raises(vltm.ArgumentError, match="argument `sensor_grid_xyz`: expected one SPAD"):
         vltm.Capture.from_arrays(h[:, :143], lg, sg[:143], 0.01, scan_type="paired")
+
+
+def test_normals_pass_through_from_arrays(tmp_path):
+    """`laser_normals`/`sensor_normals` reach the library: `info()` reports them; with
+    `weights="cos"` the image equals `vltm direct --weights cos` on the same arrays written as
+    a per-histogram `.npz` with the normals; tilted normals change the cos-weighted image (so
+    they are not dropped) and `compensate_laser`; bad normals are one-line errors naming the
+    keyword."""
+    f = fields()
+    k = len(f["laser_xyz"])
+    tilt = np.zeros((k, 3))
+    tilt[:, 0] = np.linspace(-0.4, 0.4, k)
+    tilt[:, 2] = 1.0
+    kw = dict(laser_xyz=f["laser_xyz"], sensor_xyz=f["sensor_xyz"], delta_t=f["delta_t"],
+              t_start=f["t_start"], laser_origin=f["laser_origin"],
+              sensor_origin=f["sensor_origin"])
+    plain = vltm.Capture.from_arrays(f["H"], **kw)
+    tilted = vltm.Capture.from_arrays(f["H"], laser_normals=tilt, sensor_normals=tilt, **kw)
+    assert plain.info()["normals"] == "+z"
+    assert tilted.info()["normals"] == "per point"
+    assert tilted.info()["relay"] != "planar"
+    opts = dict(wavelength=0.15, sigma=0.15, weights="cos")
+    a = vltm.direct(plain, VOL, **opts)
+    b = vltm.direct(tilted, VOL, **opts)
+    assert np.abs(a - b).max() > 1e-3 * np.abs(a).max()
+    npz = tmp_path / "tilted.npz"
+    np.savez(npz, H=f["H"].astype(np.float32), laser_xyz=f["laser_xyz"],
+             sensor_xyz=f["sensor_xyz"], delta_t=f["delta_t"], t_start=f["t_start"],
+             laser_origin=np.array(f["laser_origin"]), sensor_origin=np.array(f["sensor_origin"]),
+             laser_normals=tilt, sensor_normals=tilt)
+    want = run_cli(tmp_path, "direct", str(npz), "--volume", VOL, "--wavelength", "0.15",
+                   "--sigma", "0.15", "--weights", "cos")
+    np.testing.assert_allclose(b, want, rtol=1e-5, atol=1e-6 * np.abs(want).max())
+    c1 = vltm.direct(plain, VOL, wavelength=0.15, sigma=0.15, compensate_laser=True)
+    c2 = vltm.direct(tilted, VOL, wavelength=0.15, sigma=0.15, compensate_laser=True)
+    assert np.abs(c1 - c2).max() > 1e-3 * np.abs(c1).max()
+    bad = tilt.copy()
+    bad[3] = 0.0
+    for name, v in (("laser_normals", bad), ("sensor_normals", tilt[:5])):
+        with pytest.raises(vltm.ArgumentError) as e:
+            vltm.Capture.from_arrays(f["H"], **{name: v}, **kw)
+        msg = str(e.value)
+        assert name in msg and "\n" not in msg, msg

@@ -128,6 +128,24 @@ def _volume(v: Any, name: str = "volume") -> Volume:
     return Volume(v, name)
 
 
+def _normals(name: str, x: Any, n: int) -> Optional[np.ndarray]:
+    """Normals at `n` spots as a contiguous (n, 3) float32 array (None: +z), checked: `n` of
+    them, finite, of non-zero length (one-line :class:`ArgumentError` naming `name`)."""
+    if x is None:
+        return None
+    a = _check.array(name, x, dtype=np.float64, finite=False)
+    if a.ndim not in (2, 3) or a.shape[-1] != 3 or a.size != 3 * n:
+        raise _check.fail(name, f"expected one normal per spot ({n} x 3 values, the points' "
+                          f"shape), found shape {list(a.shape)}")
+    a = a.reshape(n, 3)
+    bad = ~(np.isfinite(a).all(axis=1) & ((a * a).sum(axis=1) > 0))
+    if bad.any():
+        i = int(np.argmax(bad))
+        raise _check.fail(name, f"expected finite normals of non-zero length, found "
+                          f"{a[i].tolist()} at index {i}")
+    return np.ascontiguousarray(a, dtype=np.float32)
+
+
 class Capture:
     """A transient NLOS capture: ``H[l][s][t]`` for laser spot l, SPAD spot s, time bin t at
     path length ``t_start + t * delta_t``. Open a file with :func:`open` (its rows are
@@ -154,6 +172,8 @@ class Capture:
         scan_type: str = "exhaustive",
         laser_origin: Optional[Sequence[float]] = None,
         sensor_origin: Optional[Sequence[float]] = None,
+        laser_normals: Optional[np.ndarray] = None,
+        sensor_normals: Optional[np.ndarray] = None,
     ) -> "Capture":
         """A capture from y-tal's fields (metres, time first), or a paired scan per histogram.
 
@@ -170,11 +190,18 @@ class Capture:
         ``laser_xyz`` and ``sensor_xyz`` of shape ``(K, 3)``: histogram ``k`` lit at
         ``laser_xyz[k]`` and seen at ``sensor_xyz[k]`` (equal points make a confocal capture).
         ``laser_origin``/``sensor_origin``: the device positions (default the origin; both
-        needed with ``t_accounts_first_and_last_bounces``)."""
+        needed with ``t_accounts_first_and_last_bounces``).
+
+        ``laser_normals``/``sensor_normals`` (optional, any scan): the relay surface's normals
+        at the spots, one per laser / SPAD spot (the points' shape: ``(K, 3)`` for a paired
+        scan, the grid's ``(X, Y, 3)`` or ``(N, 3)``); default +z. Used by
+        ``compensate_laser`` (the laser's falloff ``|cos θ|/d²`` to each spot) and
+        ``weights="cos"`` (the wall's cosine per leg, ``direct`` on paired and confocal
+        scans); finite and of non-zero length, else an :class:`ArgumentError` naming them."""
         if laser_grid_xyz is None and sensor_grid_xyz is None and np.ndim(laser_xyz) == 2:
             return cls._from_pairs(H, laser_xyz, sensor_xyz, delta_t, t_start,
                                    t_accounts_first_and_last_bounces, laser_origin,
-                                   sensor_origin)
+                                   sensor_origin, laser_normals, sensor_normals)
         for name, v in (("laser_grid_xyz", laser_grid_xyz), ("sensor_grid_xyz", sensor_grid_xyz),
                         ("delta_t", delta_t)):
             if v is None:
@@ -230,16 +257,21 @@ class Capture:
         h = np.ascontiguousarray(np.moveaxis(H.reshape(nt, rows, per), 0, -1), dtype=np.float32)
         if scan_type == "confocal":
             lg, ls = sg, ss
+            if laser_normals is None:
+                laser_normals = sensor_normals
+        ln = _normals("laser_normals", laser_normals, len(lg.reshape(-1, 3)))
+        sn = _normals("sensor_normals", sensor_normals, len(sg.reshape(-1, 3)))
         native = _native.capture_from_arrays(
             h, np.ascontiguousarray(lg.reshape(-1, 3)), ls,
             np.ascontiguousarray(sg.reshape(-1, 3)), ss, dt, t0,
-            list(lx), list(sx), legs, confocal,
+            list(lx), list(sx), legs, confocal, ln, sn,
         )
         return cls(native)
 
     @classmethod
     def _from_pairs(cls, H: Any, laser_xyz: Any, sensor_xyz: Any, delta_t: Any, t_start: Any,
-                    legs: Any, laser_origin: Any, sensor_origin: Any) -> "Capture":
+                    legs: Any, laser_origin: Any, sensor_origin: Any,
+                    laser_normals: Any = None, sensor_normals: Any = None) -> "Capture":
         """A paired scan per histogram (:meth:`from_arrays`); the ``.npz`` reader's checks
         and wording."""
         if delta_t is None:
@@ -283,9 +315,11 @@ class Capture:
         lo = (0.0, 0.0, 0.0) if laser_origin is None else _check.point("laser_origin", laser_origin)
         so = (0.0, 0.0, 0.0) if sensor_origin is None else _check.point("sensor_origin", sensor_origin)
         k = len(lp)
+        ln = _normals("laser_normals", laser_normals, k)
+        sn = _normals("sensor_normals", sensor_normals, k)
         native = _native.capture_from_arrays(
             h.reshape(k, 1, -1), lp.astype(np.float32), (k, 1), sp.astype(np.float32), (k, 1),
-            dt, t0, list(lo), list(so), legs, True)
+            dt, t0, list(lo), list(so), legs, True, ln, sn)
         return cls(native)
 
     def info(self) -> dict:
@@ -294,7 +328,9 @@ class Capture:
         scan as ``vltm info`` does: ``"confocal"`` (laser and SPAD at the same wall point),
         ``"paired"`` (one laser and one SPAD spot per histogram, apart) or
         ``"non-confocal"`` (a laser grid × a SPAD grid); ``confocal`` is true for the first
-        only, ``paired`` (one histogram per row) for the first two."""
+        only, ``paired`` (one histogram per row) for the first two. ``normals`` is ``"+z"``
+        (none given, or all +z) or ``"per point"``; ``relay`` is ``"planar"`` or says why
+        not (a z span, tilted normals)."""
         return self._native.info()
 
     def transient(self, *, t_min: Any = None, t_max: Any = None, rebin: int = 1,

@@ -215,31 +215,78 @@ fn describe(c: &Capture, out: &mut dyn FnMut(String)) {
         g.spad_shape[1],
         span(&g.spads)
     ));
+    let zspan = |p: &[Point]| {
+        p.iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), q| {
+                (a.min(q[2]), b.max(q[2]))
+            })
+    };
+    // The FFT paths need a flat set of the points they convolve over: the SPAD grid of a
+    // grid scan (its laser legs are exact per row), every spot of a confocal scan.
+    let conv = if g.confocal { &g.lasers } else { &g.spads };
+    let (z0, z1) = zspan(conv);
+    let (a0, a1) = zspan(&g.lasers);
+    let (b0, b1) = zspan(&g.spads);
+    let all = (a0.min(b0), a1.max(b1));
+    let flat_conv = z1 - z0 <= 1e-6 * (1.0 + z0.abs().max(z1.abs()));
+    let surface = if all.1 - all.0 <= 1e-6 * (1.0 + all.0.abs().max(all.1.abs())) {
+        format!("planar (every spot at z = {:.4} m)", all.0)
+    } else if !g.confocal && flat_conv {
+        format!(
+            "not planar (z spans {:.4} m; the SPADs at one z, {:.4} m)",
+            all.1 - all.0,
+            z0
+        )
+    } else {
+        format!(
+            "not planar (z spans {:.4} m): the FFT paths need a flat wall",
+            all.1 - all.0
+        )
+    };
+    out(format!("relay        {surface}"));
+    let tilt = |ns: &[Point]| {
+        ns.iter()
+            .filter_map(io::unit)
+            .map(|u| u[2].abs().clamp(0.0, 1.0).acos().to_degrees())
+            .fold(0.0f64, f64::max)
+    };
+    out(format!(
+        "normals      {}",
+        if g.normals.flat() {
+            "+z at every spot (none in the file, or all +z)".to_string()
+        } else {
+            format!(
+                "per point from the file ({}; tilted up to {:.1}° from +z): used by --compensate-laser and --weights cos",
+                match (g.normals.lasers.is_empty(), g.normals.spads.is_empty()) {
+                    (false, false) => "at the laser and SPAD spots",
+                    (false, true) => "at the laser spots; +z at the SPAD spots",
+                    _ => "at the SPAD spots; +z at the laser spots",
+                },
+                tilt(&g.normals.lasers).max(tilt(&g.normals.spads))
+            )
+        }
+    ));
     if g.paired_apart() {
-        let z = g
-            .lasers
-            .iter()
-            .chain(&g.spads)
-            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), p| {
-                (a.min(p[2]), b.max(p[2]))
-            });
-        out(format!(
-            "relay        {}",
-            if z.1 - z.0 > 0.0 {
-                format!(
-                    "not planar (z spans {:.4} m): the FFT paths need a flat wall",
-                    z.1 - z.0
-                )
-            } else {
-                "planar (every point at one z)".to_string()
-            }
-        ));
         out(
             "paths        direct: band or lookup (each row imaged with its own laser and SPAD \
-             spot); no FFT path (the planar one needs a SPAD grid, the confocal one coincident \
-             points); columns, rows and the matrix need a SPAD grid"
+             spot), --weights cos too; no FFT path (the planar one needs a SPAD grid, the \
+             confocal one coincident points); columns, rows and the matrix need a SPAD grid"
                 .to_string(),
         );
+    } else if !flat_conv {
+        out(format!(
+            "paths        band or lookup: no FFT path ({}){}",
+            if g.confocal {
+                "the wall is not flat"
+            } else {
+                "the SPADs are not in one plane"
+            },
+            if g.confocal {
+                "; --weights cos too"
+            } else {
+                ""
+            }
+        ));
     }
     out(format!(
         "laser_xyz    {:?} m, sensor_xyz {:?} m",

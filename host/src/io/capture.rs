@@ -39,15 +39,145 @@ pub struct Geometry {
     pub dt: f64,
     /// Path length of bin 0 (m).
     pub t0: f64,
+    /// Relay-surface normals at the laser and SPAD spots ([`Normals`]; empty lists: the flat
+    /// wall's +z at every spot, the convention of formats that carry none).
+    pub normals: Normals,
+}
+
+/// Relay-surface normals at the spots of a [`Geometry`]: directions of any non-zero length
+/// ([`Geometry::laser_normal`] normalises), pointing toward the hidden scene (+z on the
+/// wall z = 0 of DESIGN §B.0). An empty list means +z at every spot of that list (formats
+/// without normals, and every file whose normals are all +z); otherwise one normal per spot,
+/// in the order of [`Geometry::lasers`] / [`Geometry::spads`]. Only the sign-free direction
+/// enters vltm's cosines (`|v·n|`), so a file whose normals point away from the scene reads
+/// the same.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Normals {
+    /// One normal per laser spot, or empty (+z).
+    pub lasers: Vec<Point>,
+    /// One normal per SPAD spot, or empty (+z).
+    pub spads: Vec<Point>,
+}
+
+/// The flat wall's normal, +z (toward the hidden scene).
+pub const WALL_NORMAL: [f64; 3] = [0.0, 0.0, 1.0];
+
+impl Normals {
+    /// Normals read from a file: kept only where some normal is not +z (to within 1e-6 of
+    /// the unit vector after normalising), so that a file of +z normals is the flat default.
+    pub fn from_lists(lasers: Vec<Point>, spads: Vec<Point>) -> Self {
+        let keep = |v: Vec<Point>| {
+            let flat = v.iter().all(|n| {
+                let u = unit(n);
+                u.is_some_and(|u| (u[2].abs() - 1.0).abs() < 1e-6)
+            });
+            if flat { Vec::new() } else { v }
+        };
+        Self {
+            lasers: keep(lasers),
+            spads: keep(spads),
+        }
+    }
+
+    /// Whether every normal is +z (both lists empty).
+    pub fn flat(&self) -> bool {
+        self.lasers.is_empty() && self.spads.is_empty()
+    }
+}
+
+/// `n/|n|` in `f64`, `None` for a zero-length or non-finite `n`.
+pub fn unit(n: &Point) -> Option<[f64; 3]> {
+    let v = n.map(f64::from);
+    let len = v.iter().map(|c| c * c).sum::<f64>().sqrt();
+    (len.is_finite() && len > 0.0).then(|| v.map(|c| c / len))
+}
+
+/// `|cos θ|` between the leg from wall point `x` to `v` and the unit normal `n` at `x`:
+/// `|n·(v − x)| / |v − x|` (1 when `v = x`: a voxel on the wall is not attenuated).
+pub fn wall_cosine(x: Point, n: [f64; 3], v: Point) -> f64 {
+    let d: [f64; 3] = core::array::from_fn(|i| f64::from(v[i]) - f64::from(x[i]));
+    let len = d.iter().map(|c| c * c).sum::<f64>().sqrt();
+    if len > 0.0 {
+        (d[0] * n[0] + d[1] * n[1] + d[2] * n[2]).abs() / len
+    } else {
+        1.0
+    }
 }
 
 impl Geometry {
     /// The physical laser's falloff to spot `x_l`: `cos θ / d²` with `d = |laser_xyz − x_l|`
-    /// and θ the angle to the wall normal (y-tal `compensate_laser_cos_dsqr`).
+    /// and θ the angle to the wall normal +z (y-tal `compensate_laser_cos_dsqr` on a flat
+    /// wall). [`Geometry::laser_falloff_at`] takes the spot's own normal.
     pub fn laser_falloff(&self, x_l: Point) -> f64 {
+        self.falloff(x_l, WALL_NORMAL)
+    }
+
+    /// The physical laser's falloff to laser spot `l` with the spot's own normal `n`
+    /// ([`Geometry::laser_normal`]): `|v·n| / d³` with `v = laser_xyz − x_l`, `d = |v|` (y-tal
+    /// `compensate_laser_cos_dsqr`, which takes `laser_grid_normals`; the same as
+    /// [`Geometry::laser_falloff`] on a flat wall). `l` must be a laser row.
+    pub fn laser_falloff_at(&self, l: usize) -> f64 {
+        self.falloff(self.lasers[l], self.laser_normal(l))
+    }
+
+    /// The physical laser's falloff `|v·n| / d³` to wall point `x_l` with unit normal `n`
+    /// (`v = laser_xyz − x_l`, `d = |v|`).
+    pub fn falloff(&self, x_l: Point, n: [f64; 3]) -> f64 {
         let v: [f64; 3] = core::array::from_fn(|i| self.laser_origin[i] - f64::from(x_l[i]));
         let d2 = v.iter().map(|c| c * c).sum::<f64>();
-        (v[2].abs() / d2.sqrt()) / d2
+        let dot = v[0] * n[0] + v[1] * n[1] + v[2] * n[2];
+        (dot.abs() / d2.sqrt()) / d2
+    }
+
+    /// The unit normal at laser spot `l` (+z where the capture has none). `l` must be a laser
+    /// index.
+    pub fn laser_normal(&self, l: usize) -> [f64; 3] {
+        self.normals
+            .lasers
+            .get(l)
+            .and_then(unit)
+            .unwrap_or(WALL_NORMAL)
+    }
+
+    /// The unit normal at SPAD spot `s` (+z where the capture has none).
+    pub fn spad_normal(&self, s: usize) -> [f64; 3] {
+        self.normals
+            .spads
+            .get(s)
+            .and_then(unit)
+            .unwrap_or(WALL_NORMAL)
+    }
+
+    /// Whether the relay surface is a flat wall z = const with normal ±z at every spot: what
+    /// the FFT paths (planar, confocal, resampled) assume. `None` when it is; otherwise why
+    /// not, in words for an error or `vltm info` (the z span, or the normals that tilt).
+    pub fn not_flat(&self) -> Option<String> {
+        let (lo, hi) = self
+            .lasers
+            .iter()
+            .chain(&self.spads)
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(a, b), p| {
+                (a.min(p[2]), b.max(p[2]))
+            });
+        if hi - lo > 1e-6 * (1.0 + lo.abs().max(hi.abs())) {
+            return Some(format!(
+                "the relay surface is not flat (z spans {:.4} m)",
+                hi - lo
+            ));
+        }
+        let tilt = |ns: &[Point]| {
+            ns.iter()
+                .filter_map(unit)
+                .map(|u| u[2].abs().clamp(0.0, 1.0).acos())
+                .fold(0.0f64, f64::max)
+        };
+        let t = tilt(&self.normals.lasers).max(tilt(&self.normals.spads));
+        (t > 1e-3).then(|| {
+            format!(
+                "the relay surface's normals are not +z (tilted up to {:.1}°)",
+                t.to_degrees()
+            )
+        })
     }
 
     /// Number of SPAD histograms in each row (1 for paired and confocal captures).
@@ -116,7 +246,8 @@ impl Geometry {
         }
     }
 
-    /// Checks shapes and values: grid sizes match, positions finite, Δt > 0, Nt > 0.
+    /// Checks shapes and values: grid sizes match, positions finite, normals (where given) one
+    /// per spot, finite and of non-zero length, Δt > 0, Nt > 0.
     ///
     /// # Errors
     /// [`Error::Format`] naming `what` (the file) and the field.
@@ -156,6 +287,27 @@ impl Geometry {
                     name,
                     "finite coordinates",
                     format!("{:?} at index {i}", pts[i]),
+                ));
+            }
+        }
+        for (name, ns, pts) in [
+            ("laser_grid_normals", &self.normals.lasers, &self.lasers),
+            ("sensor_grid_normals", &self.normals.spads, &self.spads),
+        ] {
+            if !ns.is_empty() && ns.len() != pts.len() {
+                return Err(Error::format(
+                    what,
+                    name,
+                    format!("{} normals, one per spot", pts.len()),
+                    ns.len(),
+                ));
+            }
+            if let Some(i) = ns.iter().position(|n| unit(n).is_none()) {
+                return Err(Error::format(
+                    what,
+                    name,
+                    "finite normals of non-zero length",
+                    format!("{:?} at index {i}", ns[i]),
                 ));
             }
         }
@@ -445,15 +597,39 @@ impl RowSource for Capture {
 /// the virtual projector and the laser grid the camera, `T_swap(a, b) = T(b, a)`. Needs the
 /// capture in memory (`Kl·Ks·Nt` values).
 ///
+/// A paired scan (one laser and one SPAD spot per row, apart) swaps its two lists of spots
+/// (and their normals and the two devices): the histograms stay where they are, row `k` now
+/// has the laser at the old SPAD spot `S_k` and the SPAD at `L_k`.
+///
 /// # Errors
-/// [`Error::Argument`] for confocal captures (nothing to swap).
+/// [`Error::Argument`] for confocal captures (laser and SPAD at the same spots: nothing to
+/// swap).
 pub fn swap_roles(c: &Capture) -> Result<Capture> {
     let g = &c.geometry;
-    if g.confocal {
+    let swapped = |g: &Geometry| Geometry {
+        lasers: g.spads.clone(),
+        laser_shape: g.spad_shape,
+        spads: g.lasers.clone(),
+        spad_shape: g.laser_shape,
+        laser_origin: g.sensor_origin,
+        sensor_origin: g.laser_origin,
+        normals: Normals {
+            lasers: g.normals.spads.clone(),
+            spads: g.normals.lasers.clone(),
+        },
+        ..g.clone()
+    };
+    if g.coincident() {
         return Err(Error::arg(
             "swap_roles",
-            "a confocal capture has nothing to swap",
+            "a confocal capture has nothing to swap (its laser and SPAD spots coincide)",
         ));
+    }
+    if g.confocal {
+        return Ok(Capture {
+            geometry: swapped(g),
+            data: c.data.clone(),
+        });
     }
     let (kl, ks, nt) = (g.lasers.len(), g.spads.len(), g.nt);
     let mut data = vec![0.0f32; c.data.len()];
@@ -463,16 +639,10 @@ pub fn swap_roles(c: &Capture) -> Result<Capture> {
                 .copy_from_slice(&c.data[(l * ks + s) * nt..(l * ks + s + 1) * nt]);
         }
     }
-    let geometry = Geometry {
-        lasers: g.spads.clone(),
-        laser_shape: g.spad_shape,
-        spads: g.lasers.clone(),
-        spad_shape: g.laser_shape,
-        laser_origin: g.sensor_origin,
-        sensor_origin: g.laser_origin,
-        ..g.clone()
-    };
-    Ok(Capture { geometry, data })
+    Ok(Capture {
+        geometry: swapped(g),
+        data,
+    })
 }
 
 #[cfg(test)]
@@ -496,6 +666,7 @@ mod tests {
             nt: 3,
             dt: 0.01,
             t0: 0.0,
+            normals: Normals::default(),
         };
         let mut c = Capture::new(g, vec![1.0; 6], std::path::Path::new("t")).unwrap();
         let mut row = Vec::new();

@@ -20,7 +20,10 @@ pub mod ptu;
 pub mod state;
 pub mod tal;
 
-pub use capture::{Capture, Geometry, RowRange, RowSource, Rows, check_row, swap_roles};
+pub use capture::{
+    Capture, Geometry, Normals, RowRange, RowSource, Rows, WALL_NORMAL, check_row, swap_roles,
+    unit, wall_cosine,
+};
 
 use crate::error::{Error, Result};
 use std::path::Path;

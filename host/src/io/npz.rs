@@ -11,6 +11,7 @@
 //! | `laser_xyz`, `sensor_xyz` | f64 `(3,)` | device positions |
 //! | `delta_t`, `t_start` | f64 `()` | bin width, time of bin 0 (m) |
 //! | `t_accounts_first_and_last_bounces`, `confocal` | u8 `()` | flags |
+//! | `laser_grid_normals`, `sensor_grid_normals` (optional) | f32 `(Lx, Ly, 3)`, `(Sx, Sy, 3)` | relay-surface normals at the spots (absent: +z; written only when some normal is not +z) |
 //!
 //! `confocal = 1` means one histogram per row: a **paired** scan, row `l` lit at
 //! `laser_grid_xyz[l]` and seen at `sensor_grid_xyz[l]` (the two grids have one shape; a
@@ -24,7 +25,7 @@
 //! | `H` | f32 `(K, Nt)` | histogram `k`, time last |
 //! | `laser_xyz`, `sensor_xyz` | f32 or f64 `(K, 3)` | the laser and SPAD spot of histogram `k` (m) |
 //! | `delta_t`, `t_start` | f64 `()` | bin width, time of bin 0 (m) |
-//! | `laser_normals`, `sensor_normals` (optional) | f32 or f64 `(K, 3)` | relay-surface normals at the spots: checked (finite, non-zero length) |
+//! | `laser_normals`, `sensor_normals` (optional) | f32 or f64 `(K, 3)` | relay-surface normals at the spots (absent: +z): checked (finite, non-zero length), used by `--compensate-laser` and `--weights cos` |
 //! | `laser_origin`, `sensor_origin` (optional) | f64 `(3,)` | device positions (default the origin) |
 //! | `t_accounts_first_and_last_bounces` (optional) | u8 `()` | device legs in the time axis (needs both origins) |
 //!
@@ -34,7 +35,7 @@
 use crate::atomic::Transaction;
 use crate::budget;
 use crate::error::{Error, Result};
-use crate::io::capture::{Capture, Geometry, RowSource, check_row};
+use crate::io::capture::{Capture, Geometry, Normals, RowSource, check_row};
 use ndarray::{Array, ArrayD, IxDyn};
 use ndarray_npy::{NpzReader, NpzWriter, ReadableElement};
 use std::fs::File;
@@ -100,6 +101,21 @@ fn write_to(c: &Capture, file: &mut File, path: &Path, compress: bool) -> Result
         .map_err(npz)?;
     w.add_array("sensor_grid_xyz", &arr(vec![sx, sy, 3], pts(&g.spads)))
         .map_err(npz)?;
+    // Normals only where the relay surface has some that are not +z (the default).
+    if !g.normals.lasers.is_empty() {
+        w.add_array(
+            "laser_grid_normals",
+            &arr(vec![lx, ly, 3], pts(&g.normals.lasers)),
+        )
+        .map_err(npz)?;
+    }
+    if !g.normals.spads.is_empty() {
+        w.add_array(
+            "sensor_grid_normals",
+            &arr(vec![sx, sy, 3], pts(&g.normals.spads)),
+        )
+        .map_err(npz)?;
+    }
     w.add_array("laser_xyz", &ndarray::arr1(&g.laser_origin))
         .map_err(npz)?;
     w.add_array("sensor_xyz", &ndarray::arr1(&g.sensor_origin))
@@ -217,6 +233,32 @@ fn grid(
         v.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect(),
         [s[0], s[1]],
     ))
+}
+
+/// The optional normals of vltm's grid layout: `(nx, ny, 3)` of the grid's shape, or empty
+/// when the key is absent (+z). Their values are checked by [`Geometry::validate`].
+fn grid_normals(
+    r: &mut NpzReader<File>,
+    path: &Path,
+    key: &str,
+    shape: [usize; 2],
+) -> Result<Vec<vltm_kernel::Point>> {
+    let names = r
+        .names()
+        .map_err(|e| Error::format(path, "(archive)", "a NumPy .npz archive", e.to_string()))?;
+    if !names.iter().any(|n| n.trim_end_matches(".npy") == key) {
+        return Ok(Vec::new());
+    }
+    let (n, s) = grid(r, path, key)?;
+    if s != shape {
+        return Err(Error::format(
+            path,
+            key,
+            format!("shape ({}, {}, 3): one normal per spot", shape[0], shape[1]),
+            format!("({}, {}, 3)", s[0], s[1]),
+        ));
+    }
+    Ok(n)
 }
 
 fn xyz(r: &mut NpzReader<File>, path: &Path, key: &str) -> Result<[f64; 3]> {
@@ -416,7 +458,11 @@ fn paired_geometry(r: &mut NpzReader<File>, path: &Path, s: &[usize]) -> Result<
             format!("{s:?}"),
         ));
     }
-    for key in ["laser_normals", "sensor_normals"] {
+    let mut normals = [Vec::new(), Vec::new()];
+    for (key, out) in ["laser_normals", "sensor_normals"]
+        .into_iter()
+        .zip(&mut normals)
+    {
         if let Some(n) = points(r, path, key)? {
             if n.len() != lasers.len() {
                 return Err(Error::format(
@@ -437,6 +483,7 @@ fn paired_geometry(r: &mut NpzReader<File>, path: &Path, s: &[usize]) -> Result<
                     format!("{:?} at index {i}", n[i]),
                 ));
             }
+            *out = n;
         }
     }
     let names = r
@@ -487,6 +534,7 @@ fn paired_geometry(r: &mut NpzReader<File>, path: &Path, s: &[usize]) -> Result<
         nt: s[1],
         dt: scalar::<f64>(r, path, "delta_t")?,
         t0: scalar::<f64>(r, path, "t_start")?,
+        normals: Normals::from_lists(f32s(&normals[0]), f32s(&normals[1])),
     };
     g.validate(path)?;
     Ok(g)
@@ -526,6 +574,10 @@ fn geometry(r: &mut NpzReader<File>, path: &Path, s: &[usize]) -> Result<Geometr
         nt: s[s.len() - 1],
         dt: scalar::<f64>(r, path, "delta_t")?,
         t0: scalar::<f64>(r, path, "t_start")?,
+        normals: Normals::from_lists(
+            grid_normals(r, path, "laser_grid_normals", laser_shape)?,
+            grid_normals(r, path, "sensor_grid_normals", spad_shape)?,
+        ),
     };
     g.validate(path)?;
     Ok(g)
@@ -876,6 +928,49 @@ mod tests {
         let q = dir.join("vltm.npz");
         write(&c, &q).unwrap();
         assert_eq!(read(&q).unwrap(), c);
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    /// Per-pair normals (`laser_normals`, `sensor_normals`) that are not all +z are kept per
+    /// point in the geometry (all-+z ones are the flat default), and vltm's layout writes them
+    /// as `laser_grid_normals` / `sensor_grid_normals` and reads them back unchanged; a NaN
+    /// normal is a one-line error naming its key.
+    #[test]
+    fn paired_normals_are_kept_and_written() {
+        let dir = std::env::temp_dir().join(format!("vltm-paired-nrm-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("paired.npz");
+        let tilt = |a: f64| {
+            ArrayD::from_shape_fn(IxDyn(&[5, 3]), move |i| match i[1] {
+                0 => a * i[0] as f64,
+                1 => 0.0,
+                _ => 1.0,
+            })
+        };
+        write_paired(&p, |a| {
+            a.retain(|(n, _)| *n != "laser_normals");
+            a.push(("laser_normals", tilt(0.1)));
+            a.push(("sensor_normals", tilt(-0.2)));
+        });
+        let c = read(&p).unwrap();
+        let g = &c.geometry;
+        assert_eq!(g.normals.lasers[3], [0.3f32, 0.0, 1.0]);
+        assert_eq!(g.normals.spads[3], [-0.6f32, 0.0, 1.0]);
+        assert!(g.not_flat().is_some());
+        let q = dir.join("vltm.npz");
+        write(&c, &q).unwrap();
+        assert_eq!(read(&q).unwrap(), c);
+        // The layout without normals (+z) reads back with none, as before.
+        write_paired(&p, |_| {});
+        assert!(read(&p).unwrap().geometry.normals.flat());
+        write_paired(&p, |a| {
+            a.retain(|(n, _)| *n != "laser_normals");
+            let mut t = tilt(0.1);
+            t[&[1usize, 2][..]] = f64::NAN;
+            a.push(("sensor_normals", t));
+        });
+        let e = read(&p).unwrap_err().to_string();
+        assert!(e.contains("sensor_normals") && !e.contains('\n'), "{e}");
         let _ = std::fs::remove_dir_all(dir);
     }
 

@@ -565,6 +565,7 @@ mod tests {
             nt,
             dt: 0.01,
             t0: 0.0,
+            normals: Default::default(),
         };
         let data = (0..2)
             .flat_map(|l| (0..nt).map(move |n| (l, n)))

@@ -163,6 +163,7 @@ mod tests {
             nt: 10,
             dt: 0.01,
             t0: 0.0,
+            normals: Default::default(),
         }
     }
 

@@ -133,6 +133,7 @@ pub fn diagonal(
         ColumnGate::HigherOrder => Gate::HigherOrder,
         ColumnGate::None => Gate::None,
     };
+    wave.refuse_cosine("the un-gated and higher-order diagonals")?;
     if !matches!(exec.path, Path::Auto | Path::Band) {
         return Err(Error::arg(
             "path",
@@ -205,6 +206,7 @@ pub fn column(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<Output> {
+    wave.refuse_cosine("`column`")?;
     let t = Instant::now();
     let (state, cfg, crop) = column_acc(src, focus, volume, gate, wave, exec, false)?;
     let spads = src.geometry().spads.clone();

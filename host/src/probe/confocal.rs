@@ -222,7 +222,7 @@ pub(super) fn convolution_core(
             let x_l = src.read_row(start + k, &mut row)?;
             lasers[k] = x_l;
             let c = if wave.compensate_laser {
-                (1.0 / g.laser_falloff(x_l)) as f32
+                (1.0 / g.laser_falloff_at(start + k)) as f32
             } else {
                 1.0
             };

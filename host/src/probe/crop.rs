@@ -251,6 +251,7 @@ mod tests {
             nt,
             dt: 0.001,
             t0: 0.0,
+            normals: Default::default(),
         }
     }
 

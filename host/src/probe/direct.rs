@@ -74,6 +74,23 @@ pub(super) fn direct_acc(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<(Amplitudes, Config)> {
+    if wave.cosine {
+        // The kernel runs the distance weights; `cosine` multiplies each row by the wall
+        // cosines (refused before any pass where it does not apply).
+        super::cosine::check(src.geometry(), exec.path)?;
+        return direct_acc_with(src, volume, &wave.without_cosine(), exec, true);
+    }
+    direct_acc_with(src, volume, wave, exec, false)
+}
+
+/// [`direct_acc`] with the distance-only `wave`, and the wall cosines per row under `cosine`.
+fn direct_acc_with(
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    wave: &Wave,
+    exec: Exec<'_>,
+    cosine: bool,
+) -> Result<(Amplitudes, Config)> {
     let base = wave.config(src.geometry())?;
     super::window::window_rule(
         src.geometry(),
@@ -89,7 +106,7 @@ pub(super) fn direct_acc(
         late: false,
     };
     with_crop(src, wave, exec, reach, |src, exec, crop| {
-        let (mut a, cfg) = direct_acc_on(src, volume, wave, exec)?;
+        let (mut a, cfg) = direct_acc_on(src, volume, wave, exec, cosine)?;
         a.crop = crop;
         Ok((a, cfg))
     })
@@ -101,6 +118,7 @@ fn direct_acc_on(
     volume: &Volume,
     wave: &Wave,
     exec: Exec<'_>,
+    cosine: bool,
 ) -> Result<(Amplitudes, Config)> {
     let cfg = wave.config(src.geometry())?;
     check_memory(
@@ -114,6 +132,23 @@ fn direct_acc_on(
         wave,
         exec,
     };
+    if cosine {
+        let note = "cos weights (the wall's cosine per leg)".to_string();
+        let (acc, report, path) = with_note(job, note, |job| {
+            let plan = lookup_plan(src.geometry(), job.cfg, volume.len());
+            super::cosine::direct(src, job, volume, &plan)
+        })?;
+        return Ok((
+            Amplitudes {
+                acc,
+                report,
+                path,
+                crop: None,
+                support: None,
+            },
+            cfg,
+        ));
+    }
     let g = src.geometry();
     let rows = g.lasers.len() as f64;
     // Off the wall's lattice: the FFT path on a support grid, resampled, when it applies and

@@ -52,7 +52,7 @@ pub(super) fn drive(
             let x_l = {
                 let _t = timings::section("read rows", Kind::Serial);
                 let x_l = src.read_row(l, &mut hist)?;
-                compensate(&g, wave, x_l, &mut hist);
+                compensate(&g, wave, l, &mut hist);
                 x_l
             };
             // Paired (and confocal) scans: the row's own SPAD spot.
@@ -83,7 +83,7 @@ pub(super) fn drive(
         {
             let _t = timings::section("read rows", read_kind(src));
             src.read_rows(start, &mut hists[..n])?;
-            compensate_all(&g, wave, &mut hists[..n]);
+            compensate_all(&g, wave, start, &mut hists[..n]);
         }
         let mut rbs = bufs[..n]
             .iter_mut()
@@ -105,19 +105,21 @@ pub(super) fn drive(
     Ok(())
 }
 
-/// Divides a row by the laser's falloff under `compensate_laser`.
-fn compensate(g: &Geometry, wave: &Wave, x_l: Point, hist: &mut [f32]) {
+/// Divides laser row `l` by the laser's falloff to its spot under `compensate_laser`
+/// ([`Geometry::laser_falloff_at`]: the spot's own normal).
+fn compensate(g: &Geometry, wave: &Wave, l: usize, hist: &mut [f32]) {
     if wave.compensate_laser {
-        let k = (1.0 / g.laser_falloff(x_l)) as f32;
+        let k = (1.0 / g.laser_falloff_at(l)) as f32;
         hist.iter_mut().for_each(|h| *h *= k);
     }
 }
 
-/// [`compensate`] on a batch of rows, in parallel.
-fn compensate_all(g: &Geometry, wave: &Wave, rows: &mut [(Point, Vec<f32>)]) {
+/// [`compensate`] on a batch of rows `first..`, in parallel.
+fn compensate_all(g: &Geometry, wave: &Wave, first: usize, rows: &mut [(Point, Vec<f32>)]) {
     if wave.compensate_laser {
         rows.par_iter_mut()
-            .for_each(|(x, h)| compensate(g, wave, *x, h));
+            .enumerate()
+            .for_each(|(i, (_, h))| compensate(g, wave, first + i, h));
     }
 }
 
@@ -165,6 +167,21 @@ pub(super) fn drive_rows<W: Send>(
     workers: Vec<W>,
     work: impl Fn(&mut W, &Scan<'_>, &Row<'_, f32>) -> Result<()> + Sync,
 ) -> Result<Vec<W>> {
+    drive_rows_indexed(src, job, scan, label, workers, |w, _, scan, row| {
+        work(w, scan, row)
+    })
+}
+
+/// [`drive_rows`] with the row's index in the capture handed to `work` (its laser spot is
+/// `lasers[l]`; of a paired scan, its SPAD spot `spads[l]`).
+pub(super) fn drive_rows_indexed<W: Send>(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    scan: &Scan<'_>,
+    label: &str,
+    workers: Vec<W>,
+    work: impl Fn(&mut W, usize, &Scan<'_>, &Row<'_, f32>) -> Result<()> + Sync,
+) -> Result<Vec<W>> {
     let Job { cfg, wave, exec } = job;
     let g = src.geometry().clone();
     check_laser_falloff(&g, wave)?;
@@ -201,7 +218,7 @@ pub(super) fn drive_rows<W: Send>(
         {
             let _t = timings::section("read rows", read_kind(src));
             src.read_rows(start, &mut rows)?;
-            compensate_all(&g, wave, &mut rows);
+            compensate_all(&g, wave, start, &mut rows);
         }
         let _t = timings::section("rows: stage 1 and probes", Kind::Parallel);
         rows.par_iter()
@@ -222,7 +239,7 @@ pub(super) fn drive_rows<W: Send>(
                 };
                 let mut rb = RowBuffer::new(scan, buf)?;
                 let row = load_row(&mut rb, scan, &dft, *x_l, hist, clean)?;
-                work(w, scan, &row)
+                work(w, start + i_row, scan, &row)
             })?;
         bar.advance(end - start);
     }
@@ -284,14 +301,25 @@ pub(super) fn pass_name(g: &Geometry, cfg: &Config, what: &str) -> String {
     )
 }
 
+/// Under `compensate_laser`, refuses a capture where the laser's falloff `|cos θ| / d²` to
+/// some spot is 0 or not finite (the laser in the plane of the spot's surface, or on it).
 pub(super) fn check_laser_falloff(g: &Geometry, wave: &Wave) -> Result<()> {
     if wave.compensate_laser {
-        let f = g.laser_falloff(g.lasers[0]);
-        if !(f.is_finite() && f > 0.0) {
-            return Err(Error::arg(
-                "compensate_laser",
-                "laser_xyz lies in the wall plane: cos θ / d² is 0",
-            ));
+        let bad = (0..g.lasers.len()).find(|&l| {
+            let f = g.laser_falloff_at(l);
+            !(f.is_finite() && f > 0.0)
+        });
+        if let Some(l) = bad {
+            let why = if g.normals.lasers.is_empty() {
+                "laser_xyz lies in the wall plane: cos θ / d² is 0".to_string()
+            } else {
+                format!(
+                    "laser_xyz lies in the tangent plane of laser spot {l} {:?} (its normal {:?}): cos θ / d² is 0",
+                    g.lasers[l],
+                    g.laser_normal(l).map(|c| c as f32)
+                )
+            };
+            return Err(Error::arg("compensate_laser", why));
         }
     }
     Ok(())

@@ -83,6 +83,7 @@ pub fn indirect(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<IndirectOutput> {
+    wave.refuse_cosine("`indirect`")?;
     let t = Instant::now();
     let (gamma, d) = Gamma::measure(src, volume, opts.epsilon, "epsilon", wave, exec)?;
     let mut out = indirect_over(src, volume, &gamma.mask, opts, wave, exec)?;
@@ -105,6 +106,7 @@ pub fn indirect_over(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<IndirectOutput> {
+    wave.refuse_cosine("`indirect`")?;
     let t = Instant::now();
     let mut p = pair_sums(src, volume, gamma, opts, None, wave, exec)?;
     let values = p.sums.pop().unwrap_or_default();
@@ -136,6 +138,7 @@ pub fn indirect_shells(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<PairSums> {
+    wave.refuse_cosine("`indirect`")?;
     pair_sums(src, volume, gamma, opts, Some(shells), wave, exec)
 }
 
@@ -399,6 +402,7 @@ pub fn fit_over_volume(
     opts: &LeakOptions,
     exec: Exec<'_>,
 ) -> Result<DirectModel> {
+    wave.refuse_cosine("the leak fit")?;
     let (gamma, _) = Gamma::measure(src, volume, epsilon, "leak_epsilon", wave, exec)?;
     let pts = gamma.points(volume);
     DirectModel::fit(src, &pts, cell_radius(volume), wave, opts, exec)

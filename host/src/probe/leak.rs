@@ -252,12 +252,10 @@ impl Basis {
         let window = (g.nt.saturating_sub(1)) as f64 * g.dt;
         let c0 = -(k as f64) * h;
         let nc = ((window - c0) / h).ceil() as usize + k + 1;
-        let laser_scale = g
-            .lasers
-            .iter()
-            .map(|&x| {
+        let laser_scale = (0..g.lasers.len())
+            .map(|l| {
                 if wave.compensate_laser {
-                    g.laser_falloff(x)
+                    g.laser_falloff_at(l)
                 } else {
                     1.0
                 }
@@ -613,6 +611,7 @@ impl DirectModel {
         opts: &LeakOptions,
         exec: Exec<'_>,
     ) -> Result<Self> {
+        wave.refuse_cosine("the leak fit")?;
         let t = Instant::now();
         let g = src.geometry().clone();
         if opts.method == LeakMethod::Gate {

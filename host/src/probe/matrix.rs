@@ -362,6 +362,7 @@ pub fn matrix(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<Matrix> {
+    wave.refuse_cosine("`matrix`")?;
     check_set("from", from)?;
     check_set("to", to)?;
     let t = Instant::now();
@@ -538,6 +539,7 @@ pub fn relight(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<Relit> {
+    wave.refuse_cosine("`relight`")?;
     let t = Instant::now();
     let nb = volume.len();
     let fixed = budget::bytes(nb, 16).saturating_add(imaging_bytes(nb));

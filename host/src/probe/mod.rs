@@ -24,6 +24,7 @@
 mod aligned;
 mod column;
 mod confocal;
+mod cosine;
 mod crop;
 mod direct;
 mod drive;

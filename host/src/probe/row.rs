@@ -41,6 +41,7 @@ pub fn row(
     wave: &Wave,
     exec: Exec<'_>,
 ) -> Result<Output> {
+    wave.refuse_cosine("`row`")?;
     super::column::check_focus(focus)?;
     let t = Instant::now();
     let g = src.geometry().clone();

@@ -17,6 +17,14 @@ pub struct Wave {
     pub sigma: Option<f64>,
     /// Leg weights: the paper's `1/d` or y-tal's none.
     pub weights: Weights,
+    /// The Lambertian cosine at the wall point of each leg (`--weights cos`): each leg's
+    /// weight `w(d)` ([`Wave::weights`]) times `|cos θ| = |n·(x_v − x)|/|x_v − x|` with `n` the
+    /// relay surface's normal at the wall point `x` ([`Geometry::laser_normal`],
+    /// [`Geometry::spad_normal`]; +z where the capture has none). Default false (distance-only
+    /// weights, what every figure and the y-tal parity use). Computed by
+    /// [`direct`](crate::probe::direct) on paired and confocal scans (one SPAD per row), on
+    /// the band and lookup paths; every other probe and path refuses it in one line.
+    pub cosine: bool,
     /// Band half-width m in units of 1/σ.
     pub band_half_width: f64,
     /// Divide each laser row by the physical laser's falloff `cos θ / d²` to its spot.
@@ -39,6 +47,7 @@ impl Default for Wave {
             wavelength: None,
             sigma: None,
             weights: Weights::Inv,
+            cosine: false,
             band_half_width: 5.0,
             compensate_laser: false,
             auto_margin: true,
@@ -67,10 +76,40 @@ pub fn default_wavelength(g: &Geometry) -> f64 {
 }
 
 impl Wave {
+    /// Refuses [`Wave::cosine`] in a probe that does not compute it (`probe` names it): every
+    /// probe but [`direct`](crate::probe::direct).
+    ///
+    /// # Errors
+    /// [`Error::Argument`](crate::Error::Argument) (`weights`) with one line that says why.
+    pub fn refuse_cosine(&self, probe: &str) -> Result<()> {
+        if self.cosine {
+            return Err(crate::error::Error::arg(
+                "weights",
+                format!(
+                    "`cos` weights (the wall's cosine per leg) are computed by `direct` only, \
+                     on paired and confocal scans, not by {probe}: its sums factorise over the \
+                     SPAD grid inside the kernel, where the per-point cosine does not fit"
+                ),
+            ));
+        }
+        Ok(())
+    }
+
+    /// The wave the kernel runs under [`Wave::cosine`]: the same options without the cosine
+    /// (which the caller applies per row and voxel).
+    pub fn without_cosine(&self) -> Self {
+        Self {
+            cosine: false,
+            ..*self
+        }
+    }
+
     /// The kernel configuration for a capture.
     ///
     /// # Errors
-    /// [`Error::Config`](crate::Error::Config) naming the rejected parameter.
+    /// [`Error::Config`](crate::Error::Config) naming the rejected parameter. (Under
+    /// [`Wave::cosine`] the configuration has the distance weights; the cosines are the
+    /// host's.)
     pub fn config(&self, g: &Geometry) -> Result<Config> {
         let lam = self.wavelength.unwrap_or_else(|| default_wavelength(g));
         let legs = if g.legs_in_time {

@@ -438,6 +438,7 @@ mod tests {
             nt: 100,
             dt: 0.02,
             t0,
+            normals: Default::default(),
         }
     }
 

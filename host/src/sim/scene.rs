@@ -407,6 +407,7 @@ impl Scene {
             nt: s.nt,
             dt: s.dt,
             t0: s.t0,
+            normals: Default::default(),
         }
     }
 

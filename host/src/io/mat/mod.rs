@@ -317,6 +317,7 @@ fn stanford(path: &Path, file: &File, o: &MatOptions) -> Result<(Capture, Vec<St
         nt,
         dt,
         t0,
+        normals: Default::default(),
     };
     // rect_data(i, j, t) is at i + n1·(j + n2·t); the capture wants [(i·n2 + j)·nt + t].
     let mut h = vec![0.0f32; kl * nt];
@@ -508,6 +509,7 @@ fn phasor_field(path: &Path, file: &File, o: &MatOptions) -> Result<(Capture, Ve
         nt,
         dt,
         t0,
+        normals: Default::default(),
     };
     let capture = Capture::new(geometry, h, path)?;
     let conventions = vec![

@@ -305,6 +305,7 @@ impl Sidecar {
             nt: self.nt,
             dt: width * f64::from(self.rebin),
             t0: self.t0 + (f64::from(self.first_dtime) + f64::from(self.rebin - 1) / 2.0) * width,
+            normals: Default::default(),
         };
         geometry.validate(path)?;
         Ok(Plan {

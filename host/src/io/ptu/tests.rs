@@ -172,6 +172,7 @@ fn tiny(confocal: bool) -> Capture {
         nt,
         dt: 0.0123,
         t0: 0.75,
+        normals: Default::default(),
     };
     Capture::new(geometry, data, Path::new("tiny")).unwrap()
 }

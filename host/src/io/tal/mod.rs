@@ -74,7 +74,8 @@
 //! | `delta_t` | [`Geometry::dt`] (m of optical path; finite and > 0) |
 //! | `t_start` | [`Geometry::t0`], see *Time axis* |
 //! | `t_accounts_first_and_last_bounces` | [`Geometry::legs_in_time`] |
-//! | `*_grid_normals`, `volume_format`, `scene_info` | not used (the wall is z = 0 with normal +z, DESIGN §B.0) |
+//! | `laser_grid_normals`, `sensor_grid_normals` (optional) | relay-surface normals at the spots, of their grid's format and shape (absent: +z); checked (finite, non-zero length) and used by `--compensate-laser` and `--weights cos` |
+//! | `volume_format`, `scene_info` | not used |
 //!
 //! Shapes: `T_Lx_Ly_Sx_Sy` is `(Nt, Lx, Ly, Sx, Sy)` with grids of `Lx·Ly` and `Sx·Sy` points
 //! (an `X_Y_3` grid must be exactly `(Lx, Ly, 3)`, resp. `(Sx, Sy, 3)`); `T_Li_Si` is
@@ -100,7 +101,8 @@
 //!   `c(x) = cos θ / |laser_xyz − x|²` at its spot `x0` and by nothing on the SPAD side, while a
 //!   laser scan of the swapped setup would carry the falloff at each new laser spot. Row `l` is
 //!   therefore `H[:, l] · c'(S_l) / c(x0)`, with `c'` the falloff from the swapped laser origin
-//!   ([`Geometry::laser_falloff`] of the returned geometry). Then
+//!   ([`Geometry::laser_falloff_at`] of the returned geometry; both falloffs take the spots'
+//!   normals where the file has `*_grid_normals`, +z otherwise). Then
 //!   `--compensate-laser` (÷ `c'(S_l)`) gives exactly y-tal's `compensate_laser_cos_dsqr` result
 //!   `H / c(x0)` (`../shared/data/single/README.md`; there `c(x0)` = 0.47982 m⁻²).
 //! * `T_Sx_Sy`, `T_Si` with any other laser grid (a paired, non-confocal custom scan): not
@@ -346,6 +348,15 @@ pub fn read_any(path: &Path) -> Result<Capture> {
 /// # Errors
 /// [`Error::Format`] on `(file)` when it is not HDF5 (or cannot be read), on `(root group)`
 /// when its root group cannot be listed.
+/// A grid-shaped dataset the file may lack (`laser_grid_normals`): `None` when absent.
+fn optional_grid(f: &Fields<'_>, name: &'static str, format_name: &str) -> Result<Option<Grid>> {
+    if f.has(name) {
+        f.grid(name, format_name).map(Some)
+    } else {
+        Ok(None)
+    }
+}
+
 fn open_file(path: &Path) -> Result<(Hdf5File, Vec<String>)> {
     let limit = usize::try_from(budget::get()).unwrap_or(usize::MAX);
     let file = Hdf5File::open_with_options(path, OpenOptions::default().with_max_read_bytes(limit))
@@ -457,6 +468,10 @@ impl TalReader {
                 t_start,
                 legs_in_time,
                 xyz_names: ["laser_xyz", "sensor_xyz"],
+                normals: [
+                    optional_grid(&f, "laser_grid_normals", "laser_grid_format")?,
+                    optional_grid(&f, "sensor_grid_normals", "sensor_grid_format")?,
+                ],
             },
             options,
         )?;
@@ -657,7 +672,7 @@ impl RowSource for TalReader {
         taken?;
         let x_l = self.geometry.lasers[l];
         if let Some(c0) = self.single_falloff {
-            let k = self.geometry.laser_falloff(x_l) / c0;
+            let k = self.geometry.laser_falloff_at(l) / c0;
             out.iter_mut().for_each(|h| *h = (f64::from(*h) * k) as f32);
         }
         Ok(x_l)

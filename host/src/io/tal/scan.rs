@@ -6,8 +6,9 @@
 use super::fields::{Grid, allclose};
 use super::{HFormat, ScanType, TalOptions};
 use crate::error::{Error, Result};
-use crate::io::capture::Geometry;
+use crate::io::capture::{Geometry, Normals, unit};
 use std::path::Path;
+use vltm_kernel::Point;
 
 /// A capture's description in tal's terms.
 pub(super) struct Meta {
@@ -33,6 +34,9 @@ pub(super) struct Meta {
     pub(super) legs_in_time: bool,
     /// The file's names of `laser_xyz` and `sensor_xyz` (for errors).
     pub(super) xyz_names: [&'static str; 2],
+    /// `laser_grid_normals` and `sensor_grid_normals` where the file has them (same format
+    /// and shape as their grids; absent: +z).
+    pub(super) normals: [Option<Grid>; 2],
 }
 
 /// The scan a [`Meta`] describes.
@@ -60,7 +64,10 @@ pub(super) fn build(path: &Path, m: Meta, options: TalOptions) -> Result<Scan> {
         t_start,
         legs_in_time,
         xyz_names,
+        normals: [lnormals, snormals],
     } = m;
+    let lnormals = checked_normals(path, lnormals, &lgrid)?;
+    let snormals = checked_normals(path, snormals, &sgrid)?;
     let (scan, lasers, laser_shape, spads, spad_shape) = match format {
         HFormat::TLxLySxSy => {
             let l = lgrid.fit(path, [lead[0], lead[1]])?;
@@ -108,10 +115,18 @@ pub(super) fn build(path: &Path, m: Meta, options: TalOptions) -> Result<Scan> {
         }
     };
     let single = scan == ScanType::Single;
-    let (laser_origin, sensor_origin) = if single {
-        (sensor_xyz, laser_xyz)
+    let (laser_origin, sensor_origin, normals) = if single {
+        (
+            sensor_xyz,
+            laser_xyz,
+            Normals::from_lists(snormals, lnormals),
+        )
     } else {
-        (laser_xyz, sensor_xyz)
+        (
+            laser_xyz,
+            sensor_xyz,
+            Normals::from_lists(lnormals, snormals),
+        )
     };
     let geometry = Geometry {
         lasers,
@@ -129,6 +144,7 @@ pub(super) fn build(path: &Path, m: Meta, options: TalOptions) -> Result<Scan> {
         } else {
             t_start
         },
+        normals,
     };
     geometry.validate(path)?;
 
@@ -137,7 +153,8 @@ pub(super) fn build(path: &Path, m: Meta, options: TalOptions) -> Result<Scan> {
             laser_origin: laser_xyz,
             ..geometry.clone()
         };
-        let c0 = physical.laser_falloff(geometry.spads[0]);
+        // The one laser spot x0 with its own normal (now the capture's SPAD spot).
+        let c0 = physical.falloff(geometry.spads[0], geometry.spad_normal(0));
         if !(c0.is_finite() && c0 > 0.0) {
             return Err(Error::format(
                 path,
@@ -146,8 +163,8 @@ pub(super) fn build(path: &Path, m: Meta, options: TalOptions) -> Result<Scan> {
                 format!("{laser_xyz:?}"),
             ));
         }
-        let sensor_ok = geometry.lasers.iter().all(|&x| {
-            let c = geometry.laser_falloff(x);
+        let sensor_ok = (0..geometry.lasers.len()).all(|l| {
+            let c = geometry.laser_falloff_at(l);
             c.is_finite() && c > 0.0
         });
         if !sensor_ok {
@@ -176,4 +193,33 @@ fn grid_form(g: &Grid) -> String {
     } else {
         format!("as ({}, 3)", g.points.len())
     }
+}
+
+/// The normals of `grid` (empty when the file has none), checked: the grid's format and
+/// shape, finite and of non-zero length. One-line errors name the normals' field.
+fn checked_normals(path: &Path, normals: Option<Grid>, grid: &Grid) -> Result<Vec<Point>> {
+    let Some(n) = normals else {
+        return Ok(Vec::new());
+    };
+    if n.xy != grid.xy || n.shape != grid.shape {
+        return Err(Error::format(
+            path,
+            n.field,
+            format!(
+                "one normal per point of {} ({})",
+                grid.field,
+                grid_form(grid)
+            ),
+            grid_form(&n),
+        ));
+    }
+    if let Some(i) = n.points.iter().position(|v| unit(v).is_none()) {
+        return Err(Error::format(
+            path,
+            n.field,
+            "finite normals of non-zero length",
+            format!("{:?} at index {i}", n.points[i]),
+        ));
+    }
+    Ok(n.points)
 }

@@ -254,6 +254,8 @@ struct Spec {
     t_start: f64,
     legs: u8,
     skip: &'static str,
+    /// Further f32 datasets `(name, values, shape)` (`laser_grid_normals`).
+    extra: Vec<(&'static str, Vec<f32>, Vec<u64>)>,
 }
 
 /// Value of `H` at `(t, a, b, ...)` in C order: `t·10⁴ + (flat index of the rest)`.
@@ -299,6 +301,7 @@ impl Spec {
             t_start: 0.5,
             legs: 1,
             skip: "",
+            extra: Vec::new(),
         }
     }
 
@@ -376,6 +379,9 @@ impl Spec {
             b.create_dataset("t_accounts_first_and_last_bounces")
                 .with_u8_data(&[self.legs])
                 .with_shape(&[]);
+        }
+        for (name, v, shape) in &self.extra {
+            b.create_dataset(name).with_f32_data(v).with_shape(shape);
         }
         b.write(path).unwrap();
     }
@@ -945,4 +951,110 @@ fn chunked_rows_identical_on_any_number_of_decoding_threads() {
         "{text}"
     );
     let _ = std::fs::remove_dir_all(dir);
+
+/// `laser_grid_normals` / `sensor_grid_normals` (y-tal's fields, of their grid's shape):
+/// read per point into [`Geometry::normals`] (swapped with the grids for tal's `single`
+/// scan), all-+z normals are the flat default, and a zero-length, NaN or misshapen normal is a
+/// one-line error naming the field.
+#[test]
+fn grid_normals_are_read_and_checked() {
+    let dir = scratch("normals");
+    let tilted = |n: usize| -> Vec<f32> {
+        (0..n)
+            .flat_map(|i| [0.1 * i as f32, -0.05, 1.0])
+            .collect::<Vec<_>>()
+    };
+    let mut spec = Spec::exhaustive();
+    spec.h_shape = vec![6, 6];
+    spec.h_format = 3;
+    spec.sensor_grid = grid(3, 2, true, 0.0);
+    spec.laser_grid = grid(3, 2, true, 0.05);
+    spec.extra = vec![("laser_grid_normals", tilted(6), vec![6, 3])];
+    let r = spec.open(&dir, "paired").unwrap();
+    let g = r.geometry();
+    assert_eq!(g.normals.lasers.len(), 6);
+    assert_eq!(g.normals.lasers[2], [0.2, -0.05, 1.0]);
+    assert!(g.normals.spads.is_empty());
+    let n = g.laser_normal(2);
+    assert!(((n[0] * n[0] + n[1] * n[1] + n[2] * n[2]) - 1.0).abs() < 1e-12);
+    assert_eq!(g.spad_normal(2), [0.0, 0.0, 1.0]);
+    assert!(g.not_flat().is_some_and(|w| w.contains("normals")));
+    // +z everywhere (what y-tal writes for a flat wall): the default.
+    let up: Vec<f32> = (0..6).flat_map(|_| [0.0, 0.0, 1.0]).collect();
+    spec.extra = vec![
+        ("laser_grid_normals", up.clone(), vec![6, 3]),
+        ("sensor_grid_normals", up.clone(), vec![6, 3]),
+    ];
+    assert!(spec.open(&dir, "up").unwrap().geometry().normals.flat());
+    // tal `single`: the sensor grid's normals become the lasers'.
+    let mut single = Spec::exhaustive();
+    single.h_shape = vec![6, 6];
+    single.h_format = 3;
+    single.sensor_grid = grid(3, 2, true, 0.0);
+    single.laser_grid = (vec![0.05, 0.02, 0.0], vec![1, 3]);
+    single.extra = vec![
+        ("sensor_grid_normals", tilted(6), vec![6, 3]),
+        ("laser_grid_normals", vec![0.0, 0.3, 1.0], vec![1, 3]),
+    ];
+    let r = single.open(&dir, "single").unwrap();
+    assert_eq!(r.scan_type(), ScanType::Single);
+    let g = r.geometry().clone();
+    assert_eq!(g.normals.lasers[5], [0.5, -0.05, 1.0]);
+    assert_eq!(g.normals.spads, vec![[0.0, 0.3, 1.0]]);
+    // The reciprocity factor c'(S_l)/c(x0) takes the spots' own normals (so that
+    // `--compensate-laser`, which divides by c'(S_l) with the same normal, leaves H/c(x0)):
+    // computed here from the definition, |v·n̂|/d³.
+    let f = |o: [f64; 3], x: Point, n: [f64; 3]| {
+        let v: Vec<f64> = (0..3).map(|i| o[i] - f64::from(x[i])).collect();
+        let d = v.iter().map(|c| c * c).sum::<f64>().sqrt();
+        let nn = n.iter().map(|c| c * c).sum::<f64>().sqrt();
+        (v[0] * n[0] + v[1] * n[1] + v[2] * n[2]).abs() / nn / d.powi(3)
+    };
+    let c0 = f([-0.5, 0.0, 0.25], [0.05, 0.02, 0.0], [0.0, 0.3, 1.0]);
+    let mut r = r;
+    let mut row = Vec::new();
+    let mut worst = 0.0f64;
+    for l in 0..6 {
+        r.read_row(l, &mut row).unwrap();
+        let n = [0.1 * l as f64, -0.05, 1.0];
+        let k = f([0.5, 0.125, 0.375], g.lasers[l], n) / c0;
+        let flat = g.laser_falloff(g.lasers[l]) / c0;
+        assert!(
+            (k / flat - 1.0).abs() > 1e-3 || l == 0,
+            "row {l}: normals change k"
+        );
+        for (n, &h) in row.iter().enumerate() {
+            let want = (n * 10_000 + l) as f64 * k;
+            worst = worst.max((f64::from(h) - want).abs() / want.abs().max(1.0));
+        }
+    }
+    assert!(worst < 1e-6, "{worst}");
+    // Bad normals: one line naming the field.
+    for (name, v, shape, why) in [
+        (
+            "laser_grid_normals",
+            vec![0.0; 18],
+            vec![6, 3],
+            "non-zero length",
+        ),
+        (
+            "sensor_grid_normals",
+            [up.clone(), vec![f32::NAN, 0.0, 1.0]].concat()[3..].to_vec(),
+            vec![6, 3],
+            "non-zero length",
+        ),
+        (
+            "laser_grid_normals",
+            up[..15].to_vec(),
+            vec![5, 3],
+            "one normal per point",
+        ),
+    ] {
+        spec.extra = vec![(name, v, shape)];
+        let e = spec.open(&dir, "bad").unwrap_err().to_string();
+        assert!(
+            e.contains(name) && e.contains(why) && !e.contains('\n'),
+            "{name}: {e}"
+        );
+    }
 }

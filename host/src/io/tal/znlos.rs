@@ -355,6 +355,8 @@ impl ZnlosReader {
             t_start: f.float_scalar("t0")?,
             legs_in_time: true,
             xyz_names: ["laserPosition", "cameraPosition"],
+            // Z-NLOS files' `cameraGridNormals`/`laserGridNormals` are not read: +z.
+            normals: [None, None],
         };
         let (dt, t_start) = (meta.dt, meta.t_start);
         let scan::Scan {
@@ -587,7 +589,7 @@ impl RowSource for ZnlosReader {
             .take(l, l / b * b, out, reader, &self.path, "data")?;
         let x_l = self.geometry.lasers[l];
         if let Some(c0) = self.single_falloff {
-            let k = self.geometry.laser_falloff(x_l) / c0;
+            let k = self.geometry.laser_falloff_at(l) / c0;
             out.iter_mut().for_each(|h| *h = (f64::from(*h) * k) as f32);
         }
         Ok(x_l)
