@@ -951,6 +951,7 @@ fn chunked_rows_identical_on_any_number_of_decoding_threads() {
         "{text}"
     );
     let _ = std::fs::remove_dir_all(dir);
+}
 
 /// `laser_grid_normals` / `sensor_grid_normals` (y-tal's fields, of their grid's shape):
 /// read per point into [`Geometry::normals`] (swapped with the grids for tal's `single`
