@@ -72,7 +72,7 @@
 
 use crate::config::{Point, Weights};
 use crate::error::{ConfigError, Error, check_len};
-use crate::lookup::{Interpolant, Lookup, LookupGrid, dist_nr};
+use crate::lookup::{Interpolant, Lookup, LookupGrid, dist_nr, kahan, synthesise_fused, value};
 use crate::phase::cis_small_turns;
 use crate::probe::{Report, Target};
 use crate::sample::Sample;
@@ -661,100 +661,6 @@ impl<'m> LookupSlice<'m> {
     }
 }
 
-/// One SPAD's baseband grid `Y[n]` (`n < L`, then wrapped copies up to `y.len()`, at most
-/// `L`) from its band spectrum `hg`: the inverse FFT of the band placed in bit-reversed
-/// order (the unit tests' radix-2 `Lookup::synthesise`), with the radix-2 stages after the first radix-4
-/// pass fused in pairs (`h`, `2h`): each group of four values is loaded and stored once per
-/// two stages, and the second stage's odd twiddle `e^{iπ(k+h)/2h} = i·e^{iπk/2h}` is a
-/// rotation, so three complex products per four butterflies instead of four. Same sums,
-/// other rounding (within the FFT's `f32` error).
-pub(crate) fn synthesise_fused(lookup: &Lookup<'_>, hg: &[Complex32], y: &mut [Complex32]) {
-    let grid = lookup.grid();
-    let l = grid.len();
-    let bits = l.trailing_zeros();
-    let shift = usize::BITS - bits;
-    let mask = l - 1;
-    let cfg = grid.config();
-    let mut k = (cfg.k_lo() - grid.carrier_bin()).rem_euclid(l.max(1) as i64) as usize;
-    y.fill(Complex32::new(0.0, 0.0));
-    for h in hg {
-        let r = k.reverse_bits().checked_shr(shift).unwrap_or(0);
-        if let Some(v) = y.get_mut(r) {
-            *v = *h;
-        }
-        k = (k + 1) & mask;
-    }
-    let Some((g, extra)) = y.split_at_mut_checked(l) else {
-        return;
-    };
-    for q in g.as_chunks_mut::<4>().0 {
-        let (a0, a1) = (q[0] + q[1], q[0] - q[1]);
-        let (a2, a3) = (q[2] + q[3], q[2] - q[3]);
-        let ia3 = Complex32::new(-a3.im, a3.re);
-        *q = [a0 + a2, a1 + ia3, a0 - a2, a1 - ia3];
-    }
-    let tw = lookup.twiddle_table();
-    let mut h = 4;
-    while 4 * h <= l {
-        let (Some(w1), Some(w2), Some(size)) = (
-            tw.get(h - 1..2 * h - 1),
-            tw.get(2 * h - 1..3 * h - 1),
-            core::num::NonZeroUsize::new(4 * h),
-        ) else {
-            break;
-        };
-        for block in g.chunks_exact_mut(size.get()) {
-            let Some((q01, q23)) = block.split_at_mut_checked(2 * h) else {
-                return;
-            };
-            let (Some((q0, q1)), Some((q2, q3))) =
-                (q01.split_at_mut_checked(h), q23.split_at_mut_checked(h))
-            else {
-                return;
-            };
-            for ((((a0, a1), (a2, a3)), w1), w2) in q0
-                .iter_mut()
-                .zip(q1.iter_mut())
-                .zip(q2.iter_mut().zip(q3.iter_mut()))
-                .zip(w1)
-                .zip(w2)
-            {
-                let (t1, t3) = (*a1 * *w1, *a3 * *w1);
-                let (a, b) = (*a0 + t1, *a0 - t1);
-                let (c, d) = (*a2 + t3, *a2 - t3);
-                let (tc, td) = (c * *w2, d * *w2);
-                let itd = Complex32::new(-td.im, td.re);
-                *a0 = a + tc;
-                *a2 = a - tc;
-                *a1 = b + itd;
-                *a3 = b - itd;
-            }
-        }
-        h *= 4;
-    }
-    if h < l {
-        let (Some(w), Some(size)) = (
-            tw.get(h - 1..2 * h - 1),
-            core::num::NonZeroUsize::new(2 * h),
-        ) else {
-            return;
-        };
-        for block in g.chunks_exact_mut(size.get()) {
-            let Some((a, b)) = block.split_at_mut_checked(h) else {
-                return;
-            };
-            for ((a, b), w) in a.iter_mut().zip(b.iter_mut()).zip(w) {
-                let (av, t) = (*a, *b * *w);
-                *a = av + t;
-                *b = av - t;
-            }
-        }
-    }
-    for (e, v) in extra.iter_mut().zip(g.iter()) {
-        *e = *v;
-    }
-}
-
 /// The cubic of cell `n` (between the nodes `n` and `n + 1`) in power form,
 /// `p(t) = a₀ + a₁t + a₂t² + a₃t³`, for the `count` cells from `first` on (wrapping at `L`;
 /// all `L` when `count ≥ L`): the cubic of [`lagrange4`](crate::lagrange4) (nodes
@@ -952,25 +858,6 @@ fn mac<const GUARD: bool>(
     // Multiply-accumulate form (`vmla`/`vmls` on the M4F, no separate product).
     s[0] = s[0] + re * e[1] - im * e[2];
     s[1] = s[1] + re * e[2] + im * e[1];
-}
-
-/// Kahan step: `acc = [s.re, s.im, c.re, c.im]` += `z` (`c` the running compensation, the
-/// rounding error still to subtract).
-#[inline(always)]
-pub(crate) fn kahan(acc: &mut [f32; 4], z: Complex32) {
-    let [s_re, s_im, c_re, c_im] = *acc;
-    let (y_re, y_im) = (z.re - c_re, z.im - c_im);
-    let (t_re, t_im) = (s_re + y_re, s_im + y_im);
-    *acc = [t_re, t_im, (t_re - s_re) - y_re, (t_im - s_im) - y_im];
-}
-
-/// The compensated sum's value `s − c`, in `f64`.
-#[inline]
-pub(crate) fn value(a: &[f32; 4]) -> Complex64 {
-    Complex64::new(
-        f64::from(a[0]) - f64::from(a[2]),
-        f64::from(a[1]) - f64::from(a[3]),
-    )
 }
 
 #[cfg(test)]
