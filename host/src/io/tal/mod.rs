@@ -679,7 +679,7 @@ impl RowSource for TalReader {
     }
 
     /// A chunked `H` decoded chunk by chunk is inflated on the opening pool's threads
-    /// ([`ChunkMap::workers`]); a contiguous `H` or one read through the crate is read by one
+    /// (`ChunkMap::workers` of them); a contiguous `H` or one read through the crate is read by one
     /// thread.
     fn reads_in_parallel(&self) -> bool {
         self.chunks.is_some()
