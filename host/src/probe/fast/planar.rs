@@ -526,21 +526,11 @@ impl Planar {
         }
     }
 
-    /// Adds `w_leg(v)·Σ_j e^{iν_j d_leg(v)}·Σ_s spectra[s·J + j]·κ_j(x_v − x_s)` to `acc[v]`
-    /// for every voxel with `skip[v] == false` (see the module docs); `leg(v)` returns
-    /// `(d_leg, w_leg)`. `spectra` is Ks·J (the kernel's `Row::band` or a column's `U_a`).
-    pub fn apply(
-        &self,
-        spectra: &[Complex32],
-        voxels: &[Point],
-        leg: impl Fn(&Point) -> (f32, f32),
-        skip: &[bool],
-        s: &mut Scratch,
-        acc: &mut [Complex64],
-    ) {
+    /// The forward transforms of one spectrum: per bin the SPAD image, its FFT along y (the
+    /// non-zero rows only), a transpose, then along x, into `s.x` (`J·M`).
+    fn forward(&self, spectra: &[Complex32], s: &mut Scratch) {
         let (mx, my, j_n) = (self.mx, self.my, self.bins);
         let m = mx * my;
-        // Forward: SPAD image per bin → FFT along y (non-zero rows only) → transpose → along x.
         for j in 0..j_n {
             let img = &mut s.y[j * m..(j + 1) * m];
             img[..self.nsx * my].fill(Complex32::new(0.0, 0.0));
@@ -559,42 +549,78 @@ impl Planar {
             transpose(img, self.nsx, my, xt, mx);
         }
         self.fx.process_with_scratch(&mut s.x, &mut s.fft);
+    }
+
+    /// Slice `si` of the transformed spectrum `x` (from [`Self::forward`]): the product with
+    /// its `κ̂`, the inverse transforms (the output rows only) in `y`, `z` (`J·M` each) and
+    /// `fft`, then every voxel of the slice with `skip[v] == false` handed to `emit(v, term)`
+    /// in the slice's output order.
+    #[allow(clippy::too_many_arguments)]
+    fn slice_terms(
+        &self,
+        si: usize,
+        x: &[Complex32],
+        (y, z, fft): (&mut [Complex32], &mut [Complex32], &mut [Complex32]),
+        voxels: &[Point],
+        leg: &impl Fn(&Point) -> (f32, f32),
+        skip: &[bool],
+        mut emit: impl FnMut(usize, Complex64),
+    ) {
+        let (mx, my, j_n) = (self.mx, self.my, self.bins);
+        let m = mx * my;
         let (klo, inv) = (self.klo_per_span, self.inv_span);
-        for (si, slice) in self.slices.iter().enumerate() {
-            let kh: &[Complex32] =
-                bytemuck::cast_slice(&self.khat[si * j_n * m..(si + 1) * j_n * m]);
-            for ((y, x), k) in s.y.iter_mut().zip(&s.x).zip(kh) {
-                *y = x * k;
+        let slice = &self.slices[si];
+        let kh: &[Complex32] = bytemuck::cast_slice(&self.khat[si * j_n * m..(si + 1) * j_n * m]);
+        for ((y, x), k) in y.iter_mut().zip(x).zip(kh) {
+            *y = x * k;
+        }
+        self.ix.process_with_scratch(y, fft);
+        for j in 0..j_n {
+            let src = &y[j * m..(j + 1) * m];
+            let dst = &mut z[j * m..(j + 1) * m];
+            // [ky][kx] → [ix][ky], only the rows ix < rows_out.
+            for r in 0..my {
+                for c in 0..self.rows_out {
+                    dst[c * my + r] = src[r * mx + c];
+                }
             }
-            self.ix.process_with_scratch(&mut s.y, &mut s.fft);
+            self.iy
+                .process_with_scratch(&mut dst[..self.rows_out * my], fft);
+        }
+        for &(cell, v) in &slice.outputs {
+            let (cell, v) = (cell as usize, v as usize);
+            if skip.get(v).copied().unwrap_or(true) {
+                continue;
+            }
+            let (d, w) = leg(&voxels[v]);
+            let step = cis_turns(inv * d);
+            let mut p = cis_turns(klo * d);
+            let mut sum = Complex32::new(0.0, 0.0);
             for j in 0..j_n {
-                let src = &s.y[j * m..(j + 1) * m];
-                let dst = &mut s.z[j * m..(j + 1) * m];
-                // [ky][kx] → [ix][ky], only the rows ix < rows_out.
-                for r in 0..my {
-                    for c in 0..self.rows_out {
-                        dst[c * my + r] = src[r * mx + c];
-                    }
-                }
-                self.iy
-                    .process_with_scratch(&mut dst[..self.rows_out * my], &mut s.fft);
+                sum += z[j * m + cell] * p;
+                p *= step;
             }
-            for &(cell, v) in &slice.outputs {
-                let (cell, v) = (cell as usize, v as usize);
-                if skip.get(v).copied().unwrap_or(true) {
-                    continue;
-                }
-                let (d, w) = leg(&voxels[v]);
-                let step = cis_turns(inv * d);
-                let mut p = cis_turns(klo * d);
-                let mut sum = Complex32::new(0.0, 0.0);
-                for j in 0..j_n {
-                    sum += s.z[j * m + cell] * p;
-                    p *= step;
-                }
-                let sum = sum * w;
-                acc[v] += Complex64::new(sum.re as f64, sum.im as f64);
-            }
+            let sum = sum * w;
+            emit(v, Complex64::new(sum.re as f64, sum.im as f64));
+        }
+    }
+
+    /// Adds `w_leg(v)·Σ_j e^{iν_j d_leg(v)}·Σ_s spectra[s·J + j]·κ_j(x_v − x_s)` to `acc[v]`
+    /// for every voxel with `skip[v] == false` (see the module docs); `leg(v)` returns
+    /// `(d_leg, w_leg)`. `spectra` is Ks·J (the kernel's `Row::band` or a column's `U_a`).
+    pub fn apply(
+        &self,
+        spectra: &[Complex32],
+        voxels: &[Point],
+        leg: impl Fn(&Point) -> (f32, f32),
+        skip: &[bool],
+        s: &mut Scratch,
+        acc: &mut [Complex64],
+    ) {
+        self.forward(spectra, s);
+        let Scratch { x, y, z, fft } = s;
+        for si in 0..self.slices.len() {
+            self.slice_terms(si, x, (y, z, fft), voxels, &leg, skip, |v, t| acc[v] += t);
         }
     }
 
@@ -612,29 +638,10 @@ impl Planar {
         skip: &[bool],
         acc: &mut [Complex64],
     ) {
-        let (mx, my, j_n) = (self.mx, self.my, self.bins);
-        let m = mx * my;
+        let m = self.mx * self.my;
+        let j_n = self.bins;
         let mut s = self.scratch();
-        // Forward, as in `apply`.
-        for j in 0..j_n {
-            let img = &mut s.y[j * m..(j + 1) * m];
-            img[..self.nsx * my].fill(Complex32::new(0.0, 0.0));
-            for (cell, h) in self
-                .spad_cell
-                .iter()
-                .zip(spectra.iter().skip(j).step_by(j_n))
-            {
-                img[*cell] = *h;
-            }
-            self.fy
-                .process_with_scratch(&mut img[..self.nsx * my], &mut s.fft);
-            let img = &s.y[j * m..j * m + self.nsx * my];
-            let xt = &mut s.x[j * m..(j + 1) * m];
-            xt.fill(Complex32::new(0.0, 0.0));
-            transpose(img, self.nsx, my, xt, mx);
-        }
-        self.fx.process_with_scratch(&mut s.x, &mut s.fft);
-        let (klo, inv) = (self.klo_per_span, self.inv_span);
+        self.forward(spectra, &mut s);
         let x = &s.x;
         let fft_len = s.fft.len();
         let terms: Vec<Vec<(usize, Complex64)>> = (0..self.slices.len())
@@ -648,41 +655,10 @@ impl Planar {
                     )
                 },
                 |(y, z, fft), si| {
-                    let slice = &self.slices[si];
-                    let kh: &[Complex32] =
-                        bytemuck::cast_slice(&self.khat[si * j_n * m..(si + 1) * j_n * m]);
-                    for ((y, x), k) in y.iter_mut().zip(x).zip(kh) {
-                        *y = x * k;
-                    }
-                    self.ix.process_with_scratch(y, fft);
-                    for j in 0..j_n {
-                        let src = &y[j * m..(j + 1) * m];
-                        let dst = &mut z[j * m..(j + 1) * m];
-                        for r in 0..my {
-                            for c in 0..self.rows_out {
-                                dst[c * my + r] = src[r * mx + c];
-                            }
-                        }
-                        self.iy
-                            .process_with_scratch(&mut dst[..self.rows_out * my], fft);
-                    }
-                    let mut out = Vec::with_capacity(slice.outputs.len());
-                    for &(cell, v) in &slice.outputs {
-                        let (cell, v) = (cell as usize, v as usize);
-                        if skip.get(v).copied().unwrap_or(true) {
-                            continue;
-                        }
-                        let (d, w) = leg(&voxels[v]);
-                        let step = cis_turns(inv * d);
-                        let mut p = cis_turns(klo * d);
-                        let mut sum = Complex32::new(0.0, 0.0);
-                        for j in 0..j_n {
-                            sum += z[j * m + cell] * p;
-                            p *= step;
-                        }
-                        let sum = sum * w;
-                        out.push((v, Complex64::new(sum.re as f64, sum.im as f64)));
-                    }
+                    let mut out = Vec::with_capacity(self.slices[si].outputs.len());
+                    self.slice_terms(si, x, (y, z, fft), voxels, &leg, skip, |v, t| {
+                        out.push((v, t));
+                    });
                     out
                 },
             )
