@@ -75,7 +75,7 @@ pub struct Report {
 impl Report {
     /// Counts one folded row: one more row, its non-finite samples and dropped photon events.
     #[inline]
-    pub(crate) fn count_row<T: Sample>(&mut self, row: &Row<'_, T>) {
+    pub fn count_row<T: Sample>(&mut self, row: &Row<'_, T>) {
         self.rows += 1;
         self.non_finite += u64::from(row.non_finite());
         self.dropped += u64::from(row.dropped());
@@ -84,7 +84,7 @@ impl Report {
     /// Adds the rows, non-finite samples and dropped events of another part (a merge;
     /// `aliased` is counted when a probe finishes).
     #[inline]
-    pub(crate) fn add_part(&mut self, other: &Self) {
+    pub fn add_part(&mut self, other: &Self) {
         self.rows += other.rows;
         self.non_finite += other.non_finite;
         self.dropped += other.dropped;

@@ -50,7 +50,7 @@ pub(super) fn check(g: &Geometry, path: Path) -> Result<()> {
     if path == Path::Planar {
         return Err(Error::arg(
             "path",
-            "the planar FFT path does not apply: `--weights cos` multiplies each leg by the \
+            "the planar FFT path does not apply: `$weights cos` multiplies each leg by the \
              cosine at its own wall point, which the convolution's distance-only kernel \
              cannot (the band and lookup paths compute it)",
         ));
@@ -119,8 +119,7 @@ pub(super) fn direct(
                 tmp.fill(zero);
                 lk.apply(scan, row, pts, s, tmp);
                 fold(acc, tmp, l);
-                r.rows += 1;
-                r.non_finite += u64::from(row.non_finite());
+                r.count_row(row);
                 Ok(())
             },
         )?;
@@ -128,8 +127,7 @@ pub(super) fn direct(
         let parts = workers
             .into_iter()
             .map(|(_, _, a, r)| {
-                report.rows += r.rows;
-                report.non_finite += r.non_finite;
+                report.add_part(&r);
                 a
             })
             .collect::<Vec<_>>();
@@ -157,7 +155,7 @@ pub(super) fn direct(
                 p.reset();
                 p.push_row(scan, row)?;
                 fold(acc, p.accumulators(), l);
-                add(r, &p.report());
+                r.add_part(&p.report());
                 Ok(())
             },
         )?;
@@ -165,7 +163,7 @@ pub(super) fn direct(
         let parts = workers
             .into_iter()
             .map(|(_, a, r)| {
-                add(&mut report, &r);
+                report.add_part(&r);
                 a
             })
             .collect::<Vec<_>>();
@@ -178,11 +176,4 @@ pub(super) fn direct(
         }
     }
     Ok((acc, report, path))
-}
-
-/// Adds a part's counters (rows, non-finite samples, dropped events).
-fn add(r: &mut Report, other: &Report) {
-    r.rows += other.rows;
-    r.non_finite += other.non_finite;
-    r.dropped += other.dropped;
 }

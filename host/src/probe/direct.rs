@@ -391,8 +391,7 @@ pub(super) fn direct_lookup(
         workers,
         |(s, acc, r), scan, row| {
             lookup.apply(scan, row, pts, s, acc);
-            r.rows += 1;
-            r.non_finite += u64::from(row.non_finite());
+            r.count_row(row);
             Ok(())
         },
     )?;
@@ -402,8 +401,7 @@ pub(super) fn direct_lookup(
         for (x, y) in acc.iter_mut().zip(&a) {
             *x += y;
         }
-        report.rows += r.rows;
-        report.non_finite += r.non_finite;
+        report.add_part(&r);
     }
     Ok((acc, report))
 }

@@ -167,6 +167,47 @@ impl LookupResults {
     };
 }
 
+/// The structured slice's buffers for one pass: its tables, state and scratch.
+struct SliceBuffers<'a> {
+    tables: &'a mut [f32],
+    state: &'a mut [f32],
+    scratch: &'a mut [f32],
+}
+
+/// The structured slice over the scan, one pass per target (the diagonal, then the column
+/// `T(FOCUS, ·)`), each with fresh tables, state and scratch in `buf`: the values and report
+/// of each into `outs` (diagonal first).
+fn slice_passes(
+    scan: &Scan<'_>,
+    lookup: &Lookup<'_>,
+    layout: &SliceLayout,
+    rows: &mut RowBuffer<'_>,
+    scan_data: &[u16],
+    buf: SliceBuffers<'_>,
+    outs: [(&mut [f64; N_SLICE], &mut Report); 2],
+) -> Result<(), Failure> {
+    for (target, (values, report)) in [Target::Diagonal, Target::Column(FOCUS)]
+        .into_iter()
+        .zip(outs)
+    {
+        let mut slice = LookupSlice::new(
+            scan,
+            lookup,
+            layout,
+            target,
+            &mut *buf.tables,
+            &mut *buf.state,
+            &mut *buf.scratch,
+        )?;
+        for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
+            let row = rows.load(scan, laser, hists)?;
+            slice.push_row(scan, lookup, &row)?;
+        }
+        *report = slice.finish(values)?;
+    }
+    Ok(())
+}
+
 /// Runs the fixture scan through the lookup diagonal and column into `out`.
 ///
 /// # Errors
@@ -238,33 +279,22 @@ pub fn run_lookup(
         .scratch
         .get_mut(..SLICE_SCRATCH_LEN)
         .ok_or(Failure::Sizes)?;
-    for (target, values, report) in [
-        (
-            Target::Diagonal,
-            &mut out.slice_diag,
-            &mut out.report_slice_diag,
-        ),
-        (
-            Target::Column(FOCUS),
-            &mut out.slice_col,
-            &mut out.report_slice_col,
-        ),
-    ] {
-        let mut slice = LookupSlice::new(
-            &scan,
-            &lookup,
-            &layout,
-            target,
-            &mut *b.slice_tables,
-            &mut *b.slice_state,
-            &mut *scratch,
-        )?;
-        for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
-            let row = rows.load(&scan, laser, hists)?;
-            slice.push_row(&scan, &lookup, &row)?;
-        }
-        *report = slice.finish(values)?;
-    }
+    slice_passes(
+        &scan,
+        &lookup,
+        &layout,
+        &mut rows,
+        scan_data,
+        SliceBuffers {
+            tables: &mut *b.slice_tables,
+            state: &mut *b.slice_state,
+            scratch: &mut *scratch,
+        },
+        [
+            (&mut out.slice_diag, &mut out.report_slice_diag),
+            (&mut out.slice_col, &mut out.report_slice_col),
+        ],
+    )?;
     // The slice again with Hermite cells, on the grid they need for the same tolerance (the
     // lookup tables rebuilt in the same buffer).
     drop(lookup);
@@ -283,33 +313,22 @@ pub fn run_lookup(
     let scratch = scratch
         .get_mut(..LookupSlice::scratch_len(&grid, N_SLICE))
         .ok_or(Failure::Sizes)?;
-    for (target, values, report) in [
-        (
-            Target::Diagonal,
-            &mut out.slice_diag_h,
-            &mut out.report_slice_diag_h,
-        ),
-        (
-            Target::Column(FOCUS),
-            &mut out.slice_col_h,
-            &mut out.report_slice_col_h,
-        ),
-    ] {
-        let mut slice = LookupSlice::new(
-            &scan,
-            &lookup,
-            &layout,
-            target,
-            &mut *b.slice_tables,
-            &mut *b.slice_state,
-            &mut *scratch,
-        )?;
-        for (hists, laser) in scan_data.chunks_exact(ROW).zip(LASERS) {
-            let row = rows.load(&scan, laser, hists)?;
-            slice.push_row(&scan, &lookup, &row)?;
-        }
-        *report = slice.finish(values)?;
-    }
+    slice_passes(
+        &scan,
+        &lookup,
+        &layout,
+        &mut rows,
+        scan_data,
+        SliceBuffers {
+            tables: b.slice_tables,
+            state: b.slice_state,
+            scratch,
+        },
+        [
+            (&mut out.slice_diag_h, &mut out.report_slice_diag_h),
+            (&mut out.slice_col_h, &mut out.report_slice_col_h),
+        ],
+    )?;
     Ok(())
 }
 
