@@ -256,7 +256,7 @@ fn describe(c: &Capture, out: &mut dyn FnMut(String)) {
             "+z at every spot (none in the file, or all +z)".to_string()
         } else {
             format!(
-                "per point from the file ({}; tilted up to {:.1}° from +z): used by --compensate-laser and --weights cos",
+                "per point from the file ({}; tilted up to {:.1}° from +z): used by $compensate_laser and $weights cos",
                 match (g.normals.lasers.is_empty(), g.normals.spads.is_empty()) {
                     (false, false) => "at the laser and SPAD spots",
                     (false, true) => "at the laser spots; +z at the SPAD spots",
@@ -269,7 +269,7 @@ fn describe(c: &Capture, out: &mut dyn FnMut(String)) {
     if g.paired_apart() {
         out(
             "paths        direct: band or lookup (each row imaged with its own laser and SPAD \
-             spot), --weights cos too; no FFT path (the planar one needs a SPAD grid, the \
+             spot), $weights cos too; no FFT path (the planar one needs a SPAD grid, the \
              confocal one coincident points); columns, rows and the matrix need a SPAD grid"
                 .to_string(),
         );
@@ -281,11 +281,7 @@ fn describe(c: &Capture, out: &mut dyn FnMut(String)) {
             } else {
                 "the SPADs are not in one plane"
             },
-            if g.confocal {
-                "; --weights cos too"
-            } else {
-                ""
-            }
+            if g.confocal { "; $weights cos too" } else { "" }
         ));
     }
     out(format!(

@@ -280,7 +280,7 @@ pub fn accumulate(
     exec: Exec<'_>,
     rows: Range<usize>,
 ) -> Result<Partial> {
-    wave.refuse_cosine("a scan split by rows (`--rows`)")?;
+    wave.refuse_cosine("a scan split by rows (`$rows`)")?;
     let g = src.geometry().clone();
     let mut part = RowRange::new(src, rows.clone())?;
     let mut legs = Vec::new();
