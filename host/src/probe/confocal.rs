@@ -216,6 +216,8 @@ pub(super) fn convolution_core(
     let mut lasers = vec![[0.0f32; 3]; batch];
     let mut report = Report::default();
     let bar = Pass::start(exec, "direct", g.lasers.len());
+    let rows_t =
+        crate::timings::section("rows: read, band spectra", crate::timings::Kind::Parallel);
     for start in (0..g.lasers.len()).step_by(batch) {
         let n = batch.min(g.lasers.len() - start);
         for (k, h) in hists.chunks_exact_mut(nt).take(n).enumerate() {
@@ -264,9 +266,12 @@ pub(super) fn convolution_core(
         bar.advance(n);
     }
     drop(bar);
+    drop(rows_t);
+    let _t = crate::timings::section("confocal image", crate::timings::Kind::Parallel);
     conv.forward(&mut spectra);
     let mut acc = vec![Complex64::new(0.0, 0.0); skip.len()];
     conv.image(&spectra, skip, &mut acc);
+    drop(_t);
     drop(spectra);
     // The points on the band path: their accumulators are their amplitudes.
     let fb_acc = probes

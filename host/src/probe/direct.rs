@@ -729,7 +729,9 @@ fn direct_resampled_on(
         Engine::Planar(p) => planar_core(src, job, &sup.points, p, &none, &fb_pts)?,
         Engine::Confocal(c) => confocal::convolution_core(src, job, c, &none, &fb_pts)?,
     };
+    let _t = crate::timings::section("resampling", crate::timings::Kind::Parallel);
     let mut acc = rs.apply(&sup_acc);
+    drop(_t);
     for (&i, a) in fb_idx.iter().zip(fb_acc) {
         acc[i] = a;
     }

@@ -67,21 +67,92 @@ impl std::fmt::Debug for Confocal {
     }
 }
 
+/// One axis of a slice's kernel image: which image indices (offset index `a ∈ [−(n_w − 1),
+/// c − 1]`, stored at `a mod M`) are computed and which are copies of their mirror image.
+///
+/// The kernel depends on the offset `e = d + a·p` through `e²` only: when the mirror
+/// centre `−2d/p` is an integer `m` (within `tol`, m of offset), offsets `a` and `m − a` are
+/// the same kernel values. The offset `a` is computed when its mirror `m − a` lies outside
+/// the range or is not above `a`; otherwise it is a copy of the mirror's.
+#[derive(Debug, Default)]
+struct AxisKernel {
+    /// Computed image indices (ascending) and their offsets `e` (m).
+    computed: Vec<(usize, f64)>,
+    /// Copies `(destination, source)` of image indices.
+    copies: Vec<(usize, usize)>,
+}
+
+impl AxisKernel {
+    fn new(n_wall: usize, n_vox: usize, m: usize, d: f64, p: f64, tol: f64) -> Self {
+        let (lo, hi) = (-(n_wall as i64 - 1), n_vox as i64 - 1);
+        let c2 = if p > 0.0 { -2.0 * d / p } else { f64::NAN };
+        let mirror = ((c2 - c2.round()).abs() * p <= tol).then(|| c2.round() as i64);
+        let idx = |a: i64| a.rem_euclid(m as i64) as usize;
+        let mut k = Self::default();
+        for a in lo..=hi {
+            match mirror.map(|c| c - a) {
+                Some(b) if b > a && b <= hi => k.copies.push((idx(a), idx(b))),
+                _ => k.computed.push((idx(a), d + a as f64 * p)),
+            }
+        }
+        k.computed.sort_by_key(|c| c.0);
+        k
+    }
+}
+
+/// One slice's kernel over the `[Mx][My]` image, for every band bin, on the computed rows
+/// and columns ([`AxisKernel`]; the mirrored ones are copied): per computed cell the phase
+/// `ν_j·2d` at bin 0 and its step per bin as `u32` fractions of a turn (the phase at bin j
+/// is `phase0 + j·step` in wrapping arithmetic: exact modulo one turn, up to the rounding of
+/// the two seeds, `j·2⁻³³` turn), and the amplitude `w(d)²/M` (0 outside the guard).
+struct Table {
+    rows: AxisKernel,
+    cols: AxisKernel,
+    /// The computed columns as runs `(first image column, length)`.
+    segments: Vec<(usize, usize)>,
+    /// Runs `(first image row, rows)` of computed rows: the y-pass transforms these.
+    row_runs: Vec<(usize, usize)>,
+    phase0: Vec<u32>,
+    step: Vec<u32>,
+    amp: Vec<f32>,
+}
+
 /// One worker's state while it sums `Σ_j X̂_j·κ̂_j` over a run of bins of one slice.
 struct BinSum {
-    /// Kernel offsets, as columns (the recurrence vectorises): the cell of each offset,
-    /// `w²/M·e^{iν_j 2d}` at the next bin (real, imaginary parts) and the step `e^{iΔν 2d}`.
-    cells: Vec<u32>,
-    pr: Vec<f64>,
-    pi: Vec<f64>,
-    sr: Vec<f64>,
-    si: Vec<f64>,
-    /// The bin the seeds are at (`usize::MAX`: not seeded).
+    /// The kernel's phase per cell at bin `next`.
+    phase: Vec<u32>,
+    /// The bin `phase` is at (`usize::MAX`: not seeded).
     next: usize,
     img: Vec<Complex32>,
     spec: Vec<Complex32>,
     sum: Vec<Complex32>,
     fft: Vec<Complex32>,
+}
+
+/// A fraction of a turn in `u32` units (2⁻³² turn), rounded, modulo one turn.
+fn turns_u32(t: f64) -> u32 {
+    let f = t - t.floor();
+    (f * 4_294_967_296.0).round() as u64 as u32
+}
+
+/// `e^{i2πp/2³²}` in `f32`: the nearest quarter turn from the top bits, the remainder
+/// (at most 1/8 turn) by [`vltm_kernel::cis_small_turns`]'s polynomials (error < 1e-7),
+/// rotated without a branch (the loops over an image vectorise).
+#[inline(always)]
+fn cis_u32(p: u32) -> Complex32 {
+    let q = p.wrapping_add(1 << 29) >> 30;
+    let r = p.wrapping_sub(q << 30) as i32;
+    let f = r as f32 * (1.0 / 4_294_967_296.0);
+    let Complex32 { re: c, im: s } = vltm_kernel::cis_small_turns(f);
+    // Quarter turns: q = 1 → (−s, c), q = 2 → (−c, −s), q = 3 → (s, −c).
+    let odd = q & 1 == 1;
+    let (a, b) = if odd { (s, c) } else { (c, s) };
+    let neg_re = ((q + 1) & 2) << 30;
+    let neg_im = (q & 2) << 30;
+    Complex32::new(
+        f32::from_bits(a.to_bits() ^ neg_re),
+        f32::from_bits(b.to_bits() ^ neg_im),
+    )
 }
 
 impl Confocal {
@@ -216,13 +287,14 @@ impl Confocal {
             .subgrids
             .par_iter()
             .map(|sg| {
+                let table = self.table(sg);
                 let sum = (0..bins)
                     .into_par_iter()
                     .with_min_len(per)
                     .fold(
-                        || self.bin_sum(),
+                        || self.bin_sum(&table),
                         |mut b, j| {
-                            self.add_bin(sg, spectra, j, &mut b);
+                            self.add_bin(&table, spectra, j, &mut b);
                             b
                         },
                     )
@@ -240,7 +312,7 @@ impl Confocal {
         }
     }
 
-    fn bin_sum(&self) -> BinSum {
+    fn bin_sum(&self, table: &Table) -> BinSum {
         let m = self.lay.mx * self.lay.my;
         let flen = [&self.fy, &self.fx, &self.ix, &self.iy]
             .iter()
@@ -250,11 +322,7 @@ impl Confocal {
             .max(1);
         let zero = Complex32::new(0.0, 0.0);
         BinSum {
-            cells: Vec::new(),
-            pr: Vec::new(),
-            pi: Vec::new(),
-            sr: Vec::new(),
-            si: Vec::new(),
+            phase: vec![0; table.step.len()],
             next: usize::MAX,
             img: vec![zero; m],
             spec: vec![zero; m],
@@ -263,13 +331,29 @@ impl Confocal {
         }
     }
 
-    /// Seeds the kernel offsets of `sg` at bin `j`: `w(d)²/M·e^{iν_j 2d}` and the step.
-    fn seed(&self, sg: &SubGrid, j: usize, b: &mut BinSum) {
-        let (mx, my) = (self.lay.mx as i64, self.lay.my as i64);
-        let (px, py) = (self.lay.px, self.lay.py);
+    /// The kernel table of slice `sg` ([`Table`]): `w(d)²/M·e^{iν_j 2d}` per computed cell.
+    /// Mirrored offsets are copies when the mirror centre is an integer within `1e-6·λ`
+    /// (a tenth of the lattice tolerance of [`layout`]).
+    fn table(&self, sg: &SubGrid) -> Table {
+        let (mx, my) = (self.lay.mx, self.lay.my);
+        let tol = 1e-6 * self.cfg.wavelength();
+        let rows = AxisKernel::new(self.lay.nsx, sg.cx, mx, sg.dx, self.lay.px, tol);
+        let cols = AxisKernel::new(self.lay.nsy, sg.cy, my, sg.dy, self.lay.py, tol);
+        let runs = |idx: &[(usize, f64)]| {
+            let mut r: Vec<(usize, usize)> = Vec::new();
+            for &(i, _) in idx {
+                match r.last_mut() {
+                    Some((s, n)) if *s + *n == i => *n += 1,
+                    _ => r.push((i, 1)),
+                }
+            }
+            r
+        };
+        let segments = runs(&cols.computed);
+        let row_runs = runs(&rows.computed);
         let span = self.cfg.span();
         let scale = 1.0 / (mx * my) as f64;
-        let k = (self.cfg.k_lo() + j as i64) as f64;
+        let k0 = self.cfg.k_lo() as f64;
         let (g_lo, g_hi) = self.cfg.guard();
         let inside = |d: f64| {
             self.guard_offset.is_none_or(|off| {
@@ -278,56 +362,74 @@ impl Confocal {
                 rel >= g_lo as f32 && rel <= g_hi as f32
             })
         };
-        let cis = |turns: f64| {
-            let a = std::f64::consts::TAU * (turns - turns.round());
-            Complex64::new(a.cos(), a.sin())
+        let n = rows.computed.len() * cols.computed.len();
+        let mut t = Table {
+            phase0: Vec::with_capacity(n),
+            step: Vec::with_capacity(n),
+            amp: Vec::with_capacity(n),
+            rows,
+            cols,
+            segments,
+            row_runs,
         };
-        b.cells.clear();
-        b.pr.clear();
-        b.pi.clear();
-        b.sr.clear();
-        b.si.clear();
-        for ax in -(self.lay.nsx as i64 - 1)..sg.cx as i64 {
-            for ay in -(self.lay.nsy as i64 - 1)..sg.cy as i64 {
-                let ex = sg.dx + ax as f64 * px;
-                let ey = sg.dy + ay as f64 * py;
+        for &(_, ex) in &t.rows.computed {
+            for &(_, ey) in &t.cols.computed {
                 let d = (ex * ex + ey * ey + sg.dz * sg.dz).sqrt();
-                if !inside(d) {
-                    continue;
-                }
                 let w = self.cfg.weight(d as f32) as f64;
-                let tau = 2.0 * d;
-                let cell = ax.rem_euclid(mx) * my + ay.rem_euclid(my);
-                let p = cis(k * tau / span) * (w * w * scale);
-                let step = cis(tau / span);
-                b.cells.push(cell as u32);
-                b.pr.push(p.re);
-                b.pi.push(p.im);
-                b.sr.push(step.re);
-                b.si.push(step.im);
+                let per_k = 2.0 * d / span;
+                t.phase0.push(turns_u32(k0 * per_k));
+                t.step.push(turns_u32(per_k));
+                t.amp.push(if inside(d) {
+                    (w * w * scale) as f32
+                } else {
+                    0.0
+                });
             }
         }
-        b.next = j;
+        t
     }
 
-    /// `sum += X̂_j · κ̂_{j,z}` for slice `sg`.
-    fn add_bin(&self, sg: &SubGrid, spectra: &[Complex32], j: usize, b: &mut BinSum) {
+    /// `sum += X̂_j · κ̂_{j,z}` for the slice of `table`.
+    fn add_bin(&self, table: &Table, spectra: &[Complex32], j: usize, b: &mut BinSum) {
         let (mx, my) = (self.lay.mx, self.lay.my);
         let m = mx * my;
         if b.next != j {
-            self.seed(sg, j, b);
+            let jj = j as u32;
+            for ((p, &p0), &st) in b.phase.iter_mut().zip(&table.phase0).zip(&table.step) {
+                *p = p0.wrapping_add(st.wrapping_mul(jj));
+            }
         }
-        b.img.fill(Complex32::new(0.0, 0.0));
-        for ((&cell, &re), &im) in b.cells.iter().zip(&b.pr).zip(&b.pi) {
-            b.img[cell as usize] = Complex32::new(re as f32, im as f32);
-        }
-        for (((re, im), &c), &d) in b.pr.iter_mut().zip(&mut b.pi).zip(&b.sr).zip(&b.si) {
-            let (a, e) = (*re, *im);
-            *re = a * c - e * d;
-            *im = a * d + e * c;
+        // The computed rows: their computed columns, then the mirrored columns, then the
+        // y-pass over each run of computed rows, then the mirrored rows.
+        let per_row = table.cols.computed.len();
+        for (r, &(row, _)) in table.rows.computed.iter().enumerate() {
+            let img = &mut b.img[row * my..(row + 1) * my];
+            img.fill(Complex32::new(0.0, 0.0));
+            let mut k = r * per_row;
+            for &(c0, len) in &table.segments {
+                for (((o, p), &st), &a) in img[c0..c0 + len]
+                    .iter_mut()
+                    .zip(&mut b.phase[k..k + len])
+                    .zip(&table.step[k..k + len])
+                    .zip(&table.amp[k..k + len])
+                {
+                    *o = cis_u32(*p) * a;
+                    *p = p.wrapping_add(st);
+                }
+                k += len;
+            }
+            for &(dst, src) in &table.cols.copies {
+                img[dst] = img[src];
+            }
         }
         b.next = j + 1;
-        self.fy.process_with_scratch(&mut b.img, &mut b.fft);
+        for &(r0, n) in &table.row_runs {
+            self.fy
+                .process_with_scratch(&mut b.img[r0 * my..(r0 + n) * my], &mut b.fft);
+        }
+        for &(dst, src) in &table.rows.copies {
+            b.img.copy_within(src * my..(src + 1) * my, dst * my);
+        }
         transpose(&b.img, mx, my, &mut b.spec, mx);
         self.fx.process_with_scratch(&mut b.spec, &mut b.fft);
         let x = &spectra[j * m..(j + 1) * m];
