@@ -370,7 +370,8 @@ impl std::fmt::Debug for Planar {
     }
 }
 
-/// `dst[c·stride + r] = src[r·cols + c]` for r < rows, c < cols.
+/// `dst[c·stride + r] = src[r·cols + c]` for r < rows, c < cols: tiles of 16 rows, each
+/// destination row of a tile written as one contiguous run (the strided reads stay in L1).
 pub(super) fn transpose(
     src: &[Complex32],
     rows: usize,
@@ -378,13 +379,14 @@ pub(super) fn transpose(
     dst: &mut [Complex32],
     stride: usize,
 ) {
-    const B: usize = 8;
+    const B: usize = 16;
     for r0 in (0..rows).step_by(B) {
-        for c0 in (0..cols).step_by(B) {
-            for r in r0..(r0 + B).min(rows) {
-                for c in c0..(c0 + B).min(cols) {
-                    dst[c * stride + r] = src[r * cols + c];
-                }
+        let r1 = (r0 + B).min(rows);
+        let block = &src[r0 * cols..r1 * cols];
+        for c in 0..cols {
+            let d = &mut dst[c * stride + r0..c * stride + r1];
+            for (k, o) in d.iter_mut().enumerate() {
+                *o = block[k * cols + c];
             }
         }
     }
