@@ -16,9 +16,16 @@
 //!
 //! * one forward 2-D FFT of the wall image per band bin, shared by every slice
 //!   ([`Confocal::forward`]; pruned: the y-pass skips the all-zero padding rows);
-//! * per slice, J kernel images (their phases by an `f64` recurrence from two seeds per
-//!   offset), each transformed and multiplied into one accumulator, then **one** inverse
-//!   FFT (pruned to the output rows) ([`Confocal::image`]).
+//! * per slice, J kernel images, each transformed and multiplied into one accumulator, then
+//!   **one** inverse FFT (pruned to the output rows) ([`Confocal::image`]). A kernel image's
+//!   phases are `u32` fractions of a turn, `phase0 + j·step` in wrapping arithmetic (exact
+//!   modulo a turn up to the seeds' rounding, 2⁻³³ turn each; the same value whichever
+//!   thread computes bin j), turned into `e^{iφ}` by `f32` polynomials (error < 1e-7). The
+//!   kernel depends on the offset through `|Δ|²`: where the offsets along an axis mirror
+//!   about an integer centre (a volume centred on the wall grid, or on a polyphase
+//!   sub-grid's own centre, within `1e-6·λ`), the mirrored rows are copied after their
+//!   y-pass and the mirrored columns before it, so a centred volume computes and
+//!   transforms about half the rows and a quarter of the cells.
 //!
 //! `κ̂` is never stored: memory does not grow with the number of slices. The padding is as in
 //! [`super::planar`] (`Mx × My ≥ (n_w + n_v − 1)` per axis, lengths `2^a·3^b`), as is the
@@ -481,9 +488,39 @@ mod tests {
     use vltm_kernel::Params;
 
     /// The convolution equals the direct sum `Σ_j Σ_l HG_l[j]·w(d)²·e^{iν_j 2d}` in `f64`
-    /// on a small grid with a half-pitch voxel grid (polyphase) and two slices.
+    /// on a small grid with a half-pitch voxel grid (polyphase) and two slices: a volume
+    /// centred on the wall (mirrored kernel rows and columns) and one shifted off the
+    /// mirror (every offset computed).
     #[test]
     fn equals_the_direct_sum() {
+        for x0 in [-0.2f32, -0.2131] {
+            equals_the_direct_sum_at(x0);
+        }
+    }
+
+    /// Offsets mirror about an integer centre within the tolerance, and only then.
+    #[test]
+    fn mirrored_offsets() {
+        // d = −2 pitches: centre 4, offsets a = −3..=5; a = −1, 0, 1 copy 5, 4, 3.
+        let k = AxisKernel::new(4, 6, 16, -0.2, 0.1, 1e-9);
+        assert_eq!(k.computed.len(), 6);
+        assert_eq!(k.copies.len(), 3);
+        for &(dst, src) in &k.copies {
+            let off = |i: usize| -0.2 + 0.1 * (if i < 8 { i as f64 } else { i as f64 - 16.0 });
+            assert!(
+                (off(dst).abs() - off(src).abs()).abs() < 1e-12,
+                "{dst} {src}"
+            );
+            assert!(
+                k.computed.iter().any(|c| c.0 == src),
+                "the source is computed"
+            );
+        }
+        let off = AxisKernel::new(4, 6, 16, -0.2 + 1e-6, 0.1, 1e-9);
+        assert!(off.copies.is_empty() && off.computed.len() == 9);
+    }
+
+    fn equals_the_direct_sum_at(x0: f32) {
         let cfg = Config::try_new(&Params {
             sigma: Some(0.1),
             ..Params::new(0.1, 120, 0.01)
@@ -496,13 +533,8 @@ mod tests {
         let voxels: Vec<Point> = (0..nx)
             .flat_map(|i| {
                 (0..ny).flat_map(move |k| {
-                    (0..nz).map(move |z| {
-                        [
-                            -0.2 + 0.05 * i as f32,
-                            0.05 * k as f32,
-                            0.3 + 0.1 * z as f32,
-                        ]
-                    })
+                    (0..nz)
+                        .map(move |z| [x0 + 0.05 * i as f32, 0.05 * k as f32, 0.3 + 0.1 * z as f32])
                 })
             })
             .collect();
