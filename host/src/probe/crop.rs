@@ -212,7 +212,10 @@ pub(super) fn with_crop<T>(
     reach: Reach<'_>,
     f: impl FnOnce(&mut dyn RowSource, Exec<'_>, Option<Crop>) -> Result<T>,
 ) -> Result<T> {
-    match bins(src.geometry(), wave, reach)? {
+    let t = crate::timings::section("planning: crop", crate::timings::Kind::Serial);
+    let bins = bins(src.geometry(), wave, reach)?;
+    drop(t);
+    match bins {
         None => f(src, exec, None),
         Some(r) => {
             let crop = Crop {

@@ -583,6 +583,7 @@ fn choose_resampled(
     if matches!(path, Path::Band | Path::Lookup) || volume.axes.is_none() || g.paired_apart() {
         return Ok(None);
     }
+    let _t = crate::timings::section("planning: FFT path", crate::timings::Kind::Serial);
     let wall = if g.confocal { &g.lasers } else { &g.spads };
     let tol = 1e-5 * cfg.wavelength();
     let exact = match planar::layout(wall, &volume.points, volume.shape, tol) {
@@ -656,7 +657,7 @@ fn choose_resampled(
         return if forced { Err(e) } else { Ok(None) };
     }
     let engine = if g.confocal {
-        let c = match Confocal::new(cfg, &g.lasers, &sup.points, sup.shape) {
+        let c = match Confocal::with_layout(cfg, lay) {
             Ok(c) => c,
             Err(e) => return fail(e),
         };

@@ -53,6 +53,7 @@ use crate::io::capture::Geometry;
 use crate::probe::fast::planar::wall_lattice;
 use crate::volume::Volume;
 use num_complex::Complex64;
+use rayon::prelude::*;
 use vltm_kernel::{Config, Point};
 
 /// Half-width of the interpolation kernel: taps on each side of the asked voxel.
@@ -74,15 +75,24 @@ pub fn tone_error(beta: f64) -> f64 {
     }
     let mut worst = 0.0f64;
     let mut w = [0.0; 2 * TAPS];
+    // The taps' phases e^{iπbn} per frequency (they do not depend on the position).
+    let phases: Vec<[Complex64; 2 * TAPS]> = (0..=64)
+        .map(|ib| {
+            let b = beta * ib as f64 / 64.0;
+            std::array::from_fn(|t| {
+                let n = t as f64 - (TAPS as f64 - 1.0);
+                Complex64::from_polar(1.0, std::f64::consts::PI * b * n)
+            })
+        })
+        .collect();
     for iu in 0..64 {
         let u = iu as f64 / 64.0;
         kernel(u, beta, &mut w);
-        for ib in 0..=64 {
+        for (ib, ph) in phases.iter().enumerate() {
             let b = beta * ib as f64 / 64.0;
             let mut s = Complex64::new(0.0, 0.0);
-            for (t, wt) in w.iter().enumerate() {
-                let n = t as f64 - (TAPS as f64 - 1.0);
-                s += Complex64::from_polar(*wt, std::f64::consts::PI * b * n);
+            for (wt, p) in w.iter().zip(ph) {
+                s += p * *wt;
             }
             let e = (Complex64::from_polar(1.0, std::f64::consts::PI * b * u) - s).norm();
             worst = worst.max(e);
@@ -327,16 +337,14 @@ impl Resample {
                     crate::volume::MAX_VOXELS
                 )
             })?;
-        let mut points = Vec::with_capacity(total);
-        for mx in 0..sx {
-            let x = step(&ax, mx) as f32;
-            for my in 0..sy {
-                let y = step(&ay, my) as f32;
-                for &z in &zs {
-                    points.push([x, y, z as f32]);
-                }
-            }
-        }
+        let nz_ = zs.len();
+        let points: Vec<Point> = (0..total)
+            .into_par_iter()
+            .map(|i| {
+                let (mx, my, iz) = (i / (sy * nz_), (i / nz_) % sy, i % nz_);
+                [step(&ax, mx) as f32, step(&ay, my) as f32, zs[iz] as f32]
+            })
+            .collect();
         let support = Volume {
             points,
             shape: [sx, sy, nz],

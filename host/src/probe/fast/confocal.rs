@@ -175,7 +175,15 @@ impl Confocal {
         voxels: &[Point],
         shape: [usize; 3],
     ) -> Result<Self, String> {
-        let lay = layout(wall, voxels, shape, 1e-5 * cfg.wavelength())?;
+        Self::with_layout(cfg, layout(wall, voxels, shape, 1e-5 * cfg.wavelength())?)
+    }
+
+    /// [`Confocal::new`] on a layout already made by [`layout`] (the wall points and voxels
+    /// it was made of, lattice tolerance `1e-5·λ`).
+    ///
+    /// # Errors
+    /// A one-line reason (spectra too large).
+    pub(crate) fn with_layout(cfg: &Config, lay: Layout) -> Result<Self, String> {
         let m = lay.mx * lay.my;
         cfg.bins()
             .checked_mul(m)

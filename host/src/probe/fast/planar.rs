@@ -256,17 +256,19 @@ pub(crate) fn layout(
     }
     let g = spad_grid(wall, tol)?;
     let at = |ix: usize, iy: usize, iz: usize| voxels[(ix * ny + iy) * nz + iz];
-    // The volume must be a product grid: x depends on ix only, y on iy, z on iz.
-    for ix in 0..nx {
-        for iy in 0..ny {
-            for iz in 0..nz {
+    // The volume must be a product grid: x depends on ix only, y on iy, z on iz (x-planes
+    // checked in parallel).
+    let product = (0..nx).into_par_iter().all(|ix| {
+        (0..ny).all(|iy| {
+            (0..nz).all(|iz| {
                 let p = at(ix, iy, iz);
                 let q = [at(ix, 0, 0)[0], at(0, iy, 0)[1], at(0, 0, iz)[2]];
-                if (0..3).any(|c| (p[c] - q[c]).abs() as f64 > tol) {
-                    return Err("the voxels are not a wall-parallel grid".into());
-                }
-            }
-        }
+                !(0..3).any(|c| (p[c] - q[c]).abs() as f64 > tol)
+            })
+        })
+    });
+    if !product {
+        return Err("the voxels are not a wall-parallel grid".into());
     }
     // Descending axes (a SPEC `0.5:-0.5:11`) are walked in ascending order.
     let rev_x = nx > 1 && at(nx - 1, 0, 0)[0] < at(0, 0, 0)[0];
@@ -287,29 +289,30 @@ pub(crate) fn layout(
     let nvy = mapy.phases.iter().map(|p| p.1).max().unwrap_or(1);
     let mx = fft_len(g.x.n + nvx - 1);
     let my = fft_len(g.y.n + nvy - 1);
-    let mut subgrids = Vec::new();
     let (rx, ry) = (mapx.phases.len(), mapy.phases.len());
-    for (iz, &z) in vz.iter().enumerate() {
-        for (fx_, &(dx, cx)) in mapx.phases.iter().enumerate() {
-            for (fy_, &(dy, cy)) in mapy.phases.iter().enumerate() {
-                let mut outputs = Vec::with_capacity(cx * cy);
-                for i in 0..cx {
-                    for j in 0..cy {
-                        let v = (ix_of(i * rx + fx_) * ny + iy_of(j * ry + fy_)) * nz + iz;
-                        outputs.push(((i * my + j) as u32, v as u32));
-                    }
+    // Depth-major, then x phase, then y phase; each sub-grid's outputs made in parallel.
+    let subgrids: Vec<SubGrid> = (0..nz * rx * ry)
+        .into_par_iter()
+        .map(|k| {
+            let (iz, fx_, fy_) = (k / (rx * ry), (k / ry) % rx, k % ry);
+            let ((dx, cx), (dy, cy)) = (mapx.phases[fx_], mapy.phases[fy_]);
+            let mut outputs = Vec::with_capacity(cx * cy);
+            for i in 0..cx {
+                for j in 0..cy {
+                    let v = (ix_of(i * rx + fx_) * ny + iy_of(j * ry + fy_)) * nz + iz;
+                    outputs.push(((i * my + j) as u32, v as u32));
                 }
-                subgrids.push(SubGrid {
-                    dz: z - g.z,
-                    dx,
-                    dy,
-                    cx,
-                    cy,
-                    outputs,
-                });
             }
-        }
-    }
+            SubGrid {
+                dz: vz[iz] - g.z,
+                dx,
+                dy,
+                cx,
+                cy,
+                outputs,
+            }
+        })
+        .collect();
     Ok(Layout {
         mx,
         my,
