@@ -57,6 +57,8 @@ pub struct Confocal {
     /// The rows' common leg offset `d1 + d4 − t0` (m), when the guard is applied in the
     /// kernel ([`Confocal::with_guard`]).
     guard_offset: Option<f32>,
+    /// Per sub-grid, the later sub-grid whose kernel is its transpose ([`twins`]).
+    twin: Vec<Option<usize>>,
     fy: Arc<dyn Fft<f32>>,
     fx: Arc<dyn Fft<f32>>,
     ix: Arc<dyn Fft<f32>>,
@@ -133,7 +135,45 @@ struct BinSum {
     img: Vec<Complex32>,
     spec: Vec<Complex32>,
     sum: Vec<Complex32>,
+    /// The transposed sum of the slice's twin (empty without one).
+    sum_t: Vec<Complex32>,
     fft: Vec<Complex32>,
+}
+
+/// Per sub-grid of `lay`, the later sub-grid at the same depth whose kernel is its
+/// transpose, `κ_b(a_x, a_y) = κ_a(a_y, a_x)`: a square FFT and wall lattice (`Mx = My`,
+/// `n_x = n_y`, pitches equal), the sub-grids' extents swapped and their offsets swapped
+/// within `tol` (m) over the widest offset range (the polyphase phases (0, 1) and (1, 0) of
+/// a square grid). Such a pair computes one kernel spectrum `K` per bin: `S_a += X̂⊙K` and
+/// `S_bᵀ += X̂ᵀ⊙K` ([`Confocal::image`]).
+pub(crate) fn twins(lay: &Layout, tol: f64) -> Vec<Option<usize>> {
+    let n = lay.subgrids.len();
+    let mut twin = vec![None; n];
+    if lay.mx != lay.my || lay.nsx != lay.nsy {
+        return twin;
+    }
+    let mut taken = vec![false; n];
+    for a in 0..n {
+        if taken[a] {
+            continue;
+        }
+        let sa = &lay.subgrids[a];
+        let reach = lay.nsx.max(sa.cx).max(sa.cy) as f64;
+        let skew = reach * (lay.px - lay.py).abs();
+        let b = (a + 1..n).find(|&b| {
+            let sb = &lay.subgrids[b];
+            !taken[b]
+                && sb.dz == sa.dz
+                && (sb.cx, sb.cy) == (sa.cy, sa.cx)
+                && (sb.dx - sa.dy).abs() + skew <= tol
+                && (sb.dy - sa.dx).abs() + skew <= tol
+        });
+        if let Some(b) = b {
+            taken[b] = true;
+            twin[a] = Some(b);
+        }
+    }
+    twin
 }
 
 /// A fraction of a turn in `u32` units (2⁻³² turn), rounded, modulo one turn.
@@ -185,9 +225,11 @@ impl Confocal {
     /// A one-line reason (spectra too large).
     pub(crate) fn with_layout(cfg: &Config, lay: Layout) -> Result<Self, String> {
         let m = lay.mx * lay.my;
+        let twin = twins(&lay, 1e-6 * cfg.wavelength());
+        let copies = 1 + usize::from(twin.iter().any(Option::is_some));
         cfg.bins()
             .checked_mul(m)
-            .and_then(|x| x.checked_mul(8))
+            .and_then(|x| x.checked_mul(8 * copies))
             .filter(|&b| b <= MAX_TABLE_BYTES)
             .ok_or_else(|| {
                 format!(
@@ -199,6 +241,7 @@ impl Confocal {
         Ok(Self {
             cfg: *cfg,
             guard_offset: None,
+            twin,
             fy: planner.plan_fft_forward(lay.my),
             fx: planner.plan_fft_forward(lay.mx),
             ix: planner.plan_fft_inverse(lay.mx),
@@ -296,30 +339,61 @@ impl Confocal {
     pub fn image(&self, spectra: &[Complex32], skip: &[bool], acc: &mut [Complex64]) {
         assert_eq!(spectra.len(), self.spectra_len(), "spectra");
         let bins = self.cfg.bins();
+        let (mx, my) = (self.lay.mx, self.lay.my);
+        let m = mx * my;
         let per = bins.div_ceil(2 * rayon::current_num_threads()).max(8);
-        let parts: Vec<Vec<(u32, Complex64)>> = self
-            .lay
-            .subgrids
+        // The transposed spectra `X̂ᵀ`, for the sub-grids with a twin.
+        let twins = self.twin.iter().any(Option::is_some);
+        let mut spectra_t = Vec::new();
+        if twins {
+            spectra_t = vec![Complex32::new(0.0, 0.0); spectra.len()];
+            spectra_t
+                .par_chunks_mut(m)
+                .zip(spectra.par_chunks(m))
+                .for_each(|(t, x)| transpose(x, my, mx, t, my));
+        }
+        let is_twin: Vec<bool> = {
+            let mut v = vec![false; self.twin.len()];
+            for b in self.twin.iter().flatten() {
+                v[*b] = true;
+            }
+            v
+        };
+        let jobs: Vec<usize> = (0..self.lay.subgrids.len())
+            .filter(|&i| !is_twin[i])
+            .collect();
+        let parts: Vec<Vec<(u32, Complex64)>> = jobs
             .par_iter()
-            .map(|sg| {
+            .map(|&i| {
+                let sg = &self.lay.subgrids[i];
+                let twin = self.twin[i].map(|b| &self.lay.subgrids[b]);
+                let xt = twin.map(|_| &spectra_t[..]);
                 let table = self.table(sg);
                 let sum = (0..bins)
                     .into_par_iter()
                     .with_min_len(per)
                     .fold(
-                        || self.bin_sum(&table),
+                        || self.bin_sum(&table, twin.is_some()),
                         |mut b, j| {
-                            self.add_bin(&table, spectra, j, &mut b);
+                            self.add_bin(&table, spectra, xt, j, &mut b);
                             b
                         },
                     )
-                    .map(|b| b.sum)
                     .reduce_with(|mut a, b| {
-                        a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
+                        a.sum.iter_mut().zip(&b.sum).for_each(|(x, y)| *x += y);
+                        a.sum_t.iter_mut().zip(&b.sum_t).for_each(|(x, y)| *x += y);
                         a
-                    })
-                    .unwrap_or_default();
-                self.inverse(sg, sum, skip)
+                    });
+                let Some(mut b) = sum else {
+                    return Vec::new();
+                };
+                let mut out = self.inverse(sg, &mut b.sum, &mut b.fft, skip);
+                if let Some(tw) = twin {
+                    // `S_b = (S_bᵀ)ᵀ`, into the spent image buffer.
+                    transpose(&b.sum_t, my, mx, &mut b.img, my);
+                    out.extend(self.inverse(tw, &mut b.img, &mut b.fft, skip));
+                }
+                out
             })
             .collect();
         for (v, a) in parts.into_iter().flatten() {
@@ -327,7 +401,7 @@ impl Confocal {
         }
     }
 
-    fn bin_sum(&self, table: &Table) -> BinSum {
+    fn bin_sum(&self, table: &Table, twin: bool) -> BinSum {
         let m = self.lay.mx * self.lay.my;
         let flen = [&self.fy, &self.fx, &self.ix, &self.iy]
             .iter()
@@ -342,6 +416,7 @@ impl Confocal {
             img: vec![zero; m],
             spec: vec![zero; m],
             sum: vec![zero; m],
+            sum_t: if twin { vec![zero; m] } else { Vec::new() },
             fft: vec![zero; flen],
         }
     }
@@ -405,7 +480,14 @@ impl Confocal {
     }
 
     /// `sum += X̂_j · κ̂_{j,z}` for the slice of `table`.
-    fn add_bin(&self, table: &Table, spectra: &[Complex32], j: usize, b: &mut BinSum) {
+    fn add_bin(
+        &self,
+        table: &Table,
+        spectra: &[Complex32],
+        spectra_t: Option<&[Complex32]>,
+        j: usize,
+        b: &mut BinSum,
+    ) {
         let (mx, my) = (self.lay.mx, self.lay.my);
         let m = mx * my;
         if b.next != j {
@@ -448,8 +530,26 @@ impl Confocal {
         transpose(&b.img, mx, my, &mut b.spec, mx);
         self.fx.process_with_scratch(&mut b.spec, &mut b.fft);
         let x = &spectra[j * m..(j + 1) * m];
-        for ((s, x), k) in b.sum.iter_mut().zip(x).zip(&b.spec) {
-            *s += x * k;
+        match spectra_t {
+            None => {
+                for ((s, x), k) in b.sum.iter_mut().zip(x).zip(&b.spec) {
+                    *s += x * k;
+                }
+            }
+            Some(t) => {
+                let xt = &t[j * m..(j + 1) * m];
+                for ((((s, st), x), xt), k) in b
+                    .sum
+                    .iter_mut()
+                    .zip(b.sum_t.iter_mut())
+                    .zip(x)
+                    .zip(xt)
+                    .zip(&b.spec)
+                {
+                    *s += x * k;
+                    *st += xt * k;
+                }
+            }
         }
     }
 
@@ -457,7 +557,8 @@ impl Confocal {
     fn inverse(
         &self,
         sg: &SubGrid,
-        mut sum: Vec<Complex32>,
+        sum: &mut [Complex32],
+        fft: &mut [Complex32],
         skip: &[bool],
     ) -> Vec<(u32, Complex64)> {
         let (mx, my) = (self.lay.mx, self.lay.my);
@@ -465,20 +566,14 @@ impl Confocal {
         if sum.is_empty() {
             return Vec::new();
         }
-        let flen = self
-            .ix
-            .get_inplace_scratch_len()
-            .max(self.iy.get_inplace_scratch_len())
-            .max(1);
-        let mut fft = vec![Complex32::new(0.0, 0.0); flen];
-        self.ix.process_with_scratch(&mut sum, &mut fft);
+        self.ix.process_with_scratch(sum, fft);
         let mut out = vec![Complex32::new(0.0, 0.0); rows * my];
         for r in 0..my {
             for c in 0..rows {
                 out[c * my + r] = sum[r * mx + c];
             }
         }
-        self.iy.process_with_scratch(&mut out, &mut fft);
+        self.iy.process_with_scratch(&mut out, fft);
         sg.outputs
             .iter()
             .filter(|(_, v)| !skip.get(*v as usize).copied().unwrap_or(true))
@@ -502,8 +597,36 @@ mod tests {
     #[test]
     fn equals_the_direct_sum() {
         for x0 in [-0.2f32, -0.2131] {
-            equals_the_direct_sum_at(x0);
+            equals_the_direct_sum_at(x0, 4, 7, 0);
         }
+        // A square wall and grid: the phases (0, 1) and (1, 0) are twins (one kernel).
+        equals_the_direct_sum_at(-0.2, 5, 9, 2);
+    }
+
+    /// Twins are found only on a square layout with swapped offsets.
+    #[test]
+    fn twins_need_a_square_layout() {
+        let wall = |ny: usize| -> Vec<Point> {
+            (0..5)
+                .flat_map(|i| {
+                    (0..ny).map(move |k| [0.1 * i as f32 - 0.2, 0.1 * k as f32 - 0.2, 0.0])
+                })
+                .collect()
+        };
+        let grid = |y0: f32| -> Vec<Point> {
+            (0..9)
+                .flat_map(|i| {
+                    (0..9).map(move |k| [0.05 * i as f32 - 0.2, y0 + 0.05 * k as f32, 0.3])
+                })
+                .collect()
+        };
+        let count = |w: &[Point], v: &[Point]| {
+            let lay = layout(w, v, [9, 9, 1], 1e-6).unwrap();
+            twins(&lay, 1e-7).iter().flatten().count()
+        };
+        assert_eq!(count(&wall(5), &grid(-0.2)), 1);
+        assert_eq!(count(&wall(4), &grid(-0.2)), 0, "a 5×4 wall");
+        assert_eq!(count(&wall(5), &grid(-0.19)), 0, "offsets not swapped");
     }
 
     /// Offsets mirror about an integer centre within the tolerance, and only then.
@@ -528,16 +651,16 @@ mod tests {
         assert!(off.copies.is_empty() && off.computed.len() == 9);
     }
 
-    fn equals_the_direct_sum_at(x0: f32) {
+    fn equals_the_direct_sum_at(x0: f32, wall_ny: usize, ny: usize, twins: usize) {
         let cfg = Config::try_new(&Params {
             sigma: Some(0.1),
             ..Params::new(0.1, 120, 0.01)
         })
         .unwrap();
         let wall: Vec<Point> = (0..5)
-            .flat_map(|i| (0..4).map(move |k| [0.1 * i as f32 - 0.2, 0.1 * k as f32, 0.0]))
+            .flat_map(|i| (0..wall_ny).map(move |k| [0.1 * i as f32 - 0.2, 0.1 * k as f32, 0.0]))
             .collect();
-        let (nx, ny, nz) = (9, 7, 2);
+        let (nx, nz) = (9, 2);
         let voxels: Vec<Point> = (0..nx)
             .flat_map(|i| {
                 (0..ny).flat_map(move |k| {
@@ -548,6 +671,7 @@ mod tests {
             .collect();
         let c = Confocal::new(&cfg, &wall, &voxels, [nx, ny, nz]).unwrap();
         assert_eq!(c.shape().2, 2 * 2 * 2, "two depths × 2×2 phases");
+        assert_eq!(c.twin.iter().flatten().count(), twins);
         let j_n = cfg.bins();
         let hg: Vec<Complex32> = (0..wall.len() * j_n)
             .map(|i| {
