@@ -419,29 +419,33 @@ impl Resample {
         let [sx, sy, _] = self.support.shape;
         assert_eq!(support.len(), sx * sy * nz, "support amplitudes");
         let zero = Complex64::new(0.0, 0.0);
-        // Along y: mid[(mx·ny + iy)·nz + iz].
+        // Along y: mid[(mx·ny + iy)·nz + iz]; support x rows in parallel.
         let mut mid = vec![zero; sx * ny * nz];
-        for mx in 0..sx {
-            for (iy, t) in self.axes[1].taps.iter().enumerate() {
-                let out = &mut mid[(mx * ny + iy) * nz..(mx * ny + iy + 1) * nz];
+        mid.par_chunks_mut(ny * nz)
+            .enumerate()
+            .for_each(|(mx, mid)| {
+                for (iy, t) in self.axes[1].taps.iter().enumerate() {
+                    let out = &mut mid[iy * nz..(iy + 1) * nz];
+                    for (k, w) in t.w.iter().enumerate() {
+                        let row = &support[(mx * sy + t.first + k) * nz..][..nz];
+                        for (o, v) in out.iter_mut().zip(row) {
+                            *o += v * *w;
+                        }
+                    }
+                }
+            });
+        // Along x, asked x planes in parallel.
+        let mut acc = vec![zero; nx * ny * nz];
+        acc.par_chunks_mut(ny * nz)
+            .zip(self.axes[0].taps.par_iter())
+            .for_each(|(out, t)| {
                 for (k, w) in t.w.iter().enumerate() {
-                    let row = &support[(mx * sy + t.first + k) * nz..][..nz];
+                    let row = &mid[(t.first + k) * ny * nz..][..ny * nz];
                     for (o, v) in out.iter_mut().zip(row) {
                         *o += v * *w;
                     }
                 }
-            }
-        }
-        let mut acc = vec![zero; nx * ny * nz];
-        for (ix, t) in self.axes[0].taps.iter().enumerate() {
-            let out = &mut acc[ix * ny * nz..(ix + 1) * ny * nz];
-            for (k, w) in t.w.iter().enumerate() {
-                let row = &mid[(t.first + k) * ny * nz..][..ny * nz];
-                for (o, v) in out.iter_mut().zip(row) {
-                    *o += v * *w;
-                }
-            }
-        }
+            });
         acc
     }
 }
