@@ -341,7 +341,6 @@ impl Confocal {
         let bins = self.cfg.bins();
         let (mx, my) = (self.lay.mx, self.lay.my);
         let m = mx * my;
-        let per = bins.div_ceil(2 * rayon::current_num_threads()).max(8);
         // The transposed spectra `X̂ᵀ`, for the sub-grids with a twin.
         let twins = self.twin.iter().any(Option::is_some);
         let mut spectra_t = Vec::new();
@@ -362,46 +361,62 @@ impl Confocal {
         let jobs: Vec<usize> = (0..self.lay.subgrids.len())
             .filter(|&i| !is_twin[i])
             .collect();
-        let parts: Vec<Vec<(u32, Complex64)>> = jobs
-            .par_iter()
-            .map(|&i| {
-                let sg = &self.lay.subgrids[i];
-                let twin = self.twin[i].map(|b| &self.lay.subgrids[b]);
-                let xt = twin.map(|_| &spectra_t[..]);
-                let table = self.table(sg);
-                let sum = (0..bins)
-                    .into_par_iter()
-                    .with_min_len(per)
-                    .fold(
-                        || self.bin_sum(&table, twin.is_some()),
-                        |mut b, j| {
-                            self.add_bin(&table, spectra, xt, j, &mut b);
-                            b
-                        },
-                    )
-                    .reduce_with(|mut a, b| {
-                        a.sum.iter_mut().zip(&b.sum).for_each(|(x, y)| *x += y);
-                        a.sum_t.iter_mut().zip(&b.sum_t).for_each(|(x, y)| *x += y);
-                        a
-                    });
-                let Some(mut b) = sum else {
-                    return Vec::new();
-                };
-                let mut out = self.inverse(sg, &mut b.sum, &mut b.fft, skip);
-                if let Some(tw) = twin {
-                    // `S_b = (S_bᵀ)ᵀ`, into the spent image buffer.
-                    transpose(&b.sum_t, my, mx, &mut b.img, my);
-                    out.extend(self.inverse(tw, &mut b.img, &mut b.fft, skip));
-                }
-                out
-            })
-            .collect();
+        // Runs of bins per sub-grid: enough tasks for the pool (8 per thread), else one run
+        // per sub-grid with its worker state reused from one sub-grid to the next.
+        let threads = rayon::current_num_threads();
+        let runs = (8 * threads)
+            .div_ceil(jobs.len().max(1))
+            .min(bins.div_ceil(8))
+            .max(1);
+        let per = bins.div_ceil(runs);
+        let one_job = |b: &mut BinSum, i: usize| {
+            let sg = &self.lay.subgrids[i];
+            let twin = self.twin[i].map(|t| &self.lay.subgrids[t]);
+            let xt = twin.map(|_| &spectra_t[..]);
+            let table = self.table(sg);
+            self.reset(b, &table, twin.is_some());
+            for j in 0..bins {
+                self.add_bin(&table, spectra, xt, j, b);
+            }
+            self.finish(b, sg, twin, skip)
+        };
+        let parts: Vec<Vec<(u32, Complex64)>> = if runs == 1 {
+            jobs.par_iter()
+                .map_init(|| self.bin_sum(0, false), |b, &i| one_job(b, i))
+                .collect()
+        } else {
+            jobs.par_iter()
+                .map(|&i| {
+                    let sg = &self.lay.subgrids[i];
+                    let twin = self.twin[i].map(|t| &self.lay.subgrids[t]);
+                    let xt = twin.map(|_| &spectra_t[..]);
+                    let table = self.table(sg);
+                    let sum = (0..bins)
+                        .into_par_iter()
+                        .with_min_len(per)
+                        .fold(
+                            || self.bin_sum(table.step.len(), twin.is_some()),
+                            |mut b, j| {
+                                self.add_bin(&table, spectra, xt, j, &mut b);
+                                b
+                            },
+                        )
+                        .reduce_with(|mut a, b| {
+                            a.sum.iter_mut().zip(&b.sum).for_each(|(x, y)| *x += y);
+                            a.sum_t.iter_mut().zip(&b.sum_t).for_each(|(x, y)| *x += y);
+                            a
+                        });
+                    sum.map_or_else(Vec::new, |mut b| self.finish(&mut b, sg, twin, skip))
+                })
+                .collect()
+        };
         for (v, a) in parts.into_iter().flatten() {
             acc[v as usize] += a;
         }
     }
 
-    fn bin_sum(&self, table: &Table, twin: bool) -> BinSum {
+    /// A worker's state for a table of `cells` computed cells (with a twin's sum or not).
+    fn bin_sum(&self, cells: usize, twin: bool) -> BinSum {
         let m = self.lay.mx * self.lay.my;
         let flen = [&self.fy, &self.fx, &self.ix, &self.iy]
             .iter()
@@ -411,7 +426,7 @@ impl Confocal {
             .max(1);
         let zero = Complex32::new(0.0, 0.0);
         BinSum {
-            phase: vec![0; table.step.len()],
+            phase: vec![0; cells],
             next: usize::MAX,
             img: vec![zero; m],
             spec: vec![zero; m],
@@ -419,6 +434,39 @@ impl Confocal {
             sum_t: if twin { vec![zero; m] } else { Vec::new() },
             fft: vec![zero; flen],
         }
+    }
+
+    /// Makes a used worker state ready for `table` (and a twin or not), as
+    /// [`Self::bin_sum`] would.
+    fn reset(&self, b: &mut BinSum, table: &Table, twin: bool) {
+        let zero = Complex32::new(0.0, 0.0);
+        let m = self.lay.mx * self.lay.my;
+        b.next = usize::MAX;
+        b.phase.resize(table.step.len(), 0);
+        b.img.fill(zero);
+        b.sum.fill(zero);
+        b.sum_t.clear();
+        if twin {
+            b.sum_t.resize(m, zero);
+        }
+    }
+
+    /// The voxels of sub-grid `sg` (and of its twin) from a state that summed every bin.
+    fn finish(
+        &self,
+        b: &mut BinSum,
+        sg: &SubGrid,
+        twin: Option<&SubGrid>,
+        skip: &[bool],
+    ) -> Vec<(u32, Complex64)> {
+        let (mx, my) = (self.lay.mx, self.lay.my);
+        let mut out = self.inverse(sg, &mut b.sum, &mut b.fft, skip);
+        if let Some(tw) = twin {
+            // `S_b = (S_bᵀ)ᵀ`, into the spent image buffer (zeroed again by `reset`).
+            transpose(&b.sum_t, my, mx, &mut b.img, my);
+            out.extend(self.inverse(tw, &mut b.img, &mut b.fft, skip));
+        }
+        out
     }
 
     /// The kernel table of slice `sg` ([`Table`]): `w(d)²/M·e^{iν_j 2d}` per computed cell.
@@ -596,11 +644,20 @@ mod tests {
     /// mirror (every offset computed).
     #[test]
     fn equals_the_direct_sum() {
-        for x0 in [-0.2f32, -0.2131] {
-            equals_the_direct_sum_at(x0, 4, 7, 0);
+        // On 1 thread (one run of bins per sub-grid, the worker state reused) and 2 (runs).
+        for threads in [1, 2] {
+            let pool = rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .unwrap();
+            pool.install(|| {
+                for x0 in [-0.2f32, -0.2131] {
+                    equals_the_direct_sum_at(x0, 4, 7, 2, 0);
+                }
+                // A square wall and grid: the phases (0, 1) and (1, 0) are twins.
+                equals_the_direct_sum_at(-0.2, 5, 9, 4, 4);
+            });
         }
-        // A square wall and grid: the phases (0, 1) and (1, 0) are twins (one kernel).
-        equals_the_direct_sum_at(-0.2, 5, 9, 2);
     }
 
     /// Twins are found only on a square layout with swapped offsets.
@@ -651,7 +708,7 @@ mod tests {
         assert!(off.copies.is_empty() && off.computed.len() == 9);
     }
 
-    fn equals_the_direct_sum_at(x0: f32, wall_ny: usize, ny: usize, twins: usize) {
+    fn equals_the_direct_sum_at(x0: f32, wall_ny: usize, ny: usize, nz: usize, twins: usize) {
         let cfg = Config::try_new(&Params {
             sigma: Some(0.1),
             ..Params::new(0.1, 120, 0.01)
@@ -660,7 +717,7 @@ mod tests {
         let wall: Vec<Point> = (0..5)
             .flat_map(|i| (0..wall_ny).map(move |k| [0.1 * i as f32 - 0.2, 0.1 * k as f32, 0.0]))
             .collect();
-        let (nx, nz) = (9, 2);
+        let nx = 9;
         let voxels: Vec<Point> = (0..nx)
             .flat_map(|i| {
                 (0..ny).flat_map(move |k| {
@@ -670,7 +727,7 @@ mod tests {
             })
             .collect();
         let c = Confocal::new(&cfg, &wall, &voxels, [nx, ny, nz]).unwrap();
-        assert_eq!(c.shape().2, 2 * 2 * 2, "two depths × 2×2 phases");
+        assert_eq!(c.shape().2, nz * 2 * 2, "depths × 2×2 phases");
         assert_eq!(c.twin.iter().flatten().count(), twins);
         let j_n = cfg.bins();
         let hg: Vec<Complex32> = (0..wall.len() * j_n)
