@@ -121,6 +121,11 @@ struct Table {
     segments: Vec<(usize, usize)>,
     /// Runs `(first image row, rows)` of computed rows: the y-pass transforms these.
     row_runs: Vec<(usize, usize)>,
+    /// Per image row, the row it takes after the y-pass: itself when computed, its mirror
+    /// when a copy, the all-zero row `Mx` (past the image) when neither.
+    source_row: Vec<u32>,
+    /// Runs of columns neither computed nor copied (zero in every computed row).
+    zero_cols: Vec<(usize, usize)>,
     phase0: Vec<u32>,
     step: Vec<u32>,
     amp: Vec<f32>,
@@ -174,6 +179,23 @@ pub(crate) fn twins(lay: &Layout, tol: f64) -> Vec<Option<usize>> {
         }
     }
     twin
+}
+
+/// `dst[c·R + r] = src[rows[r]·cols + c]` for r < R = `rows.len()`, c < `cols`: a transpose
+/// that reads each destination column's values from the listed source rows (tiles of 16
+/// rows, each destination run written contiguously, as [`transpose`]).
+fn transpose_rows(src: &[Complex32], rows: &[u32], cols: usize, dst: &mut [Complex32]) {
+    const B: usize = 16;
+    let n = rows.len();
+    for r0 in (0..n).step_by(B) {
+        let r1 = (r0 + B).min(n);
+        let from = &rows[r0..r1];
+        for c in 0..cols {
+            for (o, &sr) in dst[c * n + r0..c * n + r1].iter_mut().zip(from) {
+                *o = src[sr as usize * cols + c];
+            }
+        }
+    }
 }
 
 /// A fraction of a turn in `u32` units (2⁻³² turn), rounded, modulo one turn.
@@ -428,7 +450,7 @@ impl Confocal {
         BinSum {
             phase: vec![0; cells],
             next: usize::MAX,
-            img: vec![zero; m],
+            img: vec![zero; m + self.lay.my],
             spec: vec![zero; m],
             sum: vec![zero; m],
             sum_t: if twin { vec![zero; m] } else { Vec::new() },
@@ -443,7 +465,9 @@ impl Confocal {
         let m = self.lay.mx * self.lay.my;
         b.next = usize::MAX;
         b.phase.resize(table.step.len(), 0);
-        b.img.fill(zero);
+        // Rows not computed are never read (the transpose reads the zero row past the
+        // image for them): only that row must be zero.
+        b.img[m..].fill(zero);
         b.sum.fill(zero);
         b.sum_t.clear();
         if twin {
@@ -463,8 +487,8 @@ impl Confocal {
         let mut out = self.inverse(sg, &mut b.sum, &mut b.fft, skip);
         if let Some(tw) = twin {
             // `S_b = (S_bᵀ)ᵀ`, into the spent image buffer (zeroed again by `reset`).
-            transpose(&b.sum_t, my, mx, &mut b.img, my);
-            out.extend(self.inverse(tw, &mut b.img, &mut b.fft, skip));
+            transpose(&b.sum_t, my, mx, &mut b.img[..mx * my], my);
+            out.extend(self.inverse(tw, &mut b.img[..mx * my], &mut b.fft, skip));
         }
         out
     }
@@ -489,6 +513,22 @@ impl Confocal {
         };
         let segments = runs(&cols.computed);
         let row_runs = runs(&rows.computed);
+        let mut source_row: Vec<u32> = vec![mx as u32; mx];
+        for &(r, _) in &rows.computed {
+            source_row[r] = r as u32;
+        }
+        for &(dst, src) in &rows.copies {
+            source_row[dst] = src as u32;
+        }
+        let mut used = vec![false; my];
+        for &(c, _) in &cols.computed {
+            used[c] = true;
+        }
+        for &(c, _) in &cols.copies {
+            used[c] = true;
+        }
+        let free: Vec<(usize, f64)> = (0..my).filter(|&c| !used[c]).map(|c| (c, 0.0)).collect();
+        let zero_cols = runs(&free);
         let span = self.cfg.span();
         let scale = 1.0 / (mx * my) as f64;
         let k0 = self.cfg.k_lo() as f64;
@@ -509,6 +549,8 @@ impl Confocal {
             cols,
             segments,
             row_runs,
+            source_row,
+            zero_cols,
         };
         for &(_, ex) in &t.rows.computed {
             for &(_, ey) in &t.cols.computed {
@@ -549,7 +591,9 @@ impl Confocal {
         let per_row = table.cols.computed.len();
         for (r, &(row, _)) in table.rows.computed.iter().enumerate() {
             let img = &mut b.img[row * my..(row + 1) * my];
-            img.fill(Complex32::new(0.0, 0.0));
+            for &(c0, len) in &table.zero_cols {
+                img[c0..c0 + len].fill(Complex32::new(0.0, 0.0));
+            }
             let mut k = r * per_row;
             for &(c0, len) in &table.segments {
                 for (((o, p), &st), &a) in img[c0..c0 + len]
@@ -572,10 +616,8 @@ impl Confocal {
             self.fy
                 .process_with_scratch(&mut b.img[r0 * my..(r0 + n) * my], &mut b.fft);
         }
-        for &(dst, src) in &table.rows.copies {
-            b.img.copy_within(src * my..(src + 1) * my, dst * my);
-        }
-        transpose(&b.img, mx, my, &mut b.spec, mx);
+        // Transposed from each row's source (the mirrored rows read their mirror).
+        transpose_rows(&b.img, &table.source_row, my, &mut b.spec);
         self.fx.process_with_scratch(&mut b.spec, &mut b.fft);
         let x = &spectra[j * m..(j + 1) * m];
         match spectra_t {
