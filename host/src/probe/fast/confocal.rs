@@ -138,7 +138,9 @@ struct BinSum {
     /// The bin `phase` is at (`usize::MAX`: not seeded).
     next: usize,
     img: Vec<Complex32>,
+    /// The kernel spectra of a pair of bins.
     spec: Vec<Complex32>,
+    spec2: Vec<Complex32>,
     sum: Vec<Complex32>,
     /// The transposed sum of the slice's twin (empty without one).
     sum_t: Vec<Complex32>,
@@ -388,17 +390,19 @@ impl Confocal {
         let threads = rayon::current_num_threads();
         let runs = (8 * threads)
             .div_ceil(jobs.len().max(1))
-            .min(bins.div_ceil(8))
+            .min(bins.div_ceil(16))
             .max(1);
-        let per = bins.div_ceil(runs);
+        // Bins go two at a time (one pass over the sums per pair).
+        let pairs = bins.div_ceil(2);
+        let per = pairs.div_ceil(runs);
         let one_job = |b: &mut BinSum, i: usize| {
             let sg = &self.lay.subgrids[i];
             let twin = self.twin[i].map(|t| &self.lay.subgrids[t]);
             let xt = twin.map(|_| &spectra_t[..]);
             let table = self.table(sg);
             self.reset(b, &table, twin.is_some());
-            for j in 0..bins {
-                self.add_bin(&table, spectra, xt, j, b);
+            for j in (0..bins).step_by(2) {
+                self.add_bins(&table, spectra, xt, j..(j + 2).min(bins), b);
             }
             self.finish(b, sg, twin, skip)
         };
@@ -413,13 +417,14 @@ impl Confocal {
                     let twin = self.twin[i].map(|t| &self.lay.subgrids[t]);
                     let xt = twin.map(|_| &spectra_t[..]);
                     let table = self.table(sg);
-                    let sum = (0..bins)
+                    let sum = (0..pairs)
                         .into_par_iter()
                         .with_min_len(per)
                         .fold(
                             || self.bin_sum(table.step.len(), twin.is_some()),
-                            |mut b, j| {
-                                self.add_bin(&table, spectra, xt, j, &mut b);
+                            |mut b, p| {
+                                let j = 2 * p;
+                                self.add_bins(&table, spectra, xt, j..(j + 2).min(bins), &mut b);
                                 b
                             },
                         )
@@ -452,6 +457,7 @@ impl Confocal {
             next: usize::MAX,
             img: vec![zero; m + self.lay.my],
             spec: vec![zero; m],
+            spec2: vec![zero; m],
             sum: vec![zero; m],
             sum_t: if twin { vec![zero; m] } else { Vec::new() },
             fft: vec![zero; flen],
@@ -569,17 +575,82 @@ impl Confocal {
         t
     }
 
-    /// `sum += X̂_j · κ̂_{j,z}` for the slice of `table`.
-    fn add_bin(
+    /// `sum += Σ_j X̂_j · κ̂_{j,z}` over the bins `js` (one or two) for the slice of
+    /// `table` (and `sum_t += Σ_j X̂ᵀ_j · κ̂_{j,z}` for its twin): one pass over the sums.
+    fn add_bins(
         &self,
         table: &Table,
         spectra: &[Complex32],
         spectra_t: Option<&[Complex32]>,
-        j: usize,
+        js: std::ops::Range<usize>,
         b: &mut BinSum,
     ) {
-        let (mx, my) = (self.lay.mx, self.lay.my);
-        let m = mx * my;
+        let m = self.lay.mx * self.lay.my;
+        let j = js.start;
+        let two = js.len() == 2;
+        let mut spec = std::mem::take(&mut b.spec);
+        self.kernel(table, j, b, &mut spec);
+        let mut spec2 = std::mem::take(&mut b.spec2);
+        if two {
+            self.kernel(table, j + 1, b, &mut spec2);
+        }
+        let x = &spectra[j * m..(j + 1) * m];
+        match (spectra_t, two) {
+            (None, false) => {
+                for ((s, x), k) in b.sum.iter_mut().zip(x).zip(&spec) {
+                    *s += x * k;
+                }
+            }
+            (None, true) => {
+                let x2 = &spectra[(j + 1) * m..(j + 2) * m];
+                for ((((s, x), k), x2), k2) in
+                    b.sum.iter_mut().zip(x).zip(&spec).zip(x2).zip(&spec2)
+                {
+                    *s += x * k + x2 * k2;
+                }
+            }
+            (Some(t), false) => {
+                let xt = &t[j * m..(j + 1) * m];
+                for ((((s, st), x), xt), k) in b
+                    .sum
+                    .iter_mut()
+                    .zip(b.sum_t.iter_mut())
+                    .zip(x)
+                    .zip(xt)
+                    .zip(&spec)
+                {
+                    *s += x * k;
+                    *st += xt * k;
+                }
+            }
+            (Some(t), true) => {
+                let x2 = &spectra[(j + 1) * m..(j + 2) * m];
+                let xt = &t[j * m..(j + 1) * m];
+                let xt2 = &t[(j + 1) * m..(j + 2) * m];
+                for (((((((s, st), x), xt), k), x2), xt2), k2) in b
+                    .sum
+                    .iter_mut()
+                    .zip(b.sum_t.iter_mut())
+                    .zip(x)
+                    .zip(xt)
+                    .zip(&spec)
+                    .zip(x2)
+                    .zip(xt2)
+                    .zip(&spec2)
+                {
+                    *s += x * k + x2 * k2;
+                    *st += xt * k + xt2 * k2;
+                }
+            }
+        }
+        b.spec = spec;
+        b.spec2 = spec2;
+    }
+
+    /// The kernel spectrum `κ̂_{j,z}` of the slice of `table` at bin `j` into `spec`
+    /// (`[ky][kx]`), the phases of `b` stepped to bin `j + 1`.
+    fn kernel(&self, table: &Table, j: usize, b: &mut BinSum, spec: &mut [Complex32]) {
+        let my = self.lay.my;
         if b.next != j {
             let jj = j as u32;
             for ((p, &p0), &st) in b.phase.iter_mut().zip(&table.phase0).zip(&table.step) {
@@ -617,30 +688,8 @@ impl Confocal {
                 .process_with_scratch(&mut b.img[r0 * my..(r0 + n) * my], &mut b.fft);
         }
         // Transposed from each row's source (the mirrored rows read their mirror).
-        transpose_rows(&b.img, &table.source_row, my, &mut b.spec);
-        self.fx.process_with_scratch(&mut b.spec, &mut b.fft);
-        let x = &spectra[j * m..(j + 1) * m];
-        match spectra_t {
-            None => {
-                for ((s, x), k) in b.sum.iter_mut().zip(x).zip(&b.spec) {
-                    *s += x * k;
-                }
-            }
-            Some(t) => {
-                let xt = &t[j * m..(j + 1) * m];
-                for ((((s, st), x), xt), k) in b
-                    .sum
-                    .iter_mut()
-                    .zip(b.sum_t.iter_mut())
-                    .zip(x)
-                    .zip(xt)
-                    .zip(&b.spec)
-                {
-                    *s += x * k;
-                    *st += xt * k;
-                }
-            }
-        }
+        transpose_rows(&b.img, &table.source_row, my, spec);
+        self.fx.process_with_scratch(spec, &mut b.fft);
     }
 
     /// The inverse transform of one slice's sum and its voxels' amplitudes.
