@@ -100,6 +100,17 @@ impl Fields<'_> {
         self.names.iter().any(|n| n == name)
     }
 
+    /// Whether `name` is a dataset with a null dataspace (no shape, no values): how h5py
+    /// and y-tal's `write_capture` store a field that is `None` (`laser_grid_normals` of a
+    /// capture without normals). False when absent or not null.
+    pub(super) fn is_null(&self, name: &str) -> bool {
+        self.has(name)
+            && self
+                .file
+                .dataset(name)
+                .is_ok_and(|ds| ds.ndim() == 0 && ds.num_elements().is_ok_and(|n| n == 0))
+    }
+
     pub(super) fn dataset(&self, name: &str) -> Result<Dataset> {
         if !self.has(name) {
             return Err(Error::format(

@@ -74,7 +74,7 @@
 //! | `delta_t` | [`Geometry::dt`] (m of optical path; finite and > 0) |
 //! | `t_start` | [`Geometry::t0`], see *Time axis* |
 //! | `t_accounts_first_and_last_bounces` | [`Geometry::legs_in_time`] |
-//! | `laser_grid_normals`, `sensor_grid_normals` (optional) | relay-surface normals at the spots, of their grid's format and shape (absent: +z); checked (finite, non-zero length) and used by `--compensate-laser` and `--weights cos` |
+//! | `laser_grid_normals`, `sensor_grid_normals` (optional) | relay-surface normals at the spots, of their grid's format and shape (absent, or a null dataset as y-tal writes `None`: +z); checked (finite, non-zero length) and used by `--compensate-laser` and `--weights cos` |
 //! | `volume_format`, `scene_info` | not used |
 //!
 //! Shapes: `T_Lx_Ly_Sx_Sy` is `(Nt, Lx, Ly, Sx, Sy)` with grids of `Lx·Ly` and `Sx·Sy` points
@@ -342,21 +342,22 @@ pub fn read_any(path: &Path) -> Result<Capture> {
     }
 }
 
-/// Opens an HDF5 capture and lists its root datasets. No single read of the file may exceed
-/// the memory budget (grids, blocks: the crate refuses it before allocating).
-///
-/// # Errors
-/// [`Error::Format`] on `(file)` when it is not HDF5 (or cannot be read), on `(root group)`
-/// when its root group cannot be listed.
-/// A grid-shaped dataset the file may lack (`laser_grid_normals`): `None` when absent.
+/// A grid-shaped dataset the file may lack (`laser_grid_normals`): `None` when absent or
+/// stored as a null dataset (y-tal's `write_capture` of a field that is `None`).
 fn optional_grid(f: &Fields<'_>, name: &'static str, format_name: &str) -> Result<Option<Grid>> {
-    if f.has(name) {
+    if f.has(name) && !f.is_null(name) {
         f.grid(name, format_name).map(Some)
     } else {
         Ok(None)
     }
 }
 
+/// Opens an HDF5 capture and lists its root datasets. No single read of the file may exceed
+/// the memory budget (grids, blocks: the crate refuses it before allocating).
+///
+/// # Errors
+/// [`Error::Format`] on `(file)` when it is not HDF5 (or cannot be read), on `(root group)`
+/// when its root group cannot be listed.
 fn open_file(path: &Path) -> Result<(Hdf5File, Vec<String>)> {
     let limit = usize::try_from(budget::get()).unwrap_or(usize::MAX);
     let file = Hdf5File::open_with_options(path, OpenOptions::default().with_max_read_bytes(limit))

@@ -953,6 +953,29 @@ fn chunked_rows_identical_on_any_number_of_decoding_threads() {
     let _ = std::fs::remove_dir_all(dir);
 }
 
+/// A capture written by y-tal's own `write_capture` with its optional fields left `None`
+/// (`fixtures/tal/make_null_fields.py`): the normals, `scene_info` and `volume_format` are
+/// datasets with a null dataspace, read as absent (a flat wall, +z), and the rows are the
+/// file's values (`H[t, x, y] = exp(−((t − 12 − 2x)/2)²/2)`).
+#[test]
+fn ytal_null_fields_are_absent() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fixtures/tal/ytal_null_fields.hdf5");
+    let mut r = open(&path).unwrap();
+    let g = r.geometry().clone();
+    assert!(g.confocal);
+    assert_eq!((g.lasers.len(), g.nt), (16, 32));
+    assert!(g.normals.flat() && g.normals.lasers.is_empty() && g.normals.spads.is_empty());
+    assert!(g.not_flat().is_none());
+    let mut row = Vec::new();
+    let x = r.read_row(5, &mut row).unwrap();
+    for (t, v) in row.iter().enumerate() {
+        let want = (-0.5 * ((t as f32 - 12.0 - 2.0 * x[0]) / 2.0).powi(2)).exp();
+        assert!((v - want).abs() <= 1e-6, "bin {t}: {v} vs {want}");
+    }
+    let c = read_all(&path).unwrap();
+    assert_eq!(c.geometry.lasers.len(), 16);
+}
+
 /// `laser_grid_normals` / `sensor_grid_normals` (y-tal's fields, of their grid's shape):
 /// read per point into [`Geometry::normals`] (swapped with the grids for tal's `single`
 /// scan), all-+z normals are the flat default, and a zero-length, NaN or misshapen normal is a
