@@ -591,42 +591,27 @@ impl Confocal {
         let mut spec = std::mem::take(&mut b.spec);
         self.kernel(table, j, b, &mut spec);
         let mut spec2 = std::mem::take(&mut b.spec2);
-        if two {
+        // A lone bin (the last of an odd run) pairs with itself under a zero kernel.
+        let j2 = if two {
             self.kernel(table, j + 1, b, &mut spec2);
-        }
+            j + 1
+        } else {
+            spec2.fill(Complex32::new(0.0, 0.0));
+            j
+        };
         let x = &spectra[j * m..(j + 1) * m];
-        match (spectra_t, two) {
-            (None, false) => {
-                for ((s, x), k) in b.sum.iter_mut().zip(x).zip(&spec) {
-                    *s += x * k;
-                }
-            }
-            (None, true) => {
-                let x2 = &spectra[(j + 1) * m..(j + 2) * m];
+        let x2 = &spectra[j2 * m..(j2 + 1) * m];
+        match spectra_t {
+            None => {
                 for ((((s, x), k), x2), k2) in
                     b.sum.iter_mut().zip(x).zip(&spec).zip(x2).zip(&spec2)
                 {
                     *s += x * k + x2 * k2;
                 }
             }
-            (Some(t), false) => {
+            Some(t) => {
                 let xt = &t[j * m..(j + 1) * m];
-                for ((((s, st), x), xt), k) in b
-                    .sum
-                    .iter_mut()
-                    .zip(b.sum_t.iter_mut())
-                    .zip(x)
-                    .zip(xt)
-                    .zip(&spec)
-                {
-                    *s += x * k;
-                    *st += xt * k;
-                }
-            }
-            (Some(t), true) => {
-                let x2 = &spectra[(j + 1) * m..(j + 2) * m];
-                let xt = &t[j * m..(j + 1) * m];
-                let xt2 = &t[(j + 1) * m..(j + 2) * m];
+                let xt2 = &t[j2 * m..(j2 + 1) * m];
                 for (((((((s, st), x), xt), k), x2), xt2), k2) in b
                     .sum
                     .iter_mut()
