@@ -14,9 +14,10 @@
 //! voxels with such a path are evaluated on the band path in the same pass (kernel probes
 //! over voxel chunks, one `Scan` per row), as the planar path does.
 //!
-//! Memory: the wall spectra `J·Mx·My` complex `f32`, one batch of rows (`128·threads·Nt`
-//! `f32` and its spectra), the convolution's per-worker scratch (`~3·Mx·My` complex) and the
-//! output: nothing grows with the number of slices or rows beyond the output itself.
+//! Memory: the wall spectra `J·Mx·My` complex `f32` (twice on a layout with transposed
+//! twins, `fast::confocal::twins`), one batch of rows (`128·threads·Nt` `f32` and its
+//! spectra), the convolution's per-worker scratch (`~5·Mx·My` complex) and the output:
+//! nothing grows with the number of slices or rows beyond the output itself.
 
 use super::drive::*;
 use super::wave::*;

@@ -618,9 +618,18 @@ fn choose_resampled(
     let [sx, sy, nz] = sup.shape;
     let mut plan = budget::Plan::new();
     if g.confocal {
+        // Twice with transposed twins (the wall spectra and their transpose).
+        let copies = if crate::probe::fast::confocal::twins(&lay, 1e-6 * cfg.wavelength())
+            .iter()
+            .any(Option::is_some)
+        {
+            2
+        } else {
+            1
+        };
         plan.add(
-            format!("the support grid's wall spectra ({j} × {mx} × {my} complex f32)"),
-            budget::bytes(j, 8).saturating_mul(m as u128),
+            format!("the support grid's wall spectra ({copies} × {j} × {mx} × {my} complex f32)"),
+            budget::bytes(j, 8 * copies).saturating_mul(m as u128),
         )
         .add(
             format!("the support grid's amplitudes ({sx} × {sy} × {nz})"),

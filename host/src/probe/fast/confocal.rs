@@ -39,9 +39,12 @@
 //! [`vltm_kernel::Config::guard`] on the band path, as for the planar path.
 //!
 //! Cost: `J·F(M)/2` (forward) `+ S·J·(F(M) + 12M) + S·F(M)/2` flops (S = slices × phases,
-//! `F(M) = 5M·log₂M`), against the band path's `Kv·K·(14J + 60)` over K rows. Memory: the
-//! spectra `J·M` complex `f32` (shared, [`Confocal::spectra_bytes`]), per worker `3M`
-//! complex `f32` and `~N_off` seeds (`N_off ≤ M` kernel offsets, 36 bytes each), the output.
+//! `F(M) = 5M·log₂M`; an upper bound: mirrored offsets and twins cut the kernel transforms
+//! by up to a half and a quarter), against the band path's `Kv·K·(14J + 60)` over K rows.
+//! Memory: the spectra `J·M` complex `f32` (shared, [`Confocal::spectra_bytes`]; twice that
+//! when a layout has transposed twins, for `X̂ᵀ`), per worker about `5M` complex `f32` (the
+//! image, two kernel spectra, the sum and a twin's) and 12 bytes per computed kernel cell,
+//! the output.
 
 use super::planar::{Layout, MAX_TABLE_BYTES, SubGrid, layout, transpose};
 use num_complex::{Complex32, Complex64};
@@ -304,7 +307,8 @@ impl Confocal {
         self.cfg.bins() * self.lay.mx * self.lay.my
     }
 
-    /// Bytes of the spectra buffer.
+    /// Bytes of the spectra buffer ([`Confocal::image`] makes as much again for the
+    /// transposed spectra when the layout has transposed twins).
     pub fn spectra_bytes(&self) -> usize {
         self.spectra_len() * 8
     }
