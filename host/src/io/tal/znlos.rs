@@ -14,7 +14,8 @@
 //! | `deltaT` (1 value, m of optical path) | `delta_t` |
 //! | `t0` (1 value, m of optical path) | `t_start` |
 //! | (none) | `t_accounts_first_and_last_bounces` = **true** |
-//! | `cameraGridNormals`, `laserGridNormals`, `hiddenVolume*`, `t`, `isConfocal`, `*GridSize`, `*GridPoints`, `engine` | not used (the wall is z = 0 with normal +z, DESIGN §B.0; the grids and `data` decide the scan) |
+//! | `cameraGridNormals`, `laserGridNormals` (optional) | `sensor_grid_normals`, `laser_grid_normals`, laid out as the positions (absent or null: +z); checked and used as tal's ([`super`]) |
+//! | `hiddenVolume*`, `t`, `isConfocal`, `*GridSize`, `*GridPoints`, `engine` | not used (the grids and `data` decide the scan) |
 //!
 //! A grid whose first axis has 3 elements is transposed (all axes reversed), as y-tal's
 //! `conv_to_xy3` does; after that it must be `(X, Y, 3)`. One deviation: a grid stored
@@ -225,6 +226,16 @@ pub fn read_all(path: &Path) -> Result<Capture> {
     open(path)?.into_capture()
 }
 
+/// [`grid_xy3`] of a dataset the file may lack (the grid normals): `None` when absent or
+/// a null dataset.
+fn optional_grid_xy3(f: &Fields<'_>, name: &'static str, want: [usize; 2]) -> Result<Option<Grid>> {
+    if f.has(name) && !f.is_null(name) {
+        grid_xy3(f, name, want).map(Some)
+    } else {
+        Ok(None)
+    }
+}
+
 /// A grid as y-tal's `conv_to_xy3` leaves it: transposed when its first axis has 3 elements,
 /// then `(X, Y, 3)`; except that a grid already `(X, Y, 3)` for `data`'s axes `want` and not
 /// `(3, Y, X)` is kept (y-tal would garble it: module docs, *Datasets*).
@@ -355,8 +366,12 @@ impl ZnlosReader {
             t_start: f.float_scalar("t0")?,
             legs_in_time: true,
             xyz_names: ["laserPosition", "cameraPosition"],
-            // Z-NLOS files' `cameraGridNormals`/`laserGridNormals` are not read: +z.
-            normals: [None, None],
+            // As y-tal's converter: `laserGridNormals`/`cameraGridNormals` become the tal
+            // grids' normals, laid out as the positions (absent or null: +z).
+            normals: [
+                optional_grid_xy3(&f, "laserGridNormals", [lx, ly])?,
+                optional_grid_xy3(&f, "cameraGridNormals", [sx, sy])?,
+            ],
         };
         let (dt, t_start) = (meta.dt, meta.t_start);
         let scan::Scan {
@@ -461,7 +476,7 @@ impl ZnlosReader {
                 }
             ),
             "device legs  included in the times (t_accounts_first_and_last_bounces = true): |laserPosition - x_l| + |x_s - cameraPosition| is subtracted from each path by the probes".to_string(),
-            "grids        cameraGridPositions, laserGridPositions as (X, Y, 3) (transposed when stored (3, Y, X)); normals and hiddenVolume* not used".to_string(),
+            "grids        cameraGridPositions, laserGridPositions and their *GridNormals as (X, Y, 3) (transposed when stored (3, Y, X)); hiddenVolume* not used".to_string(),
             format!("memory       {what}"),
         ];
         reader.conventions = conventions;

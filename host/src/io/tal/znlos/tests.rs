@@ -98,6 +98,20 @@ fn write(
     skip: &str,
     transposed: bool,
 ) {
+    builder(layout, l, s, nt, skip, transposed)
+        .write(path)
+        .unwrap();
+}
+
+/// The file of [`write`], not written yet.
+fn builder(
+    layout: ZnlosLayout,
+    l: [usize; 2],
+    s: [usize; 2],
+    nt: usize,
+    skip: &str,
+    transposed: bool,
+) -> hdf5_pure::FileBuilder {
     use hdf5_pure::FileBuilder;
     let mut b = FileBuilder::new();
     if skip != "data" {
@@ -134,7 +148,90 @@ fn write(
             b.create_dataset(name).with_f64_data(&[v]).with_shape(&[1]);
         }
     }
-    b.write(path).unwrap();
+    b
+}
+
+/// A grid of normals `n(i, j)` laid out as [`grid`]'s positions.
+fn normals(
+    nx: usize,
+    ny: usize,
+    transposed: bool,
+    n: impl Fn(usize, usize) -> [f32; 3],
+) -> (Vec<f32>, Vec<usize>) {
+    let mut v = Vec::new();
+    if transposed {
+        for c in 0..3 {
+            for j in 0..ny {
+                for i in 0..nx {
+                    v.push(n(i, j)[c]);
+                }
+            }
+        }
+        (v, vec![3, ny, nx])
+    } else {
+        for i in 0..nx {
+            for j in 0..ny {
+                v.extend(n(i, j));
+            }
+        }
+        (v, vec![nx, ny, 3])
+    }
+}
+
+/// `laserGridNormals` / `cameraGridNormals` are read as y-tal's converter reads them (the
+/// tal grids' normals, laid out as the positions, stored either way; grids of 2×5 and 4×2,
+/// no axis of 3 that would make the layout ambiguous), per point; a normal of zero length
+/// is an error naming the dataset.
+#[test]
+fn grid_normals_are_read_as_ytal_converts_them() {
+    let dir = scratch("normals");
+    let ln = |i: usize, j: usize| [0.02 * i as f32, 0.01 * j as f32, 1.0];
+    let cn = |i: usize, j: usize| [-0.03 * j as f32, 0.05 * i as f32, 1.0];
+    for transposed in [false, true] {
+        let mut b = builder(ZnlosLayout::Rows7, [2, 5], [4, 2], 4, "", transposed);
+        for (name, (v, shape)) in [
+            ("laserGridNormals", normals(2, 5, transposed, ln)),
+            ("cameraGridNormals", normals(4, 2, transposed, cn)),
+        ] {
+            b.create_dataset(name)
+                .with_f32_data(&v)
+                .with_shape(&u(&shape));
+        }
+        let p = dir.join(format!("n{transposed}.hdf5"));
+        b.write(&p).unwrap();
+        let r = open(&p).unwrap();
+        let g = r.geometry();
+        let ij = |p: Point| {
+            (
+                ((p[0] + 0.3) / 0.1).round() as usize,
+                ((p[1] + 0.2) / 0.1).round() as usize,
+            )
+        };
+        assert_eq!(g.normals.lasers.len(), 10);
+        assert_eq!(g.normals.spads.len(), 8);
+        for (p, n) in g.lasers.iter().zip(&g.normals.lasers) {
+            let (i, j) = ij(*p);
+            assert_eq!(*n, ln(i, j), "laser at {p:?}");
+        }
+        for (p, n) in g.spads.iter().zip(&g.normals.spads) {
+            let (i, j) = ij(*p);
+            assert_eq!(*n, cn(i, j), "SPAD at {p:?}");
+        }
+        assert!(!g.normals.flat());
+    }
+    let mut b = builder(ZnlosLayout::Rows7, [2, 5], [4, 2], 4, "", false);
+    let (v, shape) = normals(2, 5, false, |i, j| {
+        if (i, j) == (1, 2) { [0.0; 3] } else { ln(i, j) }
+    });
+    b.create_dataset("laserGridNormals")
+        .with_f32_data(&v)
+        .with_shape(&u(&shape));
+    let p = dir.join("zero.hdf5");
+    b.write(&p).unwrap();
+    match open(&p).unwrap_err() {
+        Error::Format { field, .. } => assert_eq!(field, "laserGridNormals"),
+        other => panic!("{other:?}"),
+    }
 }
 
 #[test]
