@@ -66,6 +66,19 @@ pub(super) struct Amplitudes {
     pub(super) support: Option<String>,
 }
 
+impl Amplitudes {
+    /// Amplitudes of the whole time axis (the crop is set by the caller that made it).
+    fn new(acc: Vec<Complex64>, report: Report, path: Path, support: Option<String>) -> Self {
+        Self {
+            acc,
+            report,
+            path,
+            crop: None,
+            support,
+        }
+    }
+}
+
 /// The accumulators of [`direct`] over the source's rows ([`RowSource::rows`]), with the
 /// configuration (of the time axis cropped to the voxels' reach, `crop`).
 pub(super) fn direct_acc(
@@ -138,16 +151,7 @@ fn direct_acc_on(
             let plan = lookup_plan(src.geometry(), job.cfg, volume.len());
             super::cosine::direct(src, job, volume, &plan)
         })?;
-        return Ok((
-            Amplitudes {
-                acc,
-                report,
-                path,
-                crop: None,
-                support: None,
-            },
-            cfg,
-        ));
+        return Ok((Amplitudes::new(acc, report, path, None), cfg));
     }
     let g = src.geometry();
     let rows = g.lasers.len() as f64;
@@ -169,28 +173,13 @@ fn direct_acc_on(
     if let Some((rs, engine)) = choose_resampled(g, &cfg, volume, exec.path, rival)? {
         let (acc, report) = direct_resampled(src, job, volume, &rs, engine)?;
         return Ok((
-            Amplitudes {
-                acc,
-                report,
-                path: Path::Planar,
-                crop: None,
-                support: Some(rs.support_spec()),
-            },
+            Amplitudes::new(acc, report, Path::Planar, Some(rs.support_spec())),
             cfg,
         ));
     }
     if g.confocal {
         let (acc, report, path) = direct_confocal(src, job, volume)?;
-        return Ok((
-            Amplitudes {
-                acc,
-                report,
-                path,
-                crop: None,
-                support: None,
-            },
-            cfg,
-        ));
+        return Ok((Amplitudes::new(acc, report, path, None), cfg));
     }
     let band_cost = band_flops(g, &cfg, volume.len());
     // The lookup competes only when its grid fits the budget (at large σ its carrier and
@@ -231,16 +220,7 @@ fn direct_acc_on(
         })?;
         (acc, report, Path::Band)
     };
-    Ok((
-        Amplitudes {
-            acc,
-            report,
-            path,
-            crop: None,
-            support: None,
-        },
-        cfg,
-    ))
+    Ok((Amplitudes::new(acc, report, path, None), cfg))
 }
 
 /// Direct light of a confocal capture: the confocal convolution on a regular wall grid

@@ -288,11 +288,13 @@ pub fn window_coverage(
         None => {
             // A confocal scan with equal legs: the projector spans are the camera's.
             let same = g.lasers == g.spads && d1 == d4;
-            let exact = |v: &Point| {
-                let c = spad_spans.span(v);
-                let p = if same { c } else { laser_spans.span(v) };
+            // Projector plus camera legs of a voxel, by `f` of each index.
+            let both = |f: fn(&SpanIndex<'_>, &Point) -> (f64, f64), v: &Point| {
+                let c = f(&spad_spans, v);
+                let p = if same { c } else { f(&laser_spans, v) };
                 (p.0 + c.0, p.1 + c.1)
             };
+            let exact = |v: &Point| both(|t, v| t.span(v), v);
             // The span over every voxel, exactly, without a query per voxel: seeded by a
             // strided sample, then a voxel is queried only when its bounds from the trees'
             // roots could widen the running span (most voxels of a grid cannot).
@@ -308,13 +310,8 @@ pub fn window_coverage(
                 .fold(
                     || seed,
                     |run, v| {
-                        let (c0, c1) = spad_spans.root_bounds(v);
-                        let (p0, p1) = if same {
-                            (c0, c1)
-                        } else {
-                            laser_spans.root_bounds(v)
-                        };
-                        if p0 + c0 >= run.0 && p1 + c1 <= run.1 {
+                        let (lo, hi) = both(|t, v| t.root_bounds(v), v);
+                        if lo >= run.0 && hi <= run.1 {
                             run
                         } else {
                             join(run, exact(v))

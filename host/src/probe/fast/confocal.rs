@@ -186,6 +186,18 @@ pub(crate) fn twins(lay: &Layout, tol: f64) -> Vec<Option<usize>> {
     twin
 }
 
+/// Ascending indices as runs `(first, length)` of consecutive ones.
+fn runs(idx: impl IntoIterator<Item = usize>) -> Vec<(usize, usize)> {
+    let mut r: Vec<(usize, usize)> = Vec::new();
+    for i in idx {
+        match r.last_mut() {
+            Some((s, n)) if *s + *n == i => *n += 1,
+            _ => r.push((i, 1)),
+        }
+    }
+    r
+}
+
 /// `dst[c·R + r] = src[rows[r]·cols + c]` for r < R = `rows.len()`, c < `cols`: a transpose
 /// that reads each destination column's values from the listed source rows (tiles of 16
 /// rows, each destination run written contiguously, as [`transpose`]).
@@ -399,36 +411,37 @@ impl Confocal {
         // Bins go two at a time (one pass over the sums per pair).
         let pairs = bins.div_ceil(2);
         let per = pairs.div_ceil(runs);
-        let one_job = |b: &mut BinSum, i: usize| {
+        // Sub-grid i, its twin, the twin's transposed spectra and the kernel table.
+        let job = |i: usize| {
             let sg = &self.lay.subgrids[i];
             let twin = self.twin[i].map(|t| &self.lay.subgrids[t]);
-            let xt = twin.map(|_| &spectra_t[..]);
-            let table = self.table(sg);
-            self.reset(b, &table, twin.is_some());
-            for j in (0..bins).step_by(2) {
-                self.add_bins(&table, spectra, xt, j..(j + 2).min(bins), b);
-            }
-            self.finish(b, sg, twin, skip)
+            (sg, twin, twin.map(|_| &spectra_t[..]), self.table(sg))
         };
         let parts: Vec<Vec<(u32, Complex64)>> = if runs == 1 {
             jobs.par_iter()
-                .map_init(|| self.bin_sum(0, false), |b, &i| one_job(b, i))
+                .map_init(
+                    || self.bin_sum(0, false),
+                    |b, &i| {
+                        let (sg, twin, xt, table) = job(i);
+                        self.reset(b, &table, twin.is_some());
+                        for p in 0..pairs {
+                            self.add_pair(&table, spectra, xt, p, b);
+                        }
+                        self.finish(b, sg, twin, skip)
+                    },
+                )
                 .collect()
         } else {
             jobs.par_iter()
                 .map(|&i| {
-                    let sg = &self.lay.subgrids[i];
-                    let twin = self.twin[i].map(|t| &self.lay.subgrids[t]);
-                    let xt = twin.map(|_| &spectra_t[..]);
-                    let table = self.table(sg);
+                    let (sg, twin, xt, table) = job(i);
                     let sum = (0..pairs)
                         .into_par_iter()
                         .with_min_len(per)
                         .fold(
                             || self.bin_sum(table.step.len(), twin.is_some()),
                             |mut b, p| {
-                                let j = 2 * p;
-                                self.add_bins(&table, spectra, xt, j..(j + 2).min(bins), &mut b);
+                                self.add_pair(&table, spectra, xt, p, &mut b);
                                 b
                             },
                         )
@@ -511,18 +524,8 @@ impl Confocal {
         let tol = 1e-6 * self.cfg.wavelength();
         let rows = AxisKernel::new(self.lay.nsx, sg.cx, mx, sg.dx, self.lay.px, tol);
         let cols = AxisKernel::new(self.lay.nsy, sg.cy, my, sg.dy, self.lay.py, tol);
-        let runs = |idx: &[(usize, f64)]| {
-            let mut r: Vec<(usize, usize)> = Vec::new();
-            for &(i, _) in idx {
-                match r.last_mut() {
-                    Some((s, n)) if *s + *n == i => *n += 1,
-                    _ => r.push((i, 1)),
-                }
-            }
-            r
-        };
-        let segments = runs(&cols.computed);
-        let row_runs = runs(&rows.computed);
+        let segments = runs(cols.computed.iter().map(|c| c.0));
+        let row_runs = runs(rows.computed.iter().map(|c| c.0));
         let mut source_row: Vec<u32> = vec![mx as u32; mx];
         for &(r, _) in &rows.computed {
             source_row[r] = r as u32;
@@ -531,14 +534,15 @@ impl Confocal {
             source_row[dst] = src as u32;
         }
         let mut used = vec![false; my];
-        for &(c, _) in &cols.computed {
+        for c in cols
+            .computed
+            .iter()
+            .map(|c| c.0)
+            .chain(cols.copies.iter().map(|c| c.0))
+        {
             used[c] = true;
         }
-        for &(c, _) in &cols.copies {
-            used[c] = true;
-        }
-        let free: Vec<(usize, f64)> = (0..my).filter(|&c| !used[c]).map(|c| (c, 0.0)).collect();
-        let zero_cols = runs(&free);
+        let zero_cols = runs((0..my).filter(|&c| !used[c]));
         let span = self.cfg.span();
         let scale = 1.0 / (mx * my) as f64;
         let k0 = self.cfg.k_lo() as f64;
@@ -579,19 +583,20 @@ impl Confocal {
         t
     }
 
-    /// `sum += Σ_j X̂_j · κ̂_{j,z}` over the bins `js` (one or two) for the slice of
-    /// `table` (and `sum_t += Σ_j X̂ᵀ_j · κ̂_{j,z}` for its twin): one pass over the sums.
-    fn add_bins(
+    /// `sum += Σ_j X̂_j · κ̂_{j,z}` over the pair of bins `j = 2·pair, 2·pair + 1` (the second
+    /// when there is one) for the slice of `table` (and `sum_t += Σ_j X̂ᵀ_j · κ̂_{j,z}` for
+    /// its twin): one pass over the sums.
+    fn add_pair(
         &self,
         table: &Table,
         spectra: &[Complex32],
         spectra_t: Option<&[Complex32]>,
-        js: std::ops::Range<usize>,
+        pair: usize,
         b: &mut BinSum,
     ) {
         let m = self.lay.mx * self.lay.my;
-        let j = js.start;
-        let two = js.len() == 2;
+        let j = 2 * pair;
+        let two = j + 1 < self.cfg.bins();
         let mut spec = std::mem::take(&mut b.spec);
         self.kernel(table, j, b, &mut spec);
         let mut spec2 = std::mem::take(&mut b.spec2);
@@ -646,8 +651,9 @@ impl Confocal {
                 *p = p0.wrapping_add(st.wrapping_mul(jj));
             }
         }
-        // The computed rows: their computed columns, then the mirrored columns, then the
-        // y-pass over each run of computed rows, then the mirrored rows.
+        // The computed rows: their gap columns zeroed, their computed columns, then the
+        // mirrored columns; then the y-pass over each run of computed rows. The mirrored and
+        // the all-zero rows are read from their source by the transpose.
         let per_row = table.cols.computed.len();
         for (r, &(row, _)) in table.rows.computed.iter().enumerate() {
             let img = &mut b.img[row * my..(row + 1) * my];

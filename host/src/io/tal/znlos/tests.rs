@@ -67,22 +67,30 @@ fn at(i: usize, j: usize) -> [f32; 3] {
 }
 
 fn grid(nx: usize, ny: usize, transposed: bool) -> (Vec<f32>, Vec<usize>) {
+    points(nx, ny, transposed, at)
+}
+
+/// Values `f(i, j)` (3 each) of an `nx × ny` grid, stored `(X, Y, 3)` or `(3, Y, X)`.
+fn points(
+    nx: usize,
+    ny: usize,
+    transposed: bool,
+    f: impl Fn(usize, usize) -> [f32; 3],
+) -> (Vec<f32>, Vec<usize>) {
+    let mut v = Vec::new();
     if transposed {
-        // (3, Y, X)
-        let mut v = Vec::new();
         for c in 0..3 {
             for j in 0..ny {
                 for i in 0..nx {
-                    v.push(at(i, j)[c]);
+                    v.push(f(i, j)[c]);
                 }
             }
         }
         (v, vec![3, ny, nx])
     } else {
-        let mut v = Vec::new();
         for i in 0..nx {
             for j in 0..ny {
-                v.extend(at(i, j));
+                v.extend(f(i, j));
             }
         }
         (v, vec![nx, ny, 3])
@@ -151,33 +159,6 @@ fn builder(
     b
 }
 
-/// A grid of normals `n(i, j)` laid out as [`grid`]'s positions.
-fn normals(
-    nx: usize,
-    ny: usize,
-    transposed: bool,
-    n: impl Fn(usize, usize) -> [f32; 3],
-) -> (Vec<f32>, Vec<usize>) {
-    let mut v = Vec::new();
-    if transposed {
-        for c in 0..3 {
-            for j in 0..ny {
-                for i in 0..nx {
-                    v.push(n(i, j)[c]);
-                }
-            }
-        }
-        (v, vec![3, ny, nx])
-    } else {
-        for i in 0..nx {
-            for j in 0..ny {
-                v.extend(n(i, j));
-            }
-        }
-        (v, vec![nx, ny, 3])
-    }
-}
-
 /// `laserGridNormals` / `cameraGridNormals` are read as y-tal's converter reads them (the
 /// tal grids' normals, laid out as the positions, stored either way; grids of 2×5 and 4×2,
 /// no axis of 3 that would make the layout ambiguous), per point; a normal of zero length
@@ -190,8 +171,8 @@ fn grid_normals_are_read_as_ytal_converts_them() {
     for transposed in [false, true] {
         let mut b = builder(ZnlosLayout::Rows7, [2, 5], [4, 2], 4, "", transposed);
         for (name, (v, shape)) in [
-            ("laserGridNormals", normals(2, 5, transposed, ln)),
-            ("cameraGridNormals", normals(4, 2, transposed, cn)),
+            ("laserGridNormals", points(2, 5, transposed, ln)),
+            ("cameraGridNormals", points(4, 2, transposed, cn)),
         ] {
             b.create_dataset(name)
                 .with_f32_data(&v)
@@ -220,7 +201,7 @@ fn grid_normals_are_read_as_ytal_converts_them() {
         assert!(!g.normals.flat());
     }
     let mut b = builder(ZnlosLayout::Rows7, [2, 5], [4, 2], 4, "", false);
-    let (v, shape) = normals(2, 5, false, |i, j| {
+    let (v, shape) = points(2, 5, false, |i, j| {
         if (i, j) == (1, 2) { [0.0; 3] } else { ln(i, j) }
     });
     b.create_dataset("laserGridNormals")
