@@ -4,7 +4,7 @@
   python benches/python_scale.py [--vltm target/release/vltm] [--exh16 /tmp/exh16.npz]
 
 Needs the package installed (`pip install ./host/python dask distributed`). Prints:
-1. the CLI's `vltm direct` vs `vltm.open` + `vltm.direct` on the shared two_patches capture
+1. the CLI's `vltm direct` vs `vltm.open` + `vltm.direct` on the path-traced two_patches capture (`fixtures/ytal`)
    (median of 7 wall times each; the CLI writes only its .npy);
 2. on exh16 (256 rows), direct light over 32x32x24 voxels and a two-bounce column, one
    process vs a LocalCluster of 2 worker processes (one rayon thread each) through
@@ -39,11 +39,11 @@ def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--vltm", default=str(REPO / "target/release/vltm"))
     ap.add_argument("--exh16", default="/tmp/exh16.npz")
-    ap.add_argument("--shared", default=str(REPO.parent / "shared/data"))
+    ap.add_argument("--capture", default=str(REPO / "fixtures/ytal/two_patches/two_patches.hdf5"))
     a = ap.parse_args()
     import vltm
 
-    tp = os.path.join(a.shared, "two_patches/two_patches.hdf5")
+    tp = a.capture
     grid = "-0.75:0.75:16,-0.75:0.75:16,0.4:1.35:20"
     with tempfile.TemporaryDirectory() as d:
         out = os.path.join(d, "d.npy")

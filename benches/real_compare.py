@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """vltm against y-tal's filtered backprojection (`tal.reconstruct.fbp`) on a real Stanford
-confocal capture (MAT v5, `../shared/data/real/`): same preprocessing, volume, λ, σ, weights.
+confocal capture (MAT v5, `fixtures/real/`): same preprocessing, volume, λ, σ, weights.
 
 Optional: needs `pip install y-tal scipy` (never needed to build or test vltm). y-tal cannot
 read the Stanford layout (`rect_data` + `width`), so this script builds its capture by hand
@@ -13,7 +13,7 @@ benches/ytal_compare.py does); y-tal samples a summed bin at its start, vltm at 
 and both wall times, their ratio and the Pearson
 correlation of the max-normalised intensities.
 
-    python3 benches/real_compare.py ../shared/data/real/data_resolution_chart_40cm.mat \\
+    python3 benches/real_compare.py fixtures/real/data_resolution_chart_40cm.mat \\
         --volume=-0.2:0.2:64,-0.2:0.2:64,0.35:0.45:11 [--wl 0.04] [--cpus 2] [--repeat 3] \\
         [--rebin 4] [--reference] [--save PREFIX]
 

@@ -34,7 +34,7 @@ Probes (lambda = sigma = 0.5 m, no lens weights: vltm `--weights one`, y-tal
   of the scene, the lit patch that reflects onto B). vltm: `vltm column` (4-vertex gate, Eq. 14).
   y-tal has no 4-vertex gate: its PROJECTOR_CAMERA transient with projector focus x_a, sampled
   per voxel x_b at bin k = rint(|x_a - x_b| / delta_t), is Eq. 14 (DESIGN §B.7 item 7; the way
-  ../shared/data/tools/run_reference.py made ref_ltmcol_focusA.npy). y-tal takes its
+  fixtures/ytal/tools/run_reference.py made ref_ltmcol_focusA.npy). y-tal takes its
   camera-convolution FFT path for all 24 slices in one call (the projector side is a single
   point, element-wise).
 

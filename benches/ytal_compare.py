@@ -2,13 +2,13 @@
 """Side-by-side timing of vltm and the peer library y-tal on the same capture and volume.
 
 Optional: needs `pip install y-tal` (never needed to build or test vltm). Runs y-tal 0.20's
-`tal.reconstruct.pf_dev.solve(DIRECT_LIGHT)` the way `../shared/data/tools/run_reference.py`
+`tal.reconstruct.pf_dev.solve(DIRECT_LIGHT)` the way `fixtures/ytal/tools/run_reference.py`
 made the committed references (laser falloff compensated, t_start moved to 0 by zero
 padding, wl_sigma = wl_mean, brute-force path), then `vltm direct` with the matching options
 (`--weights one --sigma WL --compensate-laser --band 6`), and prints both wall times, the ratio
 and the Pearson correlation of the two intensity volumes.
 
-    python3 benches/ytal_compare.py ../shared/data/two_patches/two_patches.hdf5 --wl 0.4 \\
+    python3 benches/ytal_compare.py fixtures/ytal/two_patches/two_patches.hdf5 --wl 0.4 \\
         [--volume -0.75:0.75:16,-0.75:0.75:16,0.4:1.35:20] [--cpus 2] [--vltm target/release/vltm]
 """
 import argparse

@@ -1,8 +1,8 @@
-//! The exit sign of the Stanford confocal captures (`../shared/data/real/data_exit_sign.mat`)
+//! The exit sign of the Stanford confocal captures (`fixtures/real/data_exit_sign.mat`)
 //! imaged on its own tilted plane, where its letters are legible (docs/real-data.md).
 //!
 //! ```sh
-//! cargo run --release --example exit_sign -- ../shared/data/real/data_exit_sign.mat docs/real-exit-sign.png
+//! cargo run --release --example exit_sign -- fixtures/real/data_exit_sign.mat docs/real-exit-sign.png
 //! ```
 //!
 //! Two passes of `vltm::probe::direct`, λ = 0.04 m, σ = 0.02 m (a virtual pulse of half a

@@ -32,12 +32,8 @@ const SHAPE: [usize; 3] = [13, 3, 8];
 /// Patch A of `fixtures/scenes/two_patches.json`.
 const FOCUS: &str = "-0.45,0,0.8";
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
 fn fixture(stem: &str) -> PathBuf {
-    root().join("fixtures").join(format!("{stem}.npz"))
+    support::fixture(&format!("{stem}.npz"))
 }
 
 /// The `vltm` binary (see the module documentation).
@@ -263,7 +259,7 @@ fn off_lattice_volume_is_named_and_resampled() {
 fn simulate_writes_the_committed_capture() {
     let t = TempDir::new("simulate");
     let out_npz = t.path("s.npz");
-    let scene = root().join("fixtures/scenes/two_patches_line.json");
+    let scene = support::fixture("scenes/two_patches_line.json");
     let out = ok(
         &t.0,
         &[
@@ -383,13 +379,13 @@ fn direct_and_column_write_hdf5_volumes() {
     }
 }
 
-/// The shared y-tal capture through the command line as a user runs it: `info` names its
+/// The path-traced y-tal capture of `fixtures/ytal` through the command line as a user runs it: `info` names its
 /// format and geometry, `direct` streams it row by row and writes a volume whose peak is on
 /// patch A (x_a = (−0.25, 0.15, 0.7): the volume's voxel (−0.25, 0.15, 0.65), as y-tal's).
 #[test]
 fn ytal_capture_through_the_command_line() {
     let t = TempDir::new("ytalcli");
-    let h5 = root().join("../shared/data/two_patches/two_patches.hdf5");
+    let h5 = support::fixture("ytal/two_patches/two_patches.hdf5");
     let h5 = h5.to_str().expect("utf-8");
     let out = ok(&t.0, &["info", h5]);
     print!("{out}");
@@ -402,7 +398,7 @@ fn ytal_capture_through_the_command_line() {
     ] {
         assert!(out.contains(want), "`vltm info` lacks `{want}`:\n{out}");
     }
-    let single = root().join("../shared/data/single/single.hdf5");
+    let single = support::fixture("ytal/single/single.hdf5");
     let out = ok(&t.0, &["info", single.to_str().expect("utf-8")]);
     assert!(
         out.contains("H_format T_Sx_Sy") && out.contains("reciprocity"),
@@ -870,10 +866,7 @@ fn bad_captures_exit_1_naming_the_file() {
 fn simulate_ptu_round_trip() {
     let t = TempDir::new("ptu");
     let mut scene: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(
-            PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fixtures/scenes/two_patches.json"),
-        )
-        .expect("scene"),
+        &std::fs::read_to_string(support::fixture("scenes/two_patches.json")).expect("scene"),
     )
     .expect("json");
     scene["noise"] = serde_json::json!({"peak_counts": 50.0, "background": 0.2, "seed": 7});
@@ -970,7 +963,7 @@ fn an_output_naming_the_input_is_refused() {
     );
     assert!(err.contains("--out"), "{err}");
     assert_eq!(std::fs::read(&cap).expect("read"), before);
-    let scene = root().join("fixtures/scenes/three_points.json");
+    let scene = support::fixture("scenes/three_points.json");
     let copy = t.path("scene.json");
     std::fs::copy(&scene, &copy).expect("copy scene");
     fails(&t.0, &["simulate", "scene.json", "--out", "scene.json"], 2);
@@ -1029,7 +1022,7 @@ fn a_failed_output_keeps_the_previous_file() {
 #[test]
 fn simulate_outputs_are_all_or_nothing() {
     let t = TempDir::new("sim-atomic");
-    let scene = root().join("fixtures/scenes/three_points.json");
+    let scene = support::fixture("scenes/three_points.json");
     let missing = t.path("no-such-dir").join("c.ptu");
     fails(
         &t.0,

@@ -17,13 +17,12 @@
 //! appear in `console` blocks; examples that cannot run here (hardware, long runs, downloads,
 //! Python, other programs) belong in ```` ```sh ```` blocks, which are not run.
 //!
-//! The commands of one page run in order in one scratch directory laid out like a checkout:
-//! `<tmp>/repo/{fixtures,benches,docs,examples,kernel}` link to the repository's, and `<tmp>/shared`
-//! to the `shared/` folder beside the repository (`$VLTM_SHARED_DIR` overrides where that is),
-//! so `fixtures/…` and `../shared/data/…` resolve as in the documentation, and what a command
-//! writes stays in the scratch directory. A command that reads `../shared/` is skipped with a
-//! note when that folder is missing (CI has it; `VLTM_REQUIRE_REAL=1` makes its absence
-//! an error, as in `tests/real.rs`).
+//! The commands of one page run in order in one scratch directory laid out like the clone's
+//! root: `<tmp>/repo/{fixtures,benches,docs,examples,kernel}` link to the repository's, so
+//! `fixtures/…` resolves as in the documentation, and what a command writes stays in the
+//! scratch directory, never in the repository. Nothing outside the repository is linked: an
+//! example that reads a file the repository does not hold fails. Every example runs; none is
+//! skipped.
 //!
 //! **Links.** Every relative link and image (`[text](path)`, `![alt](path)`, `src="path"`) of
 //! `README.md`, `docs/*.md` and every other `README.md` of the repository (the crates', the
@@ -510,14 +509,6 @@ fn the_matcher_has_teeth() {
     assert!(examples("```console\n$ ls\n```\n").is_err());
 }
 
-/// `<dir>/shared` beside the repository (or `$VLTM_SHARED_DIR`), if it is there.
-fn shared_dir() -> Option<PathBuf> {
-    let p = std::env::var_os("VLTM_SHARED_DIR")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root().join("../shared"));
-    p.is_dir().then_some(p)
-}
-
 /// A scratch directory laid out like a checkout (module documentation), removed on drop.
 struct Scratch(PathBuf);
 
@@ -529,9 +520,6 @@ impl Scratch {
         std::fs::create_dir_all(&repo).expect("scratch dir");
         for d in ["fixtures", "benches", "docs", "examples", "kernel"] {
             symlink(&root().join(d), &repo.join(d));
-        }
-        if let Some(s) = shared_dir() {
-            symlink(&s, &base.join("shared"));
         }
         Self(base)
     }
@@ -579,19 +567,6 @@ fn console_examples_run() {
         }
         let scratch = Scratch::new(&name.replace(['/', '.'], "_"));
         for ex in &exs {
-            let needs_shared = ex.args.iter().any(|a| a.contains("../shared/"));
-            if needs_shared && shared_dir().is_none() {
-                assert!(
-                    std::env::var("VLTM_REQUIRE_REAL").is_err(),
-                    "{name}:{}: ../shared is missing",
-                    ex.line
-                );
-                eprintln!(
-                    "skipping {name}:{}: it reads ../shared, which is not there",
-                    ex.line
-                );
-                continue;
-            }
             ran += 1;
             let out = Command::new(support::vltm_bin())
                 .args(&ex.args)

@@ -40,16 +40,12 @@ const FIXTURES: [&str; 5] = [
     "three_points",
 ];
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
 fn scene_path(stem: &str) -> PathBuf {
-    root().join("fixtures/scenes").join(format!("{stem}.json"))
+    support::fixture(&format!("scenes/{stem}.json"))
 }
 
 fn capture_path(stem: &str) -> PathBuf {
-    root().join("fixtures").join(format!("{stem}.npz"))
+    support::fixture(&format!("{stem}.npz"))
 }
 
 fn scene(stem: &str) -> Scene {
@@ -121,7 +117,7 @@ fn is_local_max(vol: &Volume, v: &[f32], i: usize) -> bool {
 /// stale), every scene file has its capture, and every capture stays small.
 #[test]
 fn fixtures_match_fresh_renders() {
-    let mut scenes: Vec<String> = std::fs::read_dir(root().join("fixtures/scenes"))
+    let mut scenes: Vec<String> = std::fs::read_dir(support::fixture("scenes"))
         .expect("fixtures/scenes")
         .filter_map(|e| {
             let p = e.ok()?.path();
@@ -145,7 +141,7 @@ fn fixtures_match_fresh_renders() {
             committed.geometry,
             fresh.geometry,
             "{stem}: geometry of the committed capture differs from a fresh render of {}; \
-             re-run the command in fixtures/README.md",
+             re-run the command in fixtures/README.md, then `bash fixtures/sums.sh`",
             scene_path(stem).display()
         );
         assert_eq!(committed.data.len(), fresh.data.len(), "{stem}: H size");
@@ -162,7 +158,8 @@ fn fixtures_match_fresh_renders() {
         assert!(
             diff <= 1e-6 * peak,
             "{stem}: committed capture differs from a fresh render by {diff:e} (peak {peak:e}); \
-             re-run `cargo run --release --bin vltm -- simulate fixtures/scenes/{stem}.json --out fixtures/{stem}.npz`"
+             re-run `cargo run --release --bin vltm -- simulate fixtures/scenes/{stem}.json --out fixtures/{stem}.npz`, \
+             then `bash fixtures/sums.sh`"
         );
         assert!(
             bytes <= 1 << 20,
@@ -717,7 +714,7 @@ fn iter_rows_yields_the_scan_in_order() {
         "streamed .npz",
     );
     let _ = std::fs::remove_file(&tmp);
-    let h5 = root().join("../shared/data/line/line.hdf5");
+    let h5 = support::fixture("ytal/line/line.hdf5");
     check(
         &mut || Box::new(vltm::io::tal::open(&h5).expect("tal")),
         "y-tal HDF5",

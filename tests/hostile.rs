@@ -772,7 +772,7 @@ fn peak_rss(dir: &TempDir, args: &[&str]) -> (u64, Output) {
 #[test]
 fn measured_peak_stays_in_the_budget() {
     let t = TempDir::new("peak");
-    let fixture = root().join("fixtures/two_patches.npz");
+    let fixture = support::fixture("two_patches.npz");
     let f = fixture.to_str().unwrap();
     let vol = "-0.5:0.5:5,-0.5:0.5:5,0.5:1:5";
     let budget = 150u64 << 20;

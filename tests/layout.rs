@@ -20,6 +20,8 @@
 //! kernel does). Module declarations (`mod x;`) are containment, not imports; re-exports
 //! (`pub use`) are imports.
 
+mod support;
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::fs;
 use std::path::{Path, PathBuf};
@@ -628,4 +630,249 @@ fn checks_have_teeth() {
         Some("config")
     );
     assert_eq!(resolve("probe", &p[0], &kmods).as_deref(), Some(""));
+}
+
+// ---------------------------------------------------------------------------------------
+// A stranger's clone is enough: nothing outside the repository, fixtures whole and listed.
+
+/// Text files of the repository that the reference check reads: everything outside
+/// `target/`, hidden folders (`.git`) and the fuzzers' corpora, below 4 MB.
+fn repo_text_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    let mut entries: Vec<_> = fs::read_dir(dir)
+        .unwrap_or_else(|e| panic!("read {}: {e}", dir.display()))
+        .map(|e| e.expect("dir entry").path())
+        .collect();
+    entries.sort();
+    for p in entries {
+        let name = p.file_name().and_then(|n| n.to_str()).unwrap_or("");
+        if p.is_dir() {
+            let skip = (name.starts_with('.') && name != ".ci")
+                || ["target", "corpus", "artifacts", "__pycache__", "dist"].contains(&name);
+            if !skip {
+                repo_text_files(&p, out);
+            }
+        } else if fs::metadata(&p).is_ok_and(|m| m.len() < 4 << 20) {
+            out.push(p);
+        }
+    }
+}
+
+/// The places in `files` that name a folder beside the repository (the development data that
+/// a clone does not have), as `path:line: text`.
+fn outside_references(files: &[PathBuf]) -> Vec<String> {
+    // Spelled in pieces, so that this file does not find itself.
+    let needles = [
+        ["..", "/shared"].concat(),
+        ["/work", "/shared"].concat(),
+        ["VLTM_", "SHARED"].concat(),
+    ];
+    let mut found = Vec::new();
+    for p in files {
+        let Ok(text) = fs::read_to_string(p) else {
+            continue; // binary
+        };
+        for (i, line) in text.lines().enumerate() {
+            if needles.iter().any(|n| line.contains(n.as_str())) {
+                let rel = p.strip_prefix(root()).unwrap_or(p);
+                found.push(format!("{}:{}: {}", rel.display(), i + 1, line.trim()));
+            }
+        }
+    }
+    found
+}
+
+/// Nothing in the repository — code, tests, docs, scripts, the CI — refers to a folder beside
+/// it: a clone with nothing beside it must build, test and run every example.
+#[test]
+fn nothing_refers_outside_the_repository() {
+    let mut files = Vec::new();
+    repo_text_files(root(), &mut files);
+    assert!(files.len() > 100, "only {} files found", files.len());
+    let found = outside_references(&files);
+    assert!(
+        found.is_empty(),
+        "references to files outside the repository (copy what is needed into fixtures/, \
+         with its provenance in fixtures/README.md):\n{}",
+        found.join("\n")
+    );
+    // With teeth: a file that reads the development data beside the repository is found.
+    let dir = std::env::temp_dir().join(format!("vltm-layout-{}", std::process::id()));
+    fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("bad.rs");
+    let text = ["let p = root().join(\"..", "/shared/data/x.hdf5\");\n"].concat();
+    fs::write(&bad, text).unwrap();
+    assert_eq!(outside_references(&[bad]).len(), 1);
+    let _ = fs::remove_dir_all(&dir);
+}
+
+/// The data files of `fixtures/` (captures, volumes, partial states), relative to it.
+fn fixture_data_files() -> Vec<String> {
+    fn walk(dir: &Path, out: &mut Vec<PathBuf>) {
+        for e in fs::read_dir(dir).unwrap_or_else(|e| panic!("read {}: {e}", dir.display())) {
+            let p = e.expect("dir entry").path();
+            if p.is_dir() {
+                walk(&p, out);
+            } else {
+                out.push(p);
+            }
+        }
+    }
+    let base = root().join("fixtures");
+    let mut files = Vec::new();
+    walk(&base, &mut files);
+    let data = ["hdf5", "h5", "npz", "npy", "mat", "ptu", "vltmpart"];
+    let mut out: Vec<String> = files
+        .iter()
+        .filter(|p| p.extension().is_some_and(|e| data.iter().any(|d| e == *d)))
+        .map(|p| {
+            p.strip_prefix(&base)
+                .unwrap()
+                .to_string_lossy()
+                .replace('\\', "/")
+        })
+        .collect();
+    out.sort();
+    out
+}
+
+/// The most bytes `fixtures/` may hold: the repository stays lean.
+const FIXTURES_MAX_BYTES: u64 = 30_000_000;
+
+/// Every data file of `fixtures/` is listed in `fixtures/SHA256SUMS` with its checksum, every
+/// listed file is there and whole, its provenance is in a `fixtures/…/README.md`, and the
+/// folder holds at most 30 MB.
+#[test]
+fn fixtures_are_whole_listed_and_small() {
+    let sums = support::fixture_sums();
+    let data = fixture_data_files();
+    assert!(
+        data.len() >= 30,
+        "only {} data files in fixtures/",
+        data.len()
+    );
+    let unlisted: Vec<&String> = data.iter().filter(|f| !sums.contains_key(*f)).collect();
+    assert!(
+        unlisted.is_empty(),
+        "fixtures not in fixtures/SHA256SUMS (run `bash fixtures/sums.sh` after adding one, \
+         and give its provenance in fixtures/README.md): {unlisted:?}"
+    );
+    let mut bad = Vec::new();
+    for rel in sums.keys() {
+        if let Err(e) = support::check_fixture(rel, &root().join("fixtures").join(rel)) {
+            bad.push(e);
+        }
+    }
+    assert!(bad.is_empty(), "{}", bad.join("\n"));
+    // Provenance: each data file (or its folder) is named by the README of fixtures/ or of a
+    // folder above it.
+    let mut readmes = String::new();
+    for r in [
+        "README.md",
+        "ytal/README.md",
+        "real/README.md",
+        "pathtraced/README.md",
+        "firmware/README.md",
+    ] {
+        readmes += &fs::read_to_string(root().join("fixtures").join(r))
+            .unwrap_or_else(|e| panic!("fixtures/{r}: {e}"));
+    }
+    let orphans: Vec<&String> = data
+        .iter()
+        .filter(|f| {
+            let name = f.rsplit('/').next().unwrap();
+            let dir = f.rsplit_once('/').map_or("", |(d, _)| d);
+            !(readmes.contains(f.as_str())
+                || readmes.contains(name)
+                || (!dir.is_empty() && readmes.contains(&format!("{dir}/"))))
+        })
+        .collect();
+    assert!(
+        orphans.is_empty(),
+        "fixtures without provenance in fixtures/README.md: {orphans:?}"
+    );
+    let total: u64 = {
+        fn size(p: &Path) -> u64 {
+            if p.is_dir() {
+                fs::read_dir(p)
+                    .unwrap()
+                    .map(|e| size(&e.unwrap().path()))
+                    .sum()
+            } else {
+                fs::metadata(p).map_or(0, |m| m.len())
+            }
+        }
+        size(&root().join("fixtures"))
+    };
+    assert!(
+        total <= FIXTURES_MAX_BYTES,
+        "fixtures/ holds {total} bytes, more than {FIXTURES_MAX_BYTES}: use a smaller capture \
+         (fewer bins, a crop, a rebin) made by a script kept in fixtures/"
+    );
+    // With teeth: a damaged copy of a listed fixture is refused, naming it and the way back.
+    let rel = "two_patches_single.npz";
+    let dir = std::env::temp_dir().join(format!("vltm-fixture-{}", std::process::id()));
+    fs::create_dir_all(&dir).unwrap();
+    let copy = dir.join("copy.npz");
+    let mut bytes = fs::read(root().join("fixtures").join(rel)).unwrap();
+    bytes.truncate(bytes.len() / 2);
+    fs::write(&copy, &bytes).unwrap();
+    let e = support::check_fixture(rel, &copy).unwrap_err();
+    assert!(
+        e.contains("fixtures/two_patches_single.npz is damaged")
+            && e.contains("git checkout -- fixtures/two_patches_single.npz"),
+        "{e}"
+    );
+    let e = support::check_fixture(rel, &dir.join("gone.npz")).unwrap_err();
+    assert!(
+        e.contains("is missing") && e.contains("git checkout --"),
+        "{e}"
+    );
+    let _ = fs::remove_dir_all(&dir);
+}
+
+/// Files the README's tour and the tests write are outputs, never committed: the clone's root
+/// holds only the workspace's own files, `.gitignore` names the outputs, and (in a git
+/// checkout) no file at the root is tracked or left untracked beyond those.
+#[test]
+fn no_outputs_at_the_root() {
+    let ignore = fs::read_to_string(root().join(".gitignore")).expect(".gitignore");
+    for pat in [
+        "/*.npy",
+        "/*.png",
+        "/*.h5",
+        "/*.npz",
+        "/*.ptu",
+        "/vltm-demo/",
+        "target/",
+    ] {
+        assert!(
+            ignore.lines().any(|l| l.trim() == pat),
+            ".gitignore does not name {pat}"
+        );
+    }
+    let out = std::process::Command::new("git")
+        .args(["ls-files", "--cached", "--others", "--exclude-standard"])
+        .current_dir(root())
+        .output()
+        .expect("git (the tests run in a git checkout)");
+    assert!(out.status.success(), "git ls-files failed");
+    let allowed = [
+        ".gitignore",
+        "Cargo.toml",
+        "Cargo.lock",
+        "README.md",
+        "rustfmt.toml",
+        "clippy.toml",
+        "rust-toolchain.toml",
+    ];
+    let stray: Vec<String> = String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter(|f| !f.contains('/') && !allowed.contains(f))
+        .map(str::to_string)
+        .collect();
+    assert!(
+        stray.is_empty(),
+        "files at the repository's root that are outputs or strays (write outputs elsewhere, \
+         or name them in .gitignore): {stray:?}"
+    );
 }

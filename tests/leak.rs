@@ -2,7 +2,7 @@
 //! against the direct-only control, as means over the lit object's voxels (its surface ± one
 //! voxel), on two scenes with the same settings:
 //!
-//! * the shared path-traced `two_patches` / `two_patches_direct_only` (mitransient, tal HDF5,
+//! * the path-traced `two_patches` / `two_patches_direct_only` (mitransient, tal HDF5,
 //!   8×8 lasers × 8×8 SPADs): patch B, lit by patch A;
 //! * a panel lighting a figure (the demo's scene at 16×16 lasers × 16×16 SPADs), rendered in
 //!   the test by the simulator twice (all paths / direct only);
@@ -30,11 +30,9 @@ const EXEC: Exec<'static> = Exec {
     path: vltm::probe::Path::Auto,
 };
 
-fn shared(capture: &str, file: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data")
-        .join(capture)
-        .join(file)
+/// `fixtures/ytal/<capture>/<file>`, checked (`support::fixture`).
+fn ytal(capture: &str, file: &str) -> PathBuf {
+    support::fixture(&format!("ytal/{capture}/{file}"))
 }
 
 /// Points on the quadrilateral with corners `c` (in order), `n × n` cell centres.
@@ -55,9 +53,9 @@ fn quad(c: [[f64; 3]; 4], n: usize) -> Vec<Point> {
     out
 }
 
-/// Patch B of the shared two_patches scene (corners from its `scene.json`).
+/// Patch B of the path-traced two_patches scene (`fixtures/ytal`) (corners from its `scene.json`).
 fn patch_b() -> Vec<Point> {
-    let path = shared("two_patches", "scene.json");
+    let path = ytal("two_patches", "scene.json");
     let text = std::fs::read_to_string(&path).unwrap();
     let j: serde_json::Value = serde_json::from_str(&text).unwrap();
     let corners = &j["objects"]["patch_B"]["corners"];
@@ -191,11 +189,11 @@ fn check_corrected(name: &str, m: &Means) {
 fn two_patches() -> (Capture, Capture, Volume, Vec<usize>) {
     let vol = Volume::parse("-0.75:0.75:16,-0.75:0.75:16,0.4:1.35:20").unwrap();
     let b = vol.surface_voxels(&patch_b());
-    let open = |n: &str| io::open(&shared(n, &format!("{n}.hdf5"))).unwrap();
+    let open = |n: &str| io::open(&ytal(n, &format!("{n}.hdf5"))).unwrap();
     (open("two_patches"), open("two_patches_direct_only"), vol, b)
 }
 
-/// The shared path-traced two_patches (the capture holds the physical laser's falloff, so
+/// The path-traced two_patches of `fixtures/ytal` (the capture holds the physical laser's falloff, so
 /// `--compensate-laser`): patch B's voxels. docs/indirect-light.md.
 #[test]
 fn two_patches_leak_corrected_beats_the_control() {

@@ -35,7 +35,7 @@ fn root() -> PathBuf {
 }
 
 fn fixture(stem: &str) -> PathBuf {
-    root().join("fixtures").join(format!("{stem}.npz"))
+    support::fixture(&format!("{stem}.npz"))
 }
 
 struct TempDir(PathBuf);
@@ -1006,7 +1006,7 @@ fn resumes_from_the_firmwares_state() {
         c,
         "--uncompressed",
     ]));
-    let fw = |n: &str| root().join("fixtures/firmware").join(n);
+    let fw = |n: &str| support::fixture(&format!("firmware/{n}"));
     let (fd, fc) = (fw("fw_direct.vltmpart"), fw("fw_column.vltmpart"));
     let held = vltm::probe::Partial::read(&fd).expect("firmware state");
     assert_eq!(

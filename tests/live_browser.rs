@@ -215,7 +215,7 @@ fn the_live_page_in_headless_chromium() {
     let dir = std::env::temp_dir().join(format!("vltm-live-browser-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("temp dir");
-    let cap = root.join("fixtures/two_patches.npz");
+    let cap = support::fixture("two_patches.npz");
     let cap = cap.to_str().expect("utf-8");
     let out = dir.join("live.npy");
     let port = std::net::TcpListener::bind("127.0.0.1:0")

@@ -1,7 +1,9 @@
-//! The LTM as a matrix on the shared y-tal capture `two_patches` (`../shared/data/`):
+//! The LTM as a matrix on the path-traced y-tal capture `two_patches` (`fixtures/ytal/`):
 //! `probe::matrix` on Γ×Γ equals the column probe element by element, relighting with a
 //! one-hot pattern equals the column and with two foci the sum of their amplitudes, and the
 //! streamed row `T(·, x_b)` equals the column of the transposed capture (`--swap-roles`).
+
+mod support;
 
 use std::path::PathBuf;
 
@@ -10,18 +12,18 @@ use vltm::probe::{self, ColumnGate, Exec, Path, Pattern, Shell, Wave};
 use vltm::volume::Volume;
 use vltm_kernel::Point;
 
-/// The volume of the shared references (16 × 16 × 20 voxels, y-tal's).
+/// The volume of the y-tal references (16 × 16 × 20 voxels, y-tal's).
 const SPEC: &str = "-0.75:0.75:16,-0.75:0.75:16,0.4:1.35:20";
 /// Patch A's and patch B's centres (`two_patches/scene.json`).
 const X_A: Point = [-0.25, 0.15, 0.7];
 const X_B: Point = [0.35, -0.15, 1.0];
 
 fn capture() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/two_patches/two_patches.hdf5")
+    support::fixture("ytal/two_patches/two_patches.hdf5")
 }
 
 fn source() -> Box<dyn RowSource> {
-    io::open_source(&capture()).expect("the shared two_patches capture")
+    io::open_source(&capture()).expect("the two_patches capture of fixtures/ytal")
 }
 
 /// The band path: the reference every other path is checked against, and the one the
@@ -33,7 +35,7 @@ fn band() -> Exec<'static> {
     }
 }
 
-/// Γ of the shared volume at the default ε (as `vltm indirect` computes it).
+/// Γ of the references' volume at the default ε (as `vltm indirect` computes it).
 fn gamma_points(wave: &Wave) -> Vec<Point> {
     let vol = Volume::parse(SPEC).expect("spec");
     let d = probe::direct(&mut *source(), &vol, wave, Exec::default()).expect("direct");

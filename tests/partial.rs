@@ -2,8 +2,10 @@
 //! state serialised and read back, merged and finished, equals one pass over all rows —
 //! bit-identical where the summation order is the same (one part holding every row, one
 //! thread), else within 1e-6 relative — for every probe and evaluation path, on a committed
-//! fixture and on the shared y-tal capture. Parts of other captures or parameters,
+//! fixture and on the path-traced y-tal capture (`fixtures/ytal`). Parts of other captures or parameters,
 //! overlapping or missing rows, and damaged states are refused with one-line errors.
+
+mod support;
 
 use std::path::{Path, PathBuf};
 use vltm::exec::{Exec, Path as EvalPath};
@@ -13,12 +15,8 @@ use vltm::probe::{
 };
 use vltm::volume::Volume;
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
 fn fixture() -> PathBuf {
-    root().join("fixtures/two_patches.npz")
+    support::fixture("two_patches.npz")
 }
 
 /// A grid whose pitch (1/14 m) divides the fixture's SPAD pitch (1/7 m): planar applies.
@@ -203,11 +201,11 @@ fn one_part_is_bit_identical_to_one_pass() {
     });
 }
 
-/// The shared y-tal capture (streamed from HDF5), direct light on the default path and a
+/// The path-traced y-tal capture of `fixtures/ytal` (streamed from HDF5), direct light on the default path and a
 /// column: four parts equal one pass.
 #[test]
 fn shared_capture_split_four_ways() {
-    let p = root().join("../shared/data/two_patches/two_patches.hdf5");
+    let p = support::fixture("ytal/two_patches/two_patches.hdf5");
     let volume = Volume::parse("-0.75:0.75:16,-0.75:0.75:16,0.4:1.35:20").expect("grid");
     for task in [
         Task::Direct,
@@ -252,7 +250,7 @@ fn merge_err(parts: Vec<Partial>) -> String {
 #[test]
 fn mismatched_parts_are_refused() {
     let p = fixture();
-    let other = root().join("fixtures/two_patches_direct.npz");
+    let other = support::fixture("two_patches_direct.npz");
     let volume = Volume::parse("-0.5:0.5:6,-0.5:0.5:6,0.5:1.0:3").expect("grid");
     let w = Wave::default();
     let a = part(&p, &volume, &w, 0..32);

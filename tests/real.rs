@@ -1,4 +1,4 @@
-//! Direct light on the two real Stanford confocal captures (`../shared/data/real/`, measured
+//! Direct light on the two real Stanford confocal captures (`fixtures/real/`, measured
 //! SPAD counts, 64×64 wall points × 2048 bins of 4 ps), read natively from their MAT v5 files
 //! with the published conventions, and preprocessed as the authors' script does (first 600
 //! bins dropped, 4 bins summed). λ = σ = 0.04 m, no lens weights (the target
@@ -13,8 +13,7 @@
 //! * the strongest voxel is inside the scanned square, away from its edge, and the farthest
 //!   decoy slices are below 0.9 of the brightest.
 //!
-//! The captures are not in the repository; without `../shared/data/real` the test says so
-//! and fails only when `VLTM_REQUIRE_REAL=1`.
+//! The captures are committed in `fixtures/real/` (provenance in `fixtures/README.md`).
 
 use std::path::{Path as FsPath, PathBuf};
 use vltm::exec::{Exec, Path};
@@ -24,21 +23,11 @@ use vltm::probe::{self, Wave};
 use vltm::volume::Volume;
 use vltm_kernel::Weights;
 
-fn real(name: &str) -> Option<PathBuf> {
-    let p = FsPath::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data/real")
-        .join(name);
-    if p.exists() {
-        Some(p)
-    } else {
-        assert!(
-            std::env::var("VLTM_REQUIRE_REAL").is_err(),
-            "{} is missing",
-            p.display()
-        );
-        eprintln!("skipping: {} is not there", p.display());
-        None
-    }
+mod support;
+
+/// `fixtures/real/<name>`, checked (`support::fixture`: a missing or damaged file fails).
+fn real(name: &str) -> PathBuf {
+    support::fixture(&format!("real/{name}"))
 }
 
 /// The authors' preprocessing: bins 0..600 dropped, 4 bins summed.
@@ -85,8 +74,8 @@ fn image(path: &FsPath, nx: usize, z: (f64, f64, usize)) -> (f32, Vec<f32>, [f32
     (zk, slice_max, volume.points[at], f64::from(w))
 }
 
-fn check(name: &str, nx: usize, z: (f64, f64, usize), depth: (f32, f32)) -> Option<[f32; 3]> {
-    let p = real(name)?;
+fn check(name: &str, nx: usize, z: (f64, f64, usize), depth: (f32, f32)) -> [f32; 3] {
+    let p = real(name);
     let (zk, slices, peak, w) = image(&p, nx, z);
     eprintln!(
         "{name}: brightest slice z = {zk:.3} m; slice maxima {slices:?}; strongest voxel {peak:?}"
@@ -109,19 +98,17 @@ fn check(name: &str, nx: usize, z: (f64, f64, usize), depth: (f32, f32)) -> Opti
             "{name}: strongest voxel {peak:?} on the edge of [-{w}, {w}]^2"
         );
     }
-    Some(peak)
+    peak
 }
 
 #[test]
 fn resolution_chart_is_at_40_cm() {
-    let Some(peak) = check(
+    let peak = check(
         "data_resolution_chart_40cm.mat",
         64,
         (0.34, 0.46, 13),
         (0.39, 0.41),
-    ) else {
-        return;
-    };
+    );
     // In the lower group of horizontal bars at x < 0, y < 0 (lower right in vltm's figures,
     // which are drawn as seen from the wall, x increasing to the left): the second index of
     // `rect_data` runs down y (before, it ran up and this group was at y > 0, with the exit

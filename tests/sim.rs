@@ -6,16 +6,17 @@
 //! `cargo test --release -p vltm-suite --test sim`; the render-time measurement of a 16×16 ×
 //! 16×16 × 800-bin scene is `-- --ignored --nocapture`.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use vltm::Error;
 use vltm::io::RowSource;
 use vltm::sim::{Aperture, Bounces, Cuboid, Noise, Object, Patch, PointScatterer, Scene, Setup};
 
+mod support;
+
+/// `fixtures/sim/<name>`, checked (`support::fixture`).
 fn fixture(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("fixtures/sim")
-        .join(name)
+    support::fixture(&format!("sim/{name}"))
 }
 
 /// Accessors for the reference file (panicking with the key: a test helper).

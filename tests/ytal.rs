@@ -1,5 +1,5 @@
 //! Agreement with the peer library y-tal 0.20 (`tal.reconstruct.pf_dev`) on the mitransient
-//! captures in `../shared/data` (DESIGN §B.7): y-tal's outputs are committed data files there,
+//! captures in `fixtures/ytal` (DESIGN §B.7): y-tal's outputs are committed data files there,
 //! so no Python runs at test time.
 //!
 //! For every capture: vltm's direct volume with y-tal's conventions — `--weights one`,
@@ -23,11 +23,11 @@ use vltm::probe::{self, ColumnGate, Exec, Shell, Wave};
 use vltm::volume::Volume;
 use vltm_kernel::Weights;
 
+mod support;
+
+/// `fixtures/ytal/<capture>/<file>`, checked (`support::fixture`).
 fn data(capture: &str, file: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data")
-        .join(capture)
-        .join(file)
+    support::fixture(&format!("ytal/{capture}/{file}"))
 }
 
 /// |z|² of a complex64 `.npy` (C order), with its shape.
@@ -235,8 +235,7 @@ fn indirect_only_column_peaks_at_x_b_like_ytal() {
 /// max-normalised intensities and the same peak voxel.
 #[test]
 fn paired_direct_matches_ytal_fbp() {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("fixtures/tal");
-    let mut c = vltm::io::tal::open(&dir.join("paired.hdf5")).unwrap();
+    let mut c = vltm::io::tal::open(&support::fixture("tal/paired.hdf5")).unwrap();
     assert_eq!(c.scan_type(), vltm::io::tal::ScanType::Paired);
     assert!(vltm::io::RowSource::geometry(&c).paired_apart());
     let vol = Volume::parse("-0.4:0.4:17,-0.4:0.4:17,0.4:1.0:13").unwrap();
@@ -251,7 +250,7 @@ fn paired_direct_matches_ytal_fbp() {
         };
         let o = probe::direct(&mut c, &vol, &wave, exec).unwrap();
         let ours: Vec<f64> = o.values.iter().map(|&v| v as f64).collect();
-        let (theirs, shape) = read_c8_intensity(&dir.join("paired_fbp.npy"));
+        let (theirs, shape) = read_c8_intensity(&support::fixture("tal/paired_fbp.npy"));
         assert_eq!(shape, vol.shape);
         let r = pearson(&ours, &theirs);
         let (pa, pb) = (argmax(&ours), argmax(&theirs));

@@ -77,10 +77,7 @@ fn ok(args: &[&str]) -> String {
 /// The two-patch scene on an 8×8 grid (lasers × SPADs, or confocal), its times with the
 /// device legs (`legs`) or wall to wall.
 fn scene(confocal: bool, legs: bool) -> Capture {
-    let json = std::fs::read_to_string(
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("fixtures/scenes/two_patches.json"),
-    )
-    .expect("scene");
+    let json = std::fs::read_to_string(support::fixture("scenes/two_patches.json")).expect("scene");
     let mut v: serde_json::Value = serde_json::from_str(&json).expect("json");
     let setup = &mut v["setup"];
     if confocal {

@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Builds the Python package's abi3 wheel once, installs the built file in a fresh virtualenv
-# and runs its pytest suite (every probe against the command line on the shared captures, bad
+# and runs its pytest suite (every probe against the command line on the path-traced captures of fixtures/ytal, bad
 # input, xarray/netCDF round trips, split/merge, a 2-worker Dask LocalCluster) and the example
 # script.
 # Usage: host/python/ci.sh            (from anywhere; VENV=/path to choose the virtualenv;
@@ -51,5 +51,5 @@ if [ "$rc" -eq 5 ]; then
     exit 1
 fi
 [ "$rc" -eq 0 ] || exit "$rc"
-# The example: opens a shared capture, plots, runs the same on a Dask cluster.
+# The example: opens a path-traced capture, plots, runs the same on a Dask cluster.
 "$venv/bin/python" "$here/examples/two_patches.py" --png "$CARGO_TARGET_DIR/python-example.png"

@@ -193,3 +193,86 @@ pub fn scene_object_voxels(
 pub fn mean_over(v: &[f32], idx: &[usize]) -> f64 {
     idx.iter().map(|&i| f64::from(v[i])).sum::<f64>() / idx.len() as f64
 }
+
+/// The repository's root (the `vltm-suite` package).
+pub fn repo_root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The committed fixture `rel` (a path under `fixtures/`, e.g. `"ytal/single/single.hdf5"`),
+/// checked before a test reads it: a missing file, or a data file whose SHA-256 differs from
+/// its line in `fixtures/SHA256SUMS`, fails with a message that names the file and says how to
+/// restore it. A test never skips for a missing fixture.
+pub fn fixture(rel: &str) -> PathBuf {
+    let rel = rel.trim_start_matches("fixtures/");
+    let path = repo_root().join("fixtures").join(rel);
+    if let Err(e) = check_fixture(rel, &path) {
+        panic!("{e}");
+    }
+    path
+}
+
+/// [`fixture`]'s check, as a `Result` (tests of the check itself).
+pub fn check_fixture(rel: &str, path: &Path) -> Result<(), String> {
+    let restore = format!(
+        "restore it with `git checkout -- fixtures/{rel}` (fixtures/README.md says how it is made)"
+    );
+    let meta = std::fs::metadata(path)
+        .map_err(|e| format!("fixture fixtures/{rel} is missing ({e}): {restore}"))?;
+    if !meta.is_file() && !meta.is_dir() {
+        return Err(format!("fixture fixtures/{rel} is not a file: {restore}"));
+    }
+    let Some(want) = fixture_sums().get(rel) else {
+        return Ok(());
+    };
+    static CHECKED: OnceLock<std::sync::Mutex<std::collections::HashSet<PathBuf>>> =
+        OnceLock::new();
+    let checked = CHECKED.get_or_init(Default::default);
+    if checked.lock().unwrap().contains(path) {
+        return Ok(());
+    }
+    let bytes =
+        std::fs::read(path).map_err(|e| format!("fixture fixtures/{rel}: {e}: {restore}"))?;
+    let got = sha256_hex(&bytes);
+    if &got != want {
+        return Err(format!(
+            "fixture fixtures/{rel} is damaged ({} bytes, SHA-256 {got}, fixtures/SHA256SUMS \
+             says {want}): {restore}",
+            bytes.len()
+        ));
+    }
+    checked.lock().unwrap().insert(path.to_path_buf());
+    Ok(())
+}
+
+/// `fixtures/SHA256SUMS` (`sha256sum` format, paths relative to `fixtures/`), parsed once.
+pub fn fixture_sums() -> &'static std::collections::BTreeMap<String, String> {
+    static SUMS: OnceLock<std::collections::BTreeMap<String, String>> = OnceLock::new();
+    SUMS.get_or_init(|| {
+        let p = repo_root().join("fixtures/SHA256SUMS");
+        let text = std::fs::read_to_string(&p).unwrap_or_else(|e| {
+            panic!(
+                "fixtures/SHA256SUMS is missing ({e}): restore it with \
+                 `git checkout -- fixtures/SHA256SUMS`"
+            )
+        });
+        text.lines()
+            .filter(|l| !l.trim().is_empty())
+            .map(|l| {
+                let (sum, name) = l
+                    .split_once("  ")
+                    .unwrap_or_else(|| panic!("fixtures/SHA256SUMS: bad line {l:?}"));
+                (name.trim().to_string(), sum.trim().to_string())
+            })
+            .collect()
+    })
+}
+
+/// The SHA-256 of `bytes`, as lowercase hex.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::Digest;
+    sha2::Sha256::digest(bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect()
+}

@@ -95,6 +95,13 @@ pub fn load_from(root: &Path, scene: &str) -> Captures {
         let p = root
             .join(format!("{scene}_{v}"))
             .join(format!("{scene}_{v}.hdf5"));
+        if !p.is_file() {
+            panic!(
+                "{} is missing: restore it with `git checkout -- fixtures/pathtraced` \
+                 (fixtures/pathtraced/README.md says how it is rendered)",
+                p.display()
+            );
+        }
         io::open(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
     };
     let text = std::fs::read_to_string(root.join(format!("{scene}_all/scene.json"))).unwrap();

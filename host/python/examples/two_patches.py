@@ -1,16 +1,15 @@
-"""A notebook-sized tour of vltm from Python: open a shared capture, image its direct light,
+"""A notebook-sized tour of vltm from Python: open a path-traced capture, image its direct light,
 one column of the light transport matrix and the in-focus indirect light, plot them, then
 run the same on a Dask cluster and check that the volumes agree.
 
 Usage: python host/python/examples/two_patches.py [CAPTURE] [--png F.png] [--workers N]
-(default capture: ../shared/data/two_patches/two_patches.hdf5 beside the repository, else
-the repository's fixtures/two_patches.npz; default figure: docs/python-example.png).
+(default capture: the repository's fixtures/ytal/two_patches/two_patches.hdf5; default figure:
+docs/python-example.png).
 """
 
 from __future__ import annotations
 
 import argparse
-import os
 import pathlib
 import time
 
@@ -23,8 +22,7 @@ import numpy as np  # noqa: E402
 import vltm  # noqa: E402
 
 REPO = pathlib.Path(__file__).resolve().parents[3]
-SHARED = (pathlib.Path(os.environ.get("VLTM_SHARED", REPO.parent / "shared")) / "data"
-          / "two_patches" / "two_patches.hdf5")
+CAPTURE = REPO / "fixtures" / "ytal" / "two_patches" / "two_patches.hdf5"
 GRID = "-0.75:0.75:24,-0.75:0.75:24,0.4:1.35:20"
 FOCUS = (-0.25, 0.15, 0.7)  # on patch A
 
@@ -44,8 +42,7 @@ def mip(ax, a, title, focus=None):
 
 def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("capture", nargs="?", default=str(SHARED if SHARED.exists()
-                                                     else REPO / "fixtures" / "two_patches.npz"))
+    p.add_argument("capture", nargs="?", default=str(CAPTURE))
     p.add_argument("--png", default=str(REPO / "docs" / "python-example.png"))
     p.add_argument("--workers", type=int, default=2)
     a = p.parse_args()

@@ -1,7 +1,8 @@
-"""Shared paths for the vltm pytest suite: the repository, the shared y-tal captures
-(`../shared/data` beside the repository) and the `vltm` command line (`VLTM_BIN`, default
-`target/release/vltm`)."""
+"""Paths for the vltm pytest suite: the repository, its fixtures (the path-traced y-tal
+captures of `fixtures/ytal`, checked against `fixtures/SHA256SUMS` before use) and the `vltm`
+command line (`VLTM_BIN`, default `target/release/vltm`)."""
 
+import hashlib
 import os
 import pathlib
 import subprocess
@@ -10,9 +11,30 @@ import numpy as np
 import pytest
 
 REPO = pathlib.Path(__file__).resolve().parents[3]
-SHARED = pathlib.Path(os.environ.get("VLTM_SHARED", REPO.parent / "shared")) / "data"
-TWO_PATCHES = SHARED / "two_patches" / "two_patches.hdf5"
+TWO_PATCHES = REPO / "fixtures" / "ytal" / "two_patches" / "two_patches.hdf5"
 FIXTURE = REPO / "fixtures" / "two_patches.npz"
+
+
+def checked_fixture(path: pathlib.Path) -> pathlib.Path:
+    """`path` (under `fixtures/`), failing with a message that names it and says how to
+    restore it when it is missing or its SHA-256 differs from `fixtures/SHA256SUMS`."""
+    rel = path.relative_to(REPO / "fixtures").as_posix()
+    restore = (f"restore it with `git checkout -- fixtures/{rel}` "
+               "(fixtures/README.md says how it is made)")
+    if not path.is_file():
+        pytest.fail(f"fixture fixtures/{rel} is missing: {restore}", pytrace=False)
+    sums = {}
+    for line in (REPO / "fixtures" / "SHA256SUMS").read_text().splitlines():
+        if line.strip():
+            digest, name = line.split("  ", 1)
+            sums[name.strip()] = digest
+    want = sums.get(rel)
+    if want is not None:
+        got = hashlib.sha256(path.read_bytes()).hexdigest()
+        if got != want:
+            pytest.fail(f"fixture fixtures/{rel} is damaged (SHA-256 {got}, "
+                        f"fixtures/SHA256SUMS says {want}): {restore}", pytrace=False)
+    return path
 GRID = "-0.75:0.75:16,-0.75:0.75:16,0.4:1.35:20"
 FOCUS = (-0.25, 0.15, 0.7)
 
@@ -37,8 +59,7 @@ def cli_volume(tmp: pathlib.Path, *args: str) -> np.ndarray:
 
 @pytest.fixture(scope="session")
 def two_patches() -> pathlib.Path:
-    assert TWO_PATCHES.exists(), f"shared capture missing: {TWO_PATCHES}"
-    return TWO_PATCHES
+    return checked_fixture(TWO_PATCHES)
 
 
 KEYWORDS = {"from": "from_", "no-leak-correct": "leak_correct", "partial": "rows",

@@ -1,4 +1,4 @@
-"""The Python API against the command line's .npy volumes on the shared captures, arrays in
+"""The Python API against the command line's .npy volumes on the path-traced captures, arrays in
 (Capture.from_arrays), exceptions on bad input, and partial states split/merged/pickled."""
 
 import pickle

@@ -41,7 +41,7 @@
 //!   fit uses σ_m² = σ² + σ_p²). Pairs whose `τ_lvs` lies outside the window are left out of
 //!   fit and model. It keeps the indirect light but needs voxels finer than about λ/4 (a
 //!   surface between two voxel centres must be reproducible at the carrier): 3.8× the control
-//!   on the shared two_patches (pitch 0.1/0.05 m, λ = 0.4 m), but 1.01× on the 16×16 panel
+//!   on the path-traced two_patches (pitch 0.1/0.05 m, λ = 0.4 m), but 1.01× on the 16×16 panel
 //!   scene (pitch 0.06 m, λ = 0.133 m), where it explains only 83 % of the demodulated energy.
 //!
 //! [`DirectModel::explained`] reports the fraction of the capture's energy `Σ H²` in the zeroed

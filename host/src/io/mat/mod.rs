@@ -17,7 +17,7 @@
 //! Anything else is an [`Error::Format`] on `(layout)` listing the variables found (name,
 //! dims, class).
 //!
-//! **Stanford conventions**, none of which the file records (`../shared/data/real/README.md`,
+//! **Stanford conventions**, none of which the file records (`fixtures/real/README.md`,
 //! from the authors' script), applied by default and each overridable ([`MatOptions`]):
 //!
 //! * bins of 4 ps: Δt = 4e-12 s · c = 1.19917 mm of path (`--delta-t`);

@@ -55,10 +55,10 @@
 //! chunked `H`, its cache of decoded chunks (up to
 //! 64 MiB). [`read_all`] reads every row into a [`Capture`] (needed by `--swap-roles` and by
 //! [`io::open`](crate::io::open)). Peak resident set of `vltm column` on the exh16 capture
-//! (210 MB of `f32`): see docs/performance.md, *Reading y-tal HDF5*; on the small shared captures
+//! (210 MB of `f32`): see docs/performance.md, *Reading y-tal HDF5*; on the small captures of `fixtures/ytal`
 //! (two_patches, 6.6 MB) a block holds the whole `H`.
 //!
-//! tal writes `H` contiguous and uncompressed (checked with h5py on every shared capture); a
+//! tal writes `H` contiguous and uncompressed (checked with h5py on every capture it rendered for `fixtures/ytal`); a
 //! chunked `H` streams too. Reading times against the uncompressed `.npz` of the same
 //! capture: docs/performance.md, *Reading y-tal HDF5*.
 //!
@@ -104,7 +104,7 @@
 //!   ([`Geometry::laser_falloff_at`] of the returned geometry; both falloffs take the spots'
 //!   normals where the file has `*_grid_normals`, +z otherwise). Then
 //!   `--compensate-laser` (÷ `c'(S_l)`) gives exactly y-tal's `compensate_laser_cos_dsqr` result
-//!   `H / c(x0)` (`../shared/data/single/README.md`; there `c(x0)` = 0.47982 m⁻²).
+//!   `H / c(x0)` (`fixtures/ytal/single/README.md`; there `c(x0)` = 0.47982 m⁻²).
 //! * `T_Sx_Sy`, `T_Si` with any other laser grid (a paired, non-confocal custom scan): not
 //!   representable by [`Geometry`]; [`Error::Format`] on `laser_grid_xyz`.
 //!
@@ -115,7 +115,7 @@
 //! samples at `t0 + n·Δt`. [`TalOptions::bin_centre`] chooses:
 //!
 //! * `false` (**the default**, [`TalOptions::YTAL`]): `t0 = t_start`, the bin start, as y-tal's
-//!   `pf_dev` reads these files (DESIGN §B.7; shared data README: "pf_dev treats bin k as OPL
+//!   `pf_dev` reads these files (DESIGN §B.7; `fixtures/ytal/README.md`: "pf_dev treats bin k as OPL
 //!   t_start + k·delta_t").
 //! * `true` ([`TalOptions::BIN_CENTRE`]): `t0 = t_start + Δt/2`, the centre of the box, the rule
 //!   of DESIGN §B.0 for interval bins and the unbiased choice for the kernel's exact gates.

@@ -2,11 +2,30 @@
 
 use super::*;
 
-/// A capture of `../shared/data` (beside the repository).
+/// A capture of the repository's `fixtures/ytal`, checked before use: a missing file, or one
+/// whose SHA-256 differs from its line in `fixtures/SHA256SUMS`, fails with a message naming
+/// it and saying how to restore it.
 fn shared(capture: &str) -> PathBuf {
-    PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/data"))
-        .join(capture)
-        .join(format!("{capture}.hdf5"))
+    use sha2::Digest;
+    let fixtures = PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/../fixtures"));
+    let rel = format!("ytal/{capture}/{capture}.hdf5");
+    let path = fixtures.join(&rel);
+    let restore = format!("restore it with `git checkout -- fixtures/{rel}`");
+    let bytes = std::fs::read(&path)
+        .unwrap_or_else(|e| panic!("fixture fixtures/{rel} is missing ({e}): {restore}"));
+    let sums = std::fs::read_to_string(fixtures.join("SHA256SUMS"))
+        .expect("fixtures/SHA256SUMS (git checkout -- fixtures/SHA256SUMS)");
+    let want = sums
+        .lines()
+        .find_map(|l| l.split_once("  ").filter(|(_, n)| n.trim() == rel))
+        .map(|(sum, _)| sum.to_string())
+        .unwrap_or_else(|| panic!("fixtures/SHA256SUMS has no line for {rel}"));
+    let got: String = sha2::Sha256::digest(&bytes)
+        .iter()
+        .map(|b| format!("{b:02x}"))
+        .collect();
+    assert_eq!(got, want, "fixture fixtures/{rel} is damaged: {restore}");
+    path
 }
 
 /// A fresh scratch directory for one test.
