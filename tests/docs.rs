@@ -602,3 +602,65 @@ fn console_examples_run() {
     assert!(failures.is_empty(), "{}", failures.join("\n\n"));
     assert!(ran >= 5, "only {ran} console examples ran");
 }
+
+/// The README's front picture is made by `vltm`: the `console` example whose `--png` names the
+/// picture's file (`docs/NAME.png` made as `NAME.png`) runs in a scratch directory, and the
+/// PNG it writes equals the committed one up to rounding (mean absolute difference of the
+/// 8-bit channels below 1 %, the same size). Regenerate the picture with that command.
+#[test]
+fn readme_front_picture_is_made_by_its_caption_command() {
+    let text = std::fs::read_to_string(root().join("README.md")).expect("README.md");
+    // The first image of the page (a line of its own).
+    let rest = text
+        .lines()
+        .find(|l| l.starts_with("!["))
+        .expect("README.md has no image");
+    let open = rest.find("](").expect("image link") + 2;
+    let picture = &rest[open..open + rest[open..].find(')').expect("image link end")];
+    let name = Path::new(picture)
+        .file_name()
+        .and_then(|n| n.to_str())
+        .expect("picture file name")
+        .to_string();
+    let exs = examples(&text).expect("README examples");
+    let ex = exs
+        .iter()
+        .find(|e| e.args.windows(2).any(|w| w[0] == "--png" && w[1] == name))
+        .unwrap_or_else(|| {
+            panic!("no console example of README.md writes its front picture (--png {name})")
+        });
+    let scratch = Scratch::new("front_picture");
+    let out = Command::new(support::vltm_bin())
+        .args(&ex.args)
+        .current_dir(scratch.repo())
+        .output()
+        .expect("run vltm");
+    assert!(
+        out.status.success(),
+        "vltm {}: {}",
+        ex.args.join(" "),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let made = image::open(scratch.repo().join(&name))
+        .expect("the command's picture")
+        .to_rgb8();
+    let committed = image::open(root().join(picture))
+        .expect("the README's picture")
+        .to_rgb8();
+    assert_eq!(made.dimensions(), committed.dimensions(), "{picture}: size");
+    let diff: f64 = made
+        .as_raw()
+        .iter()
+        .zip(committed.as_raw())
+        .map(|(&a, &b)| f64::from(a.abs_diff(b)))
+        .sum::<f64>()
+        / made.as_raw().len() as f64
+        / 255.0;
+    assert!(
+        diff < 0.01,
+        "{picture} differs from what `vltm {}` makes (mean difference {:.2} %): regenerate it \
+         with that command",
+        ex.args.join(" "),
+        100.0 * diff
+    );
+}

@@ -123,3 +123,162 @@ fn resolution_chart_is_at_40_cm() {
 fn exit_sign_is_at_about_80_cm() {
     check("data_exit_sign.mat", 64, (0.70, 0.90, 11), (0.76, 0.83));
 }
+
+/// The dark glyphs of a sign's line of text: in the rows `y0..=y1` of the front view (the
+/// maximum over the layers) of `image` (`nx × ny × layers` over the grid `[-w, w]²`), the
+/// profile along x within `x0..=x1`, normalised to its median; each local minimum with its
+/// prominence (the lower of the highest values between it and its neighbouring minima).
+fn glyphs(
+    image: &[f32],
+    n: usize,
+    layers: usize,
+    w: f32,
+    y: (f32, f32),
+    x: (f32, f32),
+) -> Vec<(f32, f32)> {
+    let step = 2.0 * w / (n - 1) as f32;
+    let at = |i: usize| -w + step * i as f32;
+    let front: Vec<f32> = image
+        .chunks_exact(layers)
+        .map(|c| c.iter().fold(0.0f32, |a, &b| a.max(b)))
+        .collect();
+    let (mut xs, mut p) = (Vec::new(), Vec::new());
+    for ix in (0..n).filter(|&i| (x.0..=x.1).contains(&at(i))) {
+        let rows: Vec<f32> = (0..n)
+            .filter(|&iy| (y.0..=y.1).contains(&at(iy)))
+            .map(|iy| front[ix * n + iy])
+            .collect();
+        xs.push(at(ix));
+        p.push(rows.iter().sum::<f32>() / rows.len() as f32);
+    }
+    let mut sorted = p.clone();
+    sorted.sort_by(f32::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    let p: Vec<f32> = p.iter().map(|v| v / median).collect();
+    let mins: Vec<usize> = (1..p.len() - 1)
+        .filter(|&i| p[i] <= p[i - 1] && p[i] < p[i + 1])
+        .collect();
+    let peak = |r: std::ops::Range<usize>| p[r].iter().fold(0.0f32, |a, &b| a.max(b));
+    mins.iter()
+        .enumerate()
+        .map(|(k, &i)| {
+            let lo = if k > 0 { mins[k - 1] } else { 0 };
+            let hi = mins.get(k + 1).copied().unwrap_or(p.len() - 1);
+            (xs[i], peak(lo..i).min(peak(i + 1..hi + 1)) - p[i])
+        })
+        .collect()
+}
+
+/// The exit sign reads EXIT on the plane `vltm surface` fits to its direct light (the README's
+/// front picture, made by the command in its caption): the plane is the sign's (0.82 m deep
+/// at the centre, tilted), and along its line of text four dark glyphs stand out — E, X, I, T
+/// where the sign has them, each at least 8 % below the brightness between it and its
+/// neighbours — with the arrow dark below them. Off the fitted plane (2 cm in front of it) or
+/// on a flat slice at the plane's mean depth the letters do not read.
+#[test]
+fn exit_sign_reads_exit_on_its_fitted_plane() {
+    let n = 64;
+    let m = mat::read(&real("data_exit_sign.mat"), &MatOptions::default()).unwrap();
+    let w = m.capture.geometry.lasers.last().unwrap()[0];
+    let mut cap = m.capture;
+    let mut src = Prepared::new(&mut cap, AUTHORS, None).unwrap();
+    let slab = Volume::parse(&format!("{}:{w}:{n},{}:{w}:{n},0.70:0.92:45", -w, -w)).unwrap();
+    let wave = Wave {
+        wavelength: Some(0.04),
+        sigma: Some(0.02),
+        weights: Weights::One,
+        ..Wave::default()
+    };
+    let opts = probe::SurfaceOptions {
+        contrast: Some(0.076),
+        ..probe::SurfaceOptions::default()
+    };
+    let s = probe::surface(&mut src, &slab, &wave, &opts, Exec::default()).unwrap();
+    let [a, b, c] = s.fit.plane;
+    eprintln!(
+        "plane z = {a:.4} {b:+.4}x {c:+.4}y, {} columns, rms {:.4}",
+        s.fit.fitted, s.fit.rms
+    );
+    assert!((0.80..=0.84).contains(&a), "plane depth {a}");
+    assert!(
+        (0.02..=0.09).contains(&b) && (0.05..=0.13).contains(&c),
+        "tilt {b}, {c}"
+    );
+    assert!(s.fit.rms < 0.006, "rms {}", s.fit.rms);
+    assert_eq!(s.outside, 0);
+
+    let letters = |image: &[f32], layers: usize| {
+        glyphs(image, n, layers, w, (0.11, 0.24), (-0.24, 0.18))
+            .into_iter()
+            .filter(|g| g.1 >= 0.08)
+            .collect::<Vec<_>>()
+    };
+    let found = letters(&s.image, opts.layers);
+    eprintln!("glyphs (x, prominence): {found:?}");
+    // E, X, I, T from left to right as seen from the wall, where x decreases.
+    let at = [0.13f32, 0.0, -0.095, -0.18];
+    assert_eq!(
+        found.len(),
+        4,
+        "EXIT: four glyphs expected, found {found:?}"
+    );
+    for (g, want) in found.iter().rev().zip(at) {
+        assert!(
+            (g.0 - want).abs() <= 0.03,
+            "glyph at x = {} m, expected {want}: {found:?}",
+            g.0
+        );
+    }
+    // The arrow: dark below the letters, between brighter bands of the sign.
+    let band = |y0: f32, y1: f32| {
+        let mut acc = (0.0f64, 0usize);
+        let step = 2.0 * w / (n - 1) as f32;
+        for ix in 0..n {
+            let x = -w + step * ix as f32;
+            if !(-0.15..=0.12).contains(&x) {
+                continue;
+            }
+            for iy in 0..n {
+                let y = -w + step * iy as f32;
+                if (y0..=y1).contains(&y) {
+                    let c = &s.image[(ix * n + iy) * opts.layers..][..opts.layers];
+                    acc.0 += f64::from(c.iter().fold(0.0f32, |a, &b| a.max(b)));
+                    acc.1 += 1;
+                }
+            }
+        }
+        acc.0 / acc.1 as f64
+    };
+    let (arrow, above, below) = (band(-0.13, -0.07), band(-0.04, 0.02), band(-0.22, -0.17));
+    assert!(
+        arrow < 0.8 * above.min(below),
+        "arrow {arrow:.3} vs the sign above {above:.3} and below {below:.3}"
+    );
+
+    // With teeth: 2 cm in front of the fitted plane, or a flat slice at its mean depth.
+    let values = &s.slab.values;
+    let shifted = probe::PlaneFit {
+        plane: [a - 0.02, b, c],
+        ..s.fit
+    };
+    let offsets = opts.offsets();
+    let (img, _, _) = probe::sample_plane(&slab, values, &shifted, &offsets);
+    let img = probe::local_contrast(
+        &img,
+        [n, n, offsets.len()],
+        [slab.pitch()[0], slab.pitch()[1]],
+        0.076,
+    );
+    assert_ne!(
+        letters(&img, offsets.len()).len(),
+        4,
+        "2 cm off the plane still reads EXIT"
+    );
+    let flat = probe::PlaneFit {
+        plane: [a, 0.0, 0.0],
+        ..s.fit
+    };
+    let (img, _, _) = probe::sample_plane(&slab, values, &flat, &[0.0]);
+    let img = probe::local_contrast(&img, [n, n, 1], [slab.pitch()[0], slab.pitch()[1]], 0.076);
+    assert_ne!(letters(&img, 1).len(), 4, "a flat slice still reads EXIT");
+}

@@ -84,6 +84,31 @@ pub(crate) enum Command {
         #[command(flatten)]
         common: Common,
     },
+    /// Direct light on a plane fitted to it: the depth of the brightest voxel of each (x, y)
+    /// column of a slab volume, a plane through the bright ones, and the image on that plane
+    /// (a tilted sign or chart, legible; see docs/real-data.md).
+    Surface {
+        /// Capture file.
+        capture: PathBuf,
+        /// Columns dimmer than FLOOR × the slab's maximum stay out of the plane fit.
+        #[arg(long, default_value_t = 0.25, value_name = "FLOOR")]
+        floor: f32,
+        /// Metres along z that the image spans around the plane.
+        #[arg(long, default_value_t = 0.02, value_name = "M")]
+        thickness: f32,
+        /// Samples along z over --thickness (the figure's top view).
+        #[arg(long, default_value_t = 5, value_name = "K")]
+        layers: usize,
+        /// Local contrast: divide by the front view blurred by a Gaussian of S metres (the
+        /// values become ratios; brings out strokes where the brightness falls off).
+        #[arg(long, value_name = "S")]
+        contrast: Option<f32>,
+        /// Also write the depth of each column's brightest voxel (metres, nx x ny) to F.npy.
+        #[arg(long, value_name = "F.npy")]
+        depth: Option<PathBuf>,
+        #[command(flatten)]
+        common: Common,
+    },
     /// First-order (or higher-order) indirect light from a focus point: the LTM column T(x_a, ·).
     Column {
         /// Capture file.

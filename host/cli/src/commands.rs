@@ -1,5 +1,6 @@
 //! The commands that run a probe over a capture or write one: `demo`, `info`, `simulate`,
-//! `direct`, `column`, `indirect`, `merge`; the matrix commands are in `ltm`.
+//! `direct`, `column`, `indirect`, `merge`; the matrix commands are in `ltm`, `surface` in
+//! `surface`.
 
 use vltm::atomic::Transaction;
 use vltm::exec::Exec;
@@ -11,7 +12,7 @@ use crate::args::{Command, DiagGateArg};
 use crate::console::{Failure, say};
 use crate::outputs::refuse_overwriting_inputs;
 use crate::summary::{Label, finish};
-use crate::{input, ltm, partial, progress, split};
+use crate::{input, ltm, partial, progress, split, surface};
 
 /// Runs one command.
 pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
@@ -115,6 +116,23 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                 marks: Vec::new(),
             };
             finish(&common, &capture, &o, &volume, label)
+        }
+        Command::Surface {
+            capture,
+            floor,
+            thickness,
+            layers,
+            contrast,
+            depth,
+            common,
+        } => {
+            let opts = probe::SurfaceOptions {
+                floor,
+                thickness,
+                layers,
+                contrast,
+            };
+            surface::run(&capture, &opts, depth.as_deref(), &common)
         }
         Command::Column {
             capture,

@@ -12,6 +12,7 @@
 //! | [`matrix()`] | amplitudes `A(x_a, x_b)` for `x_a` in one voxel set, `x_b` in another (two-bounce) | 1 (more if the accumulators exceed the memory budget) |
 //! | [`relight`] | `A_p(b) = Σ_a p_a A(x_a, b)`: the image under a weighted sum of projector foci | 1 (idem) |
 //! | [`row()`] | `T(·, x_b)` streamed by laser rows (reciprocity without a transpose) | 1 |
+//! | [`surface()`] | direct light on a plane fitted to it: the brightest depth per column, a weighted least-squares plane, the slab sampled on it, optional local contrast | 1 |
 //! | [`partial::accumulate`] | direct, column, indirect (optionally leak-corrected) or the matrix over a part of the rows, kept as a [`Partial`] state that merges by addition and finishes elsewhere | 1 |
 //! | [`DirectModel`], [`LeakCorrected`] | the capture's direct light removed before the off-diagonal probes (module `leak`: 3-vertex windows of Γ zeroed, or a one-bounce fit subtracted) | 1 to fit, then streamed |
 //!
@@ -36,6 +37,7 @@ mod matrix;
 pub mod partial;
 pub mod resample;
 mod row;
+mod surface;
 mod wave;
 pub mod window;
 
@@ -53,5 +55,8 @@ pub use leak::{DirectModel, GateEnergy, LeakCorrected, LeakMethod, LeakOptions, 
 pub use matrix::{MATRIX_BYTES_PER_ELEMENT, Matrix, Pattern, Relit, matrix, relight};
 pub use partial::{Finished, Partial, Task};
 pub use row::row;
+pub use surface::{
+    PlaneFit, Surface, SurfaceOptions, fit_plane, local_contrast, sample_plane, surface,
+};
 pub use wave::{Output, Wave, default_wavelength};
 pub use window::{Coverage, WARN_FRACTION, window_coverage};
