@@ -132,6 +132,16 @@ impl RowConsts {
     }
 }
 
+/// The sensor legs `|x_s − sensor_origin|` of `spads` into `d4` (0 for wall-to-wall time axes).
+fn fill_sensor_legs(cfg: &Config, spads: &[Point], d4: &mut [f32]) {
+    for (d, p) in d4.iter_mut().zip(spads) {
+        *d = match cfg.legs() {
+            Legs::WallToWall => 0.0,
+            Legs::FirstAndLast { sensor_origin, .. } => dist64(p, &sensor_origin) as f32,
+        };
+    }
+}
+
 impl<'t> Scan<'t> {
     /// Length in `f32` of the tables buffer: `2N + J + Ks`.
     pub const fn tables_len(cfg: &Config, n_spads: usize) -> usize {
@@ -164,12 +174,7 @@ impl<'t> Scan<'t> {
         for (j, g) in gate.iter_mut().enumerate() {
             *g = cfg.gate_weight(j) as f32;
         }
-        for (d, p) in d4.iter_mut().zip(spads) {
-            *d = match cfg.legs() {
-                Legs::WallToWall => 0.0,
-                Legs::FirstAndLast { sensor_origin, .. } => dist64(p, &sensor_origin) as f32,
-            };
-        }
+        fill_sensor_legs(cfg, spads, d4);
         Ok(Self {
             cfg: *cfg,
             spads,
@@ -178,6 +183,33 @@ impl<'t> Scan<'t> {
             d4,
             plan: BandPlan::choose(cfg),
             k: RowConsts::new(cfg),
+        })
+    }
+
+    /// The same scan for other SPAD spots: shares this scan's twiddle and gate tables (no
+    /// trigonometry, no allocation) and computes only the sensor legs of `spads` into `d4`
+    /// (length `spads.len()`). A paired or confocal row, whose one SPAD spot changes from row
+    /// to row, costs `O(Ks)` here instead of [`Scan::new`]'s `O(N + J)` sines and cosines.
+    ///
+    /// # Errors
+    /// [`Error::Length`] if `d4` has the wrong length, [`Error::NonFinite`] if a SPAD position
+    /// is not finite.
+    pub fn with_spads<'s>(
+        &'s self,
+        spads: &'s [Point],
+        d4: &'s mut [f32],
+    ) -> Result<Scan<'s>, Error> {
+        check_len("sensor legs", spads.len(), d4.len())?;
+        check_points("spads", spads)?;
+        fill_sensor_legs(&self.cfg, spads, d4);
+        Ok(Scan {
+            cfg: self.cfg,
+            spads,
+            twiddle: self.twiddle,
+            gate: self.gate,
+            d4,
+            plan: self.plan,
+            k: self.k,
         })
     }
 
@@ -783,6 +815,54 @@ mod tests {
                     tol_mono / l1
                 );
             }
+        }
+    }
+
+    /// A scan re-pointed at other SPAD spots ([`Scan::with_spads`]) loads rows bit-identically
+    /// to a scan built for those spots, with legs or without; a wrong length or a NaN spot is
+    /// refused.
+    #[test]
+    fn with_spads_equals_a_fresh_scan() {
+        use std::vec;
+        use std::vec::Vec;
+        for legs in [false, true] {
+            let mut p = Params::new(0.13, 300, 0.01);
+            p.t0 = 0.4;
+            if legs {
+                p.legs = Legs::FirstAndLast {
+                    laser_origin: [0.3, -0.2, -1.1],
+                    sensor_origin: [-0.4, 0.1, -0.9],
+                };
+            }
+            let cfg = Config::try_new(&p).unwrap();
+            let first = [[0.0f32, 0.0, 0.0]];
+            let mut tables = vec![0.0f32; Scan::tables_len(&cfg, 1)];
+            let base = Scan::new(&cfg, &first, &mut tables).unwrap();
+            let h: Vec<f32> = (0..300).map(|n| ((n * 37) % 11) as f32).collect();
+            let laser = [0.21f32, -0.13, 0.02];
+            for spot in [[0.05f32, 0.1, 0.0], [-0.3, 0.2, 0.01]] {
+                let spads = [spot];
+                let mut fresh_tables = vec![0.0f32; Scan::tables_len(&cfg, 1)];
+                let fresh = Scan::new(&cfg, &spads, &mut fresh_tables).unwrap();
+                let mut d4 = [0.0f32; 1];
+                let moved = base.with_spads(&spads, &mut d4).unwrap();
+                assert_eq!(moved.sensor_legs(), fresh.sensor_legs());
+                let load = |scan: &Scan<'_>| {
+                    let mut buf = vec![0.0f32; RowBuffer::len(&cfg, 1)];
+                    let mut rows = RowBuffer::new(scan, &mut buf).unwrap();
+                    let row = rows.load(scan, laser, &h).unwrap();
+                    (
+                        row.band().to_vec(),
+                        row.ungated().to_vec(),
+                        row.offsets().to_vec(),
+                    )
+                };
+                assert_eq!(load(&moved), load(&fresh), "legs {legs}, spot {spot:?}");
+            }
+            let mut d4 = [0.0f32; 2];
+            assert!(base.with_spads(&first, &mut d4).is_err());
+            let mut d4 = [0.0f32; 1];
+            assert!(base.with_spads(&[[f32::NAN, 0.0, 0.0]], &mut d4).is_err());
         }
     }
 

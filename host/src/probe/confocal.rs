@@ -194,16 +194,16 @@ pub(super) fn convolution_core(
         .iter()
         .map(|c| vec![0.0; Probe::state_len(cfg, Target::Diagonal, Gate::Gaussian, c.len(), 1)])
         .collect();
+    // The twiddle and gate tables once; per row only its spot's sensor leg (`with_spads`).
     let mut fb_tables = vec![0.0f32; Scan::tables_len(cfg, 1)];
     let first = [g.lasers[0]];
-    let mut probes: Vec<Probe<'_>> = {
-        let scan = Scan::new(cfg, &first, &mut fb_tables)?;
-        chunks
-            .iter()
-            .zip(states.iter_mut())
-            .map(|(c, s)| Probe::new(&scan, Target::Diagonal, Gate::Gaussian, c, s))
-            .collect::<Result<_, _>>()?
-    };
+    let fb_scan = Scan::new(cfg, &first, &mut fb_tables)?;
+    let mut fb_d4 = [0.0f32; 1];
+    let mut probes: Vec<Probe<'_>> = chunks
+        .iter()
+        .zip(states.iter_mut())
+        .map(|(c, s)| Probe::new(&fb_scan, Target::Diagonal, Gate::Gaussian, c, s))
+        .collect::<Result<_, _>>()?;
     let mut fb_buf = vec![0.0f32; RowBuffer::len(cfg, 1)];
     let gate: Vec<f32> = (0..cfg.bins()).map(|j| cfg.gate_weight(j) as f32).collect();
     let dft = BandDft::new(cfg);
@@ -243,7 +243,7 @@ pub(super) fn convolution_core(
         if !chunks.is_empty() {
             for k in 0..n {
                 let spad = [lasers[k]];
-                let scan = Scan::new(cfg, &spad, &mut fb_tables)?;
+                let scan = fb_scan.with_spads(&spad, &mut fb_d4)?;
                 let h = &hists[k * nt..(k + 1) * nt];
                 let mut rb = RowBuffer::new(&scan, &mut fb_buf)?;
                 // The raw spectra of the batch's sgemm (not folded yet).

@@ -347,7 +347,8 @@ pub(super) fn direct_lookup(
     let g = src.geometry().clone();
     lookup_plan(&g, cfg, volume.len()).check(|| pass_name(&g, cfg, "direct light (lookup)"))?;
     let ks = g.spads_per_row();
-    // Confocal captures: `drive_rows` makes one scan per row (this one only sizes things).
+    // Confocal captures: `drive_rows` re-points this scan at each row's own spot
+    // (`Scan::with_spads`, its tables shared).
     let spads = if g.confocal { &g.spads[..1] } else { &g.spads };
     let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
     let scan = Scan::new(cfg, spads, &mut tables)?;

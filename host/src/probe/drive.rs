@@ -47,7 +47,11 @@ pub(super) fn drive(
         let mut clean = Vec::new();
         let mut buf = vec![0.0f32; RowBuffer::len(cfg, ks)];
         let mut hist = Vec::new();
+        // The twiddle and gate tables once; per row only the SPAD spot's leg.
         let mut tables = vec![0.0f32; Scan::tables_len(cfg, 1)];
+        let first = [g.spads.first().copied().unwrap_or_default()];
+        let base = Scan::new(cfg, &first, &mut tables)?;
+        let mut d4 = [0.0f32; 1];
         for l in range {
             let x_l = {
                 let _t = timings::section("read rows", Kind::Serial);
@@ -57,7 +61,7 @@ pub(super) fn drive(
             };
             // Paired (and confocal) scans: the row's own SPAD spot.
             let spad = [g.spads.get(l).copied().unwrap_or(x_l)];
-            let scan = Scan::new(cfg, &spad, &mut tables)?;
+            let scan = base.with_spads(&spad, &mut d4)?;
             let mut rows = RowBuffer::new(&scan, &mut buf)?;
             let row = {
                 let _t = timings::section("stage 1 (band spectra)", Kind::Serial);
@@ -188,13 +192,9 @@ pub(super) fn drive_rows_indexed<W: Send>(
     let ks = g.spads_per_row();
     check_memory(&g, cfg, 0, label)?;
     let dft = BandDft::new(cfg);
-    // (worker, row buffer, copy of a row with non-finite samples zeroed, confocal tables)
-    type Slot<W> = Mutex<(W, Vec<f32>, Vec<f32>, Vec<f32>)>;
-    let tables_len = if g.confocal {
-        Scan::tables_len(cfg, 1)
-    } else {
-        0
-    };
+    // (worker, row buffer, copy of a row with non-finite samples zeroed, the sensor leg of a
+    // confocal or paired row's own SPAD spot: `scan`'s tables serve every row)
+    type Slot<W> = Mutex<(W, Vec<f32>, Vec<f32>, [f32; 1])>;
     let slots: Vec<Slot<W>> = workers
         .into_iter()
         .map(|w| {
@@ -202,7 +202,7 @@ pub(super) fn drive_rows_indexed<W: Send>(
                 w,
                 vec![0.0f32; RowBuffer::len(cfg, ks)],
                 Vec::new(),
-                vec![0.0f32; tables_len],
+                [0.0f32; 1],
             ))
         })
         .collect();
@@ -228,11 +228,11 @@ pub(super) fn drive_rows_indexed<W: Send>(
                 let x_s = g.spads.get(start + i_row).copied().unwrap_or(*x_l);
                 let i = rayon::current_thread_index().unwrap_or(0) % n_slots;
                 let mut slot = slots[i].lock().unwrap_or_else(|e| e.into_inner());
-                let (w, buf, clean, tables) = &mut *slot;
+                let (w, buf, clean, d4) = &mut *slot;
                 let spad = [x_s];
                 let own;
                 let scan = if g.confocal {
-                    own = Scan::new(cfg, &spad, tables)?;
+                    own = scan.with_spads(&spad, d4)?;
                     &own
                 } else {
                     scan
