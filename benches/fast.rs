@@ -308,7 +308,7 @@ fn lookup_diagonal(c: &mut Criterion) {
     g.finish();
 }
 
-/// In-focus indirect light (Eq. 17, §B.3.4) as `probe::indirect` evaluates it: one factorised
+/// In-focus indirect light (Eq. 17) as `probe::indirect` evaluates it: one factorised
 /// column per voxel of Γ, so per row `G·Ks·J` (`push_row` of G column probes), then once the
 /// G columns imaged over Γ (`G²·Ks` band sums). exh16 setup, G = 64 voxels of a 8×8 patch of
 /// the 16×16 grid at z = 0.8 m.

@@ -33,7 +33,7 @@ Probes (lambda = sigma = 0.5 m, no lens weights: vltm `--weights one`, y-tal
 * column - one LTM column T(x_a, .) over V16, x_a = `--focus` (default: the centre of patch A
   of the scene, the lit patch that reflects onto B). vltm: `vltm column` (4-vertex gate, Eq. 14).
   y-tal has no 4-vertex gate: its PROJECTOR_CAMERA transient with projector focus x_a, sampled
-  per voxel x_b at bin k = rint(|x_a - x_b| / delta_t), is Eq. 14 (DESIGN §B.7 item 7; the way
+  per voxel x_b at bin k = rint(|x_a - x_b| / delta_t), is Eq. 14 (the way
   fixtures/ytal/tools/run_reference.py made ref_ltmcol_focusA.npy). y-tal takes its
   camera-convolution FFT path for all 24 slices in one call (the projector side is a single
   point, element-wise).
@@ -43,7 +43,7 @@ the time is the wall time of the process (reading the capture included); vltm's 
 compute time ("... rows in X s") is shown too. y-tal runs in this process under
 `tal.resources(cpu_processes=CPUS)`; only the solve (incl. its FFT of H) is timed, the load of
 the capture into an NLOSCaptureData is reported separately. y-tal 0.20 quirks handled here
-(DESIGN §B.7 item 8): `nt` is passed explicitly; a capture with t_start != 0 is moved to
+(y-tal 0.20): `nt` is passed explicitly; a capture with t_start != 0 is moved to
 t_start = 0 by prepending zero bins (pf_dev raises otherwise with compensate_invsq=False).
 
 Agreement: Pearson correlation of the two intensity volumes |A|^2, each normalised to its
@@ -154,7 +154,7 @@ def ytal_data(cap):
     d.t_accounts_first_and_last_bounces = bool(cap['t_accounts_first_and_last_bounces'])
     if d.t_accounts_first_and_last_bounces:
         sys.exit('side_by_side: y-tal 0.20 pf_dev raises for t_accounts_first_and_last_bounces=True '
-                 '(DESIGN §B.7 item 8); use a wall-to-wall capture')
+                 '(y-tal 0.20); use a wall-to-wall capture')
     # y-tal 0.20: pf_dev raises for t_start != 0 with compensate_invsq=False -> prepend zero bins
     n0 = int(round(d.t_start / d.delta_t))
     if n0 != 0:

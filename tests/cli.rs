@@ -1,6 +1,6 @@
 //! The `vltm` command line on the committed fixtures (`fixtures/README.md`): every subcommand
 //! runs and writes readable outputs; bad arguments exit with code 2 and bad data with code 1,
-//! each with a one-line error starting with `vltm: ` (DESIGN §A.6).
+//! each with a one-line error starting with `vltm: `.
 //!
 //! **Which binary.** Cargo sets `CARGO_BIN_EXE_vltm` only for the tests of the package that owns
 //! the binary (`host/`), not for this root package. So [`bin`] runs

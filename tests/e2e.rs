@@ -69,7 +69,7 @@ fn centre(s: &Scene, name: &str) -> Point {
 
 /// The wave used for the indirect-light tests: default λ (twice the aperture pitch) and
 /// σ = λ/2 instead of the default 2λ/3. With 2λ/3 the patches' own direct returns leak into
-/// the 4-vertex gate at B even more strongly, the limitation of DESIGN §B.3.4; σ = λ/2 is
+/// the 4-vertex gate at B even more strongly, the gate's known limitation; σ = λ/2 is
 /// the remedy noted there (and leak correction, `vltm::probe::leak`, the one vltm uses).
 fn indirect_wave(g: &vltm::io::Geometry) -> Wave {
     Wave {
@@ -280,7 +280,7 @@ fn inter_reflection_raises_the_gated_column_at_b() {
 
     // Eq. 17 with the same Γ (default r0 = 1.5σ), without leak correction. On this scene the
     // sum over the Γ voxels around A is dominated by the patches' direct light leaking into
-    // the gate at voxels off the patch centres (DESIGN §B.3.4 caution): about as high as the
+    // the gate at voxels off the patch centres: about as high as the
     // control over B's voxels (fixtures/README.md). Also: the sum over a ∈ Γ includes a = A's
     // voxel, so I_i(B) ≥ T(A, B) (the same factorised column, the other terms are ≥ 0).
     let opts = IndirectOptions::default();
@@ -347,7 +347,7 @@ fn inter_reflection_raises_the_gated_column_at_b() {
 
 /// In-focus indirect light, Eqs. 15–17 end to end (`probe::indirect`: pass 1 the diagonal and
 /// Γ = {I_d > 0.1·max}, pass 2 the Γ-masked sum over pairs ≥ r0 apart), on the test bench of
-/// DESIGN §B.6 rendered in-test: 12×12 lasers × 12×12 SPADs over 1 m, 500 bins of 1 cm,
+/// A bench rendered in-test: 12×12 lasers × 12×12 SPADs over 1 m, 500 bins of 1 cm,
 /// λ = 0.2 m, σ = 2λ/3 (the defaults of the method), isotropic point patches A, B 0.7 m
 /// apart, r0 = 0.3 m, no leak correction. The float64 prototype gave I_i = 7.5× its
 /// direct-only control at B's single voxel; docs/reliability.md states the mean over B's voxels (its
@@ -399,7 +399,7 @@ fn in_focus_indirect_light_eq17_finds_the_inter_reflection() {
     let ratio = f / c;
     let ra = mean_over(&full.values, &oa) / mean_over(&ctrl.values, &oa);
     println!(
-        "Eq. 17 on the DESIGN §B.6 bench: |Γ| = {n_gamma}, I_i mean over B's {} voxels = {f:.4e} \
+        "Eq. 17 on the 12x12 bench: |Γ| = {n_gamma}, I_i mean over B's {} voxels = {f:.4e} \
          with the inter-reflection, {c:.4e} direct-only: {ratio:.2}x; over A's: {ra:.2}x \
          (single voxel B: {:.2}x; prototype: 7.5x)",
         ob.len(),

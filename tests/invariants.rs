@@ -19,7 +19,7 @@ fn wall_grid(n: usize, half: f32) -> Vec<Point> {
         .collect()
 }
 
-/// Tiny transient simulator (DESIGN §B.9 `sim.py`, reduced): a Gaussian pulse of std Δt in
+/// Tiny transient simulator (`fixtures/sim/sim.py`, reduced): a Gaussian pulse of std Δt in
 /// every `H[l][s][·]` at the path time of `x_l → vertices → x_s` (legs included when
 /// configured), with amplitude `k/(d_0² d_1² …)` over the path's segments (`k` = product of
 /// the vertices' reflectances).

@@ -1,6 +1,6 @@
-//! Property tests of the host's fast paths (`vltm::probe::Path`, DESIGN §B.8): the planar FFT
-//! convolution (`host/src/fast/planar.rs`, §B.8.1) for the diagonal and for imaging factorised
-//! columns, and the baseband lookup diagonal (`host/src/fast/lookup.rs`, §B.2.4), against the
+//! Property tests of the host's fast paths (`vltm::probe::Path`): the planar FFT
+//! convolution (`host/src/fast/planar.rs`) for the diagonal and for imaging factorised
+//! columns, and the baseband lookup diagonal (`host/src/fast/lookup.rs`), against the
 //! `f64` time-domain reference (`reference/mod.rs`) and against the kernel's band sum
 //! (`Path::Band`), through the public API (`probe::direct`, `probe::column`) on in-memory
 //! captures. Stage 1 of every row goes through `fast::BandDft` (sgemm) on all paths.
@@ -36,7 +36,7 @@
 //! most `ε·S` (worst case, all errors aligned), as in `proptest_kernel.rs`.
 //!
 //! * **vs the reference**: `ε = ε_f32 + ε_fft + erfc(m/√2) + 2·e^{−c_g²/2}` with the band
-//!   truncation bound `erfc(m/√2)` (DESIGN §B.2.2; 2.7e-3 at m = 3, 2e-9 at m = 6), the
+//!   truncation bound `erfc(m/√2)` (2.7e-3 at m = 3, 2e-9 at m = 6), the
 //!   guard / periodisation term `2e^{−c_g²/2}` = 7.5e-6 (c_g = 5, the host's default), the
 //!   kernel's `f32` model `ε_f32 = u·(2πΦ + J + Nt + 64)` (u = 2⁻²⁴, Φ = max|ν|·(max τ +
 //!   |t0|)/2π turns; see `proptest_kernel.rs`) and the rounding of the largest transform,

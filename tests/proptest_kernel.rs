@@ -9,7 +9,7 @@
 //! `S(a, b) = Σ_l Σ_s w_l w_s Σ_n |H_ls[n]|` (the worst case: all errors aligned):
 //!
 //! * band truncation (Gaussian gate): the omitted gate spectrum `|ν − Ω| > m/σ` has
-//!   time-domain magnitude `≤ erfc(m/√2)` (DESIGN §B.2.2 item 2);
+//!   time-domain magnitude `≤ erfc(m/√2)`;
 //! * guard and periodisation (Gaussian gate): the kernel zeroes `Z` outside
 //!   `[−c_gσ, T_w + c_gσ]` where (Z-T) is `≤ g(c_gσ) = e^{−c_g²/2}` per sample, and the nearest
 //!   `NΔt` replica of the gate is `≥ c_gσ` from every sample inside the guard (diagonal) or

@@ -1,5 +1,5 @@
 //! Agreement with the peer library y-tal 0.20 (`tal.reconstruct.pf_dev`) on the mitransient
-//! captures in `fixtures/ytal` (DESIGN §B.7): y-tal's outputs are committed data files there,
+//! captures in `fixtures/ytal`: y-tal's outputs are committed data files there,
 //! so no Python runs at test time.
 //!
 //! For every capture: vltm's direct volume with y-tal's conventions — `--weights one`,
@@ -13,7 +13,7 @@
 //! y-tal's `fbp` (`fixtures/tal/paired*`, made by `benches/ytal_paired.py`): Pearson 0.99965
 //! on the band, lookup and `Auto` paths, the same peak voxel.
 //!
-//! Remaining differences are conventions, not errors (DESIGN §B.7): y-tal's kernel envelope is
+//! Remaining differences are conventions, not errors: y-tal's kernel envelope is
 //! shifted by half a bin, its band keeps positive frequencies only and its gate is the DFT of
 //! a sampled, sum-normalised kernel, in float32.
 
@@ -185,7 +185,7 @@ fn column_matches_ytal_projector_camera() {
 }
 
 /// The indirect-only column: the two captures differ only by the light that reached a second
-/// hidden surface (the same random paths otherwise, DESIGN data README), so the column of
+/// hidden surface (the same random paths otherwise, `fixtures/ytal/README.md`), so the column of
 /// their difference `H(two_patches) − H(two_patches_direct_only)` (the probes are linear in H)
 /// is light that went from x_a to another surface. It must peak at x_b's voxel [11, 6, 12],
 /// as y-tal's complex difference of its two PROJECTOR_CAMERA columns does, and agree with it

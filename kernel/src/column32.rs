@@ -1,4 +1,4 @@
-//! The factorised Gaussian column `T(x_a, ·)` (DESIGN §B.3.2) with **`f32` state and no
+//! The factorised Gaussian column `T(x_a, ·)` with **`f32` state and no
 //! `f64` arithmetic**, for FPUs without double precision (Cortex-M4F, FPv4-SP), where every
 //! `f64` operation of [`Probe`](crate::Probe)'s accumulators is a soft-float call.
 //!

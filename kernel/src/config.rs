@@ -1,5 +1,5 @@
 //! The validated, immutable configuration: virtual wave, gate, time axis, legs and weights,
-//! and the frequency band derived from them (DESIGN §B.2.2).
+//! and the frequency band derived from them.
 //!
 //! All lengths and times are **metres of optical path** (c ≡ 1). The relay wall is the
 //! plane z = 0 with the hidden scene at z > 0.
@@ -64,7 +64,7 @@ pub enum Weights {
 pub struct Params {
     /// Virtual wavelength λ in metres (> 0).
     pub wavelength: f64,
-    /// Gate std σ in metres; `None` = 2λ/3 (DESIGN §B.2.5, ±3σ spans 4λ).
+    /// Gate std σ in metres; `None` = 2λ/3 (±3σ spans 4λ).
     pub sigma: Option<f64>,
     /// Band half-width m in units of σ_ν = 1/σ (> 0, default 5).
     pub band_half_width: f64,
@@ -89,7 +89,7 @@ pub struct Params {
 }
 
 impl Params {
-    /// Parameters with the defaults of DESIGN §B: σ = 2λ/3, m = 5, c_g = 5, t0 = 0,
+    /// Parameters with the defaults: σ = 2λ/3, m = 5, c_g = 5, t0 = 0,
     /// wall-to-wall legs, `1/d` weights, d_min = 1 mm.
     pub const fn new(wavelength: f64, nt: usize, dt: f64) -> Self {
         Self {
@@ -118,7 +118,7 @@ impl Params {
 ///
 /// ```
 /// use vltm_kernel::{Config, Params};
-/// // DESIGN §B.2.2 test bench: Nt = 500, Δt = 1 cm, λ = 0.2 m, m = 5, c_g = 5.
+/// // A test bench: Nt = 500, Δt = 1 cm, λ = 0.2 m, m = 5, c_g = 5.
 /// let c = Config::try_new(&Params::new(0.2, 500, 0.01)).unwrap();
 /// assert_eq!(c.n_fft(), 634);
 /// assert_eq!(c.bins(), 78);
@@ -365,7 +365,7 @@ impl Config {
         (self.params.nt - 1) as f64 * self.params.dt
     }
     /// Guard interval of `τ − t0` (m): the Gaussian gate contributes nothing outside
-    /// `[−c_g·σ, (Nt−1)Δt + c_g·σ]` (DESIGN §B.2.2).
+    /// `[−c_g·σ, (Nt−1)Δt + c_g·σ]`.
     pub fn guard(&self) -> (f64, f64) {
         let a = self.params.gate_support * self.sigma;
         (-a, self.window() + a)

@@ -1,5 +1,5 @@
 //! The **lookup path**: the Gaussian-gated diagonal and column with an O(1) cost per
-//! (voxel, SPAD) pair instead of the band path's `J`-term sum (DESIGN §B.2.4).
+//! (voxel, SPAD) pair instead of the band path's `J`-term sum.
 //!
 //! Per laser row and per SPAD, the gated, filtered signal `Z_s(τ)` is synthesised **once** on
 //! a fine time grid from the row's band spectrum `HG_s[j]` ([`Row::band`], gate weights and

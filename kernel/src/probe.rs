@@ -1,5 +1,5 @@
 //! Probes: which LTM elements `T(x_a, x_b)` to accumulate, streamed row by row into
-//! caller-owned complex accumulators (DESIGN §B.3, §B.4).
+//! caller-owned complex accumulators.
 //!
 //! | [`Target`] × [`Gate`] | per-row cost | state ([`Probe::state_len`], `f64`) |
 //! |---|---|---|
@@ -12,7 +12,7 @@
 //!
 //! (`E0` ≈ 60 flops: a distance, weights, two phase seeds; `R = ⌈c_gσ/Δt⌉ + 1`.)
 //!
-//! Amplitudes (convention A of DESIGN §B.0, `Z` of §B.2):
+//! Amplitudes (sign convention A, as y-tal: the gated phasor `Z`):
 //! `A(a,b) = Σ_l Σ_s w(|x_l − x_a|)·w(|x_b − x_s|)·Z_ls(τ_ls)` with
 //! `τ_ls = d1_l + |x_l − x_a| + |x_a − x_b| + |x_b − x_s| + d4_s` (a = b on the diagonal),
 //! and intensities `T = |A|²` from [`Probe::finish`].
@@ -22,10 +22,10 @@
 //!   per-path guard: it is exact while every path time stays inside
 //!   [`Config::alias_free`], and [`Report::aliased`] counts the voxels for which it did not
 //!   (widen [`Params::margin`](crate::Params::margin) to remove them).
-//! * The higher-order gate (Eq. 18) is evaluated in the time domain with suffix sums
-//!   (§B.3.6), exactly; the un-gated probe uses the monochromatic phasor (§B.3.3).
+//! * The higher-order gate (Eq. 18) is evaluated in the time domain with suffix sums,
+//!   exactly; the un-gated probe uses the monochromatic phasor.
 //! * Accumulators are `f64` complex; each row's contribution to an element is summed over the
-//!   SPADs in `f32` first (the phasor arithmetic is `f32`, DESIGN §B.4).
+//!   SPADs in `f32` first (the phasor arithmetic is `f32`).
 
 use crate::config::{Config, Point};
 use crate::error::{Error, check_len, check_points};
@@ -362,7 +362,7 @@ impl<'m> Probe<'m> {
     }
 
     /// Factorised Gaussian columns only: the accumulated spectra
-    /// `U_a[s·J + j] = Σ_l w(|x_l − x_a|)·e^{iν_j|x_l − x_a|}·HG_ls[j]` (DESIGN §B.3.2) and the
+    /// `U_a[s·J + j] = Σ_l w(|x_l − x_a|)·e^{iν_j|x_l − x_a|}·HG_ls[j]` and the
     /// range (min, max) of the projector legs `d1_l + |x_l − x_a|` seen so far (m), for hosts
     /// that image the column by other means (an FFT convolution over a SPAD grid). `None`
     /// for other probes.
@@ -436,7 +436,7 @@ fn c64(z: Complex32) -> Complex64 {
     Complex64::new(z.re as f64, z.im as f64)
 }
 
-/// `Σ_j hg[j]·e^{iν_j τ}` with `e^{iν_j τ}` by recurrence from two seeds (DESIGN §B.2.3),
+/// `Σ_j hg[j]·e^{iν_j τ}` with `e^{iν_j τ}` by recurrence from two seeds,
 /// in four interleaved chains (`p_{j+4} = p_j·step⁴`) so that the complex multiplies do not
 /// wait on each other; the phase error still grows as ≈ (J/4)·6e-8.
 #[inline]
@@ -518,7 +518,7 @@ fn diag_ungated<T: Sample>(
     }
 }
 
-/// Factorised column, per row: `U[s][j] += w_la e^{iν_j d_la} HG_ls[j]` (DESIGN §B.3.2).
+/// Factorised column, per row: `U[s][j] += w_la e^{iν_j d_la} HG_ls[j]`.
 fn column_band_push<T: Sample>(
     scan: &Scan<'_>,
     row: &Row<'_, T>,
@@ -592,7 +592,7 @@ fn column_band_finish(
     aliased
 }
 
-/// Eq. 18 by suffix sums (DESIGN §B.3.6), SPAD-outer so one histogram's sums are in scratch:
+/// Eq. 18 by suffix sums, SPAD-outer so one histogram's sums are in scratch:
 /// `S[n] = Σ_{m ≥ n} H_m e^{−iΩ(t_m − t0)}`, `D[n] = S[n] − S[n+1]`,
 /// `Z = e^{iΩ(τ − t0)}·(S[n*] − Σ_{n*}^{n*+R−1} D[n]·g(t_n − τ))`.
 fn higher_order<T: Sample>(

@@ -1,7 +1,7 @@
 //! Stage 1: the fixed description of a scan ([`Scan`]: configuration, SPAD positions, band
 //! tables) and the per-row spectra ([`RowBuffer::load`] → [`Row`]).
 //!
-//! Per laser row `l` and SPAD `s`, with `x_ls = d1_l + d4_s − t0` (DESIGN §B.2.3):
+//! Per laser row `l` and SPAD `s`, with `x_ls = d1_l + d4_s − t0`:
 //!
 //! * band spectrum `HG_ls[j] = Ĝ_j · e^{iν_j x_ls} · Σ_n H_ls[n]·e^{−2πi k_j n/N}` (J values),
 //!   from a table of `e^{−2πiq/N}` made once with `f64` `libm` (table error ≤ 6e-8). Each

@@ -1,12 +1,12 @@
-//! Float64 reference of the paper's **time-domain** equations (DESIGN §B.2 (Z-T), §B.3.1–B.3.3,
-//! §B.3.6), written to be obviously correct rather than fast:
+//! Float64 reference of the paper's **time-domain** equations (the gated phasor, the diagonal,
+//! the column, the late gate), written to be obviously correct rather than fast:
 //!
 //! * every gate is a literal sum over **all** `Nt` bins — no frequency band, no truncation of
 //!   the Gaussian, no guard interval, no suffix sums, no phase recurrences;
 //! * every distance, time and phase is computed in `f64` from the `f32` positions cast to
 //!   `f64`.
 //!
-//! Conventions (DESIGN §B.0, sign convention A): `t_n = t0 + n·Δt`, `Ω = 2π/λ`,
+//! Conventions (sign convention A, as y-tal): `t_n = t0 + n·Δt`, `Ω = 2π/λ`,
 //! `g(u) = exp(−u²/2σ²)`,
 //!
 //! ```text
