@@ -106,13 +106,17 @@ pub(crate) enum Command {
         /// (an extra diagonal pass, as `indirect`).
         #[arg(long, value_name = "E")]
         mask_epsilon: Option<f32>,
-        /// Remove the capture's direct light before the column: zero, per laser/SPAD pair,
-        /// the bins where a 3-vertex return of a voxel of Γ (direct light above
-        /// --leak-epsilon of the maximum) can arrive (see
-        /// docs/indirect-light.md).
-        #[arg(long)]
+        /// Remove the capture's direct light before the column (the default, as `indirect`):
+        /// zero, per laser/SPAD pair, the bins where a 3-vertex return of a voxel of Γ (direct
+        /// light above --leak-epsilon of the maximum) can arrive (see
+        /// docs/indirect-light.md). Accepted for scripts; it changes nothing.
+        #[arg(long, conflicts_with = "no_leak_correct")]
         leak_correct: bool,
-        /// Relative threshold of the voxels the --leak-correct fit places scatterers at.
+        /// The column of the capture as it is (no leak correction): the capture's direct
+        /// light passes the gate near the projector's own surface.
+        #[arg(long)]
+        no_leak_correct: bool,
+        /// Relative threshold of the Γ voxels whose direct returns the leak correction removes.
         #[arg(long, default_value_t = 0.1, value_name = "E")]
         leak_epsilon: f32,
         #[command(flatten)]

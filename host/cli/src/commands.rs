@@ -11,7 +11,7 @@ use crate::args::{Command, DiagGateArg};
 use crate::console::{Failure, say};
 use crate::outputs::refuse_overwriting_inputs;
 use crate::summary::{Label, finish};
-use crate::{input, ltm, partial, progress, split};
+use crate::{input, ltm, partial, progress, split, title};
 
 /// Runs one command.
 pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
@@ -110,7 +110,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
             })?;
             let label = Label {
                 probe: "direct",
-                title: "direct light".to_string(),
+                title: title::direct(&title::arg(&gate), &o.config),
                 focus: None,
                 marks: Vec::new(),
             };
@@ -123,24 +123,34 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
             shell,
             shells,
             mask_epsilon,
-            leak_correct,
+            leak_correct: _,
+            no_leak_correct,
             leak_epsilon,
             common,
         } => {
             let a = parse_point("focus", &focus)?;
             probe::check_focus(a)?;
             let volume = Volume::parse(&common.volume)?;
+            let shell_arg = shell.clone();
             let shell = shell
                 .as_deref()
                 .map(Shell::parse)
                 .transpose()?
                 .unwrap_or(Shell::ALL);
             let cuts = shells.as_deref().map(Shell::parse_cuts).transpose()?;
+            let leak = !no_leak_correct;
             if partial::wanted(&common)? {
                 if cuts.is_some() || mask_epsilon.is_some() {
                     return Err(vltm::Error::arg(
                         "partial",
                         "a partial column takes $shell, not $shells or $mask_epsilon (apply them to the merged volume)",
+                    )
+                    .into());
+                }
+                if leak {
+                    return Err(vltm::Error::arg(
+                        "partial",
+                        "a partial column cannot be leak-corrected (its Γ needs the direct light of the whole capture): add $no_leak_correct, or run the column over the whole scan",
                     )
                     .into());
                 }
@@ -162,7 +172,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                     ),
                     None => None,
                 };
-                let mut o = if leak_correct {
+                let mut o = if leak {
                     let model = probe::fit_over_volume(
                         rows,
                         &volume,
@@ -172,7 +182,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                         common.exec(),
                     )?;
                     say!(
-                        "leak correction: {:.4} of the capture's energy was in the 3-vertex windows of Γ's {} voxels and removed ({:.2} s)",
+                        "leak correction (--no-leak-correct to skip): {:.4} of the capture's energy was in the 3-vertex windows of Γ's {} voxels and removed ({:.2} s)",
                         model.explained,
                         model.points().len(),
                         model.seconds
@@ -192,7 +202,13 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                 }
                 Ok::<_, Failure>(o)
             })?;
-            let title = format!("column T(x_a, .), gate {gate:?}");
+            let words = title::ColumnWords {
+                gate: title::arg(&gate),
+                shell: shell_arg.as_deref(),
+                mask_epsilon,
+                leak_correct: leak,
+            };
+            let title = title::column(a, &words, &o.config);
             match cuts {
                 Some(cuts) => {
                     split::column_shells(&common, &capture, &o, &volume, a, &cuts, &title)

@@ -12,7 +12,7 @@ use crate::args::{Common, MatrixArgs, RelightArgs, RowArgs};
 use crate::console::{Failure, say};
 use crate::outputs::{check_matrix_out, refuse_overwriting_inputs, write_matrix};
 use crate::summary::{Label, finish};
-use crate::{input, partial, progress};
+use crate::{input, partial, progress, title};
 
 fn exec() -> probe::Exec<'static> {
     probe::Exec {
@@ -148,7 +148,7 @@ pub(crate) fn relight(a: RelightArgs) -> Result<(), Failure> {
         pattern.foci.len(),
         r.passes
     );
-    let title = format!("relit image, {} foci", pattern.foci.len());
+    let title = title::relight(pattern.foci.len(), &r.output.config);
     let marks: Vec<(Point, String)> = pattern
         .foci
         .iter()
@@ -191,7 +191,7 @@ pub(crate) fn row(a: RowArgs) -> Result<(), Failure> {
     })?;
     let label = Label {
         probe: "row",
-        title: "row T(., x_b), two-bounce gate".to_string(),
+        title: title::row(b, &o.config),
         focus: None,
         marks: vec![(b, "x_b".to_string())],
     };

@@ -24,6 +24,7 @@ mod partial;
 mod progress;
 mod split;
 mod summary;
+mod title;
 
 use args::Cli;
 use console::{flag, printable, tell};

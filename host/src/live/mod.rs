@@ -148,7 +148,7 @@ impl LiveRun {
             tasks.push((
                 format!("column{i}"),
                 format!(
-                    "column T(x_a, .) at x_a = ({:.3}, {:.3}, {:.3})",
+                    "column --focus {},{},{} --gate two-bounce (live: not leak-corrected)",
                     a[0], a[1], a[2]
                 ),
                 Task::Column {
