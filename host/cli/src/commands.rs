@@ -292,7 +292,14 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
             let run = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
                 split::indirect_run(&common, rows, &volume, &opts, cuts, direct)
             })?;
-            split::indirect_write(&common, &capture, &volume, &opts, &run)
+            split::indirect_write(&common, &capture, &volume, &opts, &run)?;
+            if !common.wave.compensate_laser && io::laser_falloff_in_data(&capture)?.0 {
+                say!(
+                    "note: {} holds the laser's cos θ / d² falloff (a tal render): --compensate-laser divides it out (`vltm info` says why; docs/indirect-light.md)",
+                    capture.display()
+                );
+            }
+            Ok(())
         }
         Command::Merge {
             parts,

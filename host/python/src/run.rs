@@ -275,17 +275,23 @@ fn run<'py>(
         "column" => {
             let focus = need_focus()?;
             let gate = column_gate(gate)?;
-            let extra = cuts.is_some() || mask_epsilon.is_some() || leak_correct;
+            let extra = cuts.is_some() || mask_epsilon.is_some();
             if rows.is_some() && extra {
                 return Err(arg(
                     "rows",
-                    "a partial column takes shell, not shells, mask_epsilon or leak_correct (apply them to the merged volume)",
+                    "a partial column takes shell, not shells or mask_epsilon (apply them to the merged volume)",
+                ));
+            }
+            if rows.is_some() && leak_correct {
+                return Err(arg(
+                    "rows",
+                    "a partial column cannot be leak-corrected (its Γ needs the direct light of the whole capture): pass leak_correct=False, or run the column over all rows",
                 ));
             }
             if amplitudes && extra {
                 return Err(arg(
                     "amplitudes",
-                    "complex amplitudes come with a column without shells, mask_epsilon or leak_correct",
+                    "complex amplitudes come with a column without shells or mask_epsilon",
                 ));
             }
             Job::Column {
@@ -507,16 +513,41 @@ fn compute(
             let n = src.geometry().lasers.len();
             let r = rows.map_or(0..n, |(a, b)| a..b);
             let (bytes, name) = (cap.file_bytes(), cap.name());
-            let (p, prep) = front::with_prep(prep, &mut *src, &vol.points, sigma, |s| {
-                partial::accumulate(s, bytes, &name, vol, &task, wave, exec, r)
-            })?;
+            // A whole-scan column's amplitudes with the leak correction: the corrected rows.
+            let leak = match &job {
+                Job::Column {
+                    leak_epsilon: Some(le),
+                    ..
+                } if rows.is_none() => Some(*le),
+                _ => None,
+            };
+            let ((p, explained), prep) =
+                front::with_prep(prep, &mut *src, &vol.points, sigma, |s| match leak {
+                    Some(le) => {
+                        let model = probe::fit_over_volume(
+                            s,
+                            vol,
+                            le,
+                            wave,
+                            &LeakOptions::default(),
+                            exec,
+                        )?;
+                        let mut lc = LeakCorrected::new(s, &model);
+                        let p = partial::accumulate(&mut lc, bytes, &name, vol, &task, wave, exec, r)?;
+                        Ok((p, Some(model.explained)))
+                    }
+                    None => Ok((
+                        partial::accumulate(s, bytes, &name, vol, &task, wave, exec, r)?,
+                        None,
+                    )),
+                })?;
             if rows.is_some() {
                 return Ok(Outcome::Part(Box::new(p)));
             }
             let f = p.finish_with(true)?;
             let mut d = Done::of(f.output);
             d.amplitudes = f.amplitudes;
-            d.explained = f.explained;
+            d.explained = f.explained.or(explained);
             d.prep = prep;
             return Ok(Outcome::Done(d));
         }

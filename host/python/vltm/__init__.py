@@ -812,7 +812,7 @@ def column(
     shell: Optional[Tuple[float, float]] = None,
     shells: Optional[Tuple[float, float]] = None,
     mask_epsilon: Optional[float] = None,
-    leak_correct: bool = False,
+    leak_correct: bool = True,
     leak_epsilon: float = 0.1,
     wavelength: Optional[float] = None,
     sigma: Optional[float] = None,
@@ -837,11 +837,13 @@ def column(
     ``[0, r1)``, middle ``[r1, r2)`` and far ``[r2, inf)`` light of one run, stacked as
     ``(3,) + shape`` (``vltm column --shells``; a ``shell`` dimension with ``as_xarray``).
     ``mask_epsilon`` zeroes every voxel whose direct light is not above ε·max (an extra
-    diagonal pass). ``leak_correct=True`` removes the capture's direct light first (the
-    3-vertex windows of Γ = direct light above ``leak_epsilon``·max; ``report["explained"]``
-    the energy removed). ``amplitudes=True`` also returns the complex amplitudes
-    ``A(x_a, ·)`` (complex128, ``T = |A|²``, 0 outside ``shell``) of two-bounce and
-    higher-order columns; the un-gated column has none. Other arguments as
+    diagonal pass). ``leak_correct=True`` (the default, as ``vltm column``) removes the
+    capture's direct light first (the 3-vertex windows of Γ = direct light above
+    ``leak_epsilon``·max; ``report["explained"]`` the energy removed);
+    ``leak_correct=False`` is the column of the capture as it is (``--no-leak-correct``),
+    needed for partial states (``rows=``). ``amplitudes=True`` also returns the complex
+    amplitudes ``A(x_a, ·)`` (complex128, ``T = |A|²``, 0 outside ``shell``) of two-bounce
+    and higher-order columns; the un-gated column has none. Other arguments as
     :func:`direct`."""
     f = _check.point("focus", focus)
     me = _check.real("mask_epsilon", mask_epsilon, none=True)

@@ -79,6 +79,34 @@ pub fn open_source(path: &Path) -> Result<Box<dyn RowSource>> {
     }
 }
 
+/// Whether the histograms of the capture file `path` hold the physical laser's falloff
+/// `cos θ / d²` at each laser spot (what `compensate_laser` divides out), and why, in words
+/// for `vltm info`: y-tal/mitransient renders (`HDF5_TAL`) multiply every path by it
+/// (`fixtures/ytal/README.md`, *Radiometry*); vltm's simulator renders none; a measured
+/// capture's collimated laser puts the same power on every spot; a Z-NLOS file records none.
+///
+/// # Errors
+/// An `.hdf5` file whose layout cannot be read ([`tal::detect`]).
+pub fn laser_falloff_in_data(path: &Path) -> Result<(bool, &'static str)> {
+    Ok(match extension(path).as_deref() {
+        Some("hdf5" | "h5") => match tal::detect(path)? {
+            tal::Hdf5Layout::Tal => (
+                true,
+                "a y-tal/mitransient render: tal multiplies every path by it at the laser spot",
+            ),
+            tal::Hdf5Layout::Znlos => (false, "a Z-NLOS capture records no laser falloff"),
+        },
+        Some("npz") => (
+            false,
+            "an .npz records none: `vltm simulate` renders none, one converted from a tal render still holds it",
+        ),
+        _ => (
+            false,
+            "a measured capture: a collimated laser puts the same power on every spot",
+        ),
+    })
+}
+
 /// Whether `path` names a y-tal HDF5 capture (`.hdf5` / `.h5`).
 pub fn is_hdf5(path: &Path) -> bool {
     matches!(extension(path).as_deref(), Some("hdf5" | "h5"))
