@@ -11,7 +11,7 @@ use crate::args::{Command, DiagGateArg};
 use crate::console::{Failure, say};
 use crate::outputs::refuse_overwriting_inputs;
 use crate::summary::{Label, finish};
-use crate::{input, ltm, partial, progress, split, title};
+use crate::{input, leak, ltm, partial, progress, split, title};
 
 /// Runs one command.
 pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
@@ -123,9 +123,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
             shell,
             shells,
             mask_epsilon,
-            leak_correct: _,
-            no_leak_correct,
-            leak_epsilon,
+            leak,
             common,
         } => {
             let a = parse_point("focus", &focus)?;
@@ -138,7 +136,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                 .transpose()?
                 .unwrap_or(Shell::ALL);
             let cuts = shells.as_deref().map(Shell::parse_cuts).transpose()?;
-            let leak = !no_leak_correct;
+            let leak_epsilon = leak.epsilon();
             if partial::wanted(&common)? {
                 if cuts.is_some() || mask_epsilon.is_some() {
                     return Err(vltm::Error::arg(
@@ -147,7 +145,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                     )
                     .into());
                 }
-                if leak {
+                if leak_epsilon.is_some() {
                     return Err(vltm::Error::arg(
                         "partial",
                         "a partial column cannot be leak-corrected (its Γ needs the direct light of the whole capture): add $no_leak_correct, or run the column over the whole scan",
@@ -172,28 +170,10 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                     ),
                     None => None,
                 };
-                let mut o = if leak {
-                    let model = probe::fit_over_volume(
-                        rows,
-                        &volume,
-                        leak_epsilon,
-                        &common.wave(),
-                        &LeakOptions::default(),
-                        common.exec(),
-                    )?;
-                    say!(
-                        "leak correction (--no-leak-correct to skip): {:.4} of the capture's energy was in the 3-vertex windows of Γ's {} voxels and removed ({:.2} s)",
-                        model.explained,
-                        model.points().len(),
-                        model.seconds
-                    );
-                    let mut lc = probe::LeakCorrected::new(rows, &model);
-                    let g = gate.gate();
-                    probe::column(&mut lc, a, &volume, g, shell, &common.wave(), common.exec())?
-                } else {
-                    let g = gate.gate();
-                    probe::column(rows, a, &volume, g, shell, &common.wave(), common.exec())?
-                };
+                let g = gate.gate();
+                let mut o = leak::corrected(rows, &volume, leak_epsilon, &common, |src| {
+                    probe::column(src, a, &volume, g, shell, &common.wave(), common.exec())
+                })?;
                 if let Some(m) = &mask {
                     o.values
                         .iter_mut()
@@ -206,7 +186,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                 gate: title::arg(&gate),
                 shell: shell_arg.as_deref(),
                 mask_epsilon,
-                leak_correct: leak,
+                leak_correct: leak_epsilon.is_some(),
             };
             let title = title::column(a, &words, &o.config);
             match cuts {

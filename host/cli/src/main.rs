@@ -17,6 +17,7 @@ mod args;
 mod commands;
 mod console;
 mod input;
+mod leak;
 mod live;
 mod ltm;
 mod outputs;

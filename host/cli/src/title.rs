@@ -47,22 +47,28 @@ pub(crate) fn column(focus: Point, w: &ColumnWords<'_>, cfg: &Config) -> String 
     if let Some(e) = w.mask_epsilon {
         t += &format!(" --mask-epsilon {e}");
     }
-    let leak = if w.leak_correct {
+    t + &wave(cfg, correction(w.leak_correct))
+}
+
+/// The words of the leak correction: `leak-corrected`, or the flag that turned it off.
+fn correction(on: bool) -> &'static str {
+    if on {
         "leak-corrected"
     } else {
         "--no-leak-correct"
-    };
-    t + &wave(cfg, leak)
+    }
 }
 
-/// `row --focus X,Y,Z (λ, σ; two-bounce gate)`.
-pub(crate) fn row(focus: Point, cfg: &Config) -> String {
-    format!("row --focus {}", point(focus)) + &wave(cfg, "two-bounce gate")
+/// `row --focus X,Y,Z (λ, σ; two-bounce gate, correction)`.
+pub(crate) fn row(focus: Point, leak: bool, cfg: &Config) -> String {
+    let extra = format!("two-bounce gate, {}", correction(leak));
+    format!("row --focus {}", point(focus)) + &wave(cfg, &extra)
 }
 
-/// `relight, N foci (λ, σ; two-bounce gate)`.
-pub(crate) fn relight(foci: usize, cfg: &Config) -> String {
-    format!("relight --pattern: {foci} foci") + &wave(cfg, "two-bounce gate")
+/// `relight --pattern: N foci (λ, σ; two-bounce gate, correction)`.
+pub(crate) fn relight(foci: usize, leak: bool, cfg: &Config) -> String {
+    let extra = format!("two-bounce gate, {}", correction(leak));
+    format!("relight --pattern: {foci} foci") + &wave(cfg, &extra)
 }
 
 /// `direct --gate G (λ, σ)`.
@@ -110,12 +116,12 @@ mod tests {
     #[test]
     fn other_titles_carry_focus_and_wave() {
         assert_eq!(
-            row([0.25, 0.0, 0.9], &cfg()),
-            "row --focus 0.25,0,0.9 (λ = 0.400 m, σ = 0.267 m; two-bounce gate)"
+            row([0.25, 0.0, 0.9], true, &cfg()),
+            "row --focus 0.25,0,0.9 (λ = 0.400 m, σ = 0.267 m; two-bounce gate, leak-corrected)"
         );
         assert_eq!(
-            relight(3, &cfg()),
-            "relight --pattern: 3 foci (λ = 0.400 m, σ = 0.267 m; two-bounce gate)"
+            relight(3, false, &cfg()),
+            "relight --pattern: 3 foci (λ = 0.400 m, σ = 0.267 m; two-bounce gate, --no-leak-correct)"
         );
         assert_eq!(
             direct(&arg(&DiagGateArg::Gaussian), &cfg()),

@@ -161,9 +161,11 @@ enum Job {
     },
     Relight {
         pattern: Pattern,
+        leak_epsilon: Option<f32>,
     },
     Row {
         focus: Point,
+        leak_epsilon: Option<f32>,
     },
 }
 
@@ -382,7 +384,10 @@ fn run<'py>(
                 }
                 (None, None) => return Err(arg("pattern", "relighting needs a pattern")),
             };
-            Job::Relight { pattern }
+            Job::Relight {
+                pattern,
+                leak_epsilon: leak_correct.then_some(leak_epsilon),
+            }
         }
         "row" => {
             no_part("a row")?;
@@ -393,7 +398,10 @@ fn run<'py>(
                     "`row` is the transposed column already (use column with swap_roles=True for the in-memory transpose)",
                 ));
             }
-            Job::Row { focus }
+            Job::Row {
+                focus,
+                leak_epsilon: leak_correct.then_some(leak_epsilon),
+            }
         }
         k => return Err(arg("kind", format!("unknown probe `{k}`"))),
     };
@@ -666,19 +674,54 @@ fn one_pass(
             d.direct = Some(direct);
             Ok(d)
         }
-        Job::Relight { pattern } => {
-            let r = probe::relight(rows, &pattern, vol, wave, exec)?;
+        Job::Relight {
+            pattern,
+            leak_epsilon,
+        } => {
+            let (r, explained) = corrected(rows, vol, leak_epsilon, wave, exec, |src| {
+                probe::relight(src, &pattern, vol, wave, exec)
+            })?;
             let mut d = Done::of(r.output);
             d.amplitudes = Some(r.amplitudes);
             d.passes = Some(r.passes);
+            d.explained = explained;
             Ok(d)
         }
-        Job::Row { focus } => Ok(Done::of(probe::row(rows, focus, vol, wave, exec)?)),
+        Job::Row {
+            focus,
+            leak_epsilon,
+        } => {
+            let (o, explained) = corrected(rows, vol, leak_epsilon, wave, exec, |src| {
+                probe::row(src, focus, vol, wave, exec)
+            })?;
+            let mut d = Done::of(o);
+            d.explained = explained;
+            Ok(d)
+        }
         Job::Matrix { .. } => Err(vltm::Error::arg(
             "kind",
             "a matrix is run over all rows above",
         )),
     }
+}
+
+/// `probe` on the rows of `src`, leak-corrected with Γ above `epsilon`·max over `vol` (as
+/// the command line's `row` and `relight`), or on `src` as it is for `None`; with the energy
+/// the correction removed.
+fn corrected<T>(
+    src: &mut dyn RowSource,
+    vol: &vltm::volume::Volume,
+    epsilon: Option<f32>,
+    wave: &Wave,
+    exec: Exec<'_>,
+    probe: impl FnOnce(&mut dyn RowSource) -> vltm::Result<T>,
+) -> vltm::Result<(T, Option<f64>)> {
+    let Some(e) = epsilon else {
+        return Ok((probe(src)?, None));
+    };
+    let model = probe::fit_over_volume(src, vol, e, wave, &LeakOptions::default(), exec)?;
+    let mut lc = LeakCorrected::new(src, &model);
+    Ok((probe(&mut lc)?, Some(model.explained)))
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

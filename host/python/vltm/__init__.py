@@ -933,6 +933,8 @@ def relight(
     volume: Union[str, np.ndarray, Volume],
     pattern: Union[str, np.ndarray],
     *,
+    leak_correct: bool = True,
+    leak_epsilon: float = 0.1,
     wavelength: Optional[float] = None,
     sigma: Optional[float] = None,
     weights: str = "inv",
@@ -957,7 +959,8 @@ def relight(
     ``(n, 3)`` or ``(n, 4)`` array of foci (and weights), a voxel image of the volume's
     shape (its voxels are the foci, its values the weights), or the path of a float32
     ``.npy`` image. ``amplitudes=True`` also returns ``A_p`` (complex128);
-    ``report["passes"]`` the passes over the capture. Other arguments as :func:`direct`."""
+    ``report["passes"]`` the passes over the capture. ``leak_correct``, ``leak_epsilon`` as
+    :func:`column` (on by default). Other arguments as :func:`direct`."""
     vol = _volume(volume)
     spec, pts = None, None
     if isinstance(pattern, (str, os.PathLike)) and os.fspath(pattern).strip().endswith(".npy"):
@@ -984,7 +987,9 @@ def relight(
                 f"argument `pattern`: expected x,y,z,w;... foci, an (n, 3) or (n, 4) array, or an image of the volume's shape {list(vol.shape)}, found shape {list(a.shape)}")
         pts = np.ascontiguousarray(pts, dtype=np.float64)
     return _probe("relight", capture, vol, None, amplitudes, report, as_xarray,
-                  {"pattern": spec}, pattern=pts, pattern_spec=spec,
+                  {"pattern": spec, "leak_correct": leak_correct}, pattern=pts, pattern_spec=spec,
+                  leak_correct=_check.flag("leak_correct", leak_correct),
+                  leak_epsilon=_check.real("leak_epsilon", leak_epsilon),
                   **_wave(wavelength, sigma, weights, band, compensate_laser, crop, path),
                   **_input(swap_roles, t_min, t_max, rebin, background))
 
@@ -994,6 +999,8 @@ def row(
     volume: Union[str, np.ndarray, Volume],
     focus: Sequence[float],
     *,
+    leak_correct: bool = True,
+    leak_epsilon: float = 0.1,
     wavelength: Optional[float] = None,
     sigma: Optional[float] = None,
     weights: str = "inv",
@@ -1012,10 +1019,13 @@ def row(
     """A row ``T(·, x_b)`` of the LTM (``vltm row``): the virtual camera focused at
     ``x_b`` = ``focus`` (m, z > 0), the projector over ``volume`` (two-bounce gate),
     streamed by laser rows without transposing the capture. ``swap_roles`` is refused (a
-    row is the transposed column already). Other arguments as :func:`direct`."""
+    row is the transposed column already). ``leak_correct``, ``leak_epsilon`` as
+    :func:`column` (on by default). Other arguments as :func:`direct`."""
     f = _check.point("focus", focus)
     return _probe("row", capture, volume, None, False, report, as_xarray,
-                  {"gate": "two-bounce", "focus": list(f)}, focus=list(f),
+                  {"gate": "two-bounce", "focus": list(f), "leak_correct": leak_correct},
+                  focus=list(f), leak_correct=_check.flag("leak_correct", leak_correct),
+                  leak_epsilon=_check.real("leak_epsilon", leak_epsilon),
                   **_wave(wavelength, sigma, weights, band, compensate_laser, crop, path),
                   **_input(swap_roles, t_min, t_max, rebin, background))
 
