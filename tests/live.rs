@@ -301,7 +301,10 @@ fn replay_matches_the_offline_commands() {
         npy(&p)
     };
     let direct = offline(&["direct", cap], "direct.npy");
-    let column = offline(&["column", cap, "--focus", FOCUS], "column.npy");
+    let column = offline(
+        &["column", cap, "--focus", FOCUS, "--no-leak-correct"],
+        "column.npy",
+    );
     let indirect = offline(&["indirect", cap], "indirect.npy");
     let same = close(&npy(&out), &direct, "direct light");
     eprintln!(
@@ -445,6 +448,7 @@ fn follows_a_ptu_file_written_by_another_process() {
         FOCUS,
         "--volume",
         SPEC,
+        "--no-leak-correct",
         "--out",
         &p("c.npy"),
     ]));
@@ -763,6 +767,7 @@ fn resume_passes_over_the_rows_the_states_hold() {
         FOCUS,
         "--volume",
         SPEC,
+        "--no-leak-correct",
         "--rows",
         "0:20",
         "--partial",
@@ -806,7 +811,10 @@ fn resume_passes_over_the_rows_the_states_hold() {
     );
     close(
         &npy(&d.path("live.column0.npy")),
-        &offline(&["column", f, "--focus", FOCUS], "oc.npy"),
+        &offline(
+            &["column", f, "--focus", FOCUS, "--no-leak-correct"],
+            "oc.npy",
+        ),
         "resumed column",
     );
     close(
@@ -1058,7 +1066,10 @@ fn resumes_from_the_firmwares_state() {
     );
     close(
         &npy(&d.path("live.column0.npy")),
-        &offline(&["column", c, "--focus", FW_FOCUS], "c.npy"),
+        &offline(
+            &["column", c, "--focus", FW_FOCUS, "--no-leak-correct"],
+            "c.npy",
+        ),
         "column",
     );
     close(

@@ -162,6 +162,9 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
             let mut c = common.load(&capture)?;
             let sigma = common.wave().config(c.geometry())?.sigma();
             let o = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
+                // Bad input is refused before the extra passes (Γ of the mask, the leak fit).
+                let (g, w) = (gate.gate(), common.wave());
+                probe::check_column(rows.geometry(), a, &volume, g, &w, common.exec())?;
                 let mask = match mask_epsilon {
                     Some(e) => Some(
                         split::gamma(rows, &volume, e, "mask_epsilon", &common)?
@@ -170,7 +173,6 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                     ),
                     None => None,
                 };
-                let g = gate.gate();
                 let mut o = leak::corrected(rows, &volume, leak_epsilon, &common, |src| {
                     probe::column(src, a, &volume, g, shell, &common.wave(), common.exec())
                 })?;

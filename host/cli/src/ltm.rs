@@ -141,6 +141,7 @@ pub(crate) fn relight(a: RelightArgs) -> Result<(), Failure> {
     let sigma = c.wave().config(src.geometry())?.sigma();
     let reach: Vec<Point> = volume.points.iter().chain(&pattern.foci).copied().collect();
     let r = input::with_prep(&c.input, &mut *src, &reach, sigma, |rows| {
+        probe::check_relight(rows.geometry(), &pattern, &volume, &c.wave())?;
         leak::corrected(rows, &volume, a.leak.epsilon(), c, |src| {
             probe::relight(src, &pattern, &volume, &c.wave(), c.exec())
         })
@@ -193,6 +194,7 @@ pub(crate) fn row(a: RowArgs) -> Result<(), Failure> {
     let mut reach = volume.points.clone();
     reach.push(b);
     let o = input::with_prep(&c.input, &mut *src, &reach, sigma, |rows| {
+        probe::check_row(rows.geometry(), b, &volume, &c.wave())?;
         leak::corrected(rows, &volume, a.leak.epsilon(), c, |src| {
             probe::row(src, b, &volume, &c.wave(), c.exec())
         })

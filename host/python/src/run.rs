@@ -532,6 +532,9 @@ fn compute(
             let ((p, explained), prep) =
                 front::with_prep(prep, &mut *src, &vol.points, sigma, |s| match leak {
                     Some(le) => {
+                        if let Job::Column { focus, gate, .. } = &job {
+                            probe::check_column(s.geometry(), *focus, vol, *gate, wave, exec)?;
+                        }
                         let model = probe::fit_over_volume(
                             s,
                             vol,
@@ -586,6 +589,8 @@ fn one_pass(
             mask_epsilon,
             leak_epsilon,
         } => {
+            // Bad input is refused before the extra passes (Γ of the mask, the leak fit).
+            probe::check_column(rows.geometry(), focus, vol, gate, wave, exec)?;
             let mask = match mask_epsilon {
                 Some(e) => {
                     if !(0.0..1.0).contains(&e) {
@@ -678,6 +683,7 @@ fn one_pass(
             pattern,
             leak_epsilon,
         } => {
+            probe::check_relight(rows.geometry(), &pattern, vol, wave)?;
             let (r, explained) = corrected(rows, vol, leak_epsilon, wave, exec, |src| {
                 probe::relight(src, &pattern, vol, wave, exec)
             })?;
@@ -691,6 +697,7 @@ fn one_pass(
             focus,
             leak_epsilon,
         } => {
+            probe::check_row(rows.geometry(), focus, vol, wave)?;
             let (o, explained) = corrected(rows, vol, leak_epsilon, wave, exec, |src| {
                 probe::row(src, focus, vol, wave, exec)
             })?;

@@ -322,8 +322,14 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
             say!("{line}");
             for v in views {
                 let p = v.peak.1;
+                // Live columns are folded row by row, before Γ exists: no leak correction.
+                let note = if v.tag.starts_with("column") {
+                    " (not leak-corrected: `vltm column` on the finished capture removes the direct light)"
+                } else {
+                    ""
+                };
                 say!(
-                    "{}: peak {:.4e} at ({:.3}, {:.3}, {:.3}) m",
+                    "{}: peak {:.4e} at ({:.3}, {:.3}, {:.3}) m{note}",
                     v.tag,
                     v.peak.0,
                     p[0],
