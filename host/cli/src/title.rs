@@ -50,6 +50,14 @@ pub(crate) fn column(focus: Point, w: &ColumnWords<'_>, cfg: &Config) -> String 
     t + &wave(cfg, correction(w.leak_correct))
 }
 
+/// A column merged from partial states (`vltm merge`): parts are never leak-corrected.
+pub(crate) fn merged_column(focus: Point, cfg: &Config) -> String {
+    format!(
+        "column --focus {} --no-leak-correct, merged parts",
+        point(focus)
+    ) + &wave(cfg, "")
+}
+
 /// The words of the leak correction: `leak-corrected`, or the flag that turned it off.
 fn correction(on: bool) -> &'static str {
     if on {
@@ -122,6 +130,10 @@ mod tests {
         assert_eq!(
             relight(3, false, &cfg()),
             "relight --pattern: 3 foci (λ = 0.400 m, σ = 0.267 m; two-bounce gate, --no-leak-correct)"
+        );
+        assert_eq!(
+            merged_column([0.1, 0.0, 0.8], &cfg()),
+            "column --focus 0.1,0,0.8 --no-leak-correct, merged parts (λ = 0.400 m, σ = 0.267 m)"
         );
         assert_eq!(
             direct(&arg(&DiagGateArg::Gaussian), &cfg()),

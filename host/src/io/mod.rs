@@ -102,7 +102,7 @@ pub fn laser_falloff_in_data(path: &Path) -> Result<(bool, &'static str)> {
         ),
         _ => (
             false,
-            "a measured capture: a collimated laser puts the same power on every spot",
+            "a PicoQuant or MATLAB capture: a measured laser is collimated and puts the same power on every spot",
         ),
     })
 }
@@ -120,4 +120,26 @@ fn unknown_format(path: &Path) -> Error {
             path.display()
         ),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// tal renders hold the laser's falloff; vltm's own `.npz` and the measured Stanford
+    /// capture do not; a file that is no capture is an error naming it.
+    #[test]
+    fn laser_falloff_follows_the_format() {
+        let f = |p: &str| laser_falloff_in_data(&Path::new("..").join(p));
+        let (held, why) = f("fixtures/ytal/two_patches/two_patches.hdf5").expect("tal");
+        assert!(held && why.contains("render"), "{why}");
+        for p in [
+            "fixtures/two_patches.npz",
+            "fixtures/real/data_exit_sign.mat",
+        ] {
+            assert!(!f(p).expect("capture").0, "{p}");
+        }
+        let e = f("fixtures/pathtraced/README.md.h5").expect_err("no file");
+        assert!(e.to_string().contains("README.md.h5"), "{e}");
+    }
 }
