@@ -544,7 +544,8 @@ fn compute(
                             exec,
                         )?;
                         let mut lc = LeakCorrected::new(s, &model);
-                        let p = partial::accumulate(&mut lc, bytes, &name, vol, &task, wave, exec, r)?;
+                        let p =
+                            partial::accumulate(&mut lc, bytes, &name, vol, &task, wave, exec, r)?;
                         Ok((p, Some(model.explained)))
                     }
                     None => Ok((
