@@ -317,9 +317,24 @@ fn replay_matches_the_offline_commands() {
         &indirect,
         "indirect light",
     );
+    // At the end the column once more, leak-corrected over the stored rows: `vltm column` at
+    // its defaults; the running column (the capture as it is) differs.
+    let corrected = offline(&["column", cap, "--focus", FOCUS], "corrected.npy");
+    let live_corrected = npy(&d.path("live.column0.corrected.npy"));
+    close(&live_corrected, &corrected, "leak-corrected column");
+    assert!(
+        column.iter().sum::<f32>() > 2.0 * live_corrected.iter().sum::<f32>(),
+        "the running column is not corrected"
+    );
+    assert!(
+        text(&o.stdout).contains("column0: peak") && text(&o.stdout).contains("not leak-corrected"),
+        "{}",
+        text(&o.stdout)
+    );
     for f in [
         "live.png",
         "live.column0.png",
+        "live.column0.corrected.png",
         "live.indirect.png",
         "live.transient.png",
         "live.direct.part",
