@@ -21,7 +21,7 @@ vltm="${CARGO_TARGET_DIR:-$PWD/target}/release/vltm"
 work="$(mktemp -d)"
 trap 'rm -rf "$work"' EXIT
 args=(--focus=-0.4,0,0.75 --volume=-0.9375:0.9375:16,-0.9375:0.9375:16,0.5:1.2:24
-  --wavelength 0.5 --sigma 0.5 --weights one)
+  --wavelength 0.5 --sigma 0.5 --weights one --no-leak-correct)
 echo "load average before: $(cut -d' ' -f1-3 /proc/loadavg)"
 for f in "$@"; do "$vltm" column "$f" "${args[@]}" --out "$work/warm.npy" >/dev/null 2>&1; done
 for ((i = 0; i < runs; i++)); do

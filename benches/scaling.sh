@@ -45,7 +45,7 @@ if [ "${1:-}" = "--efficiency" ]; then
   common=(--volume "$vol" --wavelength 0.5 --sigma 0.5 --weights one --out "$work/o.npy")
   declare -A cmd=(
     [direct]="direct"
-    [column]="column --focus=-0.4,0,0.75"
+    [column]="column --focus=-0.4,0,0.75 --no-leak-correct"
     [indirect]="indirect"
   )
   calc() { awk "BEGIN { print $1 }"; }
@@ -142,7 +142,7 @@ echo "|---|---|---|---|---|"
 for n in 4 8 16; do
   scene "rows$n" ".setup.lasers.grid = [$n, $n]"
   run "rows: $((n * n)) lasers" "$work/rows$n.npz" direct "$(vol 16 24)"
-  run "rows: $((n * n)) lasers" "$work/rows$n.npz" column "$(vol 16 24)" --focus "$focus"
+  run "rows: $((n * n)) lasers" "$work/rows$n.npz" column "$(vol 16 24)" --focus "$focus" --no-leak-correct
 done
 # 16x16 SPADs is rows16 above.
 scene spads8 '.setup.spads.grid = [8, 8]'

@@ -325,7 +325,8 @@ def main():
     jobs = {
         'direct16': ('V16', ['direct', capture, '--volume=' + vols['V16'][0]] + common),
         'direct32': ('V32', ['direct', capture, '--volume=' + vols['V32'][0]] + common),
-        'column': ('V16', ['column', capture, '--focus=' + focus, '--volume=' + vols['V16'][0]] + common),
+        'column': ('V16', ['column', capture, '--focus=' + focus, '--volume=' + vols['V16'][0],
+                           '--no-leak-correct'] + common),
     }
     rows = []
     for p in probes:

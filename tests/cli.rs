@@ -1560,6 +1560,7 @@ fn matrix_relight_and_row_through_the_command_line() {
                 SPEC,
                 "--path",
                 "band",
+                "--no-leak-correct",
                 "--out",
                 &s(&fc),
             ],
@@ -1667,6 +1668,7 @@ fn matrix_relight_and_row_through_the_command_line() {
             FOCUS,
             "--volume",
             SPEC,
+            "--no-leak-correct",
             "--out",
             &s(&fr),
         ],
@@ -1681,6 +1683,7 @@ fn matrix_relight_and_row_through_the_command_line() {
             "--volume",
             SPEC,
             "--swap-roles",
+            "--no-leak-correct",
             "--path",
             "band",
             "--out",
@@ -1692,9 +1695,10 @@ fn matrix_relight_and_row_through_the_command_line() {
     assert!(diff <= 1e-6, "{diff:.3e}");
 }
 
-/// `--leak-correct` (docs/indirect-light.md, "Leak-corrected indirect light"): `indirect` corrects by default;
-/// a volume whose direct returns all fall beyond the capture's window is refused with the
-/// window error; `column --leak-correct` runs and reports the energy it removed.
+/// The leak correction (docs/indirect-light.md): `indirect`, `column`, `row` and `relight`
+/// correct by default; a volume whose direct returns all fall beyond the capture's window is
+/// refused with the window error; `column` reports the energy it removed, `--leak-correct`
+/// (kept for scripts) changes nothing and `--no-leak-correct` gives the column as it is.
 #[test]
 fn leak_correct_on_the_command_line() {
     let t = TempDir::new("leak");
@@ -1703,7 +1707,7 @@ fn leak_correct_on_the_command_line() {
     // 3-vertex paths of voxels 4.5–5 m deep exceed the 4.48 m window.
     let far = "-0.2:0.2:3,-0.2:0.2:3,4.5:5:2";
     // The window check (the same error for every probe) refuses them before Γ is formed;
-    // an empty Γ inside the window is refused naming --leak-correct (tests/leak.rs).
+    // an empty Γ inside the window is refused naming --leak-epsilon (tests/leak.rs).
     let err = fails(&t.0, &["indirect", cap, "--volume", far], 2);
     assert!(
         err.contains("volume")
@@ -1711,26 +1715,47 @@ fn leak_correct_on_the_command_line() {
             && err.lines().count() == 1,
         "{err}"
     );
-    let out = ok(
-        &t.0,
-        &[
-            "column",
-            cap,
-            "--focus",
-            "-0.45,0,0.8",
-            "--volume",
-            SPEC,
-            "--leak-correct",
-            "--out",
-            t.path("c.npy").to_str().expect("utf-8"),
-        ],
+    let column = |name: &str, extra: &[&str]| {
+        let f = t.path(name);
+        let mut a = vec!["column", cap, "--focus", "-0.45,0,0.8", "--volume", SPEC];
+        a.extend_from_slice(extra);
+        a.extend_from_slice(&["--out", f.to_str().expect("utf-8")]);
+        (ok(&t.0, &a), npy(&f, SHAPE))
+    };
+    let (out, v) = column("c.npy", &[]);
+    assert!(
+        out.contains("leak correction (--no-leak-correct to skip): "),
+        "{out}"
     );
-    assert!(out.contains("leak correction: "), "{out}");
-    let v = npy(&t.path("c.npy"), SHAPE);
     assert!(
         v.iter().any(|&x| x > 0.0),
         "leak-corrected column is all zero"
     );
+    let (_, same) = column("c2.npy", &["--leak-correct"]);
+    assert_eq!(v, same, "--leak-correct is the default");
+    let (out, raw) = column("raw.npy", &["--no-leak-correct"]);
+    assert!(!out.contains("leak correction"), "{out}");
+    assert!(
+        raw.iter().sum::<f32>() > 2.0 * v.iter().sum::<f32>(),
+        "the correction removes direct light from the column"
+    );
+    for (probe, extra) in [("row", "--focus"), ("relight", "--pattern")] {
+        let f = t.path(&format!("{probe}.npy"));
+        let out = ok(
+            &t.0,
+            &[
+                probe,
+                cap,
+                extra,
+                "-0.45,0,0.8",
+                "--volume",
+                SPEC,
+                "--out",
+                f.to_str().expect("utf-8"),
+            ],
+        );
+        assert!(out.contains("leak correction (--no-leak-correct"), "{out}");
+    }
     let out = ok(
         &t.0,
         &[
@@ -2029,7 +2054,17 @@ fn relight_and_row_preprocess_and_refuse_parts() {
         } else {
             "--pattern"
         };
-        let base = [probe, &cap, point, FOCUS, "--volume", SPEC, "--out"];
+        // The preprocessing on the capture as it is (the test's subject is the flags).
+        let base = [
+            probe,
+            &cap,
+            point,
+            FOCUS,
+            "--volume",
+            SPEC,
+            "--no-leak-correct",
+            "--out",
+        ];
         let mut args = base.to_vec();
         args.push(&a_s);
         let mut with = args.clone();

@@ -405,6 +405,71 @@ fn leak_correct_without_direct_returns_is_an_error() {
 #[path = "support/pathtraced.rs"]
 mod pathtraced;
 
+/// `vltm column` at its defaults on the path-traced panel + figure
+/// (`fixtures/pathtraced/panel_figure_all`), focused in front of the panel (the projector's
+/// own surface): the leak correction is on by default and the column peaks on the lit figure
+/// (its surface ± one voxel, from `scene.json`), not beside x_a. With `--no-leak-correct` the
+/// panel's own direct light passes the gate and the column peaks beside x_a, between it and
+/// the wall, on the panel's side (the test's teeth). Measured: peaks at (0.15, −0.05, 0.85) m
+/// and (0.15, −0.05, 0.90) m corrected; (−0.45, −0.05, 0.55) m and (−0.35, −0.05, 0.50) m
+/// (0.21 and 0.36 m from x_a) as they are.
+#[test]
+fn pathtraced_column_at_the_defaults_peaks_on_the_lit_figure() {
+    let c = pathtraced::load("panel_figure");
+    let voxels = |name: &str| {
+        c.objects
+            .iter()
+            .find(|(n, _)| n == name)
+            .map(|(_, v)| v.clone())
+            .unwrap_or_else(|| panic!("no {name} in scene.json"))
+    };
+    let figure = voxels("figure");
+    let capture = pathtraced::dir().join("panel_figure_all/panel_figure_all.hdf5");
+    let dir = std::env::temp_dir().join(format!("vltm-leak-column-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let column = |focus: &str, extra: &[&str]| -> (usize, String) {
+        let out = dir.join("c.npy");
+        let o = std::process::Command::new(support::vltm_bin())
+            .arg("column")
+            .arg(&capture)
+            .args(["--focus", focus, "--volume", pathtraced::VOLUME])
+            .args(extra)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .expect("run vltm");
+        let text = String::from_utf8_lossy(&o.stdout).into_owned();
+        assert!(
+            o.status.success(),
+            "{text}{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let (v, _) = vltm::export::npy::read_f32(&out).expect("column.npy");
+        let peak = (0..v.len()).fold(0, |b, i| if v[i] > v[b] { i } else { b });
+        (peak, text)
+    };
+    for focus in ["-0.5,0,0.75", "-0.29,0,0.85"] {
+        let a = vltm::volume::parse_point("focus", focus).expect("focus");
+        let (peak, text) = column(focus, &[]);
+        let p = c.vol.points[peak];
+        println!("column --focus {focus}: peak at {p:?}");
+        assert!(text.contains("leak correction"), "{text}");
+        assert!(
+            figure.contains(&peak),
+            "column --focus {focus} at the defaults peaks at {p:?}, not on the lit figure:\n{text}"
+        );
+        let (raw, _) = column(focus, &["--no-leak-correct"]);
+        let q = c.vol.points[raw];
+        let d = (0..3).map(|k| (q[k] - a[k]).powi(2)).sum::<f32>().sqrt();
+        println!("column --focus {focus} --no-leak-correct: peak at {q:?}, {d:.2} m from x_a");
+        assert!(
+            !figure.contains(&raw) && d < 0.4 && q[0] < 0.0,
+            "uncorrected column --focus {focus} peaks at {q:?}"
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 /// One object's documented figures at vltm's defaults on a path-traced scene
 /// (docs/indirect-light.md, `cargo bench --bench pathtraced`): ratio to the direct-only
 /// control, kept (fraction of the indirect-only truth), Pearson with the truth over the

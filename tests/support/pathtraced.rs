@@ -144,8 +144,9 @@ pub struct Setup {
     pub leak: Option<LeakOptions>,
 }
 
-/// vltm indirect's defaults on a tal capture: λ = 2 × pitch, σ = 2λ/3, ε = 0.1, r0 = 1.5σ,
-/// leak correction by gating, `--compensate-laser` (the renders hold the laser's falloff).
+/// vltm indirect's defaults on a tal capture (λ = 2 × pitch, σ = 2λ/3, ε = 0.1, r0 = 1.5σ,
+/// leak correction by gating) plus `--compensate-laser`, stated explicitly: it is off by
+/// default, and the renders hold the laser's falloff (docs/indirect-light.md).
 pub fn defaults() -> Setup {
     Setup {
         wave: Wave {

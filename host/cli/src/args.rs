@@ -131,15 +131,8 @@ pub(crate) enum Command {
         /// (an extra diagonal pass, as `indirect`).
         #[arg(long, value_name = "E")]
         mask_epsilon: Option<f32>,
-        /// Remove the capture's direct light before the column: zero, per laser/SPAD pair,
-        /// the bins where a 3-vertex return of a voxel of Γ (direct light above
-        /// --leak-epsilon of the maximum) can arrive (see
-        /// docs/indirect-light.md).
-        #[arg(long)]
-        leak_correct: bool,
-        /// Relative threshold of the voxels the --leak-correct fit places scatterers at.
-        #[arg(long, default_value_t = 0.1, value_name = "E")]
-        leak_epsilon: f32,
+        #[command(flatten)]
+        leak: LeakArgs,
         #[command(flatten)]
         common: Common,
     },
@@ -424,6 +417,31 @@ impl WaveArgs {
     }
 }
 
+/// The leak correction of `column`, `row` and `relight`: on by default, as `indirect`'s.
+#[derive(Args, Debug)]
+pub(crate) struct LeakArgs {
+    /// Remove the capture's direct light first (the default, as `indirect`): zero, per
+    /// laser/SPAD pair, the bins where a 3-vertex return of a voxel of Γ (direct light above
+    /// --leak-epsilon of the maximum) can arrive (see docs/indirect-light.md). Accepted for
+    /// scripts; it changes nothing.
+    #[arg(long, conflicts_with = "no_leak_correct")]
+    pub(crate) leak_correct: bool,
+    /// The capture as it is (no leak correction): the capture's direct light passes the
+    /// gate near the projector's own surface.
+    #[arg(long)]
+    pub(crate) no_leak_correct: bool,
+    /// Relative threshold of the Γ voxels whose direct returns the leak correction removes.
+    #[arg(long, default_value_t = 0.1, value_name = "E")]
+    pub(crate) leak_epsilon: f32,
+}
+
+impl LeakArgs {
+    /// The Γ threshold of the correction, `None` with `--no-leak-correct`.
+    pub(crate) fn epsilon(&self) -> Option<f32> {
+        (!self.no_leak_correct).then_some(self.leak_epsilon)
+    }
+}
+
 /// `vltm relight`.
 #[derive(Args, Debug)]
 pub(crate) struct RelightArgs {
@@ -433,6 +451,8 @@ pub(crate) struct RelightArgs {
     /// float32 .npy voxel image of the volume's shape (its voxels are the foci).
     #[arg(long, value_name = "x,y,z,w;...|F.npy", allow_hyphen_values = true)]
     pub(crate) pattern: String,
+    #[command(flatten)]
+    pub(crate) leak: LeakArgs,
     #[command(flatten)]
     pub(crate) common: Common,
 }
@@ -445,6 +465,8 @@ pub(crate) struct RowArgs {
     /// Focus x_b of the virtual camera, "X,Y,Z" in metres (z > 0).
     #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub(crate) focus: String,
+    #[command(flatten)]
+    pub(crate) leak: LeakArgs,
     #[command(flatten)]
     pub(crate) common: Common,
 }

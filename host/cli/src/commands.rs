@@ -12,7 +12,7 @@ use crate::args::{Command, DiagGateArg};
 use crate::console::{Failure, say};
 use crate::outputs::refuse_overwriting_inputs;
 use crate::summary::{Label, finish};
-use crate::{input, ltm, partial, progress, split, surface};
+use crate::{input, leak, ltm, partial, progress, split, surface, title};
 
 /// Runs one command.
 pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
@@ -111,7 +111,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
             })?;
             let label = Label {
                 probe: "direct",
-                title: "direct light".to_string(),
+                title: title::direct(&title::arg(&gate), &o.config),
                 focus: None,
                 marks: Vec::new(),
             };
@@ -141,24 +141,32 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
             shell,
             shells,
             mask_epsilon,
-            leak_correct,
-            leak_epsilon,
+            leak,
             common,
         } => {
             let a = parse_point("focus", &focus)?;
             probe::check_focus(a)?;
             let volume = Volume::parse(&common.volume)?;
+            let shell_arg = shell.clone();
             let shell = shell
                 .as_deref()
                 .map(Shell::parse)
                 .transpose()?
                 .unwrap_or(Shell::ALL);
             let cuts = shells.as_deref().map(Shell::parse_cuts).transpose()?;
+            let leak_epsilon = leak.epsilon();
             if partial::wanted(&common)? {
                 if cuts.is_some() || mask_epsilon.is_some() {
                     return Err(vltm::Error::arg(
                         "partial",
                         "a partial column takes $shell, not $shells or $mask_epsilon (apply them to the merged volume)",
+                    )
+                    .into());
+                }
+                if leak_epsilon.is_some() {
+                    return Err(vltm::Error::arg(
+                        "partial",
+                        "a partial column cannot be leak-corrected (its Γ needs the direct light of the whole capture): add $no_leak_correct, or run the column over the whole scan",
                     )
                     .into());
                 }
@@ -172,6 +180,9 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
             let mut c = common.load(&capture)?;
             let sigma = common.wave().config(c.geometry())?.sigma();
             let o = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
+                // Bad input is refused before the extra passes (Γ of the mask, the leak fit).
+                let (g, w) = (gate.gate(), common.wave());
+                probe::check_column(rows.geometry(), a, &volume, g, &w, common.exec())?;
                 let mask = match mask_epsilon {
                     Some(e) => Some(
                         split::gamma(rows, &volume, e, "mask_epsilon", &common)?
@@ -180,28 +191,9 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                     ),
                     None => None,
                 };
-                let mut o = if leak_correct {
-                    let model = probe::fit_over_volume(
-                        rows,
-                        &volume,
-                        leak_epsilon,
-                        &common.wave(),
-                        &LeakOptions::default(),
-                        common.exec(),
-                    )?;
-                    say!(
-                        "leak correction: {:.4} of the capture's energy was in the 3-vertex windows of Γ's {} voxels and removed ({:.2} s)",
-                        model.explained,
-                        model.points().len(),
-                        model.seconds
-                    );
-                    let mut lc = probe::LeakCorrected::new(rows, &model);
-                    let g = gate.gate();
-                    probe::column(&mut lc, a, &volume, g, shell, &common.wave(), common.exec())?
-                } else {
-                    let g = gate.gate();
-                    probe::column(rows, a, &volume, g, shell, &common.wave(), common.exec())?
-                };
+                let mut o = leak::corrected(rows, &volume, leak_epsilon, &common, |src| {
+                    probe::column(src, a, &volume, g, shell, &common.wave(), common.exec())
+                })?;
                 if let Some(m) = &mask {
                     o.values
                         .iter_mut()
@@ -210,7 +202,13 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                 }
                 Ok::<_, Failure>(o)
             })?;
-            let title = format!("column T(x_a, .), gate {gate:?}");
+            let words = title::ColumnWords {
+                gate: title::arg(&gate),
+                shell: shell_arg.as_deref(),
+                mask_epsilon,
+                leak_correct: leak_epsilon.is_some(),
+            };
+            let title = title::column(a, &words, &o.config);
             match cuts {
                 Some(cuts) => {
                     split::column_shells(&common, &capture, &o, &volume, a, &cuts, &title)
@@ -294,7 +292,14 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
             let run = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
                 split::indirect_run(&common, rows, &volume, &opts, cuts, direct)
             })?;
-            split::indirect_write(&common, &capture, &volume, &opts, &run)
+            split::indirect_write(&common, &capture, &volume, &opts, &run)?;
+            if !common.wave.compensate_laser && io::laser_falloff_in_data(&capture)?.0 {
+                say!(
+                    "note: {} holds the laser's cos θ / d² falloff (a tal render): --compensate-laser divides it out (`vltm info` says why; docs/indirect-light.md)",
+                    capture.display()
+                );
+            }
+            Ok(())
         }
         Command::Merge {
             parts,

@@ -12,7 +12,7 @@ use crate::args::{Common, MatrixArgs, RelightArgs, RowArgs};
 use crate::console::{Failure, say};
 use crate::outputs::{check_matrix_out, refuse_overwriting_inputs, write_matrix};
 use crate::summary::{Label, finish};
-use crate::{input, partial, progress};
+use crate::{input, leak, partial, progress, title};
 
 fn exec() -> probe::Exec<'static> {
     probe::Exec {
@@ -135,20 +135,27 @@ pub(crate) fn relight(a: RelightArgs) -> Result<(), Failure> {
     refuse_parts(
         c,
         "relight",
-        "split the scan with `vltm matrix $from FOCI $to SPEC $rows A:B $partial F` (relighting is a weighted sum of the matrix's rows)",
+        "split the scan with `vltm matrix $from FOCI $to SPEC $rows A:B $partial F` (with $no_leak_correct, relighting is a weighted sum of the matrix's rows)",
     )?;
     let mut src = c.load(&a.capture)?;
     let sigma = c.wave().config(src.geometry())?.sigma();
     let reach: Vec<Point> = volume.points.iter().chain(&pattern.foci).copied().collect();
     let r = input::with_prep(&c.input, &mut *src, &reach, sigma, |rows| {
-        probe::relight(rows, &pattern, &volume, &c.wave(), c.exec())
+        probe::check_relight(rows.geometry(), &pattern, &volume, &c.wave())?;
+        leak::corrected(rows, &volume, a.leak.epsilon(), c, |src| {
+            probe::relight(src, &pattern, &volume, &c.wave(), c.exec())
+        })
     })?;
     say!(
         "pattern: {} foci with non-zero weight, {} pass(es) over the capture",
         pattern.foci.len(),
         r.passes
     );
-    let title = format!("relit image, {} foci", pattern.foci.len());
+    let title = title::relight(
+        pattern.foci.len(),
+        a.leak.epsilon().is_some(),
+        &r.output.config,
+    );
     let marks: Vec<(Point, String)> = pattern
         .foci
         .iter()
@@ -180,18 +187,21 @@ pub(crate) fn row(a: RowArgs) -> Result<(), Failure> {
     refuse_parts(
         c,
         "row",
-        "split the scan with `vltm matrix $from SPEC $to X,Y,Z $rows A:B $partial F` (the row is the matrix's column at x_b)",
+        "split the scan with `vltm matrix $from SPEC $to X,Y,Z $rows A:B $partial F` (with $no_leak_correct, the row is the matrix's column at x_b)",
     )?;
     let mut src = c.load(&a.capture)?;
     let sigma = c.wave().config(src.geometry())?.sigma();
     let mut reach = volume.points.clone();
     reach.push(b);
     let o = input::with_prep(&c.input, &mut *src, &reach, sigma, |rows| {
-        probe::row(rows, b, &volume, &c.wave(), c.exec())
+        probe::check_row(rows.geometry(), b, &volume, &c.wave())?;
+        leak::corrected(rows, &volume, a.leak.epsilon(), c, |src| {
+            probe::row(src, b, &volume, &c.wave(), c.exec())
+        })
     })?;
     let label = Label {
         probe: "row",
-        title: "row T(., x_b), two-bounce gate".to_string(),
+        title: title::row(b, a.leak.epsilon().is_some(), &o.config),
         focus: None,
         marks: vec![(b, "x_b".to_string())],
     };

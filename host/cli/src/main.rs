@@ -17,6 +17,7 @@ mod args;
 mod commands;
 mod console;
 mod input;
+mod leak;
 mod live;
 mod ltm;
 mod outputs;
@@ -25,6 +26,7 @@ mod progress;
 mod split;
 mod summary;
 mod surface;
+mod title;
 
 use args::Cli;
 use console::{flag, printable, tell};

@@ -192,9 +192,9 @@ pub(crate) fn merge(
         .map(|a| (a, "x_a".to_string()))
         .into_iter()
         .collect();
-    let title = match probe {
-        "direct" => "direct light".to_string(),
-        "column" => "column T(x_a, .)".to_string(),
+    let title = match (probe, merged.focus()) {
+        ("direct", _) => crate::title::direct("gaussian", &o.config),
+        ("column", Some(a)) => crate::title::merged_column(a, &o.config),
         _ => "in-focus indirect light".to_string(),
     };
     write_outputs((&out, &png), &meta, &o.values, &f.volume, &title, &marks)

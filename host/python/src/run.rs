@@ -161,9 +161,11 @@ enum Job {
     },
     Relight {
         pattern: Pattern,
+        leak_epsilon: Option<f32>,
     },
     Row {
         focus: Point,
+        leak_epsilon: Option<f32>,
     },
 }
 
@@ -275,17 +277,23 @@ fn run<'py>(
         "column" => {
             let focus = need_focus()?;
             let gate = column_gate(gate)?;
-            let extra = cuts.is_some() || mask_epsilon.is_some() || leak_correct;
+            let extra = cuts.is_some() || mask_epsilon.is_some();
             if rows.is_some() && extra {
                 return Err(arg(
                     "rows",
-                    "a partial column takes shell, not shells, mask_epsilon or leak_correct (apply them to the merged volume)",
+                    "a partial column takes shell, not shells or mask_epsilon (apply them to the merged volume)",
+                ));
+            }
+            if rows.is_some() && leak_correct {
+                return Err(arg(
+                    "rows",
+                    "a partial column cannot be leak-corrected (its Γ needs the direct light of the whole capture): pass leak_correct=False, or run the column over all rows",
                 ));
             }
             if amplitudes && extra {
                 return Err(arg(
                     "amplitudes",
-                    "complex amplitudes come with a column without shells, mask_epsilon or leak_correct",
+                    "complex amplitudes come with a column without shells or mask_epsilon",
                 ));
             }
             Job::Column {
@@ -376,7 +384,10 @@ fn run<'py>(
                 }
                 (None, None) => return Err(arg("pattern", "relighting needs a pattern")),
             };
-            Job::Relight { pattern }
+            Job::Relight {
+                pattern,
+                leak_epsilon: leak_correct.then_some(leak_epsilon),
+            }
         }
         "row" => {
             no_part("a row")?;
@@ -387,7 +398,10 @@ fn run<'py>(
                     "`row` is the transposed column already (use column with swap_roles=True for the in-memory transpose)",
                 ));
             }
-            Job::Row { focus }
+            Job::Row {
+                focus,
+                leak_epsilon: leak_correct.then_some(leak_epsilon),
+            }
         }
         k => return Err(arg("kind", format!("unknown probe `{k}`"))),
     };
@@ -507,16 +521,45 @@ fn compute(
             let n = src.geometry().lasers.len();
             let r = rows.map_or(0..n, |(a, b)| a..b);
             let (bytes, name) = (cap.file_bytes(), cap.name());
-            let (p, prep) = front::with_prep(prep, &mut *src, &vol.points, sigma, |s| {
-                partial::accumulate(s, bytes, &name, vol, &task, wave, exec, r)
-            })?;
+            // A whole-scan column's amplitudes with the leak correction: the corrected rows.
+            let leak = match &job {
+                Job::Column {
+                    leak_epsilon: Some(le),
+                    ..
+                } if rows.is_none() => Some(*le),
+                _ => None,
+            };
+            let ((p, explained), prep) =
+                front::with_prep(prep, &mut *src, &vol.points, sigma, |s| match leak {
+                    Some(le) => {
+                        if let Job::Column { focus, gate, .. } = &job {
+                            probe::check_column(s.geometry(), *focus, vol, *gate, wave, exec)?;
+                        }
+                        let model = probe::fit_over_volume(
+                            s,
+                            vol,
+                            le,
+                            wave,
+                            &LeakOptions::default(),
+                            exec,
+                        )?;
+                        let mut lc = LeakCorrected::new(s, &model);
+                        let p =
+                            partial::accumulate(&mut lc, bytes, &name, vol, &task, wave, exec, r)?;
+                        Ok((p, Some(model.explained)))
+                    }
+                    None => Ok((
+                        partial::accumulate(s, bytes, &name, vol, &task, wave, exec, r)?,
+                        None,
+                    )),
+                })?;
             if rows.is_some() {
                 return Ok(Outcome::Part(Box::new(p)));
             }
             let f = p.finish_with(true)?;
             let mut d = Done::of(f.output);
             d.amplitudes = f.amplitudes;
-            d.explained = f.explained;
+            d.explained = f.explained.or(explained);
             d.prep = prep;
             return Ok(Outcome::Done(d));
         }
@@ -547,6 +590,8 @@ fn one_pass(
             mask_epsilon,
             leak_epsilon,
         } => {
+            // Bad input is refused before the extra passes (Γ of the mask, the leak fit).
+            probe::check_column(rows.geometry(), focus, vol, gate, wave, exec)?;
             let mask = match mask_epsilon {
                 Some(e) => {
                     if !(0.0..1.0).contains(&e) {
@@ -635,19 +680,56 @@ fn one_pass(
             d.direct = Some(direct);
             Ok(d)
         }
-        Job::Relight { pattern } => {
-            let r = probe::relight(rows, &pattern, vol, wave, exec)?;
+        Job::Relight {
+            pattern,
+            leak_epsilon,
+        } => {
+            probe::check_relight(rows.geometry(), &pattern, vol, wave)?;
+            let (r, explained) = corrected(rows, vol, leak_epsilon, wave, exec, |src| {
+                probe::relight(src, &pattern, vol, wave, exec)
+            })?;
             let mut d = Done::of(r.output);
             d.amplitudes = Some(r.amplitudes);
             d.passes = Some(r.passes);
+            d.explained = explained;
             Ok(d)
         }
-        Job::Row { focus } => Ok(Done::of(probe::row(rows, focus, vol, wave, exec)?)),
+        Job::Row {
+            focus,
+            leak_epsilon,
+        } => {
+            probe::check_row(rows.geometry(), focus, vol, wave)?;
+            let (o, explained) = corrected(rows, vol, leak_epsilon, wave, exec, |src| {
+                probe::row(src, focus, vol, wave, exec)
+            })?;
+            let mut d = Done::of(o);
+            d.explained = explained;
+            Ok(d)
+        }
         Job::Matrix { .. } => Err(vltm::Error::arg(
             "kind",
             "a matrix is run over all rows above",
         )),
     }
+}
+
+/// `probe` on the rows of `src`, leak-corrected with Γ above `epsilon`·max over `vol` (as
+/// the command line's `row` and `relight`), or on `src` as it is for `None`; with the energy
+/// the correction removed.
+fn corrected<T>(
+    src: &mut dyn RowSource,
+    vol: &vltm::volume::Volume,
+    epsilon: Option<f32>,
+    wave: &Wave,
+    exec: Exec<'_>,
+    probe: impl FnOnce(&mut dyn RowSource) -> vltm::Result<T>,
+) -> vltm::Result<(T, Option<f64>)> {
+    let Some(e) = epsilon else {
+        return Ok((probe(src)?, None));
+    };
+    let model = probe::fit_over_volume(src, vol, e, wave, &LeakOptions::default(), exec)?;
+    let mut lc = LeakCorrected::new(src, &model);
+    Ok((probe(&mut lc)?, Some(model.explained)))
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

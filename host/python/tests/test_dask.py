@@ -107,12 +107,12 @@ OPTIONS = {
         "path": "band", "swap_roles": True, "t_min": 1.3, "t_max": "350b", "rebin": 2,
         "background": 1e-6, "report": True, "as_xarray": True}),
     "relight": ((SMALL, "-0.25,0.15,0.7,1;0.25,0,0.9,0.5"), {
-        "wavelength": 0.3, "sigma": 0.2, "weights": "one", "band": 4.0,
+        "leak_correct": False, "leak_epsilon": 0.2, "wavelength": 0.3, "sigma": 0.2, "weights": "one", "band": 4.0,
         "compensate_laser": True, "crop": False, "path": "band", "swap_roles": True, "t_min": 1.3,
         "t_max": "350b", "rebin": 2, "background": 1e-6, "amplitudes": True,
         "report": True, "as_xarray": True}),
     "row": ((SMALL, (0.25, 0.0, 0.9)), {
-        "wavelength": 0.3, "sigma": 0.2, "weights": "one", "band": 4.0,
+        "leak_correct": False, "leak_epsilon": 0.2, "wavelength": 0.3, "sigma": 0.2, "weights": "one", "band": 4.0,
         "compensate_laser": True, "crop": False, "path": "band", "swap_roles": True, "t_min": 1.3, "t_max": "350b",
         "rebin": 2, "background": 1e-6, "report": True, "as_xarray": True}),
     "matrix": (("-0.3:0.3:2,-0.3:0.3:2,0.6:0.8:2", "gamma"), {

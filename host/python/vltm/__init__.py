@@ -812,7 +812,7 @@ def column(
     shell: Optional[Tuple[float, float]] = None,
     shells: Optional[Tuple[float, float]] = None,
     mask_epsilon: Optional[float] = None,
-    leak_correct: bool = False,
+    leak_correct: bool = True,
     leak_epsilon: float = 0.1,
     wavelength: Optional[float] = None,
     sigma: Optional[float] = None,
@@ -837,11 +837,13 @@ def column(
     ``[0, r1)``, middle ``[r1, r2)`` and far ``[r2, inf)`` light of one run, stacked as
     ``(3,) + shape`` (``vltm column --shells``; a ``shell`` dimension with ``as_xarray``).
     ``mask_epsilon`` zeroes every voxel whose direct light is not above ε·max (an extra
-    diagonal pass). ``leak_correct=True`` removes the capture's direct light first (the
-    3-vertex windows of Γ = direct light above ``leak_epsilon``·max; ``report["explained"]``
-    the energy removed). ``amplitudes=True`` also returns the complex amplitudes
-    ``A(x_a, ·)`` (complex128, ``T = |A|²``, 0 outside ``shell``) of two-bounce and
-    higher-order columns; the un-gated column has none. Other arguments as
+    diagonal pass). ``leak_correct=True`` (the default, as ``vltm column``) removes the
+    capture's direct light first (the 3-vertex windows of Γ = direct light above
+    ``leak_epsilon``·max; ``report["explained"]`` the energy removed);
+    ``leak_correct=False`` is the column of the capture as it is (``--no-leak-correct``),
+    needed for partial states (``rows=``). ``amplitudes=True`` also returns the complex
+    amplitudes ``A(x_a, ·)`` (complex128, ``T = |A|²``, 0 outside ``shell``) of two-bounce
+    and higher-order columns; the un-gated column has none. Other arguments as
     :func:`direct`."""
     f = _check.point("focus", focus)
     me = _check.real("mask_epsilon", mask_epsilon, none=True)
@@ -931,6 +933,8 @@ def relight(
     volume: Union[str, np.ndarray, Volume],
     pattern: Union[str, np.ndarray],
     *,
+    leak_correct: bool = True,
+    leak_epsilon: float = 0.1,
     wavelength: Optional[float] = None,
     sigma: Optional[float] = None,
     weights: str = "inv",
@@ -955,7 +959,8 @@ def relight(
     ``(n, 3)`` or ``(n, 4)`` array of foci (and weights), a voxel image of the volume's
     shape (its voxels are the foci, its values the weights), or the path of a float32
     ``.npy`` image. ``amplitudes=True`` also returns ``A_p`` (complex128);
-    ``report["passes"]`` the passes over the capture. Other arguments as :func:`direct`."""
+    ``report["passes"]`` the passes over the capture. ``leak_correct``, ``leak_epsilon`` as
+    :func:`column` (on by default). Other arguments as :func:`direct`."""
     vol = _volume(volume)
     spec, pts = None, None
     if isinstance(pattern, (str, os.PathLike)) and os.fspath(pattern).strip().endswith(".npy"):
@@ -982,7 +987,9 @@ def relight(
                 f"argument `pattern`: expected x,y,z,w;... foci, an (n, 3) or (n, 4) array, or an image of the volume's shape {list(vol.shape)}, found shape {list(a.shape)}")
         pts = np.ascontiguousarray(pts, dtype=np.float64)
     return _probe("relight", capture, vol, None, amplitudes, report, as_xarray,
-                  {"pattern": spec}, pattern=pts, pattern_spec=spec,
+                  {"pattern": spec, "leak_correct": leak_correct}, pattern=pts, pattern_spec=spec,
+                  leak_correct=_check.flag("leak_correct", leak_correct),
+                  leak_epsilon=_check.real("leak_epsilon", leak_epsilon),
                   **_wave(wavelength, sigma, weights, band, compensate_laser, crop, path),
                   **_input(swap_roles, t_min, t_max, rebin, background))
 
@@ -992,6 +999,8 @@ def row(
     volume: Union[str, np.ndarray, Volume],
     focus: Sequence[float],
     *,
+    leak_correct: bool = True,
+    leak_epsilon: float = 0.1,
     wavelength: Optional[float] = None,
     sigma: Optional[float] = None,
     weights: str = "inv",
@@ -1010,10 +1019,13 @@ def row(
     """A row ``T(·, x_b)`` of the LTM (``vltm row``): the virtual camera focused at
     ``x_b`` = ``focus`` (m, z > 0), the projector over ``volume`` (two-bounce gate),
     streamed by laser rows without transposing the capture. ``swap_roles`` is refused (a
-    row is the transposed column already). Other arguments as :func:`direct`."""
+    row is the transposed column already). ``leak_correct``, ``leak_epsilon`` as
+    :func:`column` (on by default). Other arguments as :func:`direct`."""
     f = _check.point("focus", focus)
     return _probe("row", capture, volume, None, False, report, as_xarray,
-                  {"gate": "two-bounce", "focus": list(f)}, focus=list(f),
+                  {"gate": "two-bounce", "focus": list(f), "leak_correct": leak_correct},
+                  focus=list(f), leak_correct=_check.flag("leak_correct", leak_correct),
+                  leak_epsilon=_check.real("leak_epsilon", leak_epsilon),
                   **_wave(wavelength, sigma, weights, band, compensate_laser, crop, path),
                   **_input(swap_roles, t_min, t_max, rebin, background))
 

@@ -15,9 +15,11 @@ Every keyword of the in-process function (:func:`vltm.direct`, :func:`vltm.colum
 :func:`vltm.indirect`, :func:`vltm.relight`, :func:`vltm.row`, :func:`vltm.matrix`) passes
 through unchanged and is checked on the client before any task starts. Options a row split
 cannot carry — the preprocessing (``t_min``, ``t_max``, ``rebin``, ``background``), the
-un-gated and higher-order diagonals, ``shells``, ``mask_epsilon``, a column's
-``leak_correct``, a non-two-bounce indirect gate, and ``relight``/``row`` (no partial
-states) — run as **one task** on a worker over the whole capture.
+un-gated and higher-order diagonals, ``shells``, ``mask_epsilon``, a column's leak
+correction (on by default, as ``vltm column``: its Γ needs the whole capture; pass
+``leak_correct=False`` to split a column), a non-two-bounce indirect gate, and
+``relight``/``row`` (no partial states) — run as **one task** on a worker over the whole
+capture.
 
 Cost per task: its rows' share of the one-pass time plus opening the file; per merge: one
 addition per f64 of state (see ``Partial.nbytes``) plus (de)serialisation.
@@ -190,7 +192,7 @@ def column(capture: CaptureArg, volume: Any, focus: Sequence[float], *, client: 
     """:func:`vltm.column` over a Dask cluster (arguments as :func:`direct`)."""
     _check(vltm.column, (volume, focus), options)
     src = _source(capture)
-    if not _splits(options, ("shells", "mask_epsilon")) or options.get("leak_correct", False):
+    if not _splits(options, ("shells", "mask_epsilon")) or options.get("leak_correct", True):
         return _one_task("column", src, (volume, focus), client, options)
     f = list(vltm._check.point("focus", focus))
     kw = dict(_split_kw(options), focus=f)

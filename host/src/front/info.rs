@@ -86,6 +86,7 @@ pub fn info(
         describe_hdf5(path, &mut out)?;
     }
     describe(&c, &mut out);
+    out(laser_line(io::laser_falloff_in_data(path)?));
     out(format!("memory       budget {}", crate::budget::describe()));
     let (g, counts) = match prep {
         Some(p) => {
@@ -129,6 +130,18 @@ pub fn info(
         t0: g.t0,
         dt: g.dt,
     })
+}
+
+/// The `laser` line: whether the data hold the laser's falloff, and what `$compensate_laser`
+/// (off by default) does with it.
+fn laser_line((held, why): (bool, &str)) -> String {
+    if held {
+        format!(
+            "laser        falloff cos θ / d² in the data ({why}); $compensate_laser (off by default) divides it out: use it to compare with y-tal and for `indirect`'s in-focus light; leak-corrected columns peak on the lit surface without it (docs/indirect-light.md)"
+        )
+    } else {
+        format!("laser        no falloff in the data ({why}): leave $compensate_laser off")
+    }
 }
 
 /// The HDF5 layout of a capture: `H_format` and scan type of an `HDF5_TAL` file; axis order,

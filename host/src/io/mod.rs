@@ -79,6 +79,34 @@ pub fn open_source(path: &Path) -> Result<Box<dyn RowSource>> {
     }
 }
 
+/// Whether the histograms of the capture file `path` hold the physical laser's falloff
+/// `cos θ / d²` at each laser spot (what `compensate_laser` divides out), and why, in words
+/// for `vltm info`: y-tal/mitransient renders (`HDF5_TAL`) multiply every path by it
+/// (`fixtures/ytal/README.md`, *Radiometry*); vltm's simulator renders none; a measured
+/// capture's collimated laser puts the same power on every spot; a Z-NLOS file records none.
+///
+/// # Errors
+/// An `.hdf5` file whose layout cannot be read ([`tal::detect`]).
+pub fn laser_falloff_in_data(path: &Path) -> Result<(bool, &'static str)> {
+    Ok(match extension(path).as_deref() {
+        Some("hdf5" | "h5") => match tal::detect(path)? {
+            tal::Hdf5Layout::Tal => (
+                true,
+                "a y-tal/mitransient render: tal multiplies every path by it at the laser spot",
+            ),
+            tal::Hdf5Layout::Znlos => (false, "a Z-NLOS capture records no laser falloff"),
+        },
+        Some("npz") => (
+            false,
+            "an .npz records none: `vltm simulate` renders none, one converted from a tal render still holds it",
+        ),
+        _ => (
+            false,
+            "a PicoQuant or MATLAB capture: a measured laser is collimated and puts the same power on every spot",
+        ),
+    })
+}
+
 /// Whether `path` names a y-tal HDF5 capture (`.hdf5` / `.h5`).
 pub fn is_hdf5(path: &Path) -> bool {
     matches!(extension(path).as_deref(), Some("hdf5" | "h5"))
@@ -92,4 +120,26 @@ fn unknown_format(path: &Path) -> Error {
             path.display()
         ),
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// tal renders hold the laser's falloff; vltm's own `.npz` and the measured Stanford
+    /// capture do not; a file that is no capture is an error naming it.
+    #[test]
+    fn laser_falloff_follows_the_format() {
+        let f = |p: &str| laser_falloff_in_data(&Path::new("..").join(p));
+        let (held, why) = f("fixtures/ytal/two_patches/two_patches.hdf5").expect("tal");
+        assert!(held && why.contains("render"), "{why}");
+        for p in [
+            "fixtures/two_patches.npz",
+            "fixtures/real/data_exit_sign.mat",
+        ] {
+            assert!(!f(p).expect("capture").0, "{p}");
+        }
+        let e = f("fixtures/pathtraced/README.md.h5").expect_err("no file");
+        assert!(e.to_string().contains("README.md.h5"), "{e}");
+    }
 }

@@ -148,7 +148,7 @@ impl LiveRun {
             tasks.push((
                 format!("column{i}"),
                 format!(
-                    "column T(x_a, .) at x_a = ({:.3}, {:.3}, {:.3})",
+                    "column --focus {},{},{} --gate two-bounce (live: not leak-corrected)",
                     a[0], a[1], a[2]
                 ),
                 Task::Column {
@@ -524,6 +524,49 @@ impl LiveRun {
         )?;
         o.direct = direct.to_vec();
         Ok(o)
+    }
+}
+
+impl LiveRun {
+    /// The `--focus` columns over the whole scan, leak-corrected as `vltm column` corrects
+    /// them by default (Γ = direct light above `epsilon`·max over the volume, its direct
+    /// returns zeroed): possible only at the end, once every row is stored and Γ is known.
+    /// The running columns cannot be: they are folded row by row before Γ exists.
+    ///
+    /// # Errors
+    /// As [`LiveRun::indirect`] (the whole scan), and the leak fit's and the column's errors.
+    pub fn corrected_columns(&mut self, epsilon: f32) -> Result<Vec<crate::probe::Output>> {
+        if self.received < self.total_rows() || self.stored_from > 0 {
+            return Err(Error::arg(
+                "live",
+                "leak-corrected columns need the whole scan stored",
+            ));
+        }
+        let (wave, ex) = (self.opts.wave, exec(self.opts.path));
+        let volume = &self.opts.volume;
+        let model = crate::probe::fit_over_volume(
+            &mut self.capture,
+            volume,
+            epsilon,
+            &wave,
+            &crate::probe::LeakOptions::default(),
+            ex,
+        )?;
+        let mut out = Vec::new();
+        for &a in &self.opts.focus {
+            let mut lc = crate::probe::LeakCorrected::new(&mut self.capture, &model);
+            let g = ColumnGate::TwoBounce;
+            out.push(crate::probe::column(
+                &mut lc,
+                a,
+                volume,
+                g,
+                Shell::ALL,
+                &wave,
+                ex,
+            )?);
+        }
+        Ok(out)
     }
 }
 
@@ -922,6 +965,20 @@ pub fn drive(
             &run.opts.volume,
             Vec::new(),
         )?);
+        // With the leak correction on (as for the indirect light), the columns once more over
+        // the stored rows, corrected as `vltm column` corrects them.
+        if opts.leak.is_some() {
+            let cols = run.corrected_columns(opts.epsilon)?;
+            for (i, (o, a)) in cols.into_iter().zip(run.opts.focus.clone()).enumerate() {
+                let title = format!(
+                    "column --focus {},{},{} --gate two-bounce (leak-corrected, whole scan)",
+                    a[0], a[1], a[2]
+                );
+                let marks = vec![(a, "x_a".to_string())];
+                let tag = format!("column{i}.corrected");
+                views.push(view(&tag, &title, o.values, &run.opts.volume, marks)?);
+            }
+        }
     }
     outputs.write(run, &views, capture)?;
     observe(Update::Finished { run, views: &views });

@@ -10,7 +10,7 @@ use super::wave::*;
 use crate::budget;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path, chunk_len};
-use crate::io::capture::RowSource;
+use crate::io::capture::{Geometry, RowSource};
 use crate::probe::fast::Planar;
 use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
@@ -244,6 +244,51 @@ pub(super) enum ColumnState {
 /// configuration (of the time axis cropped to the paths' reach) and the crop. `defer`: leave
 /// the choice of the imaging path under [`Path::Auto`] to [`ColumnState::finish`] (the path is
 /// then recorded as `Auto`).
+/// The checks [`column`] makes before it reads a row: the focus, the lens weights, the
+/// evaluation path for the gate, a SPAD grid for the factorised gates, and the capture's
+/// window. A front end that runs another pass first (the leak correction's Γ) calls it to
+/// refuse bad input before any work.
+///
+/// # Errors
+/// As [`column`]'s argument errors.
+pub fn check_column(
+    g: &Geometry,
+    focus: Point,
+    volume: &Volume,
+    gate: ColumnGate,
+    wave: &Wave,
+    exec: Exec<'_>,
+) -> Result<()> {
+    wave.refuse_cosine("`column`")?;
+    check_focus(focus)?;
+    check_path(exec.path, gate)?;
+    if gate != ColumnGate::HigherOrder {
+        g.need_spad_grid("column", "columns need")?;
+    }
+    let base = wave.config(g)?;
+    // Quiet: the column itself warns about a partial coverage.
+    let quiet = Exec {
+        progress: None,
+        ..exec
+    };
+    super::window::window_rule(g, &base, Some(&[focus]), &volume.points, gate, quiet).map(|_| ())
+}
+
+/// Refuses an evaluation path that cannot image a column with `gate`.
+fn check_path(path: Path, gate: ColumnGate) -> Result<()> {
+    match (path, gate) {
+        (Path::Lookup, _) => Err(Error::arg(
+            "path",
+            "the lookup path evaluates the diagonal only (use auto, band or planar for columns)",
+        )),
+        (Path::Planar, ColumnGate::HigherOrder | ColumnGate::None) => Err(Error::arg(
+            "path",
+            "the planar path images Gaussian-gated (two-bounce) columns only (use auto or band)",
+        )),
+        _ => Ok(()),
+    }
+}
+
 pub(super) fn column_acc(
     src: &mut dyn RowSource,
     focus: Point,
@@ -254,21 +299,7 @@ pub(super) fn column_acc(
     defer: bool,
 ) -> Result<(ColumnState, vltm_kernel::Config, Option<Crop>)> {
     check_focus(focus)?;
-    match (exec.path, gate) {
-        (Path::Lookup, _) => {
-            return Err(Error::arg(
-                "path",
-                "the lookup path evaluates the diagonal only (use auto, band or planar for columns)",
-            ));
-        }
-        (Path::Planar, ColumnGate::HigherOrder | ColumnGate::None) => {
-            return Err(Error::arg(
-                "path",
-                "the planar path images Gaussian-gated (two-bounce) columns only (use auto or band)",
-            ));
-        }
-        _ => {}
-    }
+    check_path(exec.path, gate)?;
     let base = wave.config(src.geometry())?;
     let foci = [focus];
     super::window::window_rule(

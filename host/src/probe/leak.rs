@@ -1,6 +1,6 @@
 //! Leak correction (beyond the paper): the capture's **direct** (3-vertex) light removed, row
-//! by row, before the off-diagonal probes (`vltm indirect` by default, `vltm column
-//! --leak-correct`).
+//! by row, before the off-diagonal probes (by default in `vltm indirect`, `column`, `row` and
+//! `relight`; `--no-leak-correct` skips it).
 //!
 //! # Why
 //!
@@ -52,7 +52,8 @@
 //! On `fixtures/pathtraced` (mitransient 1.3.1, 8×8 lasers × 8×8 SPADs, 300 bins of 1 cm; per
 //! scene three renders with the same seed: all paths, direct only, two hidden vertices only =
 //! the indirect-only truth), volume `-0.75:0.75:16,-0.75:0.75:16,0.5:1.4:19`, vltm's defaults
-//! (λ = 0.4 m, σ = 0.267 m, ε = 0.1, r0 = 0.4 m, `--compensate-laser`), means over the
+//! (λ = 0.4 m, σ = 0.267 m, ε = 0.1, r0 = 0.4 m) plus `--compensate-laser` (off by default:
+//! docs/indirect-light.md, "The laser falloff"), means over the
 //! objects' voxels (`cargo bench --bench pathtraced -- diagnose`). Panel/figure scene (a
 //! 0.6 × 0.9 m panel, 2 cm thick, facing the wall and a box figure): the gate gives the figure
 //! 21.6× and the projector's own panel 8.1× their direct-only controls. The candidates:

@@ -41,7 +41,7 @@ use super::wave::*;
 use crate::budget;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, chunk_len};
-use crate::io::capture::RowSource;
+use crate::io::capture::{Geometry, RowSource};
 use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
@@ -523,6 +523,26 @@ impl Pattern {
             .collect();
         Self::new(&pts)
     }
+}
+
+/// The checks [`relight`] makes before it reads a row: the lens weights, a SPAD grid and the
+/// capture's window; for a front end that runs another pass first (the leak correction's Γ).
+///
+/// # Errors
+/// As [`relight`]'s argument errors.
+pub fn check_relight(g: &Geometry, pattern: &Pattern, volume: &Volume, wave: &Wave) -> Result<()> {
+    wave.refuse_cosine("`relight`")?;
+    g.need_spad_grid("relight", "the matrix needs")?;
+    let base = wave.config(g)?;
+    super::window::window_rule(
+        g,
+        &base,
+        Some(&pattern.foci),
+        &volume.points,
+        super::wave::ColumnGate::TwoBounce,
+        Exec::default(),
+    )
+    .map(|_| ())
 }
 
 /// Relighting: `A_p(b) = Σ_a p_a A(a, b)` over `volume`, intensities `|A_p|²` (see the

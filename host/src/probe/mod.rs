@@ -43,7 +43,7 @@ pub mod window;
 
 pub use crate::exec::{Exec, Path};
 pub use aligned::{aligned_volume, fft_note};
-pub use column::{ColumnGate, Shell, check_focus, column, diagonal};
+pub use column::{ColumnGate, Shell, check_column, check_focus, column, diagonal};
 pub use crop::Crop;
 pub use direct::direct;
 pub use gamma::{Gamma, gamma_mask};
@@ -52,9 +52,11 @@ pub use indirect::{
     indirect_shells,
 };
 pub use leak::{DirectModel, GateEnergy, LeakCorrected, LeakMethod, LeakOptions, cell_radius};
-pub use matrix::{MATRIX_BYTES_PER_ELEMENT, Matrix, Pattern, Relit, matrix, relight};
+pub use matrix::{
+    MATRIX_BYTES_PER_ELEMENT, Matrix, Pattern, Relit, check_relight, matrix, relight,
+};
 pub use partial::{Finished, Partial, Task};
-pub use row::row;
+pub use row::{check_row, row};
 pub use surface::{
     PlaneFit, Surface, SurfaceOptions, fit_plane, local_contrast, sample_plane, surface,
 };

@@ -21,12 +21,34 @@ use super::drive::*;
 use super::wave::*;
 use crate::error::Result;
 use crate::exec::{Exec, Path, chunk_len};
-use crate::io::capture::RowSource;
+use crate::io::capture::{Geometry, RowSource};
 use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
 use std::time::Instant;
 use vltm_kernel::{Point, Report, cis_turns, geometry};
+
+/// The checks [`row`] makes before it reads a row: the lens weights, the focus, a SPAD grid
+/// and the capture's window; for a front end that runs another pass first (the leak
+/// correction's Γ).
+///
+/// # Errors
+/// As [`row`]'s argument errors.
+pub fn check_row(g: &Geometry, focus: Point, volume: &Volume, wave: &Wave) -> Result<()> {
+    wave.refuse_cosine("`row`")?;
+    super::column::check_focus(focus)?;
+    g.need_spad_grid("row", "rows need")?;
+    let base = wave.config(g)?;
+    super::window::window_rule(
+        g,
+        &base,
+        Some(&volume.points),
+        &[focus],
+        super::wave::ColumnGate::TwoBounce,
+        Exec::default(),
+    )
+    .map(|_| ())
+}
 
 /// The row `T(·, x_b)` over `volume` (intensities `|A(a, b)|²` per voxel `a`), streamed by
 /// laser rows (see the module docs).

@@ -167,6 +167,10 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
     tags.extend((0..focus.len()).map(|i| format!("column{i}")));
     if !a.no_indirect {
         tags.push("indirect".into());
+        if !a.no_leak_correct {
+            // The columns once more at the end, leak-corrected over the stored rows.
+            tags.extend((0..focus.len()).map(|i| format!("column{i}.corrected")));
+        }
     }
     let tag_refs: Vec<&str> = tags.iter().map(String::as_str).collect();
     let all = outputs.all(&tag_refs);
@@ -322,8 +326,14 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
             say!("{line}");
             for v in views {
                 let p = v.peak.1;
+                // Live columns are folded row by row, before Γ exists: no leak correction.
+                let note = if v.tag.starts_with("column") && !v.tag.ends_with(".corrected") {
+                    " (not leak-corrected: see the .corrected column, or `vltm column` on the finished capture)"
+                } else {
+                    ""
+                };
                 say!(
-                    "{}: peak {:.4e} at ({:.3}, {:.3}, {:.3}) m",
+                    "{}: peak {:.4e} at ({:.3}, {:.3}, {:.3}) m{note}",
                     v.tag,
                     v.peak.0,
                     p[0],
