@@ -49,11 +49,7 @@ impl Stage {
     /// rate so far, once some units are done).
     pub(crate) fn line(&self, now: Instant) -> String {
         let pos = self.pos.min(self.total);
-        let pct = if self.total == 0 {
-            100
-        } else {
-            pos * 100 / self.total
-        };
+        let pct = (pos * 100).checked_div(self.total).unwrap_or(100);
         let mut line = format!("{} {pos}/{} ({pct} %)", self.label, self.total);
         if pos > 0 && pos < self.total {
             let spent = now.saturating_duration_since(self.started).as_secs_f64();

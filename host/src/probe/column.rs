@@ -673,6 +673,7 @@ impl Columns {
     ///
     /// # Errors
     /// Kernel errors (sizes).
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn image(
         &mut self,
         cfg: &vltm_kernel::Config,

@@ -390,7 +390,9 @@ pub(super) fn indirect_sum(
     let imaged = cols.image(cfg, spads, pts, Gate::Gaussian, pts, exec, "indirect")?;
     report = summed_reports(&imaged);
     let bar = Pass::start(exec, "indirect: pair sums", pts.len());
-    let sum = pair_sum(&imaged, pts, &bar, |ai, bi, d| ai != bi && shell.contains(d));
+    let sum = pair_sum(&imaged, pts, &bar, |ai, bi, d| {
+        ai != bi && shell.contains(d)
+    });
     for (&i, s) in idx.iter().zip(sum) {
         values[i] = s as f32;
     }
