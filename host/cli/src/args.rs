@@ -33,6 +33,11 @@ pub(crate) struct Cli {
     /// against it before it is made.
     #[arg(long, global = true, value_name = "SIZE")]
     pub(crate) max_memory: Option<String>,
+    /// Progress of the long stages on stderr: `auto` (a bar on a terminal, otherwise a plain
+    /// line every few seconds once the command has run a few seconds), `bar`, `plain` or
+    /// `none`.
+    #[arg(long, global = true, value_enum, default_value_t = progress::Mode::Auto)]
+    pub(crate) progress: progress::Mode,
 }
 
 #[derive(Subcommand, Debug)]

@@ -84,6 +84,7 @@ fn main() -> ExitCode {
             }
         }
     }
+    progress::BARS.set_mode(cli.progress);
     vltm::timings::start();
     let done = commands::run(cli.command);
     if let Some(t) = vltm::timings::report() {

@@ -9,7 +9,7 @@ pub use super::wave::ColumnGate;
 use super::wave::*;
 use crate::budget;
 use crate::error::{Error, Result};
-use crate::exec::{Exec, Path, chunk_len};
+use crate::exec::{Exec, Pass, Path, chunk_len};
 use crate::io::capture::{Geometry, RowSource};
 use crate::probe::fast::Planar;
 use crate::volume::Volume;
@@ -699,10 +699,12 @@ pub(super) fn factorised_columns(
 
 impl Columns {
     /// Images every column over `voxels` (`spads`: the capture's SPAD spots): per focus the
-    /// intensities and the counters.
+    /// intensities and the counters; the foci imaged go to `exec`'s progress as the stage
+    /// `<label>: columns`.
     ///
     /// # Errors
     /// Kernel errors (sizes).
+    #[allow(clippy::too_many_arguments)]
     pub(super) fn image(
         &mut self,
         cfg: &vltm_kernel::Config,
@@ -710,6 +712,8 @@ impl Columns {
         foci: &[Point],
         gate: Gate,
         voxels: &[Point],
+        exec: Exec<'_>,
+        label: &str,
     ) -> Result<Vec<(Vec<f64>, Report)>> {
         let ks = spads.len();
         let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
@@ -719,13 +723,16 @@ impl Columns {
         // In parallel over the foci (and within a focus over chunks of voxels): a column
         // over few voxels is one chunk.
         let _t = crate::timings::section("imaging columns", crate::timings::Kind::Parallel);
+        let bar = Pass::start(exec, &format!("{label}: columns"), foci.len());
         self.state
             .par_chunks_mut(n_state.max(1))
             .zip(foci.par_iter())
             .zip(self.legs.par_iter())
             .map(|((st, a), legs)| {
                 let p = Probe::resume(&scan, Target::Column(*a), gate, &[], st, report, *legs)?;
-                image_chunks(&p, &scan, voxels)
+                let imaged = image_chunks(&p, &scan, voxels);
+                bar.advance(1);
+                imaged
             })
             .collect()
     }

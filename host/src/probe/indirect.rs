@@ -11,7 +11,7 @@ use super::gamma::Gamma;
 use super::leak::{DirectModel, LeakCorrected, LeakOptions, cell_radius};
 use super::wave::*;
 use crate::error::{Error, Result};
-use crate::exec::Exec;
+use crate::exec::{Exec, Pass};
 use crate::io::capture::RowSource;
 use crate::volume::Volume;
 use rayon::prelude::*;
@@ -270,15 +270,17 @@ fn pair_sums(
             } else {
                 let spads = src.geometry().spads.clone();
                 factorised_columns(src, job, &pts, kgate, "indirect")?
-                    .image(&cfg, &spads, &pts, kgate, &pts)
+                    .image(&cfg, &spads, &pts, kgate, &pts, exec, "indirect")
             }
         })?;
         report = summed_reports(&cols);
         let _t = crate::timings::section("pair sums", crate::timings::Kind::Parallel);
+        let bar = Pass::start(exec, "indirect: pair sums", shells.len() * pts.len());
         let sums = shells
             .iter()
-            .map(|sh| pair_sum(&cols, &pts, |ai, bi, d| ai != bi && sh.contains(d)))
+            .map(|sh| pair_sum(&cols, &pts, &bar, |ai, bi, d| ai != bi && sh.contains(d)))
             .collect::<Vec<_>>();
+        drop(bar);
         for (v, sum) in values.iter_mut().zip(sums) {
             for (&i, s) in idx.iter().zip(sum) {
                 v[i] = s as f32;
@@ -296,10 +298,12 @@ fn pair_sums(
 
 /// `Σ_a T(a, b)` per `b` over the pairs that `keep(a, b, |x_a − x_b|)` accepts, from one
 /// imaged column per focus (`cols[a][b]`), in parallel over `b` (each sum in the order of
-/// `a`, as a serial loop adds them: the same result for any thread count).
+/// `a`, as a serial loop adds them: the same result for any thread count); each `b` summed
+/// advances `bar` by one.
 fn pair_sum(
     cols: &[(Vec<f64>, Report)],
     pts: &[Point],
+    bar: &Pass<'_>,
     keep: impl Fn(usize, usize, f32) -> bool + Sync,
 ) -> Vec<f64> {
     (0..pts.len())
@@ -311,6 +315,7 @@ fn pair_sum(
                     s += col[bi];
                 }
             }
+            bar.advance(1);
             s
         })
         .collect()
@@ -364,7 +369,9 @@ fn higher_order_columns(
 
 /// Pass 2's sum from the accumulated Γ columns: `I_i(b) = Σ_{a∈Γ, a≠b, r0≤|a−b|<r1} T(a, b)`
 /// over the Γ points `pts` (at volume indices `idx`), as a volume of `n` voxels, with the
-/// counters of all columns (aliased pairs summed over the foci).
+/// counters of all columns (aliased pairs summed over the foci); the columns and the pair
+/// sums go to `exec`'s progress.
+#[allow(clippy::too_many_arguments)]
 pub(super) fn indirect_sum(
     cols: &mut Columns,
     cfg: &vltm_kernel::Config,
@@ -373,15 +380,19 @@ pub(super) fn indirect_sum(
     idx: &[usize],
     shell: Shell,
     n: usize,
+    exec: Exec<'_>,
 ) -> Result<(Vec<f32>, Report)> {
     let mut values = vec![0.0f32; n];
     let mut report = Report::default();
     if pts.is_empty() {
         return Ok((values, report));
     }
-    let imaged = cols.image(cfg, spads, pts, Gate::Gaussian, pts)?;
+    let imaged = cols.image(cfg, spads, pts, Gate::Gaussian, pts, exec, "indirect")?;
     report = summed_reports(&imaged);
-    let sum = pair_sum(&imaged, pts, |ai, bi, d| ai != bi && shell.contains(d));
+    let bar = Pass::start(exec, "indirect: pair sums", pts.len());
+    let sum = pair_sum(&imaged, pts, &bar, |ai, bi, d| {
+        ai != bi && shell.contains(d)
+    });
     for (&i, s) in idx.iter().zip(sum) {
         values[i] = s as f32;
     }

@@ -858,6 +858,7 @@ impl Partial {
                     &idx,
                     shell,
                     volume.len(),
+                    Exec::default(),
                 )?;
                 (v, r, Path::Band, None)
             }
