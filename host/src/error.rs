@@ -110,7 +110,11 @@ impl Error {
                 "{}: field `{field}`: expected {expected}, found {found}",
                 path.display()
             ),
-            Self::Argument { arg, msg } => format!("argument `${arg}`: {msg}"),
+            // The parameter spelled directly (a name that is not `snake_case` must not
+            // reach the user as a `$NAME` marker), the message's markers respelled.
+            Self::Argument { arg, msg } => {
+                return format!("argument `{}`: {}", spell(arg), respell(msg, &spell));
+            }
             Self::Memory { what, need, budget } => format!(
                 "{what}: needs {} > {} memory budget (set it with $max_memory)",
                 human(*need),

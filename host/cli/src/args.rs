@@ -10,7 +10,7 @@ use vltm::probe::{ColumnGate, Wave};
 use vltm_kernel::Weights;
 
 use crate::input::Input;
-use crate::outputs::refuse_overwriting_inputs;
+use crate::outputs::{Out, prepare_output, refuse_overwriting_inputs};
 use crate::progress;
 
 /// Virtual light transport matrices (LTM) of hidden scenes from non-line-of-sight captures
@@ -304,6 +304,15 @@ impl Common {
             .map(PathBuf::as_path)
             .collect();
         refuse_overwriting_inputs(&inputs, &outputs)?;
+        for (p, kind) in [
+            (&self.out, Out::Volume),
+            (&self.png, Out::Figure),
+            (&self.partial, Out::State),
+        ] {
+            if let Some(p) = p {
+                prepare_output(p, kind)?;
+            }
+        }
         if self.swap_roles {
             let mut src = self.input.open(path)?;
             let g = src.geometry().clone();

@@ -4,7 +4,7 @@
 
 use crate::console::tell;
 use crate::console::{Failure, flag, say};
-use crate::outputs::refuse_overwriting_inputs;
+use crate::outputs::{Out, prepare_output, refuse_overwriting_inputs};
 use clap::Args;
 use std::path::Path;
 use vltm::atomic::Transaction;
@@ -79,6 +79,7 @@ impl Input {
     /// those files record their conventions).
     pub fn open(&self, path: &Path) -> vltm::Result<Box<dyn RowSource>> {
         if io::extension(path).as_deref() == Some("mat") {
+            vltm::budget::regular_file(path)?;
             return Ok(Box::new(io::mat::read(path, &self.mat_options())?.capture));
         }
         self.refuse_overrides()?;
@@ -158,8 +159,11 @@ pub fn info(
     use vltm::front::info::Stream;
     if let Some(p) = png {
         refuse_overwriting_inputs(&[path.to_path_buf()], &[p])?;
+        prepare_output(p, Out::Figure)?;
     }
     let volume = volume.map(vltm::volume::Volume::parse).transpose()?;
+    // The description is printed once it is whole: nothing on stdout before a failure.
+    let mut lines = Vec::new();
     let sum = vltm::front::info::info(
         path,
         &input.mat_options(),
@@ -169,11 +173,14 @@ pub fn info(
             // The library names the options that set a convention by parameter.
             let line = vltm::error::respell(line, flag);
             match stream {
-                Stream::Out => say!("{line}"),
+                Stream::Out => lines.push(line),
                 Stream::Warning => tell!("vltm: warning: {line}"),
             }
         },
     )?;
+    for line in &lines {
+        say!("{line}");
+    }
     if let Some(p) = png {
         let name = path
             .file_name()

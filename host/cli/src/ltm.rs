@@ -10,7 +10,9 @@ use vltm_kernel::Point;
 
 use crate::args::{Common, MatrixArgs, RelightArgs, RowArgs};
 use crate::console::{Failure, say};
-use crate::outputs::{check_matrix_out, refuse_overwriting_inputs, write_matrix};
+use crate::outputs::{
+    Out, check_matrix_out, prepare_output, refuse_overwriting_inputs, write_matrix,
+};
 use crate::summary::{Label, finish};
 use crate::{input, partial, progress};
 
@@ -32,6 +34,9 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
     refuse_overwriting_inputs(std::slice::from_ref(&a.capture), &outputs)?;
     if let Some(out) = &a.out {
         check_matrix_out(out)?;
+    }
+    if let Some(p) = &a.partial {
+        prepare_output(p, Out::State)?;
     }
     if a.rows.is_some() && a.partial.is_none() {
         return Err(vltm::Error::arg(

@@ -68,6 +68,13 @@ pub(super) fn pitch(pts: &[Point], shape: [usize; 2]) -> f32 {
     px.max(py)
 }
 
+/// The smallest band half-width [`Wave::check`] accepts (units of 1/σ; truncation error
+/// ≈ erfc(1/√2) = 0.32).
+pub const MIN_BAND: f64 = 1.0;
+/// The largest band half-width [`Wave::check`] accepts (units of 1/σ; beyond it the
+/// truncation error is below f64's precision and the band only costs time).
+pub const MAX_BAND: f64 = 20.0;
+
 /// Default virtual wavelength: twice the coarser aperture pitch (the sampling limit of the
 /// virtual lens), and at least 6 time bins (so the band stays below Nyquist).
 pub fn default_wavelength(g: &Geometry) -> f64 {
@@ -104,6 +111,51 @@ impl Wave {
         }
     }
 
+    /// Refuses options that make no sense, with their valid range: the band half-width
+    /// `band` in [[`MIN_BAND`], [`MAX_BAND`]] (units of 1/σ), a given `wavelength` from two
+    /// time bins (`2·dt`, the Nyquist limit) and a given `sigma` from one time bin (`dt`), both
+    /// at most the capture's time span (`nt·dt` metres of path).
+    ///
+    /// # Errors
+    /// [`Error::Argument`](crate::Error::Argument) naming the parameter and its range.
+    pub fn check(&self, g: &Geometry) -> Result<()> {
+        let m = self.band_half_width;
+        if !(MIN_BAND..=MAX_BAND).contains(&m) {
+            return Err(crate::error::Error::arg(
+                "band",
+                format!(
+                    "expected {MIN_BAND} to {MAX_BAND} (the band's half-width in units of 1/σ; \
+                     truncation error ≈ erfc(m/√2): 5 gives 5.7e-7), found {m}"
+                ),
+            ));
+        }
+        let span = g.nt as f64 * g.dt;
+        for (name, v, bins, least) in [
+            (
+                "wavelength",
+                self.wavelength,
+                2.0,
+                "two time bins (the Nyquist limit)",
+            ),
+            ("sigma", self.sigma, 1.0, "one time bin"),
+        ] {
+            if let Some(v) = v {
+                let lo = bins * g.dt;
+                if !(v >= lo && v <= span) {
+                    return Err(crate::error::Error::arg(
+                        name,
+                        format!(
+                            "expected {lo} to {span} m of path (from {least} to the capture's \
+                             time span, {} bins x {} m), found {v}",
+                            g.nt, g.dt
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// The kernel configuration for a capture.
     ///
     /// # Errors
@@ -111,6 +163,7 @@ impl Wave {
     /// [`Wave::cosine`] the configuration has the distance weights; the cosines are the
     /// host's.)
     pub fn config(&self, g: &Geometry) -> Result<Config> {
+        self.check(g)?;
         let lam = self.wavelength.unwrap_or_else(|| default_wavelength(g));
         let legs = if g.legs_in_time {
             Legs::FirstAndLast {

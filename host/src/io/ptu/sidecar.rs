@@ -152,7 +152,12 @@ impl Sidecar {
     /// [`Error::Io`] if unreadable, else as [`Sidecar::from_json_str`].
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let json = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        if let Err(e) = std::fs::metadata(path) {
+            if e.kind() == std::io::ErrorKind::NotFound {
+                return Err(Error::io(path, missing_sidecar(path)));
+            }
+        }
+        let json = crate::budget::read_text(path)?;
         Self::from_json_str(&json, path)
     }
 
@@ -320,4 +325,24 @@ impl Sidecar {
             unmapped_error: self.unmapped_channels == Unmapped::Error,
         })
     }
+}
+
+/// The error of a missing sidecar: what it is and where its fields are described.
+fn missing_sidecar(path: &Path) -> std::io::Error {
+    let name = |p: &Path| {
+        p.file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .into_owned()
+    };
+    let ptu = name(&path.with_extension("ptu"));
+    std::io::Error::new(
+        std::io::ErrorKind::NotFound,
+        format!(
+            "No such file or directory: a PicoQuant capture F.ptu needs a JSON sidecar F.json beside it \
+             describing the scan (rows, SPADs, time axis; here {ptu} and {}): its fields are in \
+             docs/formats.md (PTU sidecar)",
+            name(path)
+        ),
+    )
 }
