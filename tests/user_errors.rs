@@ -334,7 +334,13 @@ fn missing_files_are_named() {
             &t,
             &args,
             1,
-            &["c.json", "No such file", "JSON sidecar", "docs/formats.md"],
+            &[
+                "c.json",
+                "No such file",
+                "c.ptu needs a JSON sidecar",
+                "docs/formats.md",
+                "vltm info c.ptu --sidecar c.json",
+            ],
         );
     }
     // An existing file with an unknown extension is an unknown format, naming CAPTURE.
@@ -631,5 +637,77 @@ fn npz_with_extra_bytes_is_refused_by_every_command() {
     ok(
         &t,
         &["direct", "c.npz", "--volume", VOLUME, "--out", "o.npy"],
+    );
+}
+
+/// `vltm info F.ptu --sidecar F.json` writes a template pre-filled from the file (rows and
+/// their marker, channels, bins, bin width); filled in with the geometry as a user would,
+/// `direct` reads the `.ptu` with it and finds the volume the original sidecar gives.
+#[test]
+fn sidecar_template_round_trips() {
+    let t = TempDir::new("template");
+    capture(&t);
+    ok(
+        &t,
+        &["direct", "c.ptu", "--volume", VOLUME, "--out", "a.npy"],
+    );
+    let original: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(t.path("c.json")).unwrap()).unwrap();
+    std::fs::remove_file(t.path("c.json")).unwrap();
+    let said = ok(&t, &["info", "c.ptu", "--sidecar", "t.json"]);
+    assert!(
+        said.contains("wrote t.json") && said.contains("c.json"),
+        "{said}"
+    );
+    // Not over an existing file, and only for a .ptu.
+    fails(
+        &t,
+        &["info", "c.ptu", "--sidecar", "t.json"],
+        2,
+        &["--sidecar", "t.json exists"],
+    );
+    fails(
+        &t,
+        &["info", "c.npz", "--sidecar", "u.json"],
+        2,
+        &["--sidecar", ".ptu"],
+    );
+    let text = std::fs::read_to_string(t.path("t.json")).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(&text).unwrap();
+    // Pre-filled from the file.
+    assert_eq!(v["rows"], 16, "{text}");
+    assert_eq!(v["row_marker"], 1, "{text}");
+    assert_eq!(v["channels"], serde_json::json!([0, 1, 2, 3]), "{text}");
+    assert_eq!(v["nt"], 128, "{text}");
+    assert!(
+        (v["bin_width"].as_f64().unwrap() - 0.01).abs() < 1e-9,
+        "{text}"
+    );
+    assert!(v["_lasers"].as_str().unwrap().contains("FILL IN"), "{text}");
+    assert!(
+        v["_help"].as_str().unwrap().contains("docs/formats.md"),
+        "{text}"
+    );
+    // As it is, the geometry is missing: refused naming the sidecar's field.
+    std::fs::copy(t.path("t.json"), t.path("c.json")).unwrap();
+    fails(
+        &t,
+        &["direct", "c.ptu", "--volume", VOLUME, "--out", "b.npy"],
+        1,
+        &["c.json", "lasers"],
+    );
+    // Filled in: the spots, t0 and the devices' positions (the notes stay).
+    for key in ["lasers", "spads", "t0", "laser_origin", "sensor_origin"] {
+        v[key] = original[key].clone();
+    }
+    std::fs::write(t.path("c.json"), serde_json::to_string_pretty(&v).unwrap()).unwrap();
+    ok(
+        &t,
+        &["direct", "c.ptu", "--volume", VOLUME, "--out", "b.npy"],
+    );
+    assert_eq!(
+        std::fs::read(t.path("a.npy")).unwrap(),
+        std::fs::read(t.path("b.npy")).unwrap(),
+        "the template's volume differs from the original sidecar's"
     );
 }

@@ -54,6 +54,10 @@ pub(crate) enum Command {
         /// resampled or not, or the lookup) and the aligned grid the FFT path would take.
         #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
         volume: Option<String>,
+        /// For a .ptu capture without its sidecar: write a template sidecar F.json (each field
+        /// with a `_help` note, pre-filled from the file's header and records) to fill in.
+        #[arg(long, value_name = "F.json", conflicts_with_all = ["png", "volume"])]
+        sidecar: Option<PathBuf>,
         #[command(flatten)]
         input: Input,
     },

@@ -27,9 +27,15 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
         }
         Command::Info {
             capture,
+            sidecar: Some(sidecar),
+            ..
+        } => input::sidecar_template(&capture, &sidecar),
+        Command::Info {
+            capture,
             png,
             volume,
             input,
+            sidecar: None,
         } => input::info(&capture, &input, png.as_deref(), volume.as_deref()),
         Command::Simulate {
             scene,

@@ -55,7 +55,10 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
         )
         .into());
     }
-    let mut src = io::open_source(&a.capture)?;
+    let mut src = {
+        crate::input::require_sidecar(&a.capture)?;
+        io::open_source(&a.capture)?
+    };
     let gamma: Option<Vec<Point>> = if wants_gamma {
         let spec = a.volume.as_deref().ok_or_else(|| {
             vltm::Error::arg("volume", "`gamma` in $from/$to needs the volume of Γ")

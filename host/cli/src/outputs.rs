@@ -168,11 +168,14 @@ impl Out {
 }
 
 /// Checks an output path before any work: its extension says what it holds (`--out r.png`
-/// is refused, not written as a NumPy array), and its folder exists (it is created here, or
-/// refused in one line when it cannot be).
+/// is refused, not written as a NumPy array; an existing device such as `/dev/null` is
+/// exempt), and its folder exists (it is created here, or refused in one line when it cannot
+/// be).
 pub(crate) fn prepare_output(p: &Path, kind: Out) -> vltm::Result<()> {
     let (param, exts, what) = kind.spec();
-    if !exts.is_empty() {
+    // An existing device or pipe (`/dev/null`) is written as it is named: no extension.
+    let special = std::fs::metadata(p).is_ok_and(|m| !m.is_file() && !m.is_dir());
+    if !exts.is_empty() && !special {
         let ext = io::extension(p);
         if !ext.as_deref().is_some_and(|e| exts.contains(&e)) {
             let found = ext.map_or_else(|| "no extension".to_string(), |e| format!(".{e}"));

@@ -134,9 +134,17 @@ impl Sidecar {
     /// Parses a sidecar; `path` names it in errors.
     ///
     /// # Errors
-    /// [`Error::Format`] (field `sidecar`) for malformed JSON, unknown or missing fields.
+    /// [`Error::Format`] (field `sidecar`) for malformed JSON, unknown or missing fields (keys
+    /// that start with `_` are notes, ignored).
     pub fn from_json_str(json: &str, path: impl AsRef<Path>) -> Result<Self> {
-        serde_json::from_str(json).map_err(|e| {
+        // Keys starting with `_` are notes (the template's `_help`, `_nt`, …): dropped.
+        let parsed = serde_json::from_str::<serde_json::Value>(json).and_then(|mut v| {
+            if let Some(m) = v.as_object_mut() {
+                m.retain(|k, _| !k.starts_with('_'));
+            }
+            serde_json::from_value(v)
+        });
+        parsed.map_err(|e| {
             Error::format(
                 path.as_ref(),
                 "sidecar",
