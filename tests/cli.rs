@@ -980,8 +980,8 @@ fn a_failed_output_keeps_the_previous_file() {
     let t = TempDir::new("keep-previous");
     let out = t.path("v.npy");
     std::fs::write(&out, b"previous").expect("write");
-    // A figure path that names a directory: it cannot be written (a missing folder would be
-    // created before the work).
+    // A figure path that names a directory: refused when it is staged, after the volume's
+    // (a missing folder would be created before the work).
     let missing = t.path("dir.png");
     std::fs::create_dir(&missing).expect("mkdir");
     let err = fails(
@@ -996,7 +996,7 @@ fn a_failed_output_keeps_the_previous_file() {
             "--png",
             &s(&missing),
         ],
-        1,
+        2,
     );
     assert!(err.contains("dir.png"), "{err}");
     assert_eq!(std::fs::read(&out).expect("read"), b"previous");
@@ -1040,7 +1040,7 @@ fn simulate_outputs_are_all_or_nothing() {
             "--ptu",
             &s(&missing),
         ],
-        1,
+        2,
     );
     assert_eq!(listing(&t.0), ["dir.ptu"]);
     if Path::new("/dev/full").exists() {

@@ -516,4 +516,37 @@ Max address space         4096000000           unlimited            bytes\n";
         assert!(e.contains("largest buffer: carrier, 1.1 TB"), "{e}");
         assert!(Plan::new().add("small", 1).fits());
     }
+
+    #[test]
+    fn only_small_regular_files_are_read() {
+        let dir = std::env::temp_dir().join(format!("vltm-budget-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let small = dir.join("s.json");
+        std::fs::write(&small, "{}").unwrap();
+        assert_eq!(read_text(&small).unwrap(), "{}");
+        assert_eq!(regular_file(&small).unwrap(), 2);
+        // A sparse file one byte over the cap: refused by its size, not read.
+        let big = dir.join("b.json");
+        std::fs::File::create(&big)
+            .unwrap()
+            .set_len(MAX_TEXT_FILE + 1)
+            .unwrap();
+        let e = read_text(&big).unwrap_err().to_string();
+        assert!(e.contains("b.json") && e.contains("at most 17 MB"), "{e}");
+        // A device, a directory, a missing file.
+        let e = read_text(std::path::Path::new("/dev/zero"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("a device"), "{e}");
+        let e = regular_file(&dir).unwrap_err().to_string();
+        assert!(e.contains("a directory"), "{e}");
+        let e = regular_file(&dir.join("nothere.xyz"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("nothere.xyz") && e.contains("No such file"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

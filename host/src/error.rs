@@ -229,3 +229,21 @@ pub fn human(bytes: u128) -> String {
         format!("{v:.0} {}", UNITS[u])
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An argument's name reaches the user spelled by the front end even when it is not a
+    /// `snake_case` parameter name (no `$NAME` marker is left).
+    #[test]
+    fn argument_names_are_always_spelled() {
+        let e = Error::Argument {
+            arg: "CAPTURE".into(),
+            msg: "x.nzp: unknown; see $max_memory".into(),
+        };
+        let r = e.render(|p| format!("<{p}>"));
+        assert_eq!(r, "argument `<CAPTURE>`: x.nzp: unknown; see <max_memory>");
+        assert!(!e.to_string().contains('$'), "{e}");
+    }
+}

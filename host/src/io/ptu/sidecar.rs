@@ -354,3 +354,26 @@ fn missing_sidecar(path: &Path) -> std::io::Error {
         ),
     )
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Keys starting with `_` (the template's notes) are ignored; other unknown keys are
+    /// still refused, naming the key.
+    #[test]
+    fn notes_are_ignored_unknown_fields_refused() {
+        let base = r#""lasers": {"points": [[0, 0, 0]]}, "spads": {"points": [[0.1, 0, 0]]},
+            "nt": 8, "t0": 0.5"#;
+        let s = Sidecar::from_json_str(
+            &format!(r#"{{"_help": "x", "_nt": "bins", {base}}}"#),
+            "s.json",
+        )
+        .unwrap();
+        assert_eq!(s.nt, 8);
+        let e = Sidecar::from_json_str(&format!(r#"{{"nts": 3, {base}}}"#), "s.json")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("s.json") && e.contains("nts"), "{e}");
+    }
+}
