@@ -347,17 +347,14 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
         }
         // Only a state that was written is named, with the rows it holds.
         let state = outputs.state("direct");
-        if run.folded() > 0 {
-            if let Ok(held) = Partial::read(&state) {
-                eprintln!(
-                    "vltm: note: the states of {} rows are in {} (continue with --resume)",
-                    held.rows()
-                        .iter()
-                        .map(ExactSizeIterator::len)
-                        .sum::<usize>(),
-                    state.display()
-                );
-            }
+        if run.folded() > 0
+            && let Ok(held) = Partial::read(&state)
+        {
+            let rows: usize = held.rows().iter().map(ExactSizeIterator::len).sum();
+            eprintln!(
+                "vltm: note: the states of {rows} rows are in {} (continue with --resume)",
+                state.display()
+            );
         }
         return Err(e.into());
     }

@@ -160,10 +160,10 @@ impl Sidecar {
     /// [`Error::Io`] if unreadable, else as [`Sidecar::from_json_str`].
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        if let Err(e) = std::fs::metadata(path) {
-            if e.kind() == std::io::ErrorKind::NotFound {
-                return Err(Error::io(path, missing_sidecar(path)));
-            }
+        if let Err(e) = std::fs::metadata(path)
+            && e.kind() == std::io::ErrorKind::NotFound
+        {
+            return Err(Error::io(path, missing_sidecar(path)));
         }
         let json = crate::budget::read_text(path)?;
         Self::from_json_str(&json, path)

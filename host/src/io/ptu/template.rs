@@ -187,7 +187,6 @@ pub fn template(ptu: &Path) -> Result<String> {
             .to_string(),
         json!(false),
     );
-    drop(put);
     let end = out.trim_end_matches(",\n").len();
     out.truncate(end);
     out.push_str("\n}\n");
