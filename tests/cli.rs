@@ -980,7 +980,10 @@ fn a_failed_output_keeps_the_previous_file() {
     let t = TempDir::new("keep-previous");
     let out = t.path("v.npy");
     std::fs::write(&out, b"previous").expect("write");
-    let missing = t.path("no-such-dir").join("v.png");
+    // A figure path that names a directory: refused when it is staged, after the volume's
+    // (a missing folder would be created before the work).
+    let missing = t.path("dir.png");
+    std::fs::create_dir(&missing).expect("mkdir");
     let err = fails(
         &t.0,
         &[
@@ -993,11 +996,12 @@ fn a_failed_output_keeps_the_previous_file() {
             "--png",
             &s(&missing),
         ],
-        1,
+        2,
     );
-    assert!(err.contains("v.png"), "{err}");
+    assert!(err.contains("dir.png"), "{err}");
     assert_eq!(std::fs::read(&out).expect("read"), b"previous");
-    assert_eq!(listing(&t.0), ["v.npy"]);
+    assert_eq!(listing(&t.0), ["dir.png", "v.npy"]);
+    std::fs::remove_dir(&missing).expect("rmdir");
     // The same command with a writable figure replaces both.
     let png = t.path("v.png");
     ok(
@@ -1023,7 +1027,9 @@ fn a_failed_output_keeps_the_previous_file() {
 fn simulate_outputs_are_all_or_nothing() {
     let t = TempDir::new("sim-atomic");
     let scene = support::fixture("scenes/three_points.json");
-    let missing = t.path("no-such-dir").join("c.ptu");
+    // A PTU path that names a directory: it cannot be written.
+    let missing = t.path("dir.ptu");
+    std::fs::create_dir(&missing).expect("mkdir");
     fails(
         &t.0,
         &[
@@ -1034,9 +1040,9 @@ fn simulate_outputs_are_all_or_nothing() {
             "--ptu",
             &s(&missing),
         ],
-        1,
+        2,
     );
-    assert!(listing(&t.0).is_empty(), "{:?}", listing(&t.0));
+    assert_eq!(listing(&t.0), ["dir.ptu"]);
     if Path::new("/dev/full").exists() {
         let err = fails(&t.0, &["simulate", &s(&scene), "--out", "/dev/full"], 1);
         assert!(err.contains("/dev/full") && !err.contains("drop"), "{err}");

@@ -243,6 +243,81 @@ fn physical_memory() -> Option<u64> {
     kib.checked_mul(1024)
 }
 
+/// The largest small text file (a PTU sidecar, a scene) vltm reads: 16 MiB.
+pub const MAX_TEXT_FILE: u64 = 16 << 20;
+
+/// Checks that `path` is a regular file (following links) before it is opened: a missing
+/// file is an [`Error::Io`] "No such file or directory" whatever its extension; a named
+/// pipe, a device or a directory is refused in one line (reading one would block, or never
+/// end). Returns its size in bytes.
+///
+/// # Errors
+/// [`Error::Io`] when it cannot be examined; [`Error::Format`] when it is not a regular file.
+pub fn regular_file(path: &std::path::Path) -> Result<u64> {
+    let m = std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+    if m.is_file() {
+        return Ok(m.len());
+    }
+    let kind = {
+        use std::os::unix::fs::FileTypeExt as _;
+        let t = m.file_type();
+        if t.is_dir() {
+            "a directory"
+        } else if t.is_fifo() {
+            "a named pipe"
+        } else if t.is_socket() {
+            "a socket"
+        } else if t.is_char_device() || t.is_block_device() {
+            "a device"
+        } else {
+            "not a regular file"
+        }
+    };
+    Err(Error::Format {
+        path: path.into(),
+        field: "file".into(),
+        expected: "a regular file".into(),
+        found: kind.into(),
+    })
+}
+
+/// Reads a small text file (a PTU sidecar, a scene) after checking that it is a regular file
+/// of at most [`MAX_TEXT_FILE`] bytes: a link to `/dev/zero` or a huge file is refused before
+/// it is read.
+///
+/// # Errors
+/// As [`regular_file`]; [`Error::Format`] for a larger file; [`Error::Io`] for a read error.
+pub fn read_text(path: &std::path::Path) -> Result<String> {
+    let len = regular_file(path)?;
+    if len > MAX_TEXT_FILE {
+        return Err(Error::Format {
+            path: path.into(),
+            field: "size".into(),
+            expected: format!(
+                "at most {} (a JSON description)",
+                human(MAX_TEXT_FILE.into())
+            ),
+            found: human(len.into()),
+        });
+    }
+    use std::io::Read as _;
+    let f = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
+    let mut s = String::new();
+    // The size may change between the check and the read: never read more than the cap.
+    f.take(MAX_TEXT_FILE + 1)
+        .read_to_string(&mut s)
+        .map_err(|e| Error::io(path, e))?;
+    if s.len() as u64 > MAX_TEXT_FILE {
+        return Err(Error::Format {
+            path: path.into(),
+            field: "size".into(),
+            expected: format!("at most {}", human(MAX_TEXT_FILE.into())),
+            found: "more (it grew while read)".into(),
+        });
+    }
+    Ok(s)
+}
+
 /// Checks that `bytes` fit the budget; `what` says what they are for, e.g. "H of 10¹²
 /// samples claimed by F.npz's header".
 ///
@@ -440,5 +515,38 @@ Max address space         4096000000           unlimited            bytes\n";
         let e = p.check(|| "direct light".into()).unwrap_err().to_string();
         assert!(e.contains("largest buffer: carrier, 1.1 TB"), "{e}");
         assert!(Plan::new().add("small", 1).fits());
+    }
+
+    #[test]
+    fn only_small_regular_files_are_read() {
+        let dir = std::env::temp_dir().join(format!("vltm-budget-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let small = dir.join("s.json");
+        std::fs::write(&small, "{}").unwrap();
+        assert_eq!(read_text(&small).unwrap(), "{}");
+        assert_eq!(regular_file(&small).unwrap(), 2);
+        // A sparse file one byte over the cap: refused by its size, not read.
+        let big = dir.join("b.json");
+        std::fs::File::create(&big)
+            .unwrap()
+            .set_len(MAX_TEXT_FILE + 1)
+            .unwrap();
+        let e = read_text(&big).unwrap_err().to_string();
+        assert!(e.contains("b.json") && e.contains("at most 17 MB"), "{e}");
+        // A device, a directory, a missing file.
+        let e = read_text(std::path::Path::new("/dev/zero"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("a device"), "{e}");
+        let e = regular_file(&dir).unwrap_err().to_string();
+        assert!(e.contains("a directory"), "{e}");
+        let e = regular_file(&dir.join("nothere.xyz"))
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("nothere.xyz") && e.contains("No such file"),
+            "{e}"
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }

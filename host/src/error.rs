@@ -110,7 +110,11 @@ impl Error {
                 "{}: field `{field}`: expected {expected}, found {found}",
                 path.display()
             ),
-            Self::Argument { arg, msg } => format!("argument `${arg}`: {msg}"),
+            // The parameter spelled directly (a name that is not `snake_case` must not
+            // reach the user as a `$NAME` marker), the message's markers respelled.
+            Self::Argument { arg, msg } => {
+                return format!("argument `{}`: {}", spell(arg), respell(msg, &spell));
+            }
             Self::Memory { what, need, budget } => format!(
                 "{what}: needs {} > {} memory budget (set it with $max_memory)",
                 human(*need),
@@ -223,5 +227,23 @@ pub fn human(bytes: u128) -> String {
         format!("{v:.1} {}", UNITS[u])
     } else {
         format!("{v:.0} {}", UNITS[u])
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An argument's name reaches the user spelled by the front end even when it is not a
+    /// `snake_case` parameter name (no `$NAME` marker is left).
+    #[test]
+    fn argument_names_are_always_spelled() {
+        let e = Error::Argument {
+            arg: "CAPTURE".into(),
+            msg: "x.nzp: unknown; see $max_memory".into(),
+        };
+        let r = e.render(|p| format!("<{p}>"));
+        assert_eq!(r, "argument `<CAPTURE>`: x.nzp: unknown; see <max_memory>");
+        assert!(!e.to_string().contains('$'), "{e}");
     }
 }

@@ -54,7 +54,9 @@ impl Volume {
             return Err(Error::arg(
                 arg,
                 format!(
-                    "{}×{}×{} voxels is more than {MAX_VOXELS}",
+                    "{}×{}×{} voxels is more than the {MAX_VOXELS} a volume may hold (a guard \
+                     against typos, docs/limits.md): use a coarser grid, or split the volume \
+                     into slabs (z ranges) run one after the other",
                     n[0], n[1], n[2]
                 ),
             ));

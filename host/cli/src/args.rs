@@ -10,7 +10,7 @@ use vltm::probe::{ColumnGate, Wave};
 use vltm_kernel::Weights;
 
 use crate::input::Input;
-use crate::outputs::refuse_overwriting_inputs;
+use crate::outputs::{Out, prepare_output, refuse_overwriting_inputs};
 use crate::progress;
 
 /// Virtual light transport matrices (LTM) of hidden scenes from non-line-of-sight captures
@@ -59,6 +59,10 @@ pub(crate) enum Command {
         /// resampled or not, or the lookup) and the aligned grid the FFT path would take.
         #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
         volume: Option<String>,
+        /// For a .ptu capture without its sidecar: write a template sidecar F.json (each field
+        /// with a `_help` note, pre-filled from the file's header and records) to fill in.
+        #[arg(long, value_name = "F.json", conflicts_with_all = ["png", "volume"])]
+        sidecar: Option<PathBuf>,
         #[command(flatten)]
         input: Input,
     },
@@ -327,6 +331,15 @@ impl Common {
             .map(PathBuf::as_path)
             .collect();
         refuse_overwriting_inputs(&inputs, &outputs)?;
+        for (p, kind) in [
+            (&self.out, Out::Volume),
+            (&self.png, Out::Figure),
+            (&self.partial, Out::State),
+        ] {
+            if let Some(p) = p {
+                prepare_output(p, kind)?;
+            }
+        }
         if self.swap_roles {
             let mut src = self.input.open(path)?;
             let g = src.geometry().clone();

@@ -10,7 +10,7 @@ use vltm::volume::{Volume, parse_point};
 
 use crate::args::{Command, DiagGateArg};
 use crate::console::{Failure, say};
-use crate::outputs::refuse_overwriting_inputs;
+use crate::outputs::{Out, prepare_output, refuse_overwriting_inputs};
 use crate::summary::{Label, finish};
 use crate::{input, leak, ltm, partial, progress, split, surface, title};
 
@@ -28,9 +28,15 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
         }
         Command::Info {
             capture,
+            sidecar: Some(sidecar),
+            ..
+        } => input::sidecar_template(&capture, &sidecar),
+        Command::Info {
+            capture,
             png,
             volume,
             input,
+            sidecar: None,
         } => input::info(&capture, &input, png.as_deref(), volume.as_deref()),
         Command::Simulate {
             scene,
@@ -43,6 +49,10 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
             outputs.extend(ptu.as_deref());
             outputs.extend(sidecar.as_deref());
             refuse_overwriting_inputs(std::slice::from_ref(&scene), &outputs)?;
+            prepare_output(&out, Out::Capture)?;
+            if let Some(p) = &ptu {
+                prepare_output(p, Out::Ptu)?;
+            }
             let s = vltm::sim::Scene::load(&scene)?;
             let c = s.render_with(Exec {
                 progress: Some(&progress::BARS),

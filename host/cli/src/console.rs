@@ -26,7 +26,13 @@ pub(crate) use tell;
 /// The command line's spelling of a library parameter: `--` and the name with dashes
 /// (`t_min` → `--t-min`), the flags being named after the parameters.
 pub(crate) fn flag(param: &str) -> String {
-    format!("--{}", param.replace('_', "-"))
+    match param {
+        // Already a flag (the command line's own errors).
+        p if p.starts_with('-') => p.to_string(),
+        // The positional arguments, as `--help` names them.
+        "capture" | "scene" | "source" | "parts" => param.to_ascii_uppercase(),
+        _ => format!("--{}", param.replace('_', "-")),
+    }
 }
 
 /// Escapes control characters (terminal escapes, newlines from a file's strings) so that an
@@ -72,15 +78,19 @@ impl Failure {
     /// Prints the error as one line (`vltm: …`, parameters as flags, a context chain as
     /// `context: cause`) and returns its exit code.
     pub(crate) fn report(&self) -> ExitCode {
-        let msg = self
-            .err
-            .chain()
-            .map(|e| match e.downcast_ref::<vltm::Error>() {
-                Some(v) => v.render(flag),
-                None => e.to_string(),
-            })
-            .collect::<Vec<_>>()
-            .join(": ");
+        // A library error renders its own cause: the chain ends there (else a kernel
+        // configuration error would be printed twice).
+        let mut parts = Vec::new();
+        for e in self.err.chain() {
+            if let Some(v) = e.downcast_ref::<vltm::Error>() {
+                parts.push(v.render(flag));
+                break;
+            }
+            parts.push(e.to_string());
+        }
+        let msg = parts.join(": ");
+        // Markers in a context's text are respelled too: no `$name` reaches the user.
+        let msg = vltm::error::respell(&msg, flag);
         tell!("vltm: {}", printable(&msg.replace('\n', " ")));
         ExitCode::from(self.code)
     }

@@ -4,7 +4,7 @@
 
 use crate::console::tell;
 use crate::console::{Failure, flag, say};
-use crate::outputs::refuse_overwriting_inputs;
+use crate::outputs::{Out, prepare_output, refuse_overwriting_inputs};
 use clap::Args;
 use std::path::Path;
 use vltm::atomic::Transaction;
@@ -79,9 +79,11 @@ impl Input {
     /// those files record their conventions).
     pub fn open(&self, path: &Path) -> vltm::Result<Box<dyn RowSource>> {
         if io::extension(path).as_deref() == Some("mat") {
+            vltm::budget::regular_file(path)?;
             return Ok(Box::new(io::mat::read(path, &self.mat_options())?.capture));
         }
         self.refuse_overrides()?;
+        require_sidecar(path)?;
         io::open_source(path)
     }
 
@@ -146,6 +148,71 @@ fn check_stats(p: &Prepared<'_>) -> Result<(), Failure> {
     Ok(())
 }
 
+/// A `.ptu` capture whose sidecar is missing: the error names the sidecar, says what it is
+/// and how to make one (`vltm info F.ptu --sidecar F.json`).
+pub fn require_sidecar(path: &Path) -> vltm::Result<()> {
+    if io::extension(path).as_deref() != Some("ptu") || !path.is_file() {
+        return Ok(());
+    }
+    let json = path.with_extension("json");
+    if std::fs::symlink_metadata(&json).is_ok() {
+        return Ok(());
+    }
+    let msg = format!(
+        "No such file or directory: {} needs a JSON sidecar {} describing the scan (rows, \
+         SPADs, time axis; its fields: docs/formats.md, PTU sidecar); `vltm info {} --sidecar {}` \
+         writes a template to fill in",
+        path.display(),
+        json.display(),
+        path.display(),
+        json.display()
+    );
+    Err(vltm::Error::io(
+        &json,
+        std::io::Error::new(std::io::ErrorKind::NotFound, msg),
+    ))
+}
+
+/// `vltm info F.ptu --sidecar F.json`: a template sidecar to fill in (written all or nothing,
+/// never over an existing file).
+pub fn sidecar_template(ptu: &Path, out: &Path) -> Result<(), Failure> {
+    if io::extension(ptu).as_deref() != Some("ptu") {
+        return Err(vltm::Error::arg(
+            "sidecar",
+            format!(
+                "{}: a template sidecar is for a PicoQuant .ptu capture",
+                ptu.display()
+            ),
+        )
+        .into());
+    }
+    if io::extension(out).as_deref() != Some("json") {
+        return Err(vltm::Error::arg(
+            "sidecar",
+            format!("{}: a sidecar is a .json file", out.display()),
+        )
+        .into());
+    }
+    if out.exists() {
+        return Err(vltm::Error::arg(
+            "sidecar",
+            format!("{} exists: remove it or choose another name", out.display()),
+        )
+        .into());
+    }
+    refuse_overwriting_inputs(&[ptu.to_path_buf()], &[out])?;
+    vltm::budget::regular_file(ptu)?;
+    let text = io::ptu::template(ptu)?;
+    vltm::atomic::write_bytes(out, text.as_bytes())?;
+    say!(
+        "wrote {}: fill in the fields marked FILL IN (docs/formats.md, PTU sidecar); name it {} to read {} with it",
+        out.display(),
+        ptu.with_extension("json").display(),
+        ptu.display()
+    );
+    Ok(())
+}
+
 /// `vltm info`: what the file holds, the conventions assumed, counts after preprocessing
 /// (the library's [`vltm::front::info::info`], the text every front end prints), and with
 /// `--png` the summed transient.
@@ -158,8 +225,12 @@ pub fn info(
     use vltm::front::info::Stream;
     if let Some(p) = png {
         refuse_overwriting_inputs(&[path.to_path_buf()], &[p])?;
+        prepare_output(p, Out::Figure)?;
     }
     let volume = volume.map(vltm::volume::Volume::parse).transpose()?;
+    require_sidecar(path)?;
+    // The description is printed once it is whole: nothing on stdout before a failure.
+    let mut lines = Vec::new();
     let sum = vltm::front::info::info(
         path,
         &input.mat_options(),
@@ -169,11 +240,14 @@ pub fn info(
             // The library names the options that set a convention by parameter.
             let line = vltm::error::respell(line, flag);
             match stream {
-                Stream::Out => say!("{line}"),
+                Stream::Out => lines.push(line),
                 Stream::Warning => tell!("vltm: warning: {line}"),
             }
         },
     )?;
+    for line in &lines {
+        say!("{line}");
+    }
     if let Some(p) = png {
         let name = path
             .file_name()

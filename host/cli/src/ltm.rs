@@ -10,7 +10,9 @@ use vltm_kernel::Point;
 
 use crate::args::{Common, MatrixArgs, RelightArgs, RowArgs};
 use crate::console::{Failure, say};
-use crate::outputs::{check_matrix_out, refuse_overwriting_inputs, write_matrix};
+use crate::outputs::{
+    Out, check_matrix_out, prepare_output, refuse_overwriting_inputs, write_matrix,
+};
 use crate::summary::{Label, finish};
 use crate::{input, leak, partial, progress, title};
 
@@ -33,6 +35,9 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
     if let Some(out) = &a.out {
         check_matrix_out(out)?;
     }
+    if let Some(p) = &a.partial {
+        prepare_output(p, Out::State)?;
+    }
     if a.rows.is_some() && a.partial.is_none() {
         return Err(vltm::Error::arg(
             "rows",
@@ -50,7 +55,10 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
         )
         .into());
     }
-    let mut src = io::open_source(&a.capture)?;
+    let mut src = {
+        crate::input::require_sidecar(&a.capture)?;
+        io::open_source(&a.capture)?
+    };
     let gamma: Option<Vec<Point>> = if wants_gamma {
         let spec = a.volume.as_deref().ok_or_else(|| {
             vltm::Error::arg("volume", "`gamma` in $from/$to needs the volume of Γ")

@@ -41,15 +41,13 @@ fn main() -> ExitCode {
         }
         Err(e) => {
             // One line, like every other error: clap's message up to its first blank line
-            // (the argument it names, the values it expects), without "error: " and the
-            // usage block.
+            // (the argument it names, the values it expects) and its tips ("a similar
+            // argument exists: '--volume'"), without "error: " and the usage block.
             let text = e.render().to_string();
-            let msg = text
-                .lines()
-                .take_while(|l| !l.trim().is_empty())
-                .map(str::trim)
-                .collect::<Vec<_>>()
-                .join(" ");
+            let mut lines = text.lines().map(str::trim);
+            let mut parts: Vec<&str> = lines.by_ref().take_while(|l| !l.is_empty()).collect();
+            parts.extend(lines.filter(|l| l.starts_with("tip:")));
+            let msg = parts.join(" ").replace(" tip: ", "; ");
             let msg = msg.trim_start_matches("error: ");
             let msg = if msg.is_empty() { "bad arguments" } else { msg };
             tell!("vltm: {msg} (see --help)");

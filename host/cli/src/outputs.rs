@@ -125,16 +125,88 @@ pub(crate) fn write_parts(
 
 /// Refuses a matrix output that is not HDF5.
 pub(crate) fn check_matrix_out(out: &Path) -> vltm::Result<()> {
-    if io::is_hdf5(out) {
-        return Ok(());
+    prepare_output(out, Out::Matrix)
+}
+
+/// What an output file holds, which its extension must say.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum Out {
+    /// A volume (`--out`): float32 `.npy`, or HDF5 (`.h5`, `.hdf5`).
+    Volume,
+    /// A figure (`--png`): `.png`.
+    Figure,
+    /// A matrix: HDF5 (`.h5`, `.hdf5`).
+    Matrix,
+    /// A capture (`simulate --out`): `.npz`.
+    Capture,
+    /// A PicoQuant T3 stream: `.ptu`.
+    Ptu,
+    /// A depth map (`surface --depth`): float32 `.npy`.
+    Depth,
+    /// A partial state: any name.
+    State,
+}
+
+impl Out {
+    /// The parameter the output comes from, the extensions it may have, and what it is.
+    fn spec(self) -> (&'static str, &'static [&'static str], &'static str) {
+        match self {
+            Self::Volume => (
+                "out",
+                &["npy", "h5", "hdf5"],
+                "a volume is written as float32 .npy, or HDF5 for .h5/.hdf5",
+            ),
+            Self::Figure => ("png", &["png"], "a figure is written as .png"),
+            Self::Matrix => (
+                "out",
+                &["h5", "hdf5"],
+                "the matrix is written as HDF5 (.h5 or .hdf5)",
+            ),
+            Self::Capture => ("out", &["npz"], "a capture is written as .npz"),
+            Self::Ptu => ("ptu", &["ptu"], "a photon stream is written as .ptu"),
+            Self::Depth => (
+                "depth",
+                &["npy"],
+                "the depth map is written as float32 .npy",
+            ),
+            Self::State => ("partial", &[], ""),
+        }
     }
-    Err(vltm::Error::arg(
-        "out",
-        format!(
-            "{}: the matrix is written as HDF5 (.h5 or .hdf5)",
-            out.display()
-        ),
-    ))
+}
+
+/// Checks an output path before any work: its extension says what it holds (`--out r.png`
+/// is refused, not written as a NumPy array; an existing device such as `/dev/null` is
+/// exempt), and its folder exists (it is created here, or refused in one line when it cannot
+/// be).
+pub(crate) fn prepare_output(p: &Path, kind: Out) -> vltm::Result<()> {
+    let (param, exts, what) = kind.spec();
+    // An existing device or pipe (`/dev/null`) is written as it is named: no extension.
+    let special = std::fs::metadata(p).is_ok_and(|m| !m.is_file() && !m.is_dir());
+    if !exts.is_empty() && !special {
+        let ext = io::extension(p);
+        if !ext.as_deref().is_some_and(|e| exts.contains(&e)) {
+            let found = ext.map_or_else(|| "no extension".to_string(), |e| format!(".{e}"));
+            return Err(vltm::Error::arg(
+                param,
+                format!("{}: {what} (found {found})", p.display()),
+            ));
+        }
+    }
+    match p.parent() {
+        Some(d) if !d.as_os_str().is_empty() && !d.is_dir() => {
+            std::fs::create_dir_all(d).map_err(|e| {
+                vltm::Error::arg(
+                    param,
+                    format!(
+                        "{}: cannot create its folder {}: {e}",
+                        p.display(),
+                        d.display()
+                    ),
+                )
+            })
+        }
+        _ => Ok(()),
+    }
 }
 
 /// The summary of a matrix and its HDF5 file (all or nothing): `numbers` and `texts` are

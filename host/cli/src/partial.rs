@@ -5,7 +5,9 @@
 
 use crate::args::Common;
 use crate::console::{Failure, say};
-use crate::outputs::{check_matrix_out, refuse_overwriting_inputs, write_matrix, write_outputs};
+use crate::outputs::{
+    Out, check_matrix_out, prepare_output, refuse_overwriting_inputs, write_matrix, write_outputs,
+};
 use crate::summary::summarize;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
@@ -124,6 +126,15 @@ pub(crate) fn merge(
         .map(PathBuf::as_path)
         .collect();
     refuse_overwriting_inputs(parts, &outputs)?;
+    for (p, kind) in [
+        (&out, Out::Volume),
+        (&png, Out::Figure),
+        (&state, Out::State),
+    ] {
+        if let Some(p) = p {
+            prepare_output(p, kind)?;
+        }
+    }
     let names: Vec<String> = parts.iter().map(|p| p.display().to_string()).collect();
     let read = parts
         .iter()

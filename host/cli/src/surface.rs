@@ -8,7 +8,7 @@ use vltm::volume::Volume;
 use crate::args::Common;
 use crate::console::{Failure, say};
 use crate::input;
-use crate::outputs::refuse_overwriting_inputs;
+use crate::outputs::{Out, prepare_output, refuse_overwriting_inputs};
 use crate::summary::{Label, finish};
 
 /// Runs `vltm surface` on `capture`.
@@ -27,14 +27,8 @@ pub(crate) fn run(
         .into());
     }
     if let Some(d) = depth {
-        if vltm::io::extension(d).as_deref() != Some("npy") {
-            return Err(vltm::Error::arg(
-                "depth",
-                format!("{}: the depth map is written as .npy", d.display()),
-            )
-            .into());
-        }
         refuse_overwriting_inputs(&[capture.to_path_buf()], &[d])?;
+        prepare_output(d, Out::Depth)?;
     }
     let slab = Volume::parse(&common.volume)?;
     let mut c = common.load(capture)?;

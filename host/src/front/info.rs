@@ -57,6 +57,7 @@ pub fn info(
 ) -> Result<Summed> {
     let mut out = |s: String| say(Stream::Out, &s);
     let mut c = if io::extension(path).as_deref() == Some("mat") {
+        crate::budget::regular_file(path)?;
         let m = io::mat::read(path, mat)?;
         out(format!("capture      {}", path.display()));
         out(format!("format       MATLAB {}", m.version));
@@ -79,8 +80,9 @@ pub fn info(
                 ));
             }
         }
+        let c = io::open(path)?;
         out(format!("capture      {}", path.display()));
-        io::open(path)?
+        c
     };
     if io::is_hdf5(path) {
         describe_hdf5(path, &mut out)?;

@@ -41,8 +41,11 @@ pub fn extension(path: &Path) -> Option<String> {
 /// with the layout's default conventions).
 ///
 /// # Errors
+/// [`Error::Io`] for a missing file (whatever its extension), [`Error::Format`] for
+/// anything but a regular file (a named pipe, a device: refused before it is opened),
 /// [`Error::Argument`] for an unknown extension; read errors of the format.
 pub fn open(path: &Path) -> Result<Capture> {
+    crate::budget::regular_file(path)?;
     match extension(path).as_deref() {
         Some("npz") => npz::read(path),
         Some("ptu") => ptu::read_all(path, path.with_extension("json")),
@@ -62,6 +65,7 @@ pub fn open(path: &Path) -> Result<Capture> {
 /// # Errors
 /// As [`open`].
 pub fn open_source(path: &Path) -> Result<Box<dyn RowSource>> {
+    crate::budget::regular_file(path)?;
     match extension(path).as_deref() {
         Some("hdf5" | "h5") => tal::open_any(path),
         Some("ptu") => Ok(Box::new(ptu::PtuSource::open(
@@ -114,7 +118,7 @@ pub fn is_hdf5(path: &Path) -> bool {
 
 fn unknown_format(path: &Path) -> Error {
     Error::arg(
-        "CAPTURE",
+        "capture",
         format!(
             "{}: unknown capture format (expected .npz, .ptu, .hdf5, .h5 or .mat)",
             path.display()

@@ -659,16 +659,21 @@ pub fn open_stream(path: &Path) -> Result<Option<Stream>> {
         .iter()
         .try_fold(4u64, |a, &x| a.checked_mul(x as u64))
         .and_then(|b| b.checked_add(start));
-    if need.is_none_or(|end| end > data_start + len) {
+    // Exactly the shape's bytes, as `read` (and NumPy) require: a truncated entry, or one
+    // with bytes after its data, is refused by every command alike.
+    if need != Some(data_start + len) {
+        let have = (data_start + len).saturating_sub(start);
+        let what = if need.is_some_and(|end| end < data_start + len) {
+            "extra bytes after the data"
+        } else {
+            "truncated"
+        };
         return Err(bad(
             &format!(
                 "{} bytes of f32 data",
                 need.map_or("more than 2^64".into(), |e| (e - start).to_string())
             ),
-            format!(
-                "{} bytes (truncated)",
-                (data_start + len).saturating_sub(start)
-            ),
+            format!("{have} bytes ({what})"),
         ));
     }
     check_members(path)?;

@@ -333,7 +333,8 @@ impl Resample {
             .filter(|&t| t <= crate::volume::MAX_VOXELS)
             .ok_or_else(|| {
                 format!(
-                    "its support grid of {sx}×{sy}×{nz} voxels exceeds {} voxels",
+                    "its support grid of {sx}×{sy}×{nz} voxels exceeds {} voxels \
+                     (docs/limits.md): use a coarser grid or a smaller volume",
                     crate::volume::MAX_VOXELS
                 )
             })?;

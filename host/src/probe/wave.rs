@@ -68,6 +68,16 @@ pub(super) fn pitch(pts: &[Point], shape: [usize; 2]) -> f32 {
     px.max(py)
 }
 
+/// The smallest band half-width [`Wave::check`] accepts (units of 1/σ; truncation error
+/// ≈ erfc(1/√2) = 0.32).
+pub const MIN_BAND: f64 = 1.0;
+/// The largest band half-width [`Wave::check`] accepts (units of 1/σ; beyond it the
+/// truncation error is below f64's precision and the band only costs time).
+pub const MAX_BAND: f64 = 20.0;
+
+/// The longest `wavelength` or `sigma` [`Wave::check`] accepts: 1000 km of path.
+pub const MAX_LENGTH: f64 = 1e6;
+
 /// Default virtual wavelength: twice the coarser aperture pitch (the sampling limit of the
 /// virtual lens), and at least 6 time bins (so the band stays below Nyquist).
 pub fn default_wavelength(g: &Geometry) -> f64 {
@@ -104,6 +114,51 @@ impl Wave {
         }
     }
 
+    /// Refuses options that make no sense, with their valid range: the band half-width
+    /// `band` in [[`MIN_BAND`], [`MAX_BAND`]] (units of 1/σ), a given `wavelength` from two
+    /// time bins (`2·dt`, the Nyquist limit) and a given `sigma` from one time bin (`dt`), both
+    /// at most [`MAX_LENGTH`] (a longer wave overflows the kernel's sizes; the memory budget
+    /// bounds the DFT period long before).
+    ///
+    /// # Errors
+    /// [`Error::Argument`](crate::Error::Argument) naming the parameter and its range.
+    pub fn check(&self, g: &Geometry) -> Result<()> {
+        let m = self.band_half_width;
+        if !(MIN_BAND..=MAX_BAND).contains(&m) {
+            return Err(crate::error::Error::arg(
+                "band",
+                format!(
+                    "expected {MIN_BAND} to {MAX_BAND} (the band's half-width in units of 1/σ; \
+                     truncation error ≈ erfc(m/√2): 5 gives 5.7e-7), found {m}"
+                ),
+            ));
+        }
+        for (name, v, bins, least) in [
+            (
+                "wavelength",
+                self.wavelength,
+                2.0,
+                "two time bins (the Nyquist limit)",
+            ),
+            ("sigma", self.sigma, 1.0, "one time bin"),
+        ] {
+            if let Some(v) = v {
+                let lo = bins * g.dt;
+                if !(v >= lo && v <= MAX_LENGTH) {
+                    return Err(crate::error::Error::arg(
+                        name,
+                        format!(
+                            "expected {lo} to {MAX_LENGTH} m of path (from {least} of {} m \
+                             to 1000 km), found {v}",
+                            g.dt
+                        ),
+                    ));
+                }
+            }
+        }
+        Ok(())
+    }
+
     /// The kernel configuration for a capture.
     ///
     /// # Errors
@@ -111,6 +166,7 @@ impl Wave {
     /// [`Wave::cosine`] the configuration has the distance weights; the cosines are the
     /// host's.)
     pub fn config(&self, g: &Geometry) -> Result<Config> {
+        self.check(g)?;
         let lam = self.wavelength.unwrap_or_else(|| default_wavelength(g));
         let legs = if g.legs_in_time {
             Legs::FirstAndLast {
@@ -296,4 +352,71 @@ pub enum ColumnGate {
     HigherOrder,
     /// No gate (the paper's Fig. 6 control).
     None,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn geometry() -> Geometry {
+        Geometry {
+            lasers: vec![[0.0, 0.0, 0.0], [0.2, 0.0, 0.0]],
+            laser_shape: [2, 1],
+            spads: vec![[0.1, 0.0, 0.0]],
+            spad_shape: [1, 1],
+            laser_origin: [0.0, 0.0, 0.5],
+            sensor_origin: [0.0, 0.0, 0.5],
+            legs_in_time: false,
+            confocal: false,
+            nt: 200,
+            dt: 0.01,
+            t0: 0.0,
+            normals: Default::default(),
+        }
+    }
+
+    /// Options out of range are refused naming the parameter and its range; the ends of the
+    /// ranges are accepted.
+    #[test]
+    fn wave_options_have_ranges() {
+        let g = geometry();
+        let refused = |w: Wave, param: &str, range: &str| {
+            let e = w.check(&g).unwrap_err();
+            let line = e.to_string();
+            assert!(
+                line.starts_with(&format!("argument `{param}`")) && line.contains(range),
+                "{line}"
+            );
+        };
+        let band = |m| Wave {
+            band_half_width: m,
+            ..Wave::default()
+        };
+        for m in [1e-300, 0.5, 20.5, 1e300, f64::NAN, f64::INFINITY] {
+            refused(band(m), "band", "1 to 20");
+        }
+        for m in [MIN_BAND, 5.0, MAX_BAND] {
+            band(m).check(&g).unwrap();
+        }
+        let wl = |v| Wave {
+            wavelength: Some(v),
+            ..Wave::default()
+        };
+        for v in [1e-300, 0.019, 1.1e6, f64::NAN, -1.0, 1e300] {
+            refused(wl(v), "wavelength", "0.02 to 1000000 m");
+        }
+        for v in [0.02, 1.0, 1e6] {
+            wl(v).check(&g).unwrap();
+        }
+        let sigma = |v| Wave {
+            sigma: Some(v),
+            ..Wave::default()
+        };
+        for v in [0.0, 0.009, 1e9, f64::NAN] {
+            refused(sigma(v), "sigma", "0.01 to 1000000 m");
+        }
+        sigma(0.01).check(&g).unwrap();
+        // `config` applies the check.
+        assert!(band(1e-300).config(&g).is_err());
+    }
 }

@@ -216,7 +216,7 @@ impl Scene {
     /// [`Error::Io`] if the file cannot be read, else as [`Scene::from_json_str`].
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let json = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let json = crate::budget::read_text(path)?;
         Self::from_json_str(&json, path)
     }
 

@@ -19,7 +19,7 @@ use vltm::volume::{Volume, parse_point};
 use crate::args::LiveArgs;
 use crate::args::PathArg;
 use crate::console::{Failure, say};
-use crate::outputs::{refuse_overwriting_inputs, same_file};
+use crate::outputs::{Out, prepare_output, refuse_overwriting_inputs, same_file};
 
 /// Where the rows come from.
 enum Kind {
@@ -199,6 +199,7 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
     }
     let outs: Vec<&Path> = all.iter().map(PathBuf::as_path).collect();
     refuse_overwriting_inputs(&inputs, &outs)?;
+    prepare_output(&a.out, Out::Volume)?;
     // A state on disk is only replaced by this run's when this run continues it.
     for t in &tag_refs {
         let p = outputs.state(t);
@@ -354,11 +355,15 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
         if progress.tty {
             eprintln!();
         }
-        if run.folded() > 0 {
+        // Only a state that was written is named, with the rows it holds.
+        let state = outputs.state("direct");
+        if run.folded() > 0
+            && let Ok(held) = Partial::read(&state)
+        {
+            let rows: usize = held.rows().iter().map(ExactSizeIterator::len).sum();
             eprintln!(
-                "vltm: note: the states of {} rows are in {} (continue with --resume)",
-                run.folded(),
-                outputs.state("direct").display()
+                "vltm: note: the states of {rows} rows are in {} (continue with --resume)",
+                state.display()
             );
         }
         return Err(e.into());

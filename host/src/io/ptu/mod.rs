@@ -164,6 +164,7 @@ mod follow;
 mod header;
 mod sidecar;
 mod source;
+mod template;
 mod write;
 
 pub use decode::{Decoded, Decoder, Event, Records, open};
@@ -174,6 +175,7 @@ pub use header::{
 };
 pub use sidecar::{Sidecar, Unmapped};
 pub use source::{Counts, PtuSource, read_all};
+pub use template::template;
 pub use write::{T3WriteOptions, T3Written, stage_t3, write_t3, write_t3_to};
 
 #[cfg(test)]

@@ -134,9 +134,17 @@ impl Sidecar {
     /// Parses a sidecar; `path` names it in errors.
     ///
     /// # Errors
-    /// [`Error::Format`] (field `sidecar`) for malformed JSON, unknown or missing fields.
+    /// [`Error::Format`] (field `sidecar`) for malformed JSON, unknown or missing fields (keys
+    /// that start with `_` are notes, ignored).
     pub fn from_json_str(json: &str, path: impl AsRef<Path>) -> Result<Self> {
-        serde_json::from_str(json).map_err(|e| {
+        // Keys starting with `_` are notes (the template's `_help`, `_nt`, …): dropped.
+        let parsed = serde_json::from_str::<serde_json::Value>(json).and_then(|mut v| {
+            if let Some(m) = v.as_object_mut() {
+                m.retain(|k, _| !k.starts_with('_'));
+            }
+            serde_json::from_value(v)
+        });
+        parsed.map_err(|e| {
             Error::format(
                 path.as_ref(),
                 "sidecar",
@@ -152,7 +160,12 @@ impl Sidecar {
     /// [`Error::Io`] if unreadable, else as [`Sidecar::from_json_str`].
     pub fn load(path: impl AsRef<Path>) -> Result<Self> {
         let path = path.as_ref();
-        let json = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        if let Err(e) = std::fs::metadata(path)
+            && e.kind() == std::io::ErrorKind::NotFound
+        {
+            return Err(Error::io(path, missing_sidecar(path)));
+        }
+        let json = crate::budget::read_text(path)?;
         Self::from_json_str(&json, path)
     }
 
@@ -319,5 +332,48 @@ impl Sidecar {
             end,
             unmapped_error: self.unmapped_channels == Unmapped::Error,
         })
+    }
+}
+
+/// The error of a missing sidecar: what it is and where its fields are described.
+fn missing_sidecar(path: &Path) -> std::io::Error {
+    let name = |p: &Path| {
+        p.file_name()
+            .unwrap_or_default()
+            .to_string_lossy()
+            .into_owned()
+    };
+    let ptu = name(&path.with_extension("ptu"));
+    std::io::Error::new(
+        std::io::ErrorKind::NotFound,
+        format!(
+            "No such file or directory: a PicoQuant capture F.ptu needs a JSON sidecar F.json beside it \
+             describing the scan (rows, SPADs, time axis; here {ptu} and {}): its fields are in \
+             docs/formats.md (PTU sidecar)",
+            name(path)
+        ),
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Keys starting with `_` (the template's notes) are ignored; other unknown keys are
+    /// still refused, naming the key.
+    #[test]
+    fn notes_are_ignored_unknown_fields_refused() {
+        let base = r#""lasers": {"points": [[0, 0, 0]]}, "spads": {"points": [[0.1, 0, 0]]},
+            "nt": 8, "t0": 0.5"#;
+        let s = Sidecar::from_json_str(
+            &format!(r#"{{"_help": "x", "_nt": "bins", {base}}}"#),
+            "s.json",
+        )
+        .unwrap();
+        assert_eq!(s.nt, 8);
+        let e = Sidecar::from_json_str(&format!(r#"{{"nts": 3, {base}}}"#), "s.json")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("s.json") && e.contains("nts"), "{e}");
     }
 }

@@ -60,6 +60,8 @@ impl PtuSource<BufReader<File>> {
     /// [`Error::Io`] if a file cannot be read; header and sidecar errors (module docs).
     pub fn open(ptu: impl AsRef<Path>, sidecar: impl AsRef<Path>) -> Result<Self> {
         let (ptu, sidecar_path) = (ptu.as_ref(), sidecar.as_ref());
+        // The capture first: a missing .ptu is named as such, not as its missing sidecar.
+        crate::budget::regular_file(ptu)?;
         let sidecar = Sidecar::load(sidecar_path)?;
         let f = File::open(ptu).map_err(|e| Error::io(ptu, e))?;
         Self::from_reader(BufReader::new(f), ptu, sidecar, sidecar_path)
