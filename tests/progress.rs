@@ -21,7 +21,7 @@ fn indirect(mode: &str, test: &str) -> Output {
         .arg("indirect")
         .arg(&capture)
         .args(["--volume", SPEC, "--progress", mode, "--out"])
-        .arg(dir.join("ind"))
+        .arg(dir.join("ind.npy"))
         .output()
         .expect("run vltm");
     let _ = std::fs::remove_dir_all(&dir);
