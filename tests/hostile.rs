@@ -1017,6 +1017,58 @@ fn hdf5_layouts_without_data() {
     }
 }
 
+/// A damaged byte inside a contiguous `H` (HDF5 keeps no checksum there) and a negative
+/// count: the run goes on (the values are what the file holds) with one warning naming the
+/// value and its laser row, SPAD and bin; `info` says it too; the clean file says nothing.
+#[test]
+fn implausible_tal_values_are_named() {
+    let t = TempDir::new("implausible");
+    let good = t.path("good.hdf5");
+    write_tal(&good, false);
+    let (addr, _) = h_layout(&good);
+    let bytes = std::fs::read(&good).unwrap();
+    // H is time-first, h[n][l][s] with 4 lasers and 2 SPADs: bin 5, laser row 1, SPAD 1.
+    let k = (5 * 4 + 1) * 2 + 1;
+    let at = addr as usize + 4 * k;
+    let mut flipped = bytes.clone();
+    flipped[at + 3] = 0x4f; // the exponent's byte: a value of about 1e9 to 1e10
+    std::fs::write(t.path("flipped.hdf5"), &flipped).unwrap();
+    let mut negative = bytes.clone();
+    negative[at..at + 4].copy_from_slice(&(-2.0f32).to_le_bytes());
+    std::fs::write(t.path("negative.hdf5"), &negative).unwrap();
+    let warns = |f: &str, cmd: &str| {
+        let mut args = vec![cmd, f];
+        if cmd != "info" {
+            args.extend(["--volume", VOLUME, "--out", "o.npy", "--png", "o.png"]);
+        }
+        let o = run(&t, &args);
+        assert!(
+            o.status.success(),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        let lines: Vec<&str> = err.lines().filter(|l| l.contains("implausible")).collect();
+        assert!(lines.len() <= 1, "one line at most: {err}");
+        lines.first().map(|l| l.to_string())
+    };
+    for cmd in ["info", "direct", "indirect"] {
+        assert_eq!(warns("good.hdf5", cmd), None, "{cmd} on the clean file");
+        let w = warns("flipped.hdf5", cmd).expect("a warning on the damaged file");
+        assert!(
+            w.starts_with("vltm: warning: implausible data")
+                && w.contains("laser row 1, SPAD 1, bin 5")
+                && w.contains("99.9th percentile"),
+            "{cmd}: {w}"
+        );
+        let w = warns("negative.hdf5", cmd).expect("a warning on the negative count");
+        assert!(
+            w.contains("1 negative values") && w.contains("laser row 1, SPAD 1, bin 5"),
+            "{cmd}: {w}"
+        );
+    }
+}
+
 /// A chunked H whose chunk index was never written (address undefined): its layout is
 /// reached (the object header re-sealed) and refused; with its dataspace claiming 10⁹ bins,
 /// refused too (it read fill values, or aborted sizing 32 GB).

@@ -78,13 +78,21 @@ impl Input {
     /// overrides, other formats through [`io::open_source`] (the overrides are refused there:
     /// those files record their conventions).
     pub fn open(&self, path: &Path) -> vltm::Result<Box<dyn RowSource>> {
-        if io::extension(path).as_deref() == Some("mat") {
+        let src: Box<dyn RowSource> = if io::extension(path).as_deref() == Some("mat") {
             vltm::budget::regular_file(path)?;
-            return Ok(Box::new(io::mat::read(path, &self.mat_options())?.capture));
-        }
-        self.refuse_overrides()?;
-        require_sidecar(path)?;
-        io::open_source(path)
+            Box::new(io::mat::read(path, &self.mat_options())?.capture)
+        } else {
+            self.refuse_overrides()?;
+            require_sidecar(path)?;
+            io::open_source(path)?
+        };
+        // Implausible values (a flipped byte in a file without checksums) are named once
+        // every row has been read.
+        Ok(Box::new(io::plausible::Watched::new(
+            src,
+            io::plausible::nonnegative_format(path),
+            Box::new(|w: &str| vltm::exec::Progress::warn(&crate::progress::BARS, w)),
+        )))
     }
 
     fn refuse_overrides(&self) -> vltm::Result<()> {

@@ -88,6 +88,11 @@ pub fn info(
         describe_hdf5(path, &mut out)?;
     }
     describe(&c, &mut out);
+    let mut plausible =
+        io::plausible::Plausibility::new(&c.geometry, io::plausible::nonnegative_format(path));
+    for l in 0..c.geometry.lasers.len() {
+        plausible.observe(l, c.row(l));
+    }
     out(laser_line(io::laser_falloff_in_data(path)?));
     out(format!("memory       budget {}", crate::budget::describe()));
     let (g, counts) = match prep {
@@ -108,6 +113,9 @@ pub fn info(
         }
         None => (c.geometry.clone(), front::summed(&mut c)?),
     };
+    if let Some(w) = plausible.verdict() {
+        say(Stream::Warning, &w);
+    }
     say(
         Stream::Out,
         &format!("fast paths   {}", crate::probe::fft_note(&g, volume)),

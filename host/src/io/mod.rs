@@ -15,6 +15,7 @@
 pub mod capture;
 pub mod mat;
 pub mod npz;
+pub mod plausible;
 pub mod prep;
 pub mod ptu;
 pub mod state;

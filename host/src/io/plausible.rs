@@ -1,0 +1,330 @@
+//! Implausible data: a warning, with the position of the worst value, when a capture holds
+//! values no instrument or renderer makes.
+//!
+//! A flipped byte inside an HDF5 file's contiguous `H` block has no checksum to catch it: a
+//! corrupted exponent turns 3.2 into 5.7e37, and the file still opens. Two signs are checked:
+//!
+//! - a value whose magnitude is more than [`FACTOR`] (10⁶) times the capture's 99.9th
+//!   percentile of magnitudes (the percentile estimated from an even sample of at most
+//!   [`SAMPLE`] values, below at least its largest value, so that one or a few corrupted
+//!   values do not move it; a capture
+//!   whose percentile is 0 is compared with the median of its non-zero sampled values);
+//! - a negative value in a format that holds counts or radiance ([`nonnegative_format`]:
+//!   tal/Z-NLOS HDF5, PicoQuant PTU, Stanford `.mat`), where none can be negative. A `.npz`
+//!   may hold background-subtracted data, so negatives are allowed there.
+//!
+//! Non-finite samples are not judged here: the probes read them as 0 and say so.
+//!
+//! Cost: one pass over each row as it is read (a max/min scan and every `stride`-th value
+//! copied); memory: [`SAMPLE`] f32 at most. The check never changes the data and never fails
+//! a run: it only warns (the values are what the file holds; the user decides).
+
+use std::path::Path;
+
+use crate::error::Result;
+use crate::io::capture::{Geometry, RowSource};
+use vltm_kernel::Point;
+
+/// How many times the 99.9th percentile a value may reach before it is implausible.
+pub const FACTOR: f64 = 1e6;
+
+/// The most values sampled for the percentile.
+pub const SAMPLE: usize = 1 << 20;
+
+/// Whether the format of `path` holds values that cannot be negative (counts or radiance):
+/// HDF5 (y-tal, Z-NLOS), PTU and `.mat` captures; not `.npz` (it may hold processed data).
+pub fn nonnegative_format(path: &Path) -> bool {
+    matches!(
+        crate::io::extension(path).as_deref(),
+        Some("hdf5" | "h5" | "ptu" | "mat")
+    )
+}
+
+/// A value and where it lies: laser row, SPAD within the row, time bin.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct At {
+    value: f32,
+    row: usize,
+    spad: usize,
+    bin: usize,
+}
+
+/// Statistics of the rows seen so far, and the verdict on them.
+#[derive(Clone, Debug)]
+pub struct Plausibility {
+    nt: usize,
+    nonnegative: bool,
+    stride: usize,
+    sample: Vec<f32>,
+    largest: Option<At>,
+    lowest: Option<At>,
+    negatives: u64,
+}
+
+impl Plausibility {
+    /// Statistics for a capture of geometry `g`; `nonnegative`: negative values are
+    /// implausible (see [`nonnegative_format`]).
+    pub fn new(g: &Geometry, nonnegative: bool) -> Self {
+        let total = g.lasers.len() * g.spads_per_row() * g.nt;
+        Self {
+            nt: g.nt.max(1),
+            nonnegative,
+            stride: total.div_ceil(SAMPLE).max(1),
+            sample: Vec::new(),
+            largest: None,
+            lowest: None,
+            negatives: 0,
+        }
+    }
+
+    /// Takes row `l`'s histograms (SPAD-major, `Nt` bins each) into the statistics.
+    pub fn observe(&mut self, l: usize, row: &[f32]) {
+        let at = |i: usize, value: f32| At {
+            value,
+            row: l,
+            spad: i / self.nt,
+            bin: i % self.nt,
+        };
+        // One branch-free pass (it vectorises); positions only when a record is beaten.
+        let finite = |x: f32| if x.is_finite() { x } else { 0.0 };
+        let (hi, lo) = row.iter().fold((0.0f32, 0.0f32), |(h, l), &x| {
+            let x = finite(x);
+            (h.max(x.abs()), l.min(x))
+        });
+        if hi > 0.0 && self.largest.is_none_or(|a| hi > a.value.abs()) {
+            let i = row.iter().position(|&x| finite(x).abs() == hi).unwrap_or(0);
+            self.largest = Some(at(i, row[i]));
+        }
+        if lo < 0.0 {
+            self.negatives += row.iter().filter(|&&x| finite(x) < 0.0).count() as u64;
+            if self.lowest.is_none_or(|a| lo < a.value) {
+                let i = row.iter().position(|&x| finite(x) == lo).unwrap_or(0);
+                self.lowest = Some(at(i, row[i]));
+            }
+        }
+        if self.sample.len() < SAMPLE {
+            let room = SAMPLE - self.sample.len();
+            self.sample.extend(
+                row.iter()
+                    .step_by(self.stride)
+                    .filter(|x| x.is_finite())
+                    .map(|x| x.abs())
+                    .take(room),
+            );
+        }
+    }
+
+    /// One warning line when the rows seen hold implausible values, naming the worst one and
+    /// where it lies; `None` when they look like data.
+    pub fn verdict(&self) -> Option<String> {
+        let mut said = Vec::new();
+        if let (Some(a), Some(reference)) = (self.largest, self.reference()) {
+            let ratio = f64::from(a.value.abs()) / reference;
+            if ratio > FACTOR {
+                said.push(format!(
+                    "the value {:e} at laser row {}, SPAD {}, bin {} is {ratio:.1e} times the capture's 99.9th percentile ({reference:.4e}): the file may be damaged (a flipped byte), or the capture holds an outlier the probes will spread over the volume",
+                    a.value, a.row, a.spad, a.bin
+                ));
+            }
+        }
+        if self.nonnegative
+            && let Some(a) = self.lowest
+        {
+            said.push(format!(
+                "{} negative values in a format that holds counts (the lowest, {:e}, at laser row {}, SPAD {}, bin {}): the file may be damaged",
+                self.negatives, a.value, a.row, a.spad, a.bin
+            ));
+        }
+        (!said.is_empty()).then(|| format!("implausible data: {}", said.join("; ")))
+    }
+
+    /// The scale a plausible value stays within [`FACTOR`] of: the 99.9th percentile of the
+    /// sampled magnitudes, or the median of the non-zero ones when that percentile is 0.
+    fn reference(&self) -> Option<f64> {
+        let mut s = self.sample.clone();
+        if s.is_empty() {
+            return None;
+        }
+        // The rank below the largest 0.1 % (at least the largest value), so that a small
+        // capture's percentile is not its outlier.
+        let n = s.len();
+        let k = (n - n.div_ceil(1000)).saturating_sub(1);
+        let (_, p, _) = s.select_nth_unstable_by(k, f32::total_cmp);
+        if *p > 0.0 {
+            return Some(f64::from(*p));
+        }
+        let mut nz: Vec<f32> = s.into_iter().filter(|&x| x > 0.0).collect();
+        if nz.is_empty() {
+            return None;
+        }
+        let m = nz.len() / 2;
+        let (_, p, _) = nz.select_nth_unstable_by(m, f32::total_cmp);
+        Some(f64::from(*p))
+    }
+}
+
+/// A row source that judges its rows as they pass ([`Plausibility`]) and hands the verdict to
+/// `warn` once, when every row of the source has been read; the rows are passed on unchanged.
+pub struct Watched {
+    src: Box<dyn RowSource>,
+    stats: Plausibility,
+    seen: Vec<bool>,
+    left: usize,
+    warn: Box<dyn FnMut(&str)>,
+}
+
+impl Watched {
+    /// Watches `src`; `nonnegative` as [`Plausibility::new`]; `warn` receives the one line.
+    pub fn new(src: Box<dyn RowSource>, nonnegative: bool, warn: Box<dyn FnMut(&str)>) -> Self {
+        let g = src.geometry();
+        let stats = Plausibility::new(g, nonnegative);
+        let rows = src.rows();
+        let mut seen = vec![true; g.lasers.len()];
+        for l in rows.clone() {
+            seen[l] = false;
+        }
+        Self {
+            stats,
+            seen,
+            left: rows.len(),
+            src,
+            warn,
+        }
+    }
+
+    fn observe(&mut self, l: usize, row: &[f32]) {
+        let Some(seen) = self.seen.get_mut(l) else {
+            return;
+        };
+        if *seen {
+            return;
+        }
+        *seen = true;
+        self.stats.observe(l, row);
+        self.left -= 1;
+        if self.left == 0
+            && let Some(w) = self.stats.verdict()
+        {
+            (self.warn)(&w);
+        }
+    }
+}
+
+impl RowSource for Watched {
+    fn geometry(&self) -> &Geometry {
+        self.src.geometry()
+    }
+
+    fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
+        let x = self.src.read_row(l, out)?;
+        self.observe(l, out);
+        Ok(x)
+    }
+
+    fn read_rows(&mut self, first: usize, out: &mut [(Point, Vec<f32>)]) -> Result<()> {
+        self.src.read_rows(first, out)?;
+        for (l, (_, h)) in (first..).zip(out.iter()) {
+            self.observe(l, h);
+        }
+        Ok(())
+    }
+
+    fn reads_in_parallel(&self) -> bool {
+        self.src.reads_in_parallel()
+    }
+
+    fn rows(&self) -> std::ops::Range<usize> {
+        self.src.rows()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::Capture;
+
+    fn capture(values: impl Fn(usize) -> f32) -> Capture {
+        let g = Geometry {
+            lasers: (0..4).map(|i| [0.1 * i as f32, 0.0, 0.0]).collect(),
+            laser_shape: [4, 1],
+            spads: (0..3).map(|i| [0.0, 0.1 * i as f32, 0.0]).collect(),
+            spad_shape: [3, 1],
+            laser_origin: [0.0; 3],
+            sensor_origin: [0.0; 3],
+            legs_in_time: false,
+            confocal: false,
+            nt: 50,
+            dt: 0.01,
+            t0: 0.0,
+            normals: crate::io::capture::Normals::default(),
+        };
+        let n = 4 * 3 * 50;
+        Capture::new(g, (0..n).map(values).collect(), Path::new("test")).expect("capture")
+    }
+
+    fn verdict(c: Capture, nonnegative: bool) -> Option<String> {
+        let said = std::rc::Rc::new(std::cell::RefCell::new(None));
+        let s = said.clone();
+        let mut w = Watched::new(
+            Box::new(c),
+            nonnegative,
+            Box::new(move |m: &str| *s.borrow_mut() = Some(m.to_string())),
+        );
+        let mut row = Vec::new();
+        // Out of order and twice: each row counts once, the verdict comes after the last.
+        for l in [2, 0, 0, 3, 1] {
+            w.read_row(l, &mut row).expect("row");
+        }
+        said.take()
+    }
+
+    /// A smooth transient with noise-like spread.
+    fn clean(i: usize) -> f32 {
+        1.0 + ((i * 7919) % 97) as f32 * 0.3
+    }
+
+    #[test]
+    fn clean_data_say_nothing() {
+        assert_eq!(verdict(capture(clean), true), None);
+    }
+
+    #[test]
+    fn a_flipped_exponent_is_named_with_its_position() {
+        // Row 1, SPAD 2, bin 7: index 1·150 + 2·50 + 7.
+        let w = verdict(capture(|i| if i == 257 { 5.7e37 } else { clean(i) }), true)
+            .expect("a warning");
+        assert!(
+            w.contains("laser row 1, SPAD 2, bin 7") && w.contains("5.7e37"),
+            "{w}"
+        );
+        // Large, but within the factor: data.
+        assert_eq!(
+            verdict(capture(|i| if i == 257 { 3e4 } else { clean(i) }), true),
+            None
+        );
+    }
+
+    #[test]
+    fn negatives_are_implausible_only_in_counts() {
+        let c = || capture(|i| if i == 3 { -2.0 } else { clean(i) });
+        let w = verdict(c(), true).expect("a warning");
+        assert!(w.contains("1 negative values") && w.contains("laser row 0, SPAD 0, bin 3"));
+        assert_eq!(verdict(c(), false), None);
+    }
+
+    #[test]
+    fn sparse_data_compare_with_their_non_zero_values() {
+        // Almost all zeros: the 99.9th percentile is 0; the non-zero values set the scale.
+        let sparse = |i: usize| if i.is_multiple_of(100) { 2.0 } else { 0.0 };
+        assert_eq!(verdict(capture(sparse), true), None);
+        let w = verdict(capture(|i| if i == 51 { 1e9 } else { sparse(i) }), true);
+        assert!(w.is_some_and(|w| w.contains("bin 1")));
+    }
+
+    #[test]
+    fn formats_that_hold_counts() {
+        assert!(nonnegative_format(Path::new("a.hdf5")));
+        assert!(nonnegative_format(Path::new("a.ptu")));
+        assert!(!nonnegative_format(Path::new("a.npz")));
+    }
+}
