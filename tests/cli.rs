@@ -1566,7 +1566,6 @@ fn matrix_relight_and_row_through_the_command_line() {
                 SPEC,
                 "--path",
                 "band",
-                "--no-leak-correct",
                 "--out",
                 &s(&fc),
             ],
@@ -1574,8 +1573,57 @@ fn matrix_relight_and_row_through_the_command_line() {
         let c = npy(&fc, SHAPE);
         worst = worst.max(rel_of_max(&int[i * vol.len()..(i + 1) * vol.len()], &c));
     }
-    println!("matrix rows vs column probes: {worst:.1e} of the column's maximum");
+    println!(
+        "matrix rows vs column probes (both leak-corrected over SPEC): {worst:.1e} of the column's maximum"
+    );
     assert!(worst <= 1e-6, "{worst:.3e}");
+    // --no-leak-correct: the capture as it is, row for row the uncorrected column; the
+    // correction changed the matrix.
+    let fr = t.path("raw.h5");
+    let said = ok(
+        &t.0,
+        &[
+            "matrix",
+            &cap,
+            "--from",
+            "gamma",
+            "--to",
+            SPEC,
+            "--volume",
+            SPEC,
+            "--epsilon",
+            "0.3",
+            "--no-leak-correct",
+            "--out",
+            &s(&fr),
+        ],
+    );
+    assert!(out.contains("leak correction") && !said.contains("leak correction"));
+    let (raw, _) = vltm::export::h5::read_f32_dataset(&fr, "intensity").expect("dataset");
+    let a = format!("{},{},{}", from[0], from[1], from[2]);
+    let fc = t.path("c.npy");
+    ok(
+        &t.0,
+        &[
+            "column",
+            &cap,
+            "--focus",
+            &a,
+            "--volume",
+            SPEC,
+            "--path",
+            "band",
+            "--no-leak-correct",
+            "--out",
+            &s(&fc),
+        ],
+    );
+    let c = npy(&fc, SHAPE);
+    assert!(rel_of_max(&raw[..vol.len()], &c) <= 1e-6);
+    assert!(
+        rel_of_max(&int[..vol.len()], &c) > 1e-3,
+        "the correction changed nothing"
+    );
     // Over the memory budget: named, nothing written.
     let big = t.path("big.h5");
     let err = fails(

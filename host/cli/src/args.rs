@@ -369,7 +369,9 @@ pub(crate) struct MatrixArgs {
     /// Imaged voxels x_b (the matrix's columns): a SPEC or `gamma`.
     #[arg(long, value_name = "SPEC|gamma", allow_hyphen_values = true)]
     pub(crate) to: String,
-    /// The volume whose Γ = {x : direct(x) > ε·max} `gamma` stands for (as `vltm indirect`).
+    /// The volume whose Γ = {x : direct(x) > ε·max} `gamma` stands for (as `vltm indirect`),
+    /// and over which the capture's direct light is removed first (leak correction, on by
+    /// default when a volume is given; --no-leak-correct skips it).
     #[arg(long, value_name = "SPEC", allow_hyphen_values = true)]
     pub(crate) volume: Option<String>,
     /// Relative threshold ε of Γ (0 <= ε < 1).
@@ -387,6 +389,8 @@ pub(crate) struct MatrixArgs {
     /// the matrix; `vltm merge --out F.h5` adds the parts and images the matrix.
     #[arg(long, value_name = "F", conflicts_with = "out")]
     pub(crate) partial: Option<PathBuf>,
+    #[command(flatten)]
+    pub(crate) leak: LeakArgs,
     #[command(flatten)]
     pub(crate) wave: WaveArgs,
 }

@@ -86,13 +86,7 @@ impl Input {
             require_sidecar(path)?;
             io::open_source(path)?
         };
-        // Implausible values (a flipped byte in a file without checksums) are named once
-        // every row has been read.
-        Ok(Box::new(io::plausible::Watched::new(
-            src,
-            io::plausible::nonnegative_format(path),
-            Box::new(|w: &str| vltm::exec::Progress::warn(&crate::progress::BARS, w)),
-        )))
+        Ok(watched(path, src))
     }
 
     fn refuse_overrides(&self) -> vltm::Result<()> {
@@ -273,4 +267,15 @@ pub fn info(
         say!("wrote {}", p.display());
     }
     Ok(())
+}
+
+/// `src` (the capture file `path`) with its implausible values (a flipped byte in a file
+/// without checksums, negative counts) named in one warning once every row has been read
+/// ([`io::plausible`]).
+pub(crate) fn watched(path: &Path, src: Box<dyn RowSource>) -> Box<dyn RowSource> {
+    Box::new(io::plausible::Watched::new(
+        src,
+        io::plausible::nonnegative_format(path),
+        Box::new(|w: &str| vltm::exec::Progress::warn(&crate::progress::BARS, w)),
+    ))
 }

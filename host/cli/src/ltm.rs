@@ -57,7 +57,7 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
     }
     let mut src = {
         crate::input::require_sidecar(&a.capture)?;
-        io::open_source(&a.capture)?
+        input::watched(&a.capture, io::open_source(&a.capture)?)
     };
     let gamma: Option<Vec<Point>> = if wants_gamma {
         let spec = a.volume.as_deref().ok_or_else(|| {
@@ -101,7 +101,39 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
             part,
         );
     }
-    let m = probe::matrix(&mut *src, &from, &to, &wave, exec())?;
+    // The capture's direct light is removed over --volume (Γ's volume) by default, as in
+    // `column` and `row`; without a volume there is nothing to fit it to.
+    let leak = match (&a.volume, a.leak.epsilon()) {
+        (Some(spec), Some(e)) => Some((Volume::parse(spec)?, e)),
+        (None, Some(_)) => {
+            say!(
+                "matrix: not leak-corrected: give --volume (the volume whose direct light is removed, as column's) or --no-leak-correct"
+            );
+            None
+        }
+        (_, None) => None,
+    };
+    let m = match &leak {
+        Some((volume, e)) => {
+            let model = probe::fit_over_volume(
+                &mut *src,
+                volume,
+                *e,
+                &wave,
+                &probe::LeakOptions::default(),
+                exec(),
+            )?;
+            say!(
+                "leak correction (--no-leak-correct to skip): {:.4} of the capture's energy was in the 3-vertex windows of Γ's {} voxels and removed ({:.2} s)",
+                model.explained,
+                model.points().len(),
+                model.seconds
+            );
+            let mut lc = probe::LeakCorrected::new(&mut *src, &model);
+            probe::matrix(&mut lc, &from, &to, &wave, exec())?
+        }
+        None => probe::matrix(&mut *src, &from, &to, &wave, exec())?,
+    };
     let texts = [
         ("from", a.from.trim().to_string()),
         ("to", a.to.trim().to_string()),
@@ -109,6 +141,8 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
     ];
     let numbers = [
         ("epsilon", f64::from(a.epsilon)),
+        ("leak_correct", f64::from(u8::from(leak.is_some()))),
+        ("leak_epsilon", f64::from(a.leak.leak_epsilon)),
         (
             "compensate_laser",
             f64::from(u8::from(wave.compensate_laser)),

@@ -1,6 +1,6 @@
 //! Leak correction (beyond the paper): the capture's **direct** (3-vertex) light removed, row
-//! by row, before the off-diagonal probes (by default in `vltm indirect`, `column`, `row` and
-//! `relight`; `--no-leak-correct` skips it).
+//! by row, before the off-diagonal probes (by default in `vltm indirect`, `column`, `row`,
+//! `relight` and `matrix` with `--volume`; `--no-leak-correct` skips it).
 //!
 //! # Why
 //!
