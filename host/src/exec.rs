@@ -31,7 +31,7 @@ pub trait Progress: Sync {
 /// tolerances); they differ in cost.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub enum Path {
-    /// The cheapest applicable path by the flop model of DESIGN §B.8: for the diagonal the
+    /// The cheapest applicable path by the flop model: for the diagonal the
     /// least of planar (when the SPADs — for a confocal capture the scanned wall points — form
     /// a regular grid and the volume is a wall-parallel grid whose pitch divides its pitch, or
     /// any other regular wall-parallel grid resampled from such a grid within its stated
@@ -39,7 +39,7 @@ pub enum Path {
     /// or band.
     #[default]
     Auto,
-    /// The kernel's band sum per (voxel, SPAD) (DESIGN §B.2.3): any geometry, every probe.
+    /// The kernel's band sum per (voxel, SPAD): any geometry, every probe.
     Band,
     /// The planar FFT convolution ([`crate::probe::fast::planar`]; for confocal captures
     /// [`crate::probe::fast::confocal`]) for the diagonal and Gaussian-gated columns (the

@@ -1,7 +1,7 @@
 //! The capture model: geometry, time axis and row access.
 //!
 //! A capture holds `H[l][s][n]`: laser spot `l`, SPAD spot `s`, time bin `n` at path length
-//! `t0 + n·Δt` (metres, the point-sample convention of DESIGN §B.0). The kernel is fed one
+//! `t0 + n·Δt` (metres, the point-sample convention). The kernel is fed one
 //! laser row at a time through [`RowSource`].
 
 use crate::error::{Error, Result};
@@ -46,7 +46,7 @@ pub struct Geometry {
 
 /// Relay-surface normals at the spots of a [`Geometry`]: directions of any non-zero length
 /// ([`Geometry::laser_normal`] normalises), pointing toward the hidden scene (+z on the
-/// wall z = 0 of DESIGN §B.0). An empty list means +z at every spot of that list (formats
+/// wall z = 0). An empty list means +z at every spot of that list (formats
 /// without normals, and every file whose normals are all +z); otherwise one normal per spot,
 /// in the order of [`Geometry::lasers`] / [`Geometry::spads`]. Only the sign-free direction
 /// enters vltm's cosines (`|v·n|`), so a file whose normals point away from the scene reads
@@ -208,7 +208,7 @@ impl Geometry {
     }
 
     /// Refuses a probe that needs a SPAD grid seen from every laser row (columns, rows, the
-    /// matrix: their factorised sums run over `laser × SPAD` grids, DESIGN §B.3.2) on a
+    /// matrix: their factorised sums run over `laser × SPAD` grids) on a
     /// paired or confocal capture. `what` names the probe's output (`"columns"`), `arg` the
     /// argument of the error.
     ///
@@ -593,7 +593,7 @@ impl RowSource for Capture {
     }
 }
 
-/// Swaps the roles of lasers and SPADs by reciprocity (DESIGN §B.3.7): the SPAD array becomes
+/// Swaps the roles of lasers and SPADs by reciprocity: the SPAD array becomes
 /// the virtual projector and the laser grid the camera, `T_swap(a, b) = T(b, a)`. Needs the
 /// capture in memory (`Kl·Ks·Nt` values).
 ///

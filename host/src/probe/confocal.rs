@@ -34,7 +34,7 @@ use vltm_kernel::{Config, Gate, Point, Probe, Report, RowBuffer, Scan, Target, c
 const ROWS_PER_GEMM: usize = 128;
 
 /// Flops of the whole scan on the lookup path (one inverse FFT of the grid per row, then
-/// `E0 + 16` per voxel, DESIGN §B.8), plus the per-row `Scan` (2N twiddles).
+/// `E0 + 16` per voxel), plus the per-row `Scan` (2N twiddles).
 pub(super) fn lookup_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
     let l = Lookup::plan_len(cfg) as f64;
     let rows = g.lasers.len() as f64;

@@ -3,7 +3,7 @@
 //! `n` the relay surface's normal at the wall point `x` (the laser spot for the first leg, the
 //! SPAD spot for the last; [`Geometry::laser_normal`], [`Geometry::spad_normal`], +z where
 //! the capture has none). Together with the default `w = 1/d` this is the obliquity factor
-//! `cos θ/d` of the Rayleigh–Sommerfeld propagator (DESIGN §B.3, weights) on a relay surface
+//! `cos θ/d` of the Rayleigh–Sommerfeld propagator on a relay surface
 //! of any shape; on a flat wall it is `z_v/d` per leg.
 //!
 //! **Where it applies.** Scans with one SPAD per row (paired and confocal): the diagonal is

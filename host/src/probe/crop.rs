@@ -4,7 +4,7 @@
 //!
 //! A bin `n` at path `t0 + n·Δt` can carry light to a probe only if some path of the probed
 //! elements lies within the gate's support `c_g·σ` of it (the Gaussian gate is below
-//! `e^{−c_g²/2}` = 3.7e-6 further out, DESIGN §B.2.2). The paths are bounded over the
+//! `e^{−c_g²/2}` = 3.7e-6 further out). The paths are bounded over the
 //! **bounding boxes** of the voxels (and foci), so the bound is O(Kl + Ks) to compute and never
 //! too tight:
 //!

@@ -1,5 +1,5 @@
 //! Direct light: the diagonal `T(x_v, x_v)` (Eqs. 11–12) on the cheapest applicable path
-//! (planar FFT convolution, baseband lookup or the kernel's band sum, DESIGN §B.8).
+//! (planar FFT convolution, baseband lookup or the kernel's band sum).
 
 use super::aligned::fast_hint;
 use super::confocal;
@@ -276,7 +276,7 @@ pub(super) enum PlanarUse {
 }
 
 /// The planar convolution for this probe, if [`Exec::path`] allows it, it applies and (for
-/// [`Path::Auto`]) it costs fewer flops than `rival`, the cheapest other path (DESIGN §B.8
+/// [`Path::Auto`]) it costs fewer flops than `rival`, the cheapest other path (by the
 /// cost model, per row for the diagonal, once for a column's imaging). `spads`: the SPAD
 /// spots, `None` for a confocal capture.
 pub(super) fn choose_planar(
@@ -509,7 +509,7 @@ pub(super) fn planar_core(
 }
 
 /// Flops of the planar convolution of FFT size `(Mx, My)` over `slices` sub-grids of
-/// `n_voxels` voxels (DESIGN §B.8 cost model): per row for the diagonal, once for a column's
+/// `n_voxels` voxels (cost model): per row for the diagonal, once for a column's
 /// imaging.
 fn planar_flops(
     (mx, my, slices): (usize, usize, usize),

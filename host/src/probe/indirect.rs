@@ -23,7 +23,7 @@ use vltm_kernel::{Config, Gate, Point, Probe, Report, Scan, Target};
 pub struct IndirectOptions {
     /// Relative threshold ε: Γ = {v : I_d(v) > ε·max I_d} (default 0.1).
     pub epsilon: f32,
-    /// Pair distances accumulated: `r0 ≤ |x_a − x_b| < r1`; `r0` default 1.5σ (DESIGN §B.3.4).
+    /// Pair distances accumulated: `r0 ≤ |x_a − x_b| < r1`; `r0` default 1.5σ.
     pub shell: Option<Shell>,
     /// Largest accumulator memory accepted (bytes) (default 8 GiB).
     pub max_bytes: usize,

@@ -3,7 +3,7 @@
 //! virtual camera's image `A_p(b) = Σ_a p_a·A(a, b)` under a virtual illumination that is a
 //! weighted sum of projector foci.
 //!
-//! **Method.** Both use the factorised column of the kernel (DESIGN §B.3.2): per laser row
+//! **Method.** Both use the factorised column of the kernel: per laser row
 //! and per focus `a`, `U_a[s][j] += w(|x_l − x_a|)·e^{iν_j|x_l − x_a|}·HG_ls[j]`, then at the end
 //! `A(a, b) = Σ_s w(|x_b − x_s|) Σ_j e^{iν_j(|x_a − x_b| + |x_b − x_s|)}·U_a[s][j]`. The
 //! amplitudes are imaged on the host ([`column_amplitudes`]) with exactly the arithmetic of

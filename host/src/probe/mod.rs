@@ -1,5 +1,5 @@
 //! High-level LTM probes over a capture, streamed row by row through the kernel and
-//! multi-threaded with rayon (DESIGN §A.5, §B.3).
+//! multi-threaded with rayon.
 //!
 //! | call | computes | passes over the data |
 //! |---|---|---|

@@ -7,7 +7,7 @@
 //! factorisation runs over the camera leg instead, one laser row at a time: for row `l`,
 //! `V_l[j] = Σ_s w(|x_b − x_s|)·e^{iν_j|x_b − x_s|}·HG_ls[j]` (one J-vector), then every
 //! voxel `a` gets `A(a, b) += w(|x_l − x_a|)·Σ_j e^{iν_j(|x_l − x_a| + |x_a − x_b|)}·V_l[j]`.
-//! The amplitudes are those of the kernel's factorised column (DESIGN §B.3.2) with the sums
+//! The amplitudes are those of the kernel's factorised column with the sums
 //! taken in another order; the configuration is [`Wave::column_config`] with the volume as
 //! the foci and `x_b` as the imaged voxel, so every element is alias-free.
 //!

@@ -31,7 +31,7 @@ pub struct Wave {
     pub compensate_laser: bool,
     /// For Gaussian-gated columns and in-focus indirect light: widen the virtual DFT period
     /// ([`Params::margin`]) so that every path time of the probed elements is alias-free,
-    /// i.e. paths outside the capture's window contribute nothing (DESIGN §B.2.2) instead of
+    /// i.e. paths outside the capture's window contribute nothing instead of
     /// wrapping around (default true). The factorised column cannot zero single paths as the
     /// diagonal does; this buys the same result with a larger band (`J ∝ N`).
     pub auto_margin: bool,

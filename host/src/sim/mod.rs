@@ -1,13 +1,13 @@
-//! Analytic transient simulator of patches, boxes and point scatterers (DESIGN §A.5, §B.9).
+//! Analytic transient simulator of patches, boxes and point scatterers.
 //!
 //! A [`Scene`] (a JSON scene file, or built in code) holds the capture setup (laser and SPAD
 //! spots on the relay wall, time axis, device positions) and the hidden objects. [`Scene::render`]
 //! turns it into a [`Capture`](crate::io::Capture) `H[l][s][n]`; [`Scene::source`] streams it row by row as a
 //! [`RowSource`](crate::io::RowSource). The formulas and conventions are those of the numpy prototype
-//! `reference/sim.py` beside DESIGN.md, which `fixtures/sim/make_reference.py` checks this module
-//! against (`tests/sim.rs`).
+//! `fixtures/sim/sim.py`, whose values `fixtures/sim/make_reference.py` writes for `tests/sim.rs`
+//! to check this module against.
 //!
-//! # Conventions (DESIGN §B.0)
+//! # Conventions
 //!
 //! * The relay wall is the plane z = 0 with normal (0, 0, +1); the hidden scene is at z > 0.
 //! * Lengths and times are metres of optical path (c = 1). Bin `n` is the point sample at

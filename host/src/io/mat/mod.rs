@@ -26,8 +26,8 @@
 //!   `--t-start`);
 //! * the confocal grid spans `[-width, width]²` (`--grid-width` sets the half-width): point
 //!   `(i, j)` of `rect_data(i, j, :)` is at `x = -w + 2w·i/(N₁−1)`, `y = +w − 2w·j/(N₂−1)`
-//!   (the second index runs **down**). Laser row `l = i·N₂ + j` (C order over `[N₁, N₂]`,
-//!   DESIGN §B.0). The authors' script displays i across (increasing to the left) and j down;
+//!   (the second index runs **down**). Laser row `l = i·N₂ + j` (C order over `[N₁, N₂]`).
+//!   The authors' script displays i across (increasing to the left) and j down;
 //!   the exit sign's letters read upright and unmirrored in that display, i.e. as seen from the
 //!   wall. With `y` down the second index, `(x, y, z)` is right-handed with y up and z into the
 //!   hidden scene, and vltm's figures, drawn as seen from the wall (x increasing to the left,

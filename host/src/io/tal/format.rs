@@ -4,8 +4,8 @@
 /// How to map a tal capture onto vltm's conventions.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TalOptions {
-    /// Put sample `n` at the centre of tal's bin `n` (`t0 = t_start + Δt/2`, DESIGN §B.0) instead
-    /// of its start (`t0 = t_start`, y-tal's `pf_dev`, DESIGN §B.7). Default `false`; see the
+    /// Put sample `n` at the centre of tal's bin `n` (`t0 = t_start + Δt/2`) instead
+    /// of its start (`t0 = t_start`, y-tal's `pf_dev`). Default `false`; see the
     /// module docs, *Time axis*.
     pub bin_centre: bool,
 }

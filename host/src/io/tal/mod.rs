@@ -68,7 +68,7 @@
 //! |---|---|
 //! | `H` (f32 or f64, time axis **first**) | the histograms, laid out by `H_format` |
 //! | `H_format` (tal `HFormat`, integer or enum) | 1 `T_Sx_Sy`, 2 `T_Lx_Ly_Sx_Sy`, 3 `T_Si`, 4 `T_Li_Si`; 0 `UNKNOWN` or any other value is an error, and so is an enum member name that disagrees with this numbering |
-//! | `laser_grid_xyz`, `sensor_grid_xyz` | laser and SPAD spots: `(X, Y, 3)` flattened in C order (`l = ix·Y + iy`, DESIGN §B.0), or `(N, 3)` (shape `[N, 1]`) |
+//! | `laser_grid_xyz`, `sensor_grid_xyz` | laser and SPAD spots: `(X, Y, 3)` flattened in C order (`l = ix·Y + iy`), or `(N, 3)` (shape `[N, 1]`) |
 //! | `laser_grid_format`, `sensor_grid_format` | tal `GridFormat` 1 `N_3`, 2 `X_Y_3`, checked against the grid's rank (optional: the rank decides when absent) |
 //! | `laser_xyz`, `sensor_xyz` | [`Geometry::laser_origin`], [`Geometry::sensor_origin`] (device positions: device legs, `--compensate-laser`) |
 //! | `delta_t` | [`Geometry::dt`] (m of optical path; finite and > 0) |
@@ -94,7 +94,7 @@
 //! * `T_Sx_Sy`, `T_Si` with one laser point `x0`: tal **`single`** (one laser spot, the SPAD grid
 //!   scanned). By Helmholtz reciprocity (path reversal keeps the optical length and the
 //!   geometry terms; all BSDFs are Lambertian) it is presented as **Kl = the sensor grid's
-//!   points as lasers × one SPAD at `x0`** (DESIGN §B.3.7: the 2-D aperture must be the
+//!   points as lasers × one SPAD at `x0`** (the 2-D aperture must be the
 //!   projector to focus), with the device positions swapped ([`Geometry::laser_origin`] =
 //!   `sensor_xyz`, [`Geometry::sensor_origin`] = `laser_xyz`) so the device legs stay right.
 //!   mitransient multiplies every path by the physical laser's falloff
@@ -115,10 +115,10 @@
 //! samples at `t0 + n·Δt`. [`TalOptions::bin_centre`] chooses:
 //!
 //! * `false` (**the default**, [`TalOptions::YTAL`]): `t0 = t_start`, the bin start, as y-tal's
-//!   `pf_dev` reads these files (DESIGN §B.7; `fixtures/ytal/README.md`: "pf_dev treats bin k as OPL
+//!   `pf_dev` reads these files (`fixtures/ytal/README.md`: "pf_dev treats bin k as OPL
 //!   t_start + k·delta_t").
 //! * `true` ([`TalOptions::BIN_CENTRE`]): `t0 = t_start + Δt/2`, the centre of the box, the rule
-//!   of DESIGN §B.0 for interval bins and the unbiased choice for the kernel's exact gates.
+//!   for interval bins and the unbiased choice for the kernel's exact gates.
 //!
 //! The default follows y-tal because the reason to read these files is to compare with y-tal
 //! and with the captures' published references, and a deliberate half-bin offset would show up

@@ -2,7 +2,7 @@
 //!
 //! For a row of Ks histograms `H` (Ks × Nt, SPAD-major) the raw band spectra are
 //! `B = H · Wᵀ` with `W` the (2J × Nt) real matrix of `cos / sin (−2π k_j n / N)` rows
-//! (`k_j = k_lo + j`, the kernel's band, DESIGN §B.2.2), so `B[s][2j], B[s][2j+1]` are the
+//! (`k_j = k_lo + j`, the kernel's band), so `B[s][2j], B[s][2j+1]` are the
 //! real and imaginary parts of `Σ_n H_s[n] e^{−2πi k_j n/N}` — laid out exactly as the
 //! kernel's `Complex32` spectra. The product runs in `matrixmultiply`'s `sgemm` (through
 //! `ndarray`; AVX2/FMA picked at run time), ≈ 60 % of one core's f32 peak instead of the

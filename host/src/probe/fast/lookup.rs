@@ -1,4 +1,4 @@
-//! The gated baseband + lookup evaluation of the diagonal (DESIGN §B.2.4): per laser row, one
+//! The gated baseband + lookup evaluation of the diagonal: per laser row, one
 //! inverse FFT per SPAD turns the band spectrum into a finely sampled, demodulated gated
 //! phasor, and every (voxel, SPAD) pair then costs a 4-point interpolation instead of a
 //! `J`-term band sum. Any geometry (1-D SPAD lines with a voxel pitch that does not divide
@@ -45,8 +45,8 @@
 //! `(δ/σ)⁴` (`δ = span/L`). Measured worst amplitude error of one SPAD's `Z(τ)` against the
 //! `f64` band sum over the whole guard interval, relative to `max |Z|`, on random rows with
 //! peaks, λ/Δt ∈ {6, 13, 40} (test `interpolation_error`), by `R`: 6 → 5.1e-5,
-//! 8 → 1.6e-5, 10 → 9.1e-6, **12 → 4.4e-6**, 14 → 2.1e-6, 16 → 1.5e-6 (DESIGN §B.2.4:
-//! 1.5e-6 at σ ≈ 13Δt). Against the kernel's band diagonal (tests `matches_band_diagonal_*`:
+//! 8 → 1.6e-5, 10 → 9.1e-6, **12 → 4.4e-6**, 14 → 2.1e-6, 16 → 1.5e-6 (1.5e-6 at
+//! σ ≈ 13Δt). Against the kernel's band diagonal (tests `matches_band_diagonal_*`:
 //! one row, 16 SPADs × 200 voxels, λ/Δt from 6 to 40, `1/d` and unit weights, legs on and
 //! off, 27–63 % of the voxels with some paths outside the guard): intensities within
 //! 5.2e-6·max I (the kernel's own `f32` error against the `f64` band sum is up to 3.3e-6 on

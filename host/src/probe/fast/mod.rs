@@ -1,4 +1,4 @@
-//! Host-only fast paths (DESIGN §B.8): the same band spectra and probes as the kernel,
+//! Host-only fast paths: the same band spectra and probes as the kernel,
 //! evaluated with libraries a workstation has.
 //!
 //! * [`band`]: stage 1 of a whole laser row as one `sgemm` (`matrixmultiply`).

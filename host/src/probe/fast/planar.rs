@@ -1,4 +1,4 @@
-//! The planar FFT convolution (DESIGN §B.8.1): for a regular SPAD grid on the wall and voxel
+//! The planar FFT convolution: for a regular SPAD grid on the wall and voxel
 //! slices parallel to it, the camera leg of every voxel of a slice is one 2-D convolution.
 //!
 //! For band bin j, slice depth z and a laser row (or a factorised column's spectra `U_a`):
