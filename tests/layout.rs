@@ -881,3 +881,119 @@ fn no_outputs_at_the_root() {
          or name them in .gitignore): {stray:?}"
     );
 }
+
+/// The modules of the library without a row of their own or a mention in their row: a
+/// module below a row (`probe::cosine` under `probe`) is named in backticks in that row's
+/// "owns" cell; any other module has its own row.
+fn unmapped_modules(t: &Tree, readme: &str) -> Vec<String> {
+    let owns: BTreeMap<String, String> = readme
+        .lines()
+        .filter_map(|line| {
+            let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+            (cells.len() >= 5 && cells[1].starts_with('`'))
+                .then(|| (cells[1].trim_matches('`').to_string(), cells[2].to_string()))
+        })
+        .collect();
+    let map: BTreeMap<String, Vec<String>> = owns.keys().map(|k| (k.clone(), Vec::new())).collect();
+    let mut bad = Vec::new();
+    for m in t.files.keys().filter(|m| !m.is_empty()) {
+        match row_of(m, &map) {
+            None => bad.push(format!("`{m}` has no row")),
+            Some(row) if row != m => {
+                let name = m.rsplit("::").next().unwrap_or(m);
+                let cell = &owns[row];
+                if !cell.contains(&format!("`{name}`")) && !cell.contains(&format!("::{name}`")) {
+                    bad.push(format!("`{m}` is not named in the row of `{row}`"));
+                }
+            }
+            Some(_) => {}
+        }
+    }
+    bad
+}
+
+/// The map both ways: every module of the library has a row in `host/README.md`, or is
+/// named in its parent's row (and every row names a module: `module_map_matches_the_tree`).
+#[test]
+fn every_module_has_a_row() {
+    let readme = fs::read_to_string(root().join("host/README.md")).expect("host/README.md");
+    let t = tree();
+    let bad = unmapped_modules(&t, &readme);
+    assert!(bad.is_empty(), "host/README.md:\n{}", bad.join("\n"));
+    // With teeth: a map without the `probe` row leaves its modules unmapped.
+    let cut: String = readme
+        .lines()
+        .filter(|l| !l.starts_with("| `probe` |"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    assert!(
+        unmapped_modules(&t, &cut)
+            .iter()
+            .any(|b| b.contains("`probe::wave` has no row"))
+    );
+}
+
+/// The rows of the command line's table in `host/README.md` (the two-column table after
+/// "## The command line"): module names.
+fn cli_rows(readme: &str) -> BTreeSet<String> {
+    readme
+        .split("## The command line")
+        .nth(1)
+        .expect("host/README.md: ## The command line")
+        .lines()
+        .skip_while(|l| !l.starts_with('|'))
+        .take_while(|l| l.starts_with('|'))
+        .filter_map(|l| {
+            let cells: Vec<&str> = l.split('|').map(str::trim).collect();
+            cells
+                .get(1)
+                .filter(|c| c.starts_with('`'))
+                .map(|c| c.trim_matches('`').to_string())
+        })
+        .collect()
+}
+
+/// The command line's top-level modules (`args.rs` → `args`, `live/mod.rs` → `live`).
+fn cli_modules() -> BTreeSet<String> {
+    let mut files = Vec::new();
+    let src = root().join("host/cli/src");
+    rust_files(&src, &mut files);
+    files
+        .iter()
+        .filter_map(|p| {
+            let rel = p.strip_prefix(&src).unwrap_or(p);
+            module_of(rel)
+        })
+        .map(|m| {
+            let top = m.split("::").next().unwrap_or("").to_string();
+            if top.is_empty() {
+                "main".to_string()
+            } else {
+                top
+            }
+        })
+        .collect()
+}
+
+/// The command line's table both ways: every module of `host/cli/src` has a row, every row
+/// names a module.
+#[test]
+fn cli_table_matches_the_tree() {
+    let readme = fs::read_to_string(root().join("host/README.md")).expect("host/README.md");
+    let rows = cli_rows(&readme);
+    let modules = cli_modules();
+    assert!(
+        modules.len() > 10,
+        "host/cli/src has {} modules",
+        modules.len()
+    );
+    let missing: Vec<&String> = modules.difference(&rows).collect();
+    let extra: Vec<&String> = rows.difference(&modules).collect();
+    assert!(
+        missing.is_empty() && extra.is_empty(),
+        "host/README.md's command-line table: modules without a row {missing:?}, rows without a module {extra:?}"
+    );
+    // With teeth: a table without `args` misses it.
+    let cut = readme.replace("| `args` |", "| args |");
+    assert!(!cli_rows(&cut).contains("args"));
+}
