@@ -191,6 +191,124 @@ fn info_describes_a_capture() {
     }
 }
 
+/// The `--volume` SPEC on `info`'s `volume` line.
+fn suggested_volume(info: &str) -> &str {
+    let line = info
+        .lines()
+        .find(|l| l.starts_with("volume       suggested --volume "))
+        .unwrap_or_else(|| panic!("`vltm info` suggests no volume:\n{info}"));
+    line["volume       suggested --volume ".len()..]
+        .split_whitespace()
+        .next()
+        .expect("a SPEC")
+}
+
+/// Checks a suggested volume against a capture's time window: every slice of the volume holds
+/// a voxel whose shortest 3-bounce path (over the capture's pairs) lies in the window, the
+/// nearest slice's shortest path is not before the window opens, and the z range covers at
+/// least 80 % of the depths the window reaches (`(t_max − t0)/2` in front of a spot).
+fn check_suggestion(g: &io::Geometry, v: &Volume) -> Result<(), String> {
+    let axes = v.axes.ok_or("a point list, not a grid")?;
+    let (t0, t1) = (g.t0, g.t0 + (g.nt - 1) as f64 * g.dt);
+    let d = |a: [f32; 3], b: [f32; 3]| {
+        (0..3)
+            .map(|i| f64::from(a[i] - b[i]).powi(2))
+            .sum::<f64>()
+            .sqrt()
+    };
+    let shortest = |p: [f32; 3]| {
+        let mut m = f64::INFINITY;
+        for (l, x_l) in g.lasers.iter().enumerate() {
+            for x_s in g.row_spads(l) {
+                m = m.min(d(*x_l, p) + d(p, *x_s));
+            }
+        }
+        m
+    };
+    let nz = v.shape[2];
+    let tol = 1e-3;
+    for iz in 0..nz {
+        let slice: Vec<f64> = (0..v.shape[0] * v.shape[1])
+            .map(|k| shortest(v.points[k * nz + iz]))
+            .collect();
+        let lo = slice.iter().copied().fold(f64::INFINITY, f64::min);
+        let z = v.points[iz][2];
+        if lo > t1 + tol {
+            return Err(format!(
+                "slice z = {z}: the shortest path {lo:.4} m is past the window's end {t1:.4} m"
+            ));
+        }
+        if iz == 0 && lo < t0 - tol {
+            return Err(format!(
+                "nearest slice z = {z}: the shortest path {lo:.4} m is before the window opens at {t0:.4} m"
+            ));
+        }
+    }
+    let reach = 0.5 * (t1 - t0.max(0.0));
+    let span = f64::from(axes[2][1] - axes[2][0]);
+    if span < 0.8 * reach {
+        return Err(format!(
+            "z spans {span:.4} m of the {reach:.4} m the window reaches"
+        ));
+    }
+    if axes[2][0] <= 0.0 {
+        return Err(format!(
+            "z starts at {} m, not in front of the wall",
+            axes[2][0]
+        ));
+    }
+    Ok(())
+}
+
+/// `info` suggests a whole volume, z included: the SPEC parses, `direct` runs on it, and its
+/// z range is the depths the capture's time window reaches (on two fixtures with different
+/// windows). Teeth: the check refuses a z range past the window, one before it, and one that
+/// covers a small part of it.
+#[test]
+fn info_suggests_a_whole_volume() {
+    let t = TempDir::new("suggest");
+    for stem in ["two_patches", "three_points"] {
+        let cap = fixture(stem);
+        let out = ok(&t.0, &["info", cap.to_str().expect("utf-8")]);
+        let spec = suggested_volume(&out);
+        let v = Volume::parse(spec).unwrap_or_else(|e| panic!("{spec}: {e}"));
+        let g = io::open(&cap).expect("open").geometry;
+        check_suggestion(&g, &v).unwrap_or_else(|e| panic!("{stem}: --volume {spec}: {e}"));
+        ok(
+            &t.0,
+            &[
+                "direct",
+                cap.to_str().expect("utf-8"),
+                "--volume",
+                spec,
+                "--out",
+                "d.npy",
+            ],
+        );
+    }
+    // The Stanford chart's window opens at the wall: z starts one pitch in front of it.
+    let chart = support::fixture("real/data_resolution_chart_40cm.mat");
+    let out = ok(&t.0, &["info", chart.to_str().expect("utf-8")]);
+    let v = Volume::parse(suggested_volume(&out)).expect("parse");
+    let z = v.axes.expect("grid")[2];
+    assert!(z[0] > 0.0 && z[0] < 0.01 && z[1] <= 2.4547 / 2.0, "{z:?}");
+    assert!(z[1] > 1.2, "{z:?}");
+    // Teeth.
+    let g = io::open(&fixture("two_patches")).expect("open").geometry;
+    for (bad, why) in [
+        ("-0.5:0.5:8,-0.5:0.5:8,0.5:2.6:13", "past the window's end"),
+        (
+            "-0.5:0.5:8,-0.5:0.5:8,0.3:2.2:13",
+            "before the window opens",
+        ),
+        ("-0.5:0.5:8,-0.5:0.5:8,0.5:1.2:13", "the window reaches"),
+    ] {
+        let e = check_suggestion(&g, &Volume::parse(bad).expect("parse"))
+            .expect_err(&format!("{bad} passed the check"));
+        assert!(e.contains(why), "{bad}: {e}");
+    }
+}
+
 /// `info --volume` says which path a grid takes and the aligned grid; `direct` on that
 /// off-lattice grid with the planar path forced runs it resampled and names the support grid.
 #[test]

@@ -157,10 +157,19 @@ fn link_targets(line: &str) -> Vec<String> {
     out
 }
 
-/// GitHub's anchors of the headings of a Markdown text (duplicates get `-1`, `-2`, …).
+/// GitHub's anchors of the headings of a Markdown text (duplicates get `-1`, `-2`, …), and the
+/// explicit anchors `<a id="NAME"></a>` of its prose (the glossary's entries).
 fn anchors(text: &str) -> BTreeSet<String> {
     let mut seen = BTreeSet::new();
     for (_, line) in prose_lines(text) {
+        let mut rest = line;
+        while let Some(i) = rest.find("<a id=\"") {
+            rest = &rest[i + 7..];
+            if let Some(end) = rest.find('"') {
+                seen.insert(rest[..end].to_string());
+                rest = &rest[end..];
+            }
+        }
         let t = line.trim_start();
         if !t.starts_with('#') {
             continue;
@@ -213,6 +222,8 @@ fn anchors_follow_github() {
     .map(ToString::to_string)
     .collect();
     assert_eq!(a, want);
+    let g = anchors("* <a id=\"t3\"></a><a id=\"ptu\"></a>**T3**\n`<a id=\"no\"></a>`\n");
+    assert!(g.contains("t3") && g.contains("ptu"), "{g:?}");
     assert_eq!(
         link_targets("see [a](b.md#c), `[no](x)` and ![i](d.png) <img src=\"e.png\">"),
         ["b.md#c", "d.png", "e.png"]
@@ -663,4 +674,91 @@ fn readme_front_picture_is_made_by_its_caption_command() {
         ex.args.join(" "),
         100.0 * diff
     );
+}
+
+// ---------------------------------------------------------------------------------------
+// The guide is guidance, not a log
+
+/// Phrases of development history or references to files outside the repository that the
+/// guide must not hold: `DESIGN §…`/`§B.…` (a design file that is not in the repository),
+/// `this morning`, `the range first asked for`, and `was <number> ms` / `was <number> s`
+/// (a time the reader cannot reproduce). Returns `line: phrase` for each.
+fn history_phrases(text: &str) -> Vec<String> {
+    const FIXED: [&str; 4] = ["DESIGN §", "§B.", "this morning", "first asked for"];
+    let mut out = Vec::new();
+    for (n, line) in text.lines().enumerate() {
+        let lower = line.to_lowercase();
+        for p in FIXED {
+            if lower.contains(&p.to_lowercase()) {
+                out.push(format!("{}: `{p}`", n + 1));
+            }
+        }
+        let mut rest = lower.as_str();
+        while let Some(i) = rest.find("was ") {
+            rest = &rest[i + 4..];
+            let num = rest
+                .find(|c: char| !(c.is_ascii_digit() || c == '.' || c == ','))
+                .unwrap_or(rest.len());
+            if num == 0 || !rest.starts_with(|c: char| c.is_ascii_digit()) {
+                continue;
+            }
+            let unit = rest[num..].trim_start();
+            let word = unit
+                .find(|c: char| !c.is_alphabetic())
+                .map_or(unit, |e| &unit[..e]);
+            if word == "ms" || word == "s" {
+                out.push(format!("{}: `was {} {word}`", n + 1, &rest[..num]));
+            }
+        }
+    }
+    out
+}
+
+/// README.md and docs/*.md hold no development history ([`history_phrases`]).
+#[test]
+fn guide_holds_no_history() {
+    let mut found = Vec::new();
+    for page in doc_pages() {
+        let text = std::fs::read_to_string(&page).expect("read page");
+        let name = page
+            .strip_prefix(root())
+            .unwrap_or(&page)
+            .display()
+            .to_string();
+        found.extend(
+            history_phrases(&text)
+                .into_iter()
+                .map(|h| format!("{name}:{h}")),
+        );
+    }
+    assert!(
+        found.is_empty(),
+        "development history in the guide (say what a reader should do, and keep \
+         measurements in tables with their machine and date):\n{}",
+        found.join("\n")
+    );
+}
+
+/// The history check has teeth: each phrase is found, and ordinary text is not.
+#[test]
+fn history_check_has_teeth() {
+    for bad in [
+        "see DESIGN §3",
+        "as in §B.0",
+        "2.00 s This morning",
+        "20.5 ms (was 177 ms)",
+        "0.18 s (was 118 s)",
+        "was 1,234.5ms",
+        "the range first asked for",
+    ] {
+        assert_eq!(history_phrases(bad).len(), 1, "{bad}");
+    }
+    for good in [
+        "it was 3 slices deep",
+        "was 12 seconds long in total", // `seconds` is not the unit word `s`
+        "the bound was stated",
+        "takes 20.5 ms per row",
+    ] {
+        assert!(history_phrases(good).is_empty(), "{good}");
+    }
 }

@@ -120,6 +120,7 @@ pub fn info(
         Stream::Out,
         &format!("fast paths   {}", crate::probe::fft_note(&g, volume)),
     );
+    say(Stream::Out, &volume_line(&g));
     let total: f64 = counts.iter().sum();
     let (peak, _) =
         counts.iter().enumerate().fold(
@@ -140,6 +141,27 @@ pub fn info(
         t0: g.t0,
         dt: g.dt,
     })
+}
+
+/// The `volume` line: the `$volume` [`crate::probe::suggested_volume`] suggests, whose z range
+/// is the depths the time window reaches ([`crate::probe::window_depths`]).
+fn volume_line(g: &crate::io::capture::Geometry) -> String {
+    let end = g.t0 + (g.nt.max(1) - 1) as f64 * g.dt;
+    let legs = if g.legs_in_time {
+        " + the device legs"
+    } else {
+        ""
+    };
+    match crate::probe::suggested_volume(g) {
+        Some(spec) => format!(
+            "volume       suggested $volume {spec} (x-y: the relay wall's extent and pitch; z: the depths whose nearest 3-bounce path |x_l-x_v|+|x_v-x_s|{legs}, 2z in front of a spot, lies in the time window {:.4}..{end:.4} m)",
+            g.t0
+        ),
+        None => format!(
+            "volume       the time window {:.4}..{end:.4} m reaches no depth in front of the wall (the nearest 3-bounce path |x_l-x_v|+|x_v-x_s|{legs} is 2z in front of a spot): check the time axis",
+            g.t0
+        ),
+    }
 }
 
 /// The `laser` line: whether the data hold the laser's falloff, and what `$compensate_laser`

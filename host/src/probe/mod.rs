@@ -42,7 +42,7 @@ mod wave;
 pub mod window;
 
 pub use crate::exec::{Exec, Path};
-pub use aligned::{aligned_volume, fft_note};
+pub use aligned::{aligned_volume, fft_note, suggested_volume, window_depths};
 pub use column::{ColumnGate, Shell, check_column, check_focus, column, diagonal};
 pub use crop::Crop;
 pub use direct::direct;
