@@ -245,9 +245,10 @@ impl Phasor {
         Ok(len)
     }
 
-    /// The table of `L` nodes per DFT period (any `L ≥ N`; tests pick `L` by hand).
+    /// The table of `L` nodes per DFT period (any `L ≥ J`: the band's bins stay distinct
+    /// modulo `L`; tests pick `L` by hand).
     pub fn with_len(cfg: &Config, len: usize) -> Self {
-        let len = len.max(cfg.n_fft()).max(2);
+        let len = len.max(cfg.bins()).max(2);
         let span = cfg.span();
         let delta = span / len as f64;
         let (g_lo, g_hi) = cfg.guard();
@@ -631,5 +632,79 @@ mod tests {
                 assert!(coarse > tol, "L − 1: {coarse:.4e} ≤ {tol:.0e}");
             }
         }
+    }
+
+    /// The portable loop (forced) and the dispatched one agree to f32 rounding, and each is
+    /// deterministic; with `1/d` and unit weights, voxels inside and outside the guard.
+    #[test]
+    fn portable_matches_dispatched() {
+        for weights in [Weights::Inv, Weights::One] {
+            let c = Config::try_new(&Params {
+                t0: 0.9,
+                weights,
+                ..Params::new(0.08, 120, 0.012)
+            })
+            .unwrap();
+            let mut p = Phasor::new(&c, TOLERANCE).unwrap();
+            let mut s = p.scratch();
+            let entries: Vec<Entry> = (0..5)
+                .map(|i| Entry {
+                    laser: [-0.3 + 0.1 * i as f32, 0.1, 0.0],
+                    spad: [-0.1 + 0.1 * i as f32, 0.15, 0.0],
+                    offset: 0.01 * i as f32,
+                })
+                .collect();
+            let mut tables = vec![[0.0f32; 4]; entries.len() * p.table_len()];
+            for (e, tab) in tables.chunks_exact_mut(p.table_len()).enumerate() {
+                let h: Vec<f32> = (0..c.nt())
+                    .map(|n| ((n * 7 + e * 13) % 17) as f32 + if n == 30 + e { 50.0 } else { 0.0 })
+                    .collect();
+                p.table(&h, &mut s, tab);
+            }
+            let n = 600;
+            let vox = |i: usize, a: usize| ((i * (a + 3) * 37) % 101) as f32 / 101.0;
+            let vx: Vec<f32> = (0..n).map(|i| vox(i, 0) - 0.5).collect();
+            let vy: Vec<f32> = (0..n).map(|i| vox(i, 1) - 0.5).collect();
+            let vz: Vec<f32> = (0..n).map(|i| 0.2 + 1.5 * vox(i, 2)).collect();
+            let run = |p: &Phasor| {
+                let (mut re, mut im) = (vec![0.0f32; n], vec![0.0f32; n]);
+                p.accumulate(&entries, &tables, &vx, &vy, &vz, &mut re, &mut im);
+                (re, im)
+            };
+            let fast = run(&p);
+            assert_eq!(fast, run(&p));
+            p.set_portable(true);
+            let slow = run(&p);
+            let peak = fast
+                .0
+                .iter()
+                .chain(&fast.1)
+                .fold(0.0f32, |m, x| m.max(x.abs()));
+            let worst = fast
+                .0
+                .iter()
+                .chain(&fast.1)
+                .zip(slow.0.iter().chain(&slow.1))
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0f32, f32::max);
+            assert!(peak > 0.0 && worst <= 1e-5 * peak, "{worst} vs peak {peak}");
+            let zeros = fast.0.iter().filter(|&&x| x == 0.0).count();
+            println!(
+                "{weights:?}: portable vs dispatched {worst:.2e} of {peak:.3e}; {zeros} voxels outside the guard"
+            );
+        }
+    }
+
+    #[test]
+    fn tolerance_and_wavelength_errors() {
+        let c = cfg(0.06, 96, 0.01);
+        for tol in [0.0, -1.0, f64::NAN, 1e-9] {
+            let e = Phasor::new(&c, tol).unwrap_err().to_string();
+            assert!(e.contains("tolerance"), "{e}");
+        }
+        // λ far below the time span: no table of MAX_LEN nodes meets 1e-6.
+        let c = Config::try_new(&Params::new(0.001, 20_000, 0.0002)).expect("config");
+        let e = Phasor::new(&c, MIN_TOLERANCE).unwrap_err().to_string();
+        assert!(e.contains("wavelength"), "{e}");
     }
 }
