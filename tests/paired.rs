@@ -33,6 +33,18 @@ use vltm::volume::Volume;
 
 const U32: f64 = f32::EPSILON as f64 / 2.0;
 const INTERP: f64 = 2e-5;
+/// The phasor path's table bound (relative to one return's peak, `Σ_j Ĝ_j ≤ 1.01`), on top
+/// of the band path's `ε` (`vltm::probe::fast::phasor` module docs).
+const PHASOR: f64 = 1.01 * vltm::probe::fast::phasor::TOLERANCE + INTERP;
+
+/// The interpolation allowance of a path.
+fn interp(path: Path) -> f64 {
+    match path {
+        Path::Phasor => PHASOR,
+        Path::Band => 0.0,
+        _ => INTERP,
+    }
+}
 
 /// A small deterministic generator (xorshift*).
 struct Rng(u64);
@@ -297,6 +309,7 @@ fn worst(values: &[f32], truth: &[f64], scale: &[f64], eps: f64) -> f64 {
 fn paired_diagonal_matches_reference_flat_and_bumpy() {
     let mut worst_ref: f64 = 0.0;
     let mut worst_pair: f64 = 0.0;
+    let mut worst_phasor: f64 = 0.0;
     let mut bumpy_cases = 0;
     for seed in 1..=48u64 {
         let bumpy = seed.is_multiple_of(2);
@@ -314,13 +327,22 @@ fn paired_diagonal_matches_reference_flat_and_bumpy() {
         let band = c.direct(Path::Band).expect("band");
         let lookup = c.direct(Path::Lookup).expect("lookup");
         let auto = c.direct(Path::Auto).expect("auto");
+        let phasor = c.direct(Path::Phasor).expect("phasor");
         assert_eq!(band.path, Path::Band);
         assert_eq!(lookup.path, Path::Lookup);
+        assert_eq!(phasor.path, Path::Phasor);
+        assert_eq!(phasor.report.rows, g.lasers.len() as u64);
+        let wp = worst(&phasor.values, &truth, &scale, eps + PHASOR);
+        assert!(
+            wp <= 1.0,
+            "seed {seed} (bumpy {bumpy}): phasor vs reference {wp}"
+        );
+        worst_phasor = worst_phasor.max(wp);
         assert_ne!(auto.path, Path::Planar, "seed {seed}");
         assert_eq!(band.report.rows, g.lasers.len() as u64);
         let wb = worst(&band.values, &truth, &scale, eps);
         let wl = worst(&lookup.values, &truth, &scale, eps + INTERP);
-        let wa = worst(&auto.values, &truth, &scale, eps + INTERP);
+        let wa = worst(&auto.values, &truth, &scale, eps + interp(auto.path));
         let b: Vec<f64> = band.values.iter().map(|&i| f64::from(i).sqrt()).collect();
         let wlb = worst(&lookup.values, &b, &scale, eps_pb);
         worst_ref = worst_ref.max(wb).max(wl).max(wa);
@@ -352,8 +374,33 @@ fn paired_diagonal_matches_reference_flat_and_bumpy() {
     }
     assert!(bumpy_cases >= 20);
     println!(
-        "paired: worst error/tolerance vs reference {worst_ref:.3}, lookup vs band {worst_pair:.3}"
+        "paired: worst error/tolerance vs reference {worst_ref:.3}, lookup vs band {worst_pair:.3}, phasor {worst_phasor:.3}"
     );
+}
+
+/// The phasor path gives bit-identical volumes on 1 and 2 threads (voxel tiles, the rows of
+/// a batch summed in order), and `Auto` takes it on a paired scan with enough voxels.
+#[test]
+fn phasor_is_identical_on_1_and_2_threads() {
+    for seed in [3u64, 4, 11] {
+        let c = build(seed, seed.is_multiple_of(2));
+        let on = |threads: usize, path: Path| {
+            rayon::ThreadPoolBuilder::new()
+                .num_threads(threads)
+                .build()
+                .expect("pool")
+                .install(|| c.direct(path).expect("phasor"))
+        };
+        let (one, two) = (on(1, Path::Phasor), on(2, Path::Phasor));
+        assert_eq!(one.path, Path::Phasor);
+        assert_eq!(one.values, two.values, "seed {seed}");
+        assert_eq!(one.report.rows, two.report.rows);
+    }
+    // Auto: many voxels on a paired scan, the phasor path.
+    let mut c = build(5, false);
+    c.volume = Volume::parse("-0.3:0.3:24,-0.3:0.3:24,0.4:1.0:16").expect("volume");
+    let auto = c.direct(Path::Auto).expect("auto");
+    assert_eq!(auto.path, Path::Phasor);
 }
 
 /// Teeth: reading the same histograms as a confocal scan (SPADs on the laser spots) moves

@@ -35,7 +35,8 @@ pub enum Path {
     /// least of planar (when the SPADs — for a confocal capture the scanned wall points — form
     /// a regular grid and the volume is a wall-parallel grid whose pitch divides its pitch, or
     /// any other regular wall-parallel grid resampled from such a grid within its stated
-    /// bound, [`crate::probe::resample`]), lookup and band; for Gaussian-gated columns planar
+    /// bound, [`crate::probe::resample`]), phasor (rows of few SPADs), lookup and band; for
+    /// Gaussian-gated columns planar
     /// or band.
     #[default]
     Auto,
@@ -50,6 +51,10 @@ pub enum Path {
     /// Diagonal only: the gated baseband + cubic lookup ([`crate::probe::fast::lookup`]), any
     /// geometry (confocal captures included); an error for columns.
     Lookup,
+    /// Diagonal only: the full-phasor table per histogram with 8 voxels per vector
+    /// ([`crate::probe::fast::phasor`]), for rows of few SPADs (paired and confocal scans,
+    /// short SPAD lines); an error for columns.
+    Phasor,
 }
 
 impl Path {
@@ -60,6 +65,7 @@ impl Path {
             Self::Band => "band",
             Self::Planar => "planar",
             Self::Lookup => "lookup",
+            Self::Phasor => "phasor",
         }
     }
 }

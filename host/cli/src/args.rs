@@ -264,7 +264,9 @@ pub(crate) struct Common {
     pub(crate) swap_roles: bool,
     /// Evaluation path: auto (the cheapest that applies), band (the kernel's band sum, any
     /// geometry), planar (FFT convolution over a SPAD grid or a confocal wall grid; diagonal and two-bounce columns),
-    /// lookup (baseband + cubic interpolation; diagonal only). For indirect it applies to
+    /// lookup (baseband + cubic interpolation; diagonal only), phasor (a full-phasor table per
+    /// histogram, 8 voxels per vector; diagonal of paired and confocal scans and short SPAD
+    /// lines). For indirect it applies to
     /// pass 1 (the diagonal); pass 2 images its Γ columns with the band sum.
     #[arg(long, value_enum, default_value_t = PathArg::Auto)]
     pub(crate) path: PathArg,
@@ -295,6 +297,7 @@ pub(crate) enum PathArg {
     Band,
     Planar,
     Lookup,
+    Phasor,
 }
 
 impl Common {
@@ -306,6 +309,7 @@ impl Common {
                 PathArg::Band => EvalPath::Band,
                 PathArg::Planar => EvalPath::Planar,
                 PathArg::Lookup => EvalPath::Lookup,
+                PathArg::Phasor => EvalPath::Phasor,
             },
         }
     }

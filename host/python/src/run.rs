@@ -45,6 +45,7 @@ fn wave_of(
         "band" => EvalPath::Band,
         "planar" => EvalPath::Planar,
         "lookup" => EvalPath::Lookup,
+        "phasor" => EvalPath::Phasor,
         p => {
             return Err(arg(
                 "path",

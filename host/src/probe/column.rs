@@ -277,9 +277,12 @@ pub fn check_column(
 /// Refuses an evaluation path that cannot image a column with `gate`.
 fn check_path(path: Path, gate: ColumnGate) -> Result<()> {
     match (path, gate) {
-        (Path::Lookup, _) => Err(Error::arg(
+        (Path::Lookup | Path::Phasor, _) => Err(Error::arg(
             "path",
-            "the lookup path evaluates the diagonal only (use auto, band or planar for columns)",
+            format!(
+                "the {} path evaluates the diagonal only (use auto, band or planar for columns)",
+                path.name()
+            ),
         )),
         (Path::Planar, ColumnGate::HigherOrder | ColumnGate::None) => Err(Error::arg(
             "path",

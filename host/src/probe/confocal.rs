@@ -53,7 +53,7 @@ pub(super) fn choose(
     path: Path,
     rival: f64,
 ) -> Result<Option<Confocal>> {
-    if matches!(path, Path::Band | Path::Lookup) {
+    if matches!(path, Path::Band | Path::Lookup | Path::Phasor) {
         return Ok(None);
     }
     let conv =

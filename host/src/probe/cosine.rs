@@ -47,6 +47,13 @@ pub(super) fn check(g: &Geometry, path: Path) -> Result<()> {
              (use `inv` or `one`)",
         ));
     }
+    if path == Path::Phasor {
+        return Err(Error::arg(
+            "path",
+            "the phasor path does not take `$weights cos` (the wall cosines per leg are not in \
+             its lane loop; the band and lookup paths compute them)",
+        ));
+    }
     if path == Path::Planar {
         return Err(Error::arg(
             "path",

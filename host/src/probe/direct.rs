@@ -10,7 +10,7 @@ use crate::budget;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path};
 use crate::io::capture::{Geometry, RowSource};
-use crate::probe::fast::{Confocal, Lookup, Planar, planar};
+use crate::probe::fast::{Confocal, Lookup, Phasor, Planar, phasor, planar};
 use crate::probe::resample::Resample;
 use crate::volume::Volume;
 use num_complex::Complex64;
@@ -155,6 +155,18 @@ fn direct_acc_on(
     }
     let g = src.geometry();
     let rows = g.lasers.len() as f64;
+    // The phasor path: planned when forced (its errors name why it does not apply) or, under
+    // `Auto`, when it applies and fits the budget.
+    let ph = match exec.path {
+        Path::Phasor => Some(phasor_plan(g, &cfg, volume.len())?),
+        Path::Auto => phasor_plan(g, &cfg, volume.len())
+            .ok()
+            .filter(|(_, plan)| plan.fits()),
+        _ => None,
+    };
+    let ph_cost = ph.as_ref().map_or(f64::INFINITY, |(p, _)| {
+        phasor_flops(g, &cfg, p, volume.len())
+    });
     // Off the wall's lattice: the FFT path on a support grid, resampled, when it applies and
     // is cheaper than the rivals (whole-scan flops).
     let rival = if g.confocal {
@@ -170,6 +182,7 @@ fn direct_acc_on(
             .then(|| lookup_row_flops(g, &cfg, volume.len()));
         lookup.map_or(band, |l| l.min(band)) * rows
     };
+    let rival = rival.min(ph_cost);
     if let Some((rs, engine)) = choose_resampled(g, &cfg, volume, exec.path, rival)? {
         let (acc, report) = direct_resampled(src, job, volume, &rs, engine)?;
         return Ok((
@@ -178,7 +191,7 @@ fn direct_acc_on(
         ));
     }
     if g.confocal {
-        let (acc, report, path) = direct_confocal(src, job, volume)?;
+        let (acc, report, path) = direct_confocal(src, job, volume, ph.as_ref(), ph_cost)?;
         return Ok((Amplitudes::new(acc, report, path, None), cfg));
     }
     let band_cost = band_flops(g, &cfg, volume.len());
@@ -186,8 +199,10 @@ fn direct_acc_on(
     // tables grow with N; the band sum then runs in bounded memory).
     let lookup_fits = lookup_plan(g, &cfg, volume.len()).fits();
     let lookup_cost = lookup_fits.then(|| lookup_row_flops(g, &cfg, volume.len()));
-    // Planar competes with the cheaper of band and lookup under `Auto`.
+    // Planar competes with the cheapest of band, lookup and phasor under `Auto`.
     let rival = lookup_cost.map_or(band_cost, |l| l.min(band_cost));
+    let ph_wins = ph_cost < rival * rows;
+    let rival = rival.min(ph_cost / rows);
     let (acc, report, path) = if let Some(planar) = choose_planar(
         (!g.confocal).then_some(&g.spads[..]),
         &cfg,
@@ -200,6 +215,11 @@ fn direct_acc_on(
             direct_planar(src, job, volume, &planar)
         })?;
         (acc, report, Path::Planar)
+    } else if let Some((p, plan)) = ph.as_ref().filter(|_| exec.path == Path::Phasor || ph_wins) {
+        let (acc, report) = with_note(job, path_note(g, volume, &cfg, Path::Phasor), |job| {
+            direct_phasor(src, job, volume, p, plan)
+        })?;
+        (acc, report, Path::Phasor)
     } else if exec.path == Path::Lookup
         || (exec.path == Path::Auto && lookup_cost.is_some_and(|l| l < band_cost))
     {
@@ -230,21 +250,28 @@ fn direct_confocal(
     src: &mut dyn RowSource,
     job: Job<'_>,
     volume: &Volume,
+    ph: Option<&(Phasor, budget::Plan)>,
+    ph_cost: f64,
 ) -> Result<(Vec<Complex64>, Report, Path)> {
     let g = src.geometry();
     let cfg = job.cfg;
     let band = confocal::band_total(g, cfg, volume.len());
     let lookup = confocal::lookup_flops(g, cfg, volume.len());
-    let conv = confocal::choose(g, cfg, volume, job.exec.path, band.min(lookup))?;
+    let lookup_fits = lookup_plan(g, cfg, volume.len()).fits();
+    let conv = confocal::choose(g, cfg, volume, job.exec.path, band.min(lookup).min(ph_cost))?;
+    let ph_wins = ph_cost < band && (ph_cost < lookup || !lookup_fits);
     let (values, report, path) = if let Some(c) = conv {
         let (v, r) = with_note(job, path_note(g, volume, cfg, Path::Planar), |job| {
             confocal::direct_convolution(src, job, volume, c)
         })?;
         (v, r, Path::Planar)
+    } else if let Some((p, plan)) = ph.filter(|_| job.exec.path == Path::Phasor || ph_wins) {
+        let (v, r) = with_note(job, path_note(g, volume, cfg, Path::Phasor), |job| {
+            direct_phasor(src, job, volume, p, plan)
+        })?;
+        (v, r, Path::Phasor)
     } else if job.exec.path == Path::Lookup
-        || (job.exec.path == Path::Auto
-            && lookup < band
-            && lookup_plan(g, cfg, volume.len()).fits())
+        || (job.exec.path == Path::Auto && lookup < band && lookup_fits)
     {
         let (v, r) = with_note(job, path_note(g, volume, cfg, Path::Lookup), |job| {
             direct_lookup(src, job, volume)
@@ -287,7 +314,7 @@ pub(super) fn choose_planar(
     usage: PlanarUse,
     rival: f64,
 ) -> Result<Option<Planar>> {
-    if matches!(path, Path::Band | Path::Lookup) {
+    if matches!(path, Path::Band | Path::Lookup | Path::Phasor) {
         return Ok(None);
     }
     let planar = match spads {
@@ -561,7 +588,10 @@ fn choose_resampled(
 ) -> Result<Option<(Resample, Engine)>> {
     // A paired scan (laser and SPAD apart) has no FFT path, exact or resampled: the
     // confocal path's choice names why.
-    if matches!(path, Path::Band | Path::Lookup) || volume.axes.is_none() || g.paired_apart() {
+    if matches!(path, Path::Band | Path::Lookup | Path::Phasor)
+        || volume.axes.is_none()
+        || g.paired_apart()
+    {
         return Ok(None);
     }
     let _t = crate::timings::section("planning: FFT path", crate::timings::Kind::Serial);
@@ -754,4 +784,200 @@ fn path_note(g: &Geometry, volume: &Volume, cfg: &Config, path: Path) -> String 
         Some(v) => format!("path {}; the FFT path would take $volume {v}", path.name()),
         None => format!("path {}", path.name()),
     }
+}
+
+/// Voxels per tile of the phasor path (its `f32` accumulators live on the stack).
+const PHASOR_TILE: usize = phasor::TILE;
+
+/// Most SPADs per row for which the phasor path is planned (beyond, the lookup's blocks of 8
+/// SPADs use their lanes).
+pub(super) const PHASOR_MAX_SPADS: usize = 8;
+
+/// Rows per batch of the phasor path: its tables are built in parallel, then every voxel
+/// tile sums the batch's rows in order.
+fn phasor_batch(threads: usize) -> usize {
+    (32 * threads).max(128)
+}
+
+/// The phasor path's plan for `g` (its table for the default tolerance) and what it holds
+/// at once; `Err` says why it does not apply.
+pub(super) fn phasor_plan(
+    g: &Geometry,
+    cfg: &Config,
+    n_voxels: usize,
+) -> Result<(Phasor, budget::Plan)> {
+    let ks = g.spads_per_row();
+    if ks > PHASOR_MAX_SPADS {
+        return Err(Error::arg(
+            "path",
+            format!(
+                "the phasor path takes rows of at most {PHASOR_MAX_SPADS} SPADs (paired and confocal scans, short SPAD lines); these rows have {ks}"
+            ),
+        ));
+    }
+    let ph = Phasor::new(cfg, phasor::TOLERANCE)?;
+    let threads = rayon::current_num_threads().max(1);
+    let rows = phasor_batch(threads);
+    let mut plan = memory_plan(g, cfg, budget::bytes(n_voxels, 16 + 20), "direct light");
+    plan.add(
+        format!(
+            "the phasor tables of {rows} rows × {ks} SPADs ({} entries of 16 bytes each)",
+            budget::count(ph.table_len() as u128)
+        ),
+        budget::bytes(rows * ks, 16).saturating_mul(ph.table_len() as u128),
+    )
+    .add(
+        format!("{threads} phasor FFT buffers (N + L complex f32 each)"),
+        budget::bytes(threads, ph.scratch_bytes() as u128),
+    );
+    Ok((ph, plan))
+}
+
+/// Flops of the phasor path over the whole scan: per histogram a forward FFT of N and an
+/// inverse one of L, the table, then ~30 operations per (voxel, histogram) (8 voxels per
+/// vector: counted as 30/4 against the other paths' scalar flops).
+pub(super) fn phasor_flops(g: &Geometry, cfg: &Config, ph: &Phasor, n_voxels: usize) -> f64 {
+    let hists = (g.lasers.len() * g.spads_per_row()) as f64;
+    let (n, l) = (cfg.n_fft() as f64, ph.grid_len() as f64);
+    hists
+        * (5.0 * n * n.log2()
+            + 5.0 * l * l.log2()
+            + 4.0 * ph.table_len() as f64
+            + n_voxels as f64 * 7.5)
+}
+
+/// The diagonal's accumulators on the phasor path ([`crate::probe::fast::phasor`]): rows in
+/// batches, their tables in parallel, then voxel tiles in parallel, each summing the batch's
+/// rows in order (the same sums on any number of threads).
+pub(super) fn direct_phasor(
+    src: &mut dyn RowSource,
+    job: Job<'_>,
+    volume: &Volume,
+    ph: &Phasor,
+    plan: &budget::Plan,
+) -> Result<(Vec<Complex64>, Report)> {
+    use crate::exec::Pass;
+    use crate::probe::fast::phasor::{Entry, TableScratch};
+    use crate::timings::{self, Kind};
+    use std::sync::Mutex;
+    let Job { cfg, wave, exec } = job;
+    let g = src.geometry().clone();
+    plan.check(|| pass_name(&g, cfg, "direct light (phasor)"))?;
+    check_laser_falloff(&g, wave)?;
+    let ks = g.spads_per_row();
+    let n = volume.len();
+    // Voxel positions as structures of arrays, padded to whole lane groups (the padding
+    // repeats the last voxel; its sums are dropped).
+    let np = n.next_multiple_of(8);
+    let coord = |i: usize| -> Vec<f32> {
+        (0..np)
+            .map(|v| {
+                volume
+                    .points
+                    .get(v.min(n.saturating_sub(1)))
+                    .map_or(0.0, |p| p[i])
+            })
+            .collect()
+    };
+    let (vx, vy, vz) = (coord(0), coord(1), coord(2));
+    let mut acc = vec![Complex64::new(0.0, 0.0); np];
+    // A batch's f32 sums, per voxel.
+    let (mut re, mut im) = (vec![0.0f32; np], vec![0.0f32; np]);
+    let threads = rayon::current_num_threads().max(1);
+    // Voxel chunks: 4 per thread, whole sub-tiles (each thread sweeps its chunk once per
+    // row, the row's table in cache); results do not depend on the chunking.
+    let chunk = np
+        .div_ceil(4 * threads)
+        .next_multiple_of(PHASOR_TILE)
+        .max(PHASOR_TILE);
+    let batch = phasor_batch(threads);
+    let tl = ph.table_len();
+    let mut tables = vec![[0.0f32; 4]; batch * ks * tl];
+    let mut entries = vec![Entry::default(); batch * ks];
+    let mut bad = vec![0u32; batch * ks];
+    let scratches: Vec<Mutex<TableScratch>> =
+        (0..threads).map(|_| Mutex::new(ph.scratch())).collect();
+    let leg = |p: Point, origin: Option<[f64; 3]>| -> f64 {
+        origin.map_or(0.0, |o| {
+            (0..3)
+                .map(|i| (f64::from(p[i]) - o[i]).powi(2))
+                .sum::<f64>()
+                .sqrt()
+        })
+    };
+    let (l_origin, s_origin) = match cfg.legs() {
+        vltm_kernel::Legs::WallToWall => (None, None),
+        vltm_kernel::Legs::FirstAndLast {
+            laser_origin,
+            sensor_origin,
+        } => (Some(laser_origin), Some(sensor_origin)),
+    };
+    let range = src.rows();
+    let bar = Pass::start(exec, "direct", range.len());
+    let mut rows: Vec<(Point, Vec<f32>)> = Vec::new();
+    let mut report = Report::default();
+    let nt = g.nt;
+    for start in range.clone().step_by(batch) {
+        let end = (start + batch).min(range.end);
+        rows.resize_with(end - start, || ([0.0; 3], Vec::new()));
+        {
+            let _t = timings::section("read rows", read_kind(src));
+            src.read_rows(start, &mut rows)?;
+            compensate_all(&g, wave, start, &mut rows);
+        }
+        let ne = (end - start) * ks;
+        for (i, (x_l, _)) in rows.iter().enumerate() {
+            let l = start + i;
+            let d1 = leg(*x_l, l_origin);
+            for s in 0..ks {
+                let spad = if g.confocal {
+                    g.spads.get(l).copied().unwrap_or(*x_l)
+                } else {
+                    g.spads[s]
+                };
+                entries[i * ks + s] = Entry {
+                    laser: *x_l,
+                    spad,
+                    offset: (d1 + leg(spad, s_origin) - cfg.t0()) as f32,
+                };
+            }
+        }
+        {
+            let _t = timings::section("phasor tables", Kind::Parallel);
+            tables[..ne * tl]
+                .par_chunks_mut(tl)
+                .zip(bad[..ne].par_iter_mut())
+                .enumerate()
+                .for_each(|(e, (tab, b))| {
+                    let (row, s) = (e / ks, e % ks);
+                    let h = rows[row].1.get(s * nt..(s + 1) * nt).unwrap_or_default();
+                    let i = rayon::current_thread_index().unwrap_or(0) % scratches.len();
+                    let mut sc = scratches[i].lock().unwrap_or_else(|e| e.into_inner());
+                    *b = ph.table(h, &mut sc, tab);
+                });
+        }
+        {
+            let _t = timings::section("phasor voxels", Kind::Parallel);
+            let (es, ts) = (&entries[..ne], &tables[..ne * tl]);
+            acc.par_chunks_mut(chunk)
+                .zip(vx.par_chunks(chunk))
+                .zip(vy.par_chunks(chunk))
+                .zip(vz.par_chunks(chunk))
+                .zip(re.par_chunks_mut(chunk))
+                .zip(im.par_chunks_mut(chunk))
+                .for_each(|(((((a, x), y), z), re), im)| {
+                    re.fill(0.0);
+                    im.fill(0.0);
+                    ph.accumulate(es, ts, x, y, z, re, im);
+                    for ((a, r), i) in a.iter_mut().zip(&*re).zip(&*im) {
+                        *a += Complex64::new(f64::from(*r), f64::from(*i));
+                    }
+                });
+        }
+        report.rows += (end - start) as u64;
+        report.non_finite += bad[..ne].iter().map(|&b| u64::from(b)).sum::<u64>();
+        bar.advance(end - start);
+    }
+    acc.truncate(n);
+    Ok((acc, report))
 }

@@ -119,7 +119,12 @@ fn compensate(g: &Geometry, wave: &Wave, l: usize, hist: &mut [f32]) {
 }
 
 /// [`compensate`] on a batch of rows `first..`, in parallel.
-fn compensate_all(g: &Geometry, wave: &Wave, first: usize, rows: &mut [(Point, Vec<f32>)]) {
+pub(super) fn compensate_all(
+    g: &Geometry,
+    wave: &Wave,
+    first: usize,
+    rows: &mut [(Point, Vec<f32>)],
+) {
     if wave.compensate_laser {
         rows.par_iter_mut()
             .enumerate()
@@ -128,7 +133,7 @@ fn compensate_all(g: &Geometry, wave: &Wave, first: usize, rows: &mut [(Point, V
 }
 
 /// How a source reads a batch of rows, for the section timings.
-fn read_kind(src: &dyn RowSource) -> Kind {
+pub(super) fn read_kind(src: &dyn RowSource) -> Kind {
     if src.reads_in_parallel() {
         Kind::Parallel
     } else {

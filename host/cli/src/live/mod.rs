@@ -270,6 +270,7 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
             PathArg::Band => EvalPath::Band,
             PathArg::Planar => EvalPath::Planar,
             PathArg::Lookup => EvalPath::Lookup,
+            PathArg::Phasor => EvalPath::Phasor,
         },
         indirect,
         capture_name: name

@@ -6,6 +6,8 @@
 //!   (`rustfft`), for the diagonal per row and for imaging factorised columns.
 //! * [`confocal`]: the same FFT convolution for confocal scans (laser and SPAD at each wall
 //!   point): per slice one inverse FFT of `Σ_j X̂_j·κ̂_j`, no stored kernel table (`rustfft`).
+//! * [`phasor`]: the full-phasor table per histogram, 8 voxels per vector, for rows of one or
+//!   a few SPADs (paired and confocal scans) (`rustfft`, `pulp` dispatch).
 //! * [`lookup`]: the gated baseband + lookup diagonal (§B.2.4): one inverse FFT per SPAD and
 //!   row, then a cubic interpolation per (voxel, SPAD), for any geometry (`rustfft`).
 //!
@@ -15,9 +17,11 @@
 pub mod band;
 pub mod confocal;
 pub mod lookup;
+pub mod phasor;
 pub mod planar;
 
 pub use band::BandDft;
 pub use confocal::Confocal;
 pub use lookup::Lookup;
+pub use phasor::Phasor;
 pub use planar::Planar;

@@ -73,9 +73,15 @@ pub(super) fn parse_gate(s: &str) -> Option<ColumnGate> {
 }
 
 pub(super) fn parse_path(s: &str) -> Option<Path> {
-    [Path::Band, Path::Planar, Path::Lookup, Path::Auto]
-        .into_iter()
-        .find(|p| p.name() == s)
+    [
+        Path::Band,
+        Path::Planar,
+        Path::Lookup,
+        Path::Phasor,
+        Path::Auto,
+    ]
+    .into_iter()
+    .find(|p| p.name() == s)
 }
 
 pub(super) fn shell_head(s: Shell) -> (f32, Option<f32>) {
