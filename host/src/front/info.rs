@@ -313,8 +313,8 @@ fn describe(c: &Capture, out: &mut dyn FnMut(String)) {
     ));
     if g.paired_apart() {
         out(
-            "paths        direct: band or lookup (each row imaged with its own laser and SPAD \
-             spot), $weights cos too; no FFT path (the planar one needs a SPAD grid, the \
+            "paths        direct: phasor, lookup or band (each row imaged with its own laser \
+             and SPAD spot; $weights cos on lookup and band); no FFT path (the planar one needs a SPAD grid, the \
              confocal one coincident points); columns, rows and the matrix need a SPAD grid"
                 .to_string(),
         );

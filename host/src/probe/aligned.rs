@@ -203,7 +203,7 @@ pub fn fft_note(g: &Geometry, volume: Option<&Volume>) -> String {
         Ok(l) => l,
         Err(e) => {
             return format!(
-                "no FFT path: the wall points are not a regular lattice in one plane ({e}); direct light takes the lookup or band path"
+                "no FFT path: the wall points are not a regular lattice in one plane ({e}); direct light takes the phasor path (rows of up to 8 SPADs), the lookup or the band path"
             );
         }
     };
