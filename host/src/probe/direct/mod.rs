@@ -3,7 +3,7 @@
 
 mod phasor_path;
 
-use phasor_path::{direct_phasor, phasor_flops, phasor_plan};
+use phasor_path::{PHASOR_COST, direct_phasor, phasor_flops, phasor_plan};
 
 use super::aligned::fast_hint;
 use super::confocal;
@@ -186,7 +186,8 @@ fn direct_acc_on(
             .then(|| lookup_row_flops(g, &cfg, volume.len()));
         lookup.map_or(band, |l| l.min(band)) * rows
     };
-    let rival = rival.min(ph_cost);
+    // Against the FFT paths the phasor path's flops count at its measured rate.
+    let rival = rival.min(PHASOR_COST * ph_cost);
     if let Some((rs, engine)) = choose_resampled(g, &cfg, volume, exec.path, rival)? {
         let (acc, report) = direct_resampled(src, job, volume, &rs, engine)?;
         return Ok((
@@ -206,7 +207,7 @@ fn direct_acc_on(
     // Planar competes with the cheapest of band, lookup and phasor under `Auto`.
     let rival = lookup_cost.map_or(band_cost, |l| l.min(band_cost));
     let ph_wins = ph_cost < rival * rows;
-    let rival = rival.min(ph_cost / rows);
+    let rival = rival.min(PHASOR_COST * ph_cost / rows);
     let (acc, report, path) = if let Some(planar) = choose_planar(
         (!g.confocal).then_some(&g.spads[..]),
         &cfg,
@@ -262,7 +263,8 @@ fn direct_confocal(
     let band = confocal::band_total(g, cfg, volume.len());
     let lookup = confocal::lookup_flops(g, cfg, volume.len());
     let lookup_fits = lookup_plan(g, cfg, volume.len()).fits();
-    let conv = confocal::choose(g, cfg, volume, job.exec.path, band.min(lookup).min(ph_cost))?;
+    let rival = band.min(lookup).min(PHASOR_COST * ph_cost);
+    let conv = confocal::choose(g, cfg, volume, job.exec.path, rival)?;
     let ph_wins = ph_cost < band && (ph_cost < lookup || !lookup_fits);
     let (values, report, path) = if let Some(c) = conv {
         let (v, r) = with_note(job, path_note(g, volume, cfg, Path::Planar), |job| {

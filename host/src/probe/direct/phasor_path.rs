@@ -73,6 +73,16 @@ pub(super) fn phasor_flops(g: &Geometry, cfg: &Config, ph: &Phasor, n_voxels: us
             + n_voxels as f64 * 7.5)
 }
 
+/// How many of the FFT paths' model flops one nominal flop of the phasor path costs when the
+/// two compete: its gathers and scalar table reads run at about a quarter of the FFT paths'
+/// rate. Measured on the confocal exit sign (4,096 rows, 2 threads, 2026-11-29): nominal
+/// 6.1e9 and 2.6e9 flops took 0.95 s and 0.42 s on this path, the confocal convolution's
+/// 6.8e9 and 6.3e9 flops 0.26 s and 0.23 s; without the factor `auto` took the phasor path
+/// there at 2–4× the time. Against the lookup and the band sum the nominal flops compare as
+/// they are (the lookup's 76 flops per pair-voxel run at about a third of this path's rate,
+/// so the phasor path wins there by more than its model says).
+pub(super) const PHASOR_COST: f64 = 4.0;
+
 /// The diagonal's accumulators on the phasor path ([`crate::probe::fast::phasor`]): rows in
 /// batches, their tables in parallel, then voxel tiles in parallel, each summing the batch's
 /// rows in order (the same sums on any number of threads).
