@@ -613,7 +613,7 @@ fn cli_simulate_info_direct_paired() {
     );
     assert!(info.contains("relay        not planar"), "{info}");
     assert!(
-        info.contains("paths        direct: band or lookup"),
+        info.contains("paths        direct: phasor, lookup or band"),
         "{info}"
     );
     let out = dir.join("direct.npy");
