@@ -10,14 +10,15 @@ use std::process::{Command, Output};
 /// A 15 × 15 × 9 volume in front of the panels of `panel_figure_all`.
 const SPEC: &str = "-0.7:0.7:15,-0.5:0.5:15,0.6:1.2:9";
 
-/// `vltm indirect` on the path-traced panels, stderr piped, with `--progress mode` and plain
-/// lines at most every millisecond (and from the start).
+/// `vltm indirect` on the path-traced panels, stderr piped, with `--progress mode` and
+/// a plain line at every step (interval 0, from the start: a stage shorter than any interval
+/// still shows).
 fn indirect(mode: &str, test: &str) -> Output {
     let dir = std::env::temp_dir().join(format!("vltm-progress-{}-{test}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let capture = support::fixture("pathtraced/panel_figure_all/panel_figure_all.hdf5");
     let o = Command::new(support::vltm_bin())
-        .env("VLTM_PROGRESS_INTERVAL_MS", "1")
+        .env("VLTM_PROGRESS_INTERVAL_MS", "0")
         .arg("indirect")
         .arg(&capture)
         .args(["--volume", SPEC, "--progress", mode, "--out"])
