@@ -240,17 +240,17 @@ pub(super) enum ColumnState {
     },
 }
 
-/// The accumulators of [`column`] over the source's rows ([`RowSource::rows`]), with the
+/// The accumulators of [`column()`] over the source's rows ([`RowSource::rows`]), with the
 /// configuration (of the time axis cropped to the paths' reach) and the crop. `defer`: leave
-/// the choice of the imaging path under [`Path::Auto`] to [`ColumnState::finish`] (the path is
+/// the choice of the imaging path under [`Path::Auto`] to `ColumnState::finish` (the path is
 /// then recorded as `Auto`).
-/// The checks [`column`] makes before it reads a row: the focus, the lens weights, the
+/// The checks [`column()`] makes before it reads a row: the focus, the lens weights, the
 /// evaluation path for the gate, a SPAD grid for the factorised gates, and the capture's
 /// window. A front end that runs another pass first (the leak correction's Γ) calls it to
 /// refuse bad input before any work.
 ///
 /// # Errors
-/// As [`column`]'s argument errors.
+/// As [`column()`]'s argument errors.
 pub fn check_column(
     g: &Geometry,
     focus: Point,

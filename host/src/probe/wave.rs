@@ -115,9 +115,9 @@ impl Wave {
     }
 
     /// Refuses options that make no sense, with their valid range: the band half-width
-    /// `band` in [[`MIN_BAND`], [`MAX_BAND`]] (units of 1/σ), a given `wavelength` from two
+    /// `band` in [1, 20] (`MIN_BAND`, `MAX_BAND`; units of 1/σ), a given `wavelength` from two
     /// time bins (`2·dt`, the Nyquist limit) and a given `sigma` from one time bin (`dt`), both
-    /// at most [`MAX_LENGTH`] (a longer wave overflows the kernel's sizes; the memory budget
+    /// at most `MAX_LENGTH` (1000 km; a longer wave overflows the kernel's sizes; the memory budget
     /// bounds the DFT period long before).
     ///
     /// # Errors

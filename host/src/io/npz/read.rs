@@ -399,7 +399,7 @@ pub(super) fn geometry(r: &mut NpzReader<File>, path: &Path, s: &[usize]) -> Res
     Ok(g)
 }
 
-/// Reads a `.npz` capture written by [`write()`] (or by numpy with the same keys).
+/// Reads a `.npz` capture written by [`write`](fn@super::write) (or by numpy with the same keys).
 ///
 /// # Errors
 /// [`Error::Io`] if unreadable, [`Error::Format`] naming the key for a missing or

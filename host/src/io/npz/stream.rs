@@ -44,7 +44,7 @@ struct Crc {
 }
 
 /// Opens `path` as a [`Stream`] if its `H` is stored uncompressed as little-endian
-/// C-order `f32` (`Ok(None)` otherwise: read it with [`read`]).
+/// C-order `f32` (`Ok(None)` otherwise: read it with [`read`](fn@super::read)).
 ///
 /// # Errors
 /// [`Error::Io`], or [`Error::Format`] for a malformed archive, field or a truncated `H`.
