@@ -229,7 +229,7 @@ state_merge() { # state_merge MACHINE ELF
   pts=$(gen volume) focus=$(gen focus) wl=$(gen wavelength) rows=$(gen host-rows)
   "$vltm_bin" simulate fixture/scene.json --out "$t/scene.npz" --uncompressed >/dev/null 2>&1
   local -a d=(direct "$t/scene.npz" --volume "$pts" --wavelength "$wl" --path band)
-  local -a c=(column "$t/scene.npz" --focus="$focus" --volume "$pts" --wavelength "$wl")
+  local -a c=(column "$t/scene.npz" --focus="$focus" --volume "$pts" --wavelength "$wl" --no-leak-correct)
   for p in d c; do
     local -n args=$p
     local fw="$t/fw_direct.vltmpart"; [ $p = c ] && fw="$t/fw_column.vltmpart"
