@@ -151,7 +151,7 @@ impl std::fmt::Debug for Lookup {
 }
 
 /// Smallest `2^a·3^b·5^c ≥ n` (a size rustfft transforms with its fast butterflies).
-fn fast_len(n: usize) -> usize {
+pub(super) fn fast_len(n: usize) -> usize {
     let n = n.max(1);
     let mut best = usize::MAX;
     let mut p5 = 1usize;

@@ -55,6 +55,7 @@
 //! 8 voxels per vector; no allocation per row or voxel (per-thread FFT buffers and the batch's
 //! tables are made once per pass).
 
+use super::lookup::fast_len;
 use crate::error::{Error, Result};
 use num_complex::Complex32;
 use rustfft::{Fft, FftPlanner};
@@ -134,26 +135,6 @@ impl std::fmt::Debug for Phasor {
             .field("portable", &self.portable)
             .finish_non_exhaustive()
     }
-}
-
-/// Smallest `2^a·3^b·5^c ≥ n`.
-fn fast_len(n: usize) -> usize {
-    let n = n.max(1);
-    let mut best = usize::MAX;
-    let mut p5 = 1usize;
-    while p5 < 2 * n {
-        let mut p35 = p5;
-        while p35 < 2 * n {
-            let mut p = p35;
-            while p < n {
-                p *= 2;
-            }
-            best = best.min(p);
-            p35 *= 3;
-        }
-        p5 *= 5;
-    }
-    best
 }
 
 /// The bound ε(δ) of linear interpolation at step `delta` (m) for `cfg` (module docs).
