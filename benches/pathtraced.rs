@@ -24,6 +24,10 @@ use pathtraced::*;
 use vltm::probe::{LeakOptions, Wave};
 
 fn main() {
+    if std::env::args().any(|a| a == "synth") {
+        synth();
+        return;
+    }
     let diagnose = std::env::args().any(|a| a == "diagnose");
     let breakdown = diagnose || std::env::args().any(|a| a == "pearson");
     println!(
@@ -309,4 +313,47 @@ fn same_object(c: &mut Captures, s: &Setup, idx: &[usize]) -> [f64; 3] {
     let t = probe::indirect_over(&mut c.indirect, &c.vol, &mask, &opts, &s.wave, exec).unwrap();
     let m = |v: &[f32]| idx.iter().map(|&i| f64::from(v[i])).sum::<f64>() / idx.len() as f64;
     [m(&f.values), m(&k.values), m(&t.values)]
+}
+
+/// Stage 1 (oracle geometry) and Stage 2 (geometry from the capture) of the analysis by
+/// synthesis (`vltm::probe::synth`), both scenes, the same settings.
+fn synth() {
+    use vltm::probe::synth::SynthOptions;
+    let local = std::env::args().any(|a| a == "global");
+    let opts = SynthOptions {
+        per_histogram: !local,
+        ..SynthOptions::default()
+    };
+    println!(
+        "| stage | scene | object | Γ | corrected I_i vs control | kept | Pearson with the truth | explained: full / control | fit s |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|");
+    let only2 = std::env::args().any(|a| a == "capture");
+    for (stage, surf) in [("1 oracle", Surf::Oracle), ("2 capture", Surf::Capture)] {
+        if only2 && surf == Surf::Oracle {
+            continue;
+        }
+        for scene in SCENES {
+            let mut c = load(scene);
+            let (r, e) = measure_synth(&mut c, &defaults(), surf, &opts);
+            for o in &r.rows {
+                println!(
+                    "| {stage} | {scene} | {} | {}/{} | {:.1}× | {:.3} | {:.3} | {:.4} / {:.4} | {:.1} |",
+                    o.name,
+                    o.in_gamma,
+                    o.voxels,
+                    o.ratio(),
+                    o.kept(),
+                    o.pearson,
+                    e[0].0,
+                    e[1].0,
+                    e[0].1
+                );
+            }
+            println!(
+                "| {stage} | {scene} | all of Γ | {} | | | {:.3} | | |",
+                r.gamma, r.pearson
+            );
+        }
+    }
 }

@@ -50,6 +50,8 @@ pub struct Captures {
     pub projector: String,
     /// Points on each object's box surface (50 per metre), in `objects` order.
     pub surfaces: Vec<Vec<Point>>,
+    /// `scene.json`'s objects (centre, size, frame), in `objects` order.
+    pub boxes: Vec<serde_json::Value>,
 }
 
 /// Points on the surface of a box (`scene.json`: centre, size along (r, u, −f), frame), `n`
@@ -128,7 +130,55 @@ pub fn load_from(root: &Path, scene: &str) -> Captures {
         objects,
         projector: j["projector_surface"].as_str().unwrap().to_string(),
         surfaces,
+        boxes: j["objects"]
+            .as_object()
+            .unwrap()
+            .values()
+            .cloned()
+            .collect(),
     }
+}
+
+/// The oracle surfels of the scene (Stage 1 of the analysis by synthesis: geometry from
+/// `scene.json`, never from the capture): every face of every box sampled `n` per metre, with
+/// its outward normal and area, one cluster per object.
+pub fn oracle_surfels(c: &Captures, n: f64) -> probe::synth::Surfels {
+    c_boxes_surfels(&c.boxes, n)
+}
+
+fn c_boxes_surfels(boxes: &[serde_json::Value], n: f64) -> probe::synth::Surfels {
+    let (mut pts, mut nrm, mut area, mut cl) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for (ci, o) in boxes.iter().enumerate() {
+        let v3 = |k: &str| -> [f64; 3] { core::array::from_fn(|i| o[k][i].as_f64().unwrap()) };
+        let (ctr, s) = (v3("centre"), v3("size_m"));
+        let (r, u, f) = (v3("right_r"), v3("up_u"), v3("front_normal_f"));
+        let axes = [r, u, f.map(|x| -x)];
+        for k in 0..3 {
+            let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+            let (ni, nj) = (
+                ((s[i] * n).ceil() as usize).max(2),
+                ((s[j] * n).ceil() as usize).max(2),
+            );
+            for side in [-0.5f64, 0.5] {
+                for a in 0..ni {
+                    for b in 0..nj {
+                        let ca = (a as f64 + 0.5) / ni as f64 - 0.5;
+                        let cb = (b as f64 + 0.5) / nj as f64 - 0.5;
+                        pts.push(core::array::from_fn(|x| {
+                            ctr[x]
+                                + side * s[k] * axes[k][x]
+                                + ca * s[i] * axes[i][x]
+                                + cb * s[j] * axes[j][x]
+                        }));
+                        nrm.push(axes[k].map(|x| x * side.signum()));
+                        area.push(s[i] * s[j] / (ni * nj) as f64);
+                        cl.push(ci);
+                    }
+                }
+            }
+        }
+    }
+    probe::synth::Surfels::new(pts, nrm, area, cl).expect("oracle surfels")
 }
 
 /// Probe settings of one measurement.
@@ -433,4 +483,127 @@ pub fn print_ceilings(scene: &str, r: &SceneResult) {
             r.pearson_oracle
         );
     }
+}
+
+/// Where the surfels of the analysis by synthesis come from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Surf {
+    /// Stage 1, the oracle: `scene.json`'s boxes (validates the renderer and the subtraction).
+    Oracle,
+    /// Stage 2, the method: each capture's own direct-light volume ([`SURFEL_VOLUME`]).
+    Capture,
+}
+
+/// Sweeps of the geometry refinement.
+pub const SWEEPS: usize = 4;
+
+/// The grid the surfels of Stage 2 are read from (pitch 0.05 × 0.05 × 0.01 m).
+pub const SURFEL_VOLUME: &str = "-0.75:0.75:31,-0.75:0.75:31,0.5:1.4:91";
+
+/// One scene measured with the direct light removed by the fitted surfel model (module
+/// `vltm::probe::synth`) instead of the windows: the full capture and the control each with
+/// its own model, the truth uncorrected, Γ from the full capture's diagonal. Returns the
+/// result and, for the full capture and the control, the energy explained and the fit's
+/// seconds.
+pub fn measure_synth(
+    c: &mut Captures,
+    s: &Setup,
+    surf: Surf,
+    opts: &probe::synth::SynthOptions,
+) -> (SceneResult, [(f64, f64); 2]) {
+    use probe::synth::{Surfels, SynthModel, Synthesized};
+    let d = probe::direct(&mut c.all, &c.vol, &s.wave, EXEC).expect("direct");
+    let mask = probe::gamma_mask(&d.values, s.epsilon);
+    let fine = Volume::parse(SURFEL_VOLUME).unwrap();
+    let boxes = c.boxes.clone();
+    let surfels = |cap: &mut Capture| -> Surfels {
+        match surf {
+            Surf::Oracle => c_boxes_surfels(&boxes, 100.0),
+            Surf::Capture => {
+                let d = probe::direct(cap, &fine, &s.wave, EXEC).expect("direct, fine");
+                let raw =
+                    Surfels::from_direct(&fine, &d.values, s.epsilon, 5, 0.0).expect("surfels");
+                let g = &cap.geometry;
+                let scale: Vec<f64> = (0..g.lasers.len()).map(|l| g.laser_falloff_at(l)).collect();
+                let r =
+                    probe::synth::refine(cap, &raw, &scale, SWEEPS, 0.02, EXEC).expect("refine");
+                eprintln!(
+                    "refined {} patches ({} kept): explained {:.4} -> {:.4}",
+                    raw.patches.len(),
+                    r.surfels.patches.len(),
+                    r.before,
+                    r.after
+                );
+                r.surfels
+            }
+        }
+    };
+    let sa = surfels(&mut c.all);
+    let sk = surfels(&mut c.direct);
+    let ma = SynthModel::fit(&mut c.all, sa, opts, EXEC).expect("fit, full");
+    let mk = SynthModel::fit(&mut c.direct, sk, opts, EXEC).expect("fit, control");
+    let opts_i = IndirectOptions {
+        epsilon: s.epsilon,
+        shell: s.r0.map(|r0| Shell {
+            r0,
+            r1: f32::INFINITY,
+        }),
+        leak: None,
+        ..IndirectOptions::default()
+    };
+    let f = probe::indirect_over(
+        &mut Synthesized::new(&mut c.all, &ma),
+        &c.vol,
+        &mask,
+        &opts_i,
+        &s.wave,
+        EXEC,
+    )
+    .expect("full");
+    let k = probe::indirect_over(
+        &mut Synthesized::new(&mut c.direct, &mk),
+        &c.vol,
+        &mask,
+        &opts_i,
+        &s.wave,
+        EXEC,
+    )
+    .expect("control");
+    let t = probe::indirect_over(&mut c.indirect, &c.vol, &mask, &opts_i, &s.wave, EXEC)
+        .expect("truth");
+    let g: Vec<usize> = (0..mask.len()).filter(|&i| mask[i]).collect();
+    let nan = vec![f32::NAN; mask.len()];
+    let rows = c
+        .objects
+        .iter()
+        .map(|(name, idx)| {
+            let ig: Vec<usize> = idx.iter().copied().filter(|&i| mask[i]).collect();
+            ObjectRow {
+                name: name.clone(),
+                voxels: idx.len(),
+                in_gamma: ig.len(),
+                full: mean(&f.values, idx),
+                control: mean(&k.values, idx),
+                truth: mean(&t.values, idx),
+                truth_gated: f64::NAN,
+                pearson: pearson(&f.values, &t.values, &ig),
+                pearson_ceiling: f64::NAN,
+                pearson_windowed: f64::NAN,
+                oracle: f64::NAN,
+                pearson_oracle: f64::NAN,
+            }
+        })
+        .collect();
+    let r = SceneResult {
+        gamma: g.len(),
+        r0: f.shell.r0,
+        pearson: pearson(&f.values, &t.values, &g),
+        pearson_ceiling: f64::NAN,
+        pearson_oracle: f64::NAN,
+        explained: Some(ma.explained),
+        rows,
+        maps: [f.values, k.values, t.values, nan.clone(), nan],
+        mask,
+    };
+    (r, [(ma.explained, ma.seconds), (mk.explained, mk.seconds)])
 }

@@ -38,6 +38,7 @@ pub mod partial;
 pub mod resample;
 mod row;
 mod surface;
+pub mod synth;
 mod wave;
 pub mod window;
 

@@ -1,0 +1,601 @@
+//! Analysis by synthesis (beyond the paper): the hidden surfaces' **direct** light rendered
+//! from surfels fitted to the capture, and subtracted, so that the off-diagonal probes see the
+//! multi-bounce light and keep all of it.
+//!
+//! # Why
+//!
+//! Zeroing the time windows of Γ's direct returns ([`super::LeakMethod::Gate`]) removes the
+//! two-bounce light that arrives in those same bins: direct light from extended surfaces fills
+//! about 30 % of a capture's bins, and even an ideal window keeps only 4–13 % of the
+//! indirect-only truth on the path-traced scenes (docs/indirect-light.md). A model of the
+//! direct light, subtracted, keeps the rest.
+//!
+//! # Model
+//!
+//! Surfels `k` (centre `p_k`, unit normal `n_k`, area `A_k`, cluster `c_k`: [`Surfels`]) are
+//! Lambertian patches. The direct return of surfel `k` for laser spot `x_l` and SPAD spot `x_s`
+//! arrives at path length `τ = d1_l + |x_l − p_k| + |p_k − x_s| + d4_s` (device legs when the
+//! capture's time axis holds them) with amplitude
+//! `c_l · A_k · cos_wall,l cos_k,l / |x_l − p_k|² · cos_wall,s cos_k,s / |p_k − x_s|²`
+//! (cosines clamped at 0: a surfel facing away returns nothing; `c_l` the physical laser's
+//! falloff `cos/d²` when the capture has a laser position). No occlusion, no inter-reflection
+//! (that is the light the probes are after). A return is binned as the renderer bins it: the
+//! whole amplitude in bin `floor((τ − t0)/Δt)`, resolved to `Δt/8` so that delays below a bin
+//! shift it; the capture's time response is a Gaussian of standard deviation `w` (bins).
+//!
+//! # Fit ([`SynthModel::fit`], two passes over the capture)
+//!
+//! 1. **Global**: one reflectance per cluster (non-negative least squares), with the response
+//!    width `w ∈ {0, ¼, …, max_width}` bins and a global delay (time zero) in `±max_shift`
+//!    bins at `Δt/8` chosen by the energy explained, on up to 4,096 histograms spread over the
+//!    scan.
+//! 2. **Per histogram** ([`SynthOptions::per_histogram`], default): a gain per cluster
+//!    (non-negative) and a delay within `±local_shift` bins of the global one, per (laser,
+//!    SPAD) histogram. This absorbs the small errors of the geometry (a few mm of depth, a
+//!    fraction of a degree of tilt), of the wall's and the laser's falloff and of the surfels'
+//!    shading that a global fit leaves, at the cost of some indirect light that shares the
+//!    direct light's shape within one histogram.
+//!
+//! [`SynthModel::explained`] is the fraction of the capture's energy `Σ H²` the model
+//! explains over every histogram. On a capture of all paths it cannot reach 1: the
+//! multi-bounce light is what it must not explain (0.1–7 % of the energy on the path-traced
+//! scenes).
+//!
+//! # Cost and memory
+//!
+//! Rendering one row costs `K·S` returns (`K` surfels, `S` SPADs), then per histogram and
+//! cluster a blur and a binning of `8·Nt` samples. Pass 1 adds `W·(2·8·max_shift + 1)`
+//! binnings per sampled histogram; pass 2 `2·8·local_shift + 1` per histogram; subtracting a
+//! row renders it once. Memory: `8·K·S` bytes of SPAD tables (checked against
+//! [`SynthOptions::max_bytes`]), `S·(C + 1)` values per row of gains and delays, one row and
+//! one fine histogram per thread.
+
+mod refine;
+mod render;
+mod surfels;
+
+pub use refine::{Refined, refine};
+pub use surfels::Surfels;
+
+use crate::error::{Error, Result};
+use crate::exec::{Exec, Pass, row_batch};
+use crate::io::capture::{Geometry, RowSource};
+use crate::timings::{self, Kind};
+use rayon::prelude::*;
+use render::{Renderer, SUB, bin, blurred_prefix, kernel};
+use std::time::Instant;
+use vltm_kernel::Point;
+
+/// How [`SynthModel::fit`] fits the surfels' render to the capture.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SynthOptions {
+    /// A gain per cluster and a delay per histogram after the global fit (default true).
+    pub per_histogram: bool,
+    /// Global delay searched within ± this many bins (default 1).
+    pub max_shift: f64,
+    /// Per-histogram delay within ± this many bins of the global one (default 0.5).
+    pub local_shift: f64,
+    /// Largest response width searched, in bins (standard deviation; default 1, step ¼).
+    pub max_width: f64,
+    /// Whether the model includes the physical laser's falloff (true when the capture holds
+    /// it, as renders and raw captures do; default true).
+    pub laser_falloff: bool,
+    /// Memory budget of the SPAD tables (bytes, default 2 GB).
+    pub max_bytes: usize,
+}
+
+impl Default for SynthOptions {
+    fn default() -> Self {
+        Self {
+            per_histogram: true,
+            max_shift: 1.0,
+            local_shift: 0.5,
+            max_width: 1.0,
+            laser_falloff: true,
+            max_bytes: 2_000_000_000,
+        }
+    }
+}
+
+impl SynthOptions {
+    fn check(&self) -> Result<()> {
+        let ok = |x: f64, hi: f64| x.is_finite() && (0.0..=hi).contains(&x);
+        if !ok(self.max_shift, 50.0) {
+            return Err(Error::arg("max_shift", "must lie in [0, 50] bins"));
+        }
+        if !ok(self.local_shift, 10.0) {
+            return Err(Error::arg("local_shift", "must lie in [0, 10] bins"));
+        }
+        if !ok(self.max_width, 20.0) {
+            return Err(Error::arg("max_width", "must lie in [0, 20] bins"));
+        }
+        Ok(())
+    }
+}
+
+/// The surfels' direct light fitted to a capture (see the module docs).
+#[derive(Clone, Debug)]
+pub struct SynthModel {
+    geometry: Geometry,
+    renderer: Renderer,
+    kern: Vec<f64>,
+    /// Response width (bins, standard deviation).
+    pub width: f64,
+    /// Global delay (bins; positive: the capture arrives later than the geometry says).
+    pub shift: f64,
+    /// Reflectance per cluster of the global fit (in the capture's units per m² of surfel).
+    pub albedo: Vec<f64>,
+    /// Per histogram (`(l·S + s)·C + c`): the gain of each cluster (per-histogram fit).
+    gains: Vec<f32>,
+    /// Per histogram `l·S + s`: the delay in fine samples.
+    shifts: Vec<i16>,
+    /// Fraction of the capture's energy `Σ H²` the model explains (0..1).
+    pub explained: f64,
+    /// Wall-clock seconds of the fit.
+    pub seconds: f64,
+}
+
+/// Non-negative least squares `min ‖y − Σ a_c m_c‖²` from the normal equations `G a = b`
+/// (`G` row-major `c × c`): the exact solution when it is non-negative, otherwise projected
+/// Gauss–Seidel from it clamped.
+fn nnls(g: &[f64], b: &[f64], a: &mut [f64]) {
+    let c = b.len();
+    if solve(g, b, a) && a.iter().all(|x| *x >= 0.0) {
+        return;
+    }
+    a.iter_mut()
+        .for_each(|x| *x = if x.is_finite() { x.max(0.0) } else { 0.0 });
+    for _ in 0..500 {
+        let mut moved = 0.0f64;
+        for i in 0..c {
+            let gii = g[i * c + i];
+            if gii <= 0.0 {
+                a[i] = 0.0;
+                continue;
+            }
+            let r = b[i]
+                - (0..c)
+                    .filter(|&j| j != i)
+                    .map(|j| g[i * c + j] * a[j])
+                    .sum::<f64>();
+            let new = (r / gii).max(0.0);
+            moved = moved.max((new - a[i]).abs() * gii.sqrt());
+            a[i] = new;
+        }
+        if moved <= 1e-14 * b.iter().fold(0.0f64, |m, x| m.max(x.abs())).max(1e-300) {
+            break;
+        }
+    }
+}
+
+/// `G a = b` by Gaussian elimination with partial pivoting; false when singular.
+fn solve(g: &[f64], b: &[f64], a: &mut [f64]) -> bool {
+    let c = b.len();
+    let mut m: Vec<f64> = g.to_vec();
+    a.copy_from_slice(b);
+    let scale = (0..c).map(|i| g[i * c + i].abs()).fold(0.0f64, f64::max);
+    for k in 0..c {
+        let p = (k..c)
+            .max_by(|&i, &j| m[i * c + k].abs().total_cmp(&m[j * c + k].abs()))
+            .unwrap_or(k);
+        let pivot = m[p * c + k].abs();
+        if pivot.is_nan() || pivot <= 1e-13 * scale {
+            return false;
+        }
+        if p != k {
+            for j in 0..c {
+                m.swap(p * c + j, k * c + j);
+            }
+            a.swap(p, k);
+        }
+        for i in k + 1..c {
+            let f = m[i * c + k] / m[k * c + k];
+            for j in k..c {
+                m[i * c + j] -= f * m[k * c + j];
+            }
+            a[i] -= f * a[k];
+        }
+    }
+    for k in (0..c).rev() {
+        let s: f64 = (k + 1..c).map(|j| m[k * c + j] * a[j]).sum();
+        a[k] = (a[k] - s) / m[k * c + k];
+    }
+    a.iter().all(|x| x.is_finite())
+}
+
+/// `aᵀGa − 2aᵀb`: the change of `‖y‖²` to the residual's.
+fn drop_of(g: &[f64], b: &[f64], a: &[f64]) -> f64 {
+    let c = b.len();
+    let mut q = 0.0;
+    for i in 0..c {
+        for j in 0..c {
+            q += a[i] * g[i * c + j] * a[j];
+        }
+        q -= 2.0 * a[i] * b[i];
+    }
+    q
+}
+
+/// Per-thread work of a histogram: fine render, prefix sums and binned templates.
+#[derive(Default)]
+struct Scratch {
+    fine: Vec<f64>,
+    prefix: Vec<Vec<f64>>,
+    bins: Vec<Vec<f64>>,
+}
+
+impl Scratch {
+    /// Renders SPAD `s` of `row` and prefixes it blurred by `kern`, per cluster.
+    fn render(&mut self, r: &Renderer, g: &Geometry, row: &[(f64, f64)], s: usize, kern: &[f64]) {
+        let c_n = r.surfels.clusters;
+        r.spad(g, row, s, &mut self.fine);
+        self.prefix.resize_with(c_n, Vec::new);
+        self.bins.resize_with(c_n, Vec::new);
+        for c in 0..c_n {
+            blurred_prefix(
+                &self.fine[c * r.nf..(c + 1) * r.nf],
+                kern,
+                &mut self.prefix[c],
+            );
+        }
+    }
+
+    /// Bins every cluster with a delay of `shift` fine samples; the normal equations against
+    /// `h` into `gm` (`C × C`) and `b` (`C`).
+    fn normal(&mut self, pad: usize, shift: isize, h: &[f32], gm: &mut [f64], b: &mut [f64]) {
+        let c_n = self.prefix.len();
+        for c in 0..c_n {
+            self.bins[c].resize(h.len(), 0.0);
+            bin(&self.prefix[c], pad, shift, &mut self.bins[c]);
+        }
+        for i in 0..c_n {
+            b[i] = self.bins[i]
+                .iter()
+                .zip(h)
+                .map(|(m, y)| m * f64::from(*y))
+                .sum();
+            for j in i..c_n {
+                let v: f64 = self.bins[i]
+                    .iter()
+                    .zip(&self.bins[j])
+                    .map(|(x, y)| x * y)
+                    .sum();
+                gm[i * c_n + j] = v;
+                gm[j * c_n + i] = v;
+            }
+        }
+    }
+}
+
+impl SynthModel {
+    /// Fits the render of `surfels` to the capture `src` (two passes over its rows; see the
+    /// module docs).
+    ///
+    /// # Errors
+    /// Options out of range (named), the SPAD tables over [`SynthOptions::max_bytes`]
+    /// (`max_bytes`), a paired or confocal capture (`leak_correct`: the model needs a SPAD
+    /// grid), a capture with no energy, no surfel return inside the window or a non-finite
+    /// fit (`leak_correct`), read errors.
+    pub fn fit(
+        src: &mut dyn RowSource,
+        surfels: Surfels,
+        opts: &SynthOptions,
+        exec: Exec<'_>,
+    ) -> Result<Self> {
+        opts.check()?;
+        let t = Instant::now();
+        let g = src.geometry().clone();
+        if g.confocal {
+            return Err(Error::arg(
+                "leak_correct",
+                "the direct-light model needs a SPAD grid seen from every laser row, not a paired or confocal scan",
+            ));
+        }
+        let bytes = Renderer::table_bytes(surfels.len(), g.spads.len());
+        if bytes > opts.max_bytes {
+            return Err(Error::arg(
+                "max_bytes",
+                format!(
+                    "{} surfels × {} SPADs need {:.1} GB of tables, over the budget of {:.1} GB",
+                    surfels.len(),
+                    g.spads.len(),
+                    bytes as f64 / 1e9,
+                    opts.max_bytes as f64 / 1e9
+                ),
+            ));
+        }
+        let laser_scale = (0..g.lasers.len())
+            .map(|l| {
+                if opts.laser_falloff {
+                    g.laser_falloff_at(l)
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        let reach = opts.max_shift + opts.local_shift + 4.0 * opts.max_width;
+        let renderer = Renderer::new(&g, surfels, laser_scale, reach);
+        let c_n = renderer.surfels.clusters;
+        let (l_n, s_n) = (g.lasers.len(), g.spads.len());
+        let nt = g.nt;
+        // Pass 1: the global fit over a spread subset of histograms.
+        let stride = (l_n * s_n).div_ceil(4096).max(1);
+        let widths: Vec<f64> = {
+            let n = (opts.max_width * 4.0).floor() as usize;
+            (0..=n).map(|i| i as f64 * 0.25).collect()
+        };
+        let kerns: Vec<Vec<f64>> = widths.iter().map(|w| kernel(w * SUB as f64)).collect();
+        let js = (opts.max_shift * SUB as f64).round() as isize;
+        let shifts: Vec<isize> = (-js..=js).collect();
+        let combos = widths.len() * shifts.len();
+        let pad = renderer.pad;
+        let bar = Pass::start(exec, "direct-light model: global fit", l_n);
+        let batch = row_batch();
+        let mut rows: Vec<(Point, Vec<f32>)> = Vec::new();
+        let zero = || {
+            (
+                vec![0.0; combos * c_n * c_n],
+                vec![0.0; combos * c_n],
+                0.0f64,
+            )
+        };
+        let (mut gsum, mut bsum, mut energy) = zero();
+        for start in (0..l_n).step_by(batch) {
+            let end = (start + batch).min(l_n);
+            rows.resize_with(end - start, || ([0.0; 3], Vec::new()));
+            read(src, start, &mut rows)?;
+            let _t = timings::section("direct-light model", Kind::Parallel);
+            let (gs, bs, e) = rows
+                .par_iter()
+                .enumerate()
+                .fold(
+                    || {
+                        (
+                            zero(),
+                            Scratch::default(),
+                            vec![0.0; c_n * c_n],
+                            vec![0.0; c_n],
+                        )
+                    },
+                    |((mut ga, mut ba, mut e), mut sc, mut gm, mut b), (i, (_, h))| {
+                        let l = start + i;
+                        let row = renderer.laser_row(&g, l);
+                        for s in (0..s_n).filter(|s| (l * s_n + s) % stride == 0) {
+                            let hist = &h[s * nt..(s + 1) * nt];
+                            e += hist.iter().map(|x| f64::from(*x).powi(2)).sum::<f64>();
+                            for (wi, kern) in kerns.iter().enumerate() {
+                                sc.render(&renderer, &g, &row, s, kern);
+                                for (ji, &j) in shifts.iter().enumerate() {
+                                    sc.normal(pad, j, hist, &mut gm, &mut b);
+                                    let at = wi * shifts.len() + ji;
+                                    ga[at * c_n * c_n..(at + 1) * c_n * c_n]
+                                        .iter_mut()
+                                        .zip(&gm)
+                                        .for_each(|(x, y)| *x += y);
+                                    ba[at * c_n..(at + 1) * c_n]
+                                        .iter_mut()
+                                        .zip(&b)
+                                        .for_each(|(x, y)| *x += y);
+                                }
+                            }
+                        }
+                        ((ga, ba, e), sc, gm, b)
+                    },
+                )
+                .map(|(acc, ..)| acc)
+                .reduce(zero, |(mut a, mut b, e), (x, y, f)| {
+                    a.iter_mut().zip(&x).for_each(|(p, q)| *p += q);
+                    b.iter_mut().zip(&y).for_each(|(p, q)| *p += q);
+                    (a, b, e + f)
+                });
+            gsum.iter_mut().zip(&gs).for_each(|(p, q)| *p += q);
+            bsum.iter_mut().zip(&bs).for_each(|(p, q)| *p += q);
+            energy += e;
+            bar.advance(end - start);
+        }
+        drop(bar);
+        if !(energy > 0.0 && energy.is_finite()) {
+            return Err(Error::arg(
+                "leak_correct",
+                "the capture holds no (finite) light to fit the direct-light model to",
+            ));
+        }
+        let mut best = (f64::INFINITY, 0, vec![0.0; c_n]);
+        for at in 0..combos {
+            let (gm, b) = (
+                &gsum[at * c_n * c_n..(at + 1) * c_n * c_n],
+                &bsum[at * c_n..(at + 1) * c_n],
+            );
+            let mut a = vec![0.0; c_n];
+            nnls(gm, b, &mut a);
+            let d = drop_of(gm, b, &a);
+            if d < best.0 {
+                best = (d, at, a);
+            }
+        }
+        let (d, at, albedo) = best;
+        if d.is_nan() || d >= 0.0 || albedo.iter().any(|a| !a.is_finite()) {
+            return Err(Error::arg(
+                "leak_correct",
+                "no surfel's direct return matches the capture inside its time window",
+            ));
+        }
+        let (wi, ji) = (at / shifts.len(), at % shifts.len());
+        let mut model = Self {
+            geometry: g.clone(),
+            kern: kerns[wi].clone(),
+            width: widths[wi],
+            shift: shifts[ji] as f64 / SUB as f64,
+            albedo,
+            gains: Vec::new(),
+            shifts: vec![shifts[ji] as i16; l_n * s_n],
+            explained: 0.0,
+            seconds: 0.0,
+            renderer,
+        };
+        // Pass 2: per-histogram gains and delays (or the global fit's), and the energy
+        // explained over every histogram.
+        let jl = (opts.local_shift * SUB as f64).round() as isize;
+        let local: Vec<isize> = if opts.per_histogram {
+            (shifts[ji] - jl..=shifts[ji] + jl).collect()
+        } else {
+            vec![shifts[ji]]
+        };
+        let bar = Pass::start(exec, "direct-light model: per histogram", l_n);
+        let (mut total, mut resid) = (0.0f64, 0.0f64);
+        let mut gains = vec![0.0f32; l_n * s_n * c_n];
+        let mut hshift = vec![0i16; l_n * s_n];
+        for start in (0..l_n).step_by(batch) {
+            let end = (start + batch).min(l_n);
+            rows.resize_with(end - start, || ([0.0; 3], Vec::new()));
+            read(src, start, &mut rows)?;
+            let _t = timings::section("direct-light model", Kind::Parallel);
+            let m = &model;
+            let per_row: Vec<(Vec<f32>, Vec<i16>, f64, f64)> = rows
+                .par_iter()
+                .enumerate()
+                .map(|(i, (_, h))| {
+                    let l = start + i;
+                    let row = m.renderer.laser_row(&g, l);
+                    let mut sc = Scratch::default();
+                    let (mut gm, mut b, mut a) =
+                        (vec![0.0; c_n * c_n], vec![0.0; c_n], vec![0.0; c_n]);
+                    let mut out_g = vec![0.0f32; s_n * c_n];
+                    let mut out_j = vec![0i16; s_n];
+                    let (mut e, mut r) = (0.0, 0.0);
+                    for s in 0..s_n {
+                        let hist = &h[s * nt..(s + 1) * nt];
+                        let hh: f64 = hist.iter().map(|x| f64::from(*x).powi(2)).sum();
+                        e += hh;
+                        sc.render(&m.renderer, &g, &row, s, &m.kern);
+                        let mut keep = (0.0f64, local[0], m.albedo.clone());
+                        for &j in &local {
+                            sc.normal(pad, j, hist, &mut gm, &mut b);
+                            if opts.per_histogram {
+                                nnls(&gm, &b, &mut a);
+                            } else {
+                                a.copy_from_slice(&m.albedo);
+                            }
+                            let d = drop_of(&gm, &b, &a);
+                            if d < keep.0 {
+                                keep = (d, j, a.clone());
+                            }
+                        }
+                        r += (hh + keep.0).max(0.0);
+                        out_j[s] = keep.1 as i16;
+                        for c in 0..c_n {
+                            out_g[s * c_n + c] = keep.2[c] as f32;
+                        }
+                    }
+                    (out_g, out_j, e, r)
+                })
+                .collect();
+            for (i, (gg, jj, e, r)) in per_row.into_iter().enumerate() {
+                let l = start + i;
+                gains[l * s_n * c_n..(l + 1) * s_n * c_n].copy_from_slice(&gg);
+                hshift[l * s_n..(l + 1) * s_n].copy_from_slice(&jj);
+                total += e;
+                resid += r;
+            }
+            bar.advance(end - start);
+        }
+        drop(bar);
+        model.gains = gains;
+        model.shifts = hshift;
+        model.explained = 1.0 - resid / total;
+        if !model.explained.is_finite() {
+            return Err(Error::arg(
+                "leak_correct",
+                "the direct-light fit is not finite",
+            ));
+        }
+        model.seconds = t.elapsed().as_secs_f64();
+        Ok(model)
+    }
+
+    /// The surfels rendered.
+    pub fn surfels(&self) -> &Surfels {
+        &self.renderer.surfels
+    }
+
+    /// Renders the model's histograms of laser row `l` and **subtracts** them from `out`
+    /// (`S·Nt`, SPAD-major, as read).
+    pub fn subtract_row(&self, l: usize, out: &mut [f32]) {
+        let g = &self.geometry;
+        let (nt, s_n, c_n) = (g.nt, g.spads.len(), self.renderer.surfels.clusters);
+        let row = self.renderer.laser_row(g, l);
+        out.par_chunks_mut(nt).enumerate().take(s_n).for_each_init(
+            Scratch::default,
+            |sc, (s, h)| {
+                sc.render(&self.renderer, g, &row, s, &self.kern);
+                let j = isize::from(self.shifts[l * s_n + s]);
+                let mut m = vec![0.0; nt];
+                for c in 0..c_n {
+                    let a = f64::from(self.gains[(l * s_n + s) * c_n + c]);
+                    if a == 0.0 {
+                        continue;
+                    }
+                    bin(&sc.prefix[c], self.renderer.pad, j, &mut m);
+                    for (o, x) in h.iter_mut().zip(&m) {
+                        *o -= (a * x) as f32;
+                    }
+                }
+            },
+        );
+    }
+}
+
+/// Reads rows `start..` into `rows`, timed as the probes time their reads.
+fn read(src: &mut dyn RowSource, start: usize, rows: &mut [(Point, Vec<f32>)]) -> Result<()> {
+    let kind = if src.reads_in_parallel() {
+        Kind::Parallel
+    } else {
+        Kind::Serial
+    };
+    let _t = timings::section("read rows", kind);
+    src.read_rows(start, rows)
+}
+
+/// A [`RowSource`] that returns the capture minus the model's direct light, row by row.
+pub struct Synthesized<'a> {
+    src: &'a mut dyn RowSource,
+    model: &'a SynthModel,
+}
+
+impl<'a> Synthesized<'a> {
+    /// Wraps `src` with the model fitted to it.
+    pub fn new(src: &'a mut dyn RowSource, model: &'a SynthModel) -> Self {
+        Self { src, model }
+    }
+}
+
+impl RowSource for Synthesized<'_> {
+    fn geometry(&self) -> &Geometry {
+        self.src.geometry()
+    }
+
+    fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
+        let x = self.src.read_row(l, out)?;
+        self.model.subtract_row(l, out);
+        Ok(x)
+    }
+
+    fn read_rows(&mut self, first: usize, out: &mut [(Point, Vec<f32>)]) -> Result<()> {
+        self.src.read_rows(first, out)?;
+        for (i, (_, h)) in out.iter_mut().enumerate() {
+            self.model.subtract_row(first + i, h);
+        }
+        Ok(())
+    }
+
+    fn reads_in_parallel(&self) -> bool {
+        self.src.reads_in_parallel()
+    }
+
+    fn rows(&self) -> std::ops::Range<usize> {
+        self.src.rows()
+    }
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,184 @@
+//! The three-bounce renderer of surfels: per laser row, every SPAD's histogram of every
+//! cluster on a fine time grid (`SUB` samples per bin), blurred by the response and binned
+//! with a delay.
+
+use super::surfels::Surfels;
+use crate::io::capture::Geometry;
+use vltm_kernel::geometry::dist64;
+
+/// Fine samples per capture bin: delays are resolved to `Δt / SUB`.
+pub(super) const SUB: usize = 8;
+
+/// Leg from a wall spot (normal `nw`) to surfel `k`: `(distance, cos_wall·cos_surfel / d²)`.
+#[inline]
+fn leg(spot: [f32; 3], nw: [f64; 3], p: [f64; 3], n: [f64; 3]) -> (f64, f64) {
+    let d = dist64(&spot, &p);
+    if d.is_nan() || d <= 0.0 {
+        return (d, 0.0);
+    }
+    let u: [f64; 3] = core::array::from_fn(|i| (p[i] - f64::from(spot[i])) / d);
+    let cw = (u[0] * nw[0] + u[1] * nw[1] + u[2] * nw[2]).max(0.0);
+    let cs = -(u[0] * n[0] + u[1] * n[1] + u[2] * n[2]);
+    (d, cw * cs.max(0.0) / (d * d))
+}
+
+/// What the renderer needs of a capture and its surfels: SPAD legs per surfel (`[k][s]`),
+/// the per-laser scale (the physical laser's falloff), device legs and the fine grid.
+#[derive(Clone, Debug)]
+pub(super) struct Renderer {
+    pub surfels: Surfels,
+    /// `d_ks + d4_s` (m), `[k * spads + s]`.
+    ts: Vec<f32>,
+    /// `cos·cos / d²` of the SPAD leg, `[k * spads + s]`.
+    gs: Vec<f32>,
+    spads: usize,
+    laser_scale: Vec<f64>,
+    d1: Vec<f64>,
+    /// Padding of the fine grid on each side, in fine samples.
+    pub pad: usize,
+    /// Fine grid length: `nt·SUB + 2·pad`.
+    pub nf: usize,
+}
+
+impl Renderer {
+    /// Bytes of the SPAD tables for `k` surfels and `spads` SPADs.
+    pub fn table_bytes(k: usize, spads: usize) -> usize {
+        8 * k * spads
+    }
+
+    /// Tables for `surfels` on capture `g`; `laser_scale` per laser row; `reach` the largest
+    /// delay plus blur the fine grid must hold on each side (bins).
+    pub fn new(g: &Geometry, surfels: Surfels, laser_scale: Vec<f64>, reach: f64) -> Self {
+        let spads = g.spads.len();
+        let k_n = surfels.len();
+        let leg_len = |x: &[f32; 3], o: [f64; 3]| if g.legs_in_time { dist64(x, &o) } else { 0.0 };
+        let d4: Vec<f64> = g
+            .spads
+            .iter()
+            .map(|x| leg_len(x, g.sensor_origin))
+            .collect();
+        let d1: Vec<f64> = g
+            .lasers
+            .iter()
+            .map(|x| leg_len(x, g.laser_origin))
+            .collect();
+        let mut ts = vec![0.0f32; k_n * spads];
+        let mut gs = vec![0.0f32; k_n * spads];
+        use rayon::prelude::*;
+        ts.par_chunks_mut(spads.max(1))
+            .zip(gs.par_chunks_mut(spads.max(1)))
+            .enumerate()
+            .for_each(|(k, (t, w))| {
+                let (p, n) = (surfels.points[k], surfels.normals[k]);
+                for s in 0..spads {
+                    let (d, f) = leg(g.spads[s], g.spad_normal(s), p, n);
+                    t[s] = (d + d4[s]) as f32;
+                    w[s] = f as f32;
+                }
+            });
+        let pad = ((reach.max(0.0) + 2.0) * SUB as f64).ceil() as usize;
+        Self {
+            surfels,
+            ts,
+            gs,
+            spads,
+            laser_scale,
+            d1,
+            pad,
+            nf: g.nt * SUB + 2 * pad,
+        }
+    }
+
+    /// The laser leg of row `l` per surfel: `(d1 + d_lk − t0, scale·area·cos·cos/d²)`.
+    pub fn laser_row(&self, g: &Geometry, l: usize) -> Vec<(f64, f64)> {
+        let (x, nw) = (g.lasers[l], g.laser_normal(l));
+        let s = &self.surfels;
+        (0..s.len())
+            .map(|k| {
+                let (d, f) = leg(x, nw, s.points[k], s.normals[k]);
+                (self.d1[l] + d - g.t0, f * s.areas[k] * self.laser_scale[l])
+            })
+            .collect()
+    }
+
+    /// The fine histograms of SPAD `s` for the laser leg `row`: `fine[c·nf + i]` for cluster
+    /// `c`, every surfel's return deposited at `floor(τ/Δt·SUB)` (the render's own binning).
+    /// `fine` is resized and cleared.
+    pub fn spad(&self, g: &Geometry, row: &[(f64, f64)], s: usize, fine: &mut Vec<f64>) {
+        let nf = self.nf;
+        fine.clear();
+        fine.resize(self.surfels.clusters * nf, 0.0);
+        let scale = SUB as f64 / g.dt;
+        let pad = self.pad as f64;
+        for (k, &(tl, al)) in row.iter().enumerate() {
+            let i = k * self.spads + s;
+            let a = al * f64::from(self.gs[i]);
+            if a == 0.0 {
+                continue;
+            }
+            let f = ((tl + f64::from(self.ts[i])) * scale + pad).floor();
+            if f >= 0.0 && f < nf as f64 {
+                fine[self.surfels.cluster[k] * nf + f as usize] += a;
+            }
+        }
+    }
+}
+
+/// A Gaussian blur of `sigma` fine samples (none when 0), unit sum, radius 4σ.
+pub(super) fn kernel(sigma: f64) -> Vec<f64> {
+    if sigma <= 0.0 {
+        return vec![1.0];
+    }
+    let r = (4.0 * sigma).ceil() as isize;
+    let mut k: Vec<f64> = (-r..=r)
+        .map(|i| (-(i * i) as f64 / (2.0 * sigma * sigma)).exp())
+        .collect();
+    let s: f64 = k.iter().sum();
+    k.iter_mut().for_each(|x| *x /= s);
+    k
+}
+
+/// The prefix sums of `fine` blurred by `kern`: `out[i] = Σ_{j<i} (fine ⊛ kern)[j]`,
+/// `fine.len() + 1` values.
+pub(super) fn blurred_prefix(fine: &[f64], kern: &[f64], out: &mut Vec<f64>) {
+    let n = fine.len();
+    let r = kern.len() / 2;
+    out.clear();
+    out.resize(n + 1, 0.0);
+    let mut acc = 0.0;
+    if kern.len() == 1 {
+        for (i, &x) in fine.iter().enumerate() {
+            acc += x;
+            out[i + 1] = acc;
+        }
+        return;
+    }
+    let mut b = vec![0.0; n];
+    for (i, &x) in fine.iter().enumerate() {
+        if x == 0.0 {
+            continue;
+        }
+        let lo = i.saturating_sub(r);
+        let hi = (i + r).min(n - 1);
+        for j in lo..=hi {
+            b[j] += x * kern[j + r - i];
+        }
+    }
+    for (i, &x) in b.iter().enumerate() {
+        acc += x;
+        out[i + 1] = acc;
+    }
+}
+
+/// Bin `nt` values from a prefix sum with a delay of `shift` fine samples (positive: later):
+/// bin `n` sums the fine samples `[n·SUB − shift, (n + 1)·SUB − shift)` past the padding.
+#[inline]
+pub(super) fn bin(prefix: &[f64], pad: usize, shift: isize, out: &mut [f64]) {
+    let base = pad as isize - shift;
+    for (n, o) in out.iter_mut().enumerate() {
+        let a = base + (n * SUB) as isize;
+        let b = a + SUB as isize;
+        let at = |i: isize| prefix[i.clamp(0, prefix.len() as isize - 1) as usize];
+        *o = at(b) - at(a);
+    }
+}
