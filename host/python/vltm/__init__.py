@@ -23,6 +23,12 @@ Every probe releases the GIL while it runs. Errors are :class:`VltmError` subcla
 command line's one-line messages, naming keyword arguments (``t_min``) where the command
 line names flags (``--t-min``). Scale-out over a Dask cluster: :mod:`vltm.dask` (imported
 on first use; needs ``dask`` and ``distributed``).
+
+The keywords the probes share (the wave options ``wavelength`` … ``path``, the capture
+options ``swap_roles``, ``t_min``, ``t_max``, ``rebin``, ``background`` and the result
+options ``rows``, ``amplitudes``, ``report``, ``as_xarray``) mean the same everywhere: each
+function's ``help`` lists the ones it takes under *Common keywords* (written once, in
+``vltm._options``).
 """
 
 from __future__ import annotations
@@ -50,7 +56,7 @@ from ._commands import Text  # noqa: F401
 from ._errors import _warn  # noqa: F401
 from ._ltm import _voxel_set  # noqa: F401
 from ._partial import _out_shape, _partial_from_state, _Voxels  # noqa: F401
-from ._probes import _SHELLS, _input, _probe, _rows, _shells, _wave  # noqa: F401
+from ._probes import _SHELLS, _probe, _rows, _shells  # noqa: F401
 from ._results import _matrix_result, _shape_out  # noqa: F401
 from ._volumes import _volume  # noqa: F401
 

@@ -9,7 +9,7 @@ from typing import Any, Dict, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _check, _native
+from . import _check, _native, _options
 from ._errors import ArgumentError, _warn
 
 PathLike = Union[str, os.PathLike[str]]
@@ -220,20 +220,20 @@ class Capture:
         not (a z span, tilted normals)."""
         return self._native.info()
 
+    @_options.documented(_options.PREP)
     def transient(self, *, t_min: Any = None, t_max: Any = None, rebin: int = 1,
                   background: Any = None, report: bool = False,
                   as_xarray: bool = False) -> Any:
         """The summed transient (``vltm info --png``'s curve): every histogram summed bin by
         bin (non-finite samples skipped), float64 ``(nt,)``, after the preprocessing
-        (``t_min``, ``t_max``, ``rebin``, ``background`` as :func:`direct`; ``auto`` uses
-        the last tenth of the window, as ``vltm info``). ``report=True`` also returns a dict
-        with the path axis ``t`` (m), ``t_start``, ``delta_t`` and the preprocessing summary;
-        ``as_xarray=True`` a ``DataArray`` over ``t``."""
+        (below; ``background="auto"`` uses the last tenth of the window, as ``vltm info``).
+        ``report=True`` also returns a dict with the path axis ``t`` (m), ``t_start``,
+        ``delta_t`` and the preprocessing summary; ``as_xarray=True`` a ``DataArray`` over
+        ``t``."""
         report = _check.flag("report", report)
         as_xarray = _check.flag("as_xarray", as_xarray)
         counts, t0, dt, summary, warning = self._native.transient(
-            t_min=_check.time_bound("t_min", t_min), t_max=_check.time_bound("t_max", t_max),
-            rebin=_check.integer("rebin", rebin), background=_check.background(background))
+            **_options.checked(locals(), _options.PREP))
         _warn(warning)
         t = t0 + dt * np.arange(len(counts))
         rep = {"t": t, "t_start": t0, "delta_t": dt, "preprocessing": summary}

@@ -6,7 +6,7 @@ from __future__ import annotations
 import os
 from typing import Any, Dict, Optional, Union
 
-from . import _check, _native
+from . import _check, _native, _options
 from ._captures import Capture, PathLike
 from ._errors import _warn
 from ._volumes import Volume
@@ -20,14 +20,14 @@ class Text(str):
         return str(self)
 
 
+@_options.documented(_options.PREP)
 def info(capture: Union[Capture, PathLike], *, delta_t: Optional[float] = None,
          t_start: Optional[float] = None, grid_width: Optional[float] = None,
          t_min: Any = None, t_max: Any = None, rebin: int = 1, background: Any = None,
          png: Optional[PathLike] = None, volume: Any = None) -> Text:
     """The layout text of ``vltm info CAPTURE``, line for line: format, scan, laser and SPAD
     spots, device positions, time axis, counts, default λ, the memory budget and where it
-    comes from, and the summed transient (after the preprocessing ``t_min``, ``t_max``,
-    ``rebin``, ``background``, as :func:`direct`). ``delta_t``, ``t_start``, ``grid_width``
+    comes from, and the summed transient (after the preprocessing, below). ``delta_t``, ``t_start``, ``grid_width``
     override a ``.mat`` file's conventions (as :func:`open`); ``png`` also draws the summed
     transient there (``--png``); ``volume`` (a SPEC string or a grid :class:`Volume`, as
     ``--volume``) is named in the ``fast paths`` line: the path it takes, or the aligned grid
@@ -56,9 +56,7 @@ def info(capture: Union[Capture, PathLike], *, delta_t: Optional[float] = None,
     elif volume is not None and not isinstance(volume, str):
         raise _check.fail("volume", f"expected a SPEC string or a vltm.Volume, found {type(volume).__name__}")
     lines, warnings, _counts, _t0, _dt = _native.info_text(
-        p, **opts, t_min=_check.time_bound("t_min", t_min),
-        t_max=_check.time_bound("t_max", t_max), rebin=_check.integer("rebin", rebin),
-        background=_check.background(background),
+        p, **opts, **_options.checked(locals(), _options.PREP),
         png=None if png is None else os.fspath(png), volume=volume)
     for w in warnings:
         _warn(w)

@@ -9,15 +9,17 @@ from typing import Any, Optional, Sequence, Union
 
 import numpy as np
 
-from . import _check, _native, _probes
+from . import _check, _native, _options, _probes
 from ._captures import Capture, PathLike, _capture
 from ._errors import ArgumentError, DataError
+from ._options import INPUT, OUTPUT, WAVE
 from ._partial import Partial
-from ._probes import _input, _probe, _rows, _wave, gamma_mask
+from ._probes import _probe, _rows, gamma_mask
 from ._results import MatrixResult
 from ._volumes import Volume, _volume
 
 
+@_options.documented(WAVE, INPUT, OUTPUT)
 def relight(
     capture: Union[Capture, PathLike],
     volume: Union[str, np.ndarray, Volume],
@@ -42,7 +44,7 @@ def relight(
     as_xarray: bool = False,
 ) -> Any:
     """Relighting (``vltm relight``): the virtual camera's image ``i = T·p`` over
-    ``volume`` under an illumination that weights several projector foci, in one factorised
+    ``volume`` (float32 shaped like the volume) under an illumination that weights several projector foci, in one factorised
     pass (amplitudes add: ``A_p(b) = Σ_a p_a A(a, b)``, intensities ``|A_p|²``).
 
     ``pattern``: weighted foci ``"x,y,z,w;x,y,z,w"`` (metres; w = 1 if left out), an
@@ -50,7 +52,7 @@ def relight(
     shape (its voxels are the foci, its values the weights), or the path of a float32
     ``.npy`` image. ``amplitudes=True`` also returns ``A_p`` (complex128);
     ``report["passes"]`` the passes over the capture. ``leak_correct``, ``leak_epsilon`` as
-    :func:`column` (on by default). Other arguments as :func:`direct`."""
+    :func:`column` (on by default). ``capture`` and ``volume`` as :func:`direct`."""
     vol = _volume(volume)
     spec, pts = None, None
     if isinstance(pattern, (str, os.PathLike)) and os.fspath(pattern).strip().endswith(".npy"):
@@ -80,10 +82,10 @@ def relight(
                   {"pattern": spec, "leak_correct": leak_correct}, pattern=pts, pattern_spec=spec,
                   leak_correct=_check.flag("leak_correct", leak_correct),
                   leak_epsilon=_check.real("leak_epsilon", leak_epsilon),
-                  **_wave(wavelength, sigma, weights, band, compensate_laser, crop, path),
-                  **_input(swap_roles, t_min, t_max, rebin, background))
+                  **_options.checked(locals()))
 
 
+@_options.documented(WAVE, INPUT, OUTPUT)
 def row(
     capture: Union[Capture, PathLike],
     volume: Union[str, np.ndarray, Volume],
@@ -106,18 +108,18 @@ def row(
     report: bool = False,
     as_xarray: bool = False,
 ) -> Any:
-    """A row ``T(·, x_b)`` of the LTM (``vltm row``): the virtual camera focused at
-    ``x_b`` = ``focus`` (m, z > 0), the projector over ``volume`` (two-bounce gate),
-    streamed by laser rows without transposing the capture. ``swap_roles`` is refused (a
-    row is the transposed column already). ``leak_correct``, ``leak_epsilon`` as
-    :func:`column` (on by default). Other arguments as :func:`direct`."""
+    """A row ``T(·, x_b)`` of the LTM (``vltm row``), float32 shaped like the volume: the
+    virtual camera focused at ``x_b`` = ``focus`` (m, z > 0), the projector over ``volume``
+    (two-bounce gate), streamed by laser rows without transposing the capture.
+    ``swap_roles`` is refused (a row is the transposed column already). ``leak_correct``,
+    ``leak_epsilon`` as :func:`column` (on by default). ``capture`` and ``volume`` as
+    :func:`direct`."""
     f = _check.point("focus", focus)
     return _probe("row", capture, volume, None, False, report, as_xarray,
                   {"gate": "two-bounce", "focus": list(f), "leak_correct": leak_correct},
                   focus=list(f), leak_correct=_check.flag("leak_correct", leak_correct),
                   leak_epsilon=_check.real("leak_epsilon", leak_epsilon),
-                  **_wave(wavelength, sigma, weights, band, compensate_laser, crop, path),
-                  **_input(swap_roles, t_min, t_max, rebin, background))
+                  **_options.checked(locals()))
 
 
 def _voxel_set(spec: Any, what: str, gamma: Optional[np.ndarray]) -> np.ndarray:
@@ -137,6 +139,7 @@ def _voxel_set(spec: Any, what: str, gamma: Optional[np.ndarray]) -> np.ndarray:
     return np.ascontiguousarray(v.points.reshape(-1, 3), dtype=np.float32)
 
 
+@_options.documented(WAVE, OUTPUT)
 def matrix(
     capture: Union[Capture, PathLike],
     from_: Union[str, np.ndarray, Volume],
@@ -165,10 +168,10 @@ def matrix(
     (more if the accumulators of all foci exceed the memory budget); cost per laser row
     ``n_from·Ks·8J`` flops, at the end ``n_from·n_to·Ks·14J``; memory ``16·J·(Ks+1)`` bytes
     per focus and 44 bytes per element. ``rows=slice(a, b)`` returns a :class:`Partial` (one
-    factorised column per focus; ``gamma`` then needs ``direct``). Wave options as
-    :func:`direct`; the matrix is imaged on the band path."""
+    factorised column per focus; ``gamma`` then needs ``direct``). The matrix is imaged on
+    the band path (there is no ``path`` keyword)."""
     cap = _capture(capture)
-    wave = _wave(wavelength, sigma, weights, band, compensate_laser, crop, "auto")
+    wave = _options.checked(locals(), WAVE, path="auto")
     eps = _check.real("epsilon", epsilon)
     gamma = None
     if any(isinstance(x, str) and x.strip() == "gamma" for x in (from_, to)):

@@ -9,9 +9,10 @@ from typing import Any, Dict, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
-from . import _check, _native
+from . import _check, _native, _options
 from ._captures import Capture, PathLike, _capture
 from ._errors import ArgumentError
+from ._options import INPUT, OUTPUT, WAVE
 from ._partial import Partial
 from ._results import _shape_out
 from ._volumes import Volume, _volume
@@ -40,26 +41,6 @@ def _rows(rows: Any, capture: Capture, swap_roles: bool = False) -> Optional[Tup
             f"argument `rows`: expected A:B with 0 <= A <= B <= {n} (laser rows, B exclusive), found `{a}:{b}`"
         )
     return (a, b)
-
-
-def _wave(wavelength, sigma, weights, band, compensate_laser, crop, path) -> dict:
-    """The wave options, checked (ranges are the library's checks)."""
-    return dict(wavelength=_check.real("wavelength", wavelength, none=True),
-                sigma=_check.real("sigma", sigma, none=True),
-                weights=_check.text("weights", weights),
-                band=_check.real("band", band),
-                compensate_laser=_check.flag("compensate_laser", compensate_laser),
-                crop=_check.flag("crop", crop),
-                path=_check.text("path", path))
-
-
-def _input(swap_roles, t_min, t_max, rebin, background) -> dict:
-    """The capture options: role swap and preprocessing of the counts, checked."""
-    return dict(swap_roles=_check.flag("swap_roles", swap_roles),
-                t_min=_check.time_bound("t_min", t_min), t_max=_check.time_bound("t_max", t_max),
-                rebin=_check.integer("rebin", rebin),
-                background=_check.background(background))
-
 
 
 def _probe(kind: str, capture: Any, volume: Any, rows: Any, amplitudes: Any, report: Any,
@@ -96,6 +77,7 @@ def _shells(shells: Any) -> Optional[str]:
     return f"{r1!r},{r2!r}"
 
 
+@_options.documented(WAVE, INPUT, OUTPUT)
 def direct(
     capture: Union[Capture, PathLike],
     volume: Union[str, np.ndarray, Volume],
@@ -121,33 +103,16 @@ def direct(
     """Direct light: the LTM diagonal ``T(x_v, x_v)`` over ``volume`` (Eqs. 11–12), float32
     shaped like the volume — the same numbers as ``vltm direct``.
 
+    ``capture``: a :class:`Capture` or a file path (opened as :func:`open` does);
+    ``volume``: a SPEC string, a :class:`Volume` or an ``(..., 3)`` array of points (m).
     ``gate``: ``"gaussian"`` (direct light), ``"none"`` (monochromatic, no gate: paper
     Fig. 6) or ``"higher-order"`` (light arriving after the 3-vertex time: Eq. 18 on the
-    diagonal). ``wavelength`` λ (m, default twice the aperture pitch), ``sigma`` the gate
-    std (m, default 2λ/3), ``weights`` ``"inv"`` (the paper's 1/d) or ``"one"`` (y-tal),
-    ``band`` the band half-width in 1/σ, ``compensate_laser`` divides each row by the
-    laser's cos θ/d², ``crop=False`` keeps the whole time axis (by default it is cropped to
-    the bins the probed voxels can reach, with the gate's support, before the band
-    transform: the command line's ``--no-crop``), ``path`` ``auto|band|planar|lookup``,
-    ``swap_roles`` uses the SPADs
-    as the projector and the lasers as the camera (reciprocity; reads the capture into
-    memory).
-
-    Preprocessing of raw counts, per histogram in this order: the window ``t_min`` ..
-    ``t_max`` (metres of path as numbers or ``"0.72m"``, bins as ``"600b"``; cropped),
-    ``rebin`` K bins summed, ``background`` ``"auto"`` (each histogram's floor from the bins
-    no return from the volume reaches), ``"none"`` or counts per source bin.
-
-    ``rows=slice(a, b)`` returns a :class:`Partial` over those laser rows instead;
-    ``amplitudes=True`` also returns the complex amplitudes; ``report=True`` also the
-    counters; ``as_xarray=True`` returns an ``xarray.DataArray`` with coordinates ``x``,
-    ``y``, ``z`` (m) and the parameters as attributes."""
+    diagonal)."""
     return _probe("direct", capture, volume, rows, amplitudes, report, as_xarray,
-                  {"gate": gate}, gate=_check.text("gate", gate),
-                  **_wave(wavelength, sigma, weights, band, compensate_laser, crop, path),
-                  **_input(swap_roles, t_min, t_max, rebin, background))
+                  {"gate": gate}, gate=_check.text("gate", gate), **_options.checked(locals()))
 
 
+@_options.documented(WAVE, INPUT, OUTPUT)
 def column(
     capture: Union[Capture, PathLike],
     volume: Union[str, np.ndarray, Volume],
@@ -176,8 +141,10 @@ def column(
     report: bool = False,
     as_xarray: bool = False,
 ) -> Any:
-    """A column ``T(x_a, ·)`` of the LTM for the focus ``x_a`` = ``focus`` (m, z > 0):
-    ``gate`` ``"two-bounce"`` (Eq. 14), ``"higher-order"`` (Eq. 18) or ``"none"``; ``shell``
+    """A column ``T(x_a, ·)`` of the LTM for the focus ``x_a`` = ``focus`` (m, z > 0), float32
+    shaped like the volume — the same numbers as ``vltm column``.
+
+    ``gate``: ``"two-bounce"`` (Eq. 14), ``"higher-order"`` (Eq. 18) or ``"none"``; ``shell``
     ``(r0, r1)`` keeps ``r0 <= |x_a - x_b| < r1``. ``shells=(r1, r2)``: the near
     ``[0, r1)``, middle ``[r1, r2)`` and far ``[r2, inf)`` light of one run, stacked as
     ``(3,) + shape`` (``vltm column --shells``; a ``shell`` dimension with ``as_xarray``).
@@ -188,7 +155,7 @@ def column(
     ``leak_correct=False`` is the column of the capture as it is (``--no-leak-correct``),
     needed for partial states (``rows=``). ``amplitudes=True`` also returns the complex
     amplitudes ``A(x_a, ·)`` (complex128, ``T = |A|²``, 0 outside ``shell``) of two-bounce
-    and higher-order columns; the un-gated column has none. Other arguments as
+    and higher-order columns; the un-gated column has none. ``capture`` and ``volume`` as
     :func:`direct`."""
     f = _check.point("focus", focus)
     me = _check.real("mask_epsilon", mask_epsilon, none=True)
@@ -202,10 +169,10 @@ def column(
                   _SHELLS if cut else None, focus=list(f), gate=_check.text("gate", gate),
                   shell=sh, shells=cut, mask_epsilon=me,
                   leak_correct=_check.flag("leak_correct", leak_correct), leak_epsilon=le,
-                  **_wave(wavelength, sigma, weights, band, compensate_laser, crop, path),
-                  **_input(swap_roles, t_min, t_max, rebin, background))
+                  **_options.checked(locals()))
 
 
+@_options.documented(WAVE, INPUT, OUTPUT)
 def indirect(
     capture: Union[Capture, PathLike],
     volume: Union[str, np.ndarray, Volume],
@@ -233,7 +200,8 @@ def indirect(
     report: bool = False,
     as_xarray: bool = False,
 ) -> Any:
-    """In-focus indirect light (Eqs. 15–17): Γ = voxels whose direct light exceeds
+    """In-focus indirect light (Eqs. 15–17), float32 shaped like the volume — the same
+    numbers as ``vltm indirect``: Γ = voxels whose direct light exceeds
     ``epsilon``·max, then ``Σ T(x_a, x_b)`` over pairs of Γ at least ``min_separation``
     apart (default 1.5σ) or within ``shell``; ``shells=(r1, r2)``: the near, middle and far
     pair sums of one run, stacked as ``(3,) + shape``. ``gate``: of the summed columns,
@@ -241,8 +209,8 @@ def indirect(
     bounce") or ``"none"``. ``direct``: the direct light over the same volume (e.g. from
     :func:`direct` or a merged Dask run) instead of pass 1 — required with ``rows=``.
     ``report=True`` also returns Γ (``report["gamma"]``, boolean) and the direct light
-    (``report["direct"]``), as ``vltm indirect`` writes them beside ``I_i``. Other
-    arguments as :func:`direct`.
+    (``report["direct"]``), as ``vltm indirect`` writes them beside ``I_i``. ``capture`` and
+    ``volume`` as :func:`direct`.
 
     ``leak_correct=True`` (the default, as ``vltm indirect``): the capture's direct light is
     removed first — per laser/SPAD pair the bins where a 3-vertex return of a Γ voxel can
@@ -269,5 +237,4 @@ def indirect(
                   _SHELLS if cut else None, epsilon=eps, shell=sh, shells=cut, direct=d,
                   gate=_check.text("gate", gate),
                   leak_correct=_check.flag("leak_correct", leak_correct),
-                  **_wave(wavelength, sigma, weights, band, compensate_laser, crop, path),
-                  **_input(swap_roles, t_min, t_max, rebin, background))
+                  **_options.checked(locals()))
