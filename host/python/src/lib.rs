@@ -1,6 +1,6 @@
 //! `vltm._native`: the Rust side of the Python package. Thin typed entry points over the
 //! vltm library; argument normalisation, docstrings of the public API and the Dask layer live
-//! in the Python package (`vltm/__init__.py`, `vltm/dask.py`).
+//! in the Python package (`vltm/`: its modules are listed in `host/python/README.md`).
 //!
 //! Probes: direct light (and the un-gated and higher-order diagonals), columns (with their
 //! near/middle/far shells, Γ masks, leak correction and complex amplitudes on request),
