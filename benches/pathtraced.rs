@@ -15,6 +15,10 @@
 //! that render and the `I_i` of the noise-only capture `(H_seed0 − H_seed1)/√2`.
 //! `PATHTRACED_DIR=<dir>` measures another set of the same scenes' captures instead (for
 //! example all three rendered with seed 1).
+//! `cargo bench --bench pathtraced -- synth` prints instead the analysis by synthesis
+//! (`vltm::probe::synth`): Stage 1 with the oracle geometry of `scene.json`, Stage 2 with
+//! surfels from each capture's own direct light (`-- synth capture` for Stage 2 only;
+//! `SURFEL_EPSILON`, `SURFEL_VOLUME` and `SURFEL_SUB` change where its surfels come from).
 //! Not a timing benchmark: it measures fidelity. Takes about a minute per setup and scene.
 
 #[path = "../tests/support/pathtraced.rs"]

@@ -494,6 +494,15 @@ pub enum Surf {
     Capture,
 }
 
+/// The threshold of the columns that get surfels (× the brightest; `SURFEL_EPSILON` to
+/// change it).
+pub fn surfel_epsilon() -> f32 {
+    std::env::var("SURFEL_EPSILON")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0.1)
+}
+
 /// Sweeps of the geometry refinement.
 pub const SWEEPS: usize = 4;
 
@@ -514,15 +523,20 @@ pub fn measure_synth(
     use probe::synth::{Surfels, SynthModel, Synthesized};
     let d = probe::direct(&mut c.all, &c.vol, &s.wave, EXEC).expect("direct");
     let mask = probe::gamma_mask(&d.values, s.epsilon);
-    let fine = Volume::parse(SURFEL_VOLUME).unwrap();
+    let spec = std::env::var("SURFEL_VOLUME").unwrap_or_else(|_| SURFEL_VOLUME.to_string());
+    let fine = Volume::parse(&spec).unwrap();
+    let sub: usize = std::env::var("SURFEL_SUB")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(5);
     let boxes = c.boxes.clone();
     let surfels = |cap: &mut Capture| -> Surfels {
         match surf {
             Surf::Oracle => c_boxes_surfels(&boxes, 100.0),
             Surf::Capture => {
                 let d = probe::direct(cap, &fine, &s.wave, EXEC).expect("direct, fine");
-                let raw =
-                    Surfels::from_direct(&fine, &d.values, s.epsilon, 5, 0.0).expect("surfels");
+                let raw = Surfels::from_direct(&fine, &d.values, surfel_epsilon(), sub, 0.0)
+                    .expect("surfels");
                 let g = &cap.geometry;
                 let scale: Vec<f64> = (0..g.lasers.len()).map(|l| g.laser_falloff_at(l)).collect();
                 let r =

@@ -2,14 +2,15 @@
 //! patch at a time, to minimise the residual against a spread subset of the capture's
 //! histograms (analysis by synthesis).
 //!
-//! Each patch `p` (one column of [`Surfels::from_direct`]) has an offset `δ_p` along its
-//! normal and an amplitude `a_p ≥ 0`. The residual `R = H − Σ_p a_p m_p(δ_p)` is kept over
-//! the subset; a sweep visits every patch and tries `δ_p + {0, ±½, ±1, ±2}·step`, each with
+//! Each patch `p` (one column of [`Surfels::from_direct`]) has a pose (an offset `δ_p` along
+//! its normal and tilts about its two tangents, about its centre) and an amplitude `a_p ≥ 0`.
+//! The residual `R = H − Σ_p a_p m_p(pose_p)` is kept over the subset; a sweep visits every
+//! patch and tries `δ_p + {0, ±½, ±1, ±2}·step` and each tilt `± angle` (from 2°), each with
 //! its optimal amplitude `a = max(0, ⟨R + a_p m_p, m⟩/‖m‖²)`, keeps the best (the current one
-//! among them, so the residual never grows) and updates `R`; the step halves every sweep.
+//! among them, so the residual never grows) and updates `R`; step and angle halve every sweep.
 //! Returns are binned as the render bins them (no blur, no delay: those are fitted after).
 //!
-//! Cost: per patch and sweep, `7·|p|` returns per histogram of the subset (`|p|` surfels per
+//! Cost: per patch and sweep, `11·|p|` returns per histogram of the subset (`|p|` surfels per
 //! patch). Memory: the subset (`H·Nt` values, `H ≤ 4,096` histograms) and its residual.
 
 use super::surfels::Surfels;
@@ -23,13 +24,74 @@ use vltm_kernel::geometry::dist64;
 /// over the subset before and after.
 #[derive(Clone, Debug)]
 pub struct Refined {
-    /// The surfels, moved along their normals; areas scaled by the patches' amplitudes
+    /// The surfels, moved along their normals and tilted; areas scaled by the patches' amplitudes
     /// relative to the first global scale; patches switched off dropped.
     pub surfels: Surfels,
     /// Fraction of the subset's energy explained with the surfels as given (one global scale).
     pub before: f64,
     /// After the sweeps.
     pub after: f64,
+}
+
+/// A patch's centre and frame: its normal (of its first surfel) and two tangents.
+struct Frame {
+    centre: [f64; 3],
+    n: [f64; 3],
+    t1: [f64; 3],
+    t2: [f64; 3],
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+
+/// `v` rotated by `angle` about the unit axis `u` (Rodrigues).
+fn rotate(v: [f64; 3], u: [f64; 3], angle: f64) -> [f64; 3] {
+    let (s, c) = angle.sin_cos();
+    let x = cross(u, v);
+    let d = u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
+    core::array::from_fn(|i| v[i] * c + x[i] * s + u[i] * d * (1.0 - c))
+}
+
+impl Frame {
+    fn of(s: &Surfels, r: std::ops::Range<usize>) -> Self {
+        let m = r.len().max(1) as f64;
+        let centre: [f64; 3] =
+            core::array::from_fn(|x| r.clone().map(|k| s.points[k][x]).sum::<f64>() / m);
+        let n = s.normals[r.start];
+        let a = if n[0].abs() < 0.9 {
+            [1.0, 0.0, 0.0]
+        } else {
+            [0.0, 1.0, 0.0]
+        };
+        let t1 = {
+            let c = cross(n, a);
+            let l = (c[0] * c[0] + c[1] * c[1] + c[2] * c[2]).sqrt();
+            c.map(|x| x / l)
+        };
+        let t2 = cross(n, t1);
+        Self { centre, n, t1, t2 }
+    }
+
+    /// Surfel `k` of this patch under pose `[offset, tilt about t1, tilt about t2]`: its point
+    /// and normal.
+    fn place(&self, s: &Surfels, k: usize, pose: [f64; 3]) -> ([f64; 3], [f64; 3]) {
+        let [d, a, b] = pose;
+        let rel: [f64; 3] = core::array::from_fn(|x| s.points[k][x] - self.centre[x]);
+        let (rel, n) = if a == 0.0 && b == 0.0 {
+            (rel, s.normals[k])
+        } else {
+            let rel = rotate(rotate(rel, self.t1, a), self.t2, b);
+            let n = rotate(rotate(s.normals[k], self.t1, a), self.t2, b);
+            (rel, n)
+        };
+        let q = core::array::from_fn(|x| self.centre[x] + rel[x] + d * self.n[x]);
+        (q, n)
+    }
 }
 
 /// A return: `(bin, amplitude)` of surfel point `p` with normal `n` and area `a` for the pair
@@ -113,16 +175,20 @@ pub fn refine(
     } else {
         surfels.patches.clone()
     };
-    let mut offset = vec![0.0f64; patches.len()];
+    // Per patch: its centre and an orthonormal frame (normal of its first surfel, two
+    // tangents); its pose: offset along the normal and tilts about the two tangents.
+    let frames: Vec<Frame> = patches
+        .iter()
+        .map(|r| Frame::of(surfels, r.clone()))
+        .collect();
+    let mut pose = vec![[0.0f64; 3]; patches.len()];
     // One global scale to start: a_p = <H, M>/<M, M>.
-    let render_all = |offset: &[f64], amp: &[f64]| -> Vec<f64> {
+    let render_all = |pose: &[[f64; 3]], amp: &[f64]| -> Vec<f64> {
         let mut m = vec![0.0f64; pairs.len() * nt];
         m.par_chunks_mut(nt).zip(&pairs).for_each(|(m, &(l, s))| {
             for (p, r) in patches.iter().enumerate() {
                 for k in r.clone() {
-                    let n = surfels.normals[k];
-                    let q: [f64; 3] =
-                        core::array::from_fn(|x| surfels.points[k][x] + offset[p] * n[x]);
+                    let (q, n) = frames[p].place(surfels, k, pose[p]);
                     if let Some((b, w)) = ret(&g, l, s, laser_scale[l], q, n, surfels.areas[k]) {
                         m[b] += amp[p] * w;
                     }
@@ -131,7 +197,7 @@ pub fn refine(
         });
         m
     };
-    let m0 = render_all(&offset, &vec![1.0; patches.len()]);
+    let m0 = render_all(&pose, &vec![1.0; patches.len()]);
     let hm: f64 = h.iter().zip(&m0).map(|(a, b)| a * b).sum();
     let mm: f64 = m0.iter().map(|x| x * x).sum();
     let s0 = if mm > 0.0 { (hm / mm).max(0.0) } else { 0.0 };
@@ -139,18 +205,40 @@ pub fn refine(
     let mut r: Vec<f64> = h.iter().zip(&m0).map(|(a, b)| a - s0 * b).collect();
     let explained = |r: &[f64]| 1.0 - r.iter().map(|x| x * x).sum::<f64>() / energy;
     let before = explained(&r);
-    const TRY: [f64; 7] = [0.0, -0.5, 0.5, -1.0, 1.0, -2.0, 2.0];
+    // Moves tried per patch: offsets in steps, tilts in angle steps.
+    const TRY: [[f64; 3]; 11] = [
+        [0.0, 0.0, 0.0],
+        [-0.5, 0.0, 0.0],
+        [0.5, 0.0, 0.0],
+        [-1.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [-2.0, 0.0, 0.0],
+        [2.0, 0.0, 0.0],
+        [0.0, -1.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [0.0, 0.0, -1.0],
+        [0.0, 0.0, 1.0],
+    ];
     let mut step = step;
+    let mut angle = 2f64.to_radians();
     let bar = Pass::start(exec, "direct-light model: geometry", sweeps * patches.len());
     for _ in 0..sweeps {
         for (p, range) in patches.iter().enumerate() {
             // Per histogram: the patch's old and candidate returns, <R', m_c> and ‖m_c‖².
-            let cand: Vec<f64> = TRY.iter().map(|t| offset[p] + t * step).collect();
-            let render = |l: usize, s: usize, d: f64, out: &mut Vec<(usize, f64)>| {
+            let cand: Vec<[f64; 3]> = TRY
+                .iter()
+                .map(|t| {
+                    [
+                        pose[p][0] + t[0] * step,
+                        pose[p][1] + t[1] * angle,
+                        pose[p][2] + t[2] * angle,
+                    ]
+                })
+                .collect();
+            let render = |l: usize, s: usize, d: [f64; 3], out: &mut Vec<(usize, f64)>| {
                 out.clear();
                 for k in range.clone() {
-                    let n = surfels.normals[k];
-                    let q: [f64; 3] = core::array::from_fn(|x| surfels.points[k][x] + d * n[x]);
+                    let (q, n) = frames[p].place(surfels, k, d);
                     if let Some(x) = ret(&g, l, s, laser_scale[l], q, n, surfels.areas[k]) {
                         out.push(x);
                     }
@@ -162,7 +250,7 @@ pub fn refine(
                 .fold(
                     || (vec![0.0f64; 2 * TRY.len()], Vec::new(), Vec::new()),
                     |(mut acc, mut old, mut new), (i, &(l, s))| {
-                        render(l, s, offset[p], &mut old);
+                        render(l, s, pose[p], &mut old);
                         let rr = &r[i * nt..(i + 1) * nt];
                         // R' = R + a_p m_old on the touched bins, kept sparse.
                         let rp = |b: usize, old: &[(usize, f64)]| {
@@ -209,7 +297,7 @@ pub fn refine(
             }
             let (c, _, a_new) = best;
             // Apply: R = R + a_p m_old − a_new m_new.
-            let (d_old, d_new, a_old) = (offset[p], cand[c], amp[p]);
+            let (d_old, d_new, a_old) = (pose[p], cand[c], amp[p]);
             r.par_chunks_mut(nt)
                 .zip(&pairs)
                 .for_each_init(Vec::new, |buf, (rr, &(l, s))| {
@@ -222,11 +310,12 @@ pub fn refine(
                         rr[b] -= a_new * w;
                     }
                 });
-            offset[p] = d_new;
+            pose[p] = d_new;
             amp[p] = a_new;
             bar.advance(1);
         }
         step *= 0.5;
+        angle *= 0.5;
     }
     drop(bar);
     let after = explained(&r);
@@ -238,10 +327,8 @@ pub fn refine(
         }
         let first = pts.len();
         for k in range.clone() {
-            let n = surfels.normals[k];
-            pts.push(core::array::from_fn(|x| {
-                surfels.points[k][x] + offset[p] * n[x]
-            }));
+            let (q, n) = frames[p].place(surfels, k, pose[p]);
+            pts.push(q);
             nrm.push(n);
             area.push(surfels.areas[k] * amp[p] / s0);
             cl.push(surfels.cluster[k]);

