@@ -10,6 +10,7 @@ mod lookup;
 mod lookup_slice;
 pub mod phase;
 mod probe;
+mod report;
 mod sample;
 mod scan;
 
@@ -29,6 +30,7 @@ pub use lookup::{
 pub use lookup_slice::{Lattice, LookupSlice, SliceLayout};
 pub use num_complex;
 pub use phase::{cis_small_turns, cis_turns, cis_turns_f64};
-pub use probe::{Gate, Probe, Report, Target};
+pub use probe::{Gate, Probe, Target};
+pub use report::Report;
 pub use sample::Sample;
 pub use scan::{Row, RowBuffer, Scan};

@@ -91,7 +91,8 @@
 use crate::config::{Config, Point, Weights};
 use crate::error::{ConfigError, Error, check_len, check_points};
 use crate::phase::cis_small_turns;
-use crate::probe::{Report, Target};
+use crate::probe::Target;
+use crate::report::Report;
 use crate::sample::Sample;
 use crate::scan::{Row, Scan, as_complex};
 use num_complex::{Complex32, Complex64};
