@@ -577,7 +577,7 @@ fn import_graph_has_no_circle() {
     // line's commands import its arguments, the kernel's probe its configuration.
     assert!(tree().edges["io::tal"].contains("io::capture"));
     assert!(tree_of("host/cli/src", false).edges["commands"].contains("args"));
-    assert!(tree_of("kernel/src", true).edges["probe"].contains("config"));
+    assert!(tree_of("kernel/src", true).edges["band::probe"].contains("config"));
 }
 
 /// The checks can fail: a circle, a forbidden import, an import against the data flow and an

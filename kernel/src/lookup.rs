@@ -88,13 +88,14 @@
 //! SPAD's grid, the voxels' row sums and lead distances). SPAD-outer: one grid in memory at a
 //! time. No allocation, no panic on data; configuration checked once.
 
+use crate::band::probe::Target;
+use crate::band::row::Row;
+use crate::band::scan::{Scan, as_complex};
 use crate::config::{Config, Point, Weights};
 use crate::error::{ConfigError, Error, check_len, check_points};
 use crate::phase::cis_small_turns;
-use crate::probe::Target;
 use crate::report::Report;
 use crate::sample::Sample;
-use crate::scan::{Row, Scan, as_complex};
 use num_complex::{Complex32, Complex64};
 
 /// Largest grid accepted (`2²⁴` points: tables and `f32` grid positions stay exact).

@@ -70,14 +70,15 @@
 //! after, two SPADs' cubic cells, the voxels' row
 //! sums and leads). No allocation, no panic on data; configuration and geometry checked once.
 
+use crate::band::probe::Target;
+use crate::band::row::Row;
+use crate::band::scan::{Scan, as_complex};
 use crate::config::{Point, Weights};
 use crate::error::{ConfigError, Error, check_len};
 use crate::lookup::{Interpolant, Lookup, LookupGrid, dist_nr, kahan, synthesise_fused, value};
 use crate::phase::cis_small_turns;
-use crate::probe::Target;
 use crate::report::Report;
 use crate::sample::Sample;
-use crate::scan::{Row, Scan, as_complex};
 use num_complex::{Complex32, Complex64};
 
 /// Wrapped grid values kept before node 0 (`y[−3 .. 0]`) and after node `L − 1`

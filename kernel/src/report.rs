@@ -4,8 +4,8 @@
 //! ([`LookupProbe`](crate::LookupProbe), [`LookupSlice`](crate::LookupSlice)). Cost: O(1) per
 //! row; no memory.
 
+use crate::band::row::Row;
 use crate::sample::Sample;
-use crate::scan::Row;
 
 /// Counters returned by [`Probe::finish`](crate::Probe::finish) and
 /// [`Probe::report`](crate::Probe::report).

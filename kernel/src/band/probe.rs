@@ -27,13 +27,14 @@
 //! * Accumulators are `f64` complex; each row's contribution to an element is summed over the
 //!   SPADs in `f32` first (the phasor arithmetic is `f32`).
 
+use super::row::Row;
+use super::scan::Scan;
 use crate::config::{Config, Point};
 use crate::error::{Error, check_len, check_points};
 use crate::geometry::{alias_window, dist, leaves_window, widen};
 use crate::phase::{cis_turns, cis_turns_f64};
 use crate::report::Report;
 use crate::sample::Sample;
-use crate::scan::{Row, Scan};
 use num_complex::{Complex32, Complex64};
 
 /// Which elements of the light transport matrix a probe accumulates.
