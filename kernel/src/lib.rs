@@ -7,7 +7,6 @@ mod error;
 mod fixed;
 pub mod geometry;
 mod lookup;
-mod lookup_slice;
 pub mod phase;
 mod report;
 mod sample;
@@ -23,9 +22,9 @@ pub use band::{ColumnF32, Gate, Probe, Row, RowBuffer, Scan, Target};
 pub use config::{Config, Legs, Params, Point, Weights};
 pub use error::{ConfigError, Error};
 pub use lookup::{
-    GridReader, Interpolant, Lookup, LookupGrid, LookupParams, LookupProbe, lagrange4,
+    GridReader, Interpolant, Lattice, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice,
+    SliceLayout, lagrange4,
 };
-pub use lookup_slice::{Lattice, LookupSlice, SliceLayout};
 pub use num_complex;
 pub use phase::{cis_small_turns, cis_turns, cis_turns_f64};
 pub use report::Report;

@@ -93,7 +93,8 @@ use crate::band::probe::Target;
 use crate::config::{Point, Weights};
 use crate::error::{ConfigError, Error, check_len, check_points};
 use crate::geometry::dist;
-use crate::lookup::{EXTRA, Interpolant, LookupGrid, LookupParams};
+use crate::lookup::grid::{Interpolant, LookupGrid, LookupParams};
+use crate::lookup::table::EXTRA;
 use ::fixed::types::I1F15;
 
 /// Largest grid of the fixed-point path: `2¹⁶` points (index bits + 16 fraction bits ≤ 32).
