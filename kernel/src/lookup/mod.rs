@@ -83,11 +83,13 @@
 //! | `grid.rs` | [`LookupParams`], [`Interpolant`] → [`LookupGrid`]: the grid length `L` chosen (or checked) against the bound `η` |
 //! | `table.rs` | [`Lookup`]: the twiddle and carrier tables in caller memory, the inverse FFT synthesis of a baseband grid ([`Lookup::baseband`]) and its reader ([`GridReader`]) |
 //! | `pair.rs` | the per-pair arithmetic every lookup path shares: [`lagrange4`] and the Newton square-root distance |
+//! | `kahan.rs` | the accumulators both probes share: per voxel a Kahan-compensated `f32` complex sum in caller memory |
 //! | `probe.rs` | [`LookupProbe`]: the Gaussian diagonal or column over a voxel list |
 //! | `lattice.rs` | [`Lattice`] → [`SliceLayout`]: a structured slice's voxels and SPADs, validated |
 //! | `slice.rs` | [`LookupSlice`]: the Gaussian diagonal or column over a structured slice, with the laser-independent part of every pair tabulated once |
 
 pub(crate) mod grid;
+pub(crate) mod kahan;
 pub(crate) mod lattice;
 pub(crate) mod pair;
 pub(crate) mod probe;

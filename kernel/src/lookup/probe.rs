@@ -16,6 +16,7 @@
 //! time. No allocation, no panic on data; configuration checked once.
 
 use super::grid::{Interpolant, LookupGrid};
+use super::kahan::{self, KahanSums};
 use super::pair::{dist_nr, lagrange4};
 use super::table::{EXTRA, Lookup, synthesise_fused};
 use crate::band::probe::Target;
@@ -63,8 +64,8 @@ use num_complex::{Complex32, Complex64};
 pub struct LookupProbe<'m> {
     target: Target,
     voxels: &'m [Point],
-    /// Per voxel: the amplitude as a Kahan-compensated `f32` sum `[s.re, s.im, c.re, c.im]`.
-    acc: &'m mut [[f32; 4]],
+    /// Per voxel: the amplitude as a Kahan-compensated `f32` sum.
+    acc: KahanSums<'m>,
     /// One SPAD's grid, `L + EXTRA`.
     grid_buf: &'m mut [Complex32],
     /// Per voxel: this row's sum over the SPADs.
@@ -87,7 +88,7 @@ impl<'m> LookupProbe<'m> {
     /// bytes of the band diagonal's `2Kv` `f64`, with no soft `f64` per row on a
     /// Cortex-M4F).
     pub const fn state_len(n_voxels: usize) -> usize {
-        n_voxels.saturating_mul(4)
+        KahanSums::state_len(n_voxels)
     }
 
     /// Length in `f32` of the scratch: `2(L + 3) + 3Kv`.
@@ -126,13 +127,7 @@ impl<'m> LookupProbe<'m> {
         if let Target::Column(a) = target {
             check_points("focus", &[a])?;
         }
-        let found = state.len();
-        let acc: &mut [[f32; 4]] =
-            bytemuck::try_cast_slice_mut(state).map_err(|_| Error::Length {
-                what: "state",
-                expected: 4 * kv,
-                found,
-            })?;
+        let mut acc = KahanSums::new(state, 4 * kv)?;
         let short = Error::Length {
             what: "scratch",
             expected: Self::scratch_len(&grid, kv),
@@ -142,7 +137,7 @@ impl<'m> LookupProbe<'m> {
             .split_at_mut_checked(2 * (grid.len + EXTRA))
             .ok_or(short)?;
         let (sums, lead) = rest.split_at_mut_checked(2 * kv).ok_or(short)?;
-        acc.fill([0.0; 4]);
+        acc.reset();
         let cfg = &grid.cfg;
         let (g_lo, g_hi) = cfg.guard();
         Ok(Self {
@@ -176,11 +171,11 @@ impl<'m> LookupProbe<'m> {
     /// The complex amplitude accumulated so far at voxel `i` (0 past the end), the
     /// compensated sum's value `s − c` in `f64`.
     pub fn amplitude(&self, i: usize) -> Complex64 {
-        self.acc.get(i).map_or(Complex64::new(0.0, 0.0), value)
+        self.acc.amplitude(i)
     }
     /// Zeroes the accumulators and counters.
     pub fn reset(&mut self) {
-        self.acc.fill([0.0; 4]);
+        self.acc.reset();
         self.report = Report::default();
     }
 
@@ -284,7 +279,7 @@ impl<'m> LookupProbe<'m> {
                 Some(w) => w,
                 None => weight(*d),
             };
-            kahan(a, *s * w);
+            kahan::add(a, *s * w);
         }
         self.report.count_row(row);
         Ok(())
@@ -301,9 +296,7 @@ impl<'m> LookupProbe<'m> {
         {
             return Err(Error::Incompatible("different target, voxels or grid"));
         }
-        for (a, b) in self.acc.iter_mut().zip(other.acc.iter()) {
-            kahan(a, Complex32::new(b[0] - b[2], b[1] - b[3]));
-        }
+        self.acc.merge(&other.acc);
         self.report.add_part(&other.report);
         Ok(())
     }
@@ -315,9 +308,7 @@ impl<'m> LookupProbe<'m> {
     /// [`Error::Length`] if `out` has the wrong length.
     pub fn finish(&self, out: &mut [f64]) -> Result<Report, Error> {
         check_len("out", self.voxels.len(), out.len())?;
-        for (o, a) in out.iter_mut().zip(self.acc.iter()) {
-            *o = value(a).norm_sqr();
-        }
+        self.acc.intensities(out);
         Ok(self.report)
     }
 
@@ -328,28 +319,7 @@ impl<'m> LookupProbe<'m> {
     /// [`Error::Length`] if `out` has the wrong length.
     pub fn finish_f32(&self, out: &mut [f32]) -> Result<Report, Error> {
         check_len("out", self.voxels.len(), out.len())?;
-        for (o, a) in out.iter_mut().zip(self.acc.iter()) {
-            *o = Complex32::new(a[0] - a[2], a[1] - a[3]).norm_sqr();
-        }
+        self.acc.intensities_f32(out);
         Ok(self.report)
     }
-}
-
-/// Kahan step: `acc = [s.re, s.im, c.re, c.im]` += `z` (`c` the running compensation, the
-/// rounding error still to subtract).
-#[inline(always)]
-pub(crate) fn kahan(acc: &mut [f32; 4], z: Complex32) {
-    let [s_re, s_im, c_re, c_im] = *acc;
-    let (y_re, y_im) = (z.re - c_re, z.im - c_im);
-    let (t_re, t_im) = (s_re + y_re, s_im + y_im);
-    *acc = [t_re, t_im, (t_re - s_re) - y_re, (t_im - s_im) - y_im];
-}
-
-/// The compensated sum's value `s − c`, in `f64`.
-#[inline]
-pub(crate) fn value(a: &[f32; 4]) -> Complex64 {
-    Complex64::new(
-        f64::from(a[0]) - f64::from(a[2]),
-        f64::from(a[1]) - f64::from(a[3]),
-    )
 }

@@ -63,9 +63,9 @@
 //! sums and leads). No allocation, no panic on data; configuration and geometry checked once.
 
 use super::grid::{Interpolant, LookupGrid};
+use super::kahan::{self, KahanSums};
 use super::lattice::{SliceLayout, lattice_offset};
 use super::pair::dist_nr;
-use super::probe::{kahan, value};
 use super::table::{Lookup, synthesise_fused};
 use crate::band::probe::Target;
 use crate::band::row::Row;
@@ -124,8 +124,8 @@ pub struct LookupSlice<'m> {
     spad_info: &'m [[f32; 4]],
     /// Per (iy, u): `[x_vs, P.re, P.im, 0]`, `ny × width`.
     table: &'m [[f32; 4]],
-    /// Per voxel: the amplitude as a Kahan-compensated `f32` sum `[s.re, s.im, c.re, c.im]`.
-    acc: &'m mut [[f32; 4]],
+    /// Per voxel: the amplitude as a Kahan-compensated `f32` sum.
+    acc: KahanSums<'m>,
     /// One SPAD's grid with wrapped copies, `PRE + L + POST`: `y[−3 .. L + 5]`.
     grid_buf: &'m mut [Complex32],
     /// Two SPADs' cubic cells `[a₀, a₁, a₂, a₃]` (re, im interleaved), `2L`.
@@ -149,7 +149,7 @@ impl<'m> LookupSlice<'m> {
     /// Length in `f32` of the state: `4Kv` (per voxel a Kahan-compensated complex sum: the
     /// bytes of the general path's `2Kv` `f64`, with no soft `f64` per row on a Cortex-M4F).
     pub const fn state_len(n_voxels: usize) -> usize {
-        n_voxels.saturating_mul(4)
+        KahanSums::state_len(n_voxels)
     }
 
     /// Length in `f32` of the scratch: `2(L + 8) + 16L + 4Kv`.
@@ -255,9 +255,7 @@ impl<'m> LookupSlice<'m> {
             }
             *inf = [start as f32, lo, hi, 0.0];
         }
-        let found = state.len();
-        let acc: &mut [[f32; 4]] =
-            bytemuck::try_cast_slice_mut(state).map_err(|_| short("state", 4 * kv, found))?;
+        let mut acc = KahanSums::new(state, 4 * kv)?;
         let sl = Self::scratch_len(&grid, kv);
         let found = scratch.len();
         let (g, rest) = scratch
@@ -267,7 +265,7 @@ impl<'m> LookupSlice<'m> {
             .split_at_mut_checked(16 * l)
             .ok_or(short("scratch", sl, found))?;
         let voxel = bytemuck::try_cast_slice_mut(rest).map_err(|_| short("scratch", sl, found))?;
-        acc.fill([0.0; 4]);
+        acc.reset();
         let l = grid.len();
         let (g_lo, g_hi) = cfg.guard();
         Ok(Self {
@@ -302,11 +300,11 @@ impl<'m> LookupSlice<'m> {
     }
     /// The complex amplitude accumulated so far at voxel `i` (`iy·nx + ix`; 0 past the end).
     pub fn amplitude(&self, i: usize) -> Complex64 {
-        self.acc.get(i).map_or(Complex64::new(0.0, 0.0), value)
+        self.acc.amplitude(i)
     }
     /// Zeroes the accumulators and counters.
     pub fn reset(&mut self) {
-        self.acc.fill([0.0; 4]);
+        self.acc.reset();
         self.report = Report::default();
     }
 
@@ -453,7 +451,7 @@ impl<'m> LookupSlice<'m> {
                 }
                 Target::Diagonal => 1.0,
             };
-            kahan(a, s * (c * cis_small_turns(theta * t)) * w);
+            kahan::add(a, s * (c * cis_small_turns(theta * t)) * w);
         }
         self.report.count_row(row);
         Ok(())
@@ -467,9 +465,7 @@ impl<'m> LookupSlice<'m> {
         if self.target != other.target || self.layout != other.layout {
             return Err(Error::Incompatible("different target or slice layout"));
         }
-        for (a, b) in self.acc.iter_mut().zip(other.acc.iter()) {
-            kahan(a, Complex32::new(b[0] - b[2], b[1] - b[3]));
-        }
+        self.acc.merge(&other.acc);
         self.report.add_part(&other.report);
         Ok(())
     }
@@ -481,9 +477,7 @@ impl<'m> LookupSlice<'m> {
     /// [`Error::Length`] if `out` has the wrong length.
     pub fn finish(&self, out: &mut [f64]) -> Result<Report, Error> {
         check_len("out", self.acc.len(), out.len())?;
-        for (o, a) in out.iter_mut().zip(self.acc.iter()) {
-            *o = value(a).norm_sqr();
-        }
+        self.acc.intensities(out);
         Ok(self.report)
     }
 }
