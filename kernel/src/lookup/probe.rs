@@ -9,7 +9,7 @@
 //! butterflies), then `Kv·Ks`
 //! pairs of O(1) work (a distance, the guard test, four Lagrange weights, four complex
 //! loads, one table carrier, one small-phase polynomial, one weight), against the band
-//! path's `Kv·Ks·14J` flops. Memory, all caller-owned: shared tables `3L` `f32`
+//! path's `Kv·Ks·14J` flops. Memory, all caller-owned: shared tables `4L` `f32`
 //! ([`Lookup::tables_len`]: twiddles and carrier); per probe the state `4Kv` `f32` (the
 //! bytes of the band diagonal's `2Kv` `f64`) and the scratch `2(L + 3) + 3Kv` `f32` ([`LookupProbe::scratch_len`]: the
 //! SPAD's grid, the voxels' row sums and lead distances). SPAD-outer: one grid in memory at a

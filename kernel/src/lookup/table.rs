@@ -93,7 +93,7 @@ impl<'t> Lookup<'t> {
     /// One SPAD's baseband grid `Y[n]` (`n < L`, then `EXTRA` wrapped copies) from its band
     /// spectrum `hg` (J values): the band placed in bit-reversed order, then the radix-2
     /// decimation-in-time stages of an inverse FFT. The reference of the fused synthesis
-    /// every path runs (`lookup_slice::synthesise_fused`: the same sums, 25–30 % fewer
+    /// every path runs (`synthesise_fused`: the same sums, 25–30 % fewer
     /// instructions), checked against it and against the direct sum by the unit tests.
     #[cfg(test)]
     pub(crate) fn synthesise(&self, hg: &[Complex32], y: &mut [Complex32]) {
