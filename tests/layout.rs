@@ -577,7 +577,7 @@ fn import_graph_has_no_circle() {
     // line's commands import its arguments, the kernel's probe its configuration.
     assert!(tree().edges["io::tal"].contains("io::capture"));
     assert!(tree_of("host/cli/src", false).edges["commands"].contains("args"));
-    assert!(tree_of("kernel/src", true).edges["probe"].contains("config"));
+    assert!(tree_of("kernel/src", true).edges["band::probe"].contains("config"));
 }
 
 /// The checks can fail: a circle, a forbidden import, an import against the data flow and an
@@ -996,4 +996,53 @@ fn cli_table_matches_the_tree() {
     // With teeth: a table without `args` misses it.
     let cut = readme.replace("| `args` |", "| args |");
     assert!(!cli_rows(&cut).contains("args"));
+}
+
+/// The rows of the module map in `kernel/README.md` (the table after "## Module map"): the
+/// module path in the first cell's backticks.
+fn kernel_map_rows(readme: &str) -> BTreeSet<String> {
+    readme
+        .split("## Module map")
+        .nth(1)
+        .expect("kernel/README.md: ## Module map")
+        .lines()
+        .skip_while(|l| !l.starts_with('|'))
+        .take_while(|l| l.starts_with('|'))
+        .filter_map(|l| {
+            let cells: Vec<&str> = l.split('|').map(str::trim).collect();
+            cells
+                .get(1)
+                .filter(|c| c.starts_with('`'))
+                .and_then(|c| c.split('`').nth(1))
+                .map(str::to_string)
+        })
+        .collect()
+}
+
+/// The kernel's module map both ways: every module of `kernel/src` (`band::scan`,
+/// `lookup::kahan`, …) has a row in `kernel/README.md`, and every row names a module.
+#[test]
+fn kernel_module_map_matches_the_tree() {
+    let readme = fs::read_to_string(root().join("kernel/README.md")).expect("kernel/README.md");
+    let rows = kernel_map_rows(&readme);
+    let modules: BTreeSet<String> = tree_of("kernel/src", true)
+        .files
+        .into_keys()
+        .filter(|m| !m.is_empty())
+        .collect();
+    assert!(
+        modules.len() > 20,
+        "kernel/src has {} modules",
+        modules.len()
+    );
+    let missing: Vec<&String> = modules.difference(&rows).collect();
+    let extra: Vec<&String> = rows.difference(&modules).collect();
+    assert!(
+        missing.is_empty() && extra.is_empty(),
+        "kernel/README.md's module map: modules without a row {missing:?}, rows without a module {extra:?}"
+    );
+    // With teeth: a map without `band::row` misses it.
+    let cut = readme.replace("| `band::row` |", "| band::row |");
+    assert!(!kernel_map_rows(&cut).contains("band::row"));
+    assert!(rows.contains("band::row"));
 }

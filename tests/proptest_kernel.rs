@@ -27,7 +27,7 @@
 //! * `ColumnF32` (the factorised Gaussian column with `f32` Kahan state, checked as a seventh
 //!   probe `column/Gaussian/f32`): its compensated sums add `≤ 2u` over the whole scan
 //!   (independent of the number of rows) and its `f32` `finish` the band and SPAD sums, so its
-//!   `ε_f32` gets `u·(2J + Ks + 8)` more (kernel module `column32`).
+//!   `ε_f32` gets `u·(2J + Ks + 8)` more (kernel module `band::column32`).
 //!
 //! * `ColumnF32::finish_lookup` (the same column imaged on the lookup path, checked as
 //!   `lookup column/f32 finish` with the lookup probes): `ColumnF32`'s tolerance plus the
@@ -612,7 +612,7 @@ impl Scene {
         };
         let mut eps32 = eps_lookup(&cfg, &grid, truth, target, &self.voxels);
         if factorised {
-            // ColumnF32 (kernel module `column32`): Kahan state, f32 SPAD sums in `finish`.
+            // ColumnF32 (kernel module `band::column32`): Kahan state, f32 SPAD sums in `finish`.
             eps32 += U32 * (2 * cfg.bins() + self.spads.len() + 8) as f64;
         }
         let tail = (-cfg.params().gate_support.powi(2) / 2.0).exp();

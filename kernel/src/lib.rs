@@ -1,17 +1,15 @@
 #![doc = include_str!("../README.md")]
 #![no_std]
 
-mod column32;
+mod band;
 mod config;
 mod error;
 mod fixed;
 pub mod geometry;
 mod lookup;
-mod lookup_slice;
 pub mod phase;
-mod probe;
+mod report;
 mod sample;
-mod scan;
 
 pub use self::fixed::{
     CIS_ERR, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedLookup, FixedLookupGrid,
@@ -20,15 +18,14 @@ pub use self::fixed::{
 };
 /// The Q1.15 type of the fixed-point tables (from the `fixed` crate 1.31).
 pub use ::fixed::types::I1F15;
-pub use column32::ColumnF32;
+pub use band::{ColumnF32, Gate, Probe, Row, RowBuffer, Scan, Target};
 pub use config::{Config, Legs, Params, Point, Weights};
 pub use error::{ConfigError, Error};
 pub use lookup::{
-    GridReader, Interpolant, Lookup, LookupGrid, LookupParams, LookupProbe, lagrange4,
+    GridReader, Interpolant, Lattice, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice,
+    SliceLayout, lagrange4,
 };
-pub use lookup_slice::{Lattice, LookupSlice, SliceLayout};
 pub use num_complex;
 pub use phase::{cis_small_turns, cis_turns, cis_turns_f64};
-pub use probe::{Gate, Probe, Report, Target};
+pub use report::Report;
 pub use sample::Sample;
-pub use scan::{Row, RowBuffer, Scan};

@@ -89,11 +89,12 @@ use super::config::FixedConfig;
 use super::nco::{cis_q15, q15};
 use super::row::FixedRow;
 use super::scan::FixedScan;
+use crate::band::probe::Target;
 use crate::config::{Point, Weights};
 use crate::error::{ConfigError, Error, check_len, check_points};
 use crate::geometry::dist;
-use crate::lookup::{EXTRA, Interpolant, LookupGrid, LookupParams};
-use crate::probe::Target;
+use crate::lookup::grid::{Interpolant, LookupGrid, LookupParams};
+use crate::lookup::table::EXTRA;
 use ::fixed::types::I1F15;
 
 /// Largest grid of the fixed-point path: `2¹⁶` points (index bits + 16 fraction bits ≤ 32).

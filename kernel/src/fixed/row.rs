@@ -140,7 +140,7 @@ impl<'m> FixedRowBuffer<'m> {
         let (hg_all, offsets) = self.buf.split_at_mut_checked(2 * ks * j).ok_or(too_short)?;
         let sh = 30 + fc.sh;
         // Not `zip` over `chunks_exact`: its out-of-line `Zip::new` divides by the chunk
-        // length, a panicking branch in the no-panic link (see scan.rs).
+        // length, a panicking branch in the no-panic link (as in band/probe.rs).
         for (s, (off, sp)) in offsets.iter_mut().zip(scan.spads).enumerate() {
             let Some(hg) = hg_all.get_mut(2 * s * j..2 * (s + 1) * j) else {
                 break;

@@ -27,12 +27,14 @@
 //! * Accumulators are `f64` complex; each row's contribution to an element is summed over the
 //!   SPADs in `f32` first (the phasor arithmetic is `f32`).
 
+use super::row::Row;
+use super::scan::Scan;
 use crate::config::{Config, Point};
 use crate::error::{Error, check_len, check_points};
 use crate::geometry::{alias_window, dist, leaves_window, widen};
 use crate::phase::{cis_turns, cis_turns_f64};
+use crate::report::Report;
 use crate::sample::Sample;
-use crate::scan::{Row, Scan};
 use num_complex::{Complex32, Complex64};
 
 /// Which elements of the light transport matrix a probe accumulates.
@@ -55,40 +57,6 @@ pub enum Gate {
     HigherOrder,
     /// No gate: the monochromatic phasor over the whole histogram (paper Fig. 6).
     None,
-}
-
-/// Counters returned by [`Probe::finish`] and [`Probe::report`].
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Report {
-    /// Laser rows accumulated.
-    pub rows: u64,
-    /// Non-finite histogram samples seen (read as 0).
-    pub non_finite: u64,
-    /// Photon events dropped for an out-of-range SPAD or time bin.
-    pub dropped: u64,
-    /// Factorised columns only: voxels whose path times left [`Config::alias_free`] for some
-    /// (laser, SPAD) pair; their values include wrap-around of the band sum.
-    pub aliased: usize,
-}
-
-impl Report {
-    /// Counts one folded row: one more row, its non-finite samples and dropped photon events.
-    #[inline]
-    pub fn count_row<T: Sample>(&mut self, row: &Row<'_, T>) {
-        self.rows += 1;
-        self.non_finite += u64::from(row.non_finite());
-        self.dropped += u64::from(row.dropped());
-    }
-
-    /// Adds the rows, non-finite samples and dropped events of another part (a merge;
-    /// `aliased` is counted when a probe finishes).
-    #[inline]
-    pub fn add_part(&mut self, other: &Self) {
-        self.rows += other.rows;
-        self.non_finite += other.non_finite;
-        self.dropped += other.dropped;
-    }
 }
 
 /// A probe: a [`Target`], a [`Gate`], a voxel list and caller-owned accumulator state.

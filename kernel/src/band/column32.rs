@@ -3,7 +3,7 @@
 //! `f64` operation of [`Probe`](crate::Probe)'s accumulators is a soft-float call.
 //!
 //! Same maths and conventions as the factorised column of [`Probe`](crate::Probe) (module
-//! docs of [`crate::probe`]): per row `U[s][j] += w(d_la)·e^{iν_j d_la}·HG_ls[j]`, and at the
+//! docs of `band/probe.rs`): per row `U[s][j] += w(d_la)·e^{iν_j d_la}·HG_ls[j]`, and at the
 //! end `A(b) = Σ_s w(d_bs)·Σ_j e^{iν_j(d_ab + d_bs)}·U[s][j]`, `T = |A|²`.
 //!
 //! # Error bound
@@ -47,14 +47,18 @@
 //! Neither `push_row` nor the finishes do any `f64` arithmetic: the configuration's
 //! constants are converted to `f32` once, by [`ColumnF32::new`].
 
+use super::probe::{band_consts, band_sum};
+use super::row::Row;
+use super::scan::{Scan, as_complex};
 use crate::config::{Config, Legs, Point, Weights};
 use crate::error::{Error, check_len, check_points};
 use crate::geometry::{alias_window, dist, leaves_window, widen};
-use crate::lookup::{Lookup, LookupGrid, dist_fast};
+use crate::lookup::grid::LookupGrid;
+use crate::lookup::pair::dist_fast;
+use crate::lookup::table::Lookup;
 use crate::phase::cis_turns;
-use crate::probe::{Report, band_consts, band_sum};
+use crate::report::Report;
 use crate::sample::Sample;
-use crate::scan::{Row, Scan, as_complex};
 use num_complex::Complex32;
 
 /// Factorised Gaussian column with `f32` Kahan-compensated state (see the module docs).
@@ -456,8 +460,8 @@ impl ColumnF32<'_> {
 mod tests {
     extern crate std;
     use super::*;
+    use crate::band::row::RowBuffer;
     use crate::config::Params;
-    use crate::scan::RowBuffer;
     use std::vec;
 
     /// The compensated state stays within a few ulp of the exact sum over 2¹⁷ identical rows

@@ -2,17 +2,9 @@
 //! voxels on a regular lattice, seen by SPADs on a line commensurate with the lattice, with
 //! the laser-independent part of every (voxel, SPAD) pair precomputed once.
 //!
-//! # When it applies
-//!
-//! Voxel `(ix, iy)` (index `iy·nx + ix`) is `o + ix·a + iy·b` ([`Lattice`]), and every SPAD is
-//! `s_k = s_0 + m_k·a` for an integer `m_k` (checked to `f32` rounding by
-//! [`SliceLayout::try_new`], [`ConfigError::NotOnLattice`] otherwise). Then
-//! `v − s_k = (o − s_0) + (ix − m_k)·a + iy·b` depends only on `(ix − m_k, iy)`: the distinct
-//! SPAD legs `d_vs` fill a table of `ny × (nx + max m − min m)` entries instead of `Kv·Ks`
-//! (for 64 × 64 voxels and 28 SPADs at the lattice pitch: 5 824 entries, 93 KB, instead of
-//! 114 688 pairs, 1.8 MB). When the table does not fit the memory the caller offers,
-//! [`SliceLayout::try_new`] says so ([`ConfigError::DoesNotFit`]) and the caller uses the
-//! general [`LookupProbe`](crate::LookupProbe).
+//! Where it applies (the voxels on a [`Lattice`](crate::Lattice), the SPADs on its x lattice) is checked by
+//! [`SliceLayout::try_new`] (module docs of `lookup/lattice.rs`); otherwise the caller uses
+//! the general [`LookupProbe`](crate::LookupProbe).
 //!
 //! # Method (same maths as [`LookupProbe`](crate::LookupProbe), other factorisation)
 //!
@@ -70,13 +62,19 @@
 //! after, two SPADs' cubic cells, the voxels' row
 //! sums and leads). No allocation, no panic on data; configuration and geometry checked once.
 
-use crate::config::{Point, Weights};
-use crate::error::{ConfigError, Error, check_len};
-use crate::lookup::{Interpolant, Lookup, LookupGrid, dist_nr, kahan, synthesise_fused, value};
+use super::grid::{Interpolant, LookupGrid};
+use super::kahan::{self, KahanSums};
+use super::lattice::{SliceLayout, lattice_offset};
+use super::pair::dist_nr;
+use super::table::{Lookup, synthesise_fused};
+use crate::band::probe::Target;
+use crate::band::row::Row;
+use crate::band::scan::{Scan, as_complex};
+use crate::config::Weights;
+use crate::error::{Error, check_len};
 use crate::phase::cis_small_turns;
-use crate::probe::{Report, Target};
+use crate::report::Report;
 use crate::sample::Sample;
-use crate::scan::{Row, Scan, as_complex};
 use num_complex::{Complex32, Complex64};
 
 /// Wrapped grid values kept before node 0 (`y[−3 .. 0]`) and after node `L − 1`
@@ -84,180 +82,9 @@ use num_complex::{Complex32, Complex64};
 const PRE: usize = 3;
 const POST: usize = 5;
 
-/// A plane of voxels on a regular lattice: voxel `(ix, iy)`, index `iy·nx + ix`, at
-/// `origin + ix·step_x + iy·step_y` (m).
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct Lattice {
-    /// Voxel (0, 0) (m).
-    pub origin: Point,
-    /// From voxel `(ix, iy)` to `(ix + 1, iy)` (m); the SPAD line's direction.
-    pub step_x: Point,
-    /// From voxel `(ix, iy)` to `(ix, iy + 1)` (m).
-    pub step_y: Point,
-    /// Voxels along `step_x` (≥ 1).
-    pub nx: usize,
-    /// Voxels along `step_y` (≥ 1).
-    pub ny: usize,
-}
-
-impl Lattice {
-    /// Number of voxels `nx·ny`.
-    #[allow(clippy::len_without_is_empty)]
-    pub const fn len(&self) -> usize {
-        self.nx.saturating_mul(self.ny)
-    }
-
-    /// Voxel `(ix, iy)` in `f64` (the table's position).
-    fn point64(&self, ix: f64, iy: f64) -> [f64; 3] {
-        let mut p = [0.0; 3];
-        for (k, c) in p.iter_mut().enumerate() {
-            *c = f64::from(self.origin[k])
-                + ix * f64::from(self.step_x[k])
-                + iy * f64::from(self.step_y[k]);
-        }
-        p
-    }
-
-    /// Voxel number `i` (`iy·nx + ix`), rounded to `f32`: the voxel list the general path
-    /// ([`LookupProbe`](crate::LookupProbe)) takes for the same slice.
-    pub fn point(&self, i: usize) -> Point {
-        let nx = self.nx.max(1);
-        let p = self.point64((i % nx) as f64, (i / nx) as f64);
-        [p[0] as f32, p[1] as f32, p[2] as f32]
-    }
-}
-
-/// The validated layout of a structured slice for one scan and lookup grid: `Copy`, no
-/// tables. See the module docs.
-#[derive(Clone, Copy, Debug, PartialEq)]
-#[cfg_attr(feature = "defmt", derive(defmt::Format))]
-pub struct SliceLayout {
-    grid: LookupGrid,
-    lattice: Lattice,
-    ks: usize,
-    /// Smallest and largest SPAD lattice offset `m_k`.
-    m_min: i64,
-    m_max: i64,
-    /// Table entries per voxel row: `nx + m_max − m_min`.
-    width: usize,
-}
-
-/// Largest table (entries) and lattice offset accepted: indices stay exact in `f32`.
-const MAX_ENTRIES: usize = 1 << 22;
-
-impl SliceLayout {
-    /// Checks that the scan's SPADs lie on `lattice`'s x lattice and that the slice tables
-    /// fit `capacity` `f32` (pass `usize::MAX` to only validate).
-    ///
-    /// # Errors
-    /// [`ConfigError`] naming the parameter: `nx`/`ny` zero ([`ConfigError::NotPositive`]);
-    /// a non-finite `origin`, `step_x`, `step_y` or SPAD ([`ConfigError::NotFinite`]); a zero
-    /// `step_x` ([`ConfigError::NotPositive`]); a SPAD off the lattice
-    /// ([`ConfigError::NotOnLattice`]`("spads")`); tables over 2²² entries
-    /// ([`ConfigError::SizeOverflow`]) or over `capacity` ([`ConfigError::DoesNotFit`]`("slice
-    /// tables")`).
-    pub fn try_new(
-        scan: &Scan<'_>,
-        grid: &LookupGrid,
-        lattice: &Lattice,
-        capacity: usize,
-    ) -> Result<Self, ConfigError> {
-        if lattice.nx == 0 {
-            return Err(ConfigError::NotPositive("nx"));
-        }
-        if lattice.ny == 0 {
-            return Err(ConfigError::NotPositive("ny"));
-        }
-        for (p, name) in [
-            (lattice.origin, "origin"),
-            (lattice.step_x, "step_x"),
-            (lattice.step_y, "step_y"),
-        ] {
-            if !p.iter().all(|c| c.is_finite()) {
-                return Err(ConfigError::NotFinite(name));
-            }
-        }
-        let a = lattice.step_x.map(f64::from);
-        let a2 = a[0] * a[0] + a[1] * a[1] + a[2] * a[2];
-        if a2 <= 0.0 {
-            return Err(ConfigError::NotPositive("step_x"));
-        }
-        let spads = scan.spads();
-        let s0 = spads.first().copied().unwrap_or([0.0; 3]).map(f64::from);
-        let (mut m_min, mut m_max) = (0i64, 0i64);
-        for s in spads {
-            if !s.iter().all(|c| c.is_finite()) {
-                return Err(ConfigError::NotFinite("spads"));
-            }
-            let m = lattice_offset(&a, a2, &s0, s).ok_or(ConfigError::NotOnLattice("spads"))?;
-            m_min = m_min.min(m);
-            m_max = m_max.max(m);
-        }
-        let span = (m_max - m_min) as usize;
-        let width = lattice
-            .nx
-            .checked_add(span)
-            .ok_or(ConfigError::SizeOverflow("slice tables"))?;
-        let entries = width
-            .checked_mul(lattice.ny)
-            .filter(|&e| e <= MAX_ENTRIES && lattice.len() <= MAX_ENTRIES)
-            .ok_or(ConfigError::SizeOverflow("slice tables"))?;
-        if 4 * (entries + spads.len()) > capacity {
-            return Err(ConfigError::DoesNotFit("slice tables"));
-        }
-        Ok(Self {
-            grid: *grid,
-            lattice: *lattice,
-            ks: spads.len(),
-            m_min,
-            m_max,
-            width,
-        })
-    }
-
-    /// Length in `f32` of the slice tables: `4·Ks + 4·ny·width`.
-    pub const fn tables_len(&self) -> usize {
-        4 * (self.ks + self.width * self.lattice.ny)
-    }
-    /// The lattice.
-    pub const fn lattice(&self) -> &Lattice {
-        &self.lattice
-    }
-    /// Table entries per voxel row, `nx + max m − min m`.
-    pub const fn width(&self) -> usize {
-        self.width
-    }
-}
-
-/// `m` with `s = s0 + m·a` to `f32` rounding, or `None`.
-fn lattice_offset(a: &[f64; 3], a2: f64, s0: &[f64; 3], s: &Point) -> Option<i64> {
-    let d = [
-        f64::from(s[0]) - s0[0],
-        f64::from(s[1]) - s0[1],
-        f64::from(s[2]) - s0[2],
-    ];
-    let m = libm::round((d[0] * a[0] + d[1] * a[1] + d[2] * a[2]) / a2);
-    if m.is_nan() || m.abs() > MAX_ENTRIES as f64 {
-        return None;
-    }
-    let mut scale = 0.0f64;
-    let mut resid = 0.0f64;
-    for k in 0..3 {
-        let r = d[k] - m * a[k];
-        resid = resid.max(libm::fabs(r));
-        scale = scale
-            .max(libm::fabs(s0[k]))
-            .max(libm::fabs(f64::from(s[k])))
-            .max(libm::fabs(m * a[k]));
-    }
-    // A few f32 ulps of the coordinates: what rounding the positions to f32 leaves.
-    (resid <= 8.0 * f64::from(f32::EPSILON) * scale).then_some(m as i64)
-}
-
 /// A Gaussian-gated diagonal or column over a structured slice on the lookup path (module
 /// docs): the result equals [`LookupProbe`](crate::LookupProbe)'s over the voxel list
-/// [`Lattice::point`]`(0..Kv)` within the lookup path's bound.
+/// [`Lattice::point`](crate::Lattice::point)`(0..Kv)` within the lookup path's bound.
 ///
 /// ```
 /// use vltm_kernel::{Config, Lattice, Lookup, LookupGrid, LookupParams, LookupSlice, Params,
@@ -297,8 +124,8 @@ pub struct LookupSlice<'m> {
     spad_info: &'m [[f32; 4]],
     /// Per (iy, u): `[x_vs, P.re, P.im, 0]`, `ny × width`.
     table: &'m [[f32; 4]],
-    /// Per voxel: the amplitude as a Kahan-compensated `f32` sum `[s.re, s.im, c.re, c.im]`.
-    acc: &'m mut [[f32; 4]],
+    /// Per voxel: the amplitude as a Kahan-compensated `f32` sum.
+    acc: KahanSums<'m>,
     /// One SPAD's grid with wrapped copies, `PRE + L + POST`: `y[−3 .. L + 5]`.
     grid_buf: &'m mut [Complex32],
     /// Two SPADs' cubic cells `[a₀, a₁, a₂, a₃]` (re, im interleaved), `2L`.
@@ -322,7 +149,7 @@ impl<'m> LookupSlice<'m> {
     /// Length in `f32` of the state: `4Kv` (per voxel a Kahan-compensated complex sum: the
     /// bytes of the general path's `2Kv` `f64`, with no soft `f64` per row on a Cortex-M4F).
     pub const fn state_len(n_voxels: usize) -> usize {
-        n_voxels.saturating_mul(4)
+        KahanSums::state_len(n_voxels)
     }
 
     /// Length in `f32` of the scratch: `2(L + 8) + 16L + 4Kv`.
@@ -428,9 +255,7 @@ impl<'m> LookupSlice<'m> {
             }
             *inf = [start as f32, lo, hi, 0.0];
         }
-        let found = state.len();
-        let acc: &mut [[f32; 4]] =
-            bytemuck::try_cast_slice_mut(state).map_err(|_| short("state", 4 * kv, found))?;
+        let mut acc = KahanSums::new(state, 4 * kv)?;
         let sl = Self::scratch_len(&grid, kv);
         let found = scratch.len();
         let (g, rest) = scratch
@@ -440,7 +265,7 @@ impl<'m> LookupSlice<'m> {
             .split_at_mut_checked(16 * l)
             .ok_or(short("scratch", sl, found))?;
         let voxel = bytemuck::try_cast_slice_mut(rest).map_err(|_| short("scratch", sl, found))?;
-        acc.fill([0.0; 4]);
+        acc.reset();
         let l = grid.len();
         let (g_lo, g_hi) = cfg.guard();
         Ok(Self {
@@ -475,11 +300,11 @@ impl<'m> LookupSlice<'m> {
     }
     /// The complex amplitude accumulated so far at voxel `i` (`iy·nx + ix`; 0 past the end).
     pub fn amplitude(&self, i: usize) -> Complex64 {
-        self.acc.get(i).map_or(Complex64::new(0.0, 0.0), value)
+        self.acc.amplitude(i)
     }
     /// Zeroes the accumulators and counters.
     pub fn reset(&mut self) {
-        self.acc.fill([0.0; 4]);
+        self.acc.reset();
         self.report = Report::default();
     }
 
@@ -626,7 +451,7 @@ impl<'m> LookupSlice<'m> {
                 }
                 Target::Diagonal => 1.0,
             };
-            kahan(a, s * (c * cis_small_turns(theta * t)) * w);
+            kahan::add(a, s * (c * cis_small_turns(theta * t)) * w);
         }
         self.report.count_row(row);
         Ok(())
@@ -640,9 +465,7 @@ impl<'m> LookupSlice<'m> {
         if self.target != other.target || self.layout != other.layout {
             return Err(Error::Incompatible("different target or slice layout"));
         }
-        for (a, b) in self.acc.iter_mut().zip(other.acc.iter()) {
-            kahan(a, Complex32::new(b[0] - b[2], b[1] - b[3]));
-        }
+        self.acc.merge(&other.acc);
         self.report.add_part(&other.report);
         Ok(())
     }
@@ -654,9 +477,7 @@ impl<'m> LookupSlice<'m> {
     /// [`Error::Length`] if `out` has the wrong length.
     pub fn finish(&self, out: &mut [f64]) -> Result<Report, Error> {
         check_len("out", self.acc.len(), out.len())?;
-        for (o, a) in out.iter_mut().zip(self.acc.iter()) {
-            *o = value(a).norm_sqr();
-        }
+        self.acc.intensities(out);
         Ok(self.report)
     }
 }
@@ -858,43 +679,4 @@ fn mac<const GUARD: bool>(
     // Multiply-accumulate form (`vmla`/`vmls` on the M4F, no separate product).
     s[0] = s[0] + re * e[1] - im * e[2];
     s[1] = s[1] + re * e[2] + im * e[1];
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::config::{Config, Params};
-    use crate::lookup::{EXTRA, LookupParams};
-
-    /// The fused synthesis equals [`Lookup::synthesise`] to `f32` rounding, for grids with
-    /// an even and an odd number of radix-2 stages after the radix-4 pass.
-    #[test]
-    fn fused_synthesis_matches_radix2() {
-        let c = Config::try_new(&Params::new(0.2, 64, 0.01)).unwrap();
-        for len in [256usize, 512, 1024] {
-            let p = LookupParams {
-                tolerance: 1.0,
-                grid_len: Some(len),
-                ..LookupParams::new()
-            };
-            let grid = LookupGrid::try_new(&c, &p).unwrap();
-            let mut tables = [0.0f32; 4 * 1024];
-            let lookup = Lookup::new(&grid, &mut tables[..4 * len]).unwrap();
-            let j = c.bins();
-            let mut hg = [Complex32::new(0.0, 0.0); 64];
-            assert!(j <= 64);
-            for (i, h) in hg.iter_mut().take(j).enumerate() {
-                *h = Complex32::new(libm::sinf(i as f32 * 1.3), libm::cosf(i as f32 * 0.7));
-            }
-            let mut a = [Complex32::new(0.0, 0.0); 1024 + EXTRA];
-            let mut b = [Complex32::new(0.0, 0.0); 1024 + EXTRA];
-            lookup.synthesise(&hg[..j], &mut a[..len + EXTRA]);
-            synthesise_fused(&lookup, &hg[..j], &mut b[..len + EXTRA]);
-            let peak2 = a.iter().fold(0.0f32, |m, z| m.max(z.norm_sqr()));
-            assert!(peak2 > 1.0);
-            for (x, y) in a.iter().zip(&b).take(len + EXTRA) {
-                assert!((x - y).norm_sqr() <= 1e-10 * peak2, "L {len}: {x} vs {y}");
-            }
-        }
-    }
 }
