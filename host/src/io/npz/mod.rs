@@ -37,7 +37,7 @@ mod stream;
 mod write;
 
 pub use read::read;
-pub use stream::{Stream, open_stream};
+pub use stream::{NpzStream, open_stream};
 pub use write::{stage, write, write_with};
 
 #[cfg(test)]

@@ -18,7 +18,7 @@ use std::path::Path;
 /// capture ends with corrupted data unnoticed. A pass that skips around is checked by one
 /// extra sequential read of the entry when its last row is requested.
 #[derive(Debug)]
-pub struct Stream {
+pub struct NpzStream {
     path: std::path::PathBuf,
     geometry: Geometry,
     file: File,
@@ -29,7 +29,7 @@ pub struct Stream {
 }
 
 /// The CRC-32 check of the stored `H.npy` entry, computed as rows are read (see
-/// [`Stream`]'s [`RowSource::read_row`]).
+/// [`NpzStream`]'s [`RowSource::read_row`]).
 #[derive(Debug)]
 struct Crc {
     /// The entry's first byte (its `.npy` header) and its length in the file.
@@ -43,12 +43,12 @@ struct Crc {
     verified: bool,
 }
 
-/// Opens `path` as a [`Stream`] if its `H` is stored uncompressed as little-endian
+/// Opens `path` as an [`NpzStream`] if its `H` is stored uncompressed as little-endian
 /// C-order `f32` (`Ok(None)` otherwise: read it with [`read`](fn@super::read)).
 ///
 /// # Errors
 /// [`Error::Io`], or [`Error::Format`] for a malformed archive, field or a truncated `H`.
-pub fn open_stream(path: &Path) -> Result<Option<Stream>> {
+pub fn open_stream(path: &Path) -> Result<Option<NpzStream>> {
     use std::io::{Read, Seek, SeekFrom};
     let io = |e: std::io::Error| Error::io(path, e);
     let bad = |what: &str, found: String| Error::format(path, "H", what.to_string(), found);
@@ -115,7 +115,7 @@ pub fn open_stream(path: &Path) -> Result<Option<Stream>> {
     file.seek(SeekFrom::Start(data_start)).map_err(io)?;
     file.read_exact(&mut head).map_err(io)?;
     hasher.update(&head);
-    Ok(Some(Stream {
+    Ok(Some(NpzStream {
         path: path.to_path_buf(),
         geometry,
         file,
@@ -131,7 +131,7 @@ pub fn open_stream(path: &Path) -> Result<Option<Stream>> {
     }))
 }
 
-impl Stream {
+impl NpzStream {
     /// Completes the CRC-32 check of `H` from `hashed_to` to the end of the entry.
     fn finish_crc(&mut self) -> Result<()> {
         use std::io::{Read, Seek, SeekFrom};
@@ -164,7 +164,7 @@ impl Stream {
     }
 }
 
-impl RowSource for Stream {
+impl RowSource for NpzStream {
     fn geometry(&self) -> &Geometry {
         &self.geometry
     }
