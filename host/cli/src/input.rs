@@ -216,7 +216,7 @@ pub fn sidecar_template(ptu: &Path, out: &Path) -> Result<(), Failure> {
 }
 
 /// `vltm info`: what the file holds, the conventions assumed, counts after preprocessing
-/// (the library's [`vltm::front::info::info`], the text every front end prints), and with
+/// (the library's [`vltm::info::info`], the text every front end prints), and with
 /// `--png` the summed transient.
 pub fn info(
     path: &Path,
@@ -224,7 +224,7 @@ pub fn info(
     png: Option<&Path>,
     volume: Option<&str>,
 ) -> Result<(), Failure> {
-    use vltm::front::info::Stream;
+    use vltm::info::Stream;
     if let Some(p) = png {
         refuse_overwriting_inputs(&[path.to_path_buf()], &[p])?;
         prepare_output(p, Out::Figure)?;
@@ -233,7 +233,7 @@ pub fn info(
     require_sidecar(path)?;
     // The description is printed once it is whole: nothing on stdout before a failure.
     let mut lines = Vec::new();
-    let sum = vltm::front::info::info(
+    let sum = vltm::info::info(
         path,
         &input.mat_options(),
         input.prep()?,
