@@ -7,7 +7,7 @@ pub mod demo;
 pub mod error;
 pub mod exec;
 pub mod export;
-pub mod front;
+pub mod info;
 pub mod io;
 pub mod live;
 pub mod probe;

@@ -1,16 +1,14 @@
 //! The command line's arguments (clap): the commands, the options every probe shares
-//! ([`Common`]), the wave options and the matrix commands' arguments. Parsing only; the
-//! commands run in `commands` and `ltm`.
+//! ([`Common`]), the wave options and the matrix commands' arguments. Parsing only: the
+//! commands run in `commands` and `ltm`, and open their capture through `open`.
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use vltm::exec::{Exec, Path as EvalPath};
-use vltm::io::{self, RowSource};
 use vltm::probe::{ColumnGate, Wave};
 use vltm_kernel::Weights;
 
 use crate::input::Input;
-use crate::outputs::{Out, prepare_output, refuse_overwriting_inputs};
 use crate::progress;
 
 /// Virtual light transport matrices (LTM) of hidden scenes from non-line-of-sight captures
@@ -316,48 +314,6 @@ impl Common {
 
     pub(crate) fn wave(&self) -> Wave {
         self.wave.wave()
-    }
-
-    /// The capture as a row source: y-tal HDF5 files, PicoQuant PTU photon streams and
-    /// uncompressed `.npz` captures are streamed row by row (memory O(Ks·Nt)); compressed
-    /// `.npz`, and `--swap-roles` (a transpose), are read into memory.
-    pub(crate) fn load(&self, path: &Path) -> vltm::Result<Box<dyn RowSource>> {
-        let _t = vltm::timings::section("opening the capture", vltm::timings::Kind::Serial);
-        let mut inputs = vec![path.to_path_buf()];
-        if io::extension(path).as_deref() == Some("ptu") {
-            inputs.push(path.with_extension("json"));
-        }
-        let outputs: Vec<&Path> = self
-            .out
-            .iter()
-            .chain(&self.png)
-            .chain(&self.partial)
-            .map(PathBuf::as_path)
-            .collect();
-        refuse_overwriting_inputs(&inputs, &outputs)?;
-        for (p, kind) in [
-            (&self.out, Out::Volume),
-            (&self.png, Out::Figure),
-            (&self.partial, Out::State),
-        ] {
-            if let Some(p) = p {
-                prepare_output(p, kind)?;
-            }
-        }
-        if self.swap_roles {
-            let mut src = self.input.open(path)?;
-            let g = src.geometry().clone();
-            let mut data = Vec::new();
-            let mut row = Vec::new();
-            for l in 0..g.lasers.len() {
-                src.read_row(l, &mut row)?;
-                data.extend_from_slice(&row);
-            }
-            let c = io::Capture::new(g, data, path)?;
-            Ok(Box::new(io::swap_roles(&c)?))
-        } else {
-            self.input.open(path)
-        }
     }
 }
 

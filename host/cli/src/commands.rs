@@ -12,7 +12,7 @@ use crate::args::{Command, DiagGateArg};
 use crate::console::{Failure, say};
 use crate::outputs::{Out, prepare_output, refuse_overwriting_inputs};
 use crate::summary::{Label, finish};
-use crate::{input, leak, ltm, partial, progress, split, surface, title};
+use crate::{info, input, leak, ltm, open, partial, progress, split, surface, title};
 
 /// Runs one command.
 pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
@@ -30,14 +30,14 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
             capture,
             sidecar: Some(sidecar),
             ..
-        } => input::sidecar_template(&capture, &sidecar),
+        } => info::sidecar_template(&capture, &sidecar),
         Command::Info {
             capture,
             png,
             volume,
             input,
             sidecar: None,
-        } => input::info(&capture, &input, png.as_deref(), volume.as_deref()),
+        } => info::info(&capture, &input, png.as_deref(), volume.as_deref()),
         Command::Simulate {
             scene,
             out,
@@ -109,7 +109,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
             common,
         } => {
             let volume = Volume::parse(&common.volume)?;
-            let mut c = common.load(&capture)?;
+            let mut c = open::capture(&common, &capture)?;
             let g = match gate {
                 DiagGateArg::Gaussian => ColumnGate::TwoBounce,
                 DiagGateArg::None => ColumnGate::None,
@@ -187,7 +187,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                 };
                 return partial::run(&common, &capture, task);
             }
-            let mut c = common.load(&capture)?;
+            let mut c = open::capture(&common, &capture)?;
             let sigma = common.wave().config(c.geometry())?.sigma();
             let o = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
                 // Bad input is refused before the extra passes (Γ of the mask, the leak fit).
@@ -297,7 +297,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                 let task = probe::Task::Indirect { gamma, shell, leak };
                 return partial::run(&common, &capture, task);
             }
-            let mut c = common.load(&capture)?;
+            let mut c = open::capture(&common, &capture)?;
             let sigma = common.wave().config(c.geometry())?.sigma();
             let run = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
                 split::indirect_run(&common, rows, &volume, &opts, cuts, direct)

@@ -3,7 +3,6 @@
 
 use std::path::{Path, PathBuf};
 
-use vltm::io;
 use vltm::probe::{self, Gamma, Pattern};
 use vltm::volume::{Volume, parse_point};
 use vltm_kernel::Point;
@@ -14,7 +13,7 @@ use crate::outputs::{
     Out, check_matrix_out, prepare_output, refuse_overwriting_inputs, write_matrix,
 };
 use crate::summary::{Label, finish};
-use crate::{input, leak, partial, progress, title};
+use crate::{input, leak, open, partial, progress, title};
 
 fn exec() -> probe::Exec<'static> {
     probe::Exec {
@@ -55,10 +54,7 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
         )
         .into());
     }
-    let mut src = {
-        crate::input::require_sidecar(&a.capture)?;
-        input::watched(&a.capture, io::open_source(&a.capture)?)
-    };
+    let mut src = open::streamed(&a.capture)?;
     let gamma: Option<Vec<Point>> = if wants_gamma {
         let spec = a.volume.as_deref().ok_or_else(|| {
             vltm::Error::arg("volume", "`gamma` in $from/$to needs the volume of Γ")
@@ -179,7 +175,7 @@ pub(crate) fn relight(a: RelightArgs) -> Result<(), Failure> {
         "relight",
         "split the scan with `vltm matrix $from FOCI $to SPEC $rows A:B $partial F` (with $no_leak_correct, relighting is a weighted sum of the matrix's rows)",
     )?;
-    let mut src = c.load(&a.capture)?;
+    let mut src = open::capture(c, &a.capture)?;
     let sigma = c.wave().config(src.geometry())?.sigma();
     let reach: Vec<Point> = volume.points.iter().chain(&pattern.foci).copied().collect();
     let r = input::with_prep(&c.input, &mut *src, &reach, sigma, |rows| {
@@ -231,7 +227,7 @@ pub(crate) fn row(a: RowArgs) -> Result<(), Failure> {
         "row",
         "split the scan with `vltm matrix $from SPEC $to X,Y,Z $rows A:B $partial F` (with $no_leak_correct, the row is the matrix's column at x_b)",
     )?;
-    let mut src = c.load(&a.capture)?;
+    let mut src = open::capture(c, &a.capture)?;
     let sigma = c.wave().config(src.geometry())?.sigma();
     let mut reach = volume.points.clone();
     reach.push(b);

@@ -3,10 +3,11 @@
 //! A thin layer over the `vltm` library: `args` parses the command line (clap), `commands`
 //! and `ltm` run the commands, `split` writes the several outputs of one run (Γ masks,
 //! shells, `indirect`), `outputs` writes volumes, figures and matrices, `summary` prints the
-//! summary lines, `partial` runs parts of a scan and `vltm merge`, `input` reads captures with
-//! their options (`demo` is the library's `vltm::demo`), `console` prints errors (library parameters
-//! spelled as flags) and `progress` draws the progress bars (indicatif). This file is the
-//! entry point only.
+//! summary lines, `partial` runs parts of a scan and `vltm merge`, `open` opens a command's
+//! capture, `input` holds its reading and preprocessing options, `info` is `vltm info` (`demo`
+//! is the library's `vltm::demo`), `console` prints errors (library parameters spelled as
+//! flags) and `progress` draws the progress bars (indicatif). This file is the entry point
+//! only.
 //!
 //! Exit codes: 0 success, 2 bad arguments, 1 bad or unreadable input data.
 
@@ -16,10 +17,12 @@ use std::process::ExitCode;
 mod args;
 mod commands;
 mod console;
+mod info;
 mod input;
 mod leak;
 mod live;
 mod ltm;
+mod open;
 mod outputs;
 mod partial;
 mod progress;

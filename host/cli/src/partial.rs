@@ -5,6 +5,7 @@
 
 use crate::args::Common;
 use crate::console::{Failure, say};
+use crate::open;
 use crate::outputs::{
     Out, check_matrix_out, prepare_output, refuse_overwriting_inputs, write_matrix, write_outputs,
 };
@@ -58,7 +59,7 @@ pub(crate) fn parse_rows(s: &str, n: usize) -> vltm::Result<Range<usize>> {
 /// Runs `task` over `--rows` of the capture and writes its state to `--partial`.
 pub(crate) fn run(c: &Common, capture: &Path, task: Task) -> Result<(), Failure> {
     let volume = Volume::parse(&c.volume)?;
-    let mut src = c.load(capture)?;
+    let mut src = open::capture(c, capture)?;
     let Some(out) = &c.partial else {
         return Ok(());
     };

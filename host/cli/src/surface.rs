@@ -8,6 +8,7 @@ use vltm::volume::Volume;
 use crate::args::Common;
 use crate::console::{Failure, say};
 use crate::input;
+use crate::open;
 use crate::outputs::{Out, prepare_output, refuse_overwriting_inputs};
 use crate::summary::{Label, finish};
 
@@ -31,7 +32,7 @@ pub(crate) fn run(
         prepare_output(d, Out::Depth)?;
     }
     let slab = Volume::parse(&common.volume)?;
-    let mut c = common.load(capture)?;
+    let mut c = open::capture(common, capture)?;
     let sigma = common.wave().config(c.geometry())?.sigma();
     let s = input::with_prep(&common.input, &mut *c, &slab.points, sigma, |rows| {
         probe::surface(rows, &slab, &common.wave(), opts, common.exec())

@@ -8,9 +8,9 @@ use pyo3::types::PyDict;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use vltm::atomic::Transaction;
-use vltm::io::prep::{Background, Bound as TimeBound, Prep, Prepared};
+use vltm::io::prep::{Prep, Prepared};
 use vltm::io::{self, Capture, Geometry, RowSource};
-use vltm::{front, probe};
+use vltm::{info, probe};
 use vltm_kernel::Point;
 
 /// Where a capture's rows come from.
@@ -50,8 +50,10 @@ impl NativeCapture {
         if !swap_roles {
             return Ok(src);
         }
-        let c = front::read_all(&mut *src, Path::new(&self.name()))?;
-        Ok(Box::new(io::swap_roles(&c)?))
+        Ok(Box::new(io::capture::swapped(
+            &mut *src,
+            Path::new(&self.name()),
+        )?))
     }
 
     /// The file's size (what partial states record of a capture; 0 for arrays).
@@ -117,23 +119,7 @@ pub(crate) fn prep_of(
     rebin: usize,
     background: Option<&str>,
 ) -> PyResult<Option<Prep>> {
-    let p = Prep {
-        t_min: t_min
-            .map(|s| TimeBound::parse("t_min", s))
-            .transpose()
-            .map_err(py_err)?,
-        t_max: t_max
-            .map(|s| TimeBound::parse("t_max", s))
-            .transpose()
-            .map_err(py_err)?,
-        rebin,
-        background: background
-            .map(Background::parse)
-            .transpose()
-            .map_err(py_err)?
-            .unwrap_or_default(),
-    };
-    Ok((!p.is_identity() || rebin == 0).then_some(p))
+    Prep::parse(t_min, t_max, rebin, background).map_err(py_err)
 }
 
 #[pymethods]
@@ -171,10 +157,7 @@ impl NativeCapture {
         d.set_item("laser_xyz", g.laser_origin.to_vec())?;
         d.set_item("sensor_xyz", g.sensor_origin.to_vec())?;
         d.set_item("t_accounts_first_and_last_bounces", g.legs_in_time)?;
-        d.set_item(
-            "normals",
-            if g.normals.flat() { "+z" } else { "per point" },
-        )?;
+        d.set_item("normals", if g.normals.flat() { "+z" } else { "per point" })?;
         d.set_item(
             "relay",
             g.not_flat().unwrap_or_else(|| "planar".to_string()),
@@ -219,13 +202,13 @@ impl NativeCapture {
                 match prep {
                     Some(p) => {
                         let mut pr = Prepared::new(&mut *src, p, None)?;
-                        let sum = front::summed(&mut pr)?;
+                        let sum = info::summed(&mut pr)?;
                         let (t0, dt) = (pr.geometry().t0, pr.geometry().dt);
-                        let r = front::check(&pr)?;
+                        let r = vltm::io::prep::check(&pr)?;
                         Ok((sum, t0, dt, Some(r.summary), r.warning))
                     }
                     None => {
-                        let sum = front::summed(&mut *src)?;
+                        let sum = info::summed(&mut *src)?;
                         Ok((sum, self.geometry.t0, self.geometry.dt, None, None))
                     }
                 }
@@ -277,19 +260,13 @@ fn open_capture(
     grid_width: Option<f64>,
 ) -> PyResult<NativeCapture> {
     let mat = io::extension(&path).as_deref() == Some("mat");
+    let options = io::mat::MatOptions {
+        delta_t,
+        t_start,
+        grid_width,
+    };
     if !mat {
-        for (set, name) in [
-            (delta_t.is_some(), "delta_t"),
-            (t_start.is_some(), "t_start"),
-            (grid_width.is_some(), "grid_width"),
-        ] {
-            if set {
-                return Err(arg(
-                    name,
-                    "only for .mat captures (other formats record their time axis and grid)",
-                ));
-            }
-        }
+        options.refuse().map_err(py_err)?;
     }
     let (store, geometry) = py
         .detach(|| -> vltm::Result<_> {
@@ -297,12 +274,7 @@ fn open_capture(
                 .map_err(|e| vltm::Error::io(&path, e))?
                 .len();
             if mat {
-                let o = io::mat::MatOptions {
-                    delta_t,
-                    t_start,
-                    grid_width,
-                };
-                let c = io::mat::read(&path, &o)?.capture;
+                let c = io::mat::read(&path, &options)?.capture;
                 let g = c.geometry.clone();
                 let store = Store::Memory {
                     capture: Arc::new(c),
@@ -416,7 +388,7 @@ fn simulate(py: Python<'_>, scene: PathBuf) -> PyResult<NativeCapture> {
 }
 
 /// `vltm info`'s layout text of a capture file, its warnings and the summed transient: the
-/// library's `front::info::info` (the lines the command line prints), with `.mat` overrides
+/// library's `info::info` (the lines the command line prints), with `.mat` overrides
 /// and preprocessing as `vltm info`'s options; `png` also draws the summed transient (as
 /// `--png`, adding the command line's `wrote F` line); `volume` (a SPEC) is named in the
 /// `fast paths` line as `--volume` is.
@@ -443,7 +415,7 @@ fn info_text<'py>(
     f64,
     f64,
 )> {
-    use vltm::front::info::Stream;
+    use vltm::info::Stream;
     let prep = prep_of(t_min, t_max, rebin, background)?;
     let volume = volume
         .map(vltm::volume::Volume::parse)
@@ -465,19 +437,13 @@ fn info_text<'py>(
     let (lines, warnings, sum) = py
         .detach(|| -> vltm::Result<_> {
             let (mut lines, mut warnings) = (Vec::new(), Vec::new());
-            let sum = vltm::front::info::info(
-                &path,
-                &mat,
-                prep,
-                volume.as_ref(),
-                &mut |stream, line| {
-                    let line = vltm::error::respell(line, crate::param);
-                    match stream {
-                        Stream::Out => lines.push(line),
-                        Stream::Warning => warnings.push(line),
-                    }
-                },
-            )?;
+            let sum = vltm::info::info(&path, &mat, prep, volume.as_ref(), &mut |stream, line| {
+                let line = vltm::error::respell(line, crate::param);
+                match stream {
+                    Stream::Out => lines.push(line),
+                    Stream::Warning => warnings.push(line),
+                }
+            })?;
             if let Some(p) = &png {
                 let t = vltm::export::figure::plot::Transient {
                     counts: &sum.counts,

@@ -11,11 +11,11 @@ use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
 use vltm::exec::{Exec, Path as EvalPath};
-use vltm::front::{self, PrepReport};
 use vltm::io::RowSource;
+use vltm::io::prep::{PrepReport, with_prep};
 use vltm::probe::{
-    self, ColumnGate, IndirectOptions, LeakCorrected, LeakOptions, Partial, Pattern, Shell, Task,
-    Wave, partial,
+    self, ColumnGate, Gamma, IndirectOptions, LeakCorrected, LeakOptions, Partial, Pattern, Shell,
+    Task, Wave, partial,
 };
 use vltm_kernel::{Point, Weights};
 
@@ -224,10 +224,7 @@ fn run<'py>(
     )?;
     let prep = prep_of(t_min, t_max, rebin, background)?;
     let shell = shell_of("shell", shell)?;
-    let cuts = shells
-        .map(front::parse_shells)
-        .transpose()
-        .map_err(py_err)?;
+    let cuts = shells.map(Shell::parse_cuts).transpose().map_err(py_err)?;
     if cuts.is_some() && shell.is_some() {
         return Err(arg(
             "shells",
@@ -307,12 +304,7 @@ fn run<'py>(
             }
         }
         "indirect" => {
-            if !(0.0..1.0).contains(&epsilon) {
-                return Err(arg(
-                    "epsilon",
-                    format!("expected 0 <= E < 1, found {epsilon}"),
-                ));
-            }
+            Gamma::check_epsilon(epsilon, "epsilon").map_err(py_err)?;
             let opts = IndirectOptions {
                 epsilon,
                 shell,
@@ -530,30 +522,39 @@ fn compute(
                 } if rows.is_none() => Some(*le),
                 _ => None,
             };
-            let ((p, explained), prep) =
-                front::with_prep(prep, &mut *src, &vol.points, sigma, |s| match leak {
-                    Some(le) => {
-                        if let Job::Column { focus, gate, .. } = &job {
-                            probe::check_column(s.geometry(), *focus, vol, *gate, wave, exec)?;
+            let ((p, explained), prep) = with_prep(
+                prep,
+                &mut *src,
+                &vol.points,
+                sigma,
+                |s| -> vltm::Result<_> {
+                    match leak {
+                        Some(le) => {
+                            if let Job::Column { focus, gate, .. } = &job {
+                                probe::check_column(s.geometry(), *focus, vol, *gate, wave, exec)?;
+                            }
+                            let model = probe::fit_over_volume(
+                                s,
+                                vol,
+                                le,
+                                wave,
+                                &LeakOptions::default(),
+                                exec,
+                            )?;
+                            let mut lc = LeakCorrected::new(s, &model);
+                            let p = partial::accumulate(
+                                &mut lc, bytes, &name, vol, &task, wave, exec, r,
+                            )?;
+                            Ok((p, Some(model.explained)))
                         }
-                        let model = probe::fit_over_volume(
-                            s,
-                            vol,
-                            le,
-                            wave,
-                            &LeakOptions::default(),
-                            exec,
-                        )?;
-                        let mut lc = LeakCorrected::new(s, &model);
-                        let p =
-                            partial::accumulate(&mut lc, bytes, &name, vol, &task, wave, exec, r)?;
-                        Ok((p, Some(model.explained)))
+                        None => Ok((
+                            partial::accumulate(s, bytes, &name, vol, &task, wave, exec, r)?,
+                            None,
+                        )),
                     }
-                    None => Ok((
-                        partial::accumulate(s, bytes, &name, vol, &task, wave, exec, r)?,
-                        None,
-                    )),
-                })?;
+                },
+                |_| {},
+            )?;
             if rows.is_some() {
                 return Ok(Outcome::Part(Box::new(p)));
             }
@@ -566,9 +567,14 @@ fn compute(
         }
     }
     let sigma = wave.config(src.geometry())?.sigma();
-    let (mut d, prep) = front::with_prep(prep, &mut *src, &vol.points, sigma, |rows| {
-        one_pass(rows, vol, job, wave, exec)
-    })?;
+    let (mut d, prep) = with_prep(
+        prep,
+        &mut *src,
+        &vol.points,
+        sigma,
+        |rows| one_pass(rows, vol, job, wave, exec),
+        |_| {},
+    )?;
     d.prep = prep;
     Ok(Outcome::Done(d))
 }
@@ -595,14 +601,8 @@ fn one_pass(
             probe::check_column(rows.geometry(), focus, vol, gate, wave, exec)?;
             let mask = match mask_epsilon {
                 Some(e) => {
-                    if !(0.0..1.0).contains(&e) {
-                        return Err(vltm::Error::arg(
-                            "mask_epsilon",
-                            format!("expected 0 <= E < 1, found {e}"),
-                        ));
-                    }
-                    let d = probe::direct(rows, vol, wave, exec)?;
-                    Some(front::gamma_of(&d.values, e, "mask_epsilon")?)
+                    let (g, _) = Gamma::measure(rows, vol, e, "mask_epsilon", wave, exec)?;
+                    Some(g.non_empty("mask_epsilon")?.mask)
                 }
                 None => None,
             };
@@ -625,7 +625,7 @@ fn one_pass(
             }
             let parts = shells.map(|cuts| {
                 cuts.iter()
-                    .map(|sh| front::cut(&o.values, &vol.points, focus, *sh))
+                    .map(|sh| sh.cut(focus, &o.values, &vol.points))
                     .collect()
             });
             let mut d = Done::of(o);
@@ -641,15 +641,13 @@ fn one_pass(
         } => {
             let t = std::time::Instant::now();
             let (gamma, direct) = match direct {
-                Some(d) => (front::gamma_of(&d, opts.epsilon, "epsilon")?, d),
+                Some(d) => (Gamma::of(&d, opts.epsilon, "epsilon")?, d),
                 None => {
-                    let d = probe::direct(rows, vol, wave, exec)?;
-                    (
-                        front::gamma_of(&d.values, opts.epsilon, "epsilon")?,
-                        d.values,
-                    )
+                    let (g, d) = Gamma::measure(rows, vol, opts.epsilon, "epsilon", wave, exec)?;
+                    (g, d.values)
                 }
             };
+            let gamma = gamma.non_empty("epsilon")?.mask;
             // The report records the configuration pass 2 ran on (its band and DFT length
             // cover every Γ pair), as the command line's summary line does.
             let (values, parts, report, explained, config) = match shells {

@@ -593,6 +593,30 @@ impl RowSource for Capture {
     }
 }
 
+/// Every row of `src` read into memory, as the capture `name`.
+///
+/// # Errors
+/// Read errors; the capture's own checks ([`Capture::new`]).
+pub fn read_all(src: &mut dyn RowSource, name: &std::path::Path) -> Result<Capture> {
+    let g = src.geometry().clone();
+    let mut data = Vec::new();
+    let mut row = Vec::new();
+    for l in 0..g.lasers.len() {
+        src.read_row(l, &mut row)?;
+        data.extend_from_slice(&row);
+    }
+    Capture::new(g, data, name)
+}
+
+/// `src` with the roles of lasers and SPADs swapped (`--swap-roles`): every row read into
+/// memory ([`read_all`]), then [`swap_roles`]. Memory: twice the capture (`Kl·Ks·Nt` f32).
+///
+/// # Errors
+/// As [`read_all`] and [`swap_roles`].
+pub fn swapped(src: &mut dyn RowSource, name: &std::path::Path) -> Result<Capture> {
+    swap_roles(&read_all(src, name)?)
+}
+
 /// Swaps the roles of lasers and SPADs by reciprocity: the SPAD array becomes
 /// the virtual projector and the laser grid the camera, `T_swap(a, b) = T(b, a)`. Needs the
 /// capture in memory (`Kl·Ks·Nt` values).
@@ -679,5 +703,18 @@ mod tests {
             "argument `row`: laser row 2 is out of range: the capture has 2 rows (0..2)"
         );
         assert!(check_row(1, 2).is_ok());
+    }
+
+    /// A source read whole is the capture its file holds; `swapped` is that capture with
+    /// its roles swapped.
+    #[test]
+    fn a_source_read_whole_and_swapped() {
+        let path = std::path::Path::new("../fixtures/two_patches.npz");
+        let c = crate::io::open(path).unwrap();
+        let whole = read_all(&mut *crate::io::open_source(path).unwrap(), path).unwrap();
+        assert_eq!((&whole.geometry, &whole.data), (&c.geometry, &c.data));
+        let s = swapped(&mut *crate::io::open_source(path).unwrap(), path).unwrap();
+        let want = swap_roles(&c).unwrap();
+        assert_eq!((&s.geometry, &s.data), (&want.geometry, &want.data));
     }
 }

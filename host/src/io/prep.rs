@@ -27,8 +27,10 @@
 //! Nothing here produces NaN: a non-finite sample is left for the probes (which count it
 //! and read it as 0), and floors are means of finite samples only. [`Stats`] counts what was
 //! removed and how many histograms were left empty, so that a background larger than the
-//! signal is reported (the CLI warns above half, and refuses an all-empty capture) instead of
-//! imaging zeros. Cost: O(Nt) per histogram; memory: one source row.
+//! signal is reported (every front end warns above half, and refuses an all-empty capture:
+//! [`check`]) instead of imaging zeros. [`with_prep`] runs a pass through the preprocessing
+//! as every front end does (the imaged volume's [`Reach`], the checks). Cost: O(Nt) per
+//! histogram; memory: one source row.
 
 use crate::error::{Error, Result};
 use crate::io::capture::{Geometry, RowSource};
@@ -139,6 +141,30 @@ impl Prep {
             && self.t_max.is_none()
             && self.rebin <= 1
             && self.background == Background::None
+    }
+
+    /// The preprocessing a front end's options ask for (`t_min`, `t_max`: [`Bound::parse`];
+    /// `background`: [`Background::parse`], none by default), `None` when they ask for
+    /// nothing. `rebin = 0` is kept, for [`Prepared::new`] to refuse.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] (`t_min`, `t_max`, `background`) for a value that does not parse.
+    pub fn parse(
+        t_min: Option<&str>,
+        t_max: Option<&str>,
+        rebin: usize,
+        background: Option<&str>,
+    ) -> Result<Option<Self>> {
+        let p = Self {
+            t_min: t_min.map(|s| Bound::parse("t_min", s)).transpose()?,
+            t_max: t_max.map(|s| Bound::parse("t_max", s)).transpose()?,
+            rebin,
+            background: background
+                .map(Background::parse)
+                .transpose()?
+                .unwrap_or_default(),
+        };
+        Ok((!p.is_identity() || rebin == 0).then_some(p))
     }
 }
 
@@ -546,6 +572,97 @@ impl RowSource for Cropped<'_> {
     }
 }
 
+// A pass run through the preprocessing, as every front end (the command line, the Python
+// package) runs it: the imaged volume's reach for `background auto`, and the checks on what
+// the preprocessing removed. Errors name the parameter (`background`).
+
+/// What the preprocessing of a run did.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PrepReport {
+    /// A one-line account ([`Prepared::summary`]).
+    pub summary: String,
+    /// A warning when the background left more than half of the histograms empty.
+    pub warning: Option<String>,
+    /// The counters.
+    pub stats: Stats,
+}
+
+impl PrepReport {
+    /// What `p` did so far, not yet checked ([`PrepReport::check`]).
+    pub fn of(p: &Prepared<'_>) -> Self {
+        let s = &p.stats;
+        let warning = (2 * s.empty > s.histograms).then(|| {
+            format!(
+                "the background left {} of {} histograms empty: it is larger than most of the signal",
+                s.empty, s.histograms
+            )
+        });
+        Self {
+            summary: p.summary(),
+            warning,
+            stats: s.clone(),
+        }
+    }
+
+    /// Refuses a preprocessing that left every histogram it read empty.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] (`background`) when every histogram read was left empty.
+    pub fn check(&self) -> Result<()> {
+        let s = &self.stats;
+        if s.histograms > 0 && s.empty == s.histograms {
+            return Err(Error::arg(
+                "background",
+                format!(
+                    "the background removed every count of all {} histograms: nothing left to image (lower it or use auto)",
+                    s.histograms
+                ),
+            ));
+        }
+        Ok(())
+    }
+}
+
+/// The checks on what a preprocessing removed: every histogram empty is an error, more than
+/// half of them a warning ([`PrepReport::warning`]).
+///
+/// # Errors
+/// As [`PrepReport::check`].
+pub fn check(p: &Prepared<'_>) -> Result<PrepReport> {
+    let report = PrepReport::of(p);
+    report.check()?;
+    Ok(report)
+}
+
+/// Runs `f` on `src`, through the preprocessing `prep` when there is one: the background's
+/// return-free bins are those no path through `points` (widened by `3·sigma` plus one
+/// rebinned bin) can reach. `shown` sees what the preprocessing did once `f` has run, before
+/// it is checked (a front end that prints it prints it even when the check fails). Returns
+/// `f`'s result and the checked report.
+///
+/// # Errors
+/// `f`'s errors; [`Error::Argument`] for a window that keeps no bins, and as [`check`].
+pub fn with_prep<T, E: From<Error>>(
+    prep: Option<Prep>,
+    src: &mut dyn RowSource,
+    points: &[Point],
+    sigma: f64,
+    f: impl FnOnce(&mut dyn RowSource) -> std::result::Result<T, E>,
+    shown: impl FnOnce(&PrepReport),
+) -> std::result::Result<(T, Option<PrepReport>), E> {
+    let Some(prep) = prep else {
+        return Ok((f(src)?, None));
+    };
+    let src_dt = src.geometry().dt;
+    let margin = 3.0 * sigma + src_dt * prep.rebin.max(1) as f64;
+    let mut p = Prepared::new(src, prep, Reach::of(points, margin))?;
+    let out = f(&mut p)?;
+    let report = PrepReport::of(&p);
+    shown(&report);
+    report.check()?;
+    Ok((out, Some(report)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -714,5 +831,86 @@ mod tests {
         assert!(Bound::parse("t_min", "x").is_err());
         assert!(Background::parse("-1").is_err());
         assert_eq!(Background::parse("auto").unwrap(), Background::Auto);
+    }
+
+    fn flat(value: f32) -> Capture {
+        capture(16, |_, _| value)
+    }
+
+    fn read_rows(s: &mut dyn RowSource) -> Result<usize> {
+        let mut row = Vec::new();
+        for l in 0..s.geometry().lasers.len() {
+            s.read_row(l, &mut row)?;
+        }
+        Ok(row.len())
+    }
+
+    fn background(b: f64) -> Option<Prep> {
+        Some(Prep {
+            t_min: None,
+            t_max: None,
+            rebin: 1,
+            background: Background::Value(b),
+        })
+    }
+
+    #[test]
+    fn without_preprocessing_the_pass_runs_on_the_source() {
+        let mut c = flat(1.0);
+        let pts = [[0.0, 0.0, 0.5]];
+        let (n, r) = with_prep(None, &mut c, &pts, 0.01, read_rows, |_| panic!()).unwrap();
+        assert_eq!((n, r), (16, None));
+    }
+
+    #[test]
+    fn an_all_empty_result_is_shown_then_refused() {
+        let pts = [[0.0, 0.0, 0.5]];
+        let mut shown = None;
+        let e = with_prep(
+            background(2.0),
+            &mut flat(1.0),
+            &pts,
+            0.01,
+            read_rows,
+            |r| shown = Some(r.clone()),
+        )
+        .unwrap_err();
+        assert!(e.to_string().starts_with("argument `background`"), "{e}");
+        let shown = shown.expect("the report is shown before the check");
+        assert_eq!((shown.stats.empty, shown.stats.histograms), (2, 2));
+        assert!(shown.warning.is_some());
+        // A smaller floor leaves the counts: checked, no warning.
+        let (_, r) = with_prep(
+            background(0.5),
+            &mut flat(1.0),
+            &pts,
+            0.01,
+            read_rows,
+            |_| {},
+        )
+        .unwrap();
+        let r = r.expect("a report");
+        assert_eq!((r.stats.empty, r.warning), (0, None));
+        assert!(r.summary.contains("background"), "{}", r.summary);
+    }
+
+    #[test]
+    fn options_parse_to_nothing_or_a_preprocessing() {
+        assert_eq!(Prep::parse(None, None, 1, None).unwrap(), None);
+        let p = Prep::parse(Some("600b"), Some("2.4"), 4, Some("auto"))
+            .unwrap()
+            .unwrap();
+        assert_eq!(
+            (p.t_min, p.t_max, p.rebin, p.background),
+            (
+                Some(Bound::Bins(600)),
+                Some(Bound::Metres(2.4)),
+                4,
+                Background::Auto
+            )
+        );
+        assert!(Prep::parse(None, None, 0, None).unwrap().is_some());
+        let e = Prep::parse(None, Some("x"), 1, None).unwrap_err();
+        assert!(e.to_string().starts_with("argument `t_max`"), "{e}");
     }
 }

@@ -740,3 +740,30 @@ impl Columns {
             .collect()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shells_parse_and_cut() {
+        let s = Shell::parse_cuts("0.2, 0.5").unwrap();
+        assert_eq!(
+            (s[0].r0, s[0].r1, s[1].r0, s[1].r1, s[2].r0),
+            (0.0, 0.2, 0.2, 0.5, 0.5)
+        );
+        assert!(s[2].r1.is_infinite());
+        for bad in ["0.5,0.2", "0,1", "1", "a,b", "0.1,inf"] {
+            let e = Shell::parse_cuts(bad).unwrap_err().to_string();
+            assert!(e.starts_with("argument `shells`"), "{e}");
+            assert!(e.ends_with(&format!("found `{bad}`")), "{e}");
+        }
+        let pts = [[0.0, 0.0, 1.0], [0.0, 0.0, 1.3], [0.0, 0.0, 2.0]];
+        let v = [1.0, 2.0, 3.0];
+        let f = [0.0, 0.0, 1.0];
+        assert_eq!(s[0].cut(f, &v, &pts), [1.0, 0.0, 0.0]);
+        assert_eq!(s[1].cut(f, &v, &pts), [0.0, 2.0, 0.0]);
+        assert_eq!(s[2].cut(f, &v, &pts), [0.0, 0.0, 3.0]);
+        assert_eq!(Shell::CUT_NAMES, ["near", "middle", "far"]);
+    }
+}

@@ -19,6 +19,7 @@ use vltm::volume::{Volume, parse_point};
 use crate::args::LiveArgs;
 use crate::args::PathArg;
 use crate::console::{Failure, say};
+use crate::open;
 use crate::outputs::{Out, prepare_output, refuse_overwriting_inputs, same_file};
 
 /// Where the rows come from.
@@ -249,8 +250,7 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
             )?)
         }
         Kind::Replay(rate) => {
-            let input = crate::input::Input::default();
-            let mut src = input.open(&a.source)?;
+            let mut src = open::source(&a.source, &io::mat::MatOptions::default())?;
             Box::new(live::Replay::from_source(&mut *src, *rate, &a.source)?)
         }
     };

@@ -83,6 +83,30 @@ pub struct MatOptions {
     pub grid_width: Option<f64>,
 }
 
+impl MatOptions {
+    /// Refuses the overrides for a capture that is not a `.mat` file (other formats record
+    /// their time axis and grid).
+    ///
+    /// # Errors
+    /// [`Error::Argument`] naming the first override given (`delta_t`, `t_start`,
+    /// `grid_width`).
+    pub fn refuse(&self) -> Result<()> {
+        for (set, arg) in [
+            (self.delta_t.is_some(), "delta_t"),
+            (self.t_start.is_some(), "t_start"),
+            (self.grid_width.is_some(), "grid_width"),
+        ] {
+            if set {
+                return Err(Error::arg(
+                    arg,
+                    "only for .mat captures (other formats record their time axis and grid)",
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// A layout vltm knows.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Layout {

@@ -319,3 +319,41 @@ fn write_mat_fuzz_seeds() {
     let v73 = std::fs::read(root.join("fixtures/mat/stanford_v73.mat")).unwrap();
     write(&d, "stanford_v73.mat", &v73);
 }
+
+/// The overrides are refused, by name, for a capture that records its conventions.
+#[test]
+fn overrides_are_refused_by_name() {
+    assert!(MatOptions::default().refuse().is_ok());
+    for (o, name) in [
+        (
+            MatOptions {
+                delta_t: Some(0.01),
+                ..Default::default()
+            },
+            "delta_t",
+        ),
+        (
+            MatOptions {
+                t_start: Some(0.0),
+                grid_width: Some(1.0),
+                ..Default::default()
+            },
+            "t_start",
+        ),
+        (
+            MatOptions {
+                grid_width: Some(1.0),
+                ..Default::default()
+            },
+            "grid_width",
+        ),
+    ] {
+        let e = o.refuse().unwrap_err().to_string();
+        assert_eq!(
+            e,
+            format!(
+                "argument `{name}`: only for .mat captures (other formats record their time axis and grid)"
+            )
+        );
+    }
+}

@@ -10,7 +10,6 @@
 use std::path::Path;
 
 use crate::error::Result;
-use crate::front;
 use crate::io::prep::{Prep, Prepared};
 use crate::io::{self, Capture, RowSource};
 use crate::probe;
@@ -68,18 +67,7 @@ pub fn info(
         }
         m.capture
     } else {
-        for (set, arg) in [
-            (mat.delta_t.is_some(), "delta_t"),
-            (mat.t_start.is_some(), "t_start"),
-            (mat.grid_width.is_some(), "grid_width"),
-        ] {
-            if set {
-                return Err(crate::error::Error::arg(
-                    arg,
-                    "only for .mat captures (other formats record their time axis and grid)",
-                ));
-            }
-        }
+        mat.refuse()?;
         let c = io::open(path)?;
         out(format!("capture      {}", path.display()));
         c
@@ -98,20 +86,20 @@ pub fn info(
     let (g, counts) = match prep {
         Some(p) => {
             let mut pr = Prepared::new(&mut c, p, None)?;
-            let sum = front::summed(&mut pr)?;
+            let sum = summed(&mut pr)?;
             let g = pr.geometry().clone();
             out(format!(
                 "time window  {} bins x {} m from t0 = {} m (after preprocessing)",
                 g.nt, g.dt, g.t0
             ));
-            let r = front::check(&pr)?;
+            let r = crate::io::prep::check(&pr)?;
             out(format!("preprocessing: {}", r.summary));
             if let Some(w) = &r.warning {
                 say(Stream::Warning, w);
             }
             (g, sum)
         }
-        None => (c.geometry.clone(), front::summed(&mut c)?),
+        None => (c.geometry.clone(), summed(&mut c)?),
     };
     if let Some(w) = plausible.verdict() {
         say(Stream::Warning, &w);
@@ -141,6 +129,28 @@ pub fn info(
         t0: g.t0,
         dt: g.dt,
     })
+}
+
+/// The histograms of every row summed bin by bin (non-finite samples skipped): the summed
+/// transient, `Nt` values over the path axis `t0 + n·Δt`.
+///
+/// # Errors
+/// Read errors.
+pub fn summed(src: &mut dyn RowSource) -> Result<Vec<f64>> {
+    let g = src.geometry().clone();
+    let mut sum = vec![0.0f64; g.nt];
+    let mut row = Vec::new();
+    for l in 0..g.lasers.len() {
+        src.read_row(l, &mut row)?;
+        for h in row.chunks_exact(g.nt) {
+            for (s, &x) in sum.iter_mut().zip(h) {
+                if x.is_finite() {
+                    *s += f64::from(x);
+                }
+            }
+        }
+    }
+    Ok(sum)
 }
 
 /// The `volume` line: the `$volume` [`crate::probe::suggested_volume`] suggests, whose z range
