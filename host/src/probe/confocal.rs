@@ -28,6 +28,7 @@ use crate::probe::fast::{BandDft, Confocal, Lookup};
 use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
+use vltm_kernel::geometry::dist;
 use vltm_kernel::{Config, Gate, Point, Probe, Report, RowBuffer, Scan, Target, cis_turns_f64};
 
 /// Rows per `sgemm` of stage 1.
@@ -124,7 +125,7 @@ pub(super) fn outside_guard(g: &Geometry, cfg: &Config, voxels: &[Point]) -> Vec
             let (a, b) = g.lasers.iter().zip(&e).fold(
                 (f64::INFINITY, f64::NEG_INFINITY),
                 |(a, b), (p, e)| {
-                    let x = 2.0 * f64::from(dist(*p, *v)) + e;
+                    let x = 2.0 * f64::from(dist(p, v)) + e;
                     (a.min(x), b.max(x))
                 },
             );

@@ -6,6 +6,7 @@ use crate::error::Result;
 use crate::exec::Path;
 use crate::io::capture::Geometry;
 use rayon::prelude::*;
+use vltm_kernel::geometry::{dist, dist64, pitch};
 use vltm_kernel::{Config, Legs, Params, Point, Report, Weights};
 
 /// Virtual wave and weighting options shared by every probe (the CLI's common flags).
@@ -54,18 +55,6 @@ impl Default for Wave {
             crop: true,
         }
     }
-}
-
-/// Aperture pitch of a grid (the coarser of its two axes; 0 for a single point).
-pub(super) fn pitch(pts: &[Point], shape: [usize; 2]) -> f32 {
-    let d = |a: Point, b: Point| ((0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f32>()).sqrt();
-    let px = if shape[0] > 1 {
-        d(pts[0], pts[shape[1]])
-    } else {
-        0.0
-    };
-    let py = if shape[1] > 1 { d(pts[0], pts[1]) } else { 0.0 };
-    px.max(py)
 }
 
 /// The smallest band half-width [`Wave::check`] accepts (units of 1/σ; truncation error
@@ -205,7 +194,7 @@ impl Wave {
             pts.iter()
                 .zip(legs)
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (p, d)| {
-                    let x = f64::from(dist(*p, *v)) + d;
+                    let x = f64::from(dist(p, v)) + d;
                     (a.min(x), b.max(x))
                 })
         };
@@ -218,7 +207,7 @@ impl Wave {
                 voxels.iter().zip(&cam).fold(
                     (f64::INFINITY, f64::NEG_INFINITY),
                     |(lo, hi), (b, c)| {
-                        let d_ab = f64::from(dist(*a, *b));
+                        let d_ab = f64::from(dist(a, b));
                         (lo.min(p.0 + d_ab + c.0), hi.max(p.1 + d_ab + c.1))
                     },
                 )
@@ -312,14 +301,6 @@ pub struct Output {
     /// When the FFT path ([`crate::exec::Path::Planar`]) ran on a grid off the wall's lattice: the SPEC of
     /// the support grid it computed on before resampling ([`crate::probe::resample`]).
     pub aligned: Option<String>,
-}
-
-pub(super) use vltm_kernel::geometry::dist64;
-
-/// [`vltm_kernel::geometry::dist`] taking its points by value (the host's call sites).
-#[inline]
-pub(super) fn dist(a: Point, b: Point) -> f32 {
-    vltm_kernel::geometry::dist(&a, &b)
 }
 
 /// The part of the capture's time axis a probe kept (bins `start..end` of `nt`).

@@ -20,6 +20,7 @@ use crate::volume::Volume;
 use num_complex::Complex64;
 use rayon::prelude::*;
 use std::time::Instant;
+use vltm_kernel::geometry::dist;
 use vltm_kernel::{Config, Gate, Point, Probe, Report, Scan, Target};
 
 /// Direct light: the diagonal over `volume` (Eqs. 11–12), on the path chosen by
@@ -353,7 +354,7 @@ pub(super) fn outside_guard(g: &Geometry, cfg: &Config, voxels: &[Point]) -> Vec
         pts.iter()
             .zip(legs)
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (p, d)| {
-                let x = dist(*p, *v) as f64 + d;
+                let x = dist(p, v) as f64 + d;
                 (a.min(x), b.max(x))
             })
     };
@@ -501,7 +502,7 @@ pub(super) fn planar_core(
             row.band(),
             pts,
             |v| {
-                let d = dist(laser, *v);
+                let d = dist(&laser, v);
                 (d, cfg.weight(d))
             },
             skip,

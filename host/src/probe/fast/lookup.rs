@@ -30,7 +30,7 @@
 //! is `w(d_lv)·Σ_s w(d_vs)·Z_s(d_lv + d_vs)`, summed over the SPADs in `Complex32` and added
 //! to the `Complex64` accumulator, as the kernel's band diagonal does. The guard is the
 //! kernel's, bit for bit: a pair with `τ + offset_s` (in `f32`) outside [`Config::guard`]
-//! adds 0. Distances are `f32` `√(x² + y² + z²)` (correctly rounded, as the kernel's); the
+//! adds 0. Distances are the kernel's [`vltm_kernel::geometry::dist`] (`f32`, correctly rounded); the
 //! grid position `τ·L/span` is formed in `f64` from the `f32` τ.
 //!
 //! Each SPAD's table is stored rotated so that its guarded τ range is one contiguous run
@@ -70,6 +70,7 @@
 use num_complex::{Complex32, Complex64};
 use rustfft::{Fft, FftPlanner};
 use std::sync::Arc;
+use vltm_kernel::geometry::dist;
 use vltm_kernel::{Config, Point, Row, Sample, Scan, Weights, cis_small_turns, lagrange4};
 
 /// Grid samples per gate std σ: the grid step is `δ = span/L ≤ σ/R` (see the module docs
@@ -168,13 +169,6 @@ pub(super) fn fast_len(n: usize) -> usize {
         p5 *= 5;
     }
     best
-}
-
-/// The kernel's distance: `f32` `√(x² + y² + z²)`, correctly rounded.
-#[inline]
-fn dist(a: &Point, b: &Point) -> f32 {
-    let (x, y, z) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
-    (x * x + y * y + z * z).sqrt()
 }
 
 /// 4-point cubic Lagrange interpolation at `t ∈ [0, 1)` between `q[1]` and `q[2]`.
@@ -430,7 +424,10 @@ impl Lookup {
             let d_lv = dist(&laser, v);
             let mut sum = Complex32::new(0.0, 0.0);
             for (bi, b) in s.blocks.iter().enumerate() {
-                // Vectorisable part: no table reads.
+                // Vectorisable part: no table reads. `d_vs` is the kernel's `dist` written
+                // out on the block's arrays (the same operations in the same order, so the
+                // same bits): its `libm` square root is one scalar instruction the loop
+                // cannot vectorise through.
                 for k in 0..BLOCK {
                     let (dx, dy, dz) = (v[0] - b.x[k], v[1] - b.y[k], v[2] - b.z[k]);
                     let d_vs = (dx * dx + dy * dy + dz * dz).sqrt();
