@@ -5,7 +5,8 @@
 use super::crop::{Crop, Reach, with_crop};
 use super::direct::*;
 use super::drive::*;
-pub use super::wave::ColumnGate;
+use super::gate::ColumnGate;
+use super::output::{Output, check_finite};
 use super::wave::*;
 use crate::budget;
 use crate::error::{Error, Result};

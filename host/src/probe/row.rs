@@ -18,6 +18,7 @@
 
 use super::crop::{Reach, with_crop};
 use super::drive::*;
+use super::output::Output;
 use super::wave::*;
 use crate::error::Result;
 use crate::exec::{Exec, Path, chunk_len};
@@ -45,7 +46,7 @@ pub fn check_row(g: &Geometry, focus: Point, volume: &Volume, wave: &Wave) -> Re
         &base,
         Some(&volume.points),
         &[focus],
-        super::wave::ColumnGate::TwoBounce,
+        super::gate::ColumnGate::TwoBounce,
         Exec::default(),
     )
     .map(|_| ())
@@ -78,7 +79,7 @@ pub fn row(
         &base,
         Some(voxels),
         &to,
-        super::wave::ColumnGate::TwoBounce,
+        super::gate::ColumnGate::TwoBounce,
         exec,
     )?;
     // The time axis cropped to the paths' reach: the laser leg ends at the volume's x_a, the

@@ -25,7 +25,8 @@
 //! wall points are visited per voxel. The fraction is counted exactly on a strided sample of at most 32
 //! lasers × 32 SPADs × 32 foci × 1024 voxels (sorted legs, `O(n log n)` per pair).
 
-use super::wave::{ColumnGate, legs};
+use super::gate::ColumnGate;
+use super::wave::legs;
 use crate::error::{Error, Result};
 use crate::exec::Exec;
 use crate::io::capture::Geometry;

@@ -9,6 +9,7 @@ use super::aligned::fast_hint;
 use super::confocal;
 use super::crop::{Crop, Reach, with_crop};
 use super::drive::*;
+use super::output::{Output, check_finite};
 use super::wave::*;
 use crate::budget;
 use crate::error::{Error, Result};
@@ -115,7 +116,7 @@ fn direct_acc_with(
         &base,
         None,
         &volume.points,
-        super::wave::ColumnGate::TwoBounce,
+        super::gate::ColumnGate::TwoBounce,
         exec,
     )?;
     let reach = Reach {

@@ -25,16 +25,16 @@
 //! Merging is one addition per `f64`; finishing costs what finishing one pass costs (the
 //! imaging of factorised columns). Memory: the state, twice while merging two parts.
 
-use super::column::{
-    ColumnGate, ColumnState, Columns, Shell, check_focus, column_acc, factorised_columns,
-};
+use super::column::{ColumnState, Columns, Shell, check_focus, column_acc, factorised_columns};
 use super::crop::{self, Reach};
 use super::direct::direct_acc;
 use super::drive::{Job, intensities};
+use super::gate::ColumnGate;
 use super::indirect::indirect_sum;
 use super::leak::{DirectModel, GateEnergy, LeakCorrected, LeakOptions, cell_radius};
 use super::matrix::{Matrix, matrix_acc, matrix_of_columns};
-use super::wave::{Output, Wave};
+use super::output::Output;
+use super::wave::Wave;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path};
 use crate::io::capture::{RowRange, RowSource};
