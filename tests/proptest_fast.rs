@@ -95,7 +95,7 @@ use std::collections::BTreeMap;
 use vltm::Error;
 use vltm::io::{Capture, Geometry};
 use vltm::kernel::{Config, Legs, Params, Point, Weights};
-use vltm::probe::fast::{Confocal as ConfocalFft, Lookup, Planar};
+use vltm::probe::fast::{Confocal as ConfocalFft, LookupDiagonal, Planar};
 use vltm::probe::{self, ColumnGate, Exec, Output, Path, Shell, Wave};
 use vltm::volume::Volume;
 
@@ -567,7 +567,7 @@ impl Scan {
         let g = &self.capture.geometry;
         let m_planar = Planar::new(&cfg, &g.spads, &self.volume.points, self.volume.shape)
             .map_or(1, |p| p.shape().0 * p.shape().1);
-        let m = m_planar.max(Lookup::new(&cfg).grid_len());
+        let m = m_planar.max(LookupDiagonal::new(&cfg).grid_len());
         let fft = U32 * 8.0 * (m as f64).log2();
         let tail = (-cfg.params().gate_support.powi(2) / 2.0).exp();
         let band = reference::erfc(cfg.params().band_half_width / 2f64.sqrt());
@@ -1152,7 +1152,7 @@ impl Confocal {
         let g = &sc.capture.geometry;
         let m_conv = ConfocalFft::new(&cfg, &g.lasers, &sc.volume.points, sc.volume.shape)
             .map_or(1, |p| p.shape().0 * p.shape().1);
-        let m = m_conv.max(Lookup::new(&cfg).grid_len());
+        let m = m_conv.max(LookupDiagonal::new(&cfg).grid_len());
         let fft = U32 * 8.0 * (m as f64).log2();
         let tail = (-cfg.params().gate_support.powi(2) / 2.0).exp();
         let band = reference::erfc(cfg.params().band_half_width / 2f64.sqrt());

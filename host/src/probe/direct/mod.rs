@@ -15,7 +15,7 @@ use crate::budget;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path};
 use crate::io::capture::{Geometry, RowSource};
-use crate::probe::fast::{Confocal, Lookup, Phasor, Planar, planar};
+use crate::probe::fast::{Confocal, LookupDiagonal, Phasor, Planar, planar};
 use crate::probe::resample::Resample;
 use crate::volume::Volume;
 use num_complex::Complex64;
@@ -387,7 +387,7 @@ pub(super) fn direct_lookup(
     let spads = if g.confocal { &g.spads[..1] } else { &g.spads };
     let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
     let scan = Scan::new(cfg, spads, &mut tables)?;
-    let lookup = Lookup::new(cfg);
+    let lookup = LookupDiagonal::new(cfg);
     let nw = rayon::current_num_threads().max(1);
     let workers: Vec<_> = (0..nw)
         .map(|_| {
@@ -427,7 +427,7 @@ pub(super) fn direct_lookup(
 pub(super) fn lookup_plan(g: &Geometry, cfg: &Config, n_voxels: usize) -> budget::Plan {
     let mut plan = memory_plan(g, cfg, budget::bytes(n_voxels, 32), "direct light");
     let threads = rayon::current_num_threads().max(1);
-    Lookup::add_to_plan(cfg, g.spads_per_row(), n_voxels, threads, &mut plan);
+    LookupDiagonal::add_to_plan(cfg, g.spads_per_row(), n_voxels, threads, &mut plan);
     plan
 }
 
@@ -567,7 +567,7 @@ fn planar_flops(
 /// Flops of the lookup diagonal per row: one complex inverse FFT per SPAD, then `E0 + 16`
 /// flops per (voxel, SPAD) (§B.8).
 fn lookup_row_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
-    let l = Lookup::plan_len(cfg) as f64;
+    let l = LookupDiagonal::plan_len(cfg) as f64;
     let ks = g.spads_per_row() as f64;
     ks * 5.0 * l * l.log2() + n_voxels as f64 * ks * 76.0
 }

@@ -62,9 +62,9 @@
 //! same run (13–14× faster; 2.2–3.5 ms per row, of which 0.06 ms are the FFT tables).
 //! Parallel callers split the voxels; each worker rebuilds the row's tables (cheap).
 //!
-//! **Memory**: per worker ([`LookupScratch`], [`Lookup::scratch_bytes`]) `Ks·(L + 8) + L`
+//! **Memory**: per worker ([`LookupScratch`], [`LookupDiagonal::scratch_bytes`]) `Ks·(L + 8) + L`
 //! complex `f32` (the rotated tables and one FFT buffer), rustfft's scratch and `~40·Ks`
-//! bytes of SPAD blocks; the shared [`Lookup`] holds the FFT plan and the `2L + 8`-entry
+//! bytes of SPAD blocks; the shared [`LookupDiagonal`] holds the FFT plan and the `2L + 8`-entry
 //! carrier table. No allocation per row.
 
 use num_complex::{Complex32, Complex64};
@@ -81,8 +81,11 @@ pub const SAMPLES_PER_SIGMA: f64 = 12.0;
 /// the rest absorbs rounding at the guard edges before the wrapping fallback is needed).
 const EXTRA: usize = 8;
 
-/// Precomputed inverse-FFT plan and constants for one configuration.
-pub struct Lookup {
+/// The lookup path of the diagonal for one configuration: the precomputed inverse-FFT plan,
+/// carrier table and guard; [`LookupDiagonal::apply`] adds one laser row's diagonal
+/// amplitudes. (The kernel's [`vltm_kernel::Lookup`] is the tables of the kernel's own lookup
+/// path, on caller-owned memory.)
+pub struct LookupDiagonal {
     cfg: Config,
     /// Grid length L.
     len: usize,
@@ -99,7 +102,7 @@ pub struct Lookup {
     ifft: Arc<dyn Fft<f32>>,
 }
 
-/// Per-worker scratch of [`Lookup::apply`]: the row's baseband tables (SPAD-major) and the
+/// Per-worker scratch of [`LookupDiagonal::apply`]: the row's baseband tables (SPAD-major) and the
 /// FFT buffers. Resized (not reallocated in steady state) when the SPAD count changes.
 #[derive(Clone, Debug)]
 pub struct LookupScratch {
@@ -141,9 +144,9 @@ impl SpadBlock {
     };
 }
 
-impl std::fmt::Debug for Lookup {
+impl std::fmt::Debug for LookupDiagonal {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Lookup")
+        f.debug_struct("LookupDiagonal")
             .field("len", &self.len)
             .field("n_fft", &self.cfg.n_fft())
             .field("bins", &self.cfg.bins())
@@ -178,13 +181,13 @@ fn lagrange(q: &[Complex32; 4], t: f32) -> Complex32 {
     q[0] * w[0] + q[1] * w[1] + q[2] * w[2] + q[3] * w[3]
 }
 
-impl Lookup {
+impl LookupDiagonal {
     /// Plans the grid for `cfg` (length `L`, see the module docs).
     pub fn new(cfg: &Config) -> Self {
         Self::with_density(cfg, SAMPLES_PER_SIGMA)
     }
 
-    /// As [`Lookup::new`] with `r` grid samples per σ instead of [`SAMPLES_PER_SIGMA`].
+    /// As [`LookupDiagonal::new`] with `r` grid samples per σ instead of [`SAMPLES_PER_SIGMA`].
     fn with_density(cfg: &Config, r: f64) -> Self {
         let len = Self::len_with_density(cfg, r);
         let span = cfg.span();
@@ -212,7 +215,7 @@ impl Lookup {
         }
     }
 
-    /// The grid length `L` of [`Lookup::new`] for `cfg`, without planning anything (for cost
+    /// The grid length `L` of [`LookupDiagonal::new`] for `cfg`, without planning anything (for cost
     /// models and the memory budget).
     pub fn plan_len(cfg: &Config) -> usize {
         Self::len_with_density(cfg, SAMPLES_PER_SIGMA)
@@ -363,7 +366,7 @@ impl Lookup {
         }
     }
 
-    /// [`Lookup::gated`] outside the table's contiguous run (rounding at a guard edge):
+    /// [`LookupDiagonal::gated`] outside the table's contiguous run (rounding at a guard edge):
     /// wraps the grid index explicitly.
     #[cold]
     #[inline(never)]
@@ -389,7 +392,7 @@ impl Lookup {
     /// error of the module docs. No allocation once `s` has the row's SPAD count.
     ///
     /// # Panics
-    /// If `scan` has another configuration than this `Lookup`, if `row` was loaded for
+    /// If `scan` has another configuration than this `LookupDiagonal`, if `row` was loaded for
     /// another SPAD count, or if `acc.len() ≠ voxels.len()`.
     pub fn apply<T: Sample>(
         &self,
@@ -400,7 +403,10 @@ impl Lookup {
         acc: &mut [Complex64],
     ) {
         let cfg = scan.config();
-        assert!(*cfg == self.cfg, "Lookup made for another configuration");
+        assert!(
+            *cfg == self.cfg,
+            "LookupDiagonal made for another configuration"
+        );
         let spads = scan.spads();
         let ks = spads.len();
         assert_eq!(row.band().len(), ks * cfg.bins(), "row of another scan");
@@ -567,7 +573,7 @@ mod tests {
         let mut band = vec![0.0; kv];
         probe.finish(&scan, &mut band).unwrap();
 
-        let lk = Lookup::new(cfg);
+        let lk = LookupDiagonal::new(cfg);
         let mut s = lk.scratch(ks);
         let moved: Vec<Point> = c
             .voxels
@@ -671,7 +677,7 @@ mod tests {
         let c = case(p, 16, 200, seed);
         let o = run(&c, 0.0);
         let (di, da) = errors(&o);
-        let lk = Lookup::new(&c.cfg);
+        let lk = LookupDiagonal::new(&c.cfg);
         println!(
             "λ/Δt {:5.1}  σ/Δt {:5.2}  N {:5}  L {:5} (×{:.2})  J {:4}  cut {:3.0}%  \
              intensity err {di:.2e}  amplitude err {da:.2e}  (kernel vs f64: {:.2e})",
@@ -764,7 +770,7 @@ mod tests {
         let mut buf = vec![0.0; RowBuffer::len(cfg, 3)];
         let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
         let row = rows.load(&scan, c.laser, &c.hists).unwrap();
-        let lk = Lookup::new(cfg);
+        let lk = LookupDiagonal::new(cfg);
         let mut s = lk.scratch(3);
         lk.tables(scan.spads(), row.band(), row.offsets(), &mut s);
         let (g_lo, g_hi) = cfg.guard();
@@ -798,7 +804,7 @@ mod tests {
         let mut buf = vec![0.0; RowBuffer::len(cfg, 4)];
         let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
         let row = rows.load(&scan, c.laser, &c.hists).unwrap();
-        let lk = Lookup::with_density(cfg, r);
+        let lk = LookupDiagonal::with_density(cfg, r);
         let mut s = lk.scratch(4);
         lk.tables(scan.spads(), row.band(), row.offsets(), &mut s);
         let (g_lo, g_hi) = cfg.guard();
@@ -878,7 +884,7 @@ mod tests {
         let mut state = vec![0.0; Probe::state_len(&cfg, Target::Diagonal, Gate::Gaussian, kv, ks)];
         let mut probe =
             Probe::new(&scan, Target::Diagonal, Gate::Gaussian, &voxels, &mut state).unwrap();
-        let lk = Lookup::new(&cfg);
+        let lk = LookupDiagonal::new(&cfg);
         let mut s = lk.scratch(ks);
         let mut acc = vec![Complex64::new(0.0, 0.0); kv];
         let reps = 20;
