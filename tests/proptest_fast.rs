@@ -1,7 +1,8 @@
 //! Property tests of the host's fast paths (`vltm::probe::Path`): the planar FFT
-//! convolution (`host/src/fast/planar.rs`) for the diagonal and for imaging factorised
-//! columns, and the baseband lookup diagonal (`host/src/fast/lookup.rs`), against the
-//! `f64` time-domain reference (`reference/mod.rs`) and against the kernel's band sum
+//! convolution (`host/src/probe/fast/planar.rs`) for the diagonal and for imaging factorised
+//! columns, and the baseband lookup diagonal (`LookupDiagonal`,
+//! `host/src/probe/fast/lookup.rs`), against the `f64` time-domain reference
+//! (`reference/mod.rs`) and against the kernel's band sum
 //! (`Path::Band`), through the public API (`probe::direct`, `probe::column`) on in-memory
 //! captures. Stage 1 of every row goes through `fast::BandDft` (sgemm) on all paths.
 //!
