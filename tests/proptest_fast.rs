@@ -1,7 +1,7 @@
 //! Property tests of the host's fast paths (`vltm::probe::Path`): the planar FFT
 //! convolution (`host/src/probe/fast/planar.rs`) for the diagonal and for imaging factorised
 //! columns, and the baseband lookup diagonal (`LookupDiagonal`,
-//! `host/src/probe/fast/lookup.rs`), against the `f64` time-domain reference
+//! `host/src/probe/fast/lookup/`), against the `f64` time-domain reference
 //! (`reference/mod.rs`) and against the kernel's band sum
 //! (`Path::Band`), through the public API (`probe::direct`, `probe::column`) on in-memory
 //! captures. Stage 1 of every row goes through `fast::BandDft` (sgemm) on all paths.
@@ -53,7 +53,7 @@
 //!   of `Σ_s Σ_j`: the phases of the hidden path (`Φ_h` = max|ν|·max hidden path/2π: no legs,
 //!   no t0), a J-step phase recurrence on each side (2J), the transforms (`ε_fft`) and a few
 //!   roundings of κ, weights and products (16).
-//! * **lookup**: plus `ε_interp = 2e-5`, its cubic interpolation: `fast/lookup.rs` measures at
+//! * **lookup**: plus `ε_interp = 2e-5`, its cubic interpolation: `fast/lookup/` measures at
 //!   most 4.4e-6·max|Z_s| per SPAD over the guard interval (12 samples per σ), and
 //!   `max|Z_s| ≤ Σ_n |H_s[n]|`, so ≤ 4.4e-6·S per voxel; 2e-5 leaves 4.5× for other data.
 //!
