@@ -272,7 +272,7 @@ fn lookup_diagonal(c: &mut Criterion) {
     let mut buf = vec![0.0f32; RowBuffer::len(&cfg, sp.len())];
     let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
     let row = rows.load(&scan, [0.1, -0.2, 0.0], &h).unwrap();
-    let lookup = vltm::probe::fast::Lookup::new(&cfg);
+    let lookup = vltm::probe::fast::LookupDiagonal::new(&cfg);
     let mut scratch = lookup.scratch(sp.len());
     let mut acc = vec![Complex64::new(0.0, 0.0); vox.len()];
     eprintln!(
@@ -298,7 +298,7 @@ fn lookup_diagonal(c: &mut Criterion) {
     let mut buf = vec![0.0f32; RowBuffer::len(&cfg, sp.len())];
     let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
     let row = rows.load(&scan, [0.1, 0.0, 0.0], &h).unwrap();
-    let lookup = vltm::probe::fast::Lookup::new(&cfg);
+    let lookup = vltm::probe::fast::LookupDiagonal::new(&cfg);
     let mut scratch = lookup.scratch(sp.len());
     let mut acc = vec![Complex64::new(0.0, 0.0); vox.len()];
     g.throughput(Throughput::Elements((vox.len() * sp.len()) as u64));

@@ -27,7 +27,7 @@ use reference::{Reference, p64};
 use std::process::Command;
 use vltm::io::{Capture, Geometry};
 use vltm::kernel::{Config, Legs, Params, Point, Weights};
-use vltm::probe::fast::Lookup;
+use vltm::probe::fast::LookupDiagonal;
 use vltm::probe::{self, Exec, Output, Path, Wave};
 use vltm::volume::Volume;
 
@@ -271,7 +271,7 @@ impl Case {
         let j = cfg.bins() as f64;
         let t0 = self.capture.geometry.t0;
         let eps32 = U32 * (nu_max * (span(true).abs() + t0.abs()) + j + cfg.nt() as f64 + 64.0);
-        let fft = U32 * 8.0 * (Lookup::new(&cfg).grid_len() as f64).log2();
+        let fft = U32 * 8.0 * (LookupDiagonal::new(&cfg).grid_len() as f64).log2();
         let tail = (-cfg.params().gate_support.powi(2) / 2.0).exp();
         let band = reference::erfc(cfg.params().band_half_width / 2f64.sqrt());
         (

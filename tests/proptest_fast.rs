@@ -1,7 +1,8 @@
 //! Property tests of the host's fast paths (`vltm::probe::Path`): the planar FFT
-//! convolution (`host/src/fast/planar.rs`) for the diagonal and for imaging factorised
-//! columns, and the baseband lookup diagonal (`host/src/fast/lookup.rs`), against the
-//! `f64` time-domain reference (`reference/mod.rs`) and against the kernel's band sum
+//! convolution (`host/src/probe/fast/planar.rs`) for the diagonal and for imaging factorised
+//! columns, and the baseband lookup diagonal (`LookupDiagonal`,
+//! `host/src/probe/fast/lookup/`), against the `f64` time-domain reference
+//! (`reference/mod.rs`) and against the kernel's band sum
 //! (`Path::Band`), through the public API (`probe::direct`, `probe::column`) on in-memory
 //! captures. Stage 1 of every row goes through `fast::BandDft` (sgemm) on all paths.
 //!
@@ -52,7 +53,7 @@
 //!   of `Σ_s Σ_j`: the phases of the hidden path (`Φ_h` = max|ν|·max hidden path/2π: no legs,
 //!   no t0), a J-step phase recurrence on each side (2J), the transforms (`ε_fft`) and a few
 //!   roundings of κ, weights and products (16).
-//! * **lookup**: plus `ε_interp = 2e-5`, its cubic interpolation: `fast/lookup.rs` measures at
+//! * **lookup**: plus `ε_interp = 2e-5`, its cubic interpolation: `fast/lookup/` measures at
 //!   most 4.4e-6·max|Z_s| per SPAD over the guard interval (12 samples per σ), and
 //!   `max|Z_s| ≤ Σ_n |H_s[n]|`, so ≤ 4.4e-6·S per voxel; 2e-5 leaves 4.5× for other data.
 //!
@@ -95,7 +96,7 @@ use std::collections::BTreeMap;
 use vltm::Error;
 use vltm::io::{Capture, Geometry};
 use vltm::kernel::{Config, Legs, Params, Point, Weights};
-use vltm::probe::fast::{Confocal as ConfocalFft, Lookup, Planar};
+use vltm::probe::fast::{Confocal as ConfocalFft, LookupDiagonal, Planar};
 use vltm::probe::{self, ColumnGate, Exec, Output, Path, Shell, Wave};
 use vltm::volume::Volume;
 
@@ -567,7 +568,7 @@ impl Scan {
         let g = &self.capture.geometry;
         let m_planar = Planar::new(&cfg, &g.spads, &self.volume.points, self.volume.shape)
             .map_or(1, |p| p.shape().0 * p.shape().1);
-        let m = m_planar.max(Lookup::new(&cfg).grid_len());
+        let m = m_planar.max(LookupDiagonal::new(&cfg).grid_len());
         let fft = U32 * 8.0 * (m as f64).log2();
         let tail = (-cfg.params().gate_support.powi(2) / 2.0).exp();
         let band = reference::erfc(cfg.params().band_half_width / 2f64.sqrt());
@@ -1152,7 +1153,7 @@ impl Confocal {
         let g = &sc.capture.geometry;
         let m_conv = ConfocalFft::new(&cfg, &g.lasers, &sc.volume.points, sc.volume.shape)
             .map_or(1, |p| p.shape().0 * p.shape().1);
-        let m = m_conv.max(Lookup::new(&cfg).grid_len());
+        let m = m_conv.max(LookupDiagonal::new(&cfg).grid_len());
         let fft = U32 * 8.0 * (m as f64).log2();
         let tail = (-cfg.params().gate_support.powi(2) / 2.0).exp();
         let band = reference::erfc(cfg.params().band_half_width / 2f64.sqrt());

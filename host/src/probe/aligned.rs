@@ -98,7 +98,7 @@ pub(super) fn fast_hint(g: &Geometry, volume: &Volume, wavelength: f64) -> Optio
 pub fn window_depths(g: &Geometry, step: f64) -> Option<(f64, f64)> {
     let (t_min, t_max) = (g.t0, g.t0 + (g.nt.max(1) - 1) as f64 * g.dt);
     let p64 = |p: &Point| p.map(f64::from);
-    let dist = |a: [f64; 3], b: [f64; 3]| (0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f64>().sqrt();
+    let dist = |a: [f64; 3], b: [f64; 3]| vltm_kernel::geometry::dist64_f64(&a, &b);
     let top = g
         .lasers
         .iter()

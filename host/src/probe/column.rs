@@ -5,7 +5,8 @@
 use super::crop::{Crop, Reach, with_crop};
 use super::direct::*;
 use super::drive::*;
-pub use super::wave::ColumnGate;
+use super::gate::ColumnGate;
+use super::output::{Output, check_finite};
 use super::wave::*;
 use crate::budget;
 use crate::error::{Error, Result};
@@ -16,6 +17,7 @@ use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
 use std::time::Instant;
+use vltm_kernel::geometry::dist;
 use vltm_kernel::{Gate, Point, Probe, Report, Scan, Target, cis_turns, geometry};
 
 /// A distance shell `r0 ≤ |x_a − x_b| < r1` (m) (near / middle / far decompositions).
@@ -106,7 +108,7 @@ impl Shell {
         values
             .iter()
             .zip(points)
-            .map(|(&x, p)| if self.contains(dist(a, *p)) { x } else { 0.0 })
+            .map(|(&x, p)| if self.contains(dist(&a, p)) { x } else { 0.0 })
             .collect()
     }
 }
@@ -467,7 +469,7 @@ impl ColumnState {
             }
         };
         for (i, p) in volume.points.iter().enumerate() {
-            if !shell.contains(dist(focus, *p)) {
+            if !shell.contains(dist(&focus, p)) {
                 v[i] = 0.0;
                 if let Some(a) = &mut amplitudes {
                     a[i] = Complex64::new(0.0, 0.0);
@@ -570,7 +572,7 @@ pub(super) fn image_column(
         let skip = vec![false; voxels.len()];
         // One pass over the slices, the slices in parallel (bit-identical to one thread's).
         let mut acc = vec![Complex64::new(0.0, 0.0); voxels.len()];
-        planar.apply_parallel(&u32s, voxels, |b| (dist(focus, *b), 1.0), &skip, &mut acc);
+        planar.apply_parallel(&u32s, voxels, |b| (dist(&focus, b), 1.0), &skip, &mut acc);
         let aliased = column_aliased(&scan, focus, voxels, legs);
         let out = acc.iter().map(|a| a.norm_sqr()).collect();
         return Ok((
@@ -614,10 +616,10 @@ pub(super) fn column_amplitudes(
     let span = cfg.span();
     let (klo, inv) = ((cfg.k_lo() as f64 / span) as f32, (1.0 / span) as f32);
     for (o, b) in out.iter_mut().zip(voxels) {
-        let d_ab = dist(focus, *b);
+        let d_ab = dist(&focus, b);
         let mut sum = Complex64::new(0.0, 0.0);
         for (sp, us) in scan.spads().iter().zip(u.chunks_exact(j)) {
-            let d_bs = dist(*b, *sp);
+            let d_bs = dist(b, sp);
             let tau = d_ab + d_bs;
             let mut ph = cis_turns(klo * tau);
             let step = cis_turns(inv * tau);
@@ -645,13 +647,13 @@ pub(super) fn column_aliased(
     voxels
         .par_iter()
         .filter(|b| {
-            let d_ab = dist(a, **b);
+            let d_ab = dist(&a, b);
             let paths = scan
                 .spads()
                 .iter()
                 .zip(scan.sensor_legs())
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |r, (sp, d4)| {
-                    geometry::widen(r, f64::from(d_ab + dist(**b, *sp) + d4))
+                    geometry::widen(r, f64::from(d_ab + dist(b, sp) + d4))
                 });
             geometry::leaves_window(window, legs, paths)
         })

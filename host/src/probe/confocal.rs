@@ -24,10 +24,11 @@ use super::wave::*;
 use crate::error::{Error, Result};
 use crate::exec::{Pass, Path, chunk_len};
 use crate::io::capture::{Geometry, RowSource};
-use crate::probe::fast::{BandDft, Confocal, Lookup};
+use crate::probe::fast::{BandDft, Confocal, LookupDiagonal};
 use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
+use vltm_kernel::geometry::dist;
 use vltm_kernel::{Config, Gate, Point, Probe, Report, RowBuffer, Scan, Target, cis_turns_f64};
 
 /// Rows per `sgemm` of stage 1.
@@ -36,7 +37,7 @@ const ROWS_PER_GEMM: usize = 128;
 /// Flops of the whole scan on the lookup path (one inverse FFT of the grid per row, then
 /// `E0 + 16` per voxel), plus the per-row `Scan` (2N twiddles).
 pub(super) fn lookup_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
-    let l = Lookup::plan_len(cfg) as f64;
+    let l = LookupDiagonal::plan_len(cfg) as f64;
     let rows = g.lasers.len() as f64;
     rows * (5.0 * l * l.log2() + n_voxels as f64 * 76.0 + 40.0 * cfg.n_fft() as f64)
 }
@@ -124,7 +125,7 @@ pub(super) fn outside_guard(g: &Geometry, cfg: &Config, voxels: &[Point]) -> Vec
             let (a, b) = g.lasers.iter().zip(&e).fold(
                 (f64::INFINITY, f64::NEG_INFINITY),
                 |(a, b), (p, e)| {
-                    let x = 2.0 * f64::from(dist(*p, *v)) + e;
+                    let x = 2.0 * f64::from(dist(p, v)) + e;
                     (a.min(x), b.max(x))
                 },
             );

@@ -28,7 +28,7 @@ use crate::error::{Error, Result};
 use crate::exec::Path;
 use crate::io::capture::{Geometry, RowSource, wall_cosine};
 use crate::probe::confocal;
-use crate::probe::fast::Lookup;
+use crate::probe::fast::LookupDiagonal;
 use crate::volume::Volume;
 use num_complex::Complex64;
 use vltm_kernel::{Gate, Probe, Report, Scan, Target};
@@ -105,7 +105,7 @@ pub(super) fn direct(
     let zero = Complex64::new(0.0, 0.0);
     let (acc_parts, report, path) = if use_lookup {
         lookup_plan.check(|| pass_name(&g, cfg, "direct light (lookup)"))?;
-        let lk = Lookup::new(cfg);
+        let lk = LookupDiagonal::new(cfg);
         let workers: Vec<_> = (0..threads)
             .map(|_| {
                 (

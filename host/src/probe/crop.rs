@@ -21,7 +21,6 @@
 //! beyond `c_g·σ` and the band truncation (both ≲ 4e-6 of the signal, `tests/proptest_fast.rs`).
 //! Cost of the bound: O(Kl + Ks + voxels); of the crop: one copy per row (`Cropped`).
 
-pub use super::wave::Crop;
 use super::wave::{Wave, legs};
 use crate::error::Result;
 use crate::exec::{Exec, Progress};
@@ -29,6 +28,27 @@ use crate::io::capture::{Geometry, RowSource};
 use crate::io::prep::Cropped;
 use std::ops::Range;
 use vltm_kernel::Point;
+
+/// The part of the capture's time axis a probe kept (bins `start..end` of `nt`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Crop {
+    /// First kept bin.
+    pub start: usize,
+    /// One past the last kept bin.
+    pub end: usize,
+    /// Bins of the capture's axis.
+    pub nt: usize,
+}
+
+impl std::fmt::Display for Crop {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "time axis cropped to bins {}..{} of {} (the voxels' reach)",
+            self.start, self.end, self.nt
+        )
+    }
+}
 
 /// What the probed paths are.
 #[derive(Clone, Copy, Debug)]

@@ -8,7 +8,8 @@
 //! given ([`Gamma::of`]: e.g. a merged direct-light volume). Memory: one flag per voxel.
 
 use super::direct::direct;
-use super::wave::{Output, Wave};
+use super::output::Output;
+use super::wave::Wave;
 use crate::error::{Error, Result};
 use crate::exec::Exec;
 use crate::io::capture::RowSource;

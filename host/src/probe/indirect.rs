@@ -8,7 +8,9 @@ use super::column::*;
 use super::crop::{Reach, with_crop};
 use super::drive::*;
 use super::gamma::Gamma;
+use super::gate::ColumnGate;
 use super::leak::{DirectModel, LeakCorrected, LeakOptions, cell_radius};
+use super::output::check_finite;
 use super::wave::*;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Pass};
@@ -16,6 +18,7 @@ use crate::io::capture::RowSource;
 use crate::volume::Volume;
 use rayon::prelude::*;
 use std::time::Instant;
+use vltm_kernel::geometry::dist;
 use vltm_kernel::{Config, Gate, Point, Probe, Report, Scan, Target};
 
 /// Options of the in-focus indirect sum.
@@ -311,7 +314,7 @@ fn pair_sum(
         .map(|bi| {
             let mut s = 0.0f64;
             for (ai, (col, _)) in cols.iter().enumerate() {
-                if keep(ai, bi, dist(pts[ai], pts[bi])) {
+                if keep(ai, bi, dist(&pts[ai], &pts[bi])) {
                     s += col[bi];
                 }
             }

@@ -35,8 +35,9 @@
 //! `--pattern` (relight). Per-thread row buffers: `2·threads` rows of histograms, as every probe.
 
 use super::column::{Columns, column_aliased, column_amplitudes, factorised_columns};
-use super::crop::{Reach, with_crop};
+use super::crop::{Crop, Reach, with_crop};
 use super::drive::*;
+use super::output::Output;
 use super::wave::*;
 use crate::budget;
 use crate::error::{Error, Result};
@@ -255,7 +256,7 @@ pub(super) fn matrix_acc(
         &base,
         Some(from),
         to,
-        super::wave::ColumnGate::TwoBounce,
+        super::gate::ColumnGate::TwoBounce,
         exec,
     )?;
     let reach = Reach {
@@ -374,7 +375,7 @@ pub fn matrix(
         &base,
         Some(from),
         to,
-        super::wave::ColumnGate::TwoBounce,
+        super::gate::ColumnGate::TwoBounce,
         exec,
     )?;
     let reach = Reach {
@@ -539,7 +540,7 @@ pub fn check_relight(g: &Geometry, pattern: &Pattern, volume: &Volume, wave: &Wa
         &base,
         Some(&pattern.foci),
         &volume.points,
-        super::wave::ColumnGate::TwoBounce,
+        super::gate::ColumnGate::TwoBounce,
         Exec::default(),
     )
     .map(|_| ())
@@ -569,7 +570,7 @@ pub fn relight(
         &base,
         Some(&pattern.foci),
         &volume.points,
-        super::wave::ColumnGate::TwoBounce,
+        super::gate::ColumnGate::TwoBounce,
         exec,
     )?;
     let reach = Reach {

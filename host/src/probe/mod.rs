@@ -31,9 +31,11 @@ mod direct;
 mod drive;
 pub mod fast;
 mod gamma;
+mod gate;
 mod indirect;
 mod leak;
 mod matrix;
+mod output;
 pub mod partial;
 pub mod resample;
 mod row;
@@ -44,10 +46,11 @@ pub mod window;
 
 pub use crate::exec::{Exec, Path};
 pub use aligned::{aligned_volume, fft_note, suggested_volume, window_depths};
-pub use column::{ColumnGate, Shell, check_column, check_focus, column, diagonal};
+pub use column::{Shell, check_column, check_focus, column, diagonal};
 pub use crop::Crop;
 pub use direct::direct;
 pub use gamma::{Gamma, gamma_mask};
+pub use gate::ColumnGate;
 pub use indirect::{
     IndirectOptions, IndirectOutput, PairSums, fit_over_volume, indirect, indirect_over,
     indirect_shells,
@@ -56,10 +59,11 @@ pub use leak::{DirectModel, GateEnergy, LeakCorrected, LeakMethod, LeakOptions, 
 pub use matrix::{
     MATRIX_BYTES_PER_ELEMENT, Matrix, Pattern, Relit, check_relight, matrix, relight,
 };
+pub use output::Output;
 pub use partial::{Finished, Partial, Task};
 pub use row::{check_row, row};
 pub use surface::{
     PlaneFit, Surface, SurfaceOptions, fit_plane, local_contrast, sample_plane, surface,
 };
-pub use wave::{Output, Wave, default_wavelength};
+pub use wave::{Wave, default_wavelength};
 pub use window::{Coverage, WARN_FRACTION, window_coverage};

@@ -18,6 +18,7 @@
 
 use super::crop::{Reach, with_crop};
 use super::drive::*;
+use super::output::Output;
 use super::wave::*;
 use crate::error::Result;
 use crate::exec::{Exec, Path, chunk_len};
@@ -26,6 +27,7 @@ use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
 use std::time::Instant;
+use vltm_kernel::geometry::dist;
 use vltm_kernel::{Point, Report, cis_turns, geometry};
 
 /// The checks [`row`] makes before it reads a row: the lens weights, the focus, a SPAD grid
@@ -44,7 +46,7 @@ pub fn check_row(g: &Geometry, focus: Point, volume: &Volume, wave: &Wave) -> Re
         &base,
         Some(&volume.points),
         &[focus],
-        super::wave::ColumnGate::TwoBounce,
+        super::gate::ColumnGate::TwoBounce,
         Exec::default(),
     )
     .map(|_| ())
@@ -77,7 +79,7 @@ pub fn row(
         &base,
         Some(voxels),
         &to,
-        super::wave::ColumnGate::TwoBounce,
+        super::gate::ColumnGate::TwoBounce,
         exec,
     )?;
     // The time axis cropped to the paths' reach: the laser leg ends at the volume's x_a, the
@@ -99,7 +101,7 @@ pub fn row(
             .spads
             .iter()
             .map(|s| {
-                let d_bs = dist(b, *s);
+                let d_bs = dist(&b, s);
                 (
                     cfg.weight(d_bs),
                     cis_turns(klo * d_bs),
@@ -107,7 +109,7 @@ pub fn row(
                 )
             })
             .collect();
-        let d_ab: Vec<f32> = voxels.iter().map(|a| dist(*a, b)).collect();
+        let d_ab: Vec<f32> = voxels.iter().map(|a| dist(a, &b)).collect();
         let mut acc = vec![Complex64::new(0.0, 0.0); voxels.len()];
         let mut v = vec![Complex64::new(0.0, 0.0); j];
         let mut report = Report::default();
@@ -138,7 +140,7 @@ pub fn row(
                     .zip(d_ab.par_chunks(cl))
                     .for_each(|((vs, os), ds)| {
                         for ((a, o), dab) in vs.iter().zip(os.iter_mut()).zip(ds) {
-                            let d_la = dist(laser, *a);
+                            let d_la = dist(&laser, a);
                             let tau = d_la + dab;
                             let mut ph = cis_turns(klo * tau);
                             let step = cis_turns(inv * tau);
@@ -161,7 +163,7 @@ pub fn row(
             pts.iter()
                 .zip(legs)
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |r, (p, d)| {
-                    geometry::widen(r, f64::from(dist(*p, x)) + d)
+                    geometry::widen(r, f64::from(dist(p, &x)) + d)
                 })
         };
         let (c_lo, c_hi) = span_of(&g.spads, &d4, b);

@@ -31,7 +31,8 @@
 
 use vltm_kernel::Point;
 
-use super::wave::{Output, Wave};
+use super::output::Output;
+use super::wave::Wave;
 use crate::error::{Error, Result};
 use crate::exec::Exec;
 use crate::io::capture::RowSource;

@@ -1,12 +1,12 @@
 //! The virtual wave and weighting options every probe shares ([`Wave`]: λ, σ, lens weights,
-//! band, laser compensation, automatic margin), the kernel configuration they give, and a
-//! probe's result ([`Output`]). Lengths are metres of optical path.
+//! band, laser compensation, automatic margin), the kernel configuration they give, and the
+//! device legs of the capture's spots under it (`legs`). Lengths are metres of optical path.
 
 use crate::error::Result;
-use crate::exec::Path;
 use crate::io::capture::Geometry;
 use rayon::prelude::*;
-use vltm_kernel::{Config, Legs, Params, Point, Report, Weights};
+use vltm_kernel::geometry::{dist, dist64, pitch};
+use vltm_kernel::{Config, Legs, Params, Point, Weights};
 
 /// Virtual wave and weighting options shared by every probe (the CLI's common flags).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -54,18 +54,6 @@ impl Default for Wave {
             crop: true,
         }
     }
-}
-
-/// Aperture pitch of a grid (the coarser of its two axes; 0 for a single point).
-pub(super) fn pitch(pts: &[Point], shape: [usize; 2]) -> f32 {
-    let d = |a: Point, b: Point| ((0..3).map(|i| (a[i] - b[i]).powi(2)).sum::<f32>()).sqrt();
-    let px = if shape[0] > 1 {
-        d(pts[0], pts[shape[1]])
-    } else {
-        0.0
-    };
-    let py = if shape[1] > 1 { d(pts[0], pts[1]) } else { 0.0 };
-    px.max(py)
 }
 
 /// The smallest band half-width [`Wave::check`] accepts (units of 1/σ; truncation error
@@ -205,7 +193,7 @@ impl Wave {
             pts.iter()
                 .zip(legs)
                 .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (p, d)| {
-                    let x = f64::from(dist(*p, *v)) + d;
+                    let x = f64::from(dist(p, v)) + d;
                     (a.min(x), b.max(x))
                 })
         };
@@ -218,7 +206,7 @@ impl Wave {
                 voxels.iter().zip(&cam).fold(
                     (f64::INFINITY, f64::NEG_INFINITY),
                     |(lo, hi), (b, c)| {
-                        let d_ab = f64::from(dist(*a, *b));
+                        let d_ab = f64::from(dist(a, b));
                         (lo.min(p.0 + d_ab + c.0), hi.max(p.1 + d_ab + c.1))
                     },
                 )
@@ -243,34 +231,6 @@ impl Wave {
     }
 }
 
-/// Checks that a probe's intensities are finite: an `f32` output cannot hold intensities
-/// above 3.4e38 (histogram values so large that `|A|²` overflows), and a non-finite value is
-/// never written silently.
-///
-/// # Errors
-/// [`Error::Format`](crate::Error::Format) on `intensity`, naming the first voxel and the
-/// cause.
-pub(super) fn check_finite(values: &[f32], voxels: &[Point], what: &str) -> Result<()> {
-    let Some(i) = values.iter().position(|v| !v.is_finite()) else {
-        return Ok(());
-    };
-    let n = values.iter().filter(|v| !v.is_finite()).count();
-    let p = voxels.get(i).copied().unwrap_or_default();
-    Err(crate::error::Error::format(
-        "(result)",
-        "intensity",
-        format!("finite {what} intensities within the float32 range (< 3.4e38)"),
-        format!(
-            "{} at ({:.3}, {:.3}, {:.3}) m and {} more voxels: the capture's histogram values are too large (|A|² overflows float32); scale H down",
-            values[i],
-            p[0],
-            p[1],
-            p[2],
-            n - 1
-        ),
-    ))
-}
-
 /// The device legs `d1_l`, `d4_s` of every laser and SPAD spot (0 without legs in time).
 pub(super) fn legs(g: &Geometry, cfg: &Config) -> (Vec<f64>, Vec<f64>) {
     let d1 = g
@@ -290,68 +250,6 @@ pub(super) fn legs(g: &Geometry, cfg: &Config) -> (Vec<f64>, Vec<f64>) {
         })
         .collect();
     (d1, d4)
-}
-
-/// Result of a probe: intensities per voxel (volume order) and the kernel's counters.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Output {
-    /// `|A|²` per voxel.
-    pub values: Vec<f32>,
-    /// Rows, non-finite samples, aliased voxels.
-    pub report: Report,
-    /// Wall-clock seconds.
-    pub seconds: f64,
-    /// The kernel configuration used (λ, σ, J…).
-    pub config: Config,
-    /// The evaluation path that computed the voxel sums (never [`Path::Auto`]).
-    pub path: Path,
-    /// The part of the time axis kept ([`Wave::crop`]); `None`: all of it.
-    pub crop: Option<Crop>,
-    /// When a slower path than the FFT convolution ran on a grid because of its x–y pitch:
-    /// the `--volume` SPEC of the nearest grid the FFT path takes (`probe::aligned_volume`).
-    /// When the FFT path ([`crate::exec::Path::Planar`]) ran on a grid off the wall's lattice: the SPEC of
-    /// the support grid it computed on before resampling ([`crate::probe::resample`]).
-    pub aligned: Option<String>,
-}
-
-pub(super) use vltm_kernel::geometry::dist64;
-
-/// [`vltm_kernel::geometry::dist`] taking its points by value (the host's call sites).
-#[inline]
-pub(super) fn dist(a: Point, b: Point) -> f32 {
-    vltm_kernel::geometry::dist(&a, &b)
-}
-
-/// The part of the capture's time axis a probe kept (bins `start..end` of `nt`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Crop {
-    /// First kept bin.
-    pub start: usize,
-    /// One past the last kept bin.
-    pub end: usize,
-    /// Bins of the capture's axis.
-    pub nt: usize,
-}
-
-impl std::fmt::Display for Crop {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "time axis cropped to bins {}..{} of {} (the voxels' reach)",
-            self.start, self.end, self.nt
-        )
-    }
-}
-
-/// The time gate of a column (the CLI's `--gate`).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ColumnGate {
-    /// 4-vertex Gaussian gate (Eq. 14): first-order indirect light from `x_a`.
-    TwoBounce,
-    /// The late gate (Eq. 18): higher-order indirect light.
-    HigherOrder,
-    /// No gate (the paper's Fig. 6 control).
-    None,
 }
 
 #[cfg(test)]

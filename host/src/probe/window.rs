@@ -25,11 +25,13 @@
 //! wall points are visited per voxel. The fraction is counted exactly on a strided sample of at most 32
 //! lasers × 32 SPADs × 32 foci × 1024 voxels (sorted legs, `O(n log n)` per pair).
 
-use super::wave::{ColumnGate, dist, legs};
+use super::gate::ColumnGate;
+use super::wave::legs;
 use crate::error::{Error, Result};
 use crate::exec::Exec;
 use crate::io::capture::Geometry;
 use rayon::prelude::*;
+use vltm_kernel::geometry::dist;
 use vltm_kernel::{Config, Point};
 
 /// The probes warn when fewer than this fraction of the sampled paths lie in the window.
@@ -179,7 +181,7 @@ impl<'a> SpanIndex<'a> {
     /// The exact fold over the leaf's points, widening `span`.
     fn visit(&self, t: &Node, v: &Point, span: &mut (f64, f64)) {
         for &i in &self.order[t.start..t.end] {
-            let x = f64::from(dist(self.pts[i as usize], *v)) + self.legs[i as usize];
+            let x = f64::from(dist(&self.pts[i as usize], v)) + self.legs[i as usize];
             *span = (span.0.min(x), span.1.max(x));
         }
     }
@@ -281,7 +283,7 @@ pub fn window_coverage(
     let join = |x: (f64, f64), y: (f64, f64)| (x.0.min(y.0), x.1.max(y.1));
     let empty = (f64::INFINITY, f64::NEG_INFINITY);
     let pair = |a: &Point, p: (f64, f64), b: &Point, c: (f64, f64)| {
-        let d = f64::from(dist(*a, *b));
+        let d = f64::from(dist(a, b));
         (p.0 + d + c.0, p.1 + d + c.1)
     };
     let (found, all) = match foci {
@@ -377,7 +379,7 @@ fn sampled_fraction(
     let sorted_legs = |pts: &[Point], legs: &[f64], idx: &[usize], x: &Point| {
         let mut v: Vec<f64> = idx
             .iter()
-            .map(|&i| f64::from(dist(pts[i], *x)) + legs[i])
+            .map(|&i| f64::from(dist(&pts[i], x)) + legs[i])
             .collect();
         v.sort_by(f64::total_cmp);
         v
@@ -419,7 +421,7 @@ fn sampled_fraction(
                     let a = &foci[f];
                     let p = sorted_legs(&g.lasers, d1, &lasers, a);
                     vox.iter().zip(&cams).fold((0, 0), |acc, (&v, c)| {
-                        let d = f64::from(dist(*a, voxels[v]));
+                        let d = f64::from(dist(a, &voxels[v]));
                         (acc.0 + count(&p, d, c), acc.1 + p.len() * c.len())
                     })
                 })
@@ -564,7 +566,7 @@ mod tests {
                         pts.iter()
                             .zip(lg)
                             .fold((f64::INFINITY, f64::NEG_INFINITY), |a, (p, d)| {
-                                let x = f64::from(dist(*p, *v)) + d;
+                                let x = f64::from(dist(p, v)) + d;
                                 (a.0.min(x), a.1.max(x))
                             })
                     };
@@ -610,7 +612,7 @@ mod tests {
             (
                 wall.clone(),
                 wall.iter()
-                    .map(|p| f64::from(dist(*p, [0.1, -0.3, 0.9])))
+                    .map(|p| f64::from(dist(p, &[0.1, -0.3, 0.9])))
                     .collect(),
             ),
             (cloud.clone(), (0..cloud.len()).map(|_| rnd()).collect()),
@@ -636,7 +638,7 @@ mod tests {
                 let brute = pts.iter().zip(lg).fold(
                     (f64::INFINITY, f64::NEG_INFINITY),
                     |(a, b), (p, d)| {
-                        let x = f64::from(dist(*p, v)) + d;
+                        let x = f64::from(dist(p, &v)) + d;
                         (a.min(x), b.max(x))
                     },
                 );

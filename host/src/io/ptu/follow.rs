@@ -42,11 +42,10 @@ use std::io::{self, BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
+use super::binning::{Binner, Counts};
 use super::decode::*;
 use super::header::*;
 use super::sidecar::*;
-use super::source::Counts;
-use crate::budget;
 use crate::error::{Error, Result};
 use crate::io::capture::Geometry;
 
@@ -243,6 +242,11 @@ impl Read for Tail {
     }
 }
 
+/// The byte position in the stream of the next byte `reader` hands out.
+fn position(reader: &BufReader<Tail>) -> u64 {
+    reader.get_ref().pos - reader.buffer().len() as u64
+}
+
 /// Where the header's counted records end (`None`: past byte 2^64, a corrupt count).
 fn records_end(h: &Header) -> Option<u64> {
     h.num_records
@@ -281,7 +285,7 @@ pub struct Follower {
     marker_sync: u64,
     last_sync: u64,
     counts: Counts,
-    hist: Vec<u32>,
+    bins: Binner,
     finished: bool,
     /// Rows `0..skip` are passed over without binning ([`Follower::skip_rows`]).
     skip: usize,
@@ -384,19 +388,7 @@ impl Follower {
         let mut reader = BufReader::with_capacity(1 << 16, tail);
         let header = Header::read(&mut reader, name)?;
         let plan = sidecar.plan(&header, sidecar_path)?;
-        let row = plan.ks.saturating_mul(plan.geometry.nt);
-        budget::check(
-            || {
-                format!(
-                    "a laser row of {} bins ({} SPADs × nt {}) described by {}",
-                    budget::count(row as u128),
-                    plan.ks,
-                    plan.geometry.nt,
-                    sidecar_path.display()
-                )
-            },
-            budget::bytes(row, 8),
-        )?;
+        let bins = Binner::new(&plan, &sidecar, sidecar_path)?;
         let t = reader.get_mut();
         t.data_start = Some(header.data_offset);
         if header.num_records > 0 {
@@ -422,7 +414,7 @@ impl Follower {
             marker_sync: 0,
             last_sync: 0,
             counts: Counts::default(),
-            hist: vec![0; row],
+            bins,
             finished: false,
             skip: 0,
             sidecar_path: sidecar_path.to_path_buf(),
@@ -470,7 +462,7 @@ impl Follower {
 
     /// Bytes read from the stream so far.
     pub fn position(&self) -> u64 {
-        self.reader.get_ref().pos - self.reader.buffer().len() as u64
+        position(&self.reader)
     }
 
     /// Records read so far.
@@ -644,9 +636,8 @@ impl Follower {
         }
         let l = self.markers_seen - 1;
         if bin {
-            self.hist.fill(0);
+            self.bins.clear();
         }
-        let nt = self.plan.geometry.nt;
         let mut photons = 0u64;
         let seconds = loop {
             match self.next_event()? {
@@ -692,39 +683,12 @@ impl Follower {
                         self.counts.skipped_rows += 1;
                         continue;
                     }
-                    let Some(s) = self.plan.spad_of_channel[usize::from(channel) % CHANNELS] else {
-                        if self.plan.unmapped_error {
-                            return Err(Error::format(
-                                &self.name,
-                                "channels",
-                                format!(
-                                    "photons only on the sidecar's channels {:?} (or \
-                                     \"unmapped_channels\": \"drop\")",
-                                    self.sidecar
-                                        .channels
-                                        .clone()
-                                        .unwrap_or_else(|| (0..self.plan.ks as u32).collect())
-                                ),
-                                format!(
-                                    "a photon on channel {channel} at record {} (byte {})",
-                                    self.records - 1,
-                                    self.position() - 4
-                                ),
-                            ));
-                        }
-                        self.counts.unmapped += 1;
-                        continue;
-                    };
-                    let k = u64::from(dtime);
-                    if k < self.plan.first || k >= self.plan.end {
-                        self.counts.outside_window += 1;
-                        continue;
-                    }
-                    let n = ((k - self.plan.first) / self.plan.rebin) as usize;
-                    let bin = &mut self.hist[s * nt + n];
-                    *bin = bin.saturating_add(1);
-                    self.counts.binned += 1;
-                    photons += 1;
+                    let (records, reader) = (self.records, &self.reader);
+                    let at = || format!("record {} (byte {})", records - 1, position(reader) - 4);
+                    let binned = self
+                        .bins
+                        .photon(channel, dtime, &mut self.counts, &self.name, at);
+                    photons += u64::from(binned?);
                 }
             }
         };
@@ -732,7 +696,7 @@ impl Follower {
         Ok(Some(FollowedRow {
             index: l,
             data: if bin {
-                self.hist.iter().map(|&c| c as f32).collect()
+                self.bins.values().collect()
             } else {
                 Vec::new()
             },

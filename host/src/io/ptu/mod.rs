@@ -159,6 +159,7 @@
 //! # Ok(()) }
 //! ```
 
+mod binning;
 mod decode;
 mod follow;
 mod header;
@@ -167,6 +168,7 @@ mod source;
 mod template;
 mod write;
 
+pub use binning::Counts;
 pub use decode::{Decoded, Decoder, Event, Records, open};
 pub use follow::{Ended, FollowOptions, FollowedRow, Follower};
 pub use header::{
@@ -174,7 +176,7 @@ pub use header::{
     tag_type,
 };
 pub use sidecar::{Sidecar, Unmapped};
-pub use source::{Counts, PtuSource, read_all};
+pub use source::{PtuSource, read_all};
 pub use template::template;
 pub use write::{T3WriteOptions, T3Written, stage_t3, write_t3, write_t3_to};
 

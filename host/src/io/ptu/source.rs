@@ -7,33 +7,13 @@ use std::path::{Path, PathBuf};
 
 use vltm_kernel::Point;
 
+use super::binning::{Binner, Counts};
 use super::decode::*;
 use super::header::*;
 use super::sidecar::*;
 use crate::budget;
 use crate::error::{Error, Result};
 use crate::io::capture::{Capture, Geometry, RowSource, check_row};
-
-/// What happened to the records of the current pass over a file ([`PtuSource::counts`]).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Counts {
-    /// Photons binned into rows that were read.
-    pub binned: u64,
-    /// Photons before the first row marker (dropped).
-    pub before_first_marker: u64,
-    /// Photons of rows passed over to reach a later row (not binned).
-    pub skipped_rows: u64,
-    /// Photons with dtime outside the kept window (dropped).
-    pub outside_window: u64,
-    /// Photons on unmapped channels (dropped, with `"unmapped_channels": "drop"`).
-    pub unmapped: u64,
-    /// Marker records without the row bit (ignored).
-    pub other_markers: u64,
-    /// Overflow records.
-    pub overflow_records: u64,
-    /// Reserved special records (ignored).
-    pub reserved_records: u64,
-}
 
 /// Laser rows binned from a PTU file's photons: a [`RowSource`] (conventions in the module
 /// docs). Rows are read in one streaming pass; an earlier row rewinds and rescans.
@@ -50,7 +30,7 @@ pub struct PtuSource<R = BufReader<File>> {
     /// The reader is past the last row or an error: the next row rewinds.
     exhausted: bool,
     counts: Counts,
-    hist: Vec<u32>,
+    bins: Binner,
 }
 
 impl PtuSource<BufReader<File>> {
@@ -85,21 +65,8 @@ impl<R: BufRead + Seek> PtuSource<R> {
         let header = Header::read(&mut reader, &path)?;
         let plan = sidecar.plan(&header, sidecar_path)?;
         // The row's photon counts and the f32 row handed out, sized by the sidecar.
-        let row = plan.ks.saturating_mul(plan.geometry.nt);
-        budget::check(
-            || {
-                format!(
-                    "a laser row of {} bins ({} SPADs × nt {}) described by {}",
-                    budget::count(row as u128),
-                    plan.ks,
-                    plan.geometry.nt,
-                    sidecar_path.display()
-                )
-            },
-            budget::bytes(row, 8),
-        )?;
+        let bins = Binner::new(&plan, &sidecar, sidecar_path)?;
         let records = Records::new(reader, &header, path.clone());
-        let hist = vec![0; row];
         Ok(Self {
             data_start: start + header.data_offset,
             path,
@@ -110,7 +77,7 @@ impl<R: BufRead + Seek> PtuSource<R> {
             markers_seen: 0,
             exhausted: false,
             counts: Counts::default(),
-            hist,
+            bins,
         })
     }
 
@@ -188,8 +155,7 @@ impl<R: BufRead + Seek> PtuSource<R> {
                 Some(Event::Photon { .. }) => self.counts.skipped_rows += 1,
             }
         }
-        self.hist.fill(0);
-        let nt = self.plan.geometry.nt;
+        self.bins.clear();
         loop {
             match self.records.next_event()? {
                 None if l + 1 < self.plan.rows => return Err(self.too_few_markers()),
@@ -215,37 +181,10 @@ impl<R: BufRead + Seek> PtuSource<R> {
                 }
                 Some(Event::Marker { .. }) => self.counts.other_markers += 1,
                 Some(Event::Photon { channel, dtime, .. }) => {
-                    let Some(s) = self.plan.spad_of_channel[usize::from(channel) % CHANNELS] else {
-                        if self.plan.unmapped_error {
-                            return Err(Error::format(
-                                &self.path,
-                                "channels",
-                                format!(
-                                    "photons only on the sidecar's channels {:?} (or \
-                                     \"unmapped_channels\": \"drop\")",
-                                    self.sidecar
-                                        .channels
-                                        .clone()
-                                        .unwrap_or_else(|| (0..self.plan.ks as u32).collect())
-                                ),
-                                format!(
-                                    "a photon on channel {channel} at record {}",
-                                    self.records.records_read() - 1
-                                ),
-                            ));
-                        }
-                        self.counts.unmapped += 1;
-                        continue;
-                    };
-                    let k = u64::from(dtime);
-                    if k < self.plan.first || k >= self.plan.end {
-                        self.counts.outside_window += 1;
-                        continue;
-                    }
-                    let n = ((k - self.plan.first) / self.plan.rebin) as usize;
-                    let bin = &mut self.hist[s * nt + n];
-                    *bin = bin.saturating_add(1);
-                    self.counts.binned += 1;
+                    let records = &self.records;
+                    let at = || format!("record {}", records.records_read() - 1);
+                    self.bins
+                        .photon(channel, dtime, &mut self.counts, &self.path, at)?;
                 }
             }
         }
@@ -261,7 +200,7 @@ impl<R: BufRead + Seek> RowSource for PtuSource<R> {
     fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
         self.read_row_counts(l)?;
         out.clear();
-        out.extend(self.hist.iter().map(|&c| c as f32));
+        out.extend(self.bins.values());
         Ok(self.plan.geometry.lasers[l])
     }
 }
@@ -277,7 +216,7 @@ pub fn read_all(ptu: impl AsRef<Path>, sidecar: impl AsRef<Path>) -> Result<Capt
 }
 
 pub(super) fn collect<R: BufRead + Seek>(src: &mut PtuSource<R>, path: &Path) -> Result<Capture> {
-    let n = src.rows().saturating_mul(src.hist.len());
+    let n = src.rows().saturating_mul(src.bins.len());
     budget::check(
         || {
             format!(

@@ -1,5 +1,6 @@
 //! Unit tests of the PTU reader and writer.
 
+use super::binning::Counts;
 use super::decode::*;
 use super::header::*;
 use super::sidecar::*;
@@ -802,6 +803,70 @@ fn ptu_rows_markers_and_drops() {
         src.read_row(2, &mut Vec::new()),
         Err(Error::Argument { .. })
     ));
+}
+
+/// The follower bins as the offline reader does (one binner): the same rows and counts, and
+/// the same channel error, the follower's naming the byte position as well.
+#[test]
+fn follower_bins_as_the_source_does() {
+    // The records of `ptu_rows_markers_and_drops`: drops before the first marker, an other
+    // marker, an unmapped channel (3), a dtime outside the window, a reserved record.
+    let recs = [
+        ht3(false, 0, 1, 1),
+        ht3(false, 1, 2, 2),
+        ht3(true, 1, 0, 3),
+        ht3(false, 1, 3, 4),
+        ht3(true, 2, 0, 5),
+        ht3(true, 3, 0, 6),
+        ht3(false, 3, 4, 7),
+        ht3(false, 0, 9, 8),
+        ht3(true, 0, 0, 8),
+    ];
+    let follow = |sc: Sidecar| -> Result<(Vec<Vec<f32>>, Counts)> {
+        let mut f = super::Follower::reader(
+            Box::new(Cursor::new(hh2(&recs))),
+            None,
+            Path::new("t.ptu"),
+            sc,
+            Path::new("t.json"),
+            super::FollowOptions::default(),
+        )?;
+        let mut rows = Vec::new();
+        while let Some(r) = f.next_row()? {
+            assert_eq!(r.photons, r.data.iter().sum::<f32>() as u64);
+            rows.push(r.data);
+        }
+        Ok((rows, f.counts()))
+    };
+    let mut sc = sidecar(2, 2, 8);
+    sc.unmapped_channels = Unmapped::Drop;
+    let mut src = source(hh2(&recs), sc.clone()).unwrap();
+    let rows = all_rows(&mut src).unwrap();
+    let (followed, counts) = follow(sc.clone()).unwrap();
+    assert_eq!(followed, rows);
+    assert_eq!(counts, src.counts());
+    assert_eq!(
+        (counts.binned, counts.unmapped, counts.outside_window),
+        (1, 1, 1)
+    );
+
+    sc.unmapped_channels = Unmapped::Error;
+    let offline = all_rows(&mut source(hh2(&recs), sc.clone()).unwrap()).unwrap_err();
+    let live = follow(sc).unwrap_err();
+    assert_eq!(field(&live), field(&offline));
+    let bytes = hh2(&recs);
+    let at = bytes.len() - 4 * (recs.len() - 6); // record 6 starts here
+    assert_eq!(
+        found(&live),
+        format!("{} (byte {at})", found(&offline)),
+        "{live}"
+    );
+    let expected = |e: &Error| match e {
+        Error::Format { expected, .. } => expected.clone(),
+        other => panic!("expected a format error, got: {other}"),
+    };
+    assert_eq!(expected(&live), expected(&offline));
+    assert!(expected(&live).contains("channels [0, 1]"), "{live}");
 }
 
 #[test]

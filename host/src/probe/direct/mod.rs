@@ -9,17 +9,19 @@ use super::aligned::fast_hint;
 use super::confocal;
 use super::crop::{Crop, Reach, with_crop};
 use super::drive::*;
+use super::output::{Output, check_finite};
 use super::wave::*;
 use crate::budget;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path};
 use crate::io::capture::{Geometry, RowSource};
-use crate::probe::fast::{Confocal, Lookup, Phasor, Planar, planar};
+use crate::probe::fast::{Confocal, LookupDiagonal, Phasor, Planar, planar};
 use crate::probe::resample::Resample;
 use crate::volume::Volume;
 use num_complex::Complex64;
 use rayon::prelude::*;
 use std::time::Instant;
+use vltm_kernel::geometry::dist;
 use vltm_kernel::{Config, Gate, Point, Probe, Report, Scan, Target};
 
 /// Direct light: the diagonal over `volume` (Eqs. 11–12), on the path chosen by
@@ -114,7 +116,7 @@ fn direct_acc_with(
         &base,
         None,
         &volume.points,
-        super::wave::ColumnGate::TwoBounce,
+        super::gate::ColumnGate::TwoBounce,
         exec,
     )?;
     let reach = Reach {
@@ -353,7 +355,7 @@ pub(super) fn outside_guard(g: &Geometry, cfg: &Config, voxels: &[Point]) -> Vec
         pts.iter()
             .zip(legs)
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (p, d)| {
-                let x = dist(*p, *v) as f64 + d;
+                let x = dist(p, v) as f64 + d;
                 (a.min(x), b.max(x))
             })
     };
@@ -385,7 +387,7 @@ pub(super) fn direct_lookup(
     let spads = if g.confocal { &g.spads[..1] } else { &g.spads };
     let mut tables = vec![0.0f32; Scan::tables_len(cfg, ks)];
     let scan = Scan::new(cfg, spads, &mut tables)?;
-    let lookup = Lookup::new(cfg);
+    let lookup = LookupDiagonal::new(cfg);
     let nw = rayon::current_num_threads().max(1);
     let workers: Vec<_> = (0..nw)
         .map(|_| {
@@ -425,7 +427,7 @@ pub(super) fn direct_lookup(
 pub(super) fn lookup_plan(g: &Geometry, cfg: &Config, n_voxels: usize) -> budget::Plan {
     let mut plan = memory_plan(g, cfg, budget::bytes(n_voxels, 32), "direct light");
     let threads = rayon::current_num_threads().max(1);
-    Lookup::add_to_plan(cfg, g.spads_per_row(), n_voxels, threads, &mut plan);
+    LookupDiagonal::add_to_plan(cfg, g.spads_per_row(), n_voxels, threads, &mut plan);
     plan
 }
 
@@ -501,7 +503,7 @@ pub(super) fn planar_core(
             row.band(),
             pts,
             |v| {
-                let d = dist(laser, *v);
+                let d = dist(&laser, v);
                 (d, cfg.weight(d))
             },
             skip,
@@ -565,7 +567,7 @@ fn planar_flops(
 /// Flops of the lookup diagonal per row: one complex inverse FFT per SPAD, then `E0 + 16`
 /// flops per (voxel, SPAD) (§B.8).
 fn lookup_row_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
-    let l = Lookup::plan_len(cfg) as f64;
+    let l = LookupDiagonal::plan_len(cfg) as f64;
     let ks = g.spads_per_row() as f64;
     ks * 5.0 * l * l.log2() + n_voxels as f64 * ks * 76.0
 }

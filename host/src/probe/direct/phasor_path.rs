@@ -135,12 +135,7 @@ pub(super) fn direct_phasor(
     let scratches: Vec<Mutex<TableScratch>> =
         (0..threads).map(|_| Mutex::new(ph.scratch())).collect();
     let leg = |p: Point, origin: Option<[f64; 3]>| -> f64 {
-        origin.map_or(0.0, |o| {
-            (0..3)
-                .map(|i| (f64::from(p[i]) - o[i]).powi(2))
-                .sum::<f64>()
-                .sqrt()
-        })
+        origin.map_or(0.0, |o| vltm_kernel::geometry::dist64(&p, &o))
     };
     let (l_origin, s_origin) = match cfg.legs() {
         vltm_kernel::Legs::WallToWall => (None, None),

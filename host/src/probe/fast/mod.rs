@@ -8,8 +8,9 @@
 //!   point): per slice one inverse FFT of `Σ_j X̂_j·κ̂_j`, no stored kernel table (`rustfft`).
 //! * [`phasor`]: the full-phasor table per histogram, 8 voxels per vector, for rows of one or
 //!   a few SPADs (paired and confocal scans) (`rustfft`, `pulp` dispatch).
-//! * [`lookup`]: the gated baseband + lookup diagonal (§B.2.4): one inverse FFT per SPAD and
-//!   row, then a cubic interpolation per (voxel, SPAD), for any geometry (`rustfft`).
+//! * [`lookup`]: the gated baseband + lookup diagonal (§B.2.4, [`LookupDiagonal`]): one inverse
+//!   FFT per SPAD and row, then a cubic interpolation per (voxel, SPAD), for any geometry
+//!   (`rustfft`).
 //!
 //! [`crate::probe`] picks a path per probe ([`crate::exec::Path`]); every path is checked against
 //! the float64 reference in `tests/proptest_fast.rs`.
@@ -22,6 +23,6 @@ pub mod planar;
 
 pub use band::BandDft;
 pub use confocal::Confocal;
-pub use lookup::Lookup;
+pub use lookup::LookupDiagonal;
 pub use phasor::Phasor;
 pub use planar::Planar;

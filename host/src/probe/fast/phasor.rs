@@ -1,5 +1,5 @@
 //! The full-phasor table, voxels in vectors: the diagonal of rows with few SPADs (paired and
-//! confocal rows, one SPAD each; short SPAD lines), where [`super::Lookup`] — vectorised over
+//! confocal rows, one SPAD each; short SPAD lines), where [`super::LookupDiagonal`] — vectorised over
 //! blocks of 8 SPADs — would compute 8 lanes and keep one.
 //!
 //! **Method.** For one histogram `h` (laser `x_l`, SPAD `x_s`, leg offset

@@ -704,7 +704,7 @@ mod tests {
             .collect();
         let skip: Vec<bool> = (0..vol.len()).map(|v| v % 7 == 3).collect();
         let focus = [-0.45f32, 0.0, 0.8];
-        let leg = |b: &[f32; 3]| (crate::probe::wave::dist(focus, *b), 1.0);
+        let leg = |b: &[f32; 3]| (vltm_kernel::geometry::dist(&focus, b), 1.0);
         let mut want = vec![Complex64::new(0.5, -0.25); vol.len()];
         let mut s = p.scratch();
         p.apply(&spectra, &vol.points, leg, &skip, &mut s, &mut want);

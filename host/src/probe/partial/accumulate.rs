@@ -3,12 +3,11 @@
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path};
 use crate::io::capture::{RowRange, RowSource};
-use crate::probe::column::{
-    ColumnGate, ColumnState, Columns, Shell, column_acc, factorised_columns,
-};
+use crate::probe::column::{ColumnState, Columns, Shell, column_acc, factorised_columns};
 use crate::probe::crop::{self, Reach};
 use crate::probe::direct::direct_acc;
 use crate::probe::drive::Job;
+use crate::probe::gate::ColumnGate;
 use crate::probe::leak::{DirectModel, GateEnergy, LeakCorrected, LeakOptions, cell_radius};
 use crate::probe::matrix::matrix_acc;
 use crate::probe::wave::Wave;

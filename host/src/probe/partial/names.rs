@@ -6,7 +6,8 @@
 use crate::error::{Error, Result};
 use crate::exec::Path;
 use crate::io::capture::Geometry;
-use crate::probe::column::{ColumnGate, Shell};
+use crate::probe::column::Shell;
+use crate::probe::gate::ColumnGate;
 use num_complex::Complex64;
 use vltm_kernel::{Point, Weights};
 

@@ -3,12 +3,13 @@
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path};
 use crate::io::state;
-use crate::probe::column::{ColumnGate, ColumnState, Columns, Shell, check_focus};
+use crate::probe::column::{ColumnState, Columns, Shell, check_focus};
 use crate::probe::drive::intensities;
+use crate::probe::gate::ColumnGate;
 use crate::probe::indirect::indirect_sum;
 use crate::probe::leak::GateEnergy;
 use crate::probe::matrix::{Matrix, matrix_of_columns};
-use crate::probe::wave::Output;
+use crate::probe::output::Output;
 use crate::volume::Volume;
 use num_complex::Complex64;
 use std::ops::Range;

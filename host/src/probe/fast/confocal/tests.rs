@@ -1,4 +1,4 @@
-//! Unit tests of the confocal FFT path.
+//! Unit tests of the confocal FFT convolution (`super`).
 
 use super::*;
 use vltm_kernel::Params;

@@ -30,7 +30,7 @@
 //! is `w(d_lv)·Σ_s w(d_vs)·Z_s(d_lv + d_vs)`, summed over the SPADs in `Complex32` and added
 //! to the `Complex64` accumulator, as the kernel's band diagonal does. The guard is the
 //! kernel's, bit for bit: a pair with `τ + offset_s` (in `f32`) outside [`Config::guard`]
-//! adds 0. Distances are `f32` `√(x² + y² + z²)` (correctly rounded, as the kernel's); the
+//! adds 0. Distances are the kernel's [`vltm_kernel::geometry::dist`] (`f32`, correctly rounded); the
 //! grid position `τ·L/span` is formed in `f64` from the `f32` τ.
 //!
 //! Each SPAD's table is stored rotated so that its guarded τ range is one contiguous run
@@ -62,14 +62,15 @@
 //! same run (13–14× faster; 2.2–3.5 ms per row, of which 0.06 ms are the FFT tables).
 //! Parallel callers split the voxels; each worker rebuilds the row's tables (cheap).
 //!
-//! **Memory**: per worker ([`LookupScratch`], [`Lookup::scratch_bytes`]) `Ks·(L + 8) + L`
+//! **Memory**: per worker ([`LookupScratch`], [`LookupDiagonal::scratch_bytes`]) `Ks·(L + 8) + L`
 //! complex `f32` (the rotated tables and one FFT buffer), rustfft's scratch and `~40·Ks`
-//! bytes of SPAD blocks; the shared [`Lookup`] holds the FFT plan and the `2L + 8`-entry
+//! bytes of SPAD blocks; the shared [`LookupDiagonal`] holds the FFT plan and the `2L + 8`-entry
 //! carrier table. No allocation per row.
 
 use num_complex::{Complex32, Complex64};
 use rustfft::{Fft, FftPlanner};
 use std::sync::Arc;
+use vltm_kernel::geometry::dist;
 use vltm_kernel::{Config, Point, Row, Sample, Scan, Weights, cis_small_turns, lagrange4};
 
 /// Grid samples per gate std σ: the grid step is `δ = span/L ≤ σ/R` (see the module docs
@@ -80,8 +81,11 @@ pub const SAMPLES_PER_SIGMA: f64 = 12.0;
 /// the rest absorbs rounding at the guard edges before the wrapping fallback is needed).
 const EXTRA: usize = 8;
 
-/// Precomputed inverse-FFT plan and constants for one configuration.
-pub struct Lookup {
+/// The lookup path of the diagonal for one configuration: the precomputed inverse-FFT plan,
+/// carrier table and guard; [`LookupDiagonal::apply`] adds one laser row's diagonal
+/// amplitudes. (The kernel's [`vltm_kernel::Lookup`] is the tables of the kernel's own lookup
+/// path, on caller-owned memory.)
+pub struct LookupDiagonal {
     cfg: Config,
     /// Grid length L.
     len: usize,
@@ -98,7 +102,7 @@ pub struct Lookup {
     ifft: Arc<dyn Fft<f32>>,
 }
 
-/// Per-worker scratch of [`Lookup::apply`]: the row's baseband tables (SPAD-major) and the
+/// Per-worker scratch of [`LookupDiagonal::apply`]: the row's baseband tables (SPAD-major) and the
 /// FFT buffers. Resized (not reallocated in steady state) when the SPAD count changes.
 #[derive(Clone, Debug)]
 pub struct LookupScratch {
@@ -140,9 +144,9 @@ impl SpadBlock {
     };
 }
 
-impl std::fmt::Debug for Lookup {
+impl std::fmt::Debug for LookupDiagonal {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Lookup")
+        f.debug_struct("LookupDiagonal")
             .field("len", &self.len)
             .field("n_fft", &self.cfg.n_fft())
             .field("bins", &self.cfg.bins())
@@ -170,13 +174,6 @@ pub(super) fn fast_len(n: usize) -> usize {
     best
 }
 
-/// The kernel's distance: `f32` `√(x² + y² + z²)`, correctly rounded.
-#[inline]
-fn dist(a: &Point, b: &Point) -> f32 {
-    let (x, y, z) = (a[0] - b[0], a[1] - b[1], a[2] - b[2]);
-    (x * x + y * y + z * z).sqrt()
-}
-
 /// 4-point cubic Lagrange interpolation at `t ∈ [0, 1)` between `q[1]` and `q[2]`.
 #[inline(always)]
 fn lagrange(q: &[Complex32; 4], t: f32) -> Complex32 {
@@ -184,13 +181,13 @@ fn lagrange(q: &[Complex32; 4], t: f32) -> Complex32 {
     q[0] * w[0] + q[1] * w[1] + q[2] * w[2] + q[3] * w[3]
 }
 
-impl Lookup {
+impl LookupDiagonal {
     /// Plans the grid for `cfg` (length `L`, see the module docs).
     pub fn new(cfg: &Config) -> Self {
         Self::with_density(cfg, SAMPLES_PER_SIGMA)
     }
 
-    /// As [`Lookup::new`] with `r` grid samples per σ instead of [`SAMPLES_PER_SIGMA`].
+    /// As [`LookupDiagonal::new`] with `r` grid samples per σ instead of [`SAMPLES_PER_SIGMA`].
     fn with_density(cfg: &Config, r: f64) -> Self {
         let len = Self::len_with_density(cfg, r);
         let span = cfg.span();
@@ -218,7 +215,7 @@ impl Lookup {
         }
     }
 
-    /// The grid length `L` of [`Lookup::new`] for `cfg`, without planning anything (for cost
+    /// The grid length `L` of [`LookupDiagonal::new`] for `cfg`, without planning anything (for cost
     /// models and the memory budget).
     pub fn plan_len(cfg: &Config) -> usize {
         Self::len_with_density(cfg, SAMPLES_PER_SIGMA)
@@ -369,7 +366,7 @@ impl Lookup {
         }
     }
 
-    /// [`Lookup::gated`] outside the table's contiguous run (rounding at a guard edge):
+    /// [`LookupDiagonal::gated`] outside the table's contiguous run (rounding at a guard edge):
     /// wraps the grid index explicitly.
     #[cold]
     #[inline(never)]
@@ -395,7 +392,7 @@ impl Lookup {
     /// error of the module docs. No allocation once `s` has the row's SPAD count.
     ///
     /// # Panics
-    /// If `scan` has another configuration than this `Lookup`, if `row` was loaded for
+    /// If `scan` has another configuration than this `LookupDiagonal`, if `row` was loaded for
     /// another SPAD count, or if `acc.len() ≠ voxels.len()`.
     pub fn apply<T: Sample>(
         &self,
@@ -406,7 +403,10 @@ impl Lookup {
         acc: &mut [Complex64],
     ) {
         let cfg = scan.config();
-        assert!(*cfg == self.cfg, "Lookup made for another configuration");
+        assert!(
+            *cfg == self.cfg,
+            "LookupDiagonal made for another configuration"
+        );
         let spads = scan.spads();
         let ks = spads.len();
         assert_eq!(row.band().len(), ks * cfg.bins(), "row of another scan");
@@ -430,7 +430,10 @@ impl Lookup {
             let d_lv = dist(&laser, v);
             let mut sum = Complex32::new(0.0, 0.0);
             for (bi, b) in s.blocks.iter().enumerate() {
-                // Vectorisable part: no table reads.
+                // Vectorisable part: no table reads. `d_vs` is the kernel's `dist` written
+                // out on the block's arrays (the same operations in the same order, so the
+                // same bits): its `libm` square root is one scalar instruction the loop
+                // cannot vectorise through.
                 for k in 0..BLOCK {
                     let (dx, dy, dz) = (v[0] - b.x[k], v[1] - b.y[k], v[2] - b.z[k]);
                     let d_vs = (dx * dx + dy * dy + dz * dz).sqrt();
@@ -483,438 +486,4 @@ impl Lookup {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use rand::rngs::StdRng;
-    use rand::{Rng, SeedableRng};
-    use std::f64::consts::TAU;
-    use vltm_kernel::{Gate, Legs, Params, Probe, RowBuffer, Target};
-
-    /// A test geometry: SPADs on a line (x axis, z = 0), one laser spot, voxels in a box.
-    struct Case {
-        cfg: Config,
-        spads: Vec<Point>,
-        laser: Point,
-        voxels: Vec<Point>,
-        hists: Vec<f32>,
-    }
-
-    /// Random row with peaks at random path lengths and a noise floor.
-    fn case(p: &Params, ks: usize, kv: usize, seed: u64) -> Case {
-        let cfg = Config::try_new(p).unwrap();
-        let mut rng = StdRng::seed_from_u64(seed);
-        let spads: Vec<Point> = (0..ks)
-            .map(|i| [-0.7 + 1.4 * i as f32 / ks as f32 + 0.013, 0.05, 0.0])
-            .collect();
-        let laser = [0.2, -0.3, 0.0];
-        let voxels: Vec<Point> = (0..kv)
-            .map(|_| {
-                [
-                    rng.random_range(-0.8..0.8),
-                    rng.random_range(-0.8..0.8),
-                    rng.random_range(0.1..1.6),
-                ]
-            })
-            .collect();
-        let nt = cfg.nt();
-        let mut hists = vec![0.0f32; ks * nt];
-        for h in hists.chunks_exact_mut(nt) {
-            for x in h.iter_mut() {
-                *x = rng.random::<f32>();
-            }
-            for _ in 0..4 {
-                h[rng.random_range(0..nt)] += rng.random_range(20.0..100.0);
-            }
-        }
-        Case {
-            cfg,
-            spads,
-            laser,
-            voxels,
-            hists,
-        }
-    }
-
-    struct Outcome {
-        /// Kernel band diagonal intensities.
-        band: Vec<f64>,
-        /// Lookup amplitudes.
-        lookup: Vec<Complex64>,
-        /// f64 band sum (same f32 τ and guard decisions) amplitudes.
-        exact: Vec<Complex64>,
-        /// Fraction of voxels with at least one guarded-out path.
-        cut: f64,
-    }
-
-    /// Runs one row through the kernel's band diagonal, the lookup (voxels shifted by
-    /// `shift` m in z) and an f64 band sum.
-    fn run(c: &Case, shift: f32) -> Outcome {
-        let cfg = &c.cfg;
-        let ks = c.spads.len();
-        let kv = c.voxels.len();
-        let mut tables = vec![0.0; Scan::tables_len(cfg, ks)];
-        let scan = Scan::new(cfg, &c.spads, &mut tables).unwrap();
-        let mut buf = vec![0.0; RowBuffer::len(cfg, ks)];
-        let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
-        let row = rows.load(&scan, c.laser, &c.hists).unwrap();
-        let mut state = vec![0.0; Probe::state_len(cfg, Target::Diagonal, Gate::Gaussian, kv, ks)];
-        let mut probe = Probe::new(
-            &scan,
-            Target::Diagonal,
-            Gate::Gaussian,
-            &c.voxels,
-            &mut state,
-        )
-        .unwrap();
-        probe.push_row(&scan, &row).unwrap();
-        let mut band = vec![0.0; kv];
-        probe.finish(&scan, &mut band).unwrap();
-
-        let lk = Lookup::new(cfg);
-        let mut s = lk.scratch(ks);
-        let moved: Vec<Point> = c
-            .voxels
-            .iter()
-            .map(|v| [v[0], v[1], v[2] + shift])
-            .collect();
-        let mut lookup = vec![Complex64::new(0.0, 0.0); kv];
-        lk.apply(&scan, &row, &moved, &mut s, &mut lookup);
-
-        let (g_lo, g_hi) = cfg.guard();
-        let (g_lo, g_hi) = (g_lo as f32, g_hi as f32);
-        let j = cfg.bins();
-        let mut cuts = 0;
-        let exact = c
-            .voxels
-            .iter()
-            .map(|v| {
-                let d_lv = dist(&c.laser, v);
-                let mut sum = Complex64::new(0.0, 0.0);
-                let mut cut = false;
-                for ((sp, hg), off) in c
-                    .spads
-                    .iter()
-                    .zip(row.band().chunks_exact(j))
-                    .zip(row.offsets())
-                {
-                    let d_vs = dist(v, sp);
-                    let tau = d_lv + d_vs;
-                    let rel = tau + off;
-                    if !(rel >= g_lo && rel <= g_hi) {
-                        cut = true;
-                        continue;
-                    }
-                    let z: Complex64 = hg
-                        .iter()
-                        .enumerate()
-                        .map(|(j, h)| {
-                            let k = (cfg.k_lo() + j as i64) as f64;
-                            let ph = Complex64::from_polar(1.0, TAU * k * tau as f64 / cfg.span());
-                            Complex64::new(h.re as f64, h.im as f64) * ph
-                        })
-                        .sum();
-                    sum += z * cfg.weight(d_vs) as f64;
-                }
-                cuts += usize::from(cut);
-                sum * cfg.weight(d_lv) as f64
-            })
-            .collect();
-        Outcome {
-            band,
-            lookup,
-            exact,
-            cut: cuts as f64 / kv as f64,
-        }
-    }
-
-    /// max | |A_f64|² − I_band | / max I_band: the kernel's own `f32` error, for scale.
-    fn kernel_error(o: &Outcome) -> f64 {
-        let i_max = o.band.iter().copied().fold(0.0, f64::max);
-        o.band
-            .iter()
-            .zip(&o.exact)
-            .map(|(b, e)| (e.norm_sqr() - b).abs())
-            .fold(0.0, f64::max)
-            / i_max
-    }
-
-    /// (max |I_lookup − I_band| / max I_band, max |A_lookup − A_f64| / max |A_f64|).
-    fn errors(o: &Outcome) -> (f64, f64) {
-        let i_max = o.band.iter().copied().fold(0.0, f64::max);
-        let a_max = o.exact.iter().map(|a| a.norm()).fold(0.0, f64::max);
-        let di = o
-            .band
-            .iter()
-            .zip(&o.lookup)
-            .map(|(b, l)| (l.norm_sqr() - b).abs())
-            .fold(0.0, f64::max);
-        let da = o
-            .exact
-            .iter()
-            .zip(&o.lookup)
-            .map(|(e, l)| (e - l).norm())
-            .fold(0.0, f64::max);
-        (di / i_max, da / a_max)
-    }
-
-    /// Parameters: λ = 0.13 m, Δt = λ/ratio, a window from t0 = 0.9 m to ~2.6 m so that
-    /// a good part of the voxels have paths outside the guard on either side.
-    fn params(ratio: f64) -> Params {
-        let lam = 0.13;
-        let dt = lam / ratio;
-        Params {
-            t0: 0.9,
-            ..Params::new(lam, (1.7 / dt) as usize, dt)
-        }
-    }
-
-    const TOL: f64 = 1e-4;
-
-    fn check(p: &Params, seed: u64) -> (f64, f64) {
-        let c = case(p, 16, 200, seed);
-        let o = run(&c, 0.0);
-        let (di, da) = errors(&o);
-        let lk = Lookup::new(&c.cfg);
-        println!(
-            "λ/Δt {:5.1}  σ/Δt {:5.2}  N {:5}  L {:5} (×{:.2})  J {:4}  cut {:3.0}%  \
-             intensity err {di:.2e}  amplitude err {da:.2e}  (kernel vs f64: {:.2e})",
-            p.wavelength / p.dt,
-            c.cfg.sigma() / p.dt,
-            c.cfg.n_fft(),
-            lk.grid_len(),
-            lk.oversampling(),
-            c.cfg.bins(),
-            100.0 * o.cut,
-            kernel_error(&o)
-        );
-        assert!(o.cut > 0.1 && o.cut < 0.9, "guard cut {:.2}", o.cut);
-        assert!(di <= TOL, "intensity error {di:.3e}");
-        assert!(da <= TOL / 2.0, "amplitude error {da:.3e}");
-        (di, da)
-    }
-
-    #[test]
-    fn matches_band_diagonal_ratios() {
-        let mut worst = (0.0f64, 0.0f64);
-        for (k, ratio) in [6.0, 8.0, 13.0, 20.0, 40.0].into_iter().enumerate() {
-            let (di, da) = check(&params(ratio), 10 + k as u64);
-            worst = (worst.0.max(di), worst.1.max(da));
-        }
-        println!(
-            "worst: intensity {:.2e}, amplitude {:.2e}",
-            worst.0, worst.1
-        );
-    }
-
-    #[test]
-    fn matches_band_diagonal_weights_and_legs() {
-        let legs = Legs::FirstAndLast {
-            laser_origin: [0.3, -1.0, -0.4],
-            sensor_origin: [-0.2, 0.5, -0.3],
-        };
-        for (k, (ratio, weights, legs, t0)) in [
-            (6.0, Weights::One, Legs::WallToWall, 0.9),
-            (10.0, Weights::Inv, legs, 2.1),
-            (25.0, Weights::One, legs, 2.1),
-            (40.0, Weights::Inv, legs, 2.1),
-        ]
-        .into_iter()
-        .enumerate()
-        {
-            let p = Params {
-                weights,
-                legs,
-                t0,
-                ..params(ratio)
-            };
-            check(&p, 20 + k as u64);
-        }
-    }
-
-    #[test]
-    fn catches_a_one_centimetre_shift() {
-        let c = case(&params(8.0), 16, 200, 3);
-        let (di, da) = errors(&run(&c, 0.01));
-        println!("1 cm shift: intensity err {di:.2e}, amplitude err {da:.2e}");
-        assert!(di > 10.0 * TOL && da > 10.0 * TOL, "{di:.2e} {da:.2e}");
-    }
-
-    #[test]
-    fn fast_lengths() {
-        assert_eq!(fast_len(1), 1);
-        assert_eq!(fast_len(7), 8);
-        assert_eq!(fast_len(847), 864);
-        assert_eq!(fast_len(1001), 1024);
-        for n in 1..3000 {
-            let l = fast_len(n);
-            let mut r = l;
-            for p in [2, 3, 5] {
-                while r.is_multiple_of(p) {
-                    r /= p;
-                }
-            }
-            assert!(l >= n && r == 1 && l < n + n / 8 + 2, "{n} → {l}");
-        }
-    }
-
-    /// The cold wrapping path equals the contiguous fast path, also one period away.
-    #[test]
-    fn wrapped_path_agrees() {
-        let c = case(&params(8.0), 3, 1, 5);
-        let cfg = &c.cfg;
-        let mut tables = vec![0.0; Scan::tables_len(cfg, 3)];
-        let scan = Scan::new(cfg, &c.spads, &mut tables).unwrap();
-        let mut buf = vec![0.0; RowBuffer::len(cfg, 3)];
-        let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
-        let row = rows.load(&scan, c.laser, &c.hists).unwrap();
-        let lk = Lookup::new(cfg);
-        let mut s = lk.scratch(3);
-        lk.tables(scan.spads(), row.band(), row.offsets(), &mut s);
-        let (g_lo, g_hi) = cfg.guard();
-        let stride = lk.len + EXTRA;
-        let period = lk.len as f64;
-        let mut worst: f32 = 0.0;
-        for (si, off) in row.offsets().iter().enumerate() {
-            let tab = &s.tables[si * stride..(si + 1) * stride];
-            for i in 0..500 {
-                let rel = g_lo + (g_hi - g_lo) * (i as f64 + 0.5) / 500.0;
-                let tau = (rel - *off as f64) as f32;
-                let fast = lk.gated(tab, s.base[si], tau);
-                let x = tau as f64 * lk.per_m - s.base[si].0;
-                for shift in [0.0, period, -period, -3.0 * period] {
-                    let z = lk.gated_wrapped(tab, s.base[si].1, x + shift);
-                    worst = worst.max((z - fast).norm() / fast.norm().max(1e-30));
-                    assert!((z - fast).norm() <= 1e-4 * fast.norm() + 1e-9, "{z} {fast}");
-                }
-            }
-        }
-        println!("wrapped vs fast path: worst relative difference {worst:.2e}");
-    }
-
-    /// Worst amplitude error of one SPAD's interpolated `Z(τ)` against the f64 band sum,
-    /// relative to `max |Z|`, over dense τ in the guard, for a density of `r` samples per σ.
-    fn interp_error(p: &Params, r: f64, seed: u64) -> f64 {
-        let c = case(p, 4, 1, seed);
-        let cfg = &c.cfg;
-        let mut tables = vec![0.0; Scan::tables_len(cfg, 4)];
-        let scan = Scan::new(cfg, &c.spads, &mut tables).unwrap();
-        let mut buf = vec![0.0; RowBuffer::len(cfg, 4)];
-        let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
-        let row = rows.load(&scan, c.laser, &c.hists).unwrap();
-        let lk = Lookup::with_density(cfg, r);
-        let mut s = lk.scratch(4);
-        lk.tables(scan.spads(), row.band(), row.offsets(), &mut s);
-        let (g_lo, g_hi) = cfg.guard();
-        let j = cfg.bins();
-        let mut worst: f64 = 0.0;
-        for (si, off) in row.offsets().iter().enumerate() {
-            let hg = &row.band()[si * j..(si + 1) * j];
-            let tab = &s.tables[si * (lk.len + EXTRA)..(si + 1) * (lk.len + EXTRA)];
-            let n = 4000;
-            let (mut zmax, mut emax) = (0.0f64, 0.0f64);
-            for i in 0..=n {
-                let rel = g_lo + (g_hi - g_lo) * (i as f64 + 0.37) / (n + 1) as f64;
-                let tau = (rel - *off as f64) as f32;
-                let exact: Complex64 = hg
-                    .iter()
-                    .enumerate()
-                    .map(|(j, h)| {
-                        let k = (cfg.k_lo() + j as i64) as f64;
-                        Complex64::new(h.re as f64, h.im as f64)
-                            * Complex64::from_polar(1.0, TAU * k * tau as f64 / cfg.span())
-                    })
-                    .sum();
-                let z = lk.gated(tab, s.base[si], tau);
-                zmax = zmax.max(exact.norm());
-                emax = emax.max((Complex64::new(z.re as f64, z.im as f64) - exact).norm());
-            }
-            worst = worst.max(emax / zmax);
-        }
-        worst
-    }
-
-    #[test]
-    fn interpolation_error() {
-        let ratios = [6.0, 13.0, 40.0];
-        for r in [4.0, 6.0, 8.0, 10.0, 12.0, 14.0, 16.0] {
-            let e = ratios
-                .iter()
-                .enumerate()
-                .map(|(k, &q)| interp_error(&params(q), r, 40 + k as u64))
-                .fold(0.0, f64::max);
-            println!("{r:4} samples/σ: worst relative amplitude error {e:.2e}");
-            if r == SAMPLES_PER_SIGMA {
-                assert!(e < 1e-5, "{e:.2e}");
-            }
-        }
-    }
-
-    /// `cargo test --release -p vltm --lib fast::lookup::tests::timing -- --ignored --nocapture`
-    #[test]
-    #[ignore = "timing, prints numbers only"]
-    fn timing() {
-        use std::time::Instant;
-        let p = Params::new(0.13, 254, 0.0255);
-        let cfg = Config::try_new(&p).unwrap();
-        let ks = 28;
-        let spads: Vec<Point> = (0..ks)
-            .map(|i| [-0.7 + 1.4 * i as f32 / (ks - 1) as f32, 0.0, 0.0])
-            .collect();
-        let voxels: Vec<Point> = (0..4096)
-            .map(|i| {
-                let (x, y, z) = (i / 256, (i / 16) % 16, i % 16);
-                [
-                    -0.8 + 0.1 * x as f32,
-                    -0.8 + 0.1 * y as f32,
-                    0.3 + 0.1 * z as f32,
-                ]
-            })
-            .collect();
-        let mut rng = StdRng::seed_from_u64(7);
-        let hists: Vec<f32> = (0..ks * 254).map(|_| rng.random::<f32>()).collect();
-        let mut tables = vec![0.0; Scan::tables_len(&cfg, ks)];
-        let scan = Scan::new(&cfg, &spads, &mut tables).unwrap();
-        let mut buf = vec![0.0; RowBuffer::len(&cfg, ks)];
-        let mut rows = RowBuffer::new(&scan, &mut buf).unwrap();
-        let row = rows.load(&scan, [0.1, 0.2, 0.0], &hists).unwrap();
-        let kv = voxels.len();
-        let mut state = vec![0.0; Probe::state_len(&cfg, Target::Diagonal, Gate::Gaussian, kv, ks)];
-        let mut probe =
-            Probe::new(&scan, Target::Diagonal, Gate::Gaussian, &voxels, &mut state).unwrap();
-        let lk = Lookup::new(&cfg);
-        let mut s = lk.scratch(ks);
-        let mut acc = vec![Complex64::new(0.0, 0.0); kv];
-        let reps = 20;
-        let t = Instant::now();
-        for _ in 0..reps {
-            probe.push_row(&scan, &row).unwrap();
-        }
-        let band = t.elapsed().as_secs_f64() / reps as f64;
-        let t = Instant::now();
-        for _ in 0..reps * 10 {
-            lk.apply(&scan, &row, &voxels, &mut s, &mut acc);
-        }
-        let look = t.elapsed().as_secs_f64() / (reps * 10) as f64;
-        let t = Instant::now();
-        for _ in 0..reps * 10 {
-            lk.tables(scan.spads(), row.band(), row.offsets(), &mut s);
-        }
-        let ffts = t.elapsed().as_secs_f64() / (reps * 10) as f64;
-        let pairs = (kv * ks) as f64;
-        println!(
-            "{ks} SPADs × {kv} voxels, Nt 254, N {}, J {}, L {} (×{:.2}): band diagonal \
-             {:.2} ms/row ({:.1} ns/pair), lookup {:.3} ms/row ({:.2} ns/pair, of which \
-             FFT tables {:.3} ms), speed-up {:.1}×",
-            cfg.n_fft(),
-            cfg.bins(),
-            lk.grid_len(),
-            lk.oversampling(),
-            band * 1e3,
-            band / pairs * 1e9,
-            look * 1e3,
-            look / pairs * 1e9,
-            ffts * 1e3,
-            band / look
-        );
-    }
-}
+mod tests;
