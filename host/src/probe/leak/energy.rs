@@ -13,7 +13,7 @@ pub struct GateEnergy {
 }
 
 impl GateEnergy {
-    /// Adds one row: `raw` as read, `kept` after [`DirectModel::subtract_row`].
+    /// Adds one row: `raw` as read, `kept` after [`DirectModel::subtract_row`](crate::probe::DirectModel::subtract_row).
     pub fn add(&mut self, raw: &[f32], kept: &[f32]) {
         for (a, b) in raw.iter().zip(kept) {
             let a = f64::from(*a);
@@ -26,7 +26,7 @@ impl GateEnergy {
         }
     }
 
-    /// The fraction removed ([`DirectModel::explained`]).
+    /// The fraction removed ([`DirectModel::explained`](crate::probe::DirectModel::explained)).
     ///
     /// # Errors
     /// [`Error::Argument`] (`leak_correct`) when nothing was removed: the capture holds no
