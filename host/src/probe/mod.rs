@@ -22,10 +22,7 @@
 //! the voxels in parallel at the end; the indirect sum keeps one factorised column per focus
 //! `a ∈ Γ`, pushed in parallel. Memory never grows with the number of laser rows.
 
-mod aligned;
 mod column;
-mod confocal;
-mod cosine;
 mod crop;
 mod direct;
 mod drive;
@@ -35,7 +32,6 @@ mod indirect;
 mod leak;
 mod matrix;
 pub mod partial;
-pub mod resample;
 mod row;
 mod surface;
 pub mod synth;
@@ -43,10 +39,11 @@ mod wave;
 pub mod window;
 
 pub use crate::exec::{Exec, Path};
-pub use aligned::{aligned_volume, fft_note, suggested_volume, window_depths};
 pub use column::{ColumnGate, Shell, check_column, check_focus, column, diagonal};
 pub use crop::Crop;
 pub use direct::direct;
+pub use fast::aligned::{aligned_volume, fft_note, suggested_volume, window_depths};
+pub use fast::resample;
 pub use gamma::{Gamma, gamma_mask};
 pub use indirect::{
     IndirectOptions, IndirectOutput, PairSums, fit_over_volume, indirect, indirect_over,

@@ -19,12 +19,12 @@
 //! spectra), the convolution's per-worker scratch (`~5·Mx·My` complex) and the output:
 //! nothing grows with the number of slices or rows beyond the output itself.
 
-use crate::probe::drive::*;
-use crate::probe::wave::*;
 use crate::error::{Error, Result};
 use crate::exec::{Pass, Path, chunk_len};
 use crate::io::capture::{Geometry, RowSource};
+use crate::probe::drive::*;
 use crate::probe::fast::{BandDft, Confocal, Lookup};
+use crate::probe::wave::*;
 use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;

@@ -22,12 +22,12 @@
 //! **Memory**: one accumulator set per thread for the row and one for the sum (`32·Kv`
 //! bytes per thread), plus the path's own scratch.
 
-use crate::probe::drive::*;
+use super::confocal;
 use crate::budget;
 use crate::error::{Error, Result};
 use crate::exec::Path;
 use crate::io::capture::{Geometry, RowSource, wall_cosine};
-use super::confocal;
+use crate::probe::drive::*;
 use crate::probe::fast::Lookup;
 use crate::volume::Volume;
 use num_complex::Complex64;

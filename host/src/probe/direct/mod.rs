@@ -1,21 +1,22 @@
 //! Direct light: the diagonal `T(x_v, x_v)` (Eqs. 11–12) on the cheapest applicable path
 //! (planar FFT convolution, baseband lookup or the kernel's band sum).
 
+mod confocal;
+mod cosine;
 mod phasor_path;
 
 use phasor_path::{PHASOR_COST, direct_phasor, phasor_flops, phasor_plan};
 
-use super::aligned::fast_hint;
-use super::confocal;
-use super::crop::{Crop, Reach, with_crop};
-use super::drive::*;
-use super::wave::*;
 use crate::budget;
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Path};
 use crate::io::capture::{Geometry, RowSource};
+use crate::probe::crop::{Crop, Reach, with_crop};
+use crate::probe::drive::*;
+use crate::probe::fast::aligned::fast_hint;
+use crate::probe::fast::resample::Resample;
 use crate::probe::fast::{Confocal, Lookup, Phasor, Planar, planar};
-use crate::probe::resample::Resample;
+use crate::probe::wave::*;
 use crate::volume::Volume;
 use num_complex::Complex64;
 use rayon::prelude::*;
@@ -94,7 +95,7 @@ pub(super) fn direct_acc(
     if wave.cosine {
         // The kernel runs the distance weights; `cosine` multiplies each row by the wall
         // cosines (refused before any pass where it does not apply).
-        super::cosine::check(src.geometry(), exec.path)?;
+        cosine::check(src.geometry(), exec.path)?;
         return direct_acc_with(src, volume, &wave.without_cosine(), exec, true);
     }
     direct_acc_with(src, volume, wave, exec, false)
@@ -109,12 +110,12 @@ fn direct_acc_with(
     cosine: bool,
 ) -> Result<(Amplitudes, Config)> {
     let base = wave.config(src.geometry())?;
-    super::window::window_rule(
+    crate::probe::window::window_rule(
         src.geometry(),
         &base,
         None,
         &volume.points,
-        super::wave::ColumnGate::TwoBounce,
+        crate::probe::wave::ColumnGate::TwoBounce,
         exec,
     )?;
     let reach = Reach {
@@ -153,7 +154,7 @@ fn direct_acc_on(
         let note = "cos weights (the wall's cosine per leg)".to_string();
         let (acc, report, path) = with_note(job, note, |job| {
             let plan = lookup_plan(src.geometry(), job.cfg, volume.len());
-            super::cosine::direct(src, job, volume, &plan)
+            cosine::direct(src, job, volume, &plan)
         })?;
         return Ok((Amplitudes::new(acc, report, path, None), cfg));
     }
@@ -770,7 +771,7 @@ fn with_note<T>(job: Job<'_>, note: String, f: impl FnOnce(Job<'_>) -> Result<T>
     let labelled = job
         .exec
         .progress
-        .map(|p| super::crop::Labelled { inner: p, note });
+        .map(|p| crate::probe::crop::Labelled { inner: p, note });
     f(Job {
         exec: Exec {
             progress: labelled.as_ref().map(|l| l as &dyn crate::exec::Progress),
