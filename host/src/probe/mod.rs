@@ -32,6 +32,7 @@ mod indirect;
 mod leak;
 mod matrix;
 pub mod partial;
+mod plan;
 mod row;
 mod surface;
 pub mod synth;
@@ -42,7 +43,7 @@ pub use crate::exec::{Exec, Path};
 pub use column::{ColumnGate, Shell, check_column, check_focus, column, diagonal};
 pub use crop::Crop;
 pub use direct::direct;
-pub use fast::aligned::{aligned_volume, fft_note, suggested_volume, window_depths};
+pub use fast::aligned::{aligned_volume, suggested_volume, window_depths};
 pub use fast::resample;
 pub use gamma::{Gamma, gamma_mask};
 pub use indirect::{
@@ -54,6 +55,7 @@ pub use matrix::{
     MATRIX_BYTES_PER_ELEMENT, Matrix, Pattern, Relit, check_relight, matrix, relight,
 };
 pub use partial::{Finished, Partial, Task};
+pub use plan::fft_note;
 pub use row::{check_row, row};
 pub use surface::{
     PlaneFit, Surface, SurfaceOptions, fit_plane, local_contrast, sample_plane, surface,

@@ -1,0 +1,151 @@
+//! What each path costs and holds: the flop models (units in the planner's docs) and the
+//! memory plans that decide whether a path competes.
+
+use crate::budget;
+use crate::error::{Error, Result};
+use crate::io::capture::Geometry;
+use crate::probe::drive::memory_plan;
+use crate::probe::fast::{Lookup, Phasor, phasor};
+use vltm_kernel::Config;
+
+// ---------------------------------------------------------------------------------------
+// Flop models
+
+/// Flops per row of the kernel's band sum over `n_voxels` (`Kv·Ks·(14J + E0)`).
+pub(super) fn band_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
+    band_row_flops(g.spads_per_row(), cfg, n_voxels)
+}
+
+/// [`band_flops`] of a row of `ks` SPADs.
+pub(super) fn band_row_flops(ks: usize, cfg: &Config, n_voxels: usize) -> f64 {
+    n_voxels as f64 * ks as f64 * (14.0 * cfg.bins() as f64 + 60.0)
+}
+
+/// The whole-scan flops of the band path on a paired or confocal capture.
+pub(super) fn band_total(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
+    band_flops(g, cfg, n_voxels) * g.lasers.len() as f64
+}
+
+/// What the planar convolution is used for (its cost differs).
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub(super) enum PlanarUse {
+    /// Per row, for the diagonal.
+    Diagonal,
+    /// Once, to image a factorised column.
+    Column,
+}
+
+/// Flops of the planar convolution of FFT size `(Mx, My)` over `slices` sub-grids of
+/// `n_voxels` voxels: per row for the diagonal, once for a column's imaging.
+pub(super) fn planar_flops(
+    (mx, my, slices): (usize, usize, usize),
+    cfg: &Config,
+    n_voxels: usize,
+    usage: PlanarUse,
+) -> f64 {
+    let m = (mx * my) as f64;
+    let j = cfg.bins() as f64;
+    // Complex FFTs of M points, 5·M·log₂M (§B.8), pruned inverse ones about half that.
+    let f = 5.0 * m * m.log2();
+    let per_row = j * (f + slices as f64 * (6.0 * m + 0.75 * f)) + n_voxels as f64 * 8.0 * j;
+    // The column images once; its table costs `slices·J` forward FFTs.
+    match usage {
+        PlanarUse::Diagonal => per_row,
+        PlanarUse::Column => per_row + slices as f64 * j * f,
+    }
+}
+
+/// Flops of the lookup diagonal per row: one complex inverse FFT per SPAD, then `E0 + 16`
+/// flops per (voxel, SPAD) (§B.8).
+pub(super) fn lookup_row_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
+    let l = Lookup::plan_len(cfg) as f64;
+    let ks = g.spads_per_row() as f64;
+    ks * 5.0 * l * l.log2() + n_voxels as f64 * ks * 76.0
+}
+
+/// Flops of the whole scan on the lookup path of a paired or confocal capture (one inverse
+/// FFT of the grid per row, then `E0 + 16` per voxel), plus the per-row `Scan` (2N twiddles).
+pub(super) fn lookup_scan_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
+    let l = Lookup::plan_len(cfg) as f64;
+    let rows = g.lasers.len() as f64;
+    rows * (5.0 * l * l.log2() + n_voxels as f64 * 76.0 + 40.0 * cfg.n_fft() as f64)
+}
+
+/// Flops of the phasor path over the whole scan: per histogram a forward FFT of N and an
+/// inverse one of L, the table, then ~30 operations per (voxel, histogram) (8 voxels per
+/// vector: counted as 30/4 against the other paths' scalar flops).
+pub(super) fn phasor_flops(g: &Geometry, cfg: &Config, ph: &Phasor, n_voxels: usize) -> f64 {
+    let hists = (g.lasers.len() * g.spads_per_row()) as f64;
+    let (n, l) = (cfg.n_fft() as f64, ph.grid_len() as f64);
+    hists
+        * (5.0 * n * n.log2()
+            + 5.0 * l * l.log2()
+            + 4.0 * ph.table_len() as f64
+            + n_voxels as f64 * 7.5)
+}
+
+/// How many of the FFT paths' model flops one nominal flop of the phasor path costs when the
+/// two compete: its gathers and scalar table reads run at about a quarter of the FFT paths'
+/// rate. Measured on the confocal exit sign (4,096 rows, 2 threads, 2026-11-29): nominal
+/// 6.1e9 and 2.6e9 flops took 0.95 s and 0.42 s on this path, the confocal convolution's
+/// 6.8e9 and 6.3e9 flops 0.26 s and 0.23 s; without the factor `auto` took the phasor path
+/// there at 2–4× the time. Against the lookup and the band sum the nominal flops compare as
+/// they are (the lookup's 76 flops per pair-voxel run at about a third of this path's rate,
+/// so the phasor path wins there by more than its model says).
+pub(super) const PHASOR_COST: f64 = 4.0;
+
+// ---------------------------------------------------------------------------------------
+// Memory plans
+
+/// What the diagonal holds at once on the lookup path: the pass's tables and row buffers
+/// ([`memory_plan`]) and the lookup's grid and per-thread scratch.
+pub(super) fn lookup_plan(g: &Geometry, cfg: &Config, n_voxels: usize) -> budget::Plan {
+    let mut plan = memory_plan(g, cfg, budget::bytes(n_voxels, 32), "direct light");
+    let threads = rayon::current_num_threads().max(1);
+    Lookup::add_to_plan(cfg, g.spads_per_row(), n_voxels, threads, &mut plan);
+    plan
+}
+
+/// Most SPADs per row for which the phasor path is planned (beyond, the lookup's blocks of 8
+/// SPADs use their lanes).
+pub(super) const PHASOR_MAX_SPADS: usize = 8;
+
+/// Rows per batch of the phasor path: its tables are built in parallel, then every voxel
+/// tile sums the batch's rows in order.
+pub(crate) fn phasor_batch(threads: usize) -> usize {
+    (32 * threads).max(128)
+}
+
+/// The phasor path's plan for `g` (its table for the default tolerance) and what it holds
+/// at once; `Err` says why it does not apply.
+pub(super) fn phasor_plan(
+    g: &Geometry,
+    cfg: &Config,
+    n_voxels: usize,
+) -> Result<(Phasor, budget::Plan)> {
+    let ks = g.spads_per_row();
+    if ks > PHASOR_MAX_SPADS {
+        return Err(Error::arg(
+            "path",
+            format!(
+                "the phasor path takes rows of at most {PHASOR_MAX_SPADS} SPADs (paired and confocal scans, short SPAD lines); these rows have {ks}"
+            ),
+        ));
+    }
+    let ph = Phasor::new(cfg, phasor::TOLERANCE)?;
+    let threads = rayon::current_num_threads().max(1);
+    let rows = phasor_batch(threads);
+    let mut plan = memory_plan(g, cfg, budget::bytes(n_voxels, 16 + 20), "direct light");
+    plan.add(
+        format!(
+            "the phasor tables of {rows} rows × {ks} SPADs ({} entries of 16 bytes each)",
+            budget::count(ph.table_len() as u128)
+        ),
+        budget::bytes(rows * ks, 16).saturating_mul(ph.table_len() as u128),
+    )
+    .add(
+        format!("{threads} phasor FFT buffers (N + L complex f32 each)"),
+        budget::bytes(threads, ph.scratch_bytes() as u128),
+    );
+    Ok((ph, plan))
+}
