@@ -3,6 +3,7 @@
 
 use crate::budget;
 use crate::error::{Error, Result};
+use crate::exec::Path;
 use crate::io::capture::Geometry;
 use crate::probe::drive::memory_plan;
 use crate::probe::fast::{Lookup, Phasor, phasor};
@@ -148,4 +149,65 @@ pub(super) fn phasor_plan(
         budget::bytes(threads, ph.scratch_bytes() as u128),
     );
     Ok((ph, plan))
+}
+
+// ---------------------------------------------------------------------------------------
+// The rivals of the FFT paths
+
+/// What the diagonal's paths other than the FFT ones cost and hold on a pass under distance
+/// weights: the FFT paths compete against the cheapest of them, then they against each other.
+pub(super) struct Rivals {
+    /// The phasor path's table and plan: when forced, or under [`Path::Auto`] when it applies
+    /// and fits the budget.
+    pub(super) phasor: Option<(Phasor, budget::Plan)>,
+    /// The phasor path's whole-scan flops ([`phasor_flops`]; ∞ without it).
+    pub(super) phasor_cost: f64,
+    /// What the lookup path holds ([`lookup_plan`]): it competes only when that fits the
+    /// budget (at large σ its carrier and tables grow with N; the band sum then runs in
+    /// bounded memory).
+    pub(super) lookup: budget::Plan,
+    /// The band sum's flops: per row over a SPAD grid, per scan on paired and confocal scans.
+    pub(super) band_cost: f64,
+    /// The lookup's flops, per row or per scan as [`Rivals::band_cost`].
+    pub(super) lookup_cost: f64,
+}
+
+impl Rivals {
+    /// The rivals over `n_voxels` of the (cropped) capture `g` for `path`.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] (`path`) naming why a forced phasor path does not apply.
+    pub(super) fn new(g: &Geometry, cfg: &Config, n_voxels: usize, path: Path) -> Result<Self> {
+        // The phasor path: planned when forced (its errors name why it does not apply) or,
+        // under `Auto`, when it applies and fits the budget.
+        let phasor = match path {
+            Path::Phasor => Some(phasor_plan(g, cfg, n_voxels)?),
+            Path::Auto => phasor_plan(g, cfg, n_voxels)
+                .ok()
+                .filter(|(_, plan)| plan.fits()),
+            _ => None,
+        };
+        let phasor_cost = phasor
+            .as_ref()
+            .map_or(f64::INFINITY, |(p, _)| phasor_flops(g, cfg, p, n_voxels));
+        let lookup = lookup_plan(g, cfg, n_voxels);
+        let (band_cost, lookup_cost) = if g.confocal {
+            (
+                band_total(g, cfg, n_voxels),
+                lookup_scan_flops(g, cfg, n_voxels),
+            )
+        } else {
+            (
+                band_flops(g, cfg, n_voxels),
+                lookup_row_flops(g, cfg, n_voxels),
+            )
+        };
+        Ok(Self {
+            phasor,
+            phasor_cost,
+            lookup,
+            band_cost,
+            lookup_cost,
+        })
+    }
 }

@@ -150,48 +150,38 @@ pub(super) fn diagonal(
     volume: &Volume,
     path: Path,
 ) -> Result<Diagonal> {
-    let n = volume.len();
     let rows = g.lasers.len() as f64;
-    // The phasor path: planned when forced (its errors name why it does not apply) or, under
-    // `Auto`, when it applies and fits the budget.
-    let ph = match path {
-        Path::Phasor => Some(phasor_plan(g, cfg, n)?),
-        Path::Auto => phasor_plan(g, cfg, n).ok().filter(|(_, plan)| plan.fits()),
-        _ => None,
-    };
-    let ph_cost = ph
-        .as_ref()
-        .map_or(f64::INFINITY, |(p, _)| phasor_flops(g, cfg, p, n));
-    // The lookup competes only when its grid fits the budget (at large σ its carrier and
-    // tables grow with N; the band sum then runs in bounded memory).
-    let lookup = lookup_plan(g, cfg, n);
+    let Rivals {
+        phasor,
+        phasor_cost,
+        lookup,
+        band_cost: band,
+        lookup_cost,
+    } = Rivals::new(g, cfg, volume.len(), path)?;
+    let lookup_fits = lookup.fits();
     // Off the wall's lattice: the FFT path on a support grid, resampled, when it applies and
     // is cheaper than the rivals (whole-scan flops).
     let rival = if g.confocal {
-        band_total(g, cfg, n).min(lookup_scan_flops(g, cfg, n))
+        band.min(lookup_cost)
     } else {
-        let band = band_flops(g, cfg, n);
-        let lookup_cost = lookup.fits().then(|| lookup_row_flops(g, cfg, n));
+        let lookup_cost = lookup_fits.then_some(lookup_cost);
         lookup_cost.map_or(band, |l| l.min(band)) * rows
     };
     // Against the FFT paths the phasor path's flops count at its measured rate.
-    let rival = rival.min(PHASOR_COST * ph_cost);
+    let rival = rival.min(PHASOR_COST * phasor_cost);
     if let Some((rs, engine)) = resampled(g, cfg, volume, path, rival)? {
         return Ok(Diagonal::Resampled(Box::new(rs), engine));
     }
-    let phasor = |(p, plan): (Phasor, budget::Plan)| Diagonal::Phasor(Box::new(p), plan);
+    let phasor = phasor.map(|(p, plan)| Diagonal::Phasor(Box::new(p), plan));
     if g.confocal {
         // Paired and confocal scans: whole-scan flops.
-        let band = band_total(g, cfg, n);
-        let lookup_cost = lookup_scan_flops(g, cfg, n);
-        let lookup_fits = lookup.fits();
-        let rival = band.min(lookup_cost).min(PHASOR_COST * ph_cost);
+        let rival = band.min(lookup_cost).min(PHASOR_COST * phasor_cost);
         if let Some(c) = convolution(g, cfg, volume, path, rival)? {
             return Ok(Diagonal::Convolution(Box::new(c)));
         }
-        let ph_wins = ph_cost < band && (ph_cost < lookup_cost || !lookup_fits);
-        if let Some(ph) = ph.filter(|_| path == Path::Phasor || ph_wins) {
-            return Ok(phasor(ph));
+        let ph_wins = phasor_cost < band && (phasor_cost < lookup_cost || !lookup_fits);
+        if let Some(ph) = phasor.filter(|_| path == Path::Phasor || ph_wins) {
+            return Ok(ph);
         }
         if path == Path::Lookup || (path == Path::Auto && lookup_cost < band && lookup_fits) {
             return Ok(Diagonal::Lookup(lookup));
@@ -199,17 +189,16 @@ pub(super) fn diagonal(
         return Ok(Diagonal::Band);
     }
     // A SPAD grid: flops per row.
-    let band = band_flops(g, cfg, n);
-    let lookup_cost = lookup.fits().then(|| lookup_row_flops(g, cfg, n));
+    let lookup_cost = lookup_fits.then_some(lookup_cost);
     // Planar competes with the cheapest of band, lookup and phasor under `Auto`.
     let rival = lookup_cost.map_or(band, |l| l.min(band));
-    let ph_wins = ph_cost < rival * rows;
-    let rival = rival.min(PHASOR_COST * ph_cost / rows);
+    let ph_wins = phasor_cost < rival * rows;
+    let rival = rival.min(PHASOR_COST * phasor_cost / rows);
     if let Some(p) = planar(&g.spads, cfg, volume, path, PlanarUse::Diagonal, rival)? {
         return Ok(Diagonal::Planar(Box::new(p)));
     }
-    if let Some(ph) = ph.filter(|_| path == Path::Phasor || ph_wins) {
-        return Ok(phasor(ph));
+    if let Some(ph) = phasor.filter(|_| path == Path::Phasor || ph_wins) {
+        return Ok(ph);
     }
     if path == Path::Lookup || (path == Path::Auto && lookup_cost.is_some_and(|l| l < band)) {
         return Ok(Diagonal::Lookup(lookup));
