@@ -43,11 +43,6 @@ pub fn direct(
     let (a, config) = direct_acc(src, volume, wave, exec)?;
     let values = intensities(&a.acc);
     check_finite(&values, &volume.points, "direct light")?;
-    let aligned = if a.support.is_some() {
-        a.support.clone()
-    } else {
-        plan::aligned_hint(src.geometry(), volume, config.wavelength(), a.path)
-    };
     Ok(Output {
         values,
         report: a.report,
@@ -55,7 +50,7 @@ pub fn direct(
         config,
         path: a.path,
         crop: a.crop,
-        aligned,
+        aligned: a.aligned,
     })
 }
 
@@ -67,20 +62,21 @@ pub(super) struct Amplitudes {
     pub(super) path: Path,
     /// The part of the time axis kept.
     pub(super) crop: Option<Crop>,
-    /// When the FFT path computed an off-lattice grid on a support grid and resampled it
-    /// ([`crate::probe::resample`]): the support grid's `--volume` SPEC.
-    pub(super) support: Option<String>,
+    /// The grid the planner reports ([`Output::aligned`]): the support grid's `--volume` SPEC
+    /// when the FFT path resampled an off-lattice grid ([`crate::probe::resample`]), or the
+    /// aligned grid the FFT path would take when another path ran.
+    pub(super) aligned: Option<String>,
 }
 
 impl Amplitudes {
     /// Amplitudes of the whole time axis (the crop is set by the caller that made it).
-    fn new(acc: Vec<Complex64>, report: Report, path: Path, support: Option<String>) -> Self {
+    fn new(acc: Vec<Complex64>, report: Report, path: Path, aligned: Option<String>) -> Self {
         Self {
             acc,
             report,
             path,
             crop: None,
-            support,
+            aligned,
         }
     }
 }
@@ -157,20 +153,19 @@ fn direct_acc_on(
     } else {
         plan::diagonal(g, &cfg, volume, exec.path)?
     };
-    let (path, support) = (choice.path(), choice.support());
-    let note = choice.note(g, volume, &cfg);
-    let (acc, report) = with_note(job, note, |job| evaluate(src, job, volume, choice))?;
-    Ok((Amplitudes::new(acc, report, path, support), cfg))
+    let (how, path, aligned) = (choice.how, choice.path, choice.aligned);
+    let (acc, report) = with_note(job, choice.note, |job| evaluate(src, job, volume, how))?;
+    Ok((Amplitudes::new(acc, report, path, aligned), cfg))
 }
 
-/// The diagonal's accumulators on the path of `choice`.
+/// The diagonal's accumulators evaluated as the planner decided (`how`).
 fn evaluate(
     src: &mut dyn RowSource,
     job: Job<'_>,
     volume: &Volume,
-    choice: Diagonal,
+    how: Diagonal,
 ) -> Result<(Vec<Complex64>, Report)> {
-    match choice {
+    match how {
         Diagonal::Resampled(rs, engine) => direct_resampled(src, job, volume, &rs, engine),
         Diagonal::Planar(p) => direct_planar(src, job, volume, &p),
         Diagonal::Convolution(c) => confocal::direct_convolution(src, job, volume, *c),

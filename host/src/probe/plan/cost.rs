@@ -27,35 +27,6 @@ pub(super) fn band_total(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
     band_flops(g, cfg, n_voxels) * g.lasers.len() as f64
 }
 
-/// What the planar convolution is used for (its cost differs).
-#[derive(Clone, Copy, PartialEq, Eq)]
-pub(super) enum PlanarUse {
-    /// Per row, for the diagonal.
-    Diagonal,
-    /// Once, to image a factorised column.
-    Column,
-}
-
-/// Flops of the planar convolution of FFT size `(Mx, My)` over `slices` sub-grids of
-/// `n_voxels` voxels: per row for the diagonal, once for a column's imaging.
-pub(super) fn planar_flops(
-    (mx, my, slices): (usize, usize, usize),
-    cfg: &Config,
-    n_voxels: usize,
-    usage: PlanarUse,
-) -> f64 {
-    let m = (mx * my) as f64;
-    let j = cfg.bins() as f64;
-    // Complex FFTs of M points, 5·M·log₂M (§B.8), pruned inverse ones about half that.
-    let f = 5.0 * m * m.log2();
-    let per_row = j * (f + slices as f64 * (6.0 * m + 0.75 * f)) + n_voxels as f64 * 8.0 * j;
-    // The column images once; its table costs `slices·J` forward FFTs.
-    match usage {
-        PlanarUse::Diagonal => per_row,
-        PlanarUse::Column => per_row + slices as f64 * j * f,
-    }
-}
-
 /// Flops of the lookup diagonal per row: one complex inverse FFT per SPAD, then `E0 + 16`
 /// flops per (voxel, SPAD) (§B.8).
 pub(super) fn lookup_row_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
@@ -155,21 +126,26 @@ pub(super) fn phasor_plan(
 // The rivals of the FFT paths
 
 /// What the diagonal's paths other than the FFT ones cost and hold on a pass under distance
-/// weights: the FFT paths compete against the cheapest of them, then they against each other.
+/// weights, and how they compare: the FFT paths compete against the cheapest of them, then
+/// they against each other.
 pub(super) struct Rivals {
     /// The phasor path's table and plan: when forced, or under [`Path::Auto`] when it applies
     /// and fits the budget.
     pub(super) phasor: Option<(Phasor, budget::Plan)>,
-    /// The phasor path's whole-scan flops ([`phasor_flops`]; ∞ without it).
-    pub(super) phasor_cost: f64,
     /// What the lookup path holds ([`lookup_plan`]): it competes only when that fits the
     /// budget (at large σ its carrier and tables grow with N; the band sum then runs in
     /// bounded memory).
     pub(super) lookup: budget::Plan,
-    /// The band sum's flops: per row over a SPAD grid, per scan on paired and confocal scans.
-    pub(super) band_cost: f64,
-    /// The lookup's flops, per row or per scan as [`Rivals::band_cost`].
-    pub(super) lookup_cost: f64,
+    /// The flops the resampled FFT path must beat: the cheapest rival's over the whole scan
+    /// (the phasor path's counted [`PHASOR_COST`] times).
+    pub(super) resampled: f64,
+    /// The flops the exact FFT path must beat: as [`Rivals::resampled`] for the confocal
+    /// convolution, per row for the planar one.
+    pub(super) fft: f64,
+    /// Whether the phasor path costs less than the band sum and the lookup (where it fits).
+    pub(super) phasor_wins: bool,
+    /// Whether the lookup fits the budget and costs less than the band sum.
+    pub(super) lookup_wins: bool,
 }
 
 impl Rivals {
@@ -187,27 +163,37 @@ impl Rivals {
                 .filter(|(_, plan)| plan.fits()),
             _ => None,
         };
-        let phasor_cost = phasor
+        let ph = phasor
             .as_ref()
             .map_or(f64::INFINITY, |(p, _)| phasor_flops(g, cfg, p, n_voxels));
         let lookup = lookup_plan(g, cfg, n_voxels);
-        let (band_cost, lookup_cost) = if g.confocal {
-            (
-                band_total(g, cfg, n_voxels),
-                lookup_scan_flops(g, cfg, n_voxels),
-            )
-        } else {
-            (
-                band_flops(g, cfg, n_voxels),
-                lookup_row_flops(g, cfg, n_voxels),
-            )
-        };
+        let fits = lookup.fits();
+        if g.confocal {
+            // Paired and confocal scans: whole-scan flops.
+            let band = band_total(g, cfg, n_voxels);
+            let lk = lookup_scan_flops(g, cfg, n_voxels);
+            let rival = band.min(lk).min(PHASOR_COST * ph);
+            return Ok(Self {
+                phasor,
+                lookup,
+                resampled: rival,
+                fft: rival,
+                phasor_wins: ph < band && (ph < lk || !fits),
+                lookup_wins: lk < band && fits,
+            });
+        }
+        // A SPAD grid: flops per row.
+        let rows = g.lasers.len() as f64;
+        let band = band_flops(g, cfg, n_voxels);
+        let lk = fits.then(|| lookup_row_flops(g, cfg, n_voxels));
+        let rival = lk.map_or(band, |l| l.min(band));
         Ok(Self {
             phasor,
-            phasor_cost,
             lookup,
-            band_cost,
-            lookup_cost,
+            resampled: (rival * rows).min(PHASOR_COST * ph),
+            fft: rival.min(PHASOR_COST * ph / rows),
+            phasor_wins: ph < rival * rows,
+            lookup_wins: lk.is_some_and(|l| l < band),
         })
     }
 }

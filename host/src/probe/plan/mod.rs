@@ -1,7 +1,7 @@
 //! The planner: every choice of how a probe's voxel sums are evaluated is made here, once per
-//! pass and before any row is read, and handed on as a decision ([`Diagonal`]; a column's
-//! `(Path, Option<Planar>)`). The algorithms — `direct` with its `confocal`, `cosine` and
-//! `phasor_path` parts, the column imaging — carry the decision out and never choose. This
+//! pass and before any row is read, and handed on as a decision ([`Choice`] of a diagonal; a
+//! column's `(Path, Option<Planar>)`). The algorithms — `direct` with its `confocal`, `cosine`
+//! and `phasor_path` parts, the column imaging — carry the decision out and never choose. This
 //! module owns the flop models, the memory plans that decide whether a path competes, the
 //! refusals of forced paths that do not apply ([`Path`]: the CLI's `--path`), and the notes
 //! that say which path ran and which grid the FFT path would take.
@@ -50,15 +50,17 @@
 //! Memory: a path whose plan does not fit the budget ([`crate::budget`]) does not compete
 //! under [`Path::Auto`]; forced, its plan's check names the largest buffer.
 //!
-//! Beside the choice: `cost` (the flop models and memory plans) and `note` (the progress
-//! notes, the aligned grid a probe reports, [`fft_note`]).
+//! Beside the choice: `cost` (the flop models of the band, lookup and phasor paths, their
+//! memory plans and how they compare, `Rivals`) and `note` (the progress notes, the aligned
+//! grid a probe reports, [`fft_note`]). The FFT paths' flop model and memory plan sit with
+//! their choosers here: they need the engine's layout first.
 
 mod cost;
 mod note;
 
 pub(super) use cost::phasor_batch;
 pub use note::fft_note;
-pub(super) use note::{aligned_hint, with_note};
+pub(super) use note::with_note;
 
 use super::fast::resample::Resample;
 use super::fast::{Confocal, Phasor, Planar, confocal, planar};
@@ -69,7 +71,40 @@ use crate::exec::Path;
 use crate::io::capture::Geometry;
 use crate::volume::Volume;
 use cost::*;
+use note::diagonal_notes;
 use vltm_kernel::{Config, Gate, Point};
+
+// ---------------------------------------------------------------------------------------
+// The FFT paths' flop model
+
+/// What the planar convolution is used for (its cost differs).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum PlanarUse {
+    /// Per row, for the diagonal.
+    Diagonal,
+    /// Once, to image a factorised column.
+    Column,
+}
+
+/// Flops of the planar convolution of FFT size `(Mx, My)` over `slices` sub-grids of
+/// `n_voxels` voxels: per row for the diagonal, once for a column's imaging.
+fn planar_flops(
+    (mx, my, slices): (usize, usize, usize),
+    cfg: &Config,
+    n_voxels: usize,
+    usage: PlanarUse,
+) -> f64 {
+    let m = (mx * my) as f64;
+    let j = cfg.bins() as f64;
+    // Complex FFTs of M points, 5·M·log₂M (§B.8), pruned inverse ones about half that.
+    let f = 5.0 * m * m.log2();
+    let per_row = j * (f + slices as f64 * (6.0 * m + 0.75 * f)) + n_voxels as f64 * 8.0 * j;
+    // The column images once; its table costs `slices·J` forward FFTs.
+    match usage {
+        PlanarUse::Diagonal => per_row,
+        PlanarUse::Column => per_row + slices as f64 * j * f,
+    }
+}
 
 // ---------------------------------------------------------------------------------------
 // The diagonal's decision
@@ -101,7 +136,7 @@ pub(super) enum Diagonal {
 impl Diagonal {
     /// The path reported for this decision (the convolutions and the resampled FFT path are
     /// [`Path::Planar`]).
-    pub(super) fn path(&self) -> Path {
+    fn path(&self) -> Path {
         match self {
             Self::Resampled(..) | Self::Planar(_) | Self::Convolution(_) => Path::Planar,
             Self::Phasor(..) => Path::Phasor,
@@ -109,31 +144,34 @@ impl Diagonal {
             Self::Band | Self::Cosine(None) => Path::Band,
         }
     }
+}
 
-    /// The support grid's `$volume` SPEC of a resampled volume.
-    pub(super) fn support(&self) -> Option<String> {
-        match self {
-            Self::Resampled(rs, _) => Some(rs.support_spec()),
+/// The planner's decision for a diagonal pass: how it is evaluated, the path reported, the
+/// pass's progress note and the aligned grid the probe reports
+/// ([`crate::probe::Output::aligned`]).
+pub(super) struct Choice {
+    pub(super) how: Diagonal,
+    pub(super) path: Path,
+    pub(super) note: String,
+    pub(super) aligned: Option<String>,
+}
+
+impl Choice {
+    /// `how` with its path and notes (the resampled FFT path's support grid, the `cos`
+    /// weights, or the grid the FFT path would take).
+    fn new(how: Diagonal, g: &Geometry, volume: &Volume, cfg: &Config) -> Self {
+        let path = how.path();
+        let support = match &how {
+            Diagonal::Resampled(rs, _) => Some(rs.support_spec()),
             _ => None,
-        }
-    }
-
-    /// The progress note of the pass (`path lookup; the FFT path would take …`).
-    pub(super) fn note(&self, g: &Geometry, volume: &Volume, cfg: &Config) -> String {
-        match self {
-            Self::Resampled(rs, _) => {
-                format!("path planar, resampled from $volume {}", rs.support_spec())
-            }
-            Self::Cosine(_) => "cos weights (the wall's cosine per leg)".to_string(),
-            _ => {
-                let path = self.path();
-                match aligned_hint(g, volume, cfg.wavelength(), path) {
-                    Some(v) => {
-                        format!("path {}; the FFT path would take $volume {v}", path.name())
-                    }
-                    None => format!("path {}", path.name()),
-                }
-            }
+        };
+        let cosine = matches!(how, Diagonal::Cosine(_));
+        let (note, aligned) = diagonal_notes(g, volume, cfg.wavelength(), path, support, cosine);
+        Self {
+            how,
+            path,
+            note,
+            aligned,
         }
     }
 }
@@ -144,64 +182,31 @@ impl Diagonal {
 /// # Errors
 /// [`Error::Argument`] (`path`) naming why a forced path does not apply; [`Error::Memory`]
 /// when the forced resampled FFT path's buffers do not fit the budget.
-pub(super) fn diagonal(
-    g: &Geometry,
-    cfg: &Config,
-    volume: &Volume,
-    path: Path,
-) -> Result<Diagonal> {
-    let rows = g.lasers.len() as f64;
-    let Rivals {
-        phasor,
-        phasor_cost,
-        lookup,
-        band_cost: band,
-        lookup_cost,
-    } = Rivals::new(g, cfg, volume.len(), path)?;
-    let lookup_fits = lookup.fits();
-    // Off the wall's lattice: the FFT path on a support grid, resampled, when it applies and
-    // is cheaper than the rivals (whole-scan flops).
-    let rival = if g.confocal {
-        band.min(lookup_cost)
-    } else {
-        let lookup_cost = lookup_fits.then_some(lookup_cost);
-        lookup_cost.map_or(band, |l| l.min(band)) * rows
-    };
-    // Against the FFT paths the phasor path's flops count at its measured rate.
-    let rival = rival.min(PHASOR_COST * phasor_cost);
-    if let Some((rs, engine)) = resampled(g, cfg, volume, path, rival)? {
+pub(super) fn diagonal(g: &Geometry, cfg: &Config, volume: &Volume, path: Path) -> Result<Choice> {
+    let how = diagonal_path(g, cfg, volume, path)?;
+    Ok(Choice::new(how, g, volume, cfg))
+}
+
+/// [`diagonal`]'s path.
+fn diagonal_path(g: &Geometry, cfg: &Config, volume: &Volume, path: Path) -> Result<Diagonal> {
+    let r = Rivals::new(g, cfg, volume.len(), path)?;
+    // Off the wall's lattice: the FFT path on a support grid, resampled.
+    if let Some((rs, engine)) = resampled(g, cfg, volume, path, r.resampled)? {
         return Ok(Diagonal::Resampled(Box::new(rs), engine));
     }
-    let phasor = phasor.map(|(p, plan)| Diagonal::Phasor(Box::new(p), plan));
+    // On it: the confocal convolution of a confocal scan, the planar one over a SPAD grid.
     if g.confocal {
-        // Paired and confocal scans: whole-scan flops.
-        let rival = band.min(lookup_cost).min(PHASOR_COST * phasor_cost);
-        if let Some(c) = convolution(g, cfg, volume, path, rival)? {
+        if let Some(c) = convolution(g, cfg, volume, path, r.fft)? {
             return Ok(Diagonal::Convolution(Box::new(c)));
         }
-        let ph_wins = phasor_cost < band && (phasor_cost < lookup_cost || !lookup_fits);
-        if let Some(ph) = phasor.filter(|_| path == Path::Phasor || ph_wins) {
-            return Ok(ph);
-        }
-        if path == Path::Lookup || (path == Path::Auto && lookup_cost < band && lookup_fits) {
-            return Ok(Diagonal::Lookup(lookup));
-        }
-        return Ok(Diagonal::Band);
-    }
-    // A SPAD grid: flops per row.
-    let lookup_cost = lookup_fits.then_some(lookup_cost);
-    // Planar competes with the cheapest of band, lookup and phasor under `Auto`.
-    let rival = lookup_cost.map_or(band, |l| l.min(band));
-    let ph_wins = phasor_cost < rival * rows;
-    let rival = rival.min(PHASOR_COST * phasor_cost / rows);
-    if let Some(p) = planar(&g.spads, cfg, volume, path, PlanarUse::Diagonal, rival)? {
+    } else if let Some(p) = planar(&g.spads, cfg, volume, path, PlanarUse::Diagonal, r.fft)? {
         return Ok(Diagonal::Planar(Box::new(p)));
     }
-    if let Some(ph) = phasor.filter(|_| path == Path::Phasor || ph_wins) {
-        return Ok(ph);
+    if let Some((p, plan)) = r.phasor.filter(|_| path == Path::Phasor || r.phasor_wins) {
+        return Ok(Diagonal::Phasor(Box::new(p), plan));
     }
-    if path == Path::Lookup || (path == Path::Auto && lookup_cost.is_some_and(|l| l < band)) {
-        return Ok(Diagonal::Lookup(lookup));
+    if path == Path::Lookup || (path == Path::Auto && r.lookup_wins) {
+        return Ok(Diagonal::Lookup(r.lookup));
     }
     Ok(Diagonal::Band)
 }
@@ -243,7 +248,7 @@ pub(super) fn check_cosine(g: &Geometry, path: Path) -> Result<()> {
 ///
 /// # Errors
 /// As [`check_cosine`].
-pub(super) fn cosine(g: &Geometry, cfg: &Config, volume: &Volume, path: Path) -> Result<Diagonal> {
+pub(super) fn cosine(g: &Geometry, cfg: &Config, volume: &Volume, path: Path) -> Result<Choice> {
     check_cosine(g, path)?;
     let n = volume.len();
     let lookup = lookup_plan(g, cfg, n);
@@ -251,7 +256,8 @@ pub(super) fn cosine(g: &Geometry, cfg: &Config, volume: &Volume, path: Path) ->
     let lookup_cost = lookup_scan_flops(g, cfg, n);
     let use_lookup =
         path == Path::Lookup || (path == Path::Auto && lookup_cost < band && lookup.fits());
-    Ok(Diagonal::Cosine(use_lookup.then_some(lookup)))
+    let how = Diagonal::Cosine(use_lookup.then_some(lookup));
+    Ok(Choice::new(how, g, volume, cfg))
 }
 
 /// The planar convolution for this probe, if `path` allows it, it applies and (for

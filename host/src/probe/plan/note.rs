@@ -28,15 +28,34 @@ pub(crate) fn with_note<T>(
     })
 }
 
-/// The aligned `$volume` SPEC the FFT path would take, for a grid that ran on another `path`
-/// ([`crate::probe::Output::aligned`]): [`aligned_volume`] when the wall is a regular lattice
-/// and the aligned grid lays out on it (lattice tolerance `1e-5·λ`, as the paths check).
-pub(crate) fn aligned_hint(
+/// The progress note of a diagonal pass on `path` (`path lookup; the FFT path would take
+/// $volume …`) and the aligned grid the probe reports ([`crate::probe::Output::aligned`]): for
+/// a volume resampled from a support grid (`support`: its SPEC) that grid; under `cos` weights
+/// (`cosine`) a note naming them.
+pub(crate) fn diagonal_notes(
     g: &Geometry,
     volume: &Volume,
     wavelength: f64,
     path: Path,
-) -> Option<String> {
+    support: Option<String>,
+    cosine: bool,
+) -> (String, Option<String>) {
+    if let Some(s) = support {
+        return (format!("path planar, resampled from $volume {s}"), Some(s));
+    }
+    let hint = aligned_hint(g, volume, wavelength, path);
+    let note = match (&hint, cosine) {
+        (_, true) => "cos weights (the wall's cosine per leg)".to_string(),
+        (Some(v), false) => format!("path {}; the FFT path would take $volume {v}", path.name()),
+        (None, false) => format!("path {}", path.name()),
+    };
+    (note, hint)
+}
+
+/// The aligned `$volume` SPEC the FFT path would take, for a grid that ran on another `path`:
+/// [`aligned_volume`] when the wall is a regular lattice
+/// and the aligned grid lays out on it (lattice tolerance `1e-5·λ`, as the paths check).
+fn aligned_hint(g: &Geometry, volume: &Volume, wavelength: f64, path: Path) -> Option<String> {
     // No FFT path takes a paired scan with laser and SPAD apart: no grid would be fast.
     if path == Path::Planar || volume.axes.is_none() || g.paired_apart() {
         return None;
