@@ -400,13 +400,14 @@ impl ColumnState {
                 path,
                 planar,
             } => {
+                // A column whose path was deferred (or read from a state): the planner decides.
                 let rebuilt;
-                let planar = match (path, planar) {
-                    (Path::Planar | Path::Auto, None) if *gate == Gate::Gaussian => {
-                        rebuilt = plan::column_imaging(spads, cfg, volume, *path)?;
+                let planar = match planar {
+                    Some(p) => Some(p.as_ref()),
+                    None => {
+                        rebuilt = plan::column_imaging(spads, cfg, volume, *path, *gate)?;
                         rebuilt.as_ref()
                     }
-                    (_, p) => p.as_deref(),
                 };
                 let mut state = state.clone();
                 let (v, r, p, a) = image_column(

@@ -516,7 +516,7 @@ pub(super) fn column(
 ) -> Result<(Path, Option<Planar>)> {
     let decide = gate == Gate::Gaussian && !(defer && path == Path::Auto);
     let planar = if decide {
-        column_imaging(spads, cfg, volume, path)?
+        column_imaging(spads, cfg, volume, path, gate)?
     } else {
         None
     };
@@ -530,9 +530,10 @@ pub(super) fn column(
     Ok((path, planar))
 }
 
-/// The planar convolution that images a Gaussian-gated column over `volume` (`spads`: the
-/// SPAD grid), if `path` allows it, it applies and (for [`Path::Auto`]) it costs fewer flops
-/// than the band sum's row.
+/// The planar convolution that images a column with kernel gate `gate` over `volume`
+/// (`spads`: the SPAD grid) when `path` is [`Path::Planar`] or [`Path::Auto`], the gate is the
+/// Gaussian one, the convolution applies and (for [`Path::Auto`]) it costs fewer flops than
+/// the band sum's row; `None`: the kernel images it.
 ///
 /// # Errors
 /// [`Error::Argument`] (`path`) when the planar path is forced and does not apply.
@@ -541,7 +542,11 @@ pub(super) fn column_imaging(
     cfg: &Config,
     volume: &Volume,
     path: Path,
+    gate: Gate,
 ) -> Result<Option<Planar>> {
+    if !matches!(path, Path::Planar | Path::Auto) || gate != Gate::Gaussian {
+        return Ok(None);
+    }
     let rival = band_row_flops(spads.len(), cfg, volume.len());
     planar(spads, cfg, volume, path, PlanarUse::Column, rival)
 }
