@@ -3,10 +3,11 @@
 //! indirect sum; the diagonal under the same three gates ([`diagonal`]).
 
 use super::crop::{Crop, Reach, with_crop};
-use super::direct::*;
+use super::direct::direct;
 use super::drive::*;
 use super::gate::ColumnGate;
 use super::output::{Output, check_finite};
+use super::plan;
 use super::wave::*;
 use crate::budget;
 use crate::error::{Error, Result};
@@ -136,12 +137,7 @@ pub fn diagonal(
         ColumnGate::None => Gate::None,
     };
     wave.refuse_cosine("the un-gated and higher-order diagonals")?;
-    if !matches!(exec.path, Path::Auto | Path::Band) {
-        return Err(Error::arg(
-            "path",
-            "the un-gated and higher-order diagonals are evaluated on the band path only",
-        ));
-    }
+    let path = plan::other_gates(exec.path)?;
     let t = Instant::now();
     let base = wave.config(src.geometry())?;
     super::window::window_rule(src.geometry(), &base, None, &volume.points, gate, exec)?;
@@ -172,7 +168,7 @@ pub fn diagonal(
         report,
         seconds: t.elapsed().as_secs_f64(),
         config: cfg,
-        path: Path::Band,
+        path,
         crop,
         aligned: None,
     })
@@ -263,7 +259,7 @@ pub fn check_column(
 ) -> Result<()> {
     wave.refuse_cosine("`column`")?;
     check_focus(focus)?;
-    check_path(exec.path, gate)?;
+    plan::check_column(exec.path, gate)?;
     if gate != ColumnGate::HigherOrder {
         g.need_spad_grid("column", "columns need")?;
     }
@@ -276,24 +272,6 @@ pub fn check_column(
     super::window::window_rule(g, &base, Some(&[focus]), &volume.points, gate, quiet).map(|_| ())
 }
 
-/// Refuses an evaluation path that cannot image a column with `gate`.
-fn check_path(path: Path, gate: ColumnGate) -> Result<()> {
-    match (path, gate) {
-        (Path::Lookup | Path::Phasor, _) => Err(Error::arg(
-            "path",
-            format!(
-                "the {} path evaluates the diagonal only (use auto, band or planar for columns)",
-                path.name()
-            ),
-        )),
-        (Path::Planar, ColumnGate::HigherOrder | ColumnGate::None) => Err(Error::arg(
-            "path",
-            "the planar path images Gaussian-gated (two-bounce) columns only (use auto or band)",
-        )),
-        _ => Ok(()),
-    }
-}
-
 pub(super) fn column_acc(
     src: &mut dyn RowSource,
     focus: Point,
@@ -304,7 +282,7 @@ pub(super) fn column_acc(
     defer: bool,
 ) -> Result<(ColumnState, vltm_kernel::Config, Option<Crop>)> {
     check_focus(focus)?;
-    check_path(exec.path, gate)?;
+    plan::check_column(exec.path, gate)?;
     let base = wave.config(src.geometry())?;
     let foci = [focus];
     super::window::window_rule(
@@ -377,35 +355,15 @@ fn column_acc_on(
             };
             let g = src.geometry();
             g.need_spad_grid("column", "columns need")?;
-            // Deferred: `finish` decides (building the planar tables costs about as much as
-            // imaging, so parts of a split scan leave it to the merged state).
-            let decide = kgate == Gate::Gaussian && !(defer && exec.path == Path::Auto);
-            let planar = if decide {
-                let rival = band_flops(g, &cfg, volume.len());
-                choose_planar(
-                    Some(&g.spads),
-                    &cfg,
-                    volume,
-                    exec.path,
-                    PlanarUse::Column,
-                    rival,
-                )?
-            } else {
-                None
-            };
+            // Deferred under `Auto` (parts of a split scan): `finish` decides.
+            let (path, planar) = plan::column(&g.spads, &cfg, volume, exec.path, kgate, defer)?;
             let (state, report, legs) = single_column(src, job, focus, kgate)?;
             ColumnState::Factorised {
                 state,
                 report,
                 legs,
                 gate: kgate,
-                path: if planar.is_some() {
-                    Path::Planar
-                } else if decide || kgate != Gate::Gaussian {
-                    Path::Band
-                } else {
-                    Path::Auto
-                },
+                path,
                 planar: planar.map(Box::new),
             }
         }
@@ -444,22 +402,14 @@ impl ColumnState {
                 path,
                 planar,
             } => {
+                // A column whose path was deferred (or read from a state): the planner decides.
                 let rebuilt;
-                let planar = match (path, planar) {
-                    (Path::Planar | Path::Auto, None) if *gate == Gate::Gaussian => {
-                        let rival =
-                            (volume.len() * spads.len()) as f64 * (14.0 * cfg.bins() as f64 + 60.0);
-                        rebuilt = choose_planar(
-                            Some(spads),
-                            cfg,
-                            volume,
-                            *path,
-                            PlanarUse::Column,
-                            rival,
-                        )?;
+                let planar = match planar {
+                    Some(p) => Some(p.as_ref()),
+                    None => {
+                        rebuilt = plan::column_imaging(spads, cfg, volume, *path, *gate)?;
                         rebuilt.as_ref()
                     }
-                    (_, p) => p.as_deref(),
                 };
                 let mut state = state.clone();
                 let (v, r, p, a) = image_column(

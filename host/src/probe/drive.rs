@@ -404,8 +404,3 @@ pub(super) fn elementwise(
 pub(super) fn intensities(acc: &[Complex64]) -> Vec<f32> {
     acc.iter().map(|a| a.norm_sqr() as f32).collect()
 }
-
-/// Flops per row of the kernel's band sum over `n_voxels` (`Kv·Ks·(14J + E0)`).
-pub(super) fn band_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
-    n_voxels as f64 * g.spads_per_row() as f64 * (14.0 * cfg.bins() as f64 + 60.0)
-}

@@ -22,10 +22,7 @@
 //! the voxels in parallel at the end; the indirect sum keeps one factorised column per focus
 //! `a ∈ Γ`, pushed in parallel. Memory never grows with the number of laser rows.
 
-mod aligned;
 mod column;
-mod confocal;
-mod cosine;
 mod crop;
 mod direct;
 mod drive;
@@ -37,7 +34,7 @@ mod leak;
 mod matrix;
 mod output;
 pub mod partial;
-pub mod resample;
+mod plan;
 mod row;
 mod surface;
 pub mod synth;
@@ -45,10 +42,11 @@ mod wave;
 pub mod window;
 
 pub use crate::exec::{Exec, Path};
-pub use aligned::{aligned_volume, fft_note, suggested_volume, window_depths};
 pub use column::{Shell, check_column, check_focus, column, diagonal};
 pub use crop::Crop;
 pub use direct::direct;
+pub use fast::aligned::{aligned_volume, suggested_volume, window_depths};
+pub use fast::resample;
 pub use gamma::{Gamma, gamma_mask};
 pub use gate::ColumnGate;
 pub use indirect::{
@@ -61,6 +59,7 @@ pub use matrix::{
 };
 pub use output::Output;
 pub use partial::{Finished, Partial, Task};
+pub use plan::fft_note;
 pub use row::{check_row, row};
 pub use surface::{
     PlaneFit, Surface, SurfaceOptions, fit_plane, local_contrast, sample_plane, surface,

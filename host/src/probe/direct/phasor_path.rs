@@ -1,87 +1,22 @@
-//! The diagonal on the phasor path ([`crate::probe::fast::phasor`]): its plan (the table's
-//! size from the stated error bound, within the memory budget), its flop model, and the
-//! driver that streams rows in batches whose tables are built in parallel, then sums every
-//! voxel tile over the batch's rows in order (so the result does not depend on the threads).
+//! The diagonal on the phasor path ([`crate::probe::fast::phasor`]), planned by the planner
+//! (`probe::plan`: the table for the stated error bound within the memory budget, the flop
+//! model): the driver that streams rows in batches whose tables are built in parallel, then
+//! sums every voxel tile over the batch's rows in order (so the result does not depend on the
+//! threads).
 
 use crate::budget;
-use crate::error::{Error, Result};
-use crate::io::capture::{Geometry, RowSource};
+use crate::error::Result;
+use crate::io::capture::RowSource;
 use crate::probe::drive::*;
 use crate::probe::fast::{Phasor, phasor};
+use crate::probe::plan::phasor_batch;
 use crate::volume::Volume;
 use num_complex::Complex64;
 use rayon::prelude::*;
-use vltm_kernel::{Config, Point, Report};
+use vltm_kernel::{Point, Report};
 
 /// Voxels per tile of the phasor path (its `f32` accumulators live on the stack).
 const PHASOR_TILE: usize = phasor::TILE;
-
-/// Most SPADs per row for which the phasor path is planned (beyond, the lookup's blocks of 8
-/// SPADs use their lanes).
-pub(super) const PHASOR_MAX_SPADS: usize = 8;
-
-/// Rows per batch of the phasor path: its tables are built in parallel, then every voxel
-/// tile sums the batch's rows in order.
-fn phasor_batch(threads: usize) -> usize {
-    (32 * threads).max(128)
-}
-
-/// The phasor path's plan for `g` (its table for the default tolerance) and what it holds
-/// at once; `Err` says why it does not apply.
-pub(super) fn phasor_plan(
-    g: &Geometry,
-    cfg: &Config,
-    n_voxels: usize,
-) -> Result<(Phasor, budget::Plan)> {
-    let ks = g.spads_per_row();
-    if ks > PHASOR_MAX_SPADS {
-        return Err(Error::arg(
-            "path",
-            format!(
-                "the phasor path takes rows of at most {PHASOR_MAX_SPADS} SPADs (paired and confocal scans, short SPAD lines); these rows have {ks}"
-            ),
-        ));
-    }
-    let ph = Phasor::new(cfg, phasor::TOLERANCE)?;
-    let threads = rayon::current_num_threads().max(1);
-    let rows = phasor_batch(threads);
-    let mut plan = memory_plan(g, cfg, budget::bytes(n_voxels, 16 + 20), "direct light");
-    plan.add(
-        format!(
-            "the phasor tables of {rows} rows × {ks} SPADs ({} entries of 16 bytes each)",
-            budget::count(ph.table_len() as u128)
-        ),
-        budget::bytes(rows * ks, 16).saturating_mul(ph.table_len() as u128),
-    )
-    .add(
-        format!("{threads} phasor FFT buffers (N + L complex f32 each)"),
-        budget::bytes(threads, ph.scratch_bytes() as u128),
-    );
-    Ok((ph, plan))
-}
-
-/// Flops of the phasor path over the whole scan: per histogram a forward FFT of N and an
-/// inverse one of L, the table, then ~30 operations per (voxel, histogram) (8 voxels per
-/// vector: counted as 30/4 against the other paths' scalar flops).
-pub(super) fn phasor_flops(g: &Geometry, cfg: &Config, ph: &Phasor, n_voxels: usize) -> f64 {
-    let hists = (g.lasers.len() * g.spads_per_row()) as f64;
-    let (n, l) = (cfg.n_fft() as f64, ph.grid_len() as f64);
-    hists
-        * (5.0 * n * n.log2()
-            + 5.0 * l * l.log2()
-            + 4.0 * ph.table_len() as f64
-            + n_voxels as f64 * 7.5)
-}
-
-/// How many of the FFT paths' model flops one nominal flop of the phasor path costs when the
-/// two compete: its gathers and scalar table reads run at about a quarter of the FFT paths'
-/// rate. Measured on the confocal exit sign (4,096 rows, 2 threads, 2026-11-29): nominal
-/// 6.1e9 and 2.6e9 flops took 0.95 s and 0.42 s on this path, the confocal convolution's
-/// 6.8e9 and 6.3e9 flops 0.26 s and 0.23 s; without the factor `auto` took the phasor path
-/// there at 2–4× the time. Against the lookup and the band sum the nominal flops compare as
-/// they are (the lookup's 76 flops per pair-voxel run at about a third of this path's rate,
-/// so the phasor path wins there by more than its model says).
-pub(super) const PHASOR_COST: f64 = 4.0;
 
 /// The diagonal's accumulators on the phasor path ([`crate::probe::fast::phasor`]): rows in
 /// batches, their tables in parallel, then voxel tiles in parallel, each summing the batch's

@@ -8,18 +8,23 @@
 //!   point): per slice one inverse FFT of `Σ_j X̂_j·κ̂_j`, no stored kernel table (`rustfft`).
 //! * [`phasor`]: the full-phasor table per histogram, 8 voxels per vector, for rows of one or
 //!   a few SPADs (paired and confocal scans) (`rustfft`, `pulp` dispatch).
-//! * [`lookup`]: the gated baseband + lookup diagonal (§B.2.4, [`LookupDiagonal`]): one inverse
-//!   FFT per SPAD and row, then a cubic interpolation per (voxel, SPAD), for any geometry
-//!   (`rustfft`).
+//! * [`lookup`]: the gated baseband + lookup diagonal (§B.2.4, [`LookupDiagonal`]): one inverse FFT per SPAD and
+//!   row, then a cubic interpolation per (voxel, SPAD), for any geometry (`rustfft`).
+//! * [`resample`]: volumes off the wall's lattice computed on a support grid the FFT paths
+//!   take and resampled to the asked voxels within a stated bound.
+//! * `aligned`: the nearest grid the FFT paths take, the depths the time window reaches and
+//!   the volume `vltm info` suggests (re-exported by [`crate::probe`]).
 //!
-//! [`crate::probe`] picks a path per probe ([`crate::exec::Path`]); every path is checked against
-//! the float64 reference in `tests/proptest_fast.rs`.
+//! The planner (`probe::plan`) picks a path per probe ([`crate::exec::Path`]); every path is
+//! checked against the float64 reference in `tests/proptest_fast.rs`.
 
+pub(crate) mod aligned;
 pub mod band;
 pub mod confocal;
 pub mod lookup;
 pub mod phasor;
 pub mod planar;
+pub mod resample;
 
 pub use band::BandDft;
 pub use confocal::Confocal;

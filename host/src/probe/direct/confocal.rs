@@ -1,8 +1,7 @@
-//! Direct light of confocal and paired captures (one histogram per row): the path choice among
-//! the confocal FFT convolution ([`crate::probe::fast::confocal`], confocal scans only: laser
-//! and SPAD at the same wall point), the baseband lookup and the kernel's band sum (any paired
-//! scan, on any relay surface: each row is imaged with its own laser and SPAD spot), and the
-//! convolution's row pass.
+//! Direct light of confocal captures by the confocal FFT convolution
+//! ([`crate::probe::fast::confocal`], confocal scans only: laser and SPAD at the same wall
+//! point), when the planner (`probe::plan`) takes it: the convolution's row pass. Paired scans
+//! and the other paths of confocal ones (lookup, phasor, band sum) run as on any capture.
 //!
 //! The convolution needs every row's band spectrum on the wall grid before it can image:
 //! rows are read in batches of `128·threads`, their stage 1 done as one `sgemm` per 128 rows
@@ -19,12 +18,12 @@
 //! spectra), the convolution's per-worker scratch (`~5·Mx·My` complex) and the output:
 //! nothing grows with the number of slices or rows beyond the output itself.
 
-use super::drive::*;
-use super::wave::*;
-use crate::error::{Error, Result};
-use crate::exec::{Pass, Path, chunk_len};
+use crate::error::Result;
+use crate::exec::{Pass, chunk_len};
 use crate::io::capture::{Geometry, RowSource};
-use crate::probe::fast::{BandDft, Confocal, LookupDiagonal};
+use crate::probe::drive::*;
+use crate::probe::fast::{BandDft, Confocal};
+use crate::probe::wave::*;
 use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
@@ -33,55 +32,6 @@ use vltm_kernel::{Config, Gate, Point, Probe, Report, RowBuffer, Scan, Target, c
 
 /// Rows per `sgemm` of stage 1.
 const ROWS_PER_GEMM: usize = 128;
-
-/// Flops of the whole scan on the lookup path (one inverse FFT of the grid per row, then
-/// `E0 + 16` per voxel), plus the per-row `Scan` (2N twiddles).
-pub(super) fn lookup_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
-    let l = LookupDiagonal::plan_len(cfg) as f64;
-    let rows = g.lasers.len() as f64;
-    rows * (5.0 * l * l.log2() + n_voxels as f64 * 76.0 + 40.0 * cfg.n_fft() as f64)
-}
-
-/// The confocal convolution for this probe, if `path` allows it, it applies and (for
-/// [`Path::Auto`]) it costs fewer flops than `rival` (the cheapest other path, whole scan).
-///
-/// # Errors
-/// [`Error::Argument`] (`path`) when the planar path is forced and does not apply.
-pub(super) fn choose(
-    g: &Geometry,
-    cfg: &Config,
-    volume: &Volume,
-    path: Path,
-    rival: f64,
-) -> Result<Option<Confocal>> {
-    if matches!(path, Path::Band | Path::Lookup | Path::Phasor) {
-        return Ok(None);
-    }
-    let conv =
-        if g.paired_apart() {
-            Err("it needs the laser and SPAD at the same wall point (a confocal scan); this paired \
-             scan has them apart, so each row's path is not a function of one wall point"
-            .to_string())
-        } else if volume.axes.is_none() {
-            Err("the volume is a point list, not a grid".to_string())
-        } else {
-            Confocal::new(cfg, &g.lasers, &volume.points, volume.shape)
-        };
-    match (conv, path) {
-        (Err(e), Path::Planar) => Err(Error::arg(
-            "path",
-            format!("the planar FFT path does not apply: {e}"),
-        )),
-        (Err(_), _) => Ok(None),
-        (Ok(c), Path::Planar) => Ok(Some(c)),
-        (Ok(c), _) => Ok((c.flops() < rival).then_some(c)),
-    }
-}
-
-/// The whole-scan flops of the band path on a confocal capture.
-pub(super) fn band_total(g: &Geometry, cfg: &Config, n_voxels: usize) -> f64 {
-    band_flops(g, cfg, n_voxels) * g.lasers.len() as f64
-}
 
 /// Voxels with some confocal path `d1_l + d4_l + 2|x_l − x_v| − t0` outside the guard
 /// interval (within `1e-4·σ` counts as outside, as for the planar path). A bound from the

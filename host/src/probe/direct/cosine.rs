@@ -1,7 +1,8 @@
 //! Direct light under `--weights cos` ([`Wave::cosine`]): each leg's distance weight `w(d)`
 //! times the Lambertian cosine at its wall point, `|cos θ| = |n·(x_v − x)| / |x_v − x|` with
 //! `n` the relay surface's normal at the wall point `x` (the laser spot for the first leg, the
-//! SPAD spot for the last; [`Geometry::laser_normal`], [`Geometry::spad_normal`], +z where
+//! SPAD spot for the last; [`Geometry::laser_normal`](crate::io::capture::Geometry::laser_normal),
+//! [`Geometry::spad_normal`](crate::io::capture::Geometry::spad_normal), +z where
 //! the capture has none). Together with the default `w = 1/d` this is the obliquity factor
 //! `cos θ/d` of the Rayleigh–Sommerfeld propagator on a relay surface
 //! of any shape; on a flat wall it is `z_v/d` per leg.
@@ -12,8 +13,9 @@
 //! SPAD spot. The kernel's per-pair loop is unchanged (no normals, no new per-pair work, so
 //! the firmware builds are untouched); the host takes each row's accumulators, multiplies
 //! them by the two cosines per voxel and adds them up. Over a SPAD grid the sum over SPADs
-//! runs inside the kernel, where a per-SPAD cosine does not fit: refused in one line, as are
-//! the FFT paths (their convolution kernels are distance-only).
+//! runs inside the kernel, where a per-SPAD cosine does not fit: the planner refuses it in one
+//! line (`probe::plan::check_cosine`), as it does the FFT and phasor paths (their kernels are
+//! distance-only).
 //!
 //! **Cost.** The band or lookup path's own cost, plus per row and voxel two cosines (two
 //! square roots, ~20 flops) and a reset of one accumulator. Measured (4,096 pairs × 512
@@ -22,68 +24,27 @@
 //! **Memory**: one accumulator set per thread for the row and one for the sum (`32·Kv`
 //! bytes per thread), plus the path's own scratch.
 
-use super::drive::*;
 use crate::budget;
-use crate::error::{Error, Result};
-use crate::exec::Path;
-use crate::io::capture::{Geometry, RowSource, wall_cosine};
-use crate::probe::confocal;
+use crate::error::Result;
+use crate::io::capture::{RowSource, wall_cosine};
+use crate::probe::drive::*;
 use crate::probe::fast::LookupDiagonal;
 use crate::volume::Volume;
 use num_complex::Complex64;
 use vltm_kernel::{Gate, Probe, Report, Scan, Target};
 
-/// Refuses `--weights cos` where it does not apply: a scan with a SPAD grid, or the forced
-/// FFT path.
-///
-/// # Errors
-/// [`Error::Argument`] (`weights` or `path`) with one line that says why.
-pub(super) fn check(g: &Geometry, path: Path) -> Result<()> {
-    if !g.confocal {
-        return Err(Error::arg(
-            "weights",
-            "`cos` weights need one SPAD per row (a paired or confocal scan): over a SPAD grid \
-             the sum over SPADs runs inside the kernel, where the per-SPAD cosine does not fit \
-             (use `inv` or `one`)",
-        ));
-    }
-    if path == Path::Phasor {
-        return Err(Error::arg(
-            "path",
-            "the phasor path does not take `$weights cos` (the wall cosines per leg are not in \
-             its lane loop; the band and lookup paths compute them)",
-        ));
-    }
-    if path == Path::Planar {
-        return Err(Error::arg(
-            "path",
-            "the planar FFT path does not apply: `$weights cos` multiplies each leg by the \
-             cosine at its own wall point, which the convolution's distance-only kernel \
-             cannot (the band and lookup paths compute it)",
-        ));
-    }
-    Ok(())
-}
-
-/// The diagonal's accumulators under the wall cosines, on the lookup or band path (the
-/// cheaper by the flop model under [`Path::Auto`]), rows in parallel. `job.cfg` has the
-/// distance weights of the wave.
-/// `lookup_plan`: what the lookup path holds at once (the diagonal's plan of `direct`).
+/// The diagonal's accumulators under the wall cosines, on the lookup path (`lookup`: what it
+/// holds) or the band path (`None`), as the planner chose (`probe::plan::cosine`), rows in
+/// parallel. `job.cfg` has the distance weights of the wave.
 pub(super) fn direct(
     src: &mut dyn RowSource,
     job: Job<'_>,
     volume: &Volume,
-    lookup_plan: &budget::Plan,
-) -> Result<(Vec<Complex64>, Report, Path)> {
+    lookup: Option<&budget::Plan>,
+) -> Result<(Vec<Complex64>, Report)> {
     let g = src.geometry().clone();
-    check(&g, job.exec.path)?;
     let cfg = job.cfg;
     let n = volume.len();
-    let band = confocal::band_total(&g, cfg, n);
-    let lookup = confocal::lookup_flops(&g, cfg, n);
-    let fits = lookup_plan.fits();
-    let use_lookup =
-        job.exec.path == Path::Lookup || (job.exec.path == Path::Auto && lookup < band && fits);
     let threads = rayon::current_num_threads().max(1);
     check_memory(
         &g,
@@ -103,7 +64,7 @@ pub(super) fn direct(
         }
     };
     let zero = Complex64::new(0.0, 0.0);
-    let (acc_parts, report, path) = if use_lookup {
+    let (acc_parts, report) = if let Some(lookup_plan) = lookup {
         lookup_plan.check(|| pass_name(&g, cfg, "direct light (lookup)"))?;
         let lk = LookupDiagonal::new(cfg);
         let workers: Vec<_> = (0..threads)
@@ -138,7 +99,7 @@ pub(super) fn direct(
                 a
             })
             .collect::<Vec<_>>();
-        (parts, report, Path::Lookup)
+        (parts, report)
     } else {
         let len = Probe::state_len(cfg, Target::Diagonal, Gate::Gaussian, n, 1);
         let mut states: Vec<Vec<f64>> = (0..threads).map(|_| vec![0.0; len]).collect();
@@ -174,7 +135,7 @@ pub(super) fn direct(
                 a
             })
             .collect::<Vec<_>>();
-        (parts, report, Path::Band)
+        (parts, report)
     };
     let mut acc = vec![zero; n];
     for part in acc_parts {
@@ -182,5 +143,5 @@ pub(super) fn direct(
             *a += b;
         }
     }
-    Ok((acc, report, path))
+    Ok((acc, report))
 }

@@ -71,20 +71,6 @@ pub fn aligned_volume(g: &Geometry, volume: &Volume) -> Option<String> {
     changed.then(|| spec.join(","))
 }
 
-/// [`aligned_volume`] when the FFT paths would take it: the wall is a regular lattice and the
-/// aligned grid lays out on it (lattice tolerance `1e-5·λ`, as the paths check).
-pub(super) fn fast_hint(g: &Geometry, volume: &Volume, wavelength: f64) -> Option<String> {
-    if g.paired_apart() {
-        // No FFT path takes a paired scan with laser and SPAD apart: no grid would be fast.
-        return None;
-    }
-    let spec = aligned_volume(g, volume)?;
-    let v = Volume::parse(&spec).ok()?;
-    let wall = if g.confocal { &g.lasers } else { &g.spads };
-    crate::probe::fast::planar::layout(wall, &v.points, v.shape, 1e-5 * wavelength).ok()?;
-    Some(spec)
-}
-
 /// The depths `[z_near, z_far]` (m) the capture's time window reaches: the depths whose
 /// nearest 3-bounce path lies in the window `t0 ..= t0 + (nt − 1)·Δt`. A voxel at depth `z`
 /// seen through the pair (laser spot `x_l`, SPAD spot `x_s`) has its shortest path
@@ -190,56 +176,6 @@ pub fn suggested_volume(g: &Geometry) -> Option<String> {
         axis(xy[1]),
         axis((z0, z1, nz))
     ))
-}
-
-/// What the FFT paths take on this capture, for `vltm info`: the wall lattice's pitch and a
-/// `--volume` SPEC on it, or why the wall is not a lattice; with `volume`, which path that
-/// grid gets (exact FFT, resampled FFT or lookup, the aligned SPEC). The lattice tolerance is
-/// `1e-5·λ` at the default wavelength.
-pub fn fft_note(g: &Geometry, volume: Option<&Volume>) -> String {
-    let wall = if g.confocal { &g.lasers } else { &g.spads };
-    let tol = 1e-5 * crate::probe::wave::default_wavelength(g);
-    let (origin, pitch, n, _) = match crate::probe::fast::planar::wall_lattice(wall, tol) {
-        Ok(l) => l,
-        Err(e) => {
-            return format!(
-                "no FFT path: the wall points are not a regular lattice in one plane ({e}); direct light takes the phasor path (rows of up to 8 SPADs), the lookup or the band path"
-            );
-        }
-    };
-    let f = |x: f64| {
-        let t = format!("{:.7}", if x.abs() < 5e-8 { 0.0 } else { x });
-        t.trim_end_matches('0').trim_end_matches('.').to_string()
-    };
-    let axis = |i: usize| {
-        let end = origin[i] + (n[i] - 1) as f64 * pitch[i];
-        format!("{}:{}:{}", f(origin[i]), f(end), n[i])
-    };
-    let mut s = format!(
-        "FFT path for wall-parallel grids of x-y pitch {} x {} m (the wall's) or an integer divisor, any offset and extent, e.g. $volume {}; other regular grids are resampled from such a grid where λ and σ allow it (the probe says so), else they take the lookup path",
-        f(pitch[0]),
-        f(pitch[1]),
-        suggested_volume(g).unwrap_or_else(|| format!("{},{},Z0:Z1:NZ", axis(0), axis(1)))
-    );
-    if let Some(v) = volume {
-        let what = if v.axes.is_none() {
-            "a point list: the lookup or band path".to_string()
-        } else if crate::probe::fast::planar::layout(wall, &v.points, v.shape, tol).is_ok() {
-            "on the wall's lattice: the FFT path".to_string()
-        } else {
-            match aligned_volume(g, v) {
-                Some(a) => format!(
-                    "off the wall's lattice: resampled from a finer aligned grid where λ and σ allow it, else the lookup path; the nearest aligned grid is $volume {a}"
-                ),
-                None => {
-                    "off the wall's lattice: resampled where λ and σ allow it, else the lookup path"
-                        .to_string()
-                }
-            }
-        };
-        s.push_str(&format!("\nthe volume   {what}"));
-    }
-    s
 }
 
 #[cfg(test)]

@@ -1,0 +1,552 @@
+//! The planner: every choice of how a probe's voxel sums are evaluated is made here, once per
+//! pass and before any row is read, and handed on as a decision ([`Choice`] of a diagonal; a
+//! column's `(Path, Option<Planar>)`). The algorithms — `direct` with its `confocal`, `cosine`
+//! and `phasor_path` parts, the column imaging — carry the decision out and never choose. This
+//! module owns the flop models, the memory plans that decide whether a path competes, the
+//! refusals of forced paths that do not apply ([`Path`]: the CLI's `--path`), and the notes
+//! that say which path ran and which grid the FFT path would take.
+//!
+//! # Cost models
+//!
+//! Flops count a complex multiply-add as 8 and a complex FFT of `M` points as `5·M·log₂M`
+//! (§B.8). `Kv` voxels, `Ks` SPADs per row (1 on paired and confocal scans), `R` laser rows,
+//! `J` band bins, `N` the DFT period, `L` the lookup grid, `M = Mx·My` the wall plane's FFT
+//! size, `S` slices (depths × polyphases), `T` entries of a phasor table.
+//!
+//! | path | flops | applies to | memory beyond the pass's tables and row buffers |
+//! |---|---|---|---|
+//! | band | `Kv·Ks·(14J + 60)` per row ([`band_flops`]) | any geometry, every gate | a kernel probe state per voxel chunk |
+//! | lookup | per row `Ks·5L·log₂L + 76·Kv·Ks` on a SPAD grid ([`lookup_row_flops`]); per scan `R·(5L·log₂L + 76·Kv + 40N)` on paired and confocal scans ([`lookup_scan_flops`]) | the Gaussian diagonal, any geometry | the grid's carrier and FFT plan, per thread a scratch (`L` spectrum, `Ks·(L + 8)` tables) and `Kv` accumulators ([`lookup_plan`]) |
+//! | planar | per row `J·(F + S·(6M + 0.75F)) + 8·Kv·J`, `F = 5M·log₂M`; a column images once and adds `S·J·F` for its table ([`planar_flops`]) | a regular SPAD lattice and a wall-parallel voxel grid whose x–y pitch divides it (the diagonal, Gaussian-gated columns) | the kernel table `S·J·M` and per thread `3·J·M` scratch (complex `f32`) |
+//! | confocal convolution | per scan `J·F/2 + S·J·(F + 12M) + S·F/2` (`Confocal::flops`) | a confocal scan on a regular lattice, such a voxel grid | the wall spectra `J·M` (twice with transposed twins), a batch of rows, per worker `~5M` (complex `f32`) |
+//! | resampled FFT | the FFT path's flops on the support grid plus `32·TAPS·(sx·ny + nx·ny)·nz` (`Resample::flops`) | a regular wall-parallel grid off the lattice whose resampling bound is at most [`resample::MAX_ERROR`](crate::probe::resample::MAX_ERROR) | the support grid's buffers (as above, over the support grid) and the resampling's intermediate and output (16 bytes per value) |
+//! | phasor | per scan `R·Ks·(5N·log₂N + 5L·log₂L + 4T + 7.5·Kv)` ([`phasor_flops`]), counted [`PHASOR_COST`] times against the FFT paths | the Gaussian diagonal on rows of at most [`PHASOR_MAX_SPADS`] SPADs | the tables of a batch of rows (16 bytes per entry) and per thread an FFT buffer of `N + L` complex `f32` ([`phasor_plan`]) |
+//!
+//! # When each is chosen
+//!
+//! A forced path ([`Path::Band`], [`Path::Planar`], [`Path::Lookup`], [`Path::Phasor`]) runs
+//! where it applies and is refused in one line naming why where it does not (the planar path:
+//! neither on the lattice nor resampled within the bound; the phasor path: rows of more than
+//! [`PHASOR_MAX_SPADS`] SPADs; the lookup and phasor paths for columns; any fast path for the
+//! un-gated and higher-order diagonals). Under [`Path::Auto`] the diagonal ([`diagonal`])
+//! takes, in this order:
+//!
+//! 1. the resampled FFT path, on a grid off the wall's lattice, when its buffers fit the budget
+//!    and its flops are below the whole-scan flops of the cheapest rival (band; lookup where
+//!    its plan fits; phasor × [`PHASOR_COST`] where it applies and fits);
+//! 2. on a confocal or paired scan: the confocal convolution when it applies and is cheaper
+//!    than those rivals, else the phasor path when it beats band (and lookup, where that
+//!    fits), else the lookup when it fits and beats band, else band;
+//! 3. on a SPAD grid: the planar convolution when it applies and is cheaper per row than the
+//!    cheapest of band, lookup (where it fits) and phasor × [`PHASOR_COST`], else the phasor
+//!    path when it beats band and lookup, else the lookup when it fits and beats band, else
+//!    band.
+//!
+//! Under `cos` weights ([`cosine`]) only the lookup and band paths compute the per-leg
+//! cosines: the lookup when it fits and costs fewer flops. A Gaussian-gated column ([`column`])
+//! images by the planar convolution when it applies and costs less than the band sum's row,
+//! else by the kernel; the un-gated and higher-order gates take the band path.
+//!
+//! Memory: a path whose plan does not fit the budget ([`crate::budget`]) does not compete
+//! under [`Path::Auto`]; forced, its plan's check names the largest buffer.
+//!
+//! Beside the choice: `cost` (the flop models of the band, lookup and phasor paths, their
+//! memory plans and how they compare, `Rivals`) and `note` (the progress notes, the aligned
+//! grid a probe reports, [`fft_note`]). The FFT paths' flop model and memory plan sit with
+//! their choosers here: they need the engine's layout first.
+
+mod cost;
+mod note;
+
+pub(super) use cost::phasor_batch;
+pub use note::fft_note;
+pub(super) use note::with_note;
+
+use super::fast::resample::Resample;
+use super::fast::{Confocal, Phasor, Planar, confocal, planar};
+use super::gate::ColumnGate;
+use crate::budget;
+use crate::error::{Error, Result};
+use crate::exec::Path;
+use crate::io::capture::Geometry;
+use crate::volume::Volume;
+use cost::*;
+use note::diagonal_notes;
+use vltm_kernel::{Config, Gate, Point};
+
+// ---------------------------------------------------------------------------------------
+// The FFT paths' flop model
+
+/// What the planar convolution is used for (its cost differs).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum PlanarUse {
+    /// Per row, for the diagonal.
+    Diagonal,
+    /// Once, to image a factorised column.
+    Column,
+}
+
+/// Flops of the planar convolution of FFT size `(Mx, My)` over `slices` sub-grids of
+/// `n_voxels` voxels: per row for the diagonal, once for a column's imaging.
+fn planar_flops(
+    (mx, my, slices): (usize, usize, usize),
+    cfg: &Config,
+    n_voxels: usize,
+    usage: PlanarUse,
+) -> f64 {
+    let m = (mx * my) as f64;
+    let j = cfg.bins() as f64;
+    // Complex FFTs of M points, 5·M·log₂M (§B.8), pruned inverse ones about half that.
+    let f = 5.0 * m * m.log2();
+    let per_row = j * (f + slices as f64 * (6.0 * m + 0.75 * f)) + n_voxels as f64 * 8.0 * j;
+    // The column images once; its table costs `slices·J` forward FFTs.
+    match usage {
+        PlanarUse::Diagonal => per_row,
+        PlanarUse::Column => per_row + slices as f64 * j * f,
+    }
+}
+
+// ---------------------------------------------------------------------------------------
+// The diagonal's decision
+
+/// The FFT engine of a resampled volume: the planar convolution per row, or the confocal one.
+pub(super) enum Engine {
+    Planar(Box<Planar>),
+    Confocal(Box<Confocal>),
+}
+
+/// How the diagonal is evaluated: the planner's decision, carried out by `direct`.
+pub(super) enum Diagonal {
+    /// The FFT path on a support grid, resampled to the volume.
+    Resampled(Box<Resample>, Engine),
+    /// The planar convolution per row over a SPAD grid.
+    Planar(Box<Planar>),
+    /// The confocal convolution over the scanned wall grid.
+    Convolution(Box<Confocal>),
+    /// The phasor path, with what it holds.
+    Phasor(Box<Phasor>, budget::Plan),
+    /// The baseband lookup, with what it holds.
+    Lookup(budget::Plan),
+    /// The kernel's band sum.
+    Band,
+    /// Under the wall cosines: the lookup (with what it holds) or the band sum (`None`).
+    Cosine(Option<budget::Plan>),
+}
+
+impl Diagonal {
+    /// The path reported for this decision (the convolutions and the resampled FFT path are
+    /// [`Path::Planar`]).
+    fn path(&self) -> Path {
+        match self {
+            Self::Resampled(..) | Self::Planar(_) | Self::Convolution(_) => Path::Planar,
+            Self::Phasor(..) => Path::Phasor,
+            Self::Lookup(_) | Self::Cosine(Some(_)) => Path::Lookup,
+            Self::Band | Self::Cosine(None) => Path::Band,
+        }
+    }
+}
+
+/// The planner's decision for a diagonal pass: how it is evaluated, the path reported, the
+/// pass's progress note and the aligned grid the probe reports
+/// ([`crate::probe::Output::aligned`]).
+pub(super) struct Choice {
+    pub(super) how: Diagonal,
+    pub(super) path: Path,
+    pub(super) note: String,
+    pub(super) aligned: Option<String>,
+}
+
+impl Choice {
+    /// `how` with its path and notes (the resampled FFT path's support grid, the `cos`
+    /// weights, or the grid the FFT path would take).
+    fn new(how: Diagonal, g: &Geometry, volume: &Volume, cfg: &Config) -> Self {
+        let path = how.path();
+        let support = match &how {
+            Diagonal::Resampled(rs, _) => Some(rs.support_spec()),
+            _ => None,
+        };
+        let cosine = matches!(how, Diagonal::Cosine(_));
+        let (note, aligned) = diagonal_notes(g, volume, cfg.wavelength(), path, support, cosine);
+        Self {
+            how,
+            path,
+            note,
+            aligned,
+        }
+    }
+}
+
+/// The diagonal's path over `volume` of the (cropped) capture `g` under distance weights
+/// (module docs: the order of the choice).
+///
+/// # Errors
+/// [`Error::Argument`] (`path`) naming why a forced path does not apply; [`Error::Memory`]
+/// when the forced resampled FFT path's buffers do not fit the budget.
+pub(super) fn diagonal(g: &Geometry, cfg: &Config, volume: &Volume, path: Path) -> Result<Choice> {
+    let how = diagonal_path(g, cfg, volume, path)?;
+    Ok(Choice::new(how, g, volume, cfg))
+}
+
+/// [`diagonal`]'s path.
+fn diagonal_path(g: &Geometry, cfg: &Config, volume: &Volume, path: Path) -> Result<Diagonal> {
+    let r = Rivals::new(g, cfg, volume.len(), path)?;
+    // Off the wall's lattice: the FFT path on a support grid, resampled.
+    if let Some((rs, engine)) = resampled(g, cfg, volume, path, r.resampled)? {
+        return Ok(Diagonal::Resampled(Box::new(rs), engine));
+    }
+    // On it: the confocal convolution of a confocal scan, the planar one over a SPAD grid.
+    if g.confocal {
+        if let Some(c) = convolution(g, cfg, volume, path, r.fft)? {
+            return Ok(Diagonal::Convolution(Box::new(c)));
+        }
+    } else if let Some(p) = planar(&g.spads, cfg, volume, path, PlanarUse::Diagonal, r.fft)? {
+        return Ok(Diagonal::Planar(Box::new(p)));
+    }
+    if let Some((p, plan)) = r.phasor.filter(|_| path == Path::Phasor || r.phasor_wins) {
+        return Ok(Diagonal::Phasor(Box::new(p), plan));
+    }
+    if path == Path::Lookup || (path == Path::Auto && r.lookup_wins) {
+        return Ok(Diagonal::Lookup(r.lookup));
+    }
+    Ok(Diagonal::Band)
+}
+
+/// Refuses `cos` weights where no path computes them: a scan with a SPAD grid, or a forced
+/// FFT or phasor path.
+///
+/// # Errors
+/// [`Error::Argument`] (`weights` or `path`) with one line that says why.
+pub(super) fn check_cosine(g: &Geometry, path: Path) -> Result<()> {
+    if !g.confocal {
+        return Err(Error::arg(
+            "weights",
+            "`cos` weights need one SPAD per row (a paired or confocal scan): over a SPAD grid \
+             the sum over SPADs runs inside the kernel, where the per-SPAD cosine does not fit \
+             (use `inv` or `one`)",
+        ));
+    }
+    if path == Path::Phasor {
+        return Err(Error::arg(
+            "path",
+            "the phasor path does not take `$weights cos` (the wall cosines per leg are not in \
+             its lane loop; the band and lookup paths compute them)",
+        ));
+    }
+    if path == Path::Planar {
+        return Err(Error::arg(
+            "path",
+            "the planar FFT path does not apply: `$weights cos` multiplies each leg by the \
+             cosine at its own wall point, which the convolution's distance-only kernel \
+             cannot (the band and lookup paths compute it)",
+        ));
+    }
+    Ok(())
+}
+
+/// The diagonal's path under the wall cosines ([`Diagonal::Cosine`]): the lookup when forced
+/// or, under [`Path::Auto`], when it fits the budget and costs fewer flops than the band sum.
+///
+/// # Errors
+/// As [`check_cosine`].
+pub(super) fn cosine(g: &Geometry, cfg: &Config, volume: &Volume, path: Path) -> Result<Choice> {
+    check_cosine(g, path)?;
+    let n = volume.len();
+    let lookup = lookup_plan(g, cfg, n);
+    let band = band_total(g, cfg, n);
+    let lookup_cost = lookup_scan_flops(g, cfg, n);
+    let use_lookup =
+        path == Path::Lookup || (path == Path::Auto && lookup_cost < band && lookup.fits());
+    let how = Diagonal::Cosine(use_lookup.then_some(lookup));
+    Ok(Choice::new(how, g, volume, cfg))
+}
+
+/// The planar convolution for this probe, if `path` allows it, it applies and (for
+/// [`Path::Auto`]) it costs fewer flops than `rival`, the cheapest other path (by the cost
+/// model, per row for the diagonal, once for a column's imaging). `spads`: the SPAD spots.
+fn planar(
+    spads: &[Point],
+    cfg: &Config,
+    volume: &Volume,
+    path: Path,
+    usage: PlanarUse,
+    rival: f64,
+) -> Result<Option<Planar>> {
+    if matches!(path, Path::Band | Path::Lookup | Path::Phasor) {
+        return Ok(None);
+    }
+    let planar = if volume.axes.is_none() {
+        Err("the volume is a point list, not a grid".to_string())
+    } else {
+        Planar::new(cfg, spads, &volume.points, volume.shape)
+    };
+    match (planar, path) {
+        (Err(e), Path::Planar) => Err(Error::arg(
+            "path",
+            format!("the planar FFT path does not apply: {e}"),
+        )),
+        (Err(_), _) => Ok(None),
+        (Ok(p), Path::Planar) => Ok(Some(p)),
+        (Ok(p), _) => {
+            let planar = planar_flops(p.shape(), cfg, volume.len(), usage);
+            Ok((planar < rival).then_some(p))
+        }
+    }
+}
+
+/// The confocal convolution for this probe, if `path` allows it, it applies and (for
+/// [`Path::Auto`]) it costs fewer flops than `rival` (the cheapest other path, whole scan).
+///
+/// # Errors
+/// [`Error::Argument`] (`path`) when the planar path is forced and does not apply.
+fn convolution(
+    g: &Geometry,
+    cfg: &Config,
+    volume: &Volume,
+    path: Path,
+    rival: f64,
+) -> Result<Option<Confocal>> {
+    if matches!(path, Path::Band | Path::Lookup | Path::Phasor) {
+        return Ok(None);
+    }
+    let conv =
+        if g.paired_apart() {
+            Err("it needs the laser and SPAD at the same wall point (a confocal scan); this paired \
+             scan has them apart, so each row's path is not a function of one wall point"
+            .to_string())
+        } else if volume.axes.is_none() {
+            Err("the volume is a point list, not a grid".to_string())
+        } else {
+            Confocal::new(cfg, &g.lasers, &volume.points, volume.shape)
+        };
+    match (conv, path) {
+        (Err(e), Path::Planar) => Err(Error::arg(
+            "path",
+            format!("the planar FFT path does not apply: {e}"),
+        )),
+        (Err(_), _) => Ok(None),
+        (Ok(c), Path::Planar) => Ok(Some(c)),
+        (Ok(c), _) => Ok((c.flops() < rival).then_some(c)),
+    }
+}
+
+/// The resampled FFT path ([`crate::probe::resample`]) for `volume`: `None` when it is not the
+/// one to take — a forced band, lookup or phasor path, a point list, a paired scan, a volume
+/// on the wall's lattice (the exact FFT path's case) or, under [`Path::Auto`], when resampling
+/// does not apply, its buffers do not fit the budget or it costs more than `rival` (flops of
+/// the whole scan).
+///
+/// # Errors
+/// With the planar path forced: [`Error::Argument`] (`path`) naming why neither the exact nor
+/// the resampled FFT path applies; [`Error::Memory`] naming the largest buffer when the
+/// support grid's do not fit the budget.
+fn resampled(
+    g: &Geometry,
+    cfg: &Config,
+    volume: &Volume,
+    path: Path,
+    rival: f64,
+) -> Result<Option<(Resample, Engine)>> {
+    // A paired scan (laser and SPAD apart) has no FFT path, exact or resampled: the
+    // confocal path's choice names why.
+    if matches!(path, Path::Band | Path::Lookup | Path::Phasor)
+        || volume.axes.is_none()
+        || g.paired_apart()
+    {
+        return Ok(None);
+    }
+    let _t = crate::timings::section("planning: FFT path", crate::timings::Kind::Serial);
+    let wall = if g.confocal { &g.lasers } else { &g.spads };
+    let tol = 1e-5 * cfg.wavelength();
+    let exact = match planar::layout(wall, &volume.points, volume.shape, tol) {
+        Ok(_) => return Ok(None),
+        Err(e) => e,
+    };
+    let forced = path == Path::Planar;
+    let fail = |why: String| -> Result<Option<(Resample, Engine)>> {
+        if forced {
+            Err(Error::arg(
+                "path",
+                format!(
+                    "the planar FFT path does not apply: {exact}; nor on a resampled grid: {why}"
+                ),
+            ))
+        } else {
+            Ok(None)
+        }
+    };
+    let rs = match Resample::new(g, cfg, volume) {
+        Ok(r) => r,
+        Err(e) => return fail(e),
+    };
+    let sup = &rs.support;
+    let lay = match planar::layout(wall, &sup.points, sup.shape, tol) {
+        Ok(l) => l,
+        Err(e) => return fail(e),
+    };
+    let (mx, my, slices) = lay.size();
+    let (m, j) = (mx * my, cfg.bins());
+    let threads = rayon::current_num_threads().max(1);
+    let [sx, sy, nz] = sup.shape;
+    let mut plan = budget::Plan::new();
+    if g.confocal {
+        // Twice with transposed twins (the wall spectra and their transpose).
+        let copies = if confocal::twins(&lay, 1e-6 * cfg.wavelength())
+            .iter()
+            .any(Option::is_some)
+        {
+            2
+        } else {
+            1
+        };
+        plan.add(
+            format!("the support grid's wall spectra ({copies} × {j} × {mx} × {my} complex f32)"),
+            budget::bytes(j, 8 * copies).saturating_mul(m as u128),
+        )
+        .add(
+            format!("the support grid's amplitudes ({sx} × {sy} × {nz})"),
+            budget::bytes(sup.len(), 16),
+        );
+    } else {
+        plan.add(
+            format!("the support grid's kernel table ({slices} × {j} × {mx} × {my} complex f32)"),
+            budget::bytes(slices, 8)
+                .saturating_mul(j as u128)
+                .saturating_mul(m as u128),
+        )
+        .add(
+            format!("{threads} planar scratch buffers (3 × {j} × {mx} × {my} complex f32 each)"),
+            budget::bytes(threads, 24)
+                .saturating_mul(j as u128)
+                .saturating_mul(m as u128),
+        )
+        .add(
+            format!("{threads} support-grid accumulators ({sx} × {sy} × {nz} each)"),
+            budget::bytes(threads, 16).saturating_mul(sup.len() as u128),
+        );
+    }
+    plan.add(
+        "the resampling's intermediate and output",
+        budget::bytes(sx * volume.shape[1] * nz + volume.len(), 16),
+    );
+    if let Err(e) = plan.check(|| {
+        format!(
+            "direct light on the FFT path over the support grid {} (resampled to the volume)",
+            rs.support_spec()
+        )
+    }) {
+        return if forced { Err(e) } else { Ok(None) };
+    }
+    let engine = if g.confocal {
+        let c = match Confocal::with_layout(cfg, lay) {
+            Ok(c) => c,
+            Err(e) => return fail(e),
+        };
+        if !forced && c.flops() + rs.flops() >= rival {
+            return Ok(None);
+        }
+        Engine::Confocal(Box::new(c))
+    } else {
+        let rows = g.lasers.len() as f64;
+        let cost = planar_flops((mx, my, slices), cfg, sup.len(), PlanarUse::Diagonal) * rows;
+        if !forced && cost + rs.flops() >= rival {
+            return Ok(None);
+        }
+        match Planar::new(cfg, &g.spads, &sup.points, sup.shape) {
+            Ok(p) => Engine::Planar(Box::new(p)),
+            Err(e) => return fail(e),
+        }
+    };
+    Ok(Some((rs, engine)))
+}
+
+// ---------------------------------------------------------------------------------------
+// Columns and the other gates
+
+/// Refuses an evaluation path that cannot image a column with `gate`.
+///
+/// # Errors
+/// [`Error::Argument`] (`path`): the lookup and phasor paths (diagonal only), the planar path
+/// for the un-gated and higher-order gates.
+pub(super) fn check_column(path: Path, gate: ColumnGate) -> Result<()> {
+    match (path, gate) {
+        (Path::Lookup | Path::Phasor, _) => Err(Error::arg(
+            "path",
+            format!(
+                "the {} path evaluates the diagonal only (use auto, band or planar for columns)",
+                path.name()
+            ),
+        )),
+        (Path::Planar, ColumnGate::HigherOrder | ColumnGate::None) => Err(Error::arg(
+            "path",
+            "the planar path images Gaussian-gated (two-bounce) columns only (use auto or band)",
+        )),
+        _ => Ok(()),
+    }
+}
+
+/// The path of the un-gated and higher-order diagonals: the band sum.
+///
+/// # Errors
+/// [`Error::Argument`] (`path`) when another path is forced.
+pub(super) fn other_gates(path: Path) -> Result<Path> {
+    if !matches!(path, Path::Auto | Path::Band) {
+        return Err(Error::arg(
+            "path",
+            "the un-gated and higher-order diagonals are evaluated on the band path only",
+        ));
+    }
+    Ok(Path::Band)
+}
+
+/// The imaging path of a factorised column with kernel gate `gate`, decided before its pass:
+/// the planar convolution (when [`column_imaging`] takes it), the band sum, or — `defer`red
+/// under [`Path::Auto`], for parts of a split scan that leave it to the merged state —
+/// [`Path::Auto`], decided by [`column_imaging`] when the column is imaged. Building the
+/// planar tables costs about as much as imaging.
+///
+/// # Errors
+/// As [`column_imaging`].
+pub(super) fn column(
+    spads: &[Point],
+    cfg: &Config,
+    volume: &Volume,
+    path: Path,
+    gate: Gate,
+    defer: bool,
+) -> Result<(Path, Option<Planar>)> {
+    let decide = gate == Gate::Gaussian && !(defer && path == Path::Auto);
+    let planar = if decide {
+        column_imaging(spads, cfg, volume, path, gate)?
+    } else {
+        None
+    };
+    let path = if planar.is_some() {
+        Path::Planar
+    } else if decide || gate != Gate::Gaussian {
+        Path::Band
+    } else {
+        Path::Auto
+    };
+    Ok((path, planar))
+}
+
+/// The planar convolution that images a column with kernel gate `gate` over `volume`
+/// (`spads`: the SPAD grid) when `path` is [`Path::Planar`] or [`Path::Auto`], the gate is the
+/// Gaussian one, the convolution applies and (for [`Path::Auto`]) it costs fewer flops than
+/// the band sum's row; `None`: the kernel images it.
+///
+/// # Errors
+/// [`Error::Argument`] (`path`) when the planar path is forced and does not apply.
+pub(super) fn column_imaging(
+    spads: &[Point],
+    cfg: &Config,
+    volume: &Volume,
+    path: Path,
+    gate: Gate,
+) -> Result<Option<Planar>> {
+    if !matches!(path, Path::Planar | Path::Auto) || gate != Gate::Gaussian {
+        return Ok(None);
+    }
+    let rival = band_row_flops(spads.len(), cfg, volume.len());
+    planar(spads, cfg, volume, path, PlanarUse::Column, rival)
+}
