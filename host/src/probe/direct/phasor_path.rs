@@ -29,7 +29,7 @@ pub(super) fn direct_phasor(
     plan: &budget::Plan,
 ) -> Result<(Vec<Complex64>, Report)> {
     use crate::exec::Pass;
-    use crate::probe::fast::phasor::{Entry, TableScratch};
+    use crate::probe::fast::phasor::{Histogram, TableScratch};
     use crate::timings::{self, Kind};
     use std::sync::Mutex;
     let Job { cfg, wave, exec } = job;
@@ -65,7 +65,7 @@ pub(super) fn direct_phasor(
     let batch = phasor_batch(threads);
     let tl = ph.table_len();
     let mut tables = vec![[0.0f32; 4]; batch * ks * tl];
-    let mut entries = vec![Entry::default(); batch * ks];
+    let mut entries = vec![Histogram::default(); batch * ks];
     let mut bad = vec![0u32; batch * ks];
     let scratches: Vec<Mutex<TableScratch>> =
         (0..threads).map(|_| Mutex::new(ph.scratch())).collect();
@@ -102,7 +102,7 @@ pub(super) fn direct_phasor(
                 } else {
                     g.spads[s]
                 };
-                entries[i * ks + s] = Entry {
+                entries[i * ks + s] = Histogram {
                     laser: *x_l,
                     spad,
                     offset: (d1 + leg(spad, s_origin) - cfg.t0()) as f32,

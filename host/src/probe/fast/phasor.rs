@@ -83,7 +83,7 @@ pub const TILE: usize = 256;
 /// One histogram of a batch as the voxel loop sees it: laser and SPAD spots and the leg
 /// offset `x = d1 + d4 − t0` (m).
 #[derive(Clone, Copy, Debug, Default)]
-pub struct Entry {
+pub struct Histogram {
     /// Laser spot.
     pub laser: [f32; 3],
     /// SPAD spot.
@@ -361,7 +361,7 @@ impl Phasor {
     #[allow(clippy::too_many_arguments)]
     pub fn accumulate(
         &self,
-        entries: &[Entry],
+        entries: &[Histogram],
         tables: &[[f32; 4]],
         vx: &[f32],
         vy: &[f32],
@@ -424,7 +424,7 @@ struct Consts {
 /// One tile's work, run under the dispatched target features.
 struct Tile<'a> {
     k: Consts,
-    entries: &'a [Entry],
+    entries: &'a [Histogram],
     tables: &'a [[f32; 4]],
     vx: &'a [f32],
     vy: &'a [f32],
@@ -628,8 +628,8 @@ mod tests {
             .unwrap();
             let mut p = Phasor::new(&c, TOLERANCE).unwrap();
             let mut s = p.scratch();
-            let entries: Vec<Entry> = (0..5)
-                .map(|i| Entry {
+            let entries: Vec<Histogram> = (0..5)
+                .map(|i| Histogram {
                     laser: [-0.3 + 0.1 * i as f32, 0.1, 0.0],
                     spad: [-0.1 + 0.1 * i as f32, 0.15, 0.0],
                     offset: 0.01 * i as f32,
