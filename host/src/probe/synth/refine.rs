@@ -13,6 +13,7 @@
 //! Cost: per patch and sweep, `11·|p|` returns per histogram of the subset (`|p|` surfels per
 //! patch). Memory: the subset (`H·Nt` values, `H ≤ 4,096` histograms) and its residual.
 
+use super::render::leg;
 use super::surfels::Surfels;
 use crate::error::Result;
 use crate::exec::{Exec, Pass};
@@ -106,18 +107,8 @@ fn ret(
     n: [f64; 3],
     a: f64,
 ) -> Option<(usize, f64)> {
-    let leg = |x: [f32; 3], nw: [f64; 3]| {
-        let d = dist64(&x, &p);
-        if d.is_nan() || d <= 0.0 {
-            return (d, 0.0);
-        }
-        let u: [f64; 3] = core::array::from_fn(|i| (p[i] - f64::from(x[i])) / d);
-        let cw = (u[0] * nw[0] + u[1] * nw[1] + u[2] * nw[2]).max(0.0);
-        let cs = (-(u[0] * n[0] + u[1] * n[1] + u[2] * n[2])).max(0.0);
-        (d, cw * cs / (d * d))
-    };
-    let (dl, fl) = leg(g.lasers[l], g.laser_normal(l));
-    let (ds, fs) = leg(g.spads[s], g.spad_normal(s));
+    let (dl, fl) = leg(g.lasers[l], g.laser_normal(l), p, n);
+    let (ds, fs) = leg(g.spads[s], g.spad_normal(s), p, n);
     let w = scale * a * fl * fs;
     if w == 0.0 {
         return None;

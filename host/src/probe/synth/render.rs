@@ -11,7 +11,7 @@ pub(super) const SUB: usize = 8;
 
 /// Leg from a wall spot (normal `nw`) to surfel `k`: `(distance, cos_wall·cos_surfel / d²)`.
 #[inline]
-fn leg(spot: [f32; 3], nw: [f64; 3], p: [f64; 3], n: [f64; 3]) -> (f64, f64) {
+pub(super) fn leg(spot: [f32; 3], nw: [f64; 3], p: [f64; 3], n: [f64; 3]) -> (f64, f64) {
     let d = dist64(&spot, &p);
     if d.is_nan() || d <= 0.0 {
         return (d, 0.0);
