@@ -153,7 +153,7 @@ pub(super) fn blurred_prefix(fine: &[f64], kern: &[f64], out: &mut Vec<f64>) {
         }
         return;
     }
-    let mut b = vec![0.0; n];
+    // The blur written into `out[1..]`, then summed in place (no buffer per call).
     for (i, &x) in fine.iter().enumerate() {
         if x == 0.0 {
             continue;
@@ -161,12 +161,12 @@ pub(super) fn blurred_prefix(fine: &[f64], kern: &[f64], out: &mut Vec<f64>) {
         let lo = i.saturating_sub(r);
         let hi = (i + r).min(n - 1);
         for j in lo..=hi {
-            b[j] += x * kern[j + r - i];
+            out[j + 1] += x * kern[j + r - i];
         }
     }
-    for (i, &x) in b.iter().enumerate() {
-        acc += x;
-        out[i + 1] = acc;
+    for o in out[1..].iter_mut() {
+        acc += *o;
+        *o = acc;
     }
 }
 
