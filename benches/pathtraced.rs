@@ -338,6 +338,9 @@ fn synth() {
             continue;
         }
         for scene in SCENES {
+            if std::env::var("PATHTRACED_SCENE").is_ok_and(|s| s != scene) {
+                continue;
+            }
             let mut c = load(scene);
             let (r, e) = measure_synth(&mut c, &defaults(), surf, &opts);
             for o in &r.rows {

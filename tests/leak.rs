@@ -647,3 +647,44 @@ fn synthesis_with_the_oracle_geometry_keeps_the_indirect_light() {
         assert!(r.pearson >= 0.98, "{scene}: Pearson over Γ {}", r.pearson);
     }
 }
+
+/// Stage 2 of the analysis by synthesis on `panel_figure`, geometry from the capture alone
+/// (`vltm::probe::synth`: planes read from a direct-light image at half the wall's pitch,
+/// rectangles refined and grown against the capture, then the model fitted and subtracted;
+/// the control with its own model, Γ from the full capture's diagonal). Measured 2026-11-29:
+/// figure 13.3× its control, kept 0.96, Pearson 0.974; panel 51.6×, 0.96, 0.992; all of Γ
+/// 0.976; both models explain ≥ 0.99 of their capture's energy. The figure misses the issue's
+/// 20× for the lit object (its second visible face is not found); the corner, whose
+/// direct-light image does not show the two panels' planes, is not asserted
+/// (docs/indirect-light.md, Stage 2).
+#[test]
+fn synthesis_with_the_capture_geometry_keeps_the_indirect_light_on_panel_figure() {
+    use pathtraced::{Surf, defaults, load, measure_synth};
+    let mut c = load("panel_figure");
+    let (r, e) = measure_synth(
+        &mut c,
+        &defaults(),
+        Surf::Capture,
+        &probe::synth::SynthOptions::default(),
+    );
+    assert!(
+        e[0].0 >= 0.99 && e[1].0 >= 0.99,
+        "the models explain {} (full) and {} (control)",
+        e[0].0,
+        e[1].0
+    );
+    for o in &r.rows {
+        let what = format!(
+            "{}: {:.1}× the control, kept {:.3}, Pearson {:.3}",
+            o.name,
+            o.ratio(),
+            o.kept(),
+            o.pearson
+        );
+        let floor = if o.name == "panel" { 30.0 } else { 10.0 };
+        assert!(o.ratio() >= floor, "{what}");
+        assert!((0.9..=1.1).contains(&o.kept()), "{what}");
+        assert!(o.pearson >= 0.95, "{what}");
+    }
+    assert!(r.pearson >= 0.95, "Pearson over Γ {}", r.pearson);
+}

@@ -181,6 +181,44 @@ fn c_boxes_surfels(boxes: &[serde_json::Value], n: f64) -> probe::synth::Surfels
     probe::synth::Surfels::new(pts, nrm, area, cl).expect("oracle surfels")
 }
 
+/// A facet's error against `scene.json` (a diagnostic only, never an input): the angle
+/// (degrees) between its normal and that of the box face it stands for (of the faces that look
+/// at the wall, the nearest with 1° weighed as 1 cm), and the distance (m) of its centre from
+/// that face's plane.
+pub fn facet_error(boxes: &[serde_json::Value], f: &probe::synth::Facet) -> (f64, f64) {
+    let mut best = (f64::INFINITY, f64::INFINITY);
+    for o in boxes {
+        let v3 = |k: &str| -> [f64; 3] { core::array::from_fn(|i| o[k][i].as_f64().unwrap()) };
+        let (ctr, s) = (v3("centre"), v3("size_m"));
+        let (r, u, fr) = (v3("right_r"), v3("up_u"), v3("front_normal_f"));
+        let axes = [r, u, fr.map(|x| -x)];
+        for k in 0..3 {
+            for side in [-0.5f64, 0.5] {
+                let n = axes[k].map(|x| x * side.signum());
+                let c: [f64; 3] = core::array::from_fn(|i| ctr[i] + side * s[k] * axes[k][i]);
+                if n[2] >= 0.0 {
+                    continue;
+                }
+                let cos = (0..3)
+                    .map(|i| n[i] * f.normal[i])
+                    .sum::<f64>()
+                    .clamp(-1.0, 1.0);
+                let ang = cos.acos().to_degrees();
+                let off = (0..3)
+                    .map(|i| (f.centre[i] - c[i]) * n[i])
+                    .sum::<f64>()
+                    .abs();
+                // The face the facet stands for: the nearest in angle and distance together
+                // (1° weighs as 1 cm).
+                if ang + off * 100.0 < best.0 + best.1 * 100.0 {
+                    best = (ang, off);
+                }
+            }
+        }
+    }
+    best
+}
+
 /// Probe settings of one measurement.
 #[derive(Clone, Copy, Debug)]
 pub struct Setup {
@@ -534,21 +572,78 @@ pub fn measure_synth(
         match surf {
             Surf::Oracle => c_boxes_surfels(&boxes, 100.0),
             Surf::Capture => {
-                let d = probe::direct(cap, &fine, &s.wave, EXEC).expect("direct, fine");
+                let wave = Wave {
+                    wavelength: std::env::var("SURFEL_LAMBDA")
+                        .ok()
+                        .and_then(|v| v.parse().ok())
+                        .or_else(|| probe::synth::geometry_wavelength(&cap.geometry)),
+                    sigma: None,
+                    ..s.wave.clone()
+                };
+                let d = probe::direct(cap, &fine, &wave, EXEC).expect("direct, fine");
                 let raw = Surfels::from_direct(&fine, &d.values, surfel_epsilon(), sub, 0.0)
                     .expect("surfels");
                 let g = &cap.geometry;
                 let scale: Vec<f64> = (0..g.lasers.len()).map(|l| g.laser_falloff_at(l)).collect();
-                let r =
-                    probe::synth::refine(cap, &raw, &scale, SWEEPS, 0.02, EXEC).expect("refine");
+                if std::env::var("SURFEL_METHOD").is_ok_and(|m| m == "patches") {
+                    let r = probe::synth::refine(cap, &raw, &scale, SWEEPS, 0.02, EXEC)
+                        .expect("refine");
+                    eprintln!(
+                        "refined {} patches ({} kept): explained {:.4} -> {:.4}",
+                        raw.patches.len(),
+                        r.surfels.patches.len(),
+                        r.before,
+                        r.after
+                    );
+                    return r.surfels;
+                }
+                let pitch = fine.axes.map_or(0.05, |a| f64::from(a[0][1] - a[0][0]))
+                    / (fine.shape[0].max(2) - 1) as f64;
+                let facets =
+                    probe::synth::facets_from_surfels(&raw, 0.25 * pitch, pitch).expect("facets");
+                for f in &facets {
+                    let (ang, off) = facet_error(&boxes, f);
+                    eprintln!(
+                        "  initial facet of cluster {}: normal {:.3?} extent {:.3?}: {ang:.1}°, {:.1} mm off the nearest face",
+                        f.cluster,
+                        f.normal,
+                        f.extent,
+                        off * 1e3
+                    );
+                }
+                let t = std::time::Instant::now();
+                let r = probe::synth::refine_facets(
+                    cap,
+                    &facets,
+                    &scale,
+                    &probe::synth::FacetOptions::default(),
+                    EXEC,
+                )
+                .expect("refine facets");
                 eprintln!(
-                    "refined {} patches ({} kept): explained {:.4} -> {:.4}",
-                    raw.patches.len(),
-                    r.surfels.patches.len(),
+                    "refined {} facets (+{} grown) in {} sweeps, {:.1} s: explained {:.4} -> {:.4}",
+                    facets.len(),
+                    r.grown,
+                    r.sweeps,
+                    t.elapsed().as_secs_f64(),
                     r.before,
                     r.after
                 );
-                r.surfels
+                for (f, a) in r.facets.iter().zip(&r.amplitudes) {
+                    eprintln!(
+                        "  facet of cluster {}: centre {:.3?} normal {:.3?} extent {:.3?} area {:.3} amp {:.2}: {:.1}°, {:.1} mm",
+                        f.cluster,
+                        f.centre,
+                        f.normal,
+                        f.extent,
+                        f.area(),
+                        a,
+                        facet_error(&boxes, f).0,
+                        facet_error(&boxes, f).1 * 1e3
+                    );
+                }
+                let per_facet = !std::env::var("FACET_CLUSTERS").is_ok_and(|m| m == "source");
+                r.surfels(0.01, per_facet).expect("facet surfels")
             }
         }
     };

@@ -15,6 +15,7 @@
 
 use super::render::leg;
 use super::surfels::Surfels;
+use super::vec3::{cross, rotate};
 use crate::error::Result;
 use crate::exec::{Exec, Pass};
 use crate::io::capture::{Geometry, RowSource};
@@ -40,22 +41,6 @@ struct Frame {
     n: [f64; 3],
     t1: [f64; 3],
     t2: [f64; 3],
-}
-
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-/// `v` rotated by `angle` about the unit axis `u` (Rodrigues).
-fn rotate(v: [f64; 3], u: [f64; 3], angle: f64) -> [f64; 3] {
-    let (s, c) = angle.sin_cos();
-    let x = cross(u, v);
-    let d = u[0] * v[0] + u[1] * v[1] + u[2] * v[2];
-    core::array::from_fn(|i| v[i] * c + x[i] * s + u[i] * d * (1.0 - c))
 }
 
 impl Frame {
