@@ -8,7 +8,7 @@
 mod support;
 
 use std::path::{Path, PathBuf};
-use vltm::exec::{Exec, Path as EvalPath};
+use vltm::exec::{EvalPath, Exec};
 use vltm::io::{self, RowSource};
 use vltm::probe::{
     self, ColumnGate, IndirectOptions, LeakOptions, Partial, Shell, Task, Wave, partial,

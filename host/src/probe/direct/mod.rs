@@ -10,7 +10,7 @@ use phasor_path::direct_phasor;
 
 use crate::budget;
 use crate::error::Result;
-use crate::exec::{Exec, Path};
+use crate::exec::{EvalPath, Exec};
 use crate::io::capture::{Geometry, RowSource};
 use crate::probe::crop::{Crop, Reach, with_crop};
 use crate::probe::drive::*;
@@ -27,7 +27,7 @@ use vltm_kernel::geometry::dist;
 use vltm_kernel::{Config, Gate, Point, Probe, Report, Scan, Target};
 
 /// Direct light: the diagonal over `volume` (Eqs. 11–12), on the path [`Exec::path`] forces
-/// or, under [`Path::Auto`], the cheapest that applies by the flop model (the planner's docs,
+/// or, under [`EvalPath::Auto`], the cheapest that applies by the flop model (the planner's docs,
 /// `probe::plan`).
 ///
 /// # Errors
@@ -61,7 +61,7 @@ pub fn direct(
 pub(super) struct Amplitudes {
     pub(super) acc: Vec<Complex64>,
     pub(super) report: Report,
-    pub(super) path: Path,
+    pub(super) path: EvalPath,
     /// The part of the time axis kept.
     pub(super) crop: Option<Crop>,
     /// The grid the planner reports ([`Output::aligned`]): the support grid's `--volume` SPEC
@@ -72,7 +72,7 @@ pub(super) struct Amplitudes {
 
 impl Amplitudes {
     /// Amplitudes of the whole time axis (the crop is set by the caller that made it).
-    fn new(acc: Vec<Complex64>, report: Report, path: Path, aligned: Option<String>) -> Self {
+    fn new(acc: Vec<Complex64>, report: Report, path: EvalPath, aligned: Option<String>) -> Self {
         Self {
             acc,
             report,

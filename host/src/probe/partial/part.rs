@@ -1,7 +1,7 @@
 //! The partial state of a probe, what it accumulates ([`Task`]), merged and finished.
 
 use crate::error::{Error, Result};
-use crate::exec::{Exec, Path};
+use crate::exec::{EvalPath, Exec};
 use crate::io::state;
 use crate::probe::column::{ColumnState, Columns, Shell, check_focus};
 use crate::probe::drive::intensities;
@@ -396,7 +396,7 @@ impl Partial {
             dropped: self.head.report.dropped,
             aliased: 0,
         };
-        let path = parse_path(&p.path).unwrap_or(Path::Band);
+        let path = parse_path(&p.path).unwrap_or(EvalPath::Band);
         let shell = p.shell.map_or(Shell::ALL, shell_of);
         let mut matrix = None;
         let (values, report, path, amplitudes) = match p.kind.as_str() {
@@ -450,7 +450,7 @@ impl Partial {
                     volume.len(),
                     Exec::default(),
                 )?;
-                (v, r, Path::Band, None)
+                (v, r, EvalPath::Band, None)
             }
             "matrix" => {
                 let mut cols = Columns {
@@ -463,7 +463,7 @@ impl Partial {
                 let v = m.intensities();
                 let r = m.report;
                 matrix = Some(m);
-                (v, r, Path::Band, None)
+                (v, r, EvalPath::Band, None)
             }
             k => return Err(Error::arg("kind", format!("unknown probe `{k}`"))),
         };

@@ -3,7 +3,7 @@
 
 use crate::budget;
 use crate::error::{Error, Result};
-use crate::exec::Path;
+use crate::exec::EvalPath;
 use crate::io::capture::Geometry;
 use crate::probe::drive::memory_plan;
 use crate::probe::fast::{LookupDiagonal, Phasor, phasor};
@@ -129,7 +129,7 @@ pub(super) fn phasor_plan(
 /// weights, and how they compare: the FFT paths compete against the cheapest of them, then
 /// they against each other.
 pub(super) struct Rivals {
-    /// The phasor path's table and plan: when forced, or under [`Path::Auto`] when it applies
+    /// The phasor path's table and plan: when forced, or under [`EvalPath::Auto`] when it applies
     /// and fits the budget.
     pub(super) phasor: Option<(Phasor, budget::Plan)>,
     /// What the lookup path holds ([`lookup_plan`]): it competes only when that fits the
@@ -153,12 +153,12 @@ impl Rivals {
     ///
     /// # Errors
     /// [`Error::Argument`] (`path`) naming why a forced phasor path does not apply.
-    pub(super) fn new(g: &Geometry, cfg: &Config, n_voxels: usize, path: Path) -> Result<Self> {
+    pub(super) fn new(g: &Geometry, cfg: &Config, n_voxels: usize, path: EvalPath) -> Result<Self> {
         // The phasor path: planned when forced (its errors name why it does not apply) or,
         // under `Auto`, when it applies and fits the budget.
         let phasor = match path {
-            Path::Phasor => Some(phasor_plan(g, cfg, n_voxels)?),
-            Path::Auto => phasor_plan(g, cfg, n_voxels)
+            EvalPath::Phasor => Some(phasor_plan(g, cfg, n_voxels)?),
+            EvalPath::Auto => phasor_plan(g, cfg, n_voxels)
                 .ok()
                 .filter(|(_, plan)| plan.fits()),
             _ => None,

@@ -3,7 +3,7 @@
 
 use super::cost::PHASOR_MAX_SPADS;
 use crate::error::Result;
-use crate::exec::{Exec, Path, Progress};
+use crate::exec::{EvalPath, Exec, Progress};
 use crate::io::capture::Geometry;
 use crate::probe::crop::Labelled;
 use crate::probe::drive::Job;
@@ -36,7 +36,7 @@ pub(crate) fn diagonal_notes(
     g: &Geometry,
     volume: &Volume,
     wavelength: f64,
-    path: Path,
+    path: EvalPath,
     support: Option<String>,
     cosine: bool,
 ) -> (String, Option<String>) {
@@ -55,9 +55,9 @@ pub(crate) fn diagonal_notes(
 /// The aligned `$volume` SPEC the FFT path would take, for a grid that ran on another `path`:
 /// [`aligned_volume`] when the wall is a regular lattice
 /// and the aligned grid lays out on it (lattice tolerance `1e-5·λ`, as the paths check).
-fn aligned_hint(g: &Geometry, volume: &Volume, wavelength: f64, path: Path) -> Option<String> {
+fn aligned_hint(g: &Geometry, volume: &Volume, wavelength: f64, path: EvalPath) -> Option<String> {
     // No FFT path takes a paired scan with laser and SPAD apart: no grid would be fast.
-    if path == Path::Planar || volume.axes.is_none() || g.paired_apart() {
+    if path == EvalPath::Planar || volume.axes.is_none() || g.paired_apart() {
         return None;
     }
     let spec = aligned_volume(g, volume)?;
