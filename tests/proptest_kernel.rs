@@ -1540,7 +1540,7 @@ fn calibrate() {
 /// rows merged equal one probe over all rows (Kahan state).
 #[test]
 fn general_lookup_refuses_hermite_and_finishes_in_f32() {
-    use vltm_kernel::Error;
+    use vltm_kernel::ArgumentError;
     let p = Params {
         t0: 1.0,
         ..Params::new(0.1, 300, 0.01)
@@ -1565,7 +1565,7 @@ fn general_lookup_refuses_hermite_and_finishes_in_f32() {
         &mut scratch,
     );
     assert!(
-        matches!(refused, Err(Error::Incompatible(_))),
+        matches!(refused, Err(ArgumentError::Incompatible(_))),
         "{refused:?}"
     );
     let mut c32 = vec![0.0f32; ColumnF32::state_len(&cfg, ks)];
@@ -1574,7 +1574,7 @@ fn general_lookup_refuses_hermite_and_finishes_in_f32() {
     let mut o32 = vec![0.0f32; kv];
     let refused = col.finish_lookup(&scan, &lookup, &sc.voxels, &mut s2, &mut o32);
     assert!(
-        matches!(refused, Err(Error::Incompatible(_))),
+        matches!(refused, Err(ArgumentError::Incompatible(_))),
         "{refused:?}"
     );
 

@@ -339,7 +339,7 @@ pub(super) fn drive_probes<'m>(
     job: Job<'_>,
     label: &str,
     states: impl Iterator<Item = &'m mut [f64]>,
-    make: impl Fn(&Scan<'_>, usize, &'m mut [f64]) -> Result<Probe<'m>, vltm_kernel::Error>,
+    make: impl Fn(&Scan<'_>, usize, &'m mut [f64]) -> Result<Probe<'m>, vltm_kernel::ArgumentError>,
 ) -> Result<Vec<Probe<'m>>> {
     let mut probes = Vec::new();
     let mut states = Some(states);
