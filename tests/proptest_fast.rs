@@ -85,17 +85,17 @@
 //! printed with `-- --nocapture`.
 
 mod reference;
+mod support;
 
 use proptest::prelude::*;
-use proptest::test_runner::{
-    Config as PtConfig, FileFailurePersistence, RngAlgorithm, RngSeed, TestRunner,
-};
+use proptest::test_runner::{Config as PtConfig, TestRunner};
 use reference::{Reference, p64};
 use std::cell::RefCell;
 use std::collections::BTreeMap;
+use support::prop::Rng;
 use vltm::Error;
 use vltm::io::{Capture, Geometry};
-use vltm::kernel::{Config, Legs, Params, Point, Weights};
+use vltm::kernel::{Config, Params, Point, Weights};
 use vltm::probe::fast::{Confocal as ConfocalFft, LookupDiagonal, Planar};
 use vltm::probe::{self, ColumnGate, EvalPath, Exec, Output, Shell, Wave};
 use vltm::volume::Volume;
@@ -217,26 +217,6 @@ prop_compose! {
     }
 }
 
-/// SplitMix64: the histogram contents come from `Case::seed`.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn f(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-}
-
 /// A regular grid of wall points, C order over `n`.
 fn wall_grid(n: [usize; 2], origin: [f32; 2], pitch: [f32; 2]) -> Vec<Point> {
     (0..n[0])
@@ -277,13 +257,7 @@ impl Case {
             sigma: self.sigma_over_lambda.map(|r| r * self.lambda),
             band_half_width: self.m,
             t0,
-            legs: match self.legs {
-                None => Legs::WallToWall,
-                Some((laser_origin, sensor_origin)) => Legs::FirstAndLast {
-                    laser_origin,
-                    sensor_origin,
-                },
-            },
+            legs: support::prop::legs(self.legs),
             weights: if self.inv { Weights::Inv } else { Weights::One },
             ..Params::new(self.lambda, self.nt, self.lambda / self.lambda_over_dt)
         }
@@ -664,13 +638,8 @@ fn pt_config(seed: u64, cases: u32) -> PtConfig {
             .ok()
             .and_then(|s| s.parse().ok())
             .unwrap_or(cases),
-        rng_algorithm: RngAlgorithm::ChaCha,
-        rng_seed: RngSeed::Fixed(seed),
-        failure_persistence: Some(Box::new(FileFailurePersistence::WithSource(
-            "proptest-regressions",
-        ))),
         source_file: Some(file!()),
-        ..PtConfig::default()
+        ..support::prop::config(seed, cases)
     }
 }
 
