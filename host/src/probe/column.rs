@@ -6,7 +6,7 @@ use super::crop::{Crop, Reach, with_crop};
 use super::direct::direct;
 use super::drive::*;
 use super::gate::ColumnGate;
-use super::output::{Output, check_finite};
+use super::output::{Output, check_finite, intensities};
 use super::plan;
 use super::wave::*;
 use crate::budget;

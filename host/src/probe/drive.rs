@@ -284,6 +284,14 @@ pub(super) fn check_memory(g: &Geometry, cfg: &Config, extra: u128, what: &str) 
 
 /// The buffers of [`check_memory`], named (`extra` as `what`'s states and outputs).
 pub(super) fn memory_plan(g: &Geometry, cfg: &Config, extra: u128, what: &str) -> budget::Plan {
+    let mut plan = pass_plan(g, cfg);
+    plan.add(format!("the states and outputs of {what}"), extra);
+    plan
+}
+
+/// What every pass over `g` holds before its probes' states and outputs: the kernel's tables,
+/// the band-DFT table, and per thread a row buffer and two rows of histograms.
+pub(super) fn pass_plan(g: &Geometry, cfg: &Config) -> budget::Plan {
     let threads = rayon::current_num_threads() as u128;
     let ks = g.spads_per_row();
     let mut plan = budget::Plan::new();
@@ -305,8 +313,7 @@ pub(super) fn memory_plan(g: &Geometry, cfg: &Config, extra: u128, what: &str) -
     .add(
         format!("{threads} × 2 rows of histograms"),
         budget::bytes(ks.saturating_mul(g.nt), 8 * threads),
-    )
-    .add(format!("the states and outputs of {what}"), extra);
+    );
     plan
 }
 
@@ -414,9 +421,4 @@ pub(super) fn elementwise(
     // No row: zero accumulators.
     acc.resize(voxels.len(), Complex64::new(0.0, 0.0));
     Ok((acc, report))
-}
-
-/// Intensities `|A|²` of complex accumulators, as `f32`.
-pub(super) fn intensities(acc: &[Complex64]) -> Vec<f32> {
-    acc.iter().map(|a| a.norm_sqr() as f32).collect()
 }

@@ -5,6 +5,7 @@
 use super::crop::Crop;
 use crate::error::Result;
 use crate::exec::EvalPath;
+use num_complex::Complex64;
 use vltm_kernel::{Config, Point, Report};
 
 /// Result of a probe: intensities per voxel (volume order) and the kernel's counters.
@@ -27,6 +28,11 @@ pub struct Output {
     /// When the FFT path ([`crate::exec::EvalPath::Planar`]) ran on a grid off the wall's lattice: the SPEC of
     /// the support grid it computed on before resampling ([`crate::probe::resample`]).
     pub aligned: Option<String>,
+}
+
+/// Intensities `|A|²` of complex accumulators, as `f32`.
+pub(super) fn intensities(acc: &[Complex64]) -> Vec<f32> {
+    acc.iter().map(|a| a.norm_sqr() as f32).collect()
 }
 
 /// Checks that a probe's intensities are finite: an `f32` output cannot hold intensities

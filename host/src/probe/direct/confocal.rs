@@ -36,9 +36,13 @@ const ROWS_PER_GEMM: usize = 128;
 /// Voxels with some confocal path `d1_l + d4_l + 2|x_l − x_v| − t0` outside the guard
 /// interval (within `1e-4·σ` counts as outside, as for the planar path). A bound from the
 /// wall points' bounding box settles most voxels; the rest are checked point by point.
-pub(super) fn outside_guard(g: &Geometry, cfg: &Config, voxels: &[Point]) -> Vec<bool> {
-    let (d1, d4) = legs(g, cfg);
-    let e: Vec<f64> = d1.iter().zip(&d4).map(|(a, b)| a + b).collect();
+pub(super) fn outside_guard(
+    g: &Geometry,
+    cfg: &Config,
+    (d1, d4): &(Vec<f64>, Vec<f64>),
+    voxels: &[Point],
+) -> Vec<bool> {
+    let e: Vec<f64> = d1.iter().zip(d4).map(|(a, b)| a + b).collect();
     let (e_lo, e_hi) = e
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
@@ -103,19 +107,20 @@ pub(super) fn direct_convolution(
     job: Job<'_>,
     volume: &Volume,
     conv: Confocal,
+    legs: &(Vec<f64>, Vec<f64>),
 ) -> Result<(Vec<Complex64>, Report)> {
     let cfg = job.cfg;
     let g = src.geometry().clone();
-    let (legs1, legs4) = legs(&g, cfg);
+    let (legs1, legs4) = legs;
     let offsets: Vec<f32> = legs1
         .iter()
-        .zip(&legs4)
+        .zip(legs4)
         .map(|(a, b)| (a + b - cfg.t0()) as f32)
         .collect();
     let (conv, skip) = if offsets.iter().all(|&x| x == offsets[0]) {
         (conv.with_guard(offsets[0]), vec![false; volume.len()])
     } else {
-        (conv, outside_guard(&g, cfg, &volume.points))
+        (conv, outside_guard(&g, cfg, legs, &volume.points))
     };
     let fb_idx: Vec<usize> = (0..skip.len()).filter(|&i| skip[i]).collect();
     let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| volume.points[i]).collect();

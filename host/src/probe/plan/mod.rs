@@ -60,7 +60,6 @@ mod note;
 
 pub(super) use cost::phasor_batch;
 pub use note::fft_note;
-pub(super) use note::with_note;
 
 use super::fast::resample::Resample;
 use super::fast::{Confocal, Phasor, Planar, confocal, planar};
@@ -177,35 +176,61 @@ impl Choice {
 }
 
 /// The diagonal's path over `volume` of the (cropped) capture `g` under distance weights
-/// (module docs: the order of the choice).
+/// (module docs: the order of the choice), after the pass's own buffers are checked against
+/// the budget.
 ///
 /// # Errors
-/// [`Error::Argument`] (`path`) naming why a forced path does not apply; [`Error::Memory`]
-/// when the forced resampled FFT path's buffers do not fit the budget.
+/// [`Error::Memory`] naming the pass when its tables, row buffers and accumulators do not fit
+/// the budget; [`Error::Argument`] (`path`) naming why a forced path does not apply;
+/// [`Error::Memory`] when the forced resampled FFT path's buffers do not fit the budget.
 pub(super) fn diagonal(
     g: &Geometry,
     cfg: &Config,
     volume: &Volume,
     path: EvalPath,
 ) -> Result<Choice> {
-    let how = diagonal_path(g, cfg, volume, path)?;
+    let pass = direct_pass(g, cfg, volume.len())?;
+    let how = diagonal_path(&pass, g, cfg, volume, path)?;
     Ok(Choice::new(how, g, volume, cfg))
 }
 
-/// [`diagonal`]'s path.
-fn diagonal_path(g: &Geometry, cfg: &Config, volume: &Volume, path: EvalPath) -> Result<Diagonal> {
-    let r = Rivals::new(g, cfg, volume.len(), path)?;
+/// [`diagonal`]'s path. The exact FFT path is built first: off the wall's lattice it fails at
+/// once (its layout), and only then is the resampled FFT path weighed (on the lattice it never
+/// applies).
+fn diagonal_path(
+    pass: &budget::Plan,
+    g: &Geometry,
+    cfg: &Config,
+    volume: &Volume,
+    path: EvalPath,
+) -> Result<Diagonal> {
+    let r = Rivals::new(pass, g, cfg, volume.len(), path)?;
+    // The confocal convolution of a confocal scan, the planar one over a SPAD grid.
+    let exact = if g.confocal {
+        build_convolution(g, cfg, volume, path).map(|c| c.map(Exact::Convolution))
+    } else {
+        build_planar(&g.spads, cfg, volume, path).map(|p| p.map(Exact::Planar))
+    };
     // Off the wall's lattice: the FFT path on a support grid, resampled.
-    if let Some((rs, engine)) = resampled(g, cfg, volume, path, r.resampled)? {
+    if !matches!(exact, Some(Ok(_)))
+        && let Some((rs, engine)) = resampled(g, cfg, volume, path, r.resampled)?
+    {
         return Ok(Diagonal::Resampled(Box::new(rs), engine));
     }
-    // On it: the confocal convolution of a confocal scan, the planar one over a SPAD grid.
-    if g.confocal {
-        if let Some(c) = convolution(g, cfg, volume, path, r.fft)? {
-            return Ok(Diagonal::Convolution(Box::new(c)));
+    match exact {
+        Some(Ok(Exact::Convolution(c))) => {
+            if let Some(c) = decide_convolution(Some(Ok(c)), path, r.fft)? {
+                return Ok(Diagonal::Convolution(Box::new(c)));
+            }
         }
-    } else if let Some(p) = planar(&g.spads, cfg, volume, path, PlanarUse::Diagonal, r.fft)? {
-        return Ok(Diagonal::Planar(Box::new(p)));
+        Some(Ok(Exact::Planar(p))) => {
+            let n = volume.len();
+            if let Some(p) = decide_planar(Some(Ok(p)), cfg, n, path, PlanarUse::Diagonal, r.fft)? {
+                return Ok(Diagonal::Planar(Box::new(p)));
+            }
+        }
+        Some(Err(why)) => refuse_fft(why, path)?,
+        None => {}
     }
     if let Some((p, plan)) = r
         .phasor
@@ -264,13 +289,33 @@ pub(super) fn cosine(
 ) -> Result<Choice> {
     check_cosine(g, path)?;
     let n = volume.len();
-    let lookup = lookup_plan(g, cfg, n);
+    let pass = direct_pass(g, cfg, n)?;
+    let lookup = lookup_plan(&pass, g, cfg, n);
     let band = band_total(g, cfg, n);
     let lookup_cost = lookup_scan_flops(g, cfg, n);
     let use_lookup =
         path == EvalPath::Lookup || (path == EvalPath::Auto && lookup_cost < band && lookup.fits());
     let how = Diagonal::Cosine(use_lookup.then_some(lookup));
     Ok(Choice::new(how, g, volume, cfg))
+}
+
+/// An exact FFT path built for the diagonal: the planar convolution over a SPAD grid or the
+/// confocal one over a confocal scan.
+enum Exact {
+    Planar(Planar),
+    Convolution(Confocal),
+}
+
+/// Refuses the forced planar path with why the exact FFT path does not apply (`why`); under
+/// another path nothing.
+fn refuse_fft(why: String, path: EvalPath) -> Result<()> {
+    if path == EvalPath::Planar {
+        return Err(Error::arg(
+            "path",
+            format!("the planar FFT path does not apply: {why}"),
+        ));
+    }
+    Ok(())
 }
 
 /// The planar convolution for this probe, if `path` allows it, it applies and (for
@@ -284,61 +329,89 @@ fn planar(
     usage: PlanarUse,
     rival: f64,
 ) -> Result<Option<Planar>> {
+    let built = build_planar(spads, cfg, volume, path);
+    decide_planar(built, cfg, volume.len(), path, usage, rival)
+}
+
+/// [`planar`]'s convolution built, or why it does not apply; `None` when `path` excludes it.
+fn build_planar(
+    spads: &[Point],
+    cfg: &Config,
+    volume: &Volume,
+    path: EvalPath,
+) -> Option<Result<Planar, String>> {
     if matches!(path, EvalPath::Band | EvalPath::Lookup | EvalPath::Phasor) {
-        return Ok(None);
+        return None;
     }
-    let planar = if volume.axes.is_none() {
+    Some(if volume.axes.is_none() {
         Err("the volume is a point list, not a grid".to_string())
     } else {
         Planar::new(cfg, spads, &volume.points, volume.shape)
-    };
-    match (planar, path) {
-        (Err(e), EvalPath::Planar) => Err(Error::arg(
-            "path",
-            format!("the planar FFT path does not apply: {e}"),
-        )),
-        (Err(_), _) => Ok(None),
-        (Ok(p), EvalPath::Planar) => Ok(Some(p)),
-        (Ok(p), _) => {
-            let planar = planar_flops(p.shape(), cfg, volume.len(), usage);
+    })
+}
+
+/// [`planar`]'s decision on the convolution `built` ([`build_planar`]) over `n_voxels`.
+///
+/// # Errors
+/// [`Error::Argument`] (`path`) when the planar path is forced and does not apply.
+fn decide_planar(
+    built: Option<Result<Planar, String>>,
+    cfg: &Config,
+    n_voxels: usize,
+    path: EvalPath,
+    usage: PlanarUse,
+    rival: f64,
+) -> Result<Option<Planar>> {
+    match (built, path) {
+        (None, _) => Ok(None),
+        (Some(Err(e)), _) => refuse_fft(e, path).map(|()| None),
+        (Some(Ok(p)), EvalPath::Planar) => Ok(Some(p)),
+        (Some(Ok(p)), _) => {
+            let planar = planar_flops(p.shape(), cfg, n_voxels, usage);
             Ok((planar < rival).then_some(p))
         }
     }
 }
 
-/// The confocal convolution for this probe, if `path` allows it, it applies and (for
-/// [`EvalPath::Auto`]) it costs fewer flops than `rival` (the cheapest other path, whole scan).
-///
-/// # Errors
-/// [`Error::Argument`] (`path`) when the planar path is forced and does not apply.
-fn convolution(
+/// The confocal convolution for this probe built, or why it does not apply; `None` when
+/// `path` excludes it.
+fn build_convolution(
     g: &Geometry,
     cfg: &Config,
     volume: &Volume,
     path: EvalPath,
+) -> Option<Result<Confocal, String>> {
+    if matches!(path, EvalPath::Band | EvalPath::Lookup | EvalPath::Phasor) {
+        return None;
+    }
+    Some(if g.paired_apart() {
+        Err(
+            "it needs the laser and SPAD at the same wall point (a confocal scan); this paired \
+             scan has them apart, so each row's path is not a function of one wall point"
+                .to_string(),
+        )
+    } else if volume.axes.is_none() {
+        Err("the volume is a point list, not a grid".to_string())
+    } else {
+        Confocal::new(cfg, &g.lasers, &volume.points, volume.shape)
+    })
+}
+
+/// The confocal convolution `built` ([`build_convolution`]) if it applies and (for
+/// [`EvalPath::Auto`]) it costs fewer flops than `rival` (the cheapest other path, whole scan).
+///
+/// # Errors
+/// [`Error::Argument`] (`path`) when the planar path is forced and does not apply.
+fn decide_convolution(
+    built: Option<Result<Confocal, String>>,
+    path: EvalPath,
     rival: f64,
 ) -> Result<Option<Confocal>> {
-    if matches!(path, EvalPath::Band | EvalPath::Lookup | EvalPath::Phasor) {
-        return Ok(None);
-    }
-    let conv =
-        if g.paired_apart() {
-            Err("it needs the laser and SPAD at the same wall point (a confocal scan); this paired \
-             scan has them apart, so each row's path is not a function of one wall point"
-            .to_string())
-        } else if volume.axes.is_none() {
-            Err("the volume is a point list, not a grid".to_string())
-        } else {
-            Confocal::new(cfg, &g.lasers, &volume.points, volume.shape)
-        };
-    match (conv, path) {
-        (Err(e), EvalPath::Planar) => Err(Error::arg(
-            "path",
-            format!("the planar FFT path does not apply: {e}"),
-        )),
-        (Err(_), _) => Ok(None),
-        (Ok(c), EvalPath::Planar) => Ok(Some(c)),
-        (Ok(c), _) => Ok((c.flops() < rival).then_some(c)),
+    match (built, path) {
+        (None, _) => Ok(None),
+        (Some(Err(e)), _) => refuse_fft(e, path).map(|()| None),
+        (Some(Ok(c)), EvalPath::Planar) => Ok(Some(c)),
+        (Some(Ok(c)), _) => Ok((c.flops() < rival).then_some(c)),
     }
 }
 
