@@ -23,7 +23,6 @@ use crate::exec::{Pass, chunk_len};
 use crate::io::capture::{Geometry, RowSource};
 use crate::probe::drive::*;
 use crate::probe::fast::{BandDft, Confocal};
-use crate::probe::wave::*;
 use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
@@ -124,7 +123,7 @@ pub(super) fn direct_convolution(
     };
     let fb_idx: Vec<usize> = (0..skip.len()).filter(|&i| skip[i]).collect();
     let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| volume.points[i]).collect();
-    let (mut acc, fb_acc, report) = convolution_core(src, job, &conv, &skip, &fb_pts)?;
+    let (mut acc, fb_acc, report) = convolution_core(src, job, &conv, &skip, &fb_pts, legs)?;
     for (&i, a) in fb_idx.iter().zip(fb_acc) {
         acc[i] = a;
     }
@@ -132,18 +131,19 @@ pub(super) fn direct_convolution(
 }
 
 /// The confocal convolution `conv` over its voxel grid (voxels with `skip` left at 0), and
-/// the band path's accumulators of the points `fb_pts`, in one pass over the rows.
+/// the band path's accumulators of the points `fb_pts`, in one pass over the rows (`(d1, d4)`:
+/// the device legs of the wall points).
 pub(super) fn convolution_core(
     src: &mut dyn RowSource,
     job: Job<'_>,
     conv: &Confocal,
     skip: &[bool],
     fb_pts: &[Point],
+    (legs1, legs4): &(Vec<f64>, Vec<f64>),
 ) -> Result<(Vec<Complex64>, Vec<Complex64>, Report)> {
     let Job { cfg, wave, exec } = job;
     let g = src.geometry().clone();
     check_laser_falloff(&g, wave)?;
-    let (legs1, legs4) = legs(&g, cfg);
     let cl = chunk_len(fb_pts.len());
     let chunks: Vec<&[Point]> = fb_pts.chunks(cl).collect();
     let mut states: Vec<Vec<f64>> = chunks

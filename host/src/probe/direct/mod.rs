@@ -415,7 +415,7 @@ fn direct_resampled(
     let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| volume.points[i]).collect();
     let (sup_acc, fb_acc, report) = match &engine {
         Engine::Planar(p) => planar_core(src, job, &sup.points, p, &none, &fb_pts)?,
-        Engine::Confocal(c) => confocal::convolution_core(src, job, c, &none, &fb_pts)?,
+        Engine::Confocal(c) => confocal::convolution_core(src, job, c, &none, &fb_pts, legs)?,
     };
     let _t = crate::timings::section("resampling", crate::timings::Kind::Parallel);
     let mut acc = rs.apply(&sup_acc);
