@@ -1,13 +1,13 @@
 //! The paired benchmark of issue 36: `probe::direct` on a synthetic paired capture of
 //! 64 × 64 = 4,096 pairs × 512 bins of 32 ps (pairs 0.27 m apart on a 2 × 2 m wall, patches at
 //! 0.7–1.6 m; the scene of `benches/paired_scene.py`), rendered at bench time (nothing large
-//! is committed), over 32³ and 64³ voxels on the phasor path (`Path::Phasor`, the one `Auto`
+//! is committed), over 32³ and 64³ voxels on the phasor path (`EvalPath::Phasor`, the one `Auto`
 //! takes), whole scan, the global thread pool; 128³ too with `VLTM_BENCH_LARGE=1` (≈ 20 s a
 //! run on 2 cores). Run: `cargo bench --bench paired`.
 
 use criterion::{BenchmarkId, Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
-use vltm::probe::{self, Exec, Path, Wave};
+use vltm::probe::{self, EvalPath, Exec, Wave};
 use vltm::sim::Scene;
 use vltm::volume::Volume;
 
@@ -60,7 +60,7 @@ fn paired(c: &mut Criterion) {
                     &wave,
                     Exec {
                         progress: None,
-                        path: Path::Phasor,
+                        path: EvalPath::Phasor,
                     },
                 )
                 .expect("direct");

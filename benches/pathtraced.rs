@@ -276,7 +276,7 @@ fn same_object(c: &mut Captures, s: &Setup, idx: &[usize]) -> [f64; 3] {
     use vltm::probe::{self, DirectModel, Exec, IndirectOptions, LeakCorrected, Shell};
     let exec = Exec {
         progress: None,
-        path: probe::Path::Auto,
+        path: probe::EvalPath::Auto,
     };
     let d = probe::direct(&mut c.all, &c.vol, &s.wave, exec).unwrap();
     let full = probe::gamma_mask(&d.values, s.epsilon);

@@ -1,11 +1,11 @@
-//! Bad input: every `ConfigError`, every `Error` at every call boundary, and non-finite
+//! Bad input: every `ConfigError`, every `ArgumentError` at every call boundary, and non-finite
 //! histogram samples (read as 0, counted, never a panic).
 
 mod support;
 
 use support::{Data, all_probes, all_rows, run};
 use vltm_kernel::{
-    Config, ConfigError, Error, Gate, Legs, Params, Point, Probe, RowBuffer, Scan, Target,
+    ArgumentError, Config, ConfigError, Gate, Legs, Params, Point, Probe, RowBuffer, Scan, Target,
 };
 
 fn base() -> Params {
@@ -301,8 +301,8 @@ fn setup() -> Setup {
     }
 }
 
-fn len_err(what: &'static str, expected: usize, found: usize) -> Error {
-    Error::Length {
+fn len_err(what: &'static str, expected: usize, found: usize) -> ArgumentError {
+    ArgumentError::Length {
         what,
         expected,
         found,
@@ -447,7 +447,7 @@ fn non_finite_positions() {
             let e = Scan::new(&s.cfg, &spads, &mut tables).unwrap_err();
             assert_eq!(
                 e,
-                Error::NonFinite {
+                ArgumentError::NonFinite {
                     what: "spads",
                     index: 1
                 }
@@ -463,7 +463,7 @@ fn non_finite_positions() {
             let e = rows.load(&scan, laser, &s.hists).unwrap_err();
             assert_eq!(
                 e,
-                Error::NonFinite {
+                ArgumentError::NonFinite {
                     what: "laser",
                     index: 0
                 }
@@ -477,7 +477,7 @@ fn non_finite_positions() {
                 let e = Probe::new(&scan, t, g, &voxels, &mut state).unwrap_err();
                 assert_eq!(
                     e,
-                    Error::NonFinite {
+                    ArgumentError::NonFinite {
                         what: "voxels",
                         index: 1
                     },
@@ -493,7 +493,7 @@ fn non_finite_positions() {
                 let e = probe.image(&scan, &voxels, &mut out).unwrap_err();
                 assert_eq!(
                     e,
-                    Error::NonFinite {
+                    ArgumentError::NonFinite {
                         what: "voxels",
                         index: 1
                     },
@@ -507,7 +507,7 @@ fn non_finite_positions() {
                 let e = Probe::new(&scan, t, g, &s.voxels, &mut state).unwrap_err();
                 assert_eq!(
                     e,
-                    Error::NonFinite {
+                    ArgumentError::NonFinite {
                         what: "focus",
                         index: 0
                     },
@@ -543,7 +543,7 @@ fn merging_different_probes_is_incompatible() {
         p1.finish(&scan, &mut before).unwrap();
         let mut check_rejected = |p2: &Probe<'_>, why: &str| {
             assert!(
-                matches!(p1.merge(p2), Err(Error::Incompatible(_))),
+                matches!(p1.merge(p2), Err(ArgumentError::Incompatible(_))),
                 "{t1:?}/{g1:?} vs {why}"
             );
             let mut after = vec![0.0; 2];

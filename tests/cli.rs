@@ -3,7 +3,7 @@
 //! each with a one-line error starting with `vltm: `.
 //!
 //! **Which binary.** Cargo sets `CARGO_BIN_EXE_vltm` only for the tests of the package that owns
-//! the binary (`host/`), not for this root package. So [`bin`] runs
+//! the binary (`host/`), not for this root package. So `support::vltm_bin` runs
 //! `cargo build -p vltm-cli --bin vltm` once per test process (a `OnceLock`), with the cargo that
 //! runs the tests (`$CARGO`), the profile and the target directory of this test executable
 //! (`<target>/<dir>/deps/cli-<hash>` → `<target>/<dir>/vltm`; `debug/` → `--profile test`,
@@ -15,12 +15,13 @@
 //! overrides it (e.g. for cross-compiled or installed binaries).
 //!
 //! Outputs go to unique temporary directories under `std::env::temp_dir()` (process id + test
-//! name), removed at the end of each test.
+//! name; `support::cmd::TempDir`), removed at the end of each test.
 
 mod support;
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
+use support::cmd::{TempDir, npz_fixture, read_npy, text, vltm_in};
 
 use vltm::io;
 use vltm::probe::{self, Exec, Wave};
@@ -32,52 +33,9 @@ const SHAPE: [usize; 3] = [13, 3, 8];
 /// Patch A of `fixtures/scenes/two_patches.json`.
 const FOCUS: &str = "-0.45,0,0.8";
 
-fn fixture(stem: &str) -> PathBuf {
-    support::fixture(&format!("{stem}.npz"))
-}
-
-/// The `vltm` binary (see the module documentation).
-fn bin() -> &'static Path {
-    support::vltm_bin()
-}
-
-/// A temporary directory, unique per process and test, removed on drop.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(test: &str) -> Self {
-        let p = std::env::temp_dir().join(format!("vltm-cli-{}-{test}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).expect("create temp dir");
-        Self(p)
-    }
-    fn path(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-/// Runs `vltm args…` in `cwd`.
-fn run_in(cwd: &Path, args: &[&str]) -> Output {
-    Command::new(bin())
-        .current_dir(cwd)
-        .args(args)
-        .output()
-        .expect("run vltm")
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
-
 /// Runs `vltm args…` and asserts success; returns stdout.
 fn ok(cwd: &Path, args: &[&str]) -> String {
-    let o = run_in(cwd, args);
+    let o = vltm_in(cwd, args);
     assert!(
         o.status.success(),
         "vltm {args:?} failed ({:?}):\n{}",
@@ -90,7 +48,7 @@ fn ok(cwd: &Path, args: &[&str]) -> String {
 /// Runs `vltm args…` and asserts exit code `code` and a one-line stderr starting with
 /// `vltm: `; returns that line.
 fn fails(cwd: &Path, args: &[&str], code: i32) -> String {
-    let o = run_in(cwd, args);
+    let o = vltm_in(cwd, args);
     let err = text(&o.stderr);
     assert_eq!(
         o.status.code(),
@@ -109,7 +67,7 @@ fn fails(cwd: &Path, args: &[&str], code: i32) -> String {
 
 /// Reads a `.npy` volume and checks its shape and that every value is finite; returns it.
 fn npy(path: &Path, shape: [usize; 3]) -> Vec<f32> {
-    let (v, s) = vltm::export::npy::read_f32(path).unwrap_or_else(|e| panic!("{e}"));
+    let (v, s) = read_npy(path);
     assert_eq!(s, shape, "{}: shape", path.display());
     assert!(
         v.iter().all(|x| x.is_finite()),
@@ -174,10 +132,10 @@ fn png(path: &Path) -> (u32, u32) {
 
 #[test]
 fn info_describes_a_capture() {
-    let t = TempDir::new("info");
+    let t = TempDir::new("cli", "info");
     let out = ok(
         &t.0,
-        &["info", fixture("two_patches").to_str().expect("utf-8")],
+        &["info", npz_fixture("two_patches").to_str().expect("utf-8")],
     );
     print!("{out}");
     for want in [
@@ -266,9 +224,9 @@ fn check_suggestion(g: &io::Geometry, v: &Volume) -> Result<(), String> {
 /// covers a small part of it.
 #[test]
 fn info_suggests_a_whole_volume() {
-    let t = TempDir::new("suggest");
+    let t = TempDir::new("cli", "suggest");
     for stem in ["two_patches", "three_points"] {
-        let cap = fixture(stem);
+        let cap = npz_fixture(stem);
         let out = ok(&t.0, &["info", cap.to_str().expect("utf-8")]);
         let spec = suggested_volume(&out);
         let v = Volume::parse(spec).unwrap_or_else(|e| panic!("{spec}: {e}"));
@@ -294,7 +252,9 @@ fn info_suggests_a_whole_volume() {
     assert!(z[0] > 0.0 && z[0] < 0.01 && z[1] <= 2.4547 / 2.0, "{z:?}");
     assert!(z[1] > 1.2, "{z:?}");
     // Teeth.
-    let g = io::open(&fixture("two_patches")).expect("open").geometry;
+    let g = io::open(&npz_fixture("two_patches"))
+        .expect("open")
+        .geometry;
     for (bad, why) in [
         ("-0.5:0.5:8,-0.5:0.5:8,0.5:2.6:13", "past the window's end"),
         (
@@ -313,8 +273,8 @@ fn info_suggests_a_whole_volume() {
 /// off-lattice grid with the planar path forced runs it resampled and names the support grid.
 #[test]
 fn off_lattice_volume_is_named_and_resampled() {
-    let t = TempDir::new("offgrid");
-    let cap = fixture("two_patches");
+    let t = TempDir::new("cli", "offgrid");
+    let cap = npz_fixture("two_patches");
     let cap = cap.to_str().expect("utf-8");
     let vol = "-0.7:0.7:15,-0.7:0.7:15,0.4:1.3:4";
     let out = ok(&t.0, &["info", cap, "--volume", vol]);
@@ -375,7 +335,7 @@ fn off_lattice_volume_is_named_and_resampled() {
 /// `simulate` renders a scene file to the same capture as the committed fixture.
 #[test]
 fn simulate_writes_the_committed_capture() {
-    let t = TempDir::new("simulate");
+    let t = TempDir::new("cli", "simulate");
     let out_npz = t.path("s.npz");
     let scene = support::fixture("scenes/two_patches_line.json");
     let out = ok(
@@ -390,7 +350,7 @@ fn simulate_writes_the_committed_capture() {
     print!("{out}");
     assert!(out.contains("64 lasers x 8 SPADs x 175 bins"), "{out}");
     let fresh = io::open(&out_npz).expect("read the simulated capture");
-    let committed = io::open(&fixture("two_patches_line")).expect("fixture");
+    let committed = io::open(&npz_fixture("two_patches_line")).expect("fixture");
     assert_eq!(fresh.geometry, committed.geometry);
     assert!(
         fresh.data == committed.data,
@@ -403,8 +363,8 @@ fn simulate_writes_the_committed_capture() {
 /// `direct.png` in the current directory. `--threads 1` and `--swap-roles` run too.
 #[test]
 fn direct_writes_volume_and_figure() {
-    let t = TempDir::new("direct");
-    let cap = fixture("two_patches");
+    let t = TempDir::new("cli", "direct");
+    let cap = npz_fixture("two_patches");
     let cap = cap.to_str().expect("utf-8");
     let (f_npy, f_png) = (t.path("d.npy"), t.path("d.png"));
     let out = ok(
@@ -449,7 +409,7 @@ fn direct_writes_volume_and_figure() {
     assert!(v1 == v, "--threads 1 changed the direct image");
 
     // --swap-roles on the 1-D SPAD array: SPADs as projector, lasers as camera.
-    let line = fixture("two_patches_line");
+    let line = npz_fixture("two_patches_line");
     let sw = t.path("swap.npy");
     ok(
         &t.0,
@@ -474,8 +434,8 @@ fn direct_writes_volume_and_figure() {
 /// attributes), read back with the pure-Rust reader.
 #[test]
 fn direct_and_column_write_hdf5_volumes() {
-    let t = TempDir::new("h5out");
-    let cap = fixture("two_patches");
+    let t = TempDir::new("cli", "h5out");
+    let cap = npz_fixture("two_patches");
     let cap = cap.to_str().expect("utf-8");
     let s = |p: &Path| p.to_str().expect("utf-8").to_string();
     for (probe, extra) in [("direct", vec![]), ("column", vec!["--focus", FOCUS])] {
@@ -502,7 +462,7 @@ fn direct_and_column_write_hdf5_volumes() {
 /// patch A (x_a = (−0.25, 0.15, 0.7): the volume's voxel (−0.25, 0.15, 0.65), as y-tal's).
 #[test]
 fn ytal_capture_through_the_command_line() {
-    let t = TempDir::new("ytalcli");
+    let t = TempDir::new("cli", "ytalcli");
     let h5 = support::fixture("ytal/two_patches/two_patches.hdf5");
     let h5 = h5.to_str().expect("utf-8");
     let out = ok(&t.0, &["info", h5]);
@@ -554,8 +514,8 @@ fn ytal_capture_through_the_command_line() {
 /// the shell around the focus.
 #[test]
 fn column_runs_every_gate_and_shell() {
-    let t = TempDir::new("column");
-    let cap = fixture("two_patches");
+    let t = TempDir::new("cli", "column");
+    let cap = npz_fixture("two_patches");
     let cap = cap.to_str().expect("utf-8");
     for gate in ["two-bounce", "higher-order", "none"] {
         let (f_npy, f_png) = (
@@ -623,8 +583,8 @@ fn column_runs_every_gate_and_shell() {
 /// ε·max) and reports Γ.
 #[test]
 fn indirect_writes_a_gamma_masked_volume() {
-    let t = TempDir::new("indirect");
-    let cap = fixture("two_patches");
+    let t = TempDir::new("cli", "indirect");
+    let cap = npz_fixture("two_patches");
     let cap = cap.to_str().expect("utf-8");
     let (f_npy, f_png, f_dir) = (t.path("i.npy"), t.path("i.png"), t.path("d.npy"));
     let out = ok(
@@ -694,7 +654,7 @@ fn indirect_writes_a_gamma_masked_volume() {
 /// asserted within bands), and the 10 PNG figures, 10 `.npy` volumes and `summary.txt` (= the table) are written. (~15 s.)
 #[test]
 fn demo_writes_figures_volumes_and_summary() {
-    let t = TempDir::new("demo");
+    let t = TempDir::new("cli", "demo");
     let dir = t.path("out");
     let out = ok(&t.0, &["demo", "--out", dir.to_str().expect("utf-8")]);
     print!("{out}");
@@ -823,7 +783,7 @@ fn demo_writes_figures_volumes_and_summary() {
 /// `vltm --help` explains the physics terms; each subcommand's help explains its own.
 #[test]
 fn help_explains_the_terms() {
-    let t = TempDir::new("help");
+    let t = TempDir::new("cli", "help");
     let top = ok(&t.0, &["--help"]);
     for term in [
         "relay wall",
@@ -864,8 +824,8 @@ fn help_explains_the_terms() {
 /// Bad arguments: exit code 2 and one line naming the argument.
 #[test]
 fn bad_arguments_exit_2_with_one_line() {
-    let t = TempDir::new("badargs");
-    let cap = fixture("two_patches");
+    let t = TempDir::new("cli", "badargs");
+    let cap = npz_fixture("two_patches");
     let cap = cap.to_str().expect("utf-8");
     let col = |extra: &[&'static str]| {
         let mut a = vec!["column", cap, "--volume", SPEC, "--focus", FOCUS];
@@ -932,8 +892,8 @@ fn bad_arguments_exit_2_with_one_line() {
 /// Unreadable or corrupt captures: exit code 1 and one line naming the file.
 #[test]
 fn bad_captures_exit_1_naming_the_file() {
-    let t = TempDir::new("baddata");
-    let good = std::fs::read(fixture("two_patches_single")).expect("fixture");
+    let t = TempDir::new("cli", "baddata");
+    let good = std::fs::read(npz_fixture("two_patches_single")).expect("fixture");
     let truncated = t.path("truncated.npz");
     std::fs::write(&truncated, &good[..good.len() / 2]).expect("write");
     let text_file = t.path("notes.npz");
@@ -982,7 +942,7 @@ fn bad_captures_exit_1_naming_the_file() {
 /// both writes the same volume, bit for bit.
 #[test]
 fn simulate_ptu_round_trip() {
-    let t = TempDir::new("ptu");
+    let t = TempDir::new("cli", "ptu");
     let mut scene: serde_json::Value = serde_json::from_str(
         &std::fs::read_to_string(support::fixture("scenes/two_patches.json")).expect("scene"),
     )
@@ -1064,9 +1024,9 @@ fn listing(dir: &Path) -> Vec<String> {
 /// capture is left as it was.
 #[test]
 fn an_output_naming_the_input_is_refused() {
-    let t = TempDir::new("out-is-input");
+    let t = TempDir::new("cli", "out-is-input");
     let cap = t.path("c.npz");
-    std::fs::copy(fixture("two_patches"), &cap).expect("copy");
+    std::fs::copy(npz_fixture("two_patches"), &cap).expect("copy");
     let before = std::fs::read(&cap).expect("read");
     let err = fails(
         &t.0,
@@ -1095,7 +1055,7 @@ fn an_output_naming_the_input_is_refused() {
 /// previous volume file is intact and no partial or temporary file is left.
 #[test]
 fn a_failed_output_keeps_the_previous_file() {
-    let t = TempDir::new("keep-previous");
+    let t = TempDir::new("cli", "keep-previous");
     let out = t.path("v.npy");
     std::fs::write(&out, b"previous").expect("write");
     // A figure path that names a directory: refused when it is staged, after the volume's
@@ -1106,7 +1066,7 @@ fn a_failed_output_keeps_the_previous_file() {
         &t.0,
         &[
             "direct",
-            &s(&fixture("two_patches")),
+            &s(&npz_fixture("two_patches")),
             "--volume",
             SPEC,
             "--out",
@@ -1126,7 +1086,7 @@ fn a_failed_output_keeps_the_previous_file() {
         &t.0,
         &[
             "direct",
-            &s(&fixture("two_patches")),
+            &s(&npz_fixture("two_patches")),
             "--volume",
             SPEC,
             "--out",
@@ -1143,7 +1103,7 @@ fn a_failed_output_keeps_the_previous_file() {
 /// one clean line (no message of the zip writer glued on).
 #[test]
 fn simulate_outputs_are_all_or_nothing() {
-    let t = TempDir::new("sim-atomic");
+    let t = TempDir::new("cli", "sim-atomic");
     let scene = support::fixture("scenes/three_points.json");
     // A PTU path that names a directory: it cannot be written.
     let missing = t.path("dir.ptu");
@@ -1170,10 +1130,15 @@ fn simulate_outputs_are_all_or_nothing() {
 /// Thread counts beyond 4 per core are refused at parse time, before any thread starts.
 #[test]
 fn absurd_thread_counts_are_refused() {
-    let t = TempDir::new("threads");
+    let t = TempDir::new("cli", "threads");
     let err = fails(
         &t.0,
-        &["--threads", "100000", "info", &s(&fixture("two_patches"))],
+        &[
+            "--threads",
+            "100000",
+            "info",
+            &s(&npz_fixture("two_patches")),
+        ],
         2,
     );
     // Refused by the argument parser (exit 2, the bound in the message), before any thread
@@ -1184,7 +1149,7 @@ fn absurd_thread_counts_are_refused() {
     );
     ok(
         &t.0,
-        &["--threads", "1", "info", &s(&fixture("two_patches"))],
+        &["--threads", "1", "info", &s(&npz_fixture("two_patches"))],
     );
 }
 
@@ -1192,10 +1157,10 @@ fn absurd_thread_counts_are_refused() {
 /// before they reach the terminal.
 #[test]
 fn control_bytes_from_files_are_escaped() {
-    let t = TempDir::new("escape");
+    let t = TempDir::new("cli", "escape");
     let scene = t.path("bad.json");
     std::fs::write(&scene, "{\"\\u001b[31mred\\nline\": 1}").expect("write");
-    let o = run_in(&t.0, &["simulate", &s(&scene), "--out", "c.npz"]);
+    let o = vltm_in(&t.0, &["simulate", &s(&scene), "--out", "c.npz"]);
     assert_eq!(o.status.code(), Some(1), "{}", text(&o.stderr));
     assert!(
         !o.stderr.contains(&0x1b),
@@ -1242,7 +1207,7 @@ fn mat_v5(vars: &[(&str, &[usize], &[f64])]) -> Vec<u8> {
 /// preprocessing, and the errors of bad windows, backgrounds and files.
 #[test]
 fn mat_captures_through_the_command_line() {
-    let t = TempDir::new("mat");
+    let t = TempDir::new("cli", "mat");
     let (n, nt, w) = (8usize, 1000usize, 0.1f64);
     let dt = 4e-12 * 299_792_458.0;
     let mut v = vec![2.0f64; n * n * nt];
@@ -1362,8 +1327,8 @@ fn rel_of_max(x: &[f32], y: &[f32]) -> f64 {
 /// computes them; `--gate gaussian` is `direct` itself.
 #[test]
 fn direct_runs_every_gate() {
-    let t = TempDir::new("directgates");
-    let cap = s(&fixture("two_patches"));
+    let t = TempDir::new("cli", "directgates");
+    let cap = s(&npz_fixture("two_patches"));
     let vol = Volume::parse(SPEC).expect("spec");
     let plain = t.path("d.npy");
     ok(
@@ -1391,7 +1356,7 @@ fn direct_runs_every_gate() {
             ],
         );
         let v = npy(&f, SHAPE);
-        let mut src = io::open_source(&fixture("two_patches")).expect("fixture");
+        let mut src = io::open_source(&npz_fixture("two_patches")).expect("fixture");
         let lib = probe::diagonal(&mut *src, &vol, gate, &Wave::default(), Exec::default())
             .expect("diagonal");
         let diff = rel_of_max(&v, &lib.values);
@@ -1416,8 +1381,8 @@ fn direct_runs_every_gate() {
 /// empty Γ is an error naming `--mask-epsilon`.
 #[test]
 fn column_masks_and_shells_partition() {
-    let t = TempDir::new("maskshells");
-    let cap = s(&fixture("two_patches"));
+    let t = TempDir::new("cli", "maskshells");
+    let cap = s(&npz_fixture("two_patches"));
     let vol = Volume::parse(SPEC).expect("spec");
     let (fc, fm, fd, fs) = (
         t.path("c.npy"),
@@ -1507,8 +1472,8 @@ fn column_masks_and_shells_partition() {
 /// naming `--epsilon`.
 #[test]
 fn indirect_writes_gamma_direct_shells_and_higher_order() {
-    let t = TempDir::new("indirectplus");
-    let cap = s(&fixture("two_patches"));
+    let t = TempDir::new("cli", "indirectplus");
+    let cap = s(&npz_fixture("two_patches"));
     let vol = Volume::parse(SPEC).expect("spec");
     let base = ["indirect", &cap, "--volume", SPEC, "--epsilon", "0.3"];
     let (fi, fs, fh, fd) = (
@@ -1570,7 +1535,7 @@ fn indirect_writes_gamma_direct_shells_and_higher_order() {
     let g_vol = Volume::points(pts.clone()).expect("Γ");
     let mut want = vec![0.0f64; vol.len()];
     for a in &pts {
-        let mut src = io::open_source(&fixture("two_patches")).expect("fixture");
+        let mut src = io::open_source(&npz_fixture("two_patches")).expect("fixture");
         let col = probe::column(
             &mut *src,
             *a,
@@ -1619,8 +1584,8 @@ fn indirect_writes_gamma_direct_shells_and_higher_order() {
 /// equals `column --swap-roles`.
 #[test]
 fn matrix_relight_and_row_through_the_command_line() {
-    let t = TempDir::new("matrix");
-    let cap = s(&fixture("two_patches"));
+    let t = TempDir::new("cli", "matrix");
+    let cap = s(&npz_fixture("two_patches"));
     let vol = Volume::parse(SPEC).expect("spec");
     let fm = t.path("m.h5");
     let out = ok(
@@ -1873,8 +1838,8 @@ fn matrix_relight_and_row_through_the_command_line() {
 /// (kept for scripts) changes nothing and `--no-leak-correct` gives the column as it is.
 #[test]
 fn leak_correct_on_the_command_line() {
-    let t = TempDir::new("leak");
-    let cap = fixture("two_patches");
+    let t = TempDir::new("cli", "leak");
+    let cap = npz_fixture("two_patches");
     let cap = cap.to_str().expect("utf-8");
     // 3-vertex paths of voxels 4.5–5 m deep exceed the 4.48 m window.
     let far = "-0.2:0.2:3,-0.2:0.2:3,4.5:5:2";
@@ -1951,8 +1916,8 @@ fn leak_correct_on_the_command_line() {
 /// never an all-zero result, and writes nothing.
 #[test]
 fn empty_gamma_is_an_error_naming_the_option() {
-    let t = TempDir::new("dark");
-    let mut c = vltm::io::open(&fixture("two_patches")).expect("fixture");
+    let t = TempDir::new("cli", "dark");
+    let mut c = vltm::io::open(&npz_fixture("two_patches")).expect("fixture");
     c.data.iter_mut().for_each(|x| *x = 0.0);
     let dark = t.path("dark.npz");
     vltm::io::npz::write(&c, &dark).expect("write");
@@ -2016,8 +1981,8 @@ fn empty_gamma_is_an_error_naming_the_option() {
 /// it and a merged matrix without `--out F.h5` are refused naming the option.
 #[test]
 fn matrix_and_leak_corrected_parts_through_the_command_line() {
-    let t = TempDir::new("matrix-parts");
-    let cap = s(&fixture("two_patches"));
+    let t = TempDir::new("cli", "matrix-parts");
+    let cap = s(&npz_fixture("two_patches"));
     let from = "-0.3:0.3:2,-0.1:0.1:2,0.6:0.8:2";
     let one = t.path("one.h5");
     let base = ["matrix", cap.as_str(), "--from", from, "--to", SPEC];
@@ -2118,8 +2083,8 @@ fn indirect_summary_gives_pass_two_configuration() {
     use vltm::io::prep::{Bound, Prep, Prepared};
     use vltm::probe::Wave;
     const T_MAX: f64 = 2.4;
-    let t = TempDir::new("indirect-pass-two");
-    let cap = fixture("two_patches");
+    let t = TempDir::new("cli", "indirect-pass-two");
+    let cap = npz_fixture("two_patches");
     let out = ok(
         &t.0,
         &[
@@ -2183,8 +2148,8 @@ fn indirect_summary_gives_pass_two_configuration() {
 /// `--partial`) is refused in one line naming the option, nothing written.
 #[test]
 fn relight_and_row_preprocess_and_refuse_parts() {
-    let t = TempDir::new("rowprep");
-    let cap = fixture("two_patches");
+    let t = TempDir::new("cli", "rowprep");
+    let cap = npz_fixture("two_patches");
     let c = io::open(&cap).expect("fixture");
     let g = c.geometry.clone();
     // Bins 10..174, pairs summed, 1e-4 counts per source bin subtracted, clamped at 0.
@@ -2294,12 +2259,12 @@ fn relight_and_row_preprocess_and_refuse_parts() {
 /// the reads split over the pool compute every value the same way).
 #[test]
 fn timings_name_the_sections_and_threads_change_no_byte() {
-    let t = TempDir::new("timings");
-    let cap = s(&fixture("two_patches"));
+    let t = TempDir::new("cli", "timings");
+    let cap = s(&npz_fixture("two_patches"));
     let mut outputs = Vec::new();
     for threads in ["1", "2", "3"] {
         let out = t.path(&format!("column{threads}.npy"));
-        let o = Command::new(bin())
+        let o = Command::new(support::vltm_bin())
             .current_dir(&t.0)
             .env("VLTM_TIMINGS", "1")
             .args([

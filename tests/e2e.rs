@@ -24,7 +24,7 @@ use vltm::volume::Volume;
 
 const EXEC: Exec<'static> = Exec {
     progress: None,
-    path: vltm::probe::Path::Auto,
+    path: vltm::probe::EvalPath::Auto,
 };
 
 /// The imaged volume: 25 × 5 × 15 voxels, 5 cm pitch in x and z (10 cm in y), with voxels at
@@ -832,7 +832,7 @@ fn every_reader_refuses_an_out_of_range_row_alike() {
 fn indirect_counts_the_aliased_pairs_of_every_focus() {
     let band = Exec {
         progress: None,
-        path: vltm::probe::Path::Band,
+        path: vltm::probe::EvalPath::Band,
     };
     let s = scene("two_patches");
     // Uncropped: a time axis cropped to the voxels' reach keeps every pair in the window.

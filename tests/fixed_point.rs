@@ -40,8 +40,9 @@ mod support;
 
 use num_complex::Complex64;
 use proptest::prelude::*;
-use proptest::test_runner::{FileFailurePersistence, RngAlgorithm, RngSeed};
 use reference::{Reference, p64};
+// `hidden()`: z ≥ 0.3, every leg longer than MIN_DISTANCE, so the weights equal the float path's.
+use support::prop::{Rng, hidden, wall};
 use support::{Data, all_rows, run};
 use vltm_kernel::{
     CIS_ERR, Config, FixedColumn, FixedConfig, FixedDiagonal, FixedLimits, FixedLookup,
@@ -71,15 +72,6 @@ struct Case {
     pos: f64,
 }
 
-fn wall() -> impl Strategy<Value = Point> {
-    (-1.0f32..=1.0, -1.0f32..=1.0).prop_map(|(x, y)| [x, y, 0.0])
-}
-
-fn hidden() -> impl Strategy<Value = Point> {
-    // z ≥ 0.3: every leg is longer than MIN_DISTANCE, so the weights equal the float path's.
-    (-1.0f32..=1.0, -1.0f32..=1.0, 0.3f32..=1.5).prop_map(|(x, y, z)| [x, y, z])
-}
-
 prop_compose! {
     fn case()(
         lasers in prop::collection::vec(wall(), 1..=5),
@@ -97,22 +89,6 @@ prop_compose! {
         pos in 0.0f64..=1.0,
     ) -> Case {
         Case { lasers, spads, voxels, focus, nt, dt, lambda_over_dt, m, cg, inv, saturated, seed, pos }
-    }
-}
-
-/// SplitMix64.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    fn f(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
     }
 }
 
@@ -178,16 +154,7 @@ fn alias_free(p: Params, r: &Reference, focus: Point, voxels: &[Point]) -> Param
         let (a, b) = r.tau_range(&p64(focus), &p64(*v));
         (lo, hi) = (lo.min(a), hi.max(b));
     }
-    let (af_lo, af_hi) = Config::try_new(&p).unwrap().alias_free();
-    let need = (af_lo - (lo - p.t0)).max((hi - p.t0) - af_hi);
-    if need > 0.0 {
-        Params {
-            margin: p.margin + need + 2.0 * p.dt,
-            ..p
-        }
-    } else {
-        p
-    }
+    support::prop::widen_margin(p, (lo, hi))
 }
 
 /// Fixed-point amplitudes `|A|` (diagonal if `focus` is None, else the column).
@@ -368,13 +335,7 @@ fn compare_shifted(case: &Case, dt0: f64) -> Vec<Cmp> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig {
-        cases: 256,
-        rng_algorithm: RngAlgorithm::ChaCha,
-        rng_seed: RngSeed::Fixed(SEED),
-        failure_persistence: Some(Box::new(FileFailurePersistence::WithSource("proptest-regressions"))),
-        ..ProptestConfig::default()
-    })]
+    #![proptest_config(support::prop::config(SEED, 256))]
 
     /// Diagonal and column within the derived tolerance of the reference and of the float path.
     #[test]
@@ -391,9 +352,7 @@ proptest! {
 #[test]
 fn fixed_error_statistics() {
     use proptest::strategy::ValueTree;
-    use proptest::test_runner::{Config as PtConfig, TestRng, TestRunner};
-    let rng = TestRng::from_seed(RngAlgorithm::ChaCha, &[SEED.to_le_bytes(); 4].concat());
-    let mut runner = TestRunner::new_with_rng(PtConfig::default(), rng);
+    let mut runner = support::prop::sweep_runner(SEED);
     let (mut n, mut sq_q, mut max_q, mut sq_r, mut max_r, mut max_rel) =
         (0usize, 0.0, 0.0f64, 0.0, 0.0f64, 0.0f64);
     let (mut n_ph, mut sum_ph, mut max_ph) = (0usize, 0.0f64, 0.0f64);
@@ -476,9 +435,7 @@ fn tolerance_detects_half_bin_shift() {
 #[test]
 fn fixed_photons_equal_histograms_bit_for_bit() {
     use proptest::strategy::ValueTree;
-    use proptest::test_runner::{Config as PtConfig, TestRng, TestRunner};
-    let rng = TestRng::from_seed(RngAlgorithm::ChaCha, &SEED.to_le_bytes().repeat(4));
-    let mut runner = TestRunner::new_with_rng(PtConfig::default(), rng);
+    let mut runner = support::prop::sweep_runner(SEED);
     let mut photons_total = 0u64;
     for _ in 0..48 {
         let case = case().new_tree(&mut runner).unwrap().current();
@@ -748,13 +705,7 @@ fn compare_lookup_target(
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig {
-        cases: 128,
-        rng_algorithm: RngAlgorithm::ChaCha,
-        rng_seed: RngSeed::Fixed(SEED ^ 0x100c),
-        failure_persistence: Some(Box::new(FileFailurePersistence::WithSource("proptest-regressions"))),
-        ..ProptestConfig::default()
-    })]
+    #![proptest_config(support::prop::config(SEED ^ 0x100c, 128))]
 
     /// The fixed-point lookup diagonal within its derived tolerance of the reference (grids
     /// for tolerances 1e-5 and 1e-3; 10 % of the cases at the budget's edge, every bin 65535).
@@ -773,12 +724,7 @@ proptest! {
 #[test]
 fn fixed_lookup_error_statistics() {
     use proptest::strategy::ValueTree;
-    use proptest::test_runner::{Config as PtConfig, TestRng, TestRunner};
-    let rng = TestRng::from_seed(
-        RngAlgorithm::ChaCha,
-        &[(SEED ^ 7).to_le_bytes(); 4].concat(),
-    );
-    let mut runner = TestRunner::new_with_rng(PtConfig::default(), rng);
+    let mut runner = support::prop::sweep_runner(SEED ^ 7);
     let (mut n, mut sq, mut worst, mut rel) = (0usize, 0.0, 0.0f64, 0.0f64);
     for _ in 0..100 {
         let case = case().new_tree(&mut runner).unwrap().current();

@@ -15,6 +15,7 @@ use std::collections::BTreeMap;
 use std::io::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+use support::cmd::TempDir;
 use vltm::io::{Capture, RowSource};
 
 fn root() -> PathBuf {
@@ -24,43 +25,6 @@ fn root() -> PathBuf {
 /// The `vltm` binary (see `tests/cli.rs`).
 fn bin() -> &'static Path {
     support::vltm_bin()
-}
-
-/// A temporary directory, unique per process and test, removed on drop.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(test: &str) -> Self {
-        let p = std::env::temp_dir().join(format!("vltm-hostile-{}-{test}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).expect("create temp dir");
-        Self(p)
-    }
-    fn path(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-    fn s(&self, name: &str) -> String {
-        self.path(name).display().to_string()
-    }
-    /// Every file in the directory with its bytes.
-    fn snapshot(&self) -> BTreeMap<String, Vec<u8>> {
-        std::fs::read_dir(&self.0)
-            .unwrap()
-            .map(|e| {
-                let e = e.unwrap();
-                (
-                    e.file_name().to_string_lossy().into_owned(),
-                    std::fs::read(e.path()).unwrap(),
-                )
-            })
-            .collect()
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 /// Runs `vltm args…` in `dir`; with `fsize = Some(n)`, under a file-size limit of `n` blocks
@@ -252,7 +216,7 @@ fn valid_npz(dir: &TempDir, name: &str, compress: bool) -> PathBuf {
 /// and size (it aborted with "memory allocation of 4000000000000 bytes failed").
 #[test]
 fn npz_header_claiming_a_terabyte() {
-    let t = TempDir::new("npz-claim");
+    let t = TempDir::new("hostile", "npz-claim");
     let good = valid_npz(&t, "good.npz", true);
     let mut m = members(&good);
     m.insert(
@@ -290,7 +254,7 @@ fn npz_header_claiming_a_terabyte() {
 /// stage 1 runs table-free and `direct` succeeds under a 1 GB budget with finite values.
 #[test]
 fn many_bins_need_no_quadratic_table() {
-    let t = TempDir::new("bins");
+    let t = TempDir::new("hostile", "bins");
     let g = vltm::io::Geometry {
         lasers: vec![[0.0, 0.0, 0.0]],
         laser_shape: [1, 1],
@@ -338,7 +302,7 @@ fn many_bins_need_no_quadratic_table() {
 /// aborted).
 #[test]
 fn ptu_sidecar_sizes() {
-    let t = TempDir::new("ptu");
+    let t = TempDir::new("hostile", "ptu");
     let c = capture();
     vltm::io::ptu::write_t3(&c, t.path("c.ptu"), &Default::default()).unwrap();
     let side: serde_json::Value =
@@ -371,7 +335,7 @@ fn ptu_sidecar_sizes() {
 /// `simulate` with 10⁹ bins or 2²⁰ lasers (within its own caps): refused by the budget.
 #[test]
 fn simulate_sizes() {
-    let t = TempDir::new("sim");
+    let t = TempDir::new("hostile", "sim");
     let mut s: serde_json::Value = serde_json::from_str(SCENE).unwrap();
     s["setup"]["nt"] = 1_000_000_000u64.into();
     s["setup"]["spads"]["grid"] = serde_json::json!([1, 1]);
@@ -414,7 +378,7 @@ fn simulate_sizes() {
 /// `--sigma 1e6`: a DFT period of 5·10⁸ bins; refused naming σ (it aborted).
 #[test]
 fn huge_sigma() {
-    let t = TempDir::new("sigma");
+    let t = TempDir::new("hostile", "sigma");
     valid_npz(&t, "c.npz", false);
     for probe in ["direct", "indirect"] {
         fails(
@@ -462,7 +426,7 @@ fn huge_sigma() {
 /// A flipped byte in a stored `H`: every probe names the CRC (they returned 1e29 peaks).
 #[test]
 fn corrupted_stored_npz() {
-    let t = TempDir::new("crc");
+    let t = TempDir::new("hostile", "crc");
     let p = valid_npz(&t, "c.npz", false);
     let mut b = std::fs::read(&p).unwrap();
     let at = b.len() / 4;
@@ -488,7 +452,7 @@ fn corrupted_stored_npz() {
 /// writing Inf (and `indirect` an all-zero volume from an empty Γ).
 #[test]
 fn huge_finite_values() {
-    let t = TempDir::new("huge");
+    let t = TempDir::new("hostile", "huge");
     let mut c = capture();
     let peak = c.data.iter().fold(0.0f32, |a, &b| a.max(b));
     c.data.iter_mut().for_each(|x| *x *= 1e30 / peak);
@@ -526,7 +490,7 @@ fn huge_finite_values() {
 /// (the output was all NaN).
 #[test]
 fn absurd_bin_width() {
-    let t = TempDir::new("dt");
+    let t = TempDir::new("hostile", "dt");
     let good = valid_npz(&t, "good.npz", false);
     let mut m = members(&good);
     m.insert(
@@ -553,7 +517,7 @@ const NO_PATH: &str = "no path through the probed points lies in the capture's t
 /// (direct and indirect wrote all-zero images, column failed on the DFT size).
 #[test]
 fn window_without_paths() {
-    let t = TempDir::new("window");
+    let t = TempDir::new("hostile", "window");
     valid_npz(&t, "c.npz", false);
     let far = "-0.2:0.2:3,-0.2:0.2:3,30:31:2";
     let says = ["volume", NO_PATH];
@@ -583,7 +547,7 @@ fn window_without_paths() {
 /// the gate's tail, 10⁻¹⁴ of the scene).
 #[test]
 fn empty_window_is_one_error_on_every_probe() {
-    let t = TempDir::new("empty-window");
+    let t = TempDir::new("hostile", "empty-window");
     let mut c = capture();
     c.geometry.t0 = -3.0;
     vltm::io::npz::write_with(&c, &t.path("early.npz"), false).unwrap();
@@ -657,7 +621,7 @@ fn empty_window_is_one_error_on_every_probe() {
 /// stored entry `info` allocated the claimed 5.1 GB before noticing the entry was short.
 #[test]
 fn address_space_limit_bounds_the_budget() {
-    let t = TempDir::new("ulimit");
+    let t = TempDir::new("hostile", "ulimit");
     let good = valid_npz(&t, "good.npz", true);
     let mut m = members(&good);
     let data = m["H.npy"][128..].to_vec();
@@ -693,7 +657,7 @@ fn address_space_limit_bounds_the_budget() {
 /// (it panicked, exit code 101, on the first error line).
 #[test]
 fn closed_pipes_keep_the_exit_code() {
-    let t = TempDir::new("pipe");
+    let t = TempDir::new("hostile", "pipe");
     valid_npz(&t, "c.npz", false);
     let mut m = members(&t.path("c.npz"));
     m.insert(
@@ -771,7 +735,7 @@ fn peak_rss(dir: &TempDir, args: &[&str]) -> (u64, Output) {
 /// lookup grid (a 16·N-byte carrier) just to price it, outside the budget: 243 MB.
 #[test]
 fn measured_peak_stays_in_the_budget() {
-    let t = TempDir::new("peak");
+    let t = TempDir::new("hostile", "peak");
     let fixture = support::fixture("two_patches.npz");
     let f = fixture.to_str().unwrap();
     let vol = "-0.5:0.5:5,-0.5:0.5:5,0.5:1:5";
@@ -835,7 +799,7 @@ fn measured_peak_stays_in_the_budget() {
 /// (writing the `.npz` copied the capture: 400 MB).
 #[test]
 fn simulate_peak_stays_in_the_budget() {
-    let t = TempDir::new("sim-peak");
+    let t = TempDir::new("hostile", "sim-peak");
     let mut s: serde_json::Value = serde_json::from_str(SCENE).unwrap();
     s["setup"]["nt"] = 12_500_000u64.into();
     s["setup"]["spads"]["grid"] = serde_json::json!([1, 1]);
@@ -983,7 +947,7 @@ fn patch(bytes: &mut [u8], from: &[u8], to: &[u8]) {
 /// all-zero or non-finite output with exit 0).
 #[test]
 fn hdf5_layouts_without_data() {
-    let t = TempDir::new("h5");
+    let t = TempDir::new("hostile", "h5");
     let good = t.path("good.hdf5");
     write_tal(&good, false);
     let sane = vltm::io::tal::read_all(&good).unwrap();
@@ -1022,7 +986,7 @@ fn hdf5_layouts_without_data() {
 /// value and its laser row, SPAD and bin; `info` says it too; the clean file says nothing.
 #[test]
 fn implausible_tal_values_are_named() {
-    let t = TempDir::new("implausible");
+    let t = TempDir::new("hostile", "implausible");
     let good = t.path("good.hdf5");
     write_tal(&good, false);
     let (addr, _) = h_layout(&good);
@@ -1074,7 +1038,7 @@ fn implausible_tal_values_are_named() {
 /// refused too (it read fill values, or aborted sizing 32 GB).
 #[test]
 fn hdf5_chunked_without_chunk_index() {
-    let t = TempDir::new("h5chunk");
+    let t = TempDir::new("hostile", "h5chunk");
     let chunked = t.path("chunked.hdf5");
     write_tal(&chunked, true);
     let (index, _) = h_layout(&chunked);
@@ -1121,7 +1085,7 @@ fn hdf5_chunked_without_chunk_index() {
 /// `--out` naming the input is refused before anything is read; the input is intact.
 #[test]
 fn output_naming_the_input() {
-    let t = TempDir::new("same");
+    let t = TempDir::new("hostile", "same");
     valid_npz(&t, "c.npz", false);
     fails(
         &t,
@@ -1138,7 +1102,7 @@ fn full_device_gives_one_line() {
     if !Path::new("/dev/full").exists() {
         return;
     }
-    let t = TempDir::new("full");
+    let t = TempDir::new("hostile", "full");
     valid_npz(&t, "c.npz", false);
     std::fs::write(t.path("scene.json"), SCENE).unwrap();
     fails(
@@ -1158,7 +1122,7 @@ fn write_failing_partway_keeps_the_previous_file() {
     if !Path::new("/bin/sh").exists() {
         return;
     }
-    let t = TempDir::new("partway");
+    let t = TempDir::new("hostile", "partway");
     valid_npz(&t, "c.npz", false);
     std::fs::write(t.path("scene.json"), SCENE).unwrap();
     // 16³ voxels: a 16 kB volume; the capture is over 1 kB. The limit is 1 block (512 or
@@ -1188,7 +1152,7 @@ fn write_failing_partway_keeps_the_previous_file() {
 /// panicked).
 #[test]
 fn too_many_threads() {
-    let t = TempDir::new("threads");
+    let t = TempDir::new("hostile", "threads");
     valid_npz(&t, "c.npz", false);
     fails(
         &t,
@@ -1202,7 +1166,7 @@ fn too_many_threads() {
 /// escape (it reached stderr as it was), and a JSON key holding one.
 #[test]
 fn control_bytes_are_escaped() {
-    let t = TempDir::new("ctl");
+    let t = TempDir::new("hostile", "ctl");
     vltm::io::ptu::write_t3(&capture(), t.path("e.ptu"), &Default::default()).unwrap();
     let mut b = std::fs::read(t.path("e.ptu")).unwrap();
     // The first tag after the 8-byte magic and 8-byte version: a 32-byte ident, an i32 index,
@@ -1230,7 +1194,7 @@ fn control_bytes_are_escaped() {
 /// Streams of every crafted file above, read through the library: no panic.
 #[test]
 fn library_reads_of_valid_files_still_work() {
-    let t = TempDir::new("lib");
+    let t = TempDir::new("hostile", "lib");
     let p = valid_npz(&t, "c.npz", false);
     let mut s = vltm::io::npz::open_stream(&p).unwrap().unwrap();
     let mut row = Vec::new();

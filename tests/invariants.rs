@@ -566,7 +566,7 @@ fn image_equals_finish_on_other_voxels() {
             assert_eq!(o1, o2);
         } else {
             assert!(
-                matches!(imaged, Err(vltm_kernel::Error::Incompatible(_))),
+                matches!(imaged, Err(vltm_kernel::ArgumentError::Incompatible(_))),
                 "{t:?}/{g:?}: {imaged:?}"
             );
         }

@@ -27,7 +27,7 @@ use vltm::volume::Volume;
 
 const EXEC: Exec<'static> = Exec {
     progress: None,
-    path: vltm::probe::Path::Auto,
+    path: vltm::probe::EvalPath::Auto,
 };
 
 /// `fixtures/ytal/<capture>/<file>`, checked (`support::fixture`).

@@ -22,6 +22,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
+use support::cmd::{TempDir, npz_fixture, read_npy, text, vltm};
 use vltm::io::RowSource;
 use vltm::io::ptu::{self, FollowOptions, Follower, PtuSource, Sidecar, T3WriteOptions};
 
@@ -29,45 +30,6 @@ const SPEC: &str = "-0.6:0.6:13,-0.1:0.1:3,0.5:1.2:8";
 const FOCUS: &str = "-0.45,0,0.8";
 /// The paper's dwell per laser row.
 const DWELL_MS: u64 = 87;
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn fixture(stem: &str) -> PathBuf {
-    support::fixture(&format!("{stem}.npz"))
-}
-
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(test: &str) -> Self {
-        let p = std::env::temp_dir().join(format!("vltm-live-{}-{test}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).expect("create temp dir");
-        Self(p)
-    }
-    fn path(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-fn vltm(args: &[&str]) -> Output {
-    Command::new(support::vltm_bin())
-        .args(args)
-        .output()
-        .expect("run vltm")
-}
-
-fn text(b: &[u8]) -> String {
-    String::from_utf8_lossy(b).into_owned()
-}
 
 fn ok(o: &Output) {
     assert!(
@@ -92,10 +54,9 @@ fn fails_with(o: &Output, needles: &[&str]) -> String {
     line.to_string()
 }
 
+/// The values of a `.npy` volume.
 fn npy(p: &Path) -> Vec<f32> {
-    vltm::export::npy::read_f32(p)
-        .unwrap_or_else(|e| panic!("{}: {e}", p.display()))
-        .0
+    read_npy(p).0
 }
 
 /// `a` equals `b` within `1e-6·max|b|`; returns how many values are bit-identical.
@@ -118,7 +79,7 @@ fn close(a: &[f32], b: &[f32], what: &str) -> usize {
 /// A small PTU capture: `two_patches_single` (64 rows, one SPAD) scaled to whole photons,
 /// its rows [`DWELL_MS`] apart on the sync clock, as the paper's scan.
 fn make_ptu(dir: &TempDir) -> (PathBuf, PathBuf) {
-    let mut c = vltm::io::open(&fixture("two_patches_single")).expect("fixture");
+    let mut c = vltm::io::open(&npz_fixture("two_patches_single")).expect("fixture");
     let max = c.data.iter().fold(0f32, |m, &x| m.max(x));
     for x in &mut c.data {
         *x = (*x / max * 400.0).round();
@@ -259,8 +220,8 @@ fn free_port() -> u16 {
 
 #[test]
 fn replay_matches_the_offline_commands() {
-    let d = TempDir::new("replay");
-    let cap = fixture("two_patches");
+    let d = TempDir::new("live", "replay");
+    let cap = npz_fixture("two_patches");
     let cap = cap.to_str().expect("utf-8");
     let out = d.path("live.npy");
     let o = vltm(&[
@@ -367,7 +328,7 @@ fn replay_matches_the_offline_commands() {
 
 #[test]
 fn follows_a_ptu_file_written_by_another_process() {
-    let d = TempDir::new("follow");
+    let d = TempDir::new("live", "follow");
     let (src, side) = make_ptu(&d);
     let live_ptu = d.path("acq.ptu");
     std::fs::copy(&side, live_ptu.with_extension("json")).expect("sidecar");
@@ -482,7 +443,7 @@ fn follows_a_ptu_file_written_by_another_process() {
 
 #[test]
 fn a_marker_that_never_comes_keeps_the_rows_before_it_and_resumes() {
-    let d = TempDir::new("never");
+    let d = TempDir::new("live", "never");
     let (src, side) = make_ptu(&d);
     let live_ptu = d.path("acq.ptu");
     std::fs::copy(&side, live_ptu.with_extension("json")).expect("sidecar");
@@ -572,7 +533,7 @@ fn a_marker_that_never_comes_keeps_the_rows_before_it_and_resumes() {
 
 #[test]
 fn bad_streams_fail_with_one_line_naming_the_position() {
-    let d = TempDir::new("bad");
+    let d = TempDir::new("live", "bad");
     let (src, side) = make_ptu(&d);
     let bytes = std::fs::read(&src).expect("read");
     let (_, rows) = row_offsets(&bytes, &side);
@@ -662,7 +623,7 @@ fn bad_streams_fail_with_one_line_naming_the_position() {
 /// stream is an error naming the position, never a panic or a wrong row.
 #[test]
 fn follower_equals_ptu_source_and_truncations_fail_cleanly() {
-    let d = TempDir::new("follower");
+    let d = TempDir::new("live", "follower");
     let (src, side) = make_ptu(&d);
     let bytes = std::fs::read(&src).expect("read");
     let sc = Sidecar::load(&side).expect("sidecar");
@@ -747,7 +708,7 @@ fn follow_bytes(bytes: &[u8], side: &Path, skip: usize) -> (Vec<ptu::FollowedRow
 /// them again for the in-focus indirect light at the end, and equals the offline commands.
 #[test]
 fn resume_passes_over_the_rows_the_states_hold() {
-    let d = TempDir::new("skip");
+    let d = TempDir::new("live", "skip");
     let (src, side) = make_ptu(&d);
     let bytes = std::fs::read(&src).expect("read");
     let (all, c0) = follow_bytes(&bytes, &side, 0);
@@ -846,7 +807,7 @@ fn resume_passes_over_the_rows_the_states_hold() {
 /// whole stream then resumes from them (the rows the states hold passed over unbinned).
 #[test]
 fn stdin_that_stops_sending_times_out_and_resumes() {
-    let d = TempDir::new("stdin-idle");
+    let d = TempDir::new("live", "stdin-idle");
     let (src, side) = make_ptu(&d);
     let bytes = std::fs::read(&src).expect("read");
     let (_, rows) = row_offsets(&bytes, &side);
@@ -945,8 +906,8 @@ fn stdin_that_stops_sending_times_out_and_resumes() {
 /// line as `vltm direct`'s; one with few paths in it warns as `direct` does.
 #[test]
 fn live_applies_the_window_rule_of_every_probe() {
-    let d = TempDir::new("window");
-    let cap = fixture("two_patches");
+    let d = TempDir::new("live", "window");
+    let cap = npz_fixture("two_patches");
     let cap = cap.to_str().expect("utf-8");
     let far = "-0.2:0.2:3,-0.2:0.2:3,30:31:2";
     let o = vltm(&[
@@ -1018,8 +979,8 @@ const FW_FOCUS: &str = "-0.075,-0.075,0.5";
 /// parameters is refused with one line naming the field.
 #[test]
 fn resumes_from_the_firmwares_state() {
-    let d = TempDir::new("firmware");
-    let scene = root().join("kernel/firmware/fixture/scene.json");
+    let d = TempDir::new("live", "firmware");
+    let scene = support::repo_root().join("kernel/firmware/fixture/scene.json");
     let cap = d.path("scene.npz");
     let c = cap.to_str().expect("utf-8");
     ok(&vltm(&[
@@ -1096,7 +1057,7 @@ fn resumes_from_the_firmwares_state() {
     let s = vltm::probe::Partial::read(&d.path("live.direct.part")).expect("state");
     assert_eq!(s.rows(), vec![0..16]);
     // Another capture, other parameters: one line naming the field.
-    let other = fixture("two_patches");
+    let other = npz_fixture("two_patches");
     let o = live(other.to_str().expect("utf-8"), &[], "x.npy");
     fails_with(
         &o,

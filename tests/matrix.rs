@@ -8,7 +8,7 @@ mod support;
 use std::path::PathBuf;
 
 use vltm::io::{self, RowSource};
-use vltm::probe::{self, ColumnGate, Exec, Path, Pattern, Shell, Wave};
+use vltm::probe::{self, ColumnGate, EvalPath, Exec, Pattern, Shell, Wave};
 use vltm::volume::Volume;
 use vltm_kernel::Point;
 
@@ -30,7 +30,7 @@ fn source() -> Box<dyn RowSource> {
 /// matrix uses.
 fn band() -> Exec<'static> {
     Exec {
-        path: Path::Band,
+        path: EvalPath::Band,
         ..Exec::default()
     }
 }

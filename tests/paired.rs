@@ -28,7 +28,7 @@ use std::process::Command;
 use vltm::io::{Capture, Geometry};
 use vltm::kernel::{Config, Legs, Params, Point, Weights};
 use vltm::probe::fast::LookupDiagonal;
-use vltm::probe::{self, Exec, Output, Path, Wave};
+use vltm::probe::{self, EvalPath, Exec, Output, Wave};
 use vltm::volume::Volume;
 
 const U32: f64 = f32::EPSILON as f64 / 2.0;
@@ -38,10 +38,10 @@ const INTERP: f64 = 2e-5;
 const PHASOR: f64 = 1.01 * vltm::probe::fast::phasor::TOLERANCE + INTERP;
 
 /// The interpolation allowance of a path.
-fn interp(path: Path) -> f64 {
+fn interp(path: EvalPath) -> f64 {
     match path {
-        Path::Phasor => PHASOR,
-        Path::Band => 0.0,
+        EvalPath::Phasor => PHASOR,
+        EvalPath::Band => 0.0,
         _ => INTERP,
     }
 }
@@ -211,7 +211,7 @@ fn rng_sigma(seed: u64) -> bool {
 }
 
 impl Case {
-    fn direct(&self, path: Path) -> vltm::Result<Output> {
+    fn direct(&self, path: EvalPath) -> vltm::Result<Output> {
         probe::direct(
             &mut self.capture.clone(),
             &self.volume,
@@ -324,13 +324,13 @@ fn paired_diagonal_matches_reference_flat_and_bumpy() {
         let (eps, eps_pb) = c.tol();
         let truth = c.truth();
         let scale = c.scales();
-        let band = c.direct(Path::Band).expect("band");
-        let lookup = c.direct(Path::Lookup).expect("lookup");
-        let auto = c.direct(Path::Auto).expect("auto");
-        let phasor = c.direct(Path::Phasor).expect("phasor");
-        assert_eq!(band.path, Path::Band);
-        assert_eq!(lookup.path, Path::Lookup);
-        assert_eq!(phasor.path, Path::Phasor);
+        let band = c.direct(EvalPath::Band).expect("band");
+        let lookup = c.direct(EvalPath::Lookup).expect("lookup");
+        let auto = c.direct(EvalPath::Auto).expect("auto");
+        let phasor = c.direct(EvalPath::Phasor).expect("phasor");
+        assert_eq!(band.path, EvalPath::Band);
+        assert_eq!(lookup.path, EvalPath::Lookup);
+        assert_eq!(phasor.path, EvalPath::Phasor);
         assert_eq!(phasor.report.rows, g.lasers.len() as u64);
         let wp = worst(&phasor.values, &truth, &scale, eps + PHASOR);
         assert!(
@@ -338,7 +338,7 @@ fn paired_diagonal_matches_reference_flat_and_bumpy() {
             "seed {seed} (bumpy {bumpy}): phasor vs reference {wp}"
         );
         worst_phasor = worst_phasor.max(wp);
-        assert_ne!(auto.path, Path::Planar, "seed {seed}");
+        assert_ne!(auto.path, EvalPath::Planar, "seed {seed}");
         assert_eq!(band.report.rows, g.lasers.len() as u64);
         let wb = worst(&band.values, &truth, &scale, eps);
         let wl = worst(&lookup.values, &truth, &scale, eps + INTERP);
@@ -364,7 +364,7 @@ fn paired_diagonal_matches_reference_flat_and_bumpy() {
             "seed {seed} (bumpy {bumpy}): lookup vs band {wlb}"
         );
         let e = c
-            .direct(Path::Planar)
+            .direct(EvalPath::Planar)
             .expect_err("no FFT path for a paired scan");
         let msg = e.to_string();
         assert!(
@@ -384,23 +384,23 @@ fn paired_diagonal_matches_reference_flat_and_bumpy() {
 fn phasor_is_identical_on_1_and_2_threads() {
     for seed in [3u64, 4, 11] {
         let c = build(seed, seed.is_multiple_of(2));
-        let on = |threads: usize, path: Path| {
+        let on = |threads: usize, path: EvalPath| {
             rayon::ThreadPoolBuilder::new()
                 .num_threads(threads)
                 .build()
                 .expect("pool")
                 .install(|| c.direct(path).expect("phasor"))
         };
-        let (one, two) = (on(1, Path::Phasor), on(2, Path::Phasor));
-        assert_eq!(one.path, Path::Phasor);
+        let (one, two) = (on(1, EvalPath::Phasor), on(2, EvalPath::Phasor));
+        assert_eq!(one.path, EvalPath::Phasor);
         assert_eq!(one.values, two.values, "seed {seed}");
         assert_eq!(one.report.rows, two.report.rows);
     }
     // Auto: many voxels on a paired scan, the phasor path.
     let mut c = build(5, false);
     c.volume = Volume::parse("-0.3:0.3:24,-0.3:0.3:24,0.4:1.0:16").expect("volume");
-    let auto = c.direct(Path::Auto).expect("auto");
-    assert_eq!(auto.path, Path::Phasor);
+    let auto = c.direct(EvalPath::Auto).expect("auto");
+    assert_eq!(auto.path, EvalPath::Phasor);
 }
 
 /// Teeth: reading the same histograms as a confocal scan (SPADs on the laser spots) moves
@@ -425,7 +425,7 @@ fn paired_is_not_confocal() {
                 &c.wave,
                 Exec {
                     progress: None,
-                    path: Path::Band,
+                    path: EvalPath::Band,
                 },
             )
             .expect("band");
@@ -451,7 +451,7 @@ fn paired_columns_are_refused_with_one_line() {
         &c.wave,
         Exec {
             progress: None,
-            path: Path::Auto,
+            path: EvalPath::Auto,
         },
     )
     .expect_err("columns need a SPAD grid");
@@ -547,9 +547,9 @@ fn simulated_paired_captures_match_reference() {
         let (eps, _) = case.tol();
         let truth = case.truth();
         let scale = case.scales();
-        for path in [Path::Band, Path::Lookup] {
+        for path in [EvalPath::Band, EvalPath::Lookup] {
             let o = case.direct(path).expect("direct");
-            let tol = if path == Path::Lookup {
+            let tol = if path == EvalPath::Lookup {
                 eps + INTERP
             } else {
                 eps
@@ -819,10 +819,10 @@ fn cos_weights_match_reference_flat_and_bumpy() {
         let normals = (!g.normals.flat()).then(|| (&g.normals.lasers[..], &g.normals.spads[..]));
         assert_eq!(normals.is_some(), bumpy);
         let truth = c.truth_cos(normals);
-        for path in [Path::Band, Path::Lookup, Path::Auto] {
+        for path in [EvalPath::Band, EvalPath::Lookup, EvalPath::Auto] {
             let out = c.direct(path).expect("cos weights");
-            assert_ne!(out.path, Path::Planar);
-            let tol = if path == Path::Band {
+            assert_ne!(out.path, EvalPath::Planar);
+            let tol = if path == EvalPath::Band {
                 eps
             } else {
                 eps + INTERP
@@ -830,7 +830,7 @@ fn cos_weights_match_reference_flat_and_bumpy() {
             let w = worst(&out.values, &truth, &scale, tol);
             assert!(w <= 1.0, "seed {seed} (bumpy {bumpy}) {path:?}: {w}");
             worst_ok = worst_ok.max(w);
-            if path == Path::Band {
+            if path == EvalPath::Band {
                 if bumpy {
                     let flat = c.truth_cos(None);
                     let t = worst(&out.values, &flat, &scale, eps);
@@ -843,7 +843,7 @@ fn cos_weights_match_reference_flat_and_bumpy() {
                 least_inv = least_inv.min(t);
             }
         }
-        let e = c.direct(Path::Planar).expect_err("no FFT path");
+        let e = c.direct(EvalPath::Planar).expect_err("no FFT path");
         let msg = e.to_string();
         assert!(msg.contains("path") && !msg.contains('\n'), "{msg}");
     }
@@ -866,7 +866,7 @@ fn cos_weights_refused_where_they_do_not_apply() {
         &c.wave,
         Exec {
             progress: None,
-            path: Path::Auto,
+            path: EvalPath::Auto,
         },
     )
     .expect_err("columns do not take cos weights");
@@ -885,7 +885,7 @@ fn cos_weights_refused_where_they_do_not_apply() {
         &c.wave,
         Exec {
             progress: None,
-            path: Path::Auto,
+            path: EvalPath::Auto,
         },
     )
     .expect_err("a SPAD grid does not take cos weights");
@@ -932,7 +932,7 @@ fn compensate_laser_uses_each_spots_normal() {
             };
             let ex = Exec {
                 progress: None,
-                path: Path::Band,
+                path: EvalPath::Band,
             };
             probe::direct(cap, &c.volume, &wave, ex)
                 .expect("direct")
@@ -989,7 +989,7 @@ fn swap_roles_on_paired_scans() {
     assert_eq!(vltm::io::swap_roles(&s).unwrap(), c.capture);
     let ex = || Exec {
         progress: None,
-        path: Path::Band,
+        path: EvalPath::Band,
     };
     let a = probe::direct(&mut c.capture.clone(), &c.volume, &c.wave, ex()).unwrap();
     let b = probe::direct(&mut s.clone(), &c.volume, &c.wave, ex()).unwrap();

@@ -1,14 +1,14 @@
 //! Partial accumulators (`vltm::probe::partial`): a scan split by laser rows, each part's
 //! state serialised and read back, merged and finished, equals one pass over all rows —
-//! bit-identical where the summation order is the same (one part holding every row, one
-//! thread), else within 1e-6 relative — for every probe and evaluation path, on a committed
+//! bit-identical where the summation order is the same (one part holding every row, the
+//! same number of threads), else within 1e-6 relative — for every probe and evaluation path, on a committed
 //! fixture and on the path-traced y-tal capture (`fixtures/ytal`). Parts of other captures or parameters,
 //! overlapping or missing rows, and damaged states are refused with one-line errors.
 
 mod support;
 
 use std::path::{Path, PathBuf};
-use vltm::exec::{Exec, Path as EvalPath};
+use vltm::exec::{EvalPath, Exec};
 use vltm::io::{self, RowSource};
 use vltm::probe::{
     self, ColumnGate, IndirectOptions, LeakOptions, Partial, Shell, Task, Wave, partial,
@@ -34,24 +34,35 @@ fn source(p: &Path) -> Box<dyn RowSource> {
     io::open_source(p).expect("open")
 }
 
+/// The task's state over the rows `rows` of the capture `p` (default wave; size 1, name `x`).
+fn accumulate(
+    p: &Path,
+    volume: &Volume,
+    task: &Task,
+    path: EvalPath,
+    rows: std::ops::Range<usize>,
+) -> Partial {
+    let mut src = source(p);
+    partial::accumulate(
+        &mut *src,
+        1,
+        "x",
+        volume,
+        task,
+        &Wave::default(),
+        exec(path),
+        rows,
+    )
+    .expect("part")
+}
+
 /// The task's state over each row range, through bytes, merged in reverse order, finished.
 fn split(p: &Path, volume: &Volume, task: &Task, path: EvalPath, cuts: &[usize]) -> Vec<f32> {
     let parts: Vec<Partial> = cuts
         .windows(2)
         .rev()
         .map(|w| {
-            let mut src = source(p);
-            let part = partial::accumulate(
-                &mut *src,
-                1,
-                "x",
-                volume,
-                task,
-                &Wave::default(),
-                exec(path),
-                w[0]..w[1],
-            )
-            .expect("part");
+            let part = accumulate(p, volume, task, path, w[0]..w[1]);
             let bytes = part.to_bytes();
             assert_eq!(bytes.len(), part.byte_len());
             Partial::from_bytes(&bytes, Path::new("part")).expect("read back")
@@ -182,23 +193,38 @@ fn split_and_merge_equals_one_pass() {
     }
 }
 
-/// With one thread and one part holding every row, the summation order is that of one pass:
-/// the finished state is bit-identical.
+/// One part holding every row sums the rows in the order of one pass: on one thread and on
+/// three, the finished state is bit-identical. Which worker's partial sum holds which row
+/// depends on the row's index only, never on the thread that ran it: every probe's state is
+/// the same bytes run to run.
 #[test]
 fn one_part_is_bit_identical_to_one_pass() {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .expect("pool");
-    pool.install(|| {
-        let p = fixture();
-        let volume = Volume::parse(GRID).expect("grid");
-        for (name, task, path) in tasks(&volume, &p) {
-            let one = one_pass(&p, &volume, &task, path);
-            let all = split(&p, &volume, &task, path, &[0, 64]);
-            assert!(one == all, "{name}: not bit-identical");
-        }
-    });
+    for threads in [1, 3] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("pool");
+        pool.install(|| {
+            let p = fixture();
+            let volume = Volume::parse(GRID).expect("grid");
+            for (name, task, path) in tasks(&volume, &p) {
+                let one = one_pass(&p, &volume, &task, path);
+                let all = split(&p, &volume, &task, path, &[0, 64]);
+                assert!(
+                    one == all,
+                    "{name}: not bit-identical on {threads} thread(s)"
+                );
+                let state = || accumulate(&p, &volume, &task, path, 0..64).to_bytes();
+                let first = state();
+                for run in 1..4 {
+                    assert!(
+                        state() == first,
+                        "{name}: on {threads} thread(s), run {run}'s state differs from run 0's"
+                    );
+                }
+            }
+        });
+    }
 }
 
 /// The path-traced y-tal capture of `fixtures/ytal` (streamed from HDF5), direct light on the default path and a
@@ -366,18 +392,7 @@ fn column_amplitudes_and_leak_energy() {
             gate: ColumnGate::TwoBounce,
             shell,
         };
-        let mut src = source(&p);
-        let part = partial::accumulate(
-            &mut *src,
-            1,
-            "x",
-            &volume,
-            &task,
-            &Wave::default(),
-            exec(path),
-            0..64,
-        )
-        .expect("part");
+        let part = accumulate(&p, &volume, &task, path, 0..64);
         let f = part.finish_with(true).expect("finish");
         let a = f.amplitudes.expect("amplitudes of a two-bounce column");
         let sq: Vec<f32> = a.iter().map(|z| z.norm_sqr() as f32).collect();
@@ -402,18 +417,7 @@ fn column_amplitudes_and_leak_energy() {
         gate: ColumnGate::None,
         shell: Shell::ALL,
     };
-    let mut src = source(&p);
-    let part = partial::accumulate(
-        &mut *src,
-        1,
-        "x",
-        &volume,
-        &none,
-        &Wave::default(),
-        Exec::default(),
-        0..64,
-    )
-    .expect("part");
+    let part = accumulate(&p, &volume, &none, EvalPath::Auto, 0..64);
     assert!(part.finish_with(true).expect("finish").amplitudes.is_none());
 
     let mut src = source(&p);

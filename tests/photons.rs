@@ -3,7 +3,9 @@
 //! dropped and counted; the higher-order gate refuses photon rows.
 
 use proptest::prelude::*;
-use vltm_kernel::{Config, Error, Gate, Params, Point, Probe, RowBuffer, Scan, Target, Weights};
+use vltm_kernel::{
+    ArgumentError, Config, Gate, Params, Point, Probe, RowBuffer, Scan, Target, Weights,
+};
 
 /// A small scan: apertures, voxels and u16 counts `[Kl][Ks][Nt]`.
 #[derive(Clone, Debug)]
@@ -156,7 +158,7 @@ fn higher_order_gate_refuses_photon_rows() {
     let row = rows.end_photons(&scan, [0.0, 0.0, 0.0]).unwrap();
     assert_eq!(
         probe.push_row(&scan, &row),
-        Err(Error::Length {
+        Err(ArgumentError::Length {
             what: "row histograms",
             expected: 64,
             found: 0
@@ -165,6 +167,6 @@ fn higher_order_gate_refuses_photon_rows() {
     assert_eq!(probe.report().rows, 0);
     assert!(matches!(
         rows.end_photons(&scan, [f32::NAN, 0.0, 0.0]),
-        Err(Error::NonFinite { .. })
+        Err(ArgumentError::NonFinite { .. })
     ));
 }

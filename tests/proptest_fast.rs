@@ -1,9 +1,9 @@
-//! Property tests of the host's fast paths (`vltm::probe::Path`): the planar FFT
+//! Property tests of the host's fast paths (`vltm::probe::EvalPath`): the planar FFT
 //! convolution (`host/src/probe/fast/planar.rs`) for the diagonal and for imaging factorised
 //! columns, and the baseband lookup diagonal (`LookupDiagonal`,
 //! `host/src/probe/fast/lookup/`), against the `f64` time-domain reference
 //! (`reference/mod.rs`) and against the kernel's band sum
-//! (`Path::Band`), through the public API (`probe::direct`, `probe::column`) on in-memory
+//! (`EvalPath::Band`), through the public API (`probe::direct`, `probe::column`) on in-memory
 //! captures. Stage 1 of every row goes through `fast::BandDft` (sgemm) on all paths.
 //!
 //! Random scans ([`case`]): laser grid 1–4 × 1–4; SPAD grid nsx × nsy in 1–6 (weighted
@@ -18,15 +18,15 @@
 //!
 //! | test | checks |
 //! |---|---|
-//! | `planar_diagonal_matches_reference` (128 cases) | `Path::Planar`, `Path::Band` and `Path::Lookup` diagonals vs the reference (`ε·S`, lookup `(ε + ε_interp)·S`); guard-fallback voxels equal the band path (≤ 1e-7·S; in fact bit-identical); coverage of fallback, line, single-SPAD and r = 3 cases |
-//! | `planar_diagonal_matches_band` (256) | planar vs band on the voxels inside the guard (`ε_pb·S`), `Path::Auto` vs band (`(ε_pb + ε_interp)·S`); with and without `compensate_laser` |
+//! | `planar_diagonal_matches_reference` (128 cases) | `EvalPath::Planar`, `EvalPath::Band` and `EvalPath::Lookup` diagonals vs the reference (`ε·S`, lookup `(ε + ε_interp)·S`); guard-fallback voxels equal the band path (≤ 1e-7·S; in fact bit-identical); coverage of fallback, line, single-SPAD and r = 3 cases |
+//! | `planar_diagonal_matches_band` (256) | planar vs band on the voxels inside the guard (`ε_pb·S`), `EvalPath::Auto` vs band (`(ε_pb + ε_interp)·S`); with and without `compensate_laser` |
 //! | `planar_column_matches_band_and_reference` (128) | two-bounce columns: planar and `Auto` vs band on every voxel (`ε_pb·S`), `Lookup` an error, planar and band vs the reference's Eq. 14 element on the alias-free voxels (`ε·S`), equal alias counts matching the geometry |
 //! | `lookup_diagonal_matches_reference_and_band` (96) | the lookup and `Auto` diagonals on irregular SPADs (jitter ≤ 5 cm), tilted SPAD planes and shuffled, jittered point-list volumes: vs the reference `(ε + ε_interp)·S`, vs band `(ε_pb + ε_interp)·S` |
-//! | `confocal_diagonal_matches_reference_and_band` (96) | confocal captures (the case's SPAD grid as the wall points, laser and SPAD together; a quarter with one point jittered off the lattice): the confocal FFT convolution (`Path::Planar`), band and lookup vs the sum of one-pair references (`ε·S`, lookup `(ε + ε_interp)·S`), the convolution vs band on every voxel (`ε_pb·S`, also under `compensate_laser`), `Auto` vs band (`(ε_pb + ε_interp)·S`); jittered walls: `Path::Planar` an error; coverage of paths outside the guard, legs and r = 3 |
-//! | `forced_paths_that_do_not_apply_are_errors` | `Path::Lookup` on a column and `Path::Planar` on a higher-order or un-gated column → `Error::Argument` naming `--path`; the paths that apply succeed (every diagonal path on a confocal grid) |
-//! | `planar_path_rejects_non_planar_inputs` | point list, pitch ratio 2/3 or 3/2, one SPAD moved 1 mm, L-shaped or tilted SPADs, a confocal wall point moved 1 mm, a confocal point-list volume: `Path::Planar` → `Error::Argument` naming `--path` and the reason (diagonal and, not confocal, column); `Path::Auto` succeeds and equals `Path::Band` (within `(ε_pb + ε_interp)·S`, as Auto may pick the lookup) |
+//! | `confocal_diagonal_matches_reference_and_band` (96) | confocal captures (the case's SPAD grid as the wall points, laser and SPAD together; a quarter with one point jittered off the lattice): the confocal FFT convolution (`EvalPath::Planar`), band and lookup vs the sum of one-pair references (`ε·S`, lookup `(ε + ε_interp)·S`), the convolution vs band on every voxel (`ε_pb·S`, also under `compensate_laser`), `Auto` vs band (`(ε_pb + ε_interp)·S`); jittered walls: `EvalPath::Planar` an error; coverage of paths outside the guard, legs and r = 3 |
+//! | `forced_paths_that_do_not_apply_are_errors` | `EvalPath::Lookup` on a column and `EvalPath::Planar` on a higher-order or un-gated column → `Error::Argument` naming `--path`; the paths that apply succeed (every diagonal path on a confocal grid) |
+//! | `planar_path_rejects_non_planar_inputs` | point list, pitch ratio 2/3 or 3/2, one SPAD moved 1 mm, L-shaped or tilted SPADs, a confocal wall point moved 1 mm, a confocal point-list volume: `EvalPath::Planar` → `Error::Argument` naming `--path` and the reason (diagonal and, not confocal, column); `EvalPath::Auto` succeeds and equals `EvalPath::Band` (within `(ε_pb + ε_interp)·S`, as Auto may pick the lookup) |
 //! | `cropped_axis_matches_uncropped_and_reference` (64) | the automatic crop of the time axis (`Wave::crop`) on long axes (Nt × 8, up to 2,400 bins, the returns anywhere in the window): the cropped band and `Auto` diagonals vs the reference (`ε·S`, `Auto` `(ε + ε_interp)·S`) and vs the uncropped ones (`(2ε + ε_interp)·S`); the cropped two-bounce column vs the uncropped one on the alias-free voxels, equal alias counts; `matrix` from the focus and `relight` by it, cropped and not, vs the uncropped column (`2ε·S`); the cropped `row` at the focus vs the uncropped one (`2ε·S` of its own elements); the crop recorded in `Output::crop` and its configuration of the kept bins; coverage: most cases cropped |
-//! | `resampled_volumes_match_reference_and_band` (96) | off-lattice grids (pitch 0.36–1.7 × a wall pitch of 0.12–0.6 λ) on planar and confocal scans, `Path::Planar` forced: resampled from a support grid (`vltm::probe::resample`) vs the reference `(ε + e_rs)·S` and vs band `(ε_pb + e_rs)·S`, `e_rs` the plan's stated bound; a bound above `MAX_ERROR` → `Error::Argument` naming `--path`; `Auto` vs band. 1,000 cases: 0.26 of the reference tolerance, 0.060 of the band one; a 0.003-pitch shift of the interpolator fails it |
+//! | `resampled_volumes_match_reference_and_band` (96) | off-lattice grids (pitch 0.36–1.7 × a wall pitch of 0.12–0.6 λ) on planar and confocal scans, `EvalPath::Planar` forced: resampled from a support grid (`vltm::probe::resample`) vs the reference `(ε + e_rs)·S` and vs band `(ε_pb + e_rs)·S`, `e_rs` the plan's stated bound; a bound above `MAX_ERROR` → `Error::Argument` naming `--path`; `Auto` vs band. 1,000 cases: 0.26 of the reference tolerance, 0.060 of the band one; a 0.003-pitch shift of the interpolator fails it |
 //! | `tolerances_detect_small_mistakes` | the comparisons fail on small perturbations (below) |
 //! | `spad_order_does_not_matter`, `descending_voxel_axes` | edge cases of the grid detection |
 //!
@@ -85,19 +85,19 @@
 //! printed with `-- --nocapture`.
 
 mod reference;
+mod support;
 
 use proptest::prelude::*;
-use proptest::test_runner::{
-    Config as PtConfig, FileFailurePersistence, RngAlgorithm, RngSeed, TestRunner,
-};
+use proptest::test_runner::{Config as PtConfig, TestRunner};
 use reference::{Reference, p64};
 use std::cell::RefCell;
 use std::collections::BTreeMap;
+use support::prop::Rng;
 use vltm::Error;
 use vltm::io::{Capture, Geometry};
-use vltm::kernel::{Config, Legs, Params, Point, Weights};
+use vltm::kernel::{Config, Params, Point, Weights};
 use vltm::probe::fast::{Confocal as ConfocalFft, LookupDiagonal, Planar};
-use vltm::probe::{self, ColumnGate, Exec, Output, Path, Shell, Wave};
+use vltm::probe::{self, ColumnGate, EvalPath, Exec, Output, Shell, Wave};
 use vltm::volume::Volume;
 
 const SEED: u64 = 0x0fa5_7c0b_ad00_5eed;
@@ -217,26 +217,6 @@ prop_compose! {
     }
 }
 
-/// SplitMix64: the histogram contents come from `Case::seed`.
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn f(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-}
-
 /// A regular grid of wall points, C order over `n`.
 fn wall_grid(n: [usize; 2], origin: [f32; 2], pitch: [f32; 2]) -> Vec<Point> {
     (0..n[0])
@@ -277,13 +257,7 @@ impl Case {
             sigma: self.sigma_over_lambda.map(|r| r * self.lambda),
             band_half_width: self.m,
             t0,
-            legs: match self.legs {
-                None => Legs::WallToWall,
-                Some((laser_origin, sensor_origin)) => Legs::FirstAndLast {
-                    laser_origin,
-                    sensor_origin,
-                },
-            },
+            legs: support::prop::legs(self.legs),
             weights: if self.inv { Weights::Inv } else { Weights::One },
             ..Params::new(self.lambda, self.nt, self.lambda / self.lambda_over_dt)
         }
@@ -420,7 +394,7 @@ fn tau_span(r: &Reference, kind: Kind, focus: Point, voxels: &[Point]) -> (f64, 
         })
 }
 
-const fn exec(path: Path) -> Exec<'static> {
+const fn exec(path: EvalPath) -> Exec<'static> {
     Exec {
         progress: None,
         path,
@@ -437,7 +411,7 @@ impl Scan {
         Config::try_new(&self.params).expect("valid by construction")
     }
 
-    fn direct(&self, path: Path) -> vltm::Result<Output> {
+    fn direct(&self, path: EvalPath) -> vltm::Result<Output> {
         probe::direct(
             &mut self.capture.clone(),
             &self.volume,
@@ -446,7 +420,7 @@ impl Scan {
         )
     }
 
-    fn column(&self, path: Path) -> vltm::Result<Output> {
+    fn column(&self, path: EvalPath) -> vltm::Result<Output> {
         probe::column(
             &mut self.capture.clone(),
             self.focus,
@@ -664,13 +638,8 @@ fn pt_config(seed: u64, cases: u32) -> PtConfig {
             .ok()
             .and_then(|s| s.parse().ok())
             .unwrap_or(cases),
-        rng_algorithm: RngAlgorithm::ChaCha,
-        rng_seed: RngSeed::Fixed(seed),
-        failure_persistence: Some(Box::new(FileFailurePersistence::WithSource(
-            "proptest-regressions",
-        ))),
         source_file: Some(file!()),
-        ..PtConfig::default()
+        ..support::prop::config(seed, cases)
     }
 }
 
@@ -726,7 +695,7 @@ fn count_shapes(c: &Case, s: &mut Summary) {
 // Property 1: planar diagonal vs the float64 reference
 // ---------------------------------------------------------------------------------------------
 
-/// Planar (`Path::Planar`) and band (`Path::Band`) diagonals against the time-domain
+/// Planar (`EvalPath::Planar`) and band (`EvalPath::Band`) diagonals against the time-domain
 /// reference, `|√I − |A_ref|| ≤ ε·S(v)`; voxels with paths outside the guard (evaluated on
 /// the band path by the planar code) equal the band path to the `f32` rounding of the output.
 #[test]
@@ -734,8 +703,8 @@ fn planar_diagonal_matches_reference() {
     let s = property("planar diagonal vs reference", SEED, 128, case(), |c, s| {
         let sc = c.build(Kind::Diagonal);
         let cfg = sc.config();
-        let planar = sc.direct(Path::Planar).expect("planar applies");
-        let band = sc.direct(Path::Band).expect("band");
+        let planar = sc.direct(EvalPath::Planar).expect("planar applies");
+        let band = sc.direct(EvalPath::Band).expect("band");
         prop_assert_eq!(planar.config, cfg, "the host's configuration");
         prop_assert_eq!(band.config, cfg);
         prop_assert_eq!(planar.report.rows, sc.capture.geometry.lasers.len() as u64);
@@ -746,7 +715,7 @@ fn planar_diagonal_matches_reference() {
         let all = vec![true; truth.len()];
         let p = compare(&planar.values, &truth, &scale, eps, &all);
         let b = compare(&band.values, &truth, &scale, eps, &all);
-        let lookup = sc.direct(Path::Lookup).expect("lookup");
+        let lookup = sc.direct(EvalPath::Lookup).expect("lookup");
         let l = compare(&lookup.values, &truth, &scale, eps + tol.interp, &all);
         let outside = sc.outside(Kind::Diagonal, cfg.guard());
         let fb: Vec<bool> = outside.iter().map(|o| *o == Some(true)).collect();
@@ -795,16 +764,16 @@ fn planar_diagonal_matches_reference() {
 // ---------------------------------------------------------------------------------------------
 
 /// Planar vs band on the voxels whose paths all lie inside the guard:
-/// `|√I_planar − √I_band| ≤ ε_pb·S(v)`; `Path::Auto` within the same bound of the band.
+/// `|√I_planar − √I_band| ≤ ε_pb·S(v)`; `EvalPath::Auto` within the same bound of the band.
 #[test]
 fn planar_diagonal_matches_band() {
     let s = property("planar diagonal vs band", SEED ^ 1, 256, case(), |c, s| {
         let mut sc = c.build(Kind::Diagonal);
         sc.wave.compensate_laser = c.compensate;
         let cfg = sc.config();
-        let planar = sc.direct(Path::Planar).expect("planar applies");
-        let band = sc.direct(Path::Band).expect("band");
-        let auto = sc.direct(Path::Auto).expect("auto");
+        let planar = sc.direct(EvalPath::Planar).expect("planar applies");
+        let band = sc.direct(EvalPath::Band).expect("band");
+        let auto = sc.direct(EvalPath::Auto).expect("auto");
         let scale = sc.scales(Kind::Diagonal);
         let tol = sc.tol(Kind::Diagonal);
         let eps_pb = tol.pb;
@@ -849,9 +818,9 @@ fn planar_column_matches_band_and_reference() {
         |c, s| {
             let sc = c.build(Kind::Column);
             let cfg = sc.config();
-            let planar = sc.column(Path::Planar).expect("planar applies");
-            let band = sc.column(Path::Band).expect("band");
-            let auto = sc.column(Path::Auto).expect("auto");
+            let planar = sc.column(EvalPath::Planar).expect("planar applies");
+            let band = sc.column(EvalPath::Band).expect("band");
+            let auto = sc.column(EvalPath::Auto).expect("auto");
             let scale = sc.scales(Kind::Column);
             let tol = sc.tol(Kind::Column);
             let (eps, eps_pb) = (tol.reference, tol.pb);
@@ -860,8 +829,8 @@ fn planar_column_matches_band_and_reference() {
             let ab = compare(&auto.values, &amplitudes(&band), &scale, eps_pb, &all);
             // The lookup path evaluates the diagonal only: forced on a column it is an error.
             prop_assert!(
-                sc.column(Path::Lookup).is_err(),
-                "Path::Lookup column accepted"
+                sc.column(EvalPath::Lookup).is_err(),
+                "EvalPath::Lookup column accepted"
             );
             let aliased = sc.outside(Kind::Column, cfg.alias_free());
             let clean: Vec<bool> = aliased.iter().map(|o| *o == Some(false)).collect();
@@ -941,7 +910,7 @@ fn make_irregular(c: &Case, seed: u64, jitter: f32, tilt: Option<f32>, list: boo
     sc
 }
 
-/// `Path::Lookup` (and `Path::Auto`) on irregular SPADs, tilted SPAD planes and point-list
+/// `EvalPath::Lookup` (and `EvalPath::Auto`) on irregular SPADs, tilted SPAD planes and point-list
 /// volumes: vs the reference `(ε + ε_interp)·S`, vs the band path `(ε_pb + ε_interp)·S` on
 /// every voxel (the lookup applies the kernel's guard).
 #[test]
@@ -953,9 +922,11 @@ fn lookup_diagonal_matches_reference_and_band() {
         irregular(),
         |(c, seed, jitter, tilt, list), s| {
             let sc = make_irregular(c, *seed, *jitter, *tilt, *list);
-            let lookup = sc.direct(Path::Lookup).expect("lookup applies anywhere");
-            let band = sc.direct(Path::Band).expect("band");
-            let auto = sc.direct(Path::Auto).expect("auto");
+            let lookup = sc
+                .direct(EvalPath::Lookup)
+                .expect("lookup applies anywhere");
+            let band = sc.direct(EvalPath::Band).expect("band");
+            let auto = sc.direct(EvalPath::Auto).expect("auto");
             let tol = sc.tol(Kind::Diagonal);
             let truth = sc.reference_amplitudes(Kind::Diagonal);
             let scale = sc.scales(Kind::Diagonal);
@@ -1165,11 +1136,11 @@ impl Confocal {
     }
 }
 
-/// Confocal captures: the confocal FFT convolution (`Path::Planar`), the band path and the
+/// Confocal captures: the confocal FFT convolution (`EvalPath::Planar`), the band path and the
 /// lookup against the sum of one-pair references (`ε·S`, lookup `(ε + ε_interp)·S`), the
 /// convolution against the band path on every voxel (`ε_pb·S`: the guard is applied in the
 /// kernel for wall-to-wall time axes, by band-path voxels with legs in the time axis), and
-/// `Path::Auto` (the convolution, or the lookup / band path for a jittered wall point).
+/// `EvalPath::Auto` (the convolution, or the lookup / band path for a jittered wall point).
 #[test]
 fn confocal_diagonal_matches_reference_and_band() {
     let strategy = (case(), prop::bool::weighted(0.25), any::<bool>());
@@ -1182,11 +1153,11 @@ fn confocal_diagonal_matches_reference_and_band() {
             let jitter = if *jittered { 0.013 } else { 0.0 };
             let cc = c.build_confocal(jitter);
             let sc = &cc.scan;
-            let band = sc.direct(Path::Band).expect("band");
+            let band = sc.direct(EvalPath::Band).expect("band");
             let lookup = sc
-                .direct(Path::Lookup)
+                .direct(EvalPath::Lookup)
                 .expect("lookup applies to confocal scans");
-            let auto = sc.direct(Path::Auto).expect("auto");
+            let auto = sc.direct(EvalPath::Auto).expect("auto");
             let tol = cc.tol();
             let truth = cc.truth();
             let scale = cc.scales();
@@ -1210,7 +1181,7 @@ fn confocal_diagonal_matches_reference_and_band() {
             prop_assert!(lr.worst <= 1.0, "lookup vs reference: {lr:?}, {tol:?}");
             prop_assert!(lb.worst <= 1.0, "lookup vs band: {lb:?}, {tol:?}");
             prop_assert!(ab.worst <= 1.0, "auto vs band: {ab:?}, {tol:?}");
-            let conv = sc.direct(Path::Planar);
+            let conv = sc.direct(EvalPath::Planar);
             if *jittered && sc.capture.geometry.lasers.len() > 1 {
                 let msg = path_error(conv, "confocal, jittered");
                 // "not a regular lattice", or for two points "do not fill their lattice".
@@ -1219,7 +1190,7 @@ fn confocal_diagonal_matches_reference_and_band() {
                 return Ok(());
             }
             let conv = conv.expect("the convolution applies to a confocal grid");
-            prop_assert_eq!(conv.path, Path::Planar);
+            prop_assert_eq!(conv.path, EvalPath::Planar);
             prop_assert_eq!(conv.report.rows, sc.capture.geometry.lasers.len() as u64);
             let pr = compare(&conv.values, &truth, &scale, tol.reference, &all);
             let pb = compare(&conv.values, &b, &scale, tol.pb, &all);
@@ -1241,8 +1212,8 @@ fn confocal_diagonal_matches_reference_and_band() {
             if *compensate {
                 let mut sc2 = sc.clone();
                 sc2.wave.compensate_laser = true;
-                let conv = sc2.direct(Path::Planar).expect("conv");
-                let band = sc2.direct(Path::Band).expect("band");
+                let conv = sc2.direct(EvalPath::Planar).expect("conv");
+                let band = sc2.direct(EvalPath::Band).expect("band");
                 let g = &sc2.capture.geometry;
                 let kmax = g
                     .lasers
@@ -1329,7 +1300,7 @@ fn path_error(r: vltm::Result<Output>, what: &str) -> String {
     match r {
         Err(Error::Argument { arg, msg }) if arg == "path" => msg,
         Err(e) => panic!("{what}: expected a `path` argument error, got {e}"),
-        Ok(_) => panic!("{what}: Path::Planar accepted a non-planar input"),
+        Ok(_) => panic!("{what}: EvalPath::Planar accepted a non-planar input"),
     }
 }
 
@@ -1345,8 +1316,8 @@ fn assert_same(a: &Output, b: &Output, what: &str) {
 }
 
 /// Point lists, voxel pitches that do not divide the SPAD pitch, irregular, incomplete or
-/// tilted SPAD sets and confocal captures: `Path::Planar` is an `Error::Argument` naming
-/// `--path` (diagonal and column), `Path::Auto` succeeds and equals `Path::Band`.
+/// tilted SPAD sets and confocal captures: `EvalPath::Planar` is an `Error::Argument` naming
+/// `--path` (diagonal and column), `EvalPath::Auto` succeeds and equals `EvalPath::Band`.
 #[test]
 fn planar_path_rejects_non_planar_inputs() {
     let c = fixed_case();
@@ -1421,10 +1392,10 @@ fn planar_path_rejects_non_planar_inputs() {
     };
 
     for (name, sc, why) in &variants {
-        let msg = path_error(sc.direct(Path::Planar), name);
+        let msg = path_error(sc.direct(EvalPath::Planar), name);
         assert!(msg.contains(why), "{name}: `{msg}` does not say `{why}`");
-        let auto = sc.direct(Path::Auto).expect("auto");
-        let band = sc.direct(Path::Band).expect("band");
+        let auto = sc.direct(EvalPath::Auto).expect("auto");
+        let band = sc.direct(EvalPath::Band).expect("band");
         // Auto is the band or the lookup path.
         let (tol, scale) = if sc.capture.geometry.confocal {
             let cc = confocal_of(name);
@@ -1442,10 +1413,10 @@ fn planar_path_rejects_non_planar_inputs() {
         );
         assert!(a.worst <= 1.0, "{name}: auto vs band {a:?}");
         if !sc.capture.geometry.confocal {
-            let msg = path_error(sc.column(Path::Planar), name);
+            let msg = path_error(sc.column(EvalPath::Planar), name);
             assert!(msg.contains(why), "{name}: `{msg}` does not say `{why}`");
-            let auto = sc.column(Path::Auto).expect("auto");
-            let band = sc.column(Path::Band).expect("band");
+            let auto = sc.column(EvalPath::Auto).expect("auto");
+            let band = sc.column(EvalPath::Band).expect("band");
             assert_same(&auto, &band, name);
         }
     }
@@ -1458,7 +1429,7 @@ fn planar_path_rejects_non_planar_inputs() {
 #[test]
 fn forced_paths_that_do_not_apply_are_errors() {
     let sc = fixed_case().build(Kind::Diagonal);
-    let msg = path_error(sc.column(Path::Lookup), "lookup column");
+    let msg = path_error(sc.column(EvalPath::Lookup), "lookup column");
     assert!(msg.contains("diagonal only"), "{msg}");
     let column = |gate, path| {
         let mut c = sc.capture.clone();
@@ -1473,19 +1444,24 @@ fn forced_paths_that_do_not_apply_are_errors() {
         )
     };
     for gate in [ColumnGate::HigherOrder, ColumnGate::None] {
-        let msg = path_error(column(gate, Path::Planar), "planar column");
+        let msg = path_error(column(gate, EvalPath::Planar), "planar column");
         assert!(msg.contains("two-bounce"), "{gate:?}: {msg}");
         // The same column on the band path is fine.
-        let r = column(gate, Path::Band);
+        let r = column(gate, EvalPath::Band);
         assert!(r.is_ok(), "{gate:?} on the band path: {:?}", r.err());
     }
-    for path in [Path::Planar, Path::Lookup, Path::Band] {
+    for path in [EvalPath::Planar, EvalPath::Lookup, EvalPath::Band] {
         assert!(sc.direct(path).is_ok(), "{path:?} diagonal");
     }
-    assert!(sc.column(Path::Planar).is_ok(), "planar column");
+    assert!(sc.column(EvalPath::Planar).is_ok(), "planar column");
     // Confocal captures: every diagonal path applies to a wall grid.
     let confocal = fixed_case().build_confocal(0.0).scan;
-    for path in [Path::Planar, Path::Lookup, Path::Band, Path::Auto] {
+    for path in [
+        EvalPath::Planar,
+        EvalPath::Lookup,
+        EvalPath::Band,
+        EvalPath::Auto,
+    ] {
         assert!(confocal.direct(path).is_ok(), "{path:?} confocal diagonal");
     }
 }
@@ -1531,7 +1507,7 @@ fn tolerances_detect_small_mistakes() {
     let c = fixed_case();
     for kind in [Kind::Diagonal, Kind::Column] {
         let sc = c.build(kind);
-        let run = |s: &Scan, p: Path| match kind {
+        let run = |s: &Scan, p: EvalPath| match kind {
             Kind::Diagonal => s.direct(p).expect("direct"),
             Kind::Column => s.column(p).expect("column"),
         };
@@ -1540,8 +1516,8 @@ fn tolerances_detect_small_mistakes() {
         let tol = sc.tol(kind);
         let (eps, eps_pb) = (tol.reference, tol.pb);
         let all = vec![true; scale.len()];
-        let band = amplitudes(&run(&sc, Path::Band));
-        let planar = run(&sc, Path::Planar).values;
+        let band = amplitudes(&run(&sc, EvalPath::Band));
+        let planar = run(&sc, EvalPath::Planar).values;
         let ok_ref = compare(&planar, &truth, &scale, eps, &all);
         let ok_pb = compare(&planar, &band, &scale, eps_pb, &all);
         println!("{kind:?}, correct: vs reference {ok_ref:?}, vs band {ok_pb:?}");
@@ -1555,7 +1531,7 @@ fn tolerances_detect_small_mistakes() {
             ("0.1 mm shift", shifted(&sc, 1e-4), false, 3.0),
             ("λ + 0.1 %", detuned(&sc, 1.001), false, 3.0),
         ] {
-            let v = run(&s, Path::Planar).values;
+            let v = run(&s, EvalPath::Planar).values;
             let o = if vs_ref {
                 compare(&v, &truth, &scale, eps, &all)
             } else {
@@ -1578,7 +1554,7 @@ fn tolerances_detect_small_mistakes() {
                 ("0.1 mm shift", shifted(&sc, 1e-4), false, 2.0),
                 ("λ + 0.1 %", detuned(&sc, 1.001), false, 2.0),
             ] {
-                let v = s.direct(Path::Lookup).expect("lookup").values;
+                let v = s.direct(EvalPath::Lookup).expect("lookup").values;
                 let o = if vs_ref {
                     compare(&v, &truth, &scale, eps + tol.interp, &all)
                 } else {
@@ -1606,7 +1582,7 @@ fn spad_order_does_not_matter() {
     let eps_pb = sc.tol(Kind::Diagonal).pb;
     let scale = sc.scales(Kind::Diagonal);
     let all = vec![true; scale.len()];
-    let base = amplitudes(&sc.direct(Path::Planar).expect("planar"));
+    let base = amplitudes(&sc.direct(EvalPath::Planar).expect("planar"));
     let [nsx, nsy] = c.spad_n;
     let ks = nsx * nsy;
     let reversed: Vec<usize> = (0..ks).rev().collect();
@@ -1629,9 +1605,9 @@ fn spad_order_does_not_matter() {
             }
         }
         let planar = p
-            .direct(Path::Planar)
+            .direct(EvalPath::Planar)
             .expect("planar applies to any SPAD order");
-        let band = amplitudes(&p.direct(Path::Band).expect("band"));
+        let band = amplitudes(&p.direct(EvalPath::Band).expect("band"));
         let vs_band = compare(&planar.values, &band, &scale, eps_pb, &all);
         let vs_base = compare(&planar.values, &base, &scale, eps_pb, &all);
         assert!(vs_band.worst <= 1.0, "{name}: vs band {vs_band:?}");
@@ -1640,7 +1616,7 @@ fn spad_order_does_not_matter() {
 }
 
 /// A descending voxel axis (`SPEC` `x1:x0:n`, a valid volume) takes the planar path (the
-/// axis is walked in ascending order) and matches `Path::Band`; so does `Path::Auto`.
+/// axis is walked in ascending order) and matches `EvalPath::Band`; so does `EvalPath::Auto`.
 #[test]
 fn descending_voxel_axes() {
     let c = fixed_case();
@@ -1654,10 +1630,10 @@ fn descending_voxel_axes() {
     )
     .expect("volume");
     let sc = Scan { volume: v, ..base };
-    let band = sc.direct(Path::Band).expect("band");
-    let auto = sc.direct(Path::Auto).expect("auto");
+    let band = sc.direct(EvalPath::Band).expect("band");
+    let auto = sc.direct(EvalPath::Auto).expect("auto");
     assert_eq!(auto.values.len(), band.values.len());
-    match sc.direct(Path::Planar) {
+    match sc.direct(EvalPath::Planar) {
         Err(Error::Argument { arg, msg }) => {
             panic!("descending voxel axes must take the planar path: {arg}: {msg}")
         }
@@ -1698,7 +1674,7 @@ fn cropped_axis_matches_uncropped_and_reference() {
         let tol = full.tol(Kind::Diagonal);
         let all = vec![true; truth.len()];
         let mut any = false;
-        for path in [Path::Band, Path::Auto] {
+        for path in [EvalPath::Band, EvalPath::Auto] {
             let a = cropped.direct(path).expect("cropped");
             let b = full.direct(path).expect("uncropped");
             prop_assert_eq!(b.crop, None);
@@ -1709,7 +1685,11 @@ fn cropped_axis_matches_uncropped_and_reference() {
                 let t0 = full.params.t0 + cr.start as f64 * full.params.dt;
                 prop_assert!((a.config.t0() - t0).abs() <= 1e-9 * (1.0 + t0.abs()));
             }
-            let interp = if path == Path::Band { 0.0 } else { tol.interp };
+            let interp = if path == EvalPath::Band {
+                0.0
+            } else {
+                tol.interp
+            };
             let r = compare(&a.values, &truth, &scale, tol.reference + interp, &all);
             let u = compare(
                 &a.values,
@@ -1734,8 +1714,8 @@ fn cropped_axis_matches_uncropped_and_reference() {
         let fullc = c.build(Kind::Column);
         let mut croppedc = fullc.clone();
         croppedc.wave.crop = true;
-        let a = croppedc.column(Path::Band).expect("cropped column");
-        let b = fullc.column(Path::Band).expect("uncropped column");
+        let a = croppedc.column(EvalPath::Band).expect("cropped column");
+        let b = fullc.column(EvalPath::Band).expect("uncropped column");
         let cfg = fullc.config();
         let inside: Vec<bool> = fullc
             .outside(Kind::Column, cfg.alias_free())
@@ -1772,12 +1752,18 @@ fn cropped_axis_matches_uncropped_and_reference() {
                 &from,
                 &fullc.volume.points,
                 &wave,
-                exec(Path::Band),
+                exec(EvalPath::Band),
             )
             .expect("matrix");
             prop_assert_eq!(m.crop.is_some(), crop && a.crop.is_some());
-            let r = probe::relight(&mut src, &pattern, &fullc.volume, &wave, exec(Path::Band))
-                .expect("relight");
+            let r = probe::relight(
+                &mut src,
+                &pattern,
+                &fullc.volume,
+                &wave,
+                exec(EvalPath::Band),
+            )
+            .expect("relight");
             prop_assert_eq!(r.output.crop, m.crop);
             for (what, v) in [("matrix", m.intensities()), ("relight", r.output.values)] {
                 let u = compare(&v, &b_amp, &scale, 2.0 * tol.reference, &inside);
@@ -1798,7 +1784,7 @@ fn cropped_axis_matches_uncropped_and_reference() {
             fullc.focus,
             &fullc.volume,
             &croppedc.wave,
-            exec(Path::Band),
+            exec(EvalPath::Band),
         )
         .expect("cropped row");
         let ru = probe::row(
@@ -1806,7 +1792,7 @@ fn cropped_axis_matches_uncropped_and_reference() {
             fullc.focus,
             &fullc.volume,
             &fullc.wave,
-            exec(Path::Band),
+            exec(EvalPath::Band),
         )
         .expect("uncropped row");
         prop_assert_eq!(ru.crop, None);
@@ -1863,7 +1849,7 @@ fn off_lattice_volume(c: &Case, f: [f32; 2]) -> Volume {
 /// reference within `(ε + e_rs)·S` and the band path within `(ε_pb + e_rs)·S` (`e_rs` the
 /// plan's stated bound, [`vltm::probe::resample::Resample::bound`]), or the plan's bound
 /// exceeds [`vltm::probe::resample::MAX_ERROR`] and the forced path is an `Error::Argument`
-/// naming `--path`; `Path::Auto` is within `(ε_pb + e_rs + ε_interp)·S` of the band path.
+/// naming `--path`; `EvalPath::Auto` is within `(ε_pb + e_rs + ε_interp)·S` of the band path.
 #[test]
 fn resampled_volumes_match_reference_and_band() {
     use vltm::probe::resample::{MAX_ERROR, Resample};
@@ -1901,11 +1887,11 @@ fn resampled_volumes_match_reference_and_band() {
             let cfg = sc.config();
             let g = &sc.capture.geometry;
             let plan = Resample::new(g, &cfg, &sc.volume);
-            let forced = sc.direct(Path::Planar);
-            let band = sc.direct(Path::Band).expect("band");
+            let forced = sc.direct(EvalPath::Planar);
+            let band = sc.direct(EvalPath::Band).expect("band");
             let b = amplitudes(&band);
             let all = vec![true; scale.len()];
-            let auto = sc.direct(Path::Auto).expect("auto");
+            let auto = sc.direct(EvalPath::Auto).expect("auto");
             let plan = match plan {
                 Err(why) => {
                     let msg = path_error(forced, "off-lattice, not resampled");
@@ -1920,7 +1906,7 @@ fn resampled_volumes_match_reference_and_band() {
             let bound = plan.bound();
             prop_assert!(bound <= MAX_ERROR, "bound {bound:e}");
             let out = forced.expect("the resampled FFT path applies");
-            prop_assert_eq!(out.path, Path::Planar);
+            prop_assert_eq!(out.path, EvalPath::Planar);
             // The support grid is named, unless the wall is one point along every axis the
             // grid spans (then the exact path applies and nothing is resampled).
             prop_assert!(

@@ -59,8 +59,8 @@ mod support;
 
 use num_complex::Complex64;
 use proptest::prelude::*;
-use proptest::test_runner::{FileFailurePersistence, RngAlgorithm, RngSeed};
 use reference::{Reference, p64};
+use support::prop::{Rng, hidden, wall};
 use support::{Data, all_rows, run};
 use vltm_kernel::{
     ColumnF32, Config, Gate, Interpolant, Lattice, Legs, Lookup, LookupGrid, LookupParams,
@@ -101,14 +101,6 @@ struct Case {
     noise: f64,
 }
 
-fn wall() -> impl Strategy<Value = Point> {
-    (-1.0f32..=1.0, -1.0f32..=1.0).prop_map(|(x, y)| [x, y, 0.0])
-}
-
-fn hidden() -> impl Strategy<Value = Point> {
-    (-1.0f32..=1.0, -1.0f32..=1.0, 0.3f32..=1.5).prop_map(|(x, y, z)| [x, y, z])
-}
-
 fn device() -> impl Strategy<Value = [f64; 3]> {
     (-1.0f64..=1.0, -1.0f64..=1.0, 0.2f64..=1.5).prop_map(|(x, y, z)| [x, y, z])
 }
@@ -142,26 +134,6 @@ prop_compose! {
     }
 }
 
-/// SplitMix64: the histogram contents come from `Case::seed` (no need to shrink 10⁴ samples).
-struct Rng(u64);
-
-impl Rng {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
-        z ^ (z >> 31)
-    }
-    /// Uniform in [0, 1).
-    fn f(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next_u64() % n as u64) as usize
-    }
-}
-
 /// A scan ready for comparison: apertures, voxels, column focus and histogram values
 /// (exact `f32` values, or integer counts fed to the kernel as `u16`).
 #[derive(Clone, Debug)]
@@ -186,13 +158,7 @@ impl Case {
             nt: self.nt,
             dt: self.dt,
             t0,
-            legs: match self.legs {
-                None => Legs::WallToWall,
-                Some((laser_origin, sensor_origin)) => Legs::FirstAndLast {
-                    laser_origin,
-                    sensor_origin,
-                },
-            },
+            legs: support::prop::legs(self.legs),
             weights: if self.inv { Weights::Inv } else { Weights::One },
             d_min: 1e-3,
         }
@@ -332,18 +298,7 @@ impl Scene {
             Target::Column(self.focus),
             &self.voxels,
         );
-        let (af_lo, af_hi) = Config::try_new(&p)
-            .expect("valid by construction")
-            .alias_free();
-        let need = (af_lo - (lo - p.t0)).max((hi - p.t0) - af_hi);
-        if need > 0.0 {
-            Params {
-                margin: p.margin + need + 2.0 * p.dt,
-                ..p
-            }
-        } else {
-            p
-        }
+        support::prop::widen_margin(p, (lo, hi))
     }
 
     /// The parameters for one probe: `p`, alias-free margin for the Gaussian column.
@@ -861,13 +816,7 @@ fn check(case: &Case) -> Result<(), TestCaseError> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig {
-        cases: 512,
-        rng_algorithm: RngAlgorithm::ChaCha,
-        rng_seed: RngSeed::Fixed(SEED),
-        failure_persistence: Some(Box::new(FileFailurePersistence::WithSource("proptest-regressions"))),
-        ..ProptestConfig::default()
-    })]
+    #![proptest_config(support::prop::config(SEED, 512))]
 
     /// Every target × gate, f32 or u16 histograms, within the documented tolerance.
     #[test]
@@ -1260,13 +1209,7 @@ fn check_slice(case: &Case, lattice: &Lattice) -> Result<(), TestCaseError> {
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig {
-        cases: 192,
-        rng_algorithm: RngAlgorithm::ChaCha,
-        rng_seed: RngSeed::Fixed(SEED ^ 0x51ce),
-        failure_persistence: Some(Box::new(FileFailurePersistence::WithSource("proptest-regressions"))),
-        ..ProptestConfig::default()
-    })]
+    #![proptest_config(support::prop::config(SEED ^ 0x51ce, 192))]
 
     /// The structured-slice lookup ([`LookupSlice`]), diagonal and column, within the lookup
     /// path's tolerance of the f64 reference.
@@ -1487,13 +1430,11 @@ fn slice_lookup_matches_general_path_and_validates() {
 #[ignore = "calibration run: many cases, prints statistics"]
 fn calibrate() {
     use proptest::strategy::ValueTree;
-    use proptest::test_runner::{Config as PtConfig, TestRng, TestRunner};
     let cases: usize = std::env::var("CALIBRATE_CASES")
         .ok()
         .and_then(|s| s.parse().ok())
         .unwrap_or(2000);
-    let rng = TestRng::from_seed(RngAlgorithm::ChaCha, &[SEED.to_le_bytes(); 4].concat());
-    let mut runner = TestRunner::new_with_rng(PtConfig::default(), rng);
+    let mut runner = support::prop::sweep_runner(SEED);
     // probe → (max err/tol, max err/tol of the f32 part alone, max err/S, max |A|/S)
     let mut stats: std::collections::BTreeMap<String, [f64; 4]> = Default::default();
     let mut by_m = [0.0f64; 4];
@@ -1540,7 +1481,7 @@ fn calibrate() {
 /// rows merged equal one probe over all rows (Kahan state).
 #[test]
 fn general_lookup_refuses_hermite_and_finishes_in_f32() {
-    use vltm_kernel::Error;
+    use vltm_kernel::ArgumentError;
     let p = Params {
         t0: 1.0,
         ..Params::new(0.1, 300, 0.01)
@@ -1565,7 +1506,7 @@ fn general_lookup_refuses_hermite_and_finishes_in_f32() {
         &mut scratch,
     );
     assert!(
-        matches!(refused, Err(Error::Incompatible(_))),
+        matches!(refused, Err(ArgumentError::Incompatible(_))),
         "{refused:?}"
     );
     let mut c32 = vec![0.0f32; ColumnF32::state_len(&cfg, ks)];
@@ -1574,7 +1515,7 @@ fn general_lookup_refuses_hermite_and_finishes_in_f32() {
     let mut o32 = vec![0.0f32; kv];
     let refused = col.finish_lookup(&scan, &lookup, &sc.voxels, &mut s2, &mut o32);
     assert!(
-        matches!(refused, Err(Error::Incompatible(_))),
+        matches!(refused, Err(ArgumentError::Incompatible(_))),
         "{refused:?}"
     );
 

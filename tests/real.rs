@@ -15,8 +15,8 @@
 //!
 //! The captures are committed in `fixtures/real/` (provenance in `fixtures/README.md`).
 
-use std::path::{Path as FsPath, PathBuf};
-use vltm::exec::{Exec, Path};
+use std::path::{Path, PathBuf};
+use vltm::exec::{EvalPath, Exec};
 use vltm::io::mat::{self, MatOptions};
 use vltm::io::prep::{Background, Bound, Prep, Prepared};
 use vltm::probe::{self, Wave};
@@ -41,7 +41,7 @@ const AUTHORS: Prep = Prep {
 /// Direct light over `nx`×`nx` points of the scanned square `[-w, w]²` and the slices
 /// `z0..z1` (`nz`); returns the brightest slice's depth, the slice maxima, and the strongest
 /// voxel.
-fn image(path: &FsPath, nx: usize, z: (f64, f64, usize)) -> (f32, Vec<f32>, [f32; 3], f64) {
+fn image(path: &Path, nx: usize, z: (f64, f64, usize)) -> (f32, Vec<f32>, [f32; 3], f64) {
     let m = mat::read(path, &MatOptions::default()).unwrap();
     let w = m.capture.geometry.lasers.last().unwrap()[0];
     let mut cap = m.capture;
@@ -57,7 +57,7 @@ fn image(path: &FsPath, nx: usize, z: (f64, f64, usize)) -> (f32, Vec<f32>, [f32
     let o = probe::direct(&mut src, &volume, &wave, Exec::default()).unwrap();
     assert!(o.values.iter().all(|v| v.is_finite()));
     // Auto takes the confocal FFT convolution (reported as the planar path).
-    assert_eq!(o.path, Path::Planar, "{}", path.display());
+    assert_eq!(o.path, EvalPath::Planar, "{}", path.display());
     let nz = z.2;
     let mut slice_max = vec![0.0f32; nz];
     let (mut best, mut at) = (f32::NEG_INFINITY, 0);

@@ -6,44 +6,16 @@
 
 mod support;
 
-use std::path::PathBuf;
-use std::process::{Command, Output};
-
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(tag: &str) -> Self {
-        let d = std::env::temp_dir().join(format!("vltm-surface-{}-{tag}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&d);
-        std::fs::create_dir_all(&d).expect("temp dir");
-        Self(d)
-    }
-    fn path(&self, name: &str) -> String {
-        self.0.join(name).to_string_lossy().into_owned()
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-fn vltm(args: &[&str]) -> Output {
-    Command::new(support::vltm_bin())
-        .args(args)
-        .output()
-        .expect("run vltm")
-}
+use support::cmd::{TempDir, vltm};
 
 /// Around patch A of the two-patch fixture: a slab in front of and behind it.
 const SLAB: &str = "--volume=-0.65:-0.25:9,-0.2:0.2:9,0.5:1.1:25";
 
 #[test]
 fn surface_writes_the_image_on_its_plane_and_the_depth_map() {
-    let t = TempDir::new("ok");
+    let t = TempDir::new("surface", "ok");
     let cap = support::fixture("two_patches.npz");
-    let (out, png, depth) = (t.path("s.npy"), t.path("s.png"), t.path("d.npy"));
+    let (out, png, depth) = (t.s("s.npy"), t.s("s.png"), t.s("d.npy"));
     let o = vltm(&[
         "surface",
         cap.to_str().unwrap(),
@@ -83,10 +55,10 @@ fn surface_writes_the_image_on_its_plane_and_the_depth_map() {
 
 #[test]
 fn bad_options_are_refused_naming_them() {
-    let t = TempDir::new("bad");
+    let t = TempDir::new("surface", "bad");
     let cap = support::fixture("two_patches.npz");
     let cap = cap.to_str().unwrap();
-    let out = t.path("x.npy");
+    let out = t.s("x.npy");
     let cases: [(&[&str], &str); 6] = [
         (&["--floor", "1.5"], "`--floor`"),
         (&["--thickness=-1"], "`--thickness`"),

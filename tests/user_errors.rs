@@ -7,49 +7,13 @@ mod support;
 
 use std::collections::BTreeMap;
 use std::io::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
+use support::cmd::TempDir;
 
 fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-/// A temporary directory, unique per process and test, removed on drop.
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(test: &str) -> Self {
-        let p = std::env::temp_dir().join(format!("vltm-user-{}-{test}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).expect("create temp dir");
-        Self(p)
-    }
-    fn path(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-    /// Every file under the directory (relative names), recursively.
-    fn files(&self) -> Vec<String> {
-        fn walk(d: &Path, base: &Path, out: &mut Vec<String>) {
-            for e in std::fs::read_dir(d).unwrap() {
-                let p = e.unwrap().path();
-                out.push(p.strip_prefix(base).unwrap().display().to_string());
-                if p.is_dir() {
-                    walk(&p, base, out);
-                }
-            }
-        }
-        let mut v = Vec::new();
-        walk(&self.0, &self.0, &mut v);
-        v.sort();
-        v
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
 }
 
 fn run(dir: &TempDir, args: &[&str]) -> Output {
@@ -145,7 +109,7 @@ const VOLUME: &str = "-0.2:0.2:4,-0.2:0.2:4,0.3:0.6:4";
 /// (nothing written, nothing on stdout), naming the flag and what it expects.
 #[test]
 fn output_extension_must_match_its_format() {
-    let t = TempDir::new("ext");
+    let t = TempDir::new("user", "ext");
     capture(&t);
     let probe = |extra: &[&str]| {
         let mut a = vec!["direct", "c.npz", "--volume", VOLUME];
@@ -209,7 +173,7 @@ fn output_extension_must_match_its_format() {
 /// that cannot be created is refused in one line before any work.
 #[test]
 fn output_folders_are_made_before_the_work() {
-    let t = TempDir::new("folders");
+    let t = TempDir::new("user", "folders");
     capture(&t);
     let out = ok(
         &t,
@@ -265,7 +229,7 @@ fn output_folders_are_made_before_the_work() {
 /// A `live` run that fails names no state file it did not write.
 #[test]
 fn live_names_no_unwritten_state() {
-    let t = TempDir::new("live-state");
+    let t = TempDir::new("user", "live-state");
     capture(&t);
     std::fs::write(t.path("afile"), b"x").unwrap();
     let o = run(
@@ -296,7 +260,7 @@ fn live_names_no_unwritten_state() {
 /// A misspelled flag keeps clap's suggestion, on the one error line.
 #[test]
 fn misspelled_flag_is_suggested() {
-    let t = TempDir::new("typo");
+    let t = TempDir::new("user", "typo");
     let line = fails(
         &t,
         &["direct", "c.npz", "--volumne", VOLUME],
@@ -312,7 +276,7 @@ fn misspelled_flag_is_suggested() {
 /// `.ptu`, a missing sidecar names the sidecar and says what it is.
 #[test]
 fn missing_files_are_named() {
-    let t = TempDir::new("missing");
+    let t = TempDir::new("user", "missing");
     for name in [
         "nothere.nzp",
         "nothere.npz",
@@ -357,7 +321,7 @@ fn missing_files_are_named() {
 /// preprocessing is refused).
 #[test]
 fn info_prints_nothing_before_failing() {
-    let t = TempDir::new("info-stdout");
+    let t = TempDir::new("user", "info-stdout");
     capture(&t);
     std::fs::write(t.path("bad.npz"), b"not a zip").unwrap();
     fails(&t, &["info", "bad.npz"], 1, &["bad.npz"]);
@@ -367,7 +331,7 @@ fn info_prints_nothing_before_failing() {
 /// Wave parameters that make no sense are refused with their flag and valid range.
 #[test]
 fn wave_parameters_out_of_range() {
-    let t = TempDir::new("wave");
+    let t = TempDir::new("user", "wave");
     capture(&t);
     for (flag, value, says) in [
         ("--band", "1e-300", "1 to 20"),
@@ -408,7 +372,7 @@ fn wave_parameters_out_of_range() {
 /// library message reaches the user.
 #[test]
 fn no_template_marker_reaches_the_user() {
-    let t = TempDir::new("markers");
+    let t = TempDir::new("user", "markers");
     capture(&t);
     let cases: &[(&[&str], i32)] = &[
         (&["info", "nothere.nzp"], 1),
@@ -518,7 +482,7 @@ fn no_template_marker_reaches_the_user() {
 /// blocked forever).
 #[test]
 fn named_pipe_is_refused_at_once() {
-    let t = TempDir::new("fifo");
+    let t = TempDir::new("user", "fifo");
     let fifo = t.path("f.npz");
     let st = Command::new("mkfifo")
         .arg(&fifo)
@@ -569,7 +533,7 @@ fn named_pipe_is_refused_at_once() {
 /// over 16 MiB) is refused before it is read.
 #[test]
 fn oversized_sidecar_and_scene_are_refused() {
-    let t = TempDir::new("big-json");
+    let t = TempDir::new("user", "big-json");
     capture(&t);
     std::fs::remove_file(t.path("c.json")).unwrap();
     std::os::unix::fs::symlink("/dev/zero", t.path("c.json")).unwrap();
@@ -602,7 +566,7 @@ fn oversized_sidecar_and_scene_are_refused() {
 #[test]
 fn npz_with_extra_bytes_is_refused_by_every_command() {
     use std::io::Read as _;
-    let t = TempDir::new("npz-extra");
+    let t = TempDir::new("user", "npz-extra");
     capture(&t);
     let mut z = zip::ZipArchive::new(std::fs::File::open(t.path("c.npz")).unwrap()).unwrap();
     let mut members = BTreeMap::new();
@@ -645,7 +609,7 @@ fn npz_with_extra_bytes_is_refused_by_every_command() {
 /// `direct` reads the `.ptu` with it and finds the volume the original sidecar gives.
 #[test]
 fn sidecar_template_round_trips() {
-    let t = TempDir::new("template");
+    let t = TempDir::new("user", "template");
     capture(&t);
     ok(
         &t,

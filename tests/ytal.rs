@@ -243,7 +243,11 @@ fn paired_direct_matches_ytal_fbp() {
         compensate_laser: false,
         ..wave(0.15)
     };
-    for path in [probe::Path::Auto, probe::Path::Band, probe::Path::Lookup] {
+    for path in [
+        probe::EvalPath::Auto,
+        probe::EvalPath::Band,
+        probe::EvalPath::Lookup,
+    ] {
         let exec = Exec {
             path,
             ..Exec::default()

@@ -15,7 +15,7 @@
 mod support;
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use support::cmd::{TempDir, vltm};
 use vltm::io::{self, Capture};
 use vltm::sim::Scene;
 
@@ -40,35 +40,8 @@ enum Order {
 const COLOURS: [f32; 3] = [0.5, 0.25, 0.25];
 const BOUNCES: [f32; 6] = [0.5, 0.125, 0.125, 0.125, 0.0625, 0.0625];
 
-struct Tmp(PathBuf);
-
-impl Tmp {
-    fn new(test: &str) -> Self {
-        let p = std::env::temp_dir().join(format!("vltm-znlos-{}-{test}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).expect("temp dir");
-        Self(p)
-    }
-    fn path(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-}
-
-impl Drop for Tmp {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-fn run(args: &[&str]) -> Output {
-    Command::new(support::vltm_bin())
-        .args(args)
-        .output()
-        .expect("run vltm")
-}
-
 fn ok(args: &[&str]) -> String {
-    let o = run(args);
+    let o = vltm(args);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "vltm {args:?} failed: {err}");
     String::from_utf8_lossy(&o.stdout).into_owned()
@@ -271,7 +244,7 @@ fn keep(files: &[&Path]) {
 /// with legs images like the one rendered wall to wall.
 #[test]
 fn direct_on_znlos_equals_direct_on_the_original() {
-    let t = Tmp::new("direct");
+    let t = TempDir::new("znlos", "direct");
     for (confocal, orders) in [
         (false, [Order::Rows7, Order::Time7]),
         (true, [Order::Rows5, Order::Time5]),
@@ -343,7 +316,7 @@ fn direct_on_znlos_equals_direct_on_the_original() {
 /// `vltm info` names the layout, the scan and the conventions applied.
 #[test]
 fn info_names_the_layout_and_conventions() {
-    let t = Tmp::new("info");
+    let t = TempDir::new("znlos", "info");
     let c = scene(false, true);
     for (order, mem) in [
         (Order::Rows7, "streamed by row"),
@@ -372,7 +345,7 @@ fn info_names_the_layout_and_conventions() {
 /// and the dataset.
 #[test]
 fn bad_znlos_files_exit_1_naming_the_dataset() {
-    let t = Tmp::new("bad");
+    let t = TempDir::new("znlos", "bad");
     let c = scene(false, true);
     for (skip, bad_shape, field) in [
         ("deltaT", false, "deltaT"),
@@ -391,7 +364,7 @@ fn bad_znlos_files_exit_1_naming_the_dataset() {
         write_znlos(&c, order, &z, skip, bad_shape);
         let zs = z.to_str().expect("utf-8");
         for cmd in [vec!["info", zs], vec!["direct", zs, "--volume", SPEC]] {
-            let o = run(&cmd);
+            let o = vltm(&cmd);
             let err = String::from_utf8_lossy(&o.stderr).into_owned();
             assert_eq!(o.status.code(), Some(1), "{cmd:?}: {err}");
             let lines: Vec<&str> = err.lines().collect();

@@ -58,7 +58,7 @@ pub enum Error {
     /// The kernel rejected the wave/gate configuration.
     Config(vltm_kernel::ConfigError),
     /// The kernel rejected a buffer or a position.
-    Kernel(vltm_kernel::Error),
+    Kernel(vltm_kernel::ArgumentError),
 }
 
 impl Error {
@@ -160,8 +160,8 @@ impl From<vltm_kernel::ConfigError> for Error {
     }
 }
 
-impl From<vltm_kernel::Error> for Error {
-    fn from(e: vltm_kernel::Error) -> Self {
+impl From<vltm_kernel::ArgumentError> for Error {
+    fn from(e: vltm_kernel::ArgumentError) -> Self {
         Self::Kernel(e)
     }
 }

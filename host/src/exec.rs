@@ -1,4 +1,4 @@
-//! Execution options shared by the simulator and the probes: the evaluation [`Path`], progress
+//! Execution options shared by the simulator and the probes: the evaluation [`EvalPath`], progress
 //! reporting through a callback ([`Progress`]), and the sizes the thread pool works in.
 //!
 //! The library never draws anything itself: a caller that wants a progress bar passes a
@@ -30,7 +30,7 @@ pub trait Progress: Sync {
 /// `--path`). All paths compute the same numbers (see `tests/proptest_fast.rs` for the
 /// tolerances); they differ in cost.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub enum Path {
+pub enum EvalPath {
     /// The cheapest applicable path by the flop model: for the diagonal the
     /// least of planar (when the SPADs — for a confocal capture the scanned wall points — form
     /// a regular grid and the volume is a wall-parallel grid whose pitch divides its pitch, or
@@ -57,7 +57,7 @@ pub enum Path {
     Phasor,
 }
 
-impl Path {
+impl EvalPath {
     /// The path's name as the CLI's `--path` spells it.
     pub fn name(self) -> &'static str {
         match self {
@@ -76,7 +76,7 @@ pub struct Exec<'p> {
     /// Where progress goes (`None`: nowhere).
     pub progress: Option<&'p dyn Progress>,
     /// Evaluation path (probes only).
-    pub path: Path,
+    pub path: EvalPath,
 }
 
 impl fmt::Debug for Exec<'_> {

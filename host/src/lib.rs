@@ -16,5 +16,5 @@ pub mod timings;
 pub mod volume;
 
 pub use error::{Error, Result};
-pub use exec::{Exec, Path, Progress};
+pub use exec::{EvalPath, Exec, Progress};
 pub use vltm_kernel as kernel;

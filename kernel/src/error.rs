@@ -83,14 +83,14 @@ impl core::error::Error for ConfigError {}
 /// call, never inside the per-bin loops; nothing was modified when it is returned.
 ///
 /// ```
-/// use vltm_kernel::Error;
-/// let e = Error::Length { what: "histograms", expected: 8, found: 7 };
+/// use vltm_kernel::ArgumentError;
+/// let e = ArgumentError::Length { what: "histograms", expected: 8, found: 7 };
 /// assert_eq!(e.to_string(), "`histograms` has 7 elements, expected 8");
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[cfg_attr(feature = "defmt", derive(defmt::Format))]
 #[non_exhaustive]
-pub enum Error {
+pub enum ArgumentError {
     /// A slice has the wrong number of elements.
     Length {
         /// Which argument.
@@ -111,7 +111,7 @@ pub enum Error {
     Incompatible(&'static str),
 }
 
-impl fmt::Display for Error {
+impl fmt::Display for ArgumentError {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Length {
@@ -129,15 +129,19 @@ impl fmt::Display for Error {
     }
 }
 
-impl core::error::Error for Error {}
+impl core::error::Error for ArgumentError {}
 
 /// Checks a length once at a call boundary.
 #[inline]
-pub(crate) fn check_len(what: &'static str, expected: usize, found: usize) -> Result<(), Error> {
+pub(crate) fn check_len(
+    what: &'static str,
+    expected: usize,
+    found: usize,
+) -> Result<(), ArgumentError> {
     if expected == found {
         Ok(())
     } else {
-        Err(Error::Length {
+        Err(ArgumentError::Length {
             what,
             expected,
             found,
@@ -148,9 +152,9 @@ pub(crate) fn check_len(what: &'static str, expected: usize, found: usize) -> Re
 /// Checks that every coordinate of every point is finite. (Points as `[f32; 3]`, what
 /// `config::Point` stands for: `config` imports this module, so this one does not import
 /// `config`.)
-pub(crate) fn check_points(what: &'static str, pts: &[[f32; 3]]) -> Result<(), Error> {
+pub(crate) fn check_points(what: &'static str, pts: &[[f32; 3]]) -> Result<(), ArgumentError> {
     match pts.iter().position(|p| !p.iter().all(|c| c.is_finite())) {
         None => Ok(()),
-        Some(index) => Err(Error::NonFinite { what, index }),
+        Some(index) => Err(ArgumentError::NonFinite { what, index }),
     }
 }

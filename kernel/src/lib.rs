@@ -20,7 +20,7 @@ pub use self::fixed::{
 pub use ::fixed::types::I1F15;
 pub use band::{ColumnF32, Gate, Probe, Row, RowBuffer, Scan, Target};
 pub use config::{Config, Legs, Params, Point, Weights};
-pub use error::{ConfigError, Error};
+pub use error::{ArgumentError, ConfigError};
 pub use lookup::{
     GridReader, Interpolant, Lattice, Lookup, LookupGrid, LookupParams, LookupProbe, LookupSlice,
     SliceLayout, lagrange4,

@@ -2,6 +2,9 @@
 //! given order, `finish`. Shared by the test files via `mod support;`.
 #![allow(dead_code)]
 
+pub mod cmd;
+pub mod prop;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 use std::sync::OnceLock;

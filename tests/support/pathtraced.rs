@@ -18,7 +18,7 @@ use vltm::volume::Volume;
 
 const EXEC: Exec<'static> = Exec {
     progress: None,
-    path: vltm::probe::Path::Auto,
+    path: vltm::probe::EvalPath::Auto,
 };
 
 /// The volume every path-traced scene is probed over (pitch 0.1 × 0.1 × 0.05 m).

@@ -4,7 +4,7 @@
 
 use clap::{Args, Parser, Subcommand, ValueEnum};
 use std::path::PathBuf;
-use vltm::exec::{Exec, Path as EvalPath};
+use vltm::exec::{EvalPath, Exec};
 use vltm::probe::{ColumnGate, Wave};
 use vltm_kernel::Weights;
 

@@ -2,7 +2,7 @@
 //! a probe over a volume.
 
 use std::path::Path;
-use vltm::exec::Path as EvalPath;
+use vltm::exec::EvalPath;
 use vltm::export::h5::Provenance;
 use vltm::probe;
 use vltm::volume::Volume;
@@ -89,7 +89,7 @@ pub(crate) fn finish(
         say!("{}: {c}", label.probe);
     }
     match (&o.aligned, o.path) {
-        (Some(v), probe::Path::Planar) => say!(
+        (Some(v), EvalPath::Planar) => say!(
             "{}: path planar, resampled (the volume's x-y pitch does not divide the wall's: computed on --volume {v}, then interpolated within {:.0e} of the scale)",
             label.probe,
             probe::resample::MAX_ERROR

@@ -10,7 +10,7 @@ use crate::{arg, py_err};
 use numpy::{IntoPyArray, PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
-use vltm::exec::{Exec, Path as EvalPath};
+use vltm::exec::{EvalPath, Exec};
 use vltm::io::RowSource;
 use vltm::io::prep::{PrepReport, with_prep};
 use vltm::probe::{

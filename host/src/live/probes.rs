@@ -6,7 +6,7 @@ use std::ops::Range;
 use std::path::PathBuf;
 
 use crate::error::{Error, Result};
-use crate::exec::{Exec, Path as EvalPath};
+use crate::exec::{EvalPath, Exec};
 use crate::io::capture::Capture;
 use crate::probe::partial::{self, Partial, Task};
 use crate::probe::{ColumnGate, IndirectOptions, Shell, Wave};

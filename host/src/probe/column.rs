@@ -6,12 +6,12 @@ use super::crop::{Crop, Reach, with_crop};
 use super::direct::direct;
 use super::drive::*;
 use super::gate::ColumnGate;
-use super::output::{Output, check_finite};
+use super::output::{Output, check_finite, intensities};
 use super::plan;
 use super::wave::*;
 use crate::budget;
 use crate::error::{Error, Result};
-use crate::exec::{Exec, Pass, Path, chunk_len};
+use crate::exec::{EvalPath, Exec, Pass, chunk_len};
 use crate::io::capture::{Geometry, RowSource};
 use crate::probe::fast::Planar;
 use crate::volume::Volume;
@@ -233,14 +233,14 @@ pub(super) enum ColumnState {
         report: Report,
         legs: (f64, f64),
         gate: Gate,
-        path: Path,
+        path: EvalPath,
         planar: Option<Box<Planar>>,
     },
 }
 
 /// The accumulators of [`column()`] over the source's rows ([`RowSource::rows`]), with the
 /// configuration (of the time axis cropped to the paths' reach) and the crop. `defer`: leave
-/// the choice of the imaging path under [`Path::Auto`] to `ColumnState::finish` (the path is
+/// the choice of the imaging path under [`EvalPath::Auto`] to `ColumnState::finish` (the path is
 /// then recorded as `Auto`).
 /// The checks [`column()`] makes before it reads a row: the focus, the lens weights, the
 /// evaluation path for the gate, a SPAD grid for the factorised gates, and the capture's
@@ -373,7 +373,7 @@ fn column_acc_on(
 
 /// A finished column: intensities (0 outside the shell), counters, the path that imaged it,
 /// and the complex amplitudes when asked for (`T = |A|²`; two-bounce and higher-order gates).
-pub(super) type ColumnImage = (Vec<f32>, Report, Path, Option<Vec<Complex64>>);
+pub(super) type ColumnImage = (Vec<f32>, Report, EvalPath, Option<Vec<Complex64>>);
 
 impl ColumnState {
     /// The column's intensities over `volume` (0 outside `shell`), the counters and the
@@ -393,7 +393,12 @@ impl ColumnState {
         amps: bool,
     ) -> Result<ColumnImage> {
         let (mut v, report, path, mut amplitudes) = match self {
-            Self::Voxels(acc, r) => (intensities(acc), *r, Path::Band, amps.then(|| acc.clone())),
+            Self::Voxels(acc, r) => (
+                intensities(acc),
+                *r,
+                EvalPath::Band,
+                amps.then(|| acc.clone()),
+            ),
             Self::Factorised {
                 state,
                 report,
@@ -490,7 +495,7 @@ fn image_chunks(p: &Probe<'_>, scan: &Scan<'_>, voxels: &[Point]) -> Result<(Vec
 }
 
 /// What [`image_column`] returns: intensities, counters, path, amplitudes if asked for.
-type Imaged = (Vec<f64>, Report, Path, Option<Vec<Complex64>>);
+type Imaged = (Vec<f64>, Report, EvalPath, Option<Vec<Complex64>>);
 
 /// Images a factorised column from its state over the volume by the planar convolution
 /// (when given: Gaussian gate over a grid) or the kernel; with the path that imaged it and,
@@ -531,7 +536,7 @@ pub(super) fn image_column(
                 aliased,
                 ..p.report()
             },
-            Path::Planar,
+            EvalPath::Planar,
             amps.then_some(acc),
         ));
     }
@@ -545,7 +550,7 @@ pub(super) fn image_column(
             .for_each(|(v, o)| column_amplitudes(&p, &scan, focus, v, o));
         a
     });
-    Ok((out, r, Path::Band, amplitudes))
+    Ok((out, r, EvalPath::Band, amplitudes))
 }
 
 /// Complex amplitudes of a factorised Gaussian column probe at `voxels`: `out[i] =

@@ -27,7 +27,7 @@ use crate::exec::{Exec, Progress};
 use crate::io::capture::{Geometry, RowSource};
 use crate::io::prep::Cropped;
 use std::ops::Range;
-use vltm_kernel::Point;
+use vltm_kernel::{Config, Params, Point};
 
 /// The part of the capture's time axis a probe kept (bins `start..end` of `nt`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -128,26 +128,32 @@ fn leg_span(pts: &[Point], legs: &[f64], b: &Bbox) -> (f64, f64) {
 /// # Errors
 /// Configuration errors of [`Wave::config`].
 pub(super) fn bins(g: &Geometry, wave: &Wave, reach: Reach<'_>) -> Result<Option<Range<usize>>> {
-    if !wave.crop {
+    if !wave.crop || Bbox::of(reach.voxels).is_none() {
         return Ok(None);
     }
-    let Some(vb) = Bbox::of(reach.voxels) else {
-        return Ok(None);
-    };
     let cfg = wave.config(g)?;
-    let (d1, d4) = legs(g, &cfg);
+    Ok(bins_of(g, &cfg, &legs(g, &cfg), reach))
+}
+
+/// [`bins`] with the crop on, from the capture's configuration `cfg` ([`Wave::config`]) and
+/// device legs `(d1, d4)` ([`legs`]).
+fn bins_of(
+    g: &Geometry,
+    cfg: &Config,
+    (d1, d4): &(Vec<f64>, Vec<f64>),
+    reach: Reach<'_>,
+) -> Option<Range<usize>> {
+    let vb = Bbox::of(reach.voxels)?;
     let (lo, hi) = match reach.foci {
         None => {
-            let (l0, l1) = leg_span(&g.lasers, &d1, &vb);
-            let (s0, s1) = leg_span(&g.spads, &d4, &vb);
+            let (l0, l1) = leg_span(&g.lasers, d1, &vb);
+            let (s0, s1) = leg_span(&g.spads, d4, &vb);
             (l0 + s0, l1 + s1)
         }
         Some(foci) => {
-            let Some(fb) = Bbox::of(foci) else {
-                return Ok(None);
-            };
-            let (l0, l1) = leg_span(&g.lasers, &d1, &fb);
-            let (s0, s1) = leg_span(&g.spads, &d4, &vb);
+            let fb = Bbox::of(foci)?;
+            let (l0, l1) = leg_span(&g.lasers, d1, &fb);
+            let (s0, s1) = leg_span(&g.spads, d4, &vb);
             let (m0, m1) = fb.between(&vb);
             (l0 + m0 + s0, l1 + m1 + s1)
         }
@@ -165,9 +171,9 @@ pub(super) fn bins(g: &Geometry, wave: &Wave, reach: Reach<'_>) -> Result<Option
     let start = clamp(first);
     let end = if reach.late { g.nt } else { clamp(last) };
     if start == 0 && end == g.nt {
-        return Ok(None);
+        return None;
     }
-    Ok(Some(start..end.max(start)))
+    Some(start..end.max(start))
 }
 
 /// Runs `f` on the bins `bins` of `src` (`None`: on `src` itself).
@@ -255,6 +261,100 @@ pub(super) fn with_crop<T>(
             f(&mut c, exec, Some(crop))
         }
     }
+}
+
+/// A probe's source cut to what its reach needs ([`bins`]), made by [`cut`]: the source
+/// (cropped, or the source itself), the crop made, the configuration on the kept axis, and
+/// execution options whose progress labels name the crop.
+pub(super) struct Cut<'s, 'p> {
+    src: Kept<'s>,
+    exec: Exec<'p>,
+    labelled: Option<Labelled<'p>>,
+    /// The crop made (`None`: the whole axis).
+    pub(super) crop: Option<Crop>,
+    /// The configuration on the kept axis (the capture's own when nothing is cropped).
+    pub(super) cfg: Config,
+}
+
+/// The source a [`Cut`] hands on.
+enum Kept<'s> {
+    Whole(&'s mut dyn RowSource),
+    Cropped(Box<Cropped<'s>>),
+}
+
+impl Cut<'_, '_> {
+    /// The source to read and the execution options to run with.
+    pub(super) fn parts(&mut self) -> (&mut dyn RowSource, Exec<'_>) {
+        let exec = Exec {
+            progress: match &self.labelled {
+                Some(l) => Some(l as &dyn Progress),
+                None => self.exec.progress,
+            },
+            ..self.exec
+        };
+        let src: &mut dyn RowSource = match &mut self.src {
+            Kept::Whole(s) => &mut **s,
+            Kept::Cropped(c) => &mut **c,
+        };
+        (src, exec)
+    }
+}
+
+/// Cuts `src` to what `reach` needs (as [`bins`], with the crop on when `crop`), from the
+/// capture's configuration `base` ([`Wave::config`]) and device legs `legs` ([`legs`]): the
+/// configuration on the kept axis is `base` with the kept axis's `nt` and `t0` (what
+/// [`Wave::config`] makes of the cropped capture).
+///
+/// # Errors
+/// [`Error::Argument`](crate::Error::Argument) (`--volume`) when the crop leaves no bins;
+/// configuration errors of the kept axis.
+pub(super) fn cut<'s, 'p>(
+    src: &'s mut dyn RowSource,
+    crop: bool,
+    base: &Config,
+    legs: &(Vec<f64>, Vec<f64>),
+    exec: Exec<'p>,
+    reach: Reach<'_>,
+) -> Result<Cut<'s, 'p>> {
+    let t = crate::timings::section("planning: crop", crate::timings::Kind::Serial);
+    let bins = if crop {
+        bins_of(src.geometry(), base, legs, reach)
+    } else {
+        None
+    };
+    drop(t);
+    let Some(r) = bins else {
+        return Ok(Cut {
+            src: Kept::Whole(src),
+            exec,
+            labelled: None,
+            crop: None,
+            cfg: *base,
+        });
+    };
+    let crop = Crop {
+        start: r.start,
+        end: r.end,
+        nt: src.geometry().nt,
+    };
+    let c = Cropped::new(src, r)?;
+    let kept = c.geometry();
+    let cfg = Config::try_new(&Params {
+        nt: kept.nt,
+        t0: kept.t0,
+        ..*base.params()
+    })?;
+    let labelled = exec.progress.map(|p| Labelled {
+        inner: p,
+        note: crop.to_string(),
+    });
+    Ok(Cut {
+        src: Kept::Cropped(Box::new(c)),
+        exec,
+        labelled,
+        crop: Some(crop),
+        cfg,
+    })
 }
 
 #[cfg(test)]

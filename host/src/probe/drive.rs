@@ -13,7 +13,6 @@ use crate::probe::fast::BandDft;
 use crate::timings::{self, Kind};
 use num_complex::Complex64;
 use rayon::prelude::*;
-use std::sync::Mutex;
 use vltm_kernel::{Config, Gate, Point, Probe, Report, Row, RowBuffer, Scan, Target};
 
 /// What every pass needs: the kernel configuration and the user's options.
@@ -168,6 +167,11 @@ pub(super) fn load_row<'r>(
 /// core. `work` gets the row's scan: `scan` itself, or for a paired or confocal capture (where
 /// `scan` only sizes the buffers: one SPAD) a scan of the row's own SPAD spot. Memory:
 /// `2·threads` rows of histograms, never the whole capture.
+///
+/// Which worker sums which rows depends on the row's index only ([`worker_of`]: row `l` to
+/// worker `l mod workers`, each worker's rows in ascending order), never on the thread that
+/// runs it: a worker's partial sums, hence the merged result, are the same run to run for a
+/// given number of workers.
 pub(super) fn drive_rows<W: Send>(
     src: &mut dyn RowSource,
     job: Job<'_>,
@@ -179,6 +183,21 @@ pub(super) fn drive_rows<W: Send>(
     drive_rows_indexed(src, job, scan, label, workers, |w, _, scan, row| {
         work(w, scan, row)
     })
+}
+
+/// The worker of [`drive_rows`] that sums capture row `l` among `workers`.
+pub(super) fn worker_of(l: usize, workers: usize) -> usize {
+    l % workers.max(1)
+}
+
+/// A worker of [`drive_rows`] with its buffers: the row buffer, a copy of a row with
+/// non-finite samples zeroed, the sensor leg of a confocal or paired row's own SPAD spot
+/// (`scan`'s tables serve every row).
+struct Slot<W> {
+    worker: W,
+    buf: Vec<f32>,
+    clean: Vec<f32>,
+    d4: [f32; 1],
 }
 
 /// [`drive_rows`] with the row's index in the capture handed to `work` (its laser spot is
@@ -197,21 +216,16 @@ pub(super) fn drive_rows_indexed<W: Send>(
     let ks = g.spads_per_row();
     check_memory(&g, cfg, 0, label)?;
     let dft = BandDft::new(cfg);
-    // (worker, row buffer, copy of a row with non-finite samples zeroed, the sensor leg of a
-    // confocal or paired row's own SPAD spot: `scan`'s tables serve every row)
-    type Slot<W> = Mutex<(W, Vec<f32>, Vec<f32>, [f32; 1])>;
-    let slots: Vec<Slot<W>> = workers
+    let mut slots: Vec<Slot<W>> = workers
         .into_iter()
-        .map(|w| {
-            Mutex::new((
-                w,
-                vec![0.0f32; RowBuffer::len(cfg, ks)],
-                Vec::new(),
-                [0.0f32; 1],
-            ))
+        .map(|worker| Slot {
+            worker,
+            buf: vec![0.0f32; RowBuffer::len(cfg, ks)],
+            clean: Vec::new(),
+            d4: [0.0f32; 1],
         })
         .collect();
-    let n_slots = slots.len().max(1);
+    let n_slots = slots.len();
     let range = src.rows();
     let bar = Pass::start(exec, label, range.len());
     let batch = row_batch();
@@ -226,15 +240,18 @@ pub(super) fn drive_rows_indexed<W: Send>(
             compensate_all(&g, wave, start, &mut rows);
         }
         let _t = timings::section("rows: stage 1 and probes", Kind::Parallel);
-        rows.par_iter()
-            .enumerate()
-            .try_for_each(|(i_row, (x_l, hist))| {
+        // Each worker takes its own rows of the batch, in order, on whichever thread.
+        slots.par_iter_mut().enumerate().try_for_each(|(k, slot)| {
+            let Slot {
+                worker,
+                buf,
+                clean,
+                d4,
+            } = slot;
+            for l in (start..end).filter(|&l| worker_of(l, n_slots) == k) {
+                let (x_l, hist) = &rows[l - start];
                 // Paired (and confocal) scans: the row's own SPAD spot.
-                let x_s = g.spads.get(start + i_row).copied().unwrap_or(*x_l);
-                let i = rayon::current_thread_index().unwrap_or(0) % n_slots;
-                let mut slot = slots[i].lock().unwrap_or_else(|e| e.into_inner());
-                let (w, buf, clean, d4) = &mut *slot;
-                let spad = [x_s];
+                let spad = [g.spads.get(l).copied().unwrap_or(*x_l)];
                 let own;
                 let scan = if g.confocal {
                     own = scan.with_spads(&spad, d4)?;
@@ -244,14 +261,13 @@ pub(super) fn drive_rows_indexed<W: Send>(
                 };
                 let mut rb = RowBuffer::new(scan, buf)?;
                 let row = load_row(&mut rb, scan, &dft, *x_l, hist, clean)?;
-                work(w, start + i_row, scan, &row)
-            })?;
+                work(worker, l, scan, &row)?;
+            }
+            Ok::<_, Error>(())
+        })?;
         bar.advance(end - start);
     }
-    Ok(slots
-        .into_iter()
-        .map(|m| m.into_inner().unwrap_or_else(|e| e.into_inner()).0)
-        .collect())
+    Ok(slots.into_iter().map(|s| s.worker).collect())
 }
 
 /// Checks what a pass over `g` holds at once against the memory budget ([`budget`]): the
@@ -268,6 +284,14 @@ pub(super) fn check_memory(g: &Geometry, cfg: &Config, extra: u128, what: &str) 
 
 /// The buffers of [`check_memory`], named (`extra` as `what`'s states and outputs).
 pub(super) fn memory_plan(g: &Geometry, cfg: &Config, extra: u128, what: &str) -> budget::Plan {
+    let mut plan = pass_plan(g, cfg);
+    plan.add(format!("the states and outputs of {what}"), extra);
+    plan
+}
+
+/// What every pass over `g` holds before its probes' states and outputs: the kernel's tables,
+/// the band-DFT table, and per thread a row buffer and two rows of histograms.
+pub(super) fn pass_plan(g: &Geometry, cfg: &Config) -> budget::Plan {
     let threads = rayon::current_num_threads() as u128;
     let ks = g.spads_per_row();
     let mut plan = budget::Plan::new();
@@ -289,8 +313,7 @@ pub(super) fn memory_plan(g: &Geometry, cfg: &Config, extra: u128, what: &str) -
     .add(
         format!("{threads} × 2 rows of histograms"),
         budget::bytes(ks.saturating_mul(g.nt), 8 * threads),
-    )
-    .add(format!("the states and outputs of {what}"), extra);
+    );
     plan
 }
 
@@ -339,7 +362,7 @@ pub(super) fn drive_probes<'m>(
     job: Job<'_>,
     label: &str,
     states: impl Iterator<Item = &'m mut [f64]>,
-    make: impl Fn(&Scan<'_>, usize, &'m mut [f64]) -> Result<Probe<'m>, vltm_kernel::Error>,
+    make: impl Fn(&Scan<'_>, usize, &'m mut [f64]) -> Result<Probe<'m>, vltm_kernel::ArgumentError>,
 ) -> Result<Vec<Probe<'m>>> {
     let mut probes = Vec::new();
     let mut states = Some(states);
@@ -398,9 +421,4 @@ pub(super) fn elementwise(
     // No row: zero accumulators.
     acc.resize(voxels.len(), Complex64::new(0.0, 0.0));
     Ok((acc, report))
-}
-
-/// Intensities `|A|²` of complex accumulators, as `f32`.
-pub(super) fn intensities(acc: &[Complex64]) -> Vec<f32> {
-    acc.iter().map(|a| a.norm_sqr() as f32).collect()
 }

@@ -630,7 +630,7 @@ pub fn relight(
             report,
             seconds: t.elapsed().as_secs_f64(),
             config: cfg,
-            path: crate::exec::Path::Band,
+            path: crate::exec::EvalPath::Band,
             crop,
             aligned: None,
         },

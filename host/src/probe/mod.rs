@@ -41,7 +41,7 @@ pub mod synth;
 mod wave;
 pub mod window;
 
-pub use crate::exec::{Exec, Path};
+pub use crate::exec::{EvalPath, Exec};
 pub use column::{Shell, check_column, check_focus, column, diagonal};
 pub use crop::Crop;
 pub use direct::direct;

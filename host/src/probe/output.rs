@@ -4,7 +4,8 @@
 
 use super::crop::Crop;
 use crate::error::Result;
-use crate::exec::Path;
+use crate::exec::EvalPath;
+use num_complex::Complex64;
 use vltm_kernel::{Config, Point, Report};
 
 /// Result of a probe: intensities per voxel (volume order) and the kernel's counters.
@@ -18,15 +19,20 @@ pub struct Output {
     pub seconds: f64,
     /// The kernel configuration used (λ, σ, J…).
     pub config: Config,
-    /// The evaluation path that computed the voxel sums (never [`Path::Auto`]).
-    pub path: Path,
+    /// The evaluation path that computed the voxel sums (never [`EvalPath::Auto`]).
+    pub path: EvalPath,
     /// The part of the time axis kept ([`Wave::crop`](super::Wave::crop)); `None`: all of it.
     pub crop: Option<Crop>,
     /// When a slower path than the FFT convolution ran on a grid because of its x–y pitch:
     /// the `--volume` SPEC of the nearest grid the FFT path takes (`probe::aligned_volume`).
-    /// When the FFT path ([`crate::exec::Path::Planar`]) ran on a grid off the wall's lattice: the SPEC of
+    /// When the FFT path ([`crate::exec::EvalPath::Planar`]) ran on a grid off the wall's lattice: the SPEC of
     /// the support grid it computed on before resampling ([`crate::probe::resample`]).
     pub aligned: Option<String>,
+}
+
+/// Intensities `|A|²` of complex accumulators, as `f32`.
+pub(super) fn intensities(acc: &[Complex64]) -> Vec<f32> {
+    acc.iter().map(|a| a.norm_sqr() as f32).collect()
 }
 
 /// Checks that a probe's intensities are finite: an `f32` output cannot hold intensities

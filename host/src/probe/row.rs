@@ -21,7 +21,7 @@ use super::drive::*;
 use super::output::Output;
 use super::wave::*;
 use crate::error::Result;
-use crate::exec::{Exec, Path, chunk_len};
+use crate::exec::{EvalPath, Exec, chunk_len};
 use crate::io::capture::{Geometry, RowSource};
 use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
@@ -183,7 +183,7 @@ pub fn row(
         report,
         seconds: t.elapsed().as_secs_f64(),
         config: cfg,
-        path: Path::Band,
+        path: EvalPath::Band,
         crop,
         aligned: None,
     })

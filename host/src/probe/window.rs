@@ -263,6 +263,19 @@ pub fn window_coverage(
     voxels: &[Point],
     gate: ColumnGate,
 ) -> Result<Coverage> {
+    coverage(g, cfg, None, foci, voxels, gate)
+}
+
+/// [`window_coverage`], with the device legs `(d1, d4)` when the caller has them
+/// ([`legs`]; made here otherwise).
+fn coverage(
+    g: &Geometry,
+    cfg: &Config,
+    legs_made: Option<&(Vec<f64>, Vec<f64>)>,
+    foci: Option<&[Point]>,
+    voxels: &[Point],
+    gate: ColumnGate,
+) -> Result<Coverage> {
     let sigma = cfg.sigma();
     let window = (g.t0 - sigma, g.t0 + cfg.window() + sigma);
     let full = Coverage {
@@ -277,9 +290,16 @@ pub fn window_coverage(
     let after_only = gate == ColumnGate::HigherOrder;
     let (lo, hi) = window;
     let meets = |(a, b): (f64, f64)| a <= hi && (after_only || b >= lo);
-    let (d1, d4) = legs(g, cfg);
-    let laser_spans = SpanIndex::new(&g.lasers, &d1);
-    let spad_spans = SpanIndex::new(&g.spads, &d4);
+    let made;
+    let (d1, d4) = match legs_made {
+        Some((d1, d4)) => (d1, d4),
+        None => {
+            made = legs(g, cfg);
+            (&made.0, &made.1)
+        }
+    };
+    let laser_spans = SpanIndex::new(&g.lasers, d1);
+    let spad_spans = SpanIndex::new(&g.spads, d4);
     let join = |x: (f64, f64), y: (f64, f64)| (x.0.min(y.0), x.1.max(y.1));
     let empty = (f64::INFINITY, f64::NEG_INFINITY);
     let pair = |a: &Point, p: (f64, f64), b: &Point, c: (f64, f64)| {
@@ -357,7 +377,7 @@ pub fn window_coverage(
         ));
     }
     Ok(Coverage {
-        fraction: sampled_fraction(g, (&d1, &d4), foci, voxels, window, after_only),
+        fraction: sampled_fraction(g, (d1, d4), foci, voxels, window, after_only),
         window,
         span: all,
     })
@@ -447,7 +467,27 @@ pub(super) fn window_rule(
     gate: ColumnGate,
     exec: Exec<'_>,
 ) -> Result<Coverage> {
-    let c = window_coverage(g, cfg, foci, voxels, gate)?;
+    warn(window_coverage(g, cfg, foci, voxels, gate)?, exec)
+}
+
+/// [`window_rule`] with the device legs `legs` ([`legs`]) the caller has.
+///
+/// # Errors
+/// As [`window_coverage`].
+pub(super) fn window_rule_with(
+    g: &Geometry,
+    cfg: &Config,
+    legs: &(Vec<f64>, Vec<f64>),
+    foci: Option<&[Point]>,
+    voxels: &[Point],
+    gate: ColumnGate,
+    exec: Exec<'_>,
+) -> Result<Coverage> {
+    warn(coverage(g, cfg, Some(legs), foci, voxels, gate)?, exec)
+}
+
+/// `c`, its warning sent to `exec`'s progress sink.
+fn warn(c: Coverage, exec: Exec<'_>) -> Result<Coverage> {
     if let (Some(w), Some(p)) = (c.warning(), exec.progress) {
         p.warn(&w);
     }

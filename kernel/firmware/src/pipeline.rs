@@ -10,7 +10,9 @@ use crate::fixture::{
     BINS, FOCUS, LASERS, N_FFT, N_LASERS, N_VOXELS, NT, P1_VOXEL, P2_VOXEL, ROW, SLICE, SPADS,
     VOXELS, params,
 };
-use vltm_kernel::{Config, ConfigError, Error, Gate, Probe, Report, RowBuffer, Scan, Target};
+use vltm_kernel::{
+    ArgumentError, Config, ConfigError, Gate, Probe, Report, RowBuffer, Scan, Target,
+};
 
 /// Caller-owned buffers of the pipeline (`'static` arrays in the firmware, `Vec`s on the host).
 pub struct Buffers<'a> {
@@ -81,11 +83,11 @@ pub enum Failure {
     /// The scan data has the wrong length.
     ScanData,
     /// A kernel call rejected its arguments.
-    Kernel(Error),
+    Kernel(ArgumentError),
 }
 
-impl From<Error> for Failure {
-    fn from(e: Error) -> Self {
+impl From<ArgumentError> for Failure {
+    fn from(e: ArgumentError) -> Self {
         Self::Kernel(e)
     }
 }

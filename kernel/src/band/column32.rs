@@ -51,7 +51,7 @@ use super::probe::{band_consts, band_sum};
 use super::row::Row;
 use super::scan::{Scan, as_complex};
 use crate::config::{Config, Legs, Point, Weights};
-use crate::error::{Error, check_len, check_points};
+use crate::error::{ArgumentError, check_len, check_points};
 use crate::geometry::{alias_window, dist, leaves_window, widen};
 use crate::lookup::grid::LookupGrid;
 use crate::lookup::pair::dist_fast;
@@ -170,16 +170,16 @@ impl<'m> ColumnF32<'m> {
     /// A zeroed column for the focus `focus` with its state in `state`.
     ///
     /// # Errors
-    /// [`Error::Length`] if `state` does not have [`ColumnF32::state_len`] elements;
-    /// [`Error::NonFinite`] for a non-finite focus.
-    pub fn new(scan: &Scan<'_>, focus: Point, state: &'m mut [f32]) -> Result<Self, Error> {
+    /// [`ArgumentError::Length`] if `state` does not have [`ColumnF32::state_len`] elements;
+    /// [`ArgumentError::NonFinite`] for a non-finite focus.
+    pub fn new(scan: &Scan<'_>, focus: Point, state: &'m mut [f32]) -> Result<Self, ArgumentError> {
         let cfg = scan.config();
         let ks = scan.spads().len();
         let need = Self::state_len(cfg, ks);
         check_len("state", need, state.len())?;
         check_points("focus", &[focus])?;
         state.fill(0.0);
-        let too_short = Error::Length {
+        let too_short = ArgumentError::Length {
             what: "state",
             expected: need,
             found: state.len(),
@@ -218,13 +218,17 @@ impl<'m> ColumnF32<'m> {
     /// seeds and one weight; no `f64`. Infallible on data values and panic-free.
     ///
     /// # Errors
-    /// [`Error::Incompatible`] if `scan` has another configuration or SPAD count than the one
-    /// the column was made for; [`Error::Length`] if `row` was loaded for a scan of another
+    /// [`ArgumentError::Incompatible`] if `scan` has another configuration or SPAD count than the one
+    /// the column was made for; [`ArgumentError::Length`] if `row` was loaded for a scan of another
     /// size. Nothing is changed then.
-    pub fn push_row<T: Sample>(&mut self, scan: &Scan<'_>, row: &Row<'_, T>) -> Result<(), Error> {
+    pub fn push_row<T: Sample>(
+        &mut self,
+        scan: &Scan<'_>,
+        row: &Row<'_, T>,
+    ) -> Result<(), ArgumentError> {
         let cfg = scan.config();
         if !cfg.same(&self.cfg) || scan.spads().len() != self.n_spads {
-            return Err(Error::Incompatible("scan of another configuration"));
+            return Err(ArgumentError::Incompatible("scan of another configuration"));
         }
         let j = cfg.bins().max(1);
         check_len("row spectra", self.sums.len(), row.band().len())?;
@@ -274,17 +278,17 @@ impl<'m> ColumnF32<'m> {
     /// [`Config::alias_free`]). Does not change the state. Cost `Kb·Ks·J` band terms.
     ///
     /// # Errors
-    /// [`Error::Incompatible`] for a scan of another configuration; [`Error::Length`] if
-    /// `out.len() ≠ voxels.len()`; [`Error::NonFinite`] for a non-finite voxel.
+    /// [`ArgumentError::Incompatible`] for a scan of another configuration; [`ArgumentError::Length`] if
+    /// `out.len() ≠ voxels.len()`; [`ArgumentError::NonFinite`] for a non-finite voxel.
     pub fn finish(
         &self,
         scan: &Scan<'_>,
         voxels: &[Point],
         out: &mut [f32],
-    ) -> Result<Report, Error> {
+    ) -> Result<Report, ArgumentError> {
         let cfg = scan.config();
         if !cfg.same(&self.cfg) || scan.spads().len() != self.n_spads {
-            return Err(Error::Incompatible("scan of another configuration"));
+            return Err(ArgumentError::Incompatible("scan of another configuration"));
         }
         check_len("out", voxels.len(), out.len())?;
         check_points("voxels", voxels)?;
@@ -375,9 +379,9 @@ impl ColumnF32<'_> {
     /// ```
     ///
     /// # Errors
-    /// [`Error::Incompatible`] for a scan or lookup grid of another configuration;
-    /// [`Error::Length`] if `out.len() ≠ voxels.len()` or `scratch` does not have
-    /// [`ColumnF32::lookup_scratch_len`] elements; [`Error::NonFinite`] for a non-finite
+    /// [`ArgumentError::Incompatible`] for a scan or lookup grid of another configuration;
+    /// [`ArgumentError::Length`] if `out.len() ≠ voxels.len()` or `scratch` does not have
+    /// [`ColumnF32::lookup_scratch_len`] elements; [`ArgumentError::NonFinite`] for a non-finite
     /// voxel. Nothing is written then.
     pub fn finish_lookup(
         &self,
@@ -386,17 +390,19 @@ impl ColumnF32<'_> {
         voxels: &[Point],
         scratch: &mut [f32],
         out: &mut [f32],
-    ) -> Result<Report, Error> {
+    ) -> Result<Report, ArgumentError> {
         let cfg = scan.config();
         if !cfg.same(&self.cfg) || scan.spads().len() != self.n_spads {
-            return Err(Error::Incompatible("scan of another configuration"));
+            return Err(ArgumentError::Incompatible("scan of another configuration"));
         }
         let grid = lookup.grid();
         if !grid.config().same(&self.cfg) {
-            return Err(Error::Incompatible("lookup grid of another configuration"));
+            return Err(ArgumentError::Incompatible(
+                "lookup grid of another configuration",
+            ));
         }
         if grid.interpolant() != crate::Interpolant::Lagrange {
-            return Err(Error::Incompatible(
+            return Err(ArgumentError::Incompatible(
                 "a Hermite lookup grid (finish_lookup reads the Lagrange cubic)",
             ));
         }
@@ -405,7 +411,7 @@ impl ColumnF32<'_> {
         let need = Self::lookup_scratch_len(grid, kv);
         check_len("scratch", need, scratch.len())?;
         check_points("voxels", voxels)?;
-        let short = Error::Length {
+        let short = ArgumentError::Length {
             what: "scratch",
             expected: need,
             found: scratch.len(),
@@ -519,7 +525,7 @@ mod tests {
 mod lookup_finish {
     extern crate std;
     use crate::{
-        ColumnF32, Config, Error, Lookup, LookupGrid, LookupParams, Params, RowBuffer, Scan,
+        ArgumentError, ColumnF32, Config, Lookup, LookupGrid, LookupParams, Params, RowBuffer, Scan,
     };
     use std::vec;
     use std::vec::Vec;
@@ -600,14 +606,14 @@ mod lookup_finish {
             let mut o = vec![-1.0f32; voxels.len()];
             assert!(matches!(
                 col.finish_lookup(&scan, &lookup, &voxels, &mut short, &mut o),
-                Err(Error::Length {
+                Err(ArgumentError::Length {
                     what: "scratch",
                     ..
                 })
             ));
             assert!(matches!(
                 col.finish_lookup(&scan, &lookup, &voxels, &mut scratch, &mut o[1..]),
-                Err(Error::Length { what: "out", .. })
+                Err(ArgumentError::Length { what: "out", .. })
             ));
             assert!(o.iter().all(|&x| x == -1.0));
         }
@@ -625,7 +631,7 @@ mod lookup_finish {
         let mut o = vec![0.0f32; voxels.len()];
         assert!(matches!(
             col.finish_lookup(&scan, &lookup, &voxels, &mut scratch, &mut o),
-            Err(Error::Incompatible(_))
+            Err(ArgumentError::Incompatible(_))
         ));
     }
 }
@@ -633,7 +639,7 @@ mod lookup_finish {
 #[cfg(test)]
 mod config_checks {
     extern crate std;
-    use crate::{ColumnF32, Config, Error, Gate, Params, Probe, RowBuffer, Scan, Target};
+    use crate::{ArgumentError, ColumnF32, Config, Gate, Params, Probe, RowBuffer, Scan, Target};
     use std::vec;
 
     /// `Probe::push_row` and `ColumnF32::push_row` refuse a scan of another configuration (as
@@ -664,14 +670,14 @@ mod config_checks {
             Probe::new(&sa, Target::Diagonal, Gate::Gaussian, &voxels, &mut st).unwrap();
         assert!(matches!(
             probe.push_row(&sb, &row),
-            Err(Error::Incompatible(_))
+            Err(ArgumentError::Incompatible(_))
         ));
         assert_eq!(probe.report().rows, 0);
         let mut s32 = vec![0.0f32; ColumnF32::state_len(&a, 1)];
         let mut col = ColumnF32::new(&sa, [0.0, 0.0, 0.3], &mut s32).unwrap();
         assert!(matches!(
             col.push_row(&sb, &row),
-            Err(Error::Incompatible(_))
+            Err(ArgumentError::Incompatible(_))
         ));
         assert_eq!(col.report().rows, 0);
     }

@@ -30,7 +30,7 @@
 use super::row::Row;
 use super::scan::Scan;
 use crate::config::{Config, Point};
-use crate::error::{Error, check_len, check_points};
+use crate::error::{ArgumentError, check_len, check_points};
 use crate::geometry::{alias_window, dist, leaves_window, widen};
 use crate::phase::{cis_turns, cis_turns_f64};
 use crate::report::Report;
@@ -128,15 +128,15 @@ impl<'m> Probe<'m> {
     /// A zeroed probe over `voxels` with its state in `state`.
     ///
     /// # Errors
-    /// [`Error::Length`] if `state` does not have [`Probe::state_len`] elements;
-    /// [`Error::NonFinite`] for a non-finite voxel or focus.
+    /// [`ArgumentError::Length`] if `state` does not have [`Probe::state_len`] elements;
+    /// [`ArgumentError::NonFinite`] for a non-finite voxel or focus.
     pub fn new(
         scan: &Scan<'_>,
         target: Target,
         gate: Gate,
         voxels: &'m [Point],
         state: &'m mut [f64],
-    ) -> Result<Self, Error> {
+    ) -> Result<Self, ArgumentError> {
         let p = Self::resume(
             scan,
             target,
@@ -165,7 +165,7 @@ impl<'m> Probe<'m> {
         state: &'m mut [f64],
         report: Report,
         leg_range: (f64, f64),
-    ) -> Result<Self, Error> {
+    ) -> Result<Self, ArgumentError> {
         let cfg = scan.config();
         let need = Self::state_len(cfg, target, gate, voxels.len(), scan.spads().len());
         check_len("state", need, state.len())?;
@@ -175,7 +175,7 @@ impl<'m> Probe<'m> {
         }
         let found = state.len();
         let state: &mut [Complex64] =
-            bytemuck::try_cast_slice_mut(state).map_err(|_| Error::Length {
+            bytemuck::try_cast_slice_mut(state).map_err(|_| ArgumentError::Length {
                 what: "state",
                 expected: need,
                 found,
@@ -233,14 +233,18 @@ impl<'m> Probe<'m> {
     /// Infallible on data values and panic-free.
     ///
     /// # Errors
-    /// [`Error::Incompatible`] if `scan` has another configuration than the probe's (as
-    /// [`Probe::merge`]); [`Error::Length`] if `row` was loaded for a scan of another size
+    /// [`ArgumentError::Incompatible`] if `scan` has another configuration than the probe's (as
+    /// [`Probe::merge`]); [`ArgumentError::Length`] if `row` was loaded for a scan of another size
     /// (checked once). Nothing is changed then.
-    pub fn push_row<T: Sample>(&mut self, scan: &Scan<'_>, row: &Row<'_, T>) -> Result<(), Error> {
+    pub fn push_row<T: Sample>(
+        &mut self,
+        scan: &Scan<'_>,
+        row: &Row<'_, T>,
+    ) -> Result<(), ArgumentError> {
         let cfg = scan.config();
         if *cfg != self.cfg {
             // As `merge`: a scan of another configuration has other frequencies and legs.
-            return Err(Error::Incompatible("scan of another configuration"));
+            return Err(ArgumentError::Incompatible("scan of another configuration"));
         }
         let ks = scan.spads().len();
         check_len("row spectra", ks * cfg.bins(), row.band().len())?;
@@ -286,16 +290,18 @@ impl<'m> Probe<'m> {
     /// the merge of a scan split over workers or devices.
     ///
     /// # Errors
-    /// [`Error::Incompatible`] if the probes differ; nothing is changed then.
-    pub fn merge(&mut self, other: &Probe<'_>) -> Result<(), Error> {
+    /// [`ArgumentError::Incompatible`] if the probes differ; nothing is changed then.
+    pub fn merge(&mut self, other: &Probe<'_>) -> Result<(), ArgumentError> {
         if self.target != other.target || self.gate != other.gate {
-            return Err(Error::Incompatible("different target or gate"));
+            return Err(ArgumentError::Incompatible("different target or gate"));
         }
         if self.voxels != other.voxels
             || self.state.len() != other.state.len()
             || self.cfg != other.cfg
         {
-            return Err(Error::Incompatible("different voxels or configuration"));
+            return Err(ArgumentError::Incompatible(
+                "different voxels or configuration",
+            ));
         }
         let n = match self.gate {
             Gate::HigherOrder => self.voxels.len(),
@@ -317,8 +323,8 @@ impl<'m> Probe<'m> {
     /// finished, continued and finished again.
     ///
     /// # Errors
-    /// [`Error::Length`] if `out` has the wrong length.
-    pub fn finish(&self, scan: &Scan<'_>, out: &mut [f64]) -> Result<Report, Error> {
+    /// [`ArgumentError::Length`] if `out` has the wrong length.
+    pub fn finish(&self, scan: &Scan<'_>, out: &mut [f64]) -> Result<Report, ArgumentError> {
         check_len("out", self.voxels.len(), out.len())?;
         if self.is_factorised() {
             return self.image(scan, self.voxels, out);
@@ -360,14 +366,14 @@ impl<'m> Probe<'m> {
     /// imaging over threads or image a Γ set.
     ///
     /// # Errors
-    /// [`Error::Incompatible`] for probes that are not factorised columns; [`Error::Length`]
-    /// if `out.len() ≠ voxels.len()`; [`Error::NonFinite`] for a non-finite voxel.
+    /// [`ArgumentError::Incompatible`] for probes that are not factorised columns; [`ArgumentError::Length`]
+    /// if `out.len() ≠ voxels.len()`; [`ArgumentError::NonFinite`] for a non-finite voxel.
     pub fn image(
         &self,
         scan: &Scan<'_>,
         voxels: &[Point],
         out: &mut [f64],
-    ) -> Result<Report, Error> {
+    ) -> Result<Report, ArgumentError> {
         check_len("out", voxels.len(), out.len())?;
         check_points("voxels", voxels)?;
         let mut report = self.report;
@@ -390,7 +396,7 @@ impl<'m> Probe<'m> {
                 }
             }
             _ => {
-                return Err(Error::Incompatible(
+                return Err(ArgumentError::Incompatible(
                     "only factorised columns can image other voxels",
                 ));
             }

@@ -38,7 +38,7 @@
 
 use super::scan::{Scan, as_complex};
 use crate::config::{Config, Point};
-use crate::error::{Error, check_len, check_points};
+use crate::error::{ArgumentError, check_len, check_points};
 use crate::geometry::dist;
 use crate::phase::{TwiddleStep, cis_turns, wrap};
 use crate::sample::Sample;
@@ -78,12 +78,12 @@ impl<'m> RowBuffer<'m> {
     /// Wraps `buf` (length [`RowBuffer::len`]) for rows of `scan`.
     ///
     /// # Errors
-    /// [`Error::Length`] if `buf` has the wrong length.
-    pub fn new(scan: &Scan<'_>, buf: &'m mut [f32]) -> Result<Self, Error> {
+    /// [`ArgumentError::Length`] if `buf` has the wrong length.
+    pub fn new(scan: &Scan<'_>, buf: &'m mut [f32]) -> Result<Self, ArgumentError> {
         let ks = scan.spads.len();
         let j = scan.cfg.bins();
         check_len("row buffer", Self::len(&scan.cfg, ks), buf.len())?;
-        let too_short = Error::Length {
+        let too_short = ArgumentError::Length {
             what: "row buffer",
             expected: Self::len(&scan.cfg, ks),
             found: buf.len(),
@@ -105,14 +105,14 @@ impl<'m> RowBuffer<'m> {
     /// as 0 and are counted in [`Row::non_finite`]).
     ///
     /// # Errors
-    /// [`Error::Length`] if `hists.len() ≠ Ks·Nt` or this buffer was made for another scan
-    /// size; [`Error::NonFinite`] for a non-finite laser position. Nothing is changed then.
+    /// [`ArgumentError::Length`] if `hists.len() ≠ Ks·Nt` or this buffer was made for another scan
+    /// size; [`ArgumentError::NonFinite`] for a non-finite laser position. Nothing is changed then.
     pub fn load<'r, T: Sample>(
         &'r mut self,
         scan: &Scan<'_>,
         laser: Point,
         hists: &'r [T],
-    ) -> Result<Row<'r, T>, Error> {
+    ) -> Result<Row<'r, T>, ArgumentError> {
         let cfg = &scan.cfg;
         let (nt, j) = (cfg.nt().max(1), cfg.bins().max(1));
         let (carrier_step, block_step) = (scan.k.carrier_step, scan.k.block_step);
@@ -154,7 +154,7 @@ impl<'m> RowBuffer<'m> {
         laser: Point,
         hists: &'r [T],
         spectra: impl FnOnce(&mut [Complex32], &mut [Complex32]),
-    ) -> Result<Row<'r, T>, Error> {
+    ) -> Result<Row<'r, T>, ArgumentError> {
         let cfg = &scan.cfg;
         let (ks, nt, j) = (scan.spads.len(), cfg.nt(), cfg.bins());
         check_len("row buffer", ks * j, self.hg.len())?;
@@ -250,16 +250,16 @@ impl<'m> RowBuffer<'m> {
 
     /// Ends a photon-event row: folds gate weights and legs in and returns the row for the
     /// probes. The row has no histograms, so the higher-order (time-domain) gate cannot use
-    /// it ([`Probe::push_row`](crate::Probe::push_row) returns [`Error::Length`]).
+    /// it ([`Probe::push_row`](crate::Probe::push_row) returns [`ArgumentError::Length`]).
     ///
     /// # Errors
-    /// [`Error::Length`] if this buffer was made for another scan size;
-    /// [`Error::NonFinite`] for a non-finite laser position.
+    /// [`ArgumentError::Length`] if this buffer was made for another scan size;
+    /// [`ArgumentError::NonFinite`] for a non-finite laser position.
     pub fn end_photons<'r>(
         &'r mut self,
         scan: &Scan<'_>,
         laser: Point,
-    ) -> Result<Row<'r, u16>, Error> {
+    ) -> Result<Row<'r, u16>, ArgumentError> {
         check_len(
             "row buffer",
             scan.spads.len() * scan.cfg.bins(),

@@ -27,7 +27,7 @@
 //! transforms use 1.3 KB of stack.
 
 use crate::config::{Config, Legs, Point};
-use crate::error::{Error, check_len, check_points};
+use crate::error::{ArgumentError, check_len, check_points};
 use crate::geometry::dist64;
 use crate::phase::{TwiddleStep, cis_turns_f64, wrap};
 use crate::sample::Sample;
@@ -38,9 +38,9 @@ use num_complex::Complex32;
 pub(crate) fn as_complex<'b>(
     what: &'static str,
     buf: &'b mut [f32],
-) -> Result<&'b mut [Complex32], Error> {
+) -> Result<&'b mut [Complex32], ArgumentError> {
     let found = buf.len();
-    bytemuck::try_cast_slice_mut(buf).map_err(|_| Error::Length {
+    bytemuck::try_cast_slice_mut(buf).map_err(|_| ArgumentError::Length {
         what,
         expected: found & !1,
         found,
@@ -133,14 +133,18 @@ impl<'t> Scan<'t> {
     /// Builds the tables into `tables` (length [`Scan::tables_len`]).
     ///
     /// # Errors
-    /// [`Error::Length`] if `tables` has the wrong length, [`Error::NonFinite`] if a SPAD
+    /// [`ArgumentError::Length`] if `tables` has the wrong length, [`ArgumentError::NonFinite`] if a SPAD
     /// position is not finite.
-    pub fn new(cfg: &Config, spads: &'t [Point], tables: &'t mut [f32]) -> Result<Self, Error> {
+    pub fn new(
+        cfg: &Config,
+        spads: &'t [Point],
+        tables: &'t mut [f32],
+    ) -> Result<Self, ArgumentError> {
         check_len("tables", Self::tables_len(cfg, spads.len()), tables.len())?;
         check_points("spads", spads)?;
         let n = cfg.n_fft();
         // `_checked` (the lengths were checked above): no panicking branch in the ELF.
-        let too_short = Error::Length {
+        let too_short = ArgumentError::Length {
             what: "tables",
             expected: Self::tables_len(cfg, spads.len()),
             found: tables.len(),
@@ -173,13 +177,13 @@ impl<'t> Scan<'t> {
     /// to row, costs `O(Ks)` here instead of [`Scan::new`]'s `O(N + J)` sines and cosines.
     ///
     /// # Errors
-    /// [`Error::Length`] if `d4` has the wrong length, [`Error::NonFinite`] if a SPAD position
+    /// [`ArgumentError::Length`] if `d4` has the wrong length, [`ArgumentError::NonFinite`] if a SPAD position
     /// is not finite.
     pub fn with_spads<'s>(
         &'s self,
         spads: &'s [Point],
         d4: &'s mut [f32],
-    ) -> Result<Scan<'s>, Error> {
+    ) -> Result<Scan<'s>, ArgumentError> {
         check_len("sensor legs", spads.len(), d4.len())?;
         check_points("spads", spads)?;
         fill_sensor_legs(&self.cfg, spads, d4);

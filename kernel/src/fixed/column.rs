@@ -6,7 +6,7 @@ use super::nco::{cis_q15, phase_step};
 use super::row::FixedRow;
 use super::scan::FixedScan;
 use crate::config::Point;
-use crate::error::{Error, check_len, check_points};
+use crate::error::{ArgumentError, check_len, check_points};
 use crate::geometry::{alias_window, dist, leaves_window, widen};
 
 /// Factorised Gaussian column `T(x_a, ·)` in fixed point: per row
@@ -31,8 +31,12 @@ impl<'m> FixedColumn<'m> {
     /// A column probe for focus `focus` with zeroed `state`.
     ///
     /// # Errors
-    /// [`Error::Length`] / [`Error::NonFinite`].
-    pub fn new(scan: &FixedScan<'_>, focus: Point, state: &'m mut [i64]) -> Result<Self, Error> {
+    /// [`ArgumentError::Length`] / [`ArgumentError::NonFinite`].
+    pub fn new(
+        scan: &FixedScan<'_>,
+        focus: Point,
+        state: &'m mut [i64],
+    ) -> Result<Self, ArgumentError> {
         check_len(
             "state",
             Self::state_len(&scan.fc, scan.spads.len()),
@@ -52,12 +56,16 @@ impl<'m> FixedColumn<'m> {
     ///
     /// # Errors
     /// As [`FixedDiagonal::push_row`](crate::FixedDiagonal::push_row).
-    pub fn push_row(&mut self, scan: &FixedScan<'_>, row: &FixedRow<'_>) -> Result<(), Error> {
+    pub fn push_row(
+        &mut self,
+        scan: &FixedScan<'_>,
+        row: &FixedRow<'_>,
+    ) -> Result<(), ArgumentError> {
         let fc = &scan.fc;
         let j = fc.cfg.bins();
         check_len("row spectra", self.state.len(), row.hg.len())?;
         if self.rows >= fc.limits.max_rows {
-            return Err(Error::Incompatible("FixedLimits::max_rows reached"));
+            return Err(ArgumentError::Incompatible("FixedLimits::max_rows reached"));
         }
         let d_la = dist(&row.laser, &self.focus);
         let leg = scan.laser_leg(&row.laser) + f64::from(d_la);
@@ -104,13 +112,13 @@ impl<'m> FixedColumn<'m> {
     /// then the `1/d` weight and the intensity in `f64` (once per voxel and SPAD).
     ///
     /// # Errors
-    /// [`Error::Length`] if `out.len() ≠ voxels.len()`; [`Error::NonFinite`].
+    /// [`ArgumentError::Length`] if `out.len() ≠ voxels.len()`; [`ArgumentError::NonFinite`].
     pub fn finish(
         &self,
         scan: &FixedScan<'_>,
         voxels: &[Point],
         out: &mut [f64],
-    ) -> Result<usize, Error> {
+    ) -> Result<usize, ArgumentError> {
         check_len("out", voxels.len(), out.len())?;
         check_points("voxels", voxels)?;
         let fc = &scan.fc;

@@ -6,7 +6,7 @@ use super::nco::{cis_q15, phase_step};
 use super::row::FixedRow;
 use super::scan::FixedScan;
 use crate::config::Point;
-use crate::error::{Error, check_len, check_points};
+use crate::error::{ArgumentError, check_len, check_points};
 use crate::geometry::dist;
 
 /// `Σ_j HG_j·e^{iν_j τ}` in `HG` LSB (the `i64` sums `>> 15`, rounded): the NCO phase steps
@@ -49,8 +49,8 @@ impl<'m> FixedDiagonal<'m> {
     /// A diagonal probe over `voxels` with zeroed `state` (length [`Self::state_len`]).
     ///
     /// # Errors
-    /// [`Error::Length`] / [`Error::NonFinite`].
-    pub fn new(voxels: &'m [Point], state: &'m mut [i64]) -> Result<Self, Error> {
+    /// [`ArgumentError::Length`] / [`ArgumentError::NonFinite`].
+    pub fn new(voxels: &'m [Point], state: &'m mut [i64]) -> Result<Self, ArgumentError> {
         check_len("state", Self::state_len(voxels.len()), state.len())?;
         check_points("voxels", voxels)?;
         state.fill(0);
@@ -64,15 +64,19 @@ impl<'m> FixedDiagonal<'m> {
     /// Adds one row (guard interval as in the float path).
     ///
     /// # Errors
-    /// [`Error::Incompatible`] past [`FixedLimits::max_rows`](crate::FixedLimits::max_rows) (the budget); [`Error::Length`]
+    /// [`ArgumentError::Incompatible`] past [`FixedLimits::max_rows`](crate::FixedLimits::max_rows) (the budget); [`ArgumentError::Length`]
     /// for a row of another scan size. Nothing is changed then.
-    pub fn push_row(&mut self, scan: &FixedScan<'_>, row: &FixedRow<'_>) -> Result<(), Error> {
+    pub fn push_row(
+        &mut self,
+        scan: &FixedScan<'_>,
+        row: &FixedRow<'_>,
+    ) -> Result<(), ArgumentError> {
         let fc = &scan.fc;
         let j = fc.cfg.bins();
         let ks = scan.spads.len();
         check_len("row spectra", 2 * ks * j, row.hg.len())?;
         if self.rows >= fc.limits.max_rows {
-            return Err(Error::Incompatible("FixedLimits::max_rows reached"));
+            return Err(ArgumentError::Incompatible("FixedLimits::max_rows reached"));
         }
         let (g_lo, g_hi) = fc.cfg.guard();
         let (g_lo, g_hi) = (g_lo as f32, g_hi as f32);
@@ -115,8 +119,8 @@ impl<'m> FixedDiagonal<'m> {
     /// Intensities `T = |A|²` in counts² (`f64`, once).
     ///
     /// # Errors
-    /// [`Error::Length`] if `out.len() ≠ Kv`.
-    pub fn finish(&self, fc: &FixedConfig, out: &mut [f64]) -> Result<(), Error> {
+    /// [`ArgumentError::Length`] if `out.len() ≠ Kv`.
+    pub fn finish(&self, fc: &FixedConfig, out: &mut [f64]) -> Result<(), ArgumentError> {
         check_len("out", self.voxels.len(), out.len())?;
         let lsb = fc.diag_lsb();
         for (o, [re, im]) in out.iter_mut().zip(self.acc.as_chunks::<2>().0) {

@@ -91,7 +91,7 @@ use super::row::FixedRow;
 use super::scan::FixedScan;
 use crate::band::probe::Target;
 use crate::config::{Point, Weights};
-use crate::error::{ConfigError, Error, check_len, check_points};
+use crate::error::{ArgumentError, ConfigError, check_len, check_points};
 use crate::geometry::dist;
 use crate::lookup::grid::{Interpolant, LookupGrid, LookupParams};
 use crate::lookup::table::EXTRA;
@@ -270,8 +270,8 @@ impl<'t> FixedLookup<'t> {
     /// Builds the twiddles (`f64` `libm`, rounded to Q1.15; soft float, once).
     ///
     /// # Errors
-    /// [`Error::Length`] for a wrong `tables` length.
-    pub fn new(g: &FixedLookupGrid, tables: &'t mut [I1F15]) -> Result<Self, Error> {
+    /// [`ArgumentError::Length`] for a wrong `tables` length.
+    pub fn new(g: &FixedLookupGrid, tables: &'t mut [I1F15]) -> Result<Self, ArgumentError> {
         let l = g.grid.len();
         check_len("fixed lookup tables", Self::tables_len(g), tables.len())?;
         for (k, [c, s]) in tables.as_chunks_mut::<2>().0.iter_mut().enumerate() {
@@ -402,7 +402,7 @@ impl<'m> FixedLookupProbe<'m> {
     /// A probe for `target` over `voxels` with zeroed `state`.
     ///
     /// # Errors
-    /// [`Error::Length`] for a wrong `state` or `scratch` length; [`Error::NonFinite`] for a
+    /// [`ArgumentError::Length`] for a wrong `state` or `scratch` length; [`ArgumentError::NonFinite`] for a
     /// non-finite voxel or focus.
     pub fn new(
         lookup: &FixedLookup<'_>,
@@ -410,7 +410,7 @@ impl<'m> FixedLookupProbe<'m> {
         voxels: &'m [Point],
         state: &'m mut [i64],
         scratch: &'m mut [i32],
-    ) -> Result<Self, Error> {
+    ) -> Result<Self, ArgumentError> {
         let g = lookup.g;
         let kv = voxels.len();
         check_len("state", Self::state_len(kv), state.len())?;
@@ -421,7 +421,7 @@ impl<'m> FixedLookupProbe<'m> {
         }
         let (grid_buf, lead) = scratch
             .split_at_mut_checked(2 * (g.grid.len() + EXTRA))
-            .ok_or(Error::Length {
+            .ok_or(ArgumentError::Length {
                 what: "scratch",
                 expected: Self::scratch_len(&g, kv),
                 found: 0,
@@ -442,17 +442,17 @@ impl<'m> FixedLookupProbe<'m> {
     /// the `f32` distance, weight and phase (module docs); no panic, no allocation.
     ///
     /// # Errors
-    /// [`Error::Incompatible`] if `lookup` or `scan` is not the probe's configuration, or
-    /// past [`FixedLimits::max_rows`](crate::FixedLimits::max_rows); [`Error::Length`] for a
+    /// [`ArgumentError::Incompatible`] if `lookup` or `scan` is not the probe's configuration, or
+    /// past [`FixedLimits::max_rows`](crate::FixedLimits::max_rows); [`ArgumentError::Length`] for a
     /// row of another scan size. Nothing is changed then.
     pub fn push_row(
         &mut self,
         scan: &FixedScan<'_>,
         lookup: &FixedLookup<'_>,
         row: &FixedRow<'_>,
-    ) -> Result<(), Error> {
+    ) -> Result<(), ArgumentError> {
         if !lookup.g.same(&self.g) || !same_fc(&scan.fc, &self.g.fc) {
-            return Err(Error::Incompatible(
+            return Err(ArgumentError::Incompatible(
                 "fixed lookup grid of another configuration",
             ));
         }
@@ -461,7 +461,7 @@ impl<'m> FixedLookupProbe<'m> {
         let ks = scan.spads.len();
         check_len("row spectra", 2 * ks * j, row.hg.len())?;
         if self.rows >= fc.limits.max_rows {
-            return Err(Error::Incompatible("FixedLimits::max_rows reached"));
+            return Err(ArgumentError::Incompatible("FixedLimits::max_rows reached"));
         }
         let (g_lo, g_hi) = fc.cfg.guard();
         let (g_lo, g_hi) = (g_lo as f32, g_hi as f32);
@@ -547,8 +547,8 @@ impl<'m> FixedLookupProbe<'m> {
     /// Intensities `T = |A|²` in counts² (`f64`, once).
     ///
     /// # Errors
-    /// [`Error::Length`] if `out.len() ≠ Kv`.
-    pub fn finish(&self, out: &mut [f64]) -> Result<(), Error> {
+    /// [`ArgumentError::Length`] if `out.len() ≠ Kv`.
+    pub fn finish(&self, out: &mut [f64]) -> Result<(), ArgumentError> {
         check_len("out", self.voxels.len(), out.len())?;
         let lsb = self.g.fc.diag_lsb();
         for (o, [re, im]) in out.iter_mut().zip(self.acc.as_chunks::<2>().0) {

@@ -68,8 +68,8 @@
 //!   modulo one turn).
 //! * **Accumulators and products cannot overflow** (proven by the table above, enforced by
 //!   [`FixedConfig::try_new`]): every row is bounded by the `u16` range, and a probe refuses
-//!   rows beyond [`FixedLimits::max_rows`] ([`Error::Incompatible`]) and scans with more than
-//!   [`FixedLimits::max_spads`] SPADs ([`Error::Length`]). The additions are written
+//!   rows beyond [`FixedLimits::max_rows`] ([`ArgumentError::Incompatible`]) and scans with more than
+//!   [`FixedLimits::max_spads`] SPADs ([`ArgumentError::Length`]). The additions are written
 //!   `wrapping_add` so the no-panic build has no overflow branch; the `i128 → i64` narrowing
 //!   saturates (unreachable within the budget). The property test `tests/fixed_point.rs`
 //!   runs all-65535 histograms at the budget's edge.

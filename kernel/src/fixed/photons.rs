@@ -2,7 +2,7 @@
 
 use super::config::FixedConfig;
 use super::scan::FixedScan;
-use crate::error::{Error, check_len};
+use crate::error::{ArgumentError, check_len};
 use crate::phase::{TwiddleStep, wrap};
 
 /// Caller-owned integer accumulators of one row's **photon events** for the fixed-point path:
@@ -29,8 +29,8 @@ impl<'m> FixedPhotons<'m> {
     /// Wraps `buf` (length [`FixedPhotons::len`]) and zeroes it: an empty row.
     ///
     /// # Errors
-    /// [`Error::Length`] for a wrong length.
-    pub fn new(scan: &FixedScan<'_>, buf: &'m mut [i64]) -> Result<Self, Error> {
+    /// [`ArgumentError::Length`] for a wrong length.
+    pub fn new(scan: &FixedScan<'_>, buf: &'m mut [i64]) -> Result<Self, ArgumentError> {
         check_len(
             "photon sums",
             Self::len(&scan.fc, scan.spads.len()),

@@ -7,7 +7,7 @@ use super::nco::{cis_q15, phase_step};
 use super::photons::FixedPhotons;
 use super::scan::FixedScan;
 use crate::config::Point;
-use crate::error::{Error, check_len, check_points};
+use crate::error::{ArgumentError, check_len, check_points};
 use crate::phase::TwiddleStep;
 
 /// Caller-owned `i32` buffer for one row's band spectra: `Ks·(2J + 1)` (`HG` as re/im
@@ -50,8 +50,8 @@ impl<'m> FixedRowBuffer<'m> {
     /// Wraps `buf` (length [`FixedRowBuffer::len`]).
     ///
     /// # Errors
-    /// [`Error::Length`] for a wrong length.
-    pub fn new(scan: &FixedScan<'_>, buf: &'m mut [i32]) -> Result<Self, Error> {
+    /// [`ArgumentError::Length`] for a wrong length.
+    pub fn new(scan: &FixedScan<'_>, buf: &'m mut [i32]) -> Result<Self, ArgumentError> {
         check_len(
             "row buffer",
             Self::len(&scan.fc, scan.spads.len()),
@@ -64,14 +64,14 @@ impl<'m> FixedRowBuffer<'m> {
     /// in `i32`/`i64` integers (`Ks·J·Nt` MACs), then gate weights and leg phases.
     ///
     /// # Errors
-    /// [`Error::Length`] for a wrong `hists` length or a buffer made for another scan;
-    /// [`Error::NonFinite`] for a non-finite laser position.
+    /// [`ArgumentError::Length`] for a wrong `hists` length or a buffer made for another scan;
+    /// [`ArgumentError::NonFinite`] for a non-finite laser position.
     pub fn load<'r>(
         &'r mut self,
         scan: &FixedScan<'_>,
         laser: Point,
         hists: &[u16],
-    ) -> Result<FixedRow<'r>, Error> {
+    ) -> Result<FixedRow<'r>, ArgumentError> {
         let cfg = &scan.fc.cfg;
         let (nt, n, k_lo) = (cfg.nt(), cfg.n_fft().max(1), cfg.k_lo());
         check_len("histograms", scan.spads.len() * nt, hists.len())?;
@@ -97,14 +97,14 @@ impl<'m> FixedRowBuffer<'m> {
     /// are integers (exact, in any order) and the rest of the computation is shared.
     ///
     /// # Errors
-    /// [`Error::Length`] for a buffer or `photons` made for another scan;
-    /// [`Error::NonFinite`] for a non-finite laser position.
+    /// [`ArgumentError::Length`] for a buffer or `photons` made for another scan;
+    /// [`ArgumentError::NonFinite`] for a non-finite laser position.
     pub fn load_photons<'r>(
         &'r mut self,
         scan: &FixedScan<'_>,
         laser: Point,
         photons: &FixedPhotons<'_>,
-    ) -> Result<FixedRow<'r>, Error> {
+    ) -> Result<FixedRow<'r>, ArgumentError> {
         let j = scan.fc.cfg.bins();
         check_len(
             "photon sums",
@@ -124,7 +124,7 @@ impl<'m> FixedRowBuffer<'m> {
         scan: &FixedScan<'_>,
         laser: Point,
         mut dft: impl FnMut(usize, usize) -> (i64, i64),
-    ) -> Result<FixedRow<'r>, Error> {
+    ) -> Result<FixedRow<'r>, ArgumentError> {
         let fc = &scan.fc;
         let cfg = &fc.cfg;
         let (ks, j) = (scan.spads.len(), cfg.bins());
@@ -132,7 +132,7 @@ impl<'m> FixedRowBuffer<'m> {
         check_points("laser", &[laser])?;
         let d1 = scan.laser_leg(&laser);
         let k_lo = cfg.k_lo();
-        let too_short = Error::Length {
+        let too_short = ArgumentError::Length {
             what: "row buffer",
             expected: Self::len(fc, ks),
             found: 0,

@@ -3,7 +3,7 @@
 use super::config::FixedConfig;
 use super::nco::q15;
 use crate::config::{Legs, Point};
-use crate::error::{Error, check_len, check_points};
+use crate::error::{ArgumentError, check_len, check_points};
 use crate::geometry::dist64 as dist_f64;
 use ::fixed::types::I1F15;
 
@@ -26,24 +26,24 @@ impl<'t> FixedScan<'t> {
     /// Builds the tables (`f64` `libm`, rounded to Q1.15; soft float, once).
     ///
     /// # Errors
-    /// [`Error::Length`] for a wrong `tables` length or more SPADs than
-    /// [`FixedLimits::max_spads`](crate::FixedLimits::max_spads); [`Error::NonFinite`] for a non-finite SPAD.
+    /// [`ArgumentError::Length`] for a wrong `tables` length or more SPADs than
+    /// [`FixedLimits::max_spads`](crate::FixedLimits::max_spads); [`ArgumentError::NonFinite`] for a non-finite SPAD.
     pub fn new(
         fc: &FixedConfig,
         spads: &'t [Point],
         tables: &'t mut [I1F15],
-    ) -> Result<Self, Error> {
+    ) -> Result<Self, ArgumentError> {
         check_len("tables", Self::tables_len(fc), tables.len())?;
         check_points("spads", spads)?;
         if spads.len() > fc.limits.max_spads as usize {
-            return Err(Error::Length {
+            return Err(ArgumentError::Length {
                 what: "spads (over FixedLimits::max_spads)",
                 expected: fc.limits.max_spads as usize,
                 found: spads.len(),
             });
         }
         let n = fc.cfg.n_fft();
-        let too_short = Error::Length {
+        let too_short = ArgumentError::Length {
             what: "tables",
             expected: Self::tables_len(fc),
             found: 0,

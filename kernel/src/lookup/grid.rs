@@ -248,7 +248,7 @@ mod tests {
     use crate::config::Params;
 
     use super::super::table::{EXTRA, Lookup};
-    use crate::error::Error;
+    use crate::error::ArgumentError;
     use num_complex::Complex32;
 
     fn cfg() -> Config {
@@ -354,7 +354,7 @@ mod tests {
         let mut y = [Complex32::new(0.0, 0.0); 512 + EXTRA];
         assert!(matches!(
             lookup.baseband(&hg[..c.bins()], &mut y),
-            Err(Error::Incompatible(_))
+            Err(ArgumentError::Incompatible(_))
         ));
     }
 }

@@ -9,7 +9,7 @@
 //! complex addition ([`add`]). Memory: `4Kv` `f32` of caller state ([`KahanSums::state_len`]:
 //! the bytes of the band diagonal's `2Kv` `f64`).
 
-use crate::error::Error;
+use crate::error::ArgumentError;
 use num_complex::{Complex32, Complex64};
 
 /// Kahan-compensated complex `f32` sums in caller memory, one per voxel, each
@@ -30,11 +30,11 @@ impl<'m> KahanSums<'m> {
     /// [`KahanSums::state_len`]), as they are: [`KahanSums::reset`] zeroes them.
     ///
     /// # Errors
-    /// [`Error::Length`] (`"state"`, `expected` as given) if `state` is not a whole number
+    /// [`ArgumentError::Length`] (`"state"`, `expected` as given) if `state` is not a whole number
     /// of sums.
-    pub(crate) fn new(state: &'m mut [f32], expected: usize) -> Result<Self, Error> {
+    pub(crate) fn new(state: &'m mut [f32], expected: usize) -> Result<Self, ArgumentError> {
         let found = state.len();
-        let acc = bytemuck::try_cast_slice_mut(state).map_err(|_| Error::Length {
+        let acc = bytemuck::try_cast_slice_mut(state).map_err(|_| ArgumentError::Length {
             what: "state",
             expected,
             found,

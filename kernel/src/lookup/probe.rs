@@ -23,7 +23,7 @@ use crate::band::probe::Target;
 use crate::band::row::Row;
 use crate::band::scan::{Scan, as_complex};
 use crate::config::{Point, Weights};
-use crate::error::{Error, check_len, check_points};
+use crate::error::{ArgumentError, check_len, check_points};
 use crate::phase::cis_small_turns;
 use crate::report::Report;
 use crate::sample::Sample;
@@ -99,10 +99,10 @@ impl<'m> LookupProbe<'m> {
     /// A zeroed probe over `voxels`.
     ///
     /// # Errors
-    /// [`Error::Length`] if `state` or `scratch` does not have [`Self::state_len`] /
-    /// [`Self::scratch_len`] elements; [`Error::Incompatible`] if `lookup` was made for
+    /// [`ArgumentError::Length`] if `state` or `scratch` does not have [`Self::state_len`] /
+    /// [`Self::scratch_len`] elements; [`ArgumentError::Incompatible`] if `lookup` was made for
     /// another configuration than `scan` or for [`Interpolant::Hermite`];
-    /// [`Error::NonFinite`] for a non-finite voxel or focus.
+    /// [`ArgumentError::NonFinite`] for a non-finite voxel or focus.
     pub fn new(
         scan: &Scan<'_>,
         lookup: &Lookup<'_>,
@@ -110,13 +110,15 @@ impl<'m> LookupProbe<'m> {
         voxels: &'m [Point],
         state: &'m mut [f32],
         scratch: &'m mut [f32],
-    ) -> Result<Self, Error> {
+    ) -> Result<Self, ArgumentError> {
         let grid = lookup.grid;
         if !grid.cfg.same(scan.config()) {
-            return Err(Error::Incompatible("lookup grid of another configuration"));
+            return Err(ArgumentError::Incompatible(
+                "lookup grid of another configuration",
+            ));
         }
         if grid.interp != Interpolant::Lagrange {
-            return Err(Error::Incompatible(
+            return Err(ArgumentError::Incompatible(
                 "a Hermite lookup grid (the voxel list reads the Lagrange cubic)",
             ));
         }
@@ -128,7 +130,7 @@ impl<'m> LookupProbe<'m> {
             check_points("focus", &[a])?;
         }
         let mut acc = KahanSums::new(state, 4 * kv)?;
-        let short = Error::Length {
+        let short = ArgumentError::Length {
             what: "scratch",
             expected: Self::scratch_len(&grid, kv),
             found: scratch.len(),
@@ -183,18 +185,20 @@ impl<'m> LookupProbe<'m> {
     /// data values and panic-free.
     ///
     /// # Errors
-    /// [`Error::Incompatible`] if `lookup` or `scan` is not the probe's configuration;
-    /// [`Error::Length`] if `row` was loaded for a scan of another size. Nothing is
+    /// [`ArgumentError::Incompatible`] if `lookup` or `scan` is not the probe's configuration;
+    /// [`ArgumentError::Length`] if `row` was loaded for a scan of another size. Nothing is
     /// changed then.
     pub fn push_row<T: Sample>(
         &mut self,
         scan: &Scan<'_>,
         lookup: &Lookup<'_>,
         row: &Row<'_, T>,
-    ) -> Result<(), Error> {
+    ) -> Result<(), ArgumentError> {
         let cfg = scan.config();
         if !lookup.grid.same(&self.grid) || !cfg.same(&self.grid.cfg) {
-            return Err(Error::Incompatible("lookup grid of another configuration"));
+            return Err(ArgumentError::Incompatible(
+                "lookup grid of another configuration",
+            ));
         }
         let ks = scan.spads().len();
         let j = cfg.bins().max(1);
@@ -288,13 +292,15 @@ impl<'m> LookupProbe<'m> {
     /// Adds another lookup probe's accumulators (same grid, target and voxels).
     ///
     /// # Errors
-    /// [`Error::Incompatible`] if the probes differ; nothing is changed then.
-    pub fn merge(&mut self, other: &LookupProbe<'_>) -> Result<(), Error> {
+    /// [`ArgumentError::Incompatible`] if the probes differ; nothing is changed then.
+    pub fn merge(&mut self, other: &LookupProbe<'_>) -> Result<(), ArgumentError> {
         if self.target != other.target
             || self.voxels != other.voxels
             || !self.grid.same(&other.grid)
         {
-            return Err(Error::Incompatible("different target, voxels or grid"));
+            return Err(ArgumentError::Incompatible(
+                "different target, voxels or grid",
+            ));
         }
         self.acc.merge(&other.acc);
         self.report.add_part(&other.report);
@@ -305,8 +311,8 @@ impl<'m> LookupProbe<'m> {
     /// counters. Does not change the accumulators.
     ///
     /// # Errors
-    /// [`Error::Length`] if `out` has the wrong length.
-    pub fn finish(&self, out: &mut [f64]) -> Result<Report, Error> {
+    /// [`ArgumentError::Length`] if `out` has the wrong length.
+    pub fn finish(&self, out: &mut [f64]) -> Result<Report, ArgumentError> {
         check_len("out", self.voxels.len(), out.len())?;
         self.acc.intensities(out);
         Ok(self.report)
@@ -316,8 +322,8 @@ impl<'m> LookupProbe<'m> {
     /// compensated sum's value rounded once to `f32` (a relative `2u` more than `finish`).
     ///
     /// # Errors
-    /// [`Error::Length`] if `out` has the wrong length.
-    pub fn finish_f32(&self, out: &mut [f32]) -> Result<Report, Error> {
+    /// [`ArgumentError::Length`] if `out` has the wrong length.
+    pub fn finish_f32(&self, out: &mut [f32]) -> Result<Report, ArgumentError> {
         check_len("out", self.voxels.len(), out.len())?;
         self.acc.intensities_f32(out);
         Ok(self.report)

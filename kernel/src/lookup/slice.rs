@@ -71,7 +71,7 @@ use crate::band::probe::Target;
 use crate::band::row::Row;
 use crate::band::scan::{Scan, as_complex};
 use crate::config::Weights;
-use crate::error::{Error, check_len};
+use crate::error::{ArgumentError, check_len};
 use crate::phase::cis_small_turns;
 use crate::report::Report;
 use crate::sample::Sample;
@@ -160,10 +160,10 @@ impl<'m> LookupSlice<'m> {
     /// Fills the slice tables (once, in `f64`) and returns a zeroed probe.
     ///
     /// # Errors
-    /// [`Error::Incompatible`] if `layout` or `lookup` was made for another scan or
-    /// configuration; [`Error::Length`] if `tables`, `state` or `scratch` does not have
+    /// [`ArgumentError::Incompatible`] if `layout` or `lookup` was made for another scan or
+    /// configuration; [`ArgumentError::Length`] if `tables`, `state` or `scratch` does not have
     /// [`SliceLayout::tables_len`] / [`Self::state_len`] / [`Self::scratch_len`] elements;
-    /// [`Error::NonFinite`] for a non-finite column focus.
+    /// [`ArgumentError::NonFinite`] for a non-finite column focus.
     pub fn new(
         scan: &Scan<'_>,
         lookup: &Lookup<'_>,
@@ -172,11 +172,13 @@ impl<'m> LookupSlice<'m> {
         tables: &'m mut [f32],
         state: &'m mut [f32],
         scratch: &'m mut [f32],
-    ) -> Result<Self, Error> {
+    ) -> Result<Self, ArgumentError> {
         let grid = *lookup.grid();
         let cfg = scan.config();
         if !grid.same(&layout.grid) || !grid.config().same(cfg) {
-            return Err(Error::Incompatible("lookup grid of another configuration"));
+            return Err(ArgumentError::Incompatible(
+                "lookup grid of another configuration",
+            ));
         }
         let lat = layout.lattice;
         let a = lat.step_x.map(f64::from);
@@ -193,7 +195,7 @@ impl<'m> LookupSlice<'m> {
                 lattice_offset(&a, a2, &s0, s).is_none_or(|m| m < layout.m_min || m > layout.m_max)
             })
         {
-            return Err(Error::Incompatible("slice layout of another scan"));
+            return Err(ArgumentError::Incompatible("slice layout of another scan"));
         }
         let kv = lat.len();
         check_len("slice tables", layout.tables_len(), tables.len())?;
@@ -203,7 +205,7 @@ impl<'m> LookupSlice<'m> {
             crate::error::check_points("focus", &[f])?;
         }
         let l = grid.len();
-        let short = |what, expected, found| Error::Length {
+        let short = |what, expected, found| ArgumentError::Length {
             what,
             expected,
             found,
@@ -312,22 +314,24 @@ impl<'m> LookupSlice<'m> {
     /// lookups. Infallible on data values and panic-free.
     ///
     /// # Errors
-    /// [`Error::Incompatible`] if `lookup` or `scan` is not the probe's configuration or
-    /// SPAD count; [`Error::Length`] if `row` was loaded for a scan of another size. Nothing
+    /// [`ArgumentError::Incompatible`] if `lookup` or `scan` is not the probe's configuration or
+    /// SPAD count; [`ArgumentError::Length`] if `row` was loaded for a scan of another size. Nothing
     /// is changed then.
     pub fn push_row<T: Sample>(
         &mut self,
         scan: &Scan<'_>,
         lookup: &Lookup<'_>,
         row: &Row<'_, T>,
-    ) -> Result<(), Error> {
+    ) -> Result<(), ArgumentError> {
         let grid = self.layout.grid;
         let cfg = scan.config();
         if !lookup.grid().same(&grid)
             || !cfg.same(grid.config())
             || scan.spads().len() != self.layout.ks
         {
-            return Err(Error::Incompatible("lookup grid of another configuration"));
+            return Err(ArgumentError::Incompatible(
+                "lookup grid of another configuration",
+            ));
         }
         let ks = scan.spads().len();
         let j = cfg.bins().max(1);
@@ -460,10 +464,12 @@ impl<'m> LookupSlice<'m> {
     /// Adds another slice probe's accumulators (same layout and target).
     ///
     /// # Errors
-    /// [`Error::Incompatible`] if the probes differ; nothing is changed then.
-    pub fn merge(&mut self, other: &LookupSlice<'_>) -> Result<(), Error> {
+    /// [`ArgumentError::Incompatible`] if the probes differ; nothing is changed then.
+    pub fn merge(&mut self, other: &LookupSlice<'_>) -> Result<(), ArgumentError> {
         if self.target != other.target || self.layout != other.layout {
-            return Err(Error::Incompatible("different target or slice layout"));
+            return Err(ArgumentError::Incompatible(
+                "different target or slice layout",
+            ));
         }
         self.acc.merge(&other.acc);
         self.report.add_part(&other.report);
@@ -474,8 +480,8 @@ impl<'m> LookupSlice<'m> {
     /// returns the counters. Does not change the accumulators.
     ///
     /// # Errors
-    /// [`Error::Length`] if `out` has the wrong length.
-    pub fn finish(&self, out: &mut [f64]) -> Result<Report, Error> {
+    /// [`ArgumentError::Length`] if `out` has the wrong length.
+    pub fn finish(&self, out: &mut [f64]) -> Result<Report, ArgumentError> {
         check_len("out", self.acc.len(), out.len())?;
         self.acc.intensities(out);
         Ok(self.report)

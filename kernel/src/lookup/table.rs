@@ -10,7 +10,7 @@
 use super::grid::{Interpolant, LookupGrid};
 use super::pair::lagrange4;
 use crate::band::scan::as_complex;
-use crate::error::{Error, check_len};
+use crate::error::{ArgumentError, check_len};
 use crate::phase::cis_small_turns;
 use num_complex::Complex32;
 
@@ -35,14 +35,14 @@ impl<'t> Lookup<'t> {
     /// Builds the tables into `tables` (once, `f64` `libm`, rounded to `f32`).
     ///
     /// # Errors
-    /// [`Error::Length`] if `tables` does not have [`Lookup::tables_len`] elements.
-    pub fn new(grid: &LookupGrid, tables: &'t mut [f32]) -> Result<Self, Error> {
+    /// [`ArgumentError::Length`] if `tables` does not have [`Lookup::tables_len`] elements.
+    pub fn new(grid: &LookupGrid, tables: &'t mut [f32]) -> Result<Self, ArgumentError> {
         let l = grid.len;
         check_len("lookup tables", Self::tables_len(grid), tables.len())?;
         let found = tables.len();
         let all = as_complex("lookup tables", tables)?;
         let Some((tw, car)) = all.split_at_mut_checked(l) else {
-            return Err(Error::Length {
+            return Err(ArgumentError::Length {
                 what: "lookup tables",
                 expected: 4 * l,
                 found,
@@ -198,12 +198,12 @@ impl Lookup<'_> {
     /// ([`ColumnF32::finish_lookup`](crate::ColumnF32::finish_lookup)).
     ///
     /// # Errors
-    /// [`Error::Length`] if `hg` does not have `J` values or `y` not
-    /// [`Lookup::grid_buf_len`]; [`Error::Incompatible`] for an [`Interpolant::Hermite`] grid
+    /// [`ArgumentError::Length`] if `hg` does not have `J` values or `y` not
+    /// [`Lookup::grid_buf_len`]; [`ArgumentError::Incompatible`] for an [`Interpolant::Hermite`] grid
     /// (the reader is the Lagrange cubic); `y` is unchanged then.
-    pub fn baseband(&self, hg: &[Complex32], y: &mut [Complex32]) -> Result<(), Error> {
+    pub fn baseband(&self, hg: &[Complex32], y: &mut [Complex32]) -> Result<(), ArgumentError> {
         if self.grid.interp != Interpolant::Lagrange {
-            return Err(Error::Incompatible(
+            return Err(ArgumentError::Incompatible(
                 "a Hermite lookup grid (the reader is the Lagrange cubic)",
             ));
         }

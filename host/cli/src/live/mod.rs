@@ -10,7 +10,7 @@ use std::io::IsTerminal as _;
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use vltm::exec::Path as EvalPath;
+use vltm::exec::EvalPath;
 use vltm::io::{self, ptu};
 use vltm::live::{self, LiveOptions, LiveRun, LiveSource, Outputs, Update};
 use vltm::probe::{self, IndirectOptions, LeakOptions, Partial};

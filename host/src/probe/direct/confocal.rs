@@ -23,7 +23,6 @@ use crate::exec::{Pass, chunk_len};
 use crate::io::capture::{Geometry, RowSource};
 use crate::probe::drive::*;
 use crate::probe::fast::{BandDft, Confocal};
-use crate::probe::wave::*;
 use crate::volume::Volume;
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
@@ -36,9 +35,13 @@ const ROWS_PER_GEMM: usize = 128;
 /// Voxels with some confocal path `d1_l + d4_l + 2|x_l − x_v| − t0` outside the guard
 /// interval (within `1e-4·σ` counts as outside, as for the planar path). A bound from the
 /// wall points' bounding box settles most voxels; the rest are checked point by point.
-pub(super) fn outside_guard(g: &Geometry, cfg: &Config, voxels: &[Point]) -> Vec<bool> {
-    let (d1, d4) = legs(g, cfg);
-    let e: Vec<f64> = d1.iter().zip(&d4).map(|(a, b)| a + b).collect();
+pub(super) fn outside_guard(
+    g: &Geometry,
+    cfg: &Config,
+    (d1, d4): &(Vec<f64>, Vec<f64>),
+    voxels: &[Point],
+) -> Vec<bool> {
+    let e: Vec<f64> = d1.iter().zip(d4).map(|(a, b)| a + b).collect();
     let (e_lo, e_hi) = e
         .iter()
         .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &x| {
@@ -103,23 +106,24 @@ pub(super) fn direct_convolution(
     job: Job<'_>,
     volume: &Volume,
     conv: Confocal,
+    legs: &(Vec<f64>, Vec<f64>),
 ) -> Result<(Vec<Complex64>, Report)> {
     let cfg = job.cfg;
     let g = src.geometry().clone();
-    let (legs1, legs4) = legs(&g, cfg);
+    let (legs1, legs4) = legs;
     let offsets: Vec<f32> = legs1
         .iter()
-        .zip(&legs4)
+        .zip(legs4)
         .map(|(a, b)| (a + b - cfg.t0()) as f32)
         .collect();
     let (conv, skip) = if offsets.iter().all(|&x| x == offsets[0]) {
         (conv.with_guard(offsets[0]), vec![false; volume.len()])
     } else {
-        (conv, outside_guard(&g, cfg, &volume.points))
+        (conv, outside_guard(&g, cfg, legs, &volume.points))
     };
     let fb_idx: Vec<usize> = (0..skip.len()).filter(|&i| skip[i]).collect();
     let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| volume.points[i]).collect();
-    let (mut acc, fb_acc, report) = convolution_core(src, job, &conv, &skip, &fb_pts)?;
+    let (mut acc, fb_acc, report) = convolution_core(src, job, &conv, &skip, &fb_pts, legs)?;
     for (&i, a) in fb_idx.iter().zip(fb_acc) {
         acc[i] = a;
     }
@@ -127,18 +131,19 @@ pub(super) fn direct_convolution(
 }
 
 /// The confocal convolution `conv` over its voxel grid (voxels with `skip` left at 0), and
-/// the band path's accumulators of the points `fb_pts`, in one pass over the rows.
+/// the band path's accumulators of the points `fb_pts`, in one pass over the rows (`(d1, d4)`:
+/// the device legs of the wall points).
 pub(super) fn convolution_core(
     src: &mut dyn RowSource,
     job: Job<'_>,
     conv: &Confocal,
     skip: &[bool],
     fb_pts: &[Point],
+    (legs1, legs4): &(Vec<f64>, Vec<f64>),
 ) -> Result<(Vec<Complex64>, Vec<Complex64>, Report)> {
     let Job { cfg, wave, exec } = job;
     let g = src.geometry().clone();
     check_laser_falloff(&g, wave)?;
-    let (legs1, legs4) = legs(&g, cfg);
     let cl = chunk_len(fb_pts.len());
     let chunks: Vec<&[Point]> = fb_pts.chunks(cl).collect();
     let mut states: Vec<Vec<f64>> = chunks

@@ -10,14 +10,14 @@ use phasor_path::direct_phasor;
 
 use crate::budget;
 use crate::error::Result;
-use crate::exec::{Exec, Path};
+use crate::exec::{EvalPath, Exec, Progress};
 use crate::io::capture::{Geometry, RowSource};
-use crate::probe::crop::{Crop, Reach, with_crop};
+use crate::probe::crop::{self, Crop, Labelled, Reach};
 use crate::probe::drive::*;
 use crate::probe::fast::resample::Resample;
 use crate::probe::fast::{LookupDiagonal, Planar, planar};
-use crate::probe::output::{Output, check_finite};
-use crate::probe::plan::{self, Diagonal, Engine, with_note};
+use crate::probe::output::{Output, check_finite, intensities};
+use crate::probe::plan::{self, Diagonal, Engine};
 use crate::probe::wave::*;
 use crate::volume::Volume;
 use num_complex::Complex64;
@@ -27,7 +27,7 @@ use vltm_kernel::geometry::dist;
 use vltm_kernel::{Config, Gate, Point, Probe, Report, Scan, Target};
 
 /// Direct light: the diagonal over `volume` (Eqs. 11–12), on the path [`Exec::path`] forces
-/// or, under [`Path::Auto`], the cheapest that applies by the flop model (the planner's docs,
+/// or, under [`EvalPath::Auto`], the cheapest that applies by the flop model (the planner's docs,
 /// `probe::plan`).
 ///
 /// # Errors
@@ -61,7 +61,7 @@ pub fn direct(
 pub(super) struct Amplitudes {
     pub(super) acc: Vec<Complex64>,
     pub(super) report: Report,
-    pub(super) path: Path,
+    pub(super) path: EvalPath,
     /// The part of the time axis kept.
     pub(super) crop: Option<Crop>,
     /// The grid the planner reports ([`Output::aligned`]): the support grid's `--volume` SPEC
@@ -72,7 +72,7 @@ pub(super) struct Amplitudes {
 
 impl Amplitudes {
     /// Amplitudes of the whole time axis (the crop is set by the caller that made it).
-    fn new(acc: Vec<Complex64>, report: Report, path: Path, aligned: Option<String>) -> Self {
+    fn new(acc: Vec<Complex64>, report: Report, path: EvalPath, aligned: Option<String>) -> Self {
         Self {
             acc,
             report,
@@ -100,7 +100,9 @@ pub(super) fn direct_acc(
     direct_acc_with(src, volume, wave, exec, false)
 }
 
-/// [`direct_acc`] with the distance-only `wave`, and the wall cosines per row under `cosine`.
+/// [`direct_acc`] with the distance-only `wave`, and the wall cosines per row under `cosine`:
+/// the capture's configuration and device legs made once, the window checked, the time axis
+/// cut to the voxels' reach, then the planner's path carried out.
 fn direct_acc_with(
     src: &mut dyn RowSource,
     volume: &Volume,
@@ -108,10 +110,13 @@ fn direct_acc_with(
     exec: Exec<'_>,
     cosine: bool,
 ) -> Result<(Amplitudes, Config)> {
-    let base = wave.config(src.geometry())?;
-    crate::probe::window::window_rule(
-        src.geometry(),
+    let g = src.geometry();
+    let base = wave.config(g)?;
+    let legs = legs(g, &base);
+    crate::probe::window::window_rule_with(
+        g,
         &base,
+        &legs,
         None,
         &volume.points,
         crate::probe::gate::ColumnGate::TwoBounce,
@@ -122,55 +127,49 @@ fn direct_acc_with(
         voxels: &volume.points,
         late: false,
     };
-    with_crop(src, wave, exec, reach, |src, exec, crop| {
-        let (mut a, cfg) = direct_acc_on(src, volume, wave, exec, cosine)?;
-        a.crop = crop;
-        Ok((a, cfg))
-    })
-}
-
-/// [`direct_acc`] on the (cropped) source.
-fn direct_acc_on(
-    src: &mut dyn RowSource,
-    volume: &Volume,
-    wave: &Wave,
-    exec: Exec<'_>,
-    cosine: bool,
-) -> Result<(Amplitudes, Config)> {
-    let cfg = wave.config(src.geometry())?;
-    check_memory(
-        src.geometry(),
-        &cfg,
-        budget::bytes(volume.len(), 32),
-        "direct light",
-    )?;
-    let job = Job {
-        cfg: &cfg,
-        wave,
-        exec,
-    };
+    let mut cut = crop::cut(src, wave.crop, &base, &legs, exec, reach)?;
+    let (crop, cfg) = (cut.crop, cut.cfg);
+    let (src, exec) = cut.parts();
     let g = src.geometry();
     let choice = if cosine {
         plan::cosine(g, &cfg, volume, exec.path)?
     } else {
         plan::diagonal(g, &cfg, volume, exec.path)?
     };
-    let (how, path, aligned) = (choice.how, choice.path, choice.aligned);
-    let (acc, report) = with_note(job, choice.note, |job| evaluate(src, job, volume, how))?;
-    Ok((Amplitudes::new(acc, report, path, aligned), cfg))
+    // The pass's progress labels carry the planner's note (`direct (path lookup; …)`).
+    let noted = exec.progress.map(|p| Labelled {
+        inner: p,
+        note: choice.note,
+    });
+    let job = Job {
+        cfg: &cfg,
+        wave,
+        exec: Exec {
+            progress: noted.as_ref().map(|l| l as &dyn Progress),
+            ..exec
+        },
+    };
+    let (acc, report) = evaluate(src, job, volume, choice.how, &legs)?;
+    let a = Amplitudes {
+        crop,
+        ..Amplitudes::new(acc, report, choice.path, choice.aligned)
+    };
+    Ok((a, cfg))
 }
 
-/// The diagonal's accumulators evaluated as the planner decided (`how`).
+/// The diagonal's accumulators evaluated as the planner decided (`how`); `legs`: the device
+/// legs `(d1, d4)` of the capture's spots.
 fn evaluate(
     src: &mut dyn RowSource,
     job: Job<'_>,
     volume: &Volume,
     how: Diagonal,
+    legs: &(Vec<f64>, Vec<f64>),
 ) -> Result<(Vec<Complex64>, Report)> {
     match how {
-        Diagonal::Resampled(rs, engine) => direct_resampled(src, job, volume, &rs, engine),
-        Diagonal::Planar(p) => direct_planar(src, job, volume, &p),
-        Diagonal::Convolution(c) => confocal::direct_convolution(src, job, volume, *c),
+        Diagonal::Resampled(rs, engine) => direct_resampled(src, job, volume, &rs, engine, legs),
+        Diagonal::Planar(p) => direct_planar(src, job, volume, &p, legs),
+        Diagonal::Convolution(c) => confocal::direct_convolution(src, job, volume, *c, legs),
         Diagonal::Phasor(p, plan) => direct_phasor(src, job, volume, &p, &plan),
         Diagonal::Lookup(plan) => direct_lookup(src, job, volume, &plan),
         Diagonal::Band => elementwise(
@@ -187,8 +186,12 @@ fn evaluate(
 
 /// Voxels that have some (laser, SPAD) path outside the guard interval: the band path zeroes
 /// those paths, the convolution cannot, so these voxels are evaluated on the band path.
-pub(super) fn outside_guard(g: &Geometry, cfg: &Config, voxels: &[Point]) -> Vec<bool> {
-    let (d1, d4) = legs(g, cfg);
+pub(super) fn outside_guard(
+    g: &Geometry,
+    cfg: &Config,
+    (d1, d4): &(Vec<f64>, Vec<f64>),
+    voxels: &[Point],
+) -> Vec<bool> {
     let (lo, hi) = cfg.guard();
     let range = |pts: &[Point], legs: &[f64], v: &Point| {
         pts.iter()
@@ -201,8 +204,8 @@ pub(super) fn outside_guard(g: &Geometry, cfg: &Config, voxels: &[Point]) -> Vec
     voxels
         .par_iter()
         .map(|v| {
-            let (l0, l1) = range(&g.lasers, &d1, v);
-            let (s0, s1) = range(&g.spads, &d4, v);
+            let (l0, l1) = range(&g.lasers, d1, v);
+            let (s0, s1) = range(&g.spads, d4, v);
             // A margin of 1e-4·σ for the f32 path lengths of the kernel.
             let m = 1e-4 * cfg.sigma();
             l0 + s0 - cfg.t0() < lo + m || l1 + s1 - cfg.t0() > hi - m
@@ -279,8 +282,9 @@ pub(super) fn direct_planar(
     job: Job<'_>,
     volume: &Volume,
     planar: &Planar,
+    legs: &(Vec<f64>, Vec<f64>),
 ) -> Result<(Vec<Complex64>, Report)> {
-    let skip = outside_guard(src.geometry(), job.cfg, &volume.points);
+    let skip = outside_guard(src.geometry(), job.cfg, legs, &volume.points);
     let fb_idx: Vec<usize> = (0..skip.len()).filter(|&i| skip[i]).collect();
     let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| volume.points[i]).collect();
     let (mut acc, fb_acc, report) = planar_core(src, job, &volume.points, planar, &skip, &fb_pts)?;
@@ -383,6 +387,7 @@ fn direct_resampled(
     volume: &Volume,
     rs: &Resample,
     engine: Engine,
+    legs: &(Vec<f64>, Vec<f64>),
 ) -> Result<(Vec<Complex64>, Report)> {
     let g = src.geometry().clone();
     let cfg = job.cfg;
@@ -390,10 +395,10 @@ fn direct_resampled(
     let none = vec![false; sup.len()];
     // A confocal capture whose rows share one leg offset (wall-to-wall time axes): the guard
     // in the convolution's kernel, as on the aligned path, no band-path voxels.
-    let (legs1, legs4) = legs(&g, cfg);
+    let (legs1, legs4) = legs;
     let offsets: Vec<f32> = legs1
         .iter()
-        .zip(&legs4)
+        .zip(legs4)
         .map(|(a, b)| (a + b - cfg.t0()) as f32)
         .collect();
     let uniform = offsets.iter().all(|&x| x == offsets[0]);
@@ -402,15 +407,15 @@ fn direct_resampled(
         e => e,
     };
     let outside = match &engine {
-        Engine::Planar(_) => outside_guard(&g, cfg, &volume.points),
+        Engine::Planar(_) => outside_guard(&g, cfg, legs, &volume.points),
         Engine::Confocal(_) if uniform => vec![false; volume.len()],
-        Engine::Confocal(_) => confocal::outside_guard(&g, cfg, &volume.points),
+        Engine::Confocal(_) => confocal::outside_guard(&g, cfg, legs, &volume.points),
     };
     let fb_idx: Vec<usize> = (0..outside.len()).filter(|&i| outside[i]).collect();
     let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| volume.points[i]).collect();
     let (sup_acc, fb_acc, report) = match &engine {
         Engine::Planar(p) => planar_core(src, job, &sup.points, p, &none, &fb_pts)?,
-        Engine::Confocal(c) => confocal::convolution_core(src, job, c, &none, &fb_pts)?,
+        Engine::Confocal(c) => confocal::convolution_core(src, job, c, &none, &fb_pts, legs)?,
     };
     let _t = crate::timings::section("resampling", crate::timings::Kind::Parallel);
     let mut acc = rs.apply(&sup_acc);

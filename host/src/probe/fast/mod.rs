@@ -15,7 +15,7 @@
 //! * `aligned`: the nearest grid the FFT paths take, the depths the time window reaches and
 //!   the volume `vltm info` suggests (re-exported by [`crate::probe`]).
 //!
-//! The planner (`probe::plan`) picks a path per probe ([`crate::exec::Path`]); every path is
+//! The planner (`probe::plan`) picks a path per probe ([`crate::exec::EvalPath`]); every path is
 //! checked against the float64 reference in `tests/proptest_fast.rs`.
 
 pub(crate) mod aligned;

@@ -177,6 +177,17 @@ pub fn min_len(cfg: &Config, tol: f64) -> Option<usize> {
     (hi <= MAX_LEN).then_some(hi)
 }
 
+/// The sizes of a [`Phasor`] plan that its cost and memory depend on ([`Phasor::sizes`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Sizes {
+    /// Nodes per DFT period, `L`.
+    pub grid_len: usize,
+    /// Entries of one histogram's table.
+    pub table_len: usize,
+    /// Bytes of one thread's FFT buffers.
+    pub scratch_bytes: usize,
+}
+
 impl Phasor {
     /// Plans the table for `cfg` meeting `tol` (module docs).
     ///
@@ -292,6 +303,16 @@ impl Phasor {
                 .fwd
                 .get_inplace_scratch_len()
                 .max(self.inv.get_inplace_scratch_len()))
+    }
+
+    /// What a planner weighs of this plan in one read: [`Phasor::grid_len`],
+    /// [`Phasor::table_len`] and [`Phasor::scratch_bytes`].
+    pub fn sizes(&self) -> Sizes {
+        Sizes {
+            grid_len: self.grid_len(),
+            table_len: self.table_len(),
+            scratch_bytes: self.scratch_bytes(),
+        }
     }
 
     /// A thread's FFT buffers.

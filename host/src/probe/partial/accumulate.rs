@@ -1,7 +1,7 @@
 //! A probe run over a part of the rows, kept as a [`Partial`].
 
 use crate::error::{Error, Result};
-use crate::exec::{Exec, Path};
+use crate::exec::{EvalPath, Exec};
 use crate::io::capture::{RowRange, RowSource};
 use crate::probe::column::{ColumnState, Columns, Shell, column_acc, factorised_columns};
 use crate::probe::crop::{self, Reach};
@@ -53,7 +53,7 @@ pub fn accumulate(
         Task::Column { focus, gate, shell } => {
             let (state, cfg, _) = column_acc(&mut part, *focus, volume, *gate, wave, exec, true)?;
             let (acc, report, path) = match state {
-                ColumnState::Voxels(acc, r) => (flat(&acc), r, Path::Band),
+                ColumnState::Voxels(acc, r) => (flat(&acc), r, EvalPath::Band),
                 ColumnState::Factorised {
                     state,
                     report,
@@ -137,7 +137,7 @@ pub fn accumulate(
                 cfg,
                 cols.state,
                 cols.report,
-                Path::Band,
+                EvalPath::Band,
                 None,
                 None,
                 sh,
@@ -152,7 +152,7 @@ pub fn accumulate(
                 cfg,
                 cols.state,
                 cols.report,
-                Path::Band,
+                EvalPath::Band,
                 None,
                 None,
                 None,

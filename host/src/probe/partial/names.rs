@@ -4,7 +4,7 @@
 //! from the header and the `f64` body. Pure functions, no allocation beyond their results.
 
 use crate::error::{Error, Result};
-use crate::exec::Path;
+use crate::exec::EvalPath;
 use crate::io::capture::Geometry;
 use crate::probe::column::Shell;
 use crate::probe::gate::ColumnGate;
@@ -73,13 +73,13 @@ pub(super) fn parse_gate(s: &str) -> Option<ColumnGate> {
     }
 }
 
-pub(super) fn parse_path(s: &str) -> Option<Path> {
+pub(super) fn parse_path(s: &str) -> Option<EvalPath> {
     [
-        Path::Band,
-        Path::Planar,
-        Path::Lookup,
-        Path::Phasor,
-        Path::Auto,
+        EvalPath::Band,
+        EvalPath::Planar,
+        EvalPath::Lookup,
+        EvalPath::Phasor,
+        EvalPath::Auto,
     ]
     .into_iter()
     .find(|p| p.name() == s)

@@ -1,15 +1,14 @@
 //! The partial state of a probe, what it accumulates ([`Task`]), merged and finished.
 
 use crate::error::{Error, Result};
-use crate::exec::{Exec, Path};
+use crate::exec::{EvalPath, Exec};
 use crate::io::state;
 use crate::probe::column::{ColumnState, Columns, Shell, check_focus};
-use crate::probe::drive::intensities;
 use crate::probe::gate::ColumnGate;
 use crate::probe::indirect::indirect_sum;
 use crate::probe::leak::GateEnergy;
 use crate::probe::matrix::{Matrix, matrix_of_columns};
-use crate::probe::output::Output;
+use crate::probe::output::{Output, intensities};
 use crate::volume::Volume;
 use num_complex::Complex64;
 use std::ops::Range;
@@ -396,7 +395,7 @@ impl Partial {
             dropped: self.head.report.dropped,
             aliased: 0,
         };
-        let path = parse_path(&p.path).unwrap_or(Path::Band);
+        let path = parse_path(&p.path).unwrap_or(EvalPath::Band);
         let shell = p.shell.map_or(Shell::ALL, shell_of);
         let mut matrix = None;
         let (values, report, path, amplitudes) = match p.kind.as_str() {
@@ -450,7 +449,7 @@ impl Partial {
                     volume.len(),
                     Exec::default(),
                 )?;
-                (v, r, Path::Band, None)
+                (v, r, EvalPath::Band, None)
             }
             "matrix" => {
                 let mut cols = Columns {
@@ -463,7 +462,7 @@ impl Partial {
                 let v = m.intensities();
                 let r = m.report;
                 matrix = Some(m);
-                (v, r, Path::Band, None)
+                (v, r, EvalPath::Band, None)
             }
             k => return Err(Error::arg("kind", format!("unknown probe `{k}`"))),
         };

@@ -3,9 +3,9 @@
 
 use crate::budget;
 use crate::error::{Error, Result};
-use crate::exec::Path;
+use crate::exec::EvalPath;
 use crate::io::capture::Geometry;
-use crate::probe::drive::memory_plan;
+use crate::probe::drive::{pass_name, pass_plan};
 use crate::probe::fast::{LookupDiagonal, Phasor, phasor};
 use vltm_kernel::Config;
 
@@ -46,13 +46,13 @@ pub(super) fn lookup_scan_flops(g: &Geometry, cfg: &Config, n_voxels: usize) -> 
 /// Flops of the phasor path over the whole scan: per histogram a forward FFT of N and an
 /// inverse one of L, the table, then ~30 operations per (voxel, histogram) (8 voxels per
 /// vector: counted as 30/4 against the other paths' scalar flops).
-pub(super) fn phasor_flops(g: &Geometry, cfg: &Config, ph: &Phasor, n_voxels: usize) -> f64 {
+pub(super) fn phasor_flops(g: &Geometry, cfg: &Config, ph: &phasor::Sizes, n_voxels: usize) -> f64 {
     let hists = (g.lasers.len() * g.spads_per_row()) as f64;
-    let (n, l) = (cfg.n_fft() as f64, ph.grid_len() as f64);
+    let (n, l) = (cfg.n_fft() as f64, ph.grid_len as f64);
     hists
         * (5.0 * n * n.log2()
             + 5.0 * l * l.log2()
-            + 4.0 * ph.table_len() as f64
+            + 4.0 * ph.table_len as f64
             + n_voxels as f64 * 7.5)
 }
 
@@ -69,10 +69,37 @@ pub(super) const PHASOR_COST: f64 = 4.0;
 // ---------------------------------------------------------------------------------------
 // Memory plans
 
+/// What a diagonal pass over `n_voxels` holds before its path's own buffers: the pass's
+/// tables, row buffers and histograms (`pass`, [`pass_plan`]) and its accumulators.
+fn direct_plan(pass: &budget::Plan, n_voxels: usize) -> budget::Plan {
+    let mut plan = pass.clone();
+    plan.add(
+        "the states and outputs of direct light",
+        budget::bytes(n_voxels, 32),
+    );
+    plan
+}
+
+/// What every diagonal pass over `n_voxels` of `g` holds at once before its path's own
+/// buffers (`pass_plan`), checked against the budget: returned for the paths' plans.
+///
+/// # Errors
+/// [`Error::Memory`] naming the pass, the DFT sizes and σ.
+pub(super) fn direct_pass(g: &Geometry, cfg: &Config, n_voxels: usize) -> Result<budget::Plan> {
+    let pass = pass_plan(g, cfg);
+    direct_plan(&pass, n_voxels).check(|| pass_name(g, cfg, "direct light"))?;
+    Ok(pass)
+}
+
 /// What the diagonal holds at once on the lookup path: the pass's tables and row buffers
-/// ([`memory_plan`]) and the lookup's grid and per-thread scratch.
-pub(super) fn lookup_plan(g: &Geometry, cfg: &Config, n_voxels: usize) -> budget::Plan {
-    let mut plan = memory_plan(g, cfg, budget::bytes(n_voxels, 32), "direct light");
+/// (`pass`, [`direct_pass`]), its accumulators and the lookup's grid and per-thread scratch.
+pub(super) fn lookup_plan(
+    pass: &budget::Plan,
+    g: &Geometry,
+    cfg: &Config,
+    n_voxels: usize,
+) -> budget::Plan {
+    let mut plan = direct_plan(pass, n_voxels);
     let threads = rayon::current_num_threads().max(1);
     LookupDiagonal::add_to_plan(cfg, g.spads_per_row(), n_voxels, threads, &mut plan);
     plan
@@ -91,10 +118,11 @@ pub(crate) fn phasor_batch(threads: usize) -> usize {
 /// The phasor path's plan for `g` (its table for the default tolerance) and what it holds
 /// at once; `Err` says why it does not apply.
 pub(super) fn phasor_plan(
+    pass: &budget::Plan,
     g: &Geometry,
     cfg: &Config,
     n_voxels: usize,
-) -> Result<(Phasor, budget::Plan)> {
+) -> Result<(Phasor, phasor::Sizes, budget::Plan)> {
     let ks = g.spads_per_row();
     if ks > PHASOR_MAX_SPADS {
         return Err(Error::arg(
@@ -105,21 +133,26 @@ pub(super) fn phasor_plan(
         ));
     }
     let ph = Phasor::new(cfg, phasor::TOLERANCE)?;
+    let sizes = ph.sizes();
     let threads = rayon::current_num_threads().max(1);
     let rows = phasor_batch(threads);
-    let mut plan = memory_plan(g, cfg, budget::bytes(n_voxels, 16 + 20), "direct light");
+    let mut plan = pass.clone();
     plan.add(
+        "the states and outputs of direct light",
+        budget::bytes(n_voxels, 16 + 20),
+    )
+    .add(
         format!(
             "the phasor tables of {rows} rows × {ks} SPADs ({} entries of 16 bytes each)",
-            budget::count(ph.table_len() as u128)
+            budget::count(sizes.table_len as u128)
         ),
-        budget::bytes(rows * ks, 16).saturating_mul(ph.table_len() as u128),
+        budget::bytes(rows * ks, 16).saturating_mul(sizes.table_len as u128),
     )
     .add(
         format!("{threads} phasor FFT buffers (N + L complex f32 each)"),
-        budget::bytes(threads, ph.scratch_bytes() as u128),
+        budget::bytes(threads, sizes.scratch_bytes as u128),
     );
-    Ok((ph, plan))
+    Ok((ph, sizes, plan))
 }
 
 // ---------------------------------------------------------------------------------------
@@ -129,7 +162,7 @@ pub(super) fn phasor_plan(
 /// weights, and how they compare: the FFT paths compete against the cheapest of them, then
 /// they against each other.
 pub(super) struct Rivals {
-    /// The phasor path's table and plan: when forced, or under [`Path::Auto`] when it applies
+    /// The phasor path's table and plan: when forced, or under [`EvalPath::Auto`] when it applies
     /// and fits the budget.
     pub(super) phasor: Option<(Phasor, budget::Plan)>,
     /// What the lookup path holds ([`lookup_plan`]): it competes only when that fits the
@@ -153,20 +186,27 @@ impl Rivals {
     ///
     /// # Errors
     /// [`Error::Argument`] (`path`) naming why a forced phasor path does not apply.
-    pub(super) fn new(g: &Geometry, cfg: &Config, n_voxels: usize, path: Path) -> Result<Self> {
+    pub(super) fn new(
+        pass: &budget::Plan,
+        g: &Geometry,
+        cfg: &Config,
+        n_voxels: usize,
+        path: EvalPath,
+    ) -> Result<Self> {
         // The phasor path: planned when forced (its errors name why it does not apply) or,
         // under `Auto`, when it applies and fits the budget.
-        let phasor = match path {
-            Path::Phasor => Some(phasor_plan(g, cfg, n_voxels)?),
-            Path::Auto => phasor_plan(g, cfg, n_voxels)
+        let planned = match path {
+            EvalPath::Phasor => Some(phasor_plan(pass, g, cfg, n_voxels)?),
+            EvalPath::Auto => phasor_plan(pass, g, cfg, n_voxels)
                 .ok()
-                .filter(|(_, plan)| plan.fits()),
+                .filter(|(_, _, plan)| plan.fits()),
             _ => None,
         };
-        let ph = phasor
-            .as_ref()
-            .map_or(f64::INFINITY, |(p, _)| phasor_flops(g, cfg, p, n_voxels));
-        let lookup = lookup_plan(g, cfg, n_voxels);
+        let ph = planned.as_ref().map_or(f64::INFINITY, |(_, sizes, _)| {
+            phasor_flops(g, cfg, sizes, n_voxels)
+        });
+        let phasor = planned.map(|(p, _, plan)| (p, plan));
+        let lookup = lookup_plan(pass, g, cfg, n_voxels);
         let fits = lookup.fits();
         if g.confocal {
             // Paired and confocal scans: whole-scan flops.

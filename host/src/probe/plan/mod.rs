@@ -1,9 +1,9 @@
 //! The planner: every choice of how a probe's voxel sums are evaluated is made here, once per
 //! pass and before any row is read, and handed on as a decision ([`Choice`] of a diagonal; a
-//! column's `(Path, Option<Planar>)`). The algorithms — `direct` with its `confocal`, `cosine`
+//! column's `(EvalPath, Option<Planar>)`). The algorithms — `direct` with its `confocal`, `cosine`
 //! and `phasor_path` parts, the column imaging — carry the decision out and never choose. This
 //! module owns the flop models, the memory plans that decide whether a path competes, the
-//! refusals of forced paths that do not apply ([`Path`]: the CLI's `--path`), and the notes
+//! refusals of forced paths that do not apply ([`EvalPath`]: the CLI's `--path`), and the notes
 //! that say which path ran and which grid the FFT path would take.
 //!
 //! # Cost models
@@ -24,11 +24,11 @@
 //!
 //! # When each is chosen
 //!
-//! A forced path ([`Path::Band`], [`Path::Planar`], [`Path::Lookup`], [`Path::Phasor`]) runs
+//! A forced path ([`EvalPath::Band`], [`EvalPath::Planar`], [`EvalPath::Lookup`], [`EvalPath::Phasor`]) runs
 //! where it applies and is refused in one line naming why where it does not (the planar path:
 //! neither on the lattice nor resampled within the bound; the phasor path: rows of more than
 //! [`PHASOR_MAX_SPADS`] SPADs; the lookup and phasor paths for columns; any fast path for the
-//! un-gated and higher-order diagonals). Under [`Path::Auto`] the diagonal ([`diagonal`])
+//! un-gated and higher-order diagonals). Under [`EvalPath::Auto`] the diagonal ([`diagonal`])
 //! takes, in this order:
 //!
 //! 1. the resampled FFT path, on a grid off the wall's lattice, when its buffers fit the budget
@@ -48,7 +48,7 @@
 //! else by the kernel; the un-gated and higher-order gates take the band path.
 //!
 //! Memory: a path whose plan does not fit the budget ([`crate::budget`]) does not compete
-//! under [`Path::Auto`]; forced, its plan's check names the largest buffer.
+//! under [`EvalPath::Auto`]; forced, its plan's check names the largest buffer.
 //!
 //! Beside the choice: `cost` (the flop models of the band, lookup and phasor paths, their
 //! memory plans and how they compare, `Rivals`) and `note` (the progress notes, the aligned
@@ -60,14 +60,13 @@ mod note;
 
 pub(super) use cost::phasor_batch;
 pub use note::fft_note;
-pub(super) use note::with_note;
 
 use super::fast::resample::Resample;
 use super::fast::{Confocal, Phasor, Planar, confocal, planar};
 use super::gate::ColumnGate;
 use crate::budget;
 use crate::error::{Error, Result};
-use crate::exec::Path;
+use crate::exec::EvalPath;
 use crate::io::capture::Geometry;
 use crate::volume::Volume;
 use cost::*;
@@ -135,13 +134,13 @@ pub(super) enum Diagonal {
 
 impl Diagonal {
     /// The path reported for this decision (the convolutions and the resampled FFT path are
-    /// [`Path::Planar`]).
-    fn path(&self) -> Path {
+    /// [`EvalPath::Planar`]).
+    fn path(&self) -> EvalPath {
         match self {
-            Self::Resampled(..) | Self::Planar(_) | Self::Convolution(_) => Path::Planar,
-            Self::Phasor(..) => Path::Phasor,
-            Self::Lookup(_) | Self::Cosine(Some(_)) => Path::Lookup,
-            Self::Band | Self::Cosine(None) => Path::Band,
+            Self::Resampled(..) | Self::Planar(_) | Self::Convolution(_) => EvalPath::Planar,
+            Self::Phasor(..) => EvalPath::Phasor,
+            Self::Lookup(_) | Self::Cosine(Some(_)) => EvalPath::Lookup,
+            Self::Band | Self::Cosine(None) => EvalPath::Band,
         }
     }
 }
@@ -151,7 +150,7 @@ impl Diagonal {
 /// ([`crate::probe::Output::aligned`]).
 pub(super) struct Choice {
     pub(super) how: Diagonal,
-    pub(super) path: Path,
+    pub(super) path: EvalPath,
     pub(super) note: String,
     pub(super) aligned: Option<String>,
 }
@@ -177,35 +176,69 @@ impl Choice {
 }
 
 /// The diagonal's path over `volume` of the (cropped) capture `g` under distance weights
-/// (module docs: the order of the choice).
+/// (module docs: the order of the choice), after the pass's own buffers are checked against
+/// the budget.
 ///
 /// # Errors
-/// [`Error::Argument`] (`path`) naming why a forced path does not apply; [`Error::Memory`]
-/// when the forced resampled FFT path's buffers do not fit the budget.
-pub(super) fn diagonal(g: &Geometry, cfg: &Config, volume: &Volume, path: Path) -> Result<Choice> {
-    let how = diagonal_path(g, cfg, volume, path)?;
+/// [`Error::Memory`] naming the pass when its tables, row buffers and accumulators do not fit
+/// the budget; [`Error::Argument`] (`path`) naming why a forced path does not apply;
+/// [`Error::Memory`] when the forced resampled FFT path's buffers do not fit the budget.
+pub(super) fn diagonal(
+    g: &Geometry,
+    cfg: &Config,
+    volume: &Volume,
+    path: EvalPath,
+) -> Result<Choice> {
+    let pass = direct_pass(g, cfg, volume.len())?;
+    let how = diagonal_path(&pass, g, cfg, volume, path)?;
     Ok(Choice::new(how, g, volume, cfg))
 }
 
-/// [`diagonal`]'s path.
-fn diagonal_path(g: &Geometry, cfg: &Config, volume: &Volume, path: Path) -> Result<Diagonal> {
-    let r = Rivals::new(g, cfg, volume.len(), path)?;
+/// [`diagonal`]'s path. The exact FFT path is built first: off the wall's lattice it fails at
+/// once (its layout), and only then is the resampled FFT path weighed (on the lattice it never
+/// applies).
+fn diagonal_path(
+    pass: &budget::Plan,
+    g: &Geometry,
+    cfg: &Config,
+    volume: &Volume,
+    path: EvalPath,
+) -> Result<Diagonal> {
+    let r = Rivals::new(pass, g, cfg, volume.len(), path)?;
+    // The confocal convolution of a confocal scan, the planar one over a SPAD grid.
+    let exact = if g.confocal {
+        build_convolution(g, cfg, volume, path).map(|c| c.map(Exact::Convolution))
+    } else {
+        build_planar(&g.spads, cfg, volume, path).map(|p| p.map(Exact::Planar))
+    };
     // Off the wall's lattice: the FFT path on a support grid, resampled.
-    if let Some((rs, engine)) = resampled(g, cfg, volume, path, r.resampled)? {
+    if !matches!(exact, Some(Ok(_)))
+        && let Some((rs, engine)) = resampled(g, cfg, volume, path, r.resampled)?
+    {
         return Ok(Diagonal::Resampled(Box::new(rs), engine));
     }
-    // On it: the confocal convolution of a confocal scan, the planar one over a SPAD grid.
-    if g.confocal {
-        if let Some(c) = convolution(g, cfg, volume, path, r.fft)? {
-            return Ok(Diagonal::Convolution(Box::new(c)));
+    match exact {
+        Some(Ok(Exact::Convolution(c))) => {
+            if let Some(c) = decide_convolution(Some(Ok(c)), path, r.fft)? {
+                return Ok(Diagonal::Convolution(Box::new(c)));
+            }
         }
-    } else if let Some(p) = planar(&g.spads, cfg, volume, path, PlanarUse::Diagonal, r.fft)? {
-        return Ok(Diagonal::Planar(Box::new(p)));
+        Some(Ok(Exact::Planar(p))) => {
+            let n = volume.len();
+            if let Some(p) = decide_planar(Some(Ok(p)), cfg, n, path, PlanarUse::Diagonal, r.fft)? {
+                return Ok(Diagonal::Planar(Box::new(p)));
+            }
+        }
+        Some(Err(why)) => refuse_fft(why, path)?,
+        None => {}
     }
-    if let Some((p, plan)) = r.phasor.filter(|_| path == Path::Phasor || r.phasor_wins) {
+    if let Some((p, plan)) = r
+        .phasor
+        .filter(|_| path == EvalPath::Phasor || r.phasor_wins)
+    {
         return Ok(Diagonal::Phasor(Box::new(p), plan));
     }
-    if path == Path::Lookup || (path == Path::Auto && r.lookup_wins) {
+    if path == EvalPath::Lookup || (path == EvalPath::Auto && r.lookup_wins) {
         return Ok(Diagonal::Lookup(r.lookup));
     }
     Ok(Diagonal::Band)
@@ -216,7 +249,7 @@ fn diagonal_path(g: &Geometry, cfg: &Config, volume: &Volume, path: Path) -> Res
 ///
 /// # Errors
 /// [`Error::Argument`] (`weights` or `path`) with one line that says why.
-pub(super) fn check_cosine(g: &Geometry, path: Path) -> Result<()> {
+pub(super) fn check_cosine(g: &Geometry, path: EvalPath) -> Result<()> {
     if !g.confocal {
         return Err(Error::arg(
             "weights",
@@ -225,14 +258,14 @@ pub(super) fn check_cosine(g: &Geometry, path: Path) -> Result<()> {
              (use `inv` or `one`)",
         ));
     }
-    if path == Path::Phasor {
+    if path == EvalPath::Phasor {
         return Err(Error::arg(
             "path",
             "the phasor path does not take `$weights cos` (the wall cosines per leg are not in \
              its lane loop; the band and lookup paths compute them)",
         ));
     }
-    if path == Path::Planar {
+    if path == EvalPath::Planar {
         return Err(Error::arg(
             "path",
             "the planar FFT path does not apply: `$weights cos` multiplies each leg by the \
@@ -244,94 +277,147 @@ pub(super) fn check_cosine(g: &Geometry, path: Path) -> Result<()> {
 }
 
 /// The diagonal's path under the wall cosines ([`Diagonal::Cosine`]): the lookup when forced
-/// or, under [`Path::Auto`], when it fits the budget and costs fewer flops than the band sum.
+/// or, under [`EvalPath::Auto`], when it fits the budget and costs fewer flops than the band sum.
 ///
 /// # Errors
 /// As [`check_cosine`].
-pub(super) fn cosine(g: &Geometry, cfg: &Config, volume: &Volume, path: Path) -> Result<Choice> {
+pub(super) fn cosine(
+    g: &Geometry,
+    cfg: &Config,
+    volume: &Volume,
+    path: EvalPath,
+) -> Result<Choice> {
     check_cosine(g, path)?;
     let n = volume.len();
-    let lookup = lookup_plan(g, cfg, n);
+    let pass = direct_pass(g, cfg, n)?;
+    let lookup = lookup_plan(&pass, g, cfg, n);
     let band = band_total(g, cfg, n);
     let lookup_cost = lookup_scan_flops(g, cfg, n);
     let use_lookup =
-        path == Path::Lookup || (path == Path::Auto && lookup_cost < band && lookup.fits());
+        path == EvalPath::Lookup || (path == EvalPath::Auto && lookup_cost < band && lookup.fits());
     let how = Diagonal::Cosine(use_lookup.then_some(lookup));
     Ok(Choice::new(how, g, volume, cfg))
 }
 
+/// An exact FFT path built for the diagonal: the planar convolution over a SPAD grid or the
+/// confocal one over a confocal scan.
+enum Exact {
+    Planar(Planar),
+    Convolution(Confocal),
+}
+
+/// Refuses the forced planar path with why the exact FFT path does not apply (`why`); under
+/// another path nothing.
+fn refuse_fft(why: String, path: EvalPath) -> Result<()> {
+    if path == EvalPath::Planar {
+        return Err(Error::arg(
+            "path",
+            format!("the planar FFT path does not apply: {why}"),
+        ));
+    }
+    Ok(())
+}
+
 /// The planar convolution for this probe, if `path` allows it, it applies and (for
-/// [`Path::Auto`]) it costs fewer flops than `rival`, the cheapest other path (by the cost
+/// [`EvalPath::Auto`]) it costs fewer flops than `rival`, the cheapest other path (by the cost
 /// model, per row for the diagonal, once for a column's imaging). `spads`: the SPAD spots.
 fn planar(
     spads: &[Point],
     cfg: &Config,
     volume: &Volume,
-    path: Path,
+    path: EvalPath,
     usage: PlanarUse,
     rival: f64,
 ) -> Result<Option<Planar>> {
-    if matches!(path, Path::Band | Path::Lookup | Path::Phasor) {
-        return Ok(None);
+    let built = build_planar(spads, cfg, volume, path);
+    decide_planar(built, cfg, volume.len(), path, usage, rival)
+}
+
+/// [`planar`]'s convolution built, or why it does not apply; `None` when `path` excludes it.
+fn build_planar(
+    spads: &[Point],
+    cfg: &Config,
+    volume: &Volume,
+    path: EvalPath,
+) -> Option<Result<Planar, String>> {
+    if matches!(path, EvalPath::Band | EvalPath::Lookup | EvalPath::Phasor) {
+        return None;
     }
-    let planar = if volume.axes.is_none() {
+    Some(if volume.axes.is_none() {
         Err("the volume is a point list, not a grid".to_string())
     } else {
         Planar::new(cfg, spads, &volume.points, volume.shape)
-    };
-    match (planar, path) {
-        (Err(e), Path::Planar) => Err(Error::arg(
-            "path",
-            format!("the planar FFT path does not apply: {e}"),
-        )),
-        (Err(_), _) => Ok(None),
-        (Ok(p), Path::Planar) => Ok(Some(p)),
-        (Ok(p), _) => {
-            let planar = planar_flops(p.shape(), cfg, volume.len(), usage);
+    })
+}
+
+/// [`planar`]'s decision on the convolution `built` ([`build_planar`]) over `n_voxels`.
+///
+/// # Errors
+/// [`Error::Argument`] (`path`) when the planar path is forced and does not apply.
+fn decide_planar(
+    built: Option<Result<Planar, String>>,
+    cfg: &Config,
+    n_voxels: usize,
+    path: EvalPath,
+    usage: PlanarUse,
+    rival: f64,
+) -> Result<Option<Planar>> {
+    match (built, path) {
+        (None, _) => Ok(None),
+        (Some(Err(e)), _) => refuse_fft(e, path).map(|()| None),
+        (Some(Ok(p)), EvalPath::Planar) => Ok(Some(p)),
+        (Some(Ok(p)), _) => {
+            let planar = planar_flops(p.shape(), cfg, n_voxels, usage);
             Ok((planar < rival).then_some(p))
         }
     }
 }
 
-/// The confocal convolution for this probe, if `path` allows it, it applies and (for
-/// [`Path::Auto`]) it costs fewer flops than `rival` (the cheapest other path, whole scan).
-///
-/// # Errors
-/// [`Error::Argument`] (`path`) when the planar path is forced and does not apply.
-fn convolution(
+/// The confocal convolution for this probe built, or why it does not apply; `None` when
+/// `path` excludes it.
+fn build_convolution(
     g: &Geometry,
     cfg: &Config,
     volume: &Volume,
-    path: Path,
+    path: EvalPath,
+) -> Option<Result<Confocal, String>> {
+    if matches!(path, EvalPath::Band | EvalPath::Lookup | EvalPath::Phasor) {
+        return None;
+    }
+    Some(if g.paired_apart() {
+        Err(
+            "it needs the laser and SPAD at the same wall point (a confocal scan); this paired \
+             scan has them apart, so each row's path is not a function of one wall point"
+                .to_string(),
+        )
+    } else if volume.axes.is_none() {
+        Err("the volume is a point list, not a grid".to_string())
+    } else {
+        Confocal::new(cfg, &g.lasers, &volume.points, volume.shape)
+    })
+}
+
+/// The confocal convolution `built` ([`build_convolution`]) if it applies and (for
+/// [`EvalPath::Auto`]) it costs fewer flops than `rival` (the cheapest other path, whole scan).
+///
+/// # Errors
+/// [`Error::Argument`] (`path`) when the planar path is forced and does not apply.
+fn decide_convolution(
+    built: Option<Result<Confocal, String>>,
+    path: EvalPath,
     rival: f64,
 ) -> Result<Option<Confocal>> {
-    if matches!(path, Path::Band | Path::Lookup | Path::Phasor) {
-        return Ok(None);
-    }
-    let conv =
-        if g.paired_apart() {
-            Err("it needs the laser and SPAD at the same wall point (a confocal scan); this paired \
-             scan has them apart, so each row's path is not a function of one wall point"
-            .to_string())
-        } else if volume.axes.is_none() {
-            Err("the volume is a point list, not a grid".to_string())
-        } else {
-            Confocal::new(cfg, &g.lasers, &volume.points, volume.shape)
-        };
-    match (conv, path) {
-        (Err(e), Path::Planar) => Err(Error::arg(
-            "path",
-            format!("the planar FFT path does not apply: {e}"),
-        )),
-        (Err(_), _) => Ok(None),
-        (Ok(c), Path::Planar) => Ok(Some(c)),
-        (Ok(c), _) => Ok((c.flops() < rival).then_some(c)),
+    match (built, path) {
+        (None, _) => Ok(None),
+        (Some(Err(e)), _) => refuse_fft(e, path).map(|()| None),
+        (Some(Ok(c)), EvalPath::Planar) => Ok(Some(c)),
+        (Some(Ok(c)), _) => Ok((c.flops() < rival).then_some(c)),
     }
 }
 
 /// The resampled FFT path ([`crate::probe::resample`]) for `volume`: `None` when it is not the
 /// one to take — a forced band, lookup or phasor path, a point list, a paired scan, a volume
-/// on the wall's lattice (the exact FFT path's case) or, under [`Path::Auto`], when resampling
+/// on the wall's lattice (the exact FFT path's case) or, under [`EvalPath::Auto`], when resampling
 /// does not apply, its buffers do not fit the budget or it costs more than `rival` (flops of
 /// the whole scan).
 ///
@@ -343,12 +429,12 @@ fn resampled(
     g: &Geometry,
     cfg: &Config,
     volume: &Volume,
-    path: Path,
+    path: EvalPath,
     rival: f64,
 ) -> Result<Option<(Resample, Engine)>> {
     // A paired scan (laser and SPAD apart) has no FFT path, exact or resampled: the
     // confocal path's choice names why.
-    if matches!(path, Path::Band | Path::Lookup | Path::Phasor)
+    if matches!(path, EvalPath::Band | EvalPath::Lookup | EvalPath::Phasor)
         || volume.axes.is_none()
         || g.paired_apart()
     {
@@ -361,7 +447,7 @@ fn resampled(
         Ok(_) => return Ok(None),
         Err(e) => e,
     };
-    let forced = path == Path::Planar;
+    let forced = path == EvalPath::Planar;
     let fail = |why: String| -> Result<Option<(Resample, Engine)>> {
         if forced {
             Err(Error::arg(
@@ -467,16 +553,16 @@ fn resampled(
 /// # Errors
 /// [`Error::Argument`] (`path`): the lookup and phasor paths (diagonal only), the planar path
 /// for the un-gated and higher-order gates.
-pub(super) fn check_column(path: Path, gate: ColumnGate) -> Result<()> {
+pub(super) fn check_column(path: EvalPath, gate: ColumnGate) -> Result<()> {
     match (path, gate) {
-        (Path::Lookup | Path::Phasor, _) => Err(Error::arg(
+        (EvalPath::Lookup | EvalPath::Phasor, _) => Err(Error::arg(
             "path",
             format!(
                 "the {} path evaluates the diagonal only (use auto, band or planar for columns)",
                 path.name()
             ),
         )),
-        (Path::Planar, ColumnGate::HigherOrder | ColumnGate::None) => Err(Error::arg(
+        (EvalPath::Planar, ColumnGate::HigherOrder | ColumnGate::None) => Err(Error::arg(
             "path",
             "the planar path images Gaussian-gated (two-bounce) columns only (use auto or band)",
         )),
@@ -488,20 +574,20 @@ pub(super) fn check_column(path: Path, gate: ColumnGate) -> Result<()> {
 ///
 /// # Errors
 /// [`Error::Argument`] (`path`) when another path is forced.
-pub(super) fn other_gates(path: Path) -> Result<Path> {
-    if !matches!(path, Path::Auto | Path::Band) {
+pub(super) fn other_gates(path: EvalPath) -> Result<EvalPath> {
+    if !matches!(path, EvalPath::Auto | EvalPath::Band) {
         return Err(Error::arg(
             "path",
             "the un-gated and higher-order diagonals are evaluated on the band path only",
         ));
     }
-    Ok(Path::Band)
+    Ok(EvalPath::Band)
 }
 
 /// The imaging path of a factorised column with kernel gate `gate`, decided before its pass:
 /// the planar convolution (when [`column_imaging`] takes it), the band sum, or — `defer`red
-/// under [`Path::Auto`], for parts of a split scan that leave it to the merged state —
-/// [`Path::Auto`], decided by [`column_imaging`] when the column is imaged. Building the
+/// under [`EvalPath::Auto`], for parts of a split scan that leave it to the merged state —
+/// [`EvalPath::Auto`], decided by [`column_imaging`] when the column is imaged. Building the
 /// planar tables costs about as much as imaging.
 ///
 /// # Errors
@@ -510,29 +596,29 @@ pub(super) fn column(
     spads: &[Point],
     cfg: &Config,
     volume: &Volume,
-    path: Path,
+    path: EvalPath,
     gate: Gate,
     defer: bool,
-) -> Result<(Path, Option<Planar>)> {
-    let decide = gate == Gate::Gaussian && !(defer && path == Path::Auto);
+) -> Result<(EvalPath, Option<Planar>)> {
+    let decide = gate == Gate::Gaussian && !(defer && path == EvalPath::Auto);
     let planar = if decide {
         column_imaging(spads, cfg, volume, path, gate)?
     } else {
         None
     };
     let path = if planar.is_some() {
-        Path::Planar
+        EvalPath::Planar
     } else if decide || gate != Gate::Gaussian {
-        Path::Band
+        EvalPath::Band
     } else {
-        Path::Auto
+        EvalPath::Auto
     };
     Ok((path, planar))
 }
 
 /// The planar convolution that images a column with kernel gate `gate` over `volume`
-/// (`spads`: the SPAD grid) when `path` is [`Path::Planar`] or [`Path::Auto`], the gate is the
-/// Gaussian one, the convolution applies and (for [`Path::Auto`]) it costs fewer flops than
+/// (`spads`: the SPAD grid) when `path` is [`EvalPath::Planar`] or [`EvalPath::Auto`], the gate is the
+/// Gaussian one, the convolution applies and (for [`EvalPath::Auto`]) it costs fewer flops than
 /// the band sum's row; `None`: the kernel images it.
 ///
 /// # Errors
@@ -541,10 +627,10 @@ pub(super) fn column_imaging(
     spads: &[Point],
     cfg: &Config,
     volume: &Volume,
-    path: Path,
+    path: EvalPath,
     gate: Gate,
 ) -> Result<Option<Planar>> {
-    if !matches!(path, Path::Planar | Path::Auto) || gate != Gate::Gaussian {
+    if !matches!(path, EvalPath::Planar | EvalPath::Auto) || gate != Gate::Gaussian {
         return Ok(None);
     }
     let rival = band_row_flops(spads.len(), cfg, volume.len());

@@ -2,31 +2,12 @@
 //! would take …`), the aligned grid a probe reports, and `vltm info`'s line on the FFT paths.
 
 use super::cost::PHASOR_MAX_SPADS;
-use crate::error::Result;
-use crate::exec::{Exec, Path, Progress};
+use crate::exec::EvalPath;
 use crate::io::capture::Geometry;
-use crate::probe::crop::Labelled;
-use crate::probe::drive::Job;
 use crate::probe::fast::aligned::{aligned_volume, suggested_volume};
 use crate::probe::fast::planar;
 use crate::probe::wave::default_wavelength;
 use crate::volume::Volume;
-
-/// Runs `f` with `job`'s progress labels carrying `note` (`direct (path lookup; …)`).
-pub(crate) fn with_note<T>(
-    job: Job<'_>,
-    note: String,
-    f: impl FnOnce(Job<'_>) -> Result<T>,
-) -> Result<T> {
-    let labelled = job.exec.progress.map(|p| Labelled { inner: p, note });
-    f(Job {
-        exec: Exec {
-            progress: labelled.as_ref().map(|l| l as &dyn Progress),
-            ..job.exec
-        },
-        ..job
-    })
-}
 
 /// The progress note of a diagonal pass on `path` (`path lookup; the FFT path would take
 /// $volume …`) and the aligned grid the probe reports ([`crate::probe::Output::aligned`]): for
@@ -36,7 +17,7 @@ pub(crate) fn diagonal_notes(
     g: &Geometry,
     volume: &Volume,
     wavelength: f64,
-    path: Path,
+    path: EvalPath,
     support: Option<String>,
     cosine: bool,
 ) -> (String, Option<String>) {
@@ -55,9 +36,9 @@ pub(crate) fn diagonal_notes(
 /// The aligned `$volume` SPEC the FFT path would take, for a grid that ran on another `path`:
 /// [`aligned_volume`] when the wall is a regular lattice
 /// and the aligned grid lays out on it (lattice tolerance `1e-5·λ`, as the paths check).
-fn aligned_hint(g: &Geometry, volume: &Volume, wavelength: f64, path: Path) -> Option<String> {
+fn aligned_hint(g: &Geometry, volume: &Volume, wavelength: f64, path: EvalPath) -> Option<String> {
     // No FFT path takes a paired scan with laser and SPAD apart: no grid would be fast.
-    if path == Path::Planar || volume.axes.is_none() || g.paired_apart() {
+    if path == EvalPath::Planar || volume.axes.is_none() || g.paired_apart() {
         return None;
     }
     let spec = aligned_volume(g, volume)?;

@@ -8,7 +8,7 @@ use crate::sim::{Aperture, Scene, Setup};
 
 const EXEC: Exec<'static> = Exec {
     progress: None,
-    path: crate::exec::Path::Auto,
+    path: crate::exec::EvalPath::Auto,
 };
 
 fn geometry() -> Geometry {

@@ -18,7 +18,7 @@ use vltm_firmware::fixture::{
     TABLES_LEN, VOXELS, params,
 };
 use vltm_firmware::state::{StateParts, write_state};
-use vltm_kernel::{Config, Error, Gate, Probe, RowBuffer, Scan, Target};
+use vltm_kernel::{ArgumentError, Config, Gate, Probe, RowBuffer, Scan, Target};
 
 /// The host's header templates for this fixture (`gen state-template`).
 const DIRECT_HEAD: &str = include_str!("../../fixture/state_direct.json");
@@ -37,7 +37,7 @@ fn fold<'m>(
     cfg: &Config,
     data: &[u16],
     (tables, row, diag, column): (&mut [f32], &mut [f32], &'m mut [f64], &'m mut [f64]),
-) -> Result<(Probe<'m>, Probe<'m>), Error> {
+) -> Result<(Probe<'m>, Probe<'m>), ArgumentError> {
     let scan = Scan::new(cfg, &SPADS, tables)?;
     let mut rows = RowBuffer::new(&scan, row)?;
     let mut d = Probe::new(&scan, Target::Diagonal, Gate::Gaussian, &VOXELS, diag)?;
@@ -50,7 +50,7 @@ fn fold<'m>(
     )?;
     let expected = N_LASERS * ROW;
     if data.len() != expected {
-        return Err(Error::Length {
+        return Err(ArgumentError::Length {
             what: "scan data",
             expected,
             found: data.len(),
