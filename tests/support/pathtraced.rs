@@ -578,7 +578,7 @@ pub fn measure_synth(
                         .and_then(|v| v.parse().ok())
                         .or_else(|| probe::synth::geometry_wavelength(&cap.geometry)),
                     sigma: None,
-                    ..s.wave.clone()
+                    ..s.wave
                 };
                 let d = probe::direct(cap, &fine, &wave, EXEC).expect("direct, fine");
                 let raw = Surfels::from_direct(&fine, &d.values, surfel_epsilon(), sub, 0.0)

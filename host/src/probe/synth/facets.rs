@@ -643,12 +643,11 @@ pub fn refine_facets(
                         }
                     }
                 }
-                if best.2 > 0.0 {
-                    if let Some(lm) = sub
+                if best.2 > 0.0
+                    && let Some(lm) = sub
                         .levenberg_marquardt(&best.0, best.2, best.1, &r, pitch, scale[fi], &base)
-                    {
-                        best = lm;
-                    }
+                {
+                    best = lm;
                 }
                 let (f, _, a, moved) = best;
                 if !moved {
