@@ -85,7 +85,7 @@ impl Plausibility {
 
     /// [`Plausibility::observe`] with the row's [`extremes`] computed beforehand (on any
     /// thread: the rows of a batch in parallel, then observed in order).
-    pub fn observe_with(&mut self, l: usize, row: &[f32], (hi, lo): (f32, f32)) {
+    pub fn observe_with(&mut self, l: usize, row: &[f32], (hi, lo, negatives): (f32, f32, u64)) {
         let at = |i: usize, value: f32| At {
             value,
             row: l,
@@ -99,7 +99,7 @@ impl Plausibility {
             self.largest = Some(at(i, row[i]));
         }
         if lo < 0.0 {
-            self.negatives += row.iter().filter(|&&x| finite(x) < 0.0).count() as u64;
+            self.negatives += negatives;
             if self.lowest.is_none_or(|a| lo < a.value) {
                 let i = row.iter().position(|&x| finite(x) == lo).unwrap_or(0);
                 self.lowest = Some(at(i, row[i]));
@@ -166,30 +166,39 @@ impl Plausibility {
     }
 }
 
-/// The largest magnitude (≥ 0) and the lowest value (≤ 0) of a row's finite samples (others
-/// read as 0): one branch-free pass in 16 independent lanes (it vectorises; max and min do
-/// not depend on the order, so the result is that of a plain fold).
-pub fn extremes(row: &[f32]) -> (f32, f32) {
+/// The largest magnitude (≥ 0), the lowest value (≤ 0) and the number of negative values of
+/// a row's finite samples (others read as 0): one branch-free pass in 16 independent lanes
+/// (it vectorises; max, min and counts do not depend on the order, so the result is that of
+/// a plain fold).
+pub fn extremes(row: &[f32]) -> (f32, f32, u64) {
     const W: usize = 16;
     let finite = |x: f32| if x.is_finite() { x } else { 0.0 };
-    let (mut hi, mut lo) = ([0.0f32; W], [0.0f32; W]);
-    let mut chunks = row.chunks_exact(W);
-    for c in &mut chunks {
-        for ((h, l), &x) in hi.iter_mut().zip(lo.iter_mut()).zip(c) {
-            let x = finite(x);
-            let a = x.abs();
-            *h = if a > *h { a } else { *h };
-            *l = if x < *l { x } else { *l };
+    let (mut hi, mut lo, mut neg) = ([0.0f32; W], [0.0f32; W], [0u32; W]);
+    let mut negatives = 0u64;
+    // Blocks short enough for the lanes' `u32` counts.
+    for block in row.chunks(W << 20) {
+        let mut chunks = block.chunks_exact(W);
+        for c in &mut chunks {
+            for (((h, l), n), &x) in hi.iter_mut().zip(lo.iter_mut()).zip(neg.iter_mut()).zip(c) {
+                let x = finite(x);
+                let a = x.abs();
+                *h = if a > *h { a } else { *h };
+                *l = if x < *l { x } else { *l };
+                *n += u32::from(x < 0.0);
+            }
         }
-    }
-    for &x in chunks.remainder() {
-        let x = finite(x);
-        hi[0] = hi[0].max(x.abs());
-        lo[0] = lo[0].min(x);
+        for &x in chunks.remainder() {
+            let x = finite(x);
+            hi[0] = hi[0].max(x.abs());
+            lo[0] = lo[0].min(x);
+            neg[0] += u32::from(x < 0.0);
+        }
+        negatives += neg.iter().map(|&n| u64::from(n)).sum::<u64>();
+        neg = [0; W];
     }
     let hi = hi.iter().fold(0.0f32, |a, &b| a.max(b));
     let lo = lo.iter().fold(0.0f32, |a, &b| a.min(b));
-    (hi, lo)
+    (hi, lo, negatives)
 }
 
 /// A row source that judges its rows as they pass ([`Plausibility`]) and hands the verdict to
@@ -221,7 +230,7 @@ impl Watched {
         }
     }
 
-    fn observe(&mut self, l: usize, row: &[f32], ext: (f32, f32)) {
+    fn observe(&mut self, l: usize, row: &[f32], ext: (f32, f32, u64)) {
         let Some(seen) = self.seen.get_mut(l) else {
             return;
         };
@@ -253,7 +262,7 @@ impl RowSource for Watched {
     fn read_rows(&mut self, first: usize, out: &mut [(Point, Vec<f32>)]) -> Result<()> {
         self.src.read_rows(first, out)?;
         // The rows' passes in parallel; the statistics in row order.
-        let ext: Vec<(f32, f32)> = out.par_iter().map(|(_, h)| extremes(h)).collect();
+        let ext: Vec<_> = out.par_iter().map(|(_, h)| extremes(h)).collect();
         for ((l, (_, h)), e) in (first..).zip(out.iter()).zip(ext) {
             self.observe(l, h, e);
         }
