@@ -1,6 +1,6 @@
 //! The complex `f32` loops of the planar path's inverse pass ([`super::planar`]), portable and
 //! for AVX (through `pulp`'s safe wrappers, no `unsafe`): the pointwise product `X̂_j·κ̂_j`
-//! and each voxel's `sum += z·p; p *= step`.
+//! each voxel's `sum += z·p; p *= step`, and the transpose between the two inverse passes.
 //!
 //! Every value is computed by the operations of `num_complex`'s `Complex32` product (two
 //! products, then one subtraction or addition; AVX's `addsub` does the same in each lane, and
@@ -20,6 +20,16 @@ pub(super) trait Lanes: Copy {
         p: &mut [Complex32],
         step: &[Complex32],
         sum: &mut [Complex32],
+    );
+    /// `dst[c·n + r] = src[r·stride + c]` for `r < n`, `c < cols` (the first `cols` columns
+    /// of `n` rows of `src`, transposed; copies, so every version gives the same values).
+    fn transpose(
+        self,
+        src: &[Complex32],
+        stride: usize,
+        n: usize,
+        cols: usize,
+        dst: &mut [Complex32],
     );
 }
 
@@ -48,6 +58,22 @@ impl Lanes for Portable {
             *p *= t;
         }
     }
+
+    #[inline(always)]
+    fn transpose(
+        self,
+        src: &[Complex32],
+        stride: usize,
+        n: usize,
+        cols: usize,
+        dst: &mut [Complex32],
+    ) {
+        for (c, dst) in dst.chunks_exact_mut(n.max(1)).take(cols).enumerate() {
+            for (d, src) in dst.iter_mut().zip(src.chunks(stride.max(1))) {
+                *d = src[c];
+            }
+        }
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -56,7 +82,7 @@ pub(super) use avx::Avx;
 #[cfg(target_arch = "x86_64")]
 mod avx {
     use super::{Lanes, Portable};
-    use core::arch::x86_64::__m256;
+    use core::arch::x86_64::{__m256, __m256d};
     use num_complex::Complex32;
     use pulp::x86::V3;
 
@@ -127,6 +153,46 @@ mod avx {
                 s4.into_remainder(),
             );
         }
+
+        /// Blocks of 4 × 4 complex values through registers (unpack and swap halves).
+        #[inline(always)]
+        fn transpose(
+            self,
+            src: &[Complex32],
+            stride: usize,
+            n: usize,
+            cols: usize,
+            dst: &mut [Complex32],
+        ) {
+            let fits = n.is_multiple_of(4)
+                && cols.is_multiple_of(4)
+                && cols <= stride
+                && src.len() >= n * stride
+                && dst.len() >= cols * n;
+            if !fits {
+                return Portable.transpose(src, stride, n, cols, dst);
+            }
+            let a = &self.0.avx;
+            for c0 in (0..cols).step_by(4) {
+                for r0 in (0..n).step_by(4) {
+                    let row = |k: usize| -> __m256d {
+                        pulp::cast(load(&src[(r0 + k) * stride + c0..][..4]))
+                    };
+                    let (a0, a1, a2, a3) = (row(0), row(1), row(2), row(3));
+                    let (t0, t1) = (a._mm256_unpacklo_pd(a0, a1), a._mm256_unpackhi_pd(a0, a1));
+                    let (t2, t3) = (a._mm256_unpacklo_pd(a2, a3), a._mm256_unpackhi_pd(a2, a3));
+                    let o = [
+                        a._mm256_permute2f128_pd::<0x20>(t0, t2),
+                        a._mm256_permute2f128_pd::<0x20>(t1, t3),
+                        a._mm256_permute2f128_pd::<0x31>(t0, t2),
+                        a._mm256_permute2f128_pd::<0x31>(t1, t3),
+                    ];
+                    for (k, o) in o.into_iter().enumerate() {
+                        store(&mut dst[(c0 + k) * n + r0..][..4], pulp::cast(o));
+                    }
+                }
+            }
+        }
     }
 }
 
@@ -167,6 +233,15 @@ mod tests {
             }
             assert_eq!(bits(&p1), bits(&p0), "phase, n = {n}");
             assert_eq!(bits(&s1), bits(&s0), "sum, n = {n}");
+        }
+        for (stride, n, cols) in [(32, 32, 16), (8, 4, 8), (6, 9, 3), (12, 8, 4)] {
+            let src: Vec<_> = (0..stride * n).map(|i| c(i, 0.3)).collect();
+            let mut want = vec![Complex32::default(); n * cols];
+            let mut got = want.clone();
+            Portable.transpose(&src, stride, n, cols, &mut want);
+            v3.vectorize(|| Avx(v3).transpose(&src, stride, n, cols, &mut got));
+            assert_eq!(bits(&got), bits(&want), "transpose {stride} {n} {cols}");
+            assert_eq!(want[n + 2], src[2 * stride + 1]);
         }
     }
 }
