@@ -9,6 +9,28 @@
 
 use num_complex::Complex32;
 
+/// `dst[c·stride + r] = src[r·cols + c]` for r < rows, c < cols: tiles of 16 rows, each
+/// destination row of a tile written as one contiguous run (the strided reads stay in L1).
+pub(super) fn transpose(
+    src: &[Complex32],
+    rows: usize,
+    cols: usize,
+    dst: &mut [Complex32],
+    stride: usize,
+) {
+    const B: usize = 16;
+    for r0 in (0..rows).step_by(B) {
+        let r1 = (r0 + B).min(rows);
+        let block = &src[r0 * cols..r1 * cols];
+        for c in 0..cols {
+            let d = &mut dst[c * stride + r0..c * stride + r1];
+            for (k, o) in d.iter_mut().enumerate() {
+                *o = block[k * cols + c];
+            }
+        }
+    }
+}
+
 /// The loops, by vector width.
 pub(super) trait Lanes: Copy {
     /// `dst[k] = a[k]·b[k]` over the shortest of the three.
@@ -211,6 +233,11 @@ mod tests {
             let t = i as f32 * s;
             Complex32::new((t * 1.3).sin() * 3.0, (t * 0.7).cos() - 0.25)
         };
+        let bits = |v: &[Complex32]| -> Vec<u32> {
+            v.iter()
+                .flat_map(|c| [c.re.to_bits(), c.im.to_bits()])
+                .collect()
+        };
         for n in [0, 1, 3, 4, 7, 16, 33] {
             let a: Vec<_> = (0..n).map(|i| c(i, 0.618)).collect();
             let b: Vec<_> = (0..n).map(|i| c(i, 1.7)).collect();
@@ -219,11 +246,6 @@ mod tests {
             let mut got = want.clone();
             Portable.mul(&mut want, &a, &b);
             v3.vectorize(|| Avx(v3).mul(&mut got, &a, &b));
-            let bits = |v: &[Complex32]| -> Vec<u32> {
-                v.iter()
-                    .flat_map(|c| [c.re.to_bits(), c.im.to_bits()])
-                    .collect()
-            };
             assert_eq!(bits(&got), bits(&want), "mul, n = {n}");
             let (mut p0, mut s0) = (b.clone(), a.clone());
             let (mut p1, mut s1) = (b.clone(), a.clone());

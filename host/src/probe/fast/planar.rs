@@ -14,7 +14,10 @@
 //! bin (shared by all slices), then per (slice, bin) a pointwise product with the
 //! precomputed `κ̂` and one inverse 2-D FFT. Both transforms are pruned: the forward pass
 //! skips the all-zero rows of the padded SPAD image, the inverse pass computes only the
-//! output rows that hold voxels. Transforms are `rustfft` (AVX), `f32`.
+//! output rows that hold voxels. Transforms are `rustfft` (AVX), `f32`; the inverse pass goes
+//! bin by bin in buffers that stay in L1, its product, transpose and per-voxel sums in AVX
+//! lanes (`fast::lanes`; bit-identical to the portable loops, which
+//! [`Planar::set_portable`] forces).
 //!
 //! **Voxel pitch.** Voxels finer than the SPADs by an integer factor `r` per axis (`p_s =
 //! r·p_v`, e.g. a 32×32 slice over a 16×16 SPAD grid) are split into `r_x·r_y` polyphase
@@ -31,7 +34,7 @@
 //! Cost per row `J·[F(M)·(nsx/Mx + 1) + S·(6M + F(M)·(1 + nvx/Mx))] + Kv·(8J + 40)` flops
 //! (S = slices × phases, F(M) = 2.5·M·log₂M per pruned half), against the band path's
 //! `Kv·Ks·(14J + 60)`. Memory: `κ̂` = S·J·M complex `f32` (shared, read-only) and per worker
-//! `3·J·M` complex scratch.
+//! `J·M` complex scratch and one bin's buffers.
 //!
 //! Threads: [`Planar::new`] builds `κ̂` on the thread pool, one (slice, bin) table per task;
 //! [`Planar::apply`] runs on the caller's thread (the probes call it once per row, rows in
@@ -39,6 +42,7 @@
 //! the slices in parallel. Every value is computed by the same operations whatever the
 //! number of threads: the results are bit-identical.
 
+pub(super) use super::lanes::transpose;
 use super::lanes::{self, Lanes, Portable};
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
@@ -392,28 +396,6 @@ impl std::fmt::Debug for Planar {
     }
 }
 
-/// `dst[c·stride + r] = src[r·cols + c]` for r < rows, c < cols: tiles of 16 rows, each
-/// destination row of a tile written as one contiguous run (the strided reads stay in L1).
-pub(super) fn transpose(
-    src: &[Complex32],
-    rows: usize,
-    cols: usize,
-    dst: &mut [Complex32],
-    stride: usize,
-) {
-    const B: usize = 16;
-    for r0 in (0..rows).step_by(B) {
-        let r1 = (r0 + B).min(rows);
-        let block = &src[r0 * cols..r1 * cols];
-        for c in 0..cols {
-            let d = &mut dst[c * stride + r0..c * stride + r1];
-            for (k, o) in d.iter_mut().enumerate() {
-                *o = block[k * cols + c];
-            }
-        }
-    }
-}
-
 impl Planar {
     /// Prepares the convolution of `spads` onto the voxel grid `voxels` (C order over
     /// `shape = [nx, ny, nz]`, as [`crate::volume::Volume`]), or says why it does not apply.
@@ -488,18 +470,33 @@ impl Planar {
                 let j = i % bins;
                 img.fill(Complex32::new(0.0, 0.0));
                 let k = (cfg.k_lo() + j as i64) as f64;
-                for ax in -(nsx as i64 - 1)..cx as i64 {
-                    for ay in -(nsy as i64 - 1)..cy as i64 {
+                let (x0, x1) = (-(nsx as i64 - 1), cx as i64);
+                let (y0, y1) = (-(nsy as i64 - 1), cy as i64);
+                // A sub-grid on the lattice (offsets 0) has a mirror-symmetric kernel: each
+                // value made once for (|Δx|, |Δy|) (the same operations give the same bits).
+                let sym = dx == 0.0 && dy == 0.0;
+                let (ax0, ay0, ax1, ay1) = if sym {
+                    (0, 0, (-x0).max(x1 - 1) + 1, (-y0).max(y1 - 1) + 1)
+                } else {
+                    (x0, y0, x1, y1)
+                };
+                for ax in ax0..ax1 {
+                    for ay in ay0..ay1 {
                         let ex = dx + ax as f64 * px;
                         let ey = dy + ay as f64 * py;
                         let d = (ex * ex + ey * ey + dz * dz).sqrt();
                         let turns = k * d / span;
                         let a = std::f64::consts::TAU * (turns - turns.round());
                         let w = cfg.weight(d as f32) as f64 * scale;
-                        let cx_ = ax.rem_euclid(mx as i64) as usize;
-                        let cy_ = ay.rem_euclid(my as i64) as usize;
-                        img[cx_ * my + cy_] =
-                            Complex32::new((w * a.cos()) as f32, (w * a.sin()) as f32);
+                        let v = Complex32::new((w * a.cos()) as f32, (w * a.sin()) as f32);
+                        let m = |a: i64| if sym { [a, -a] } else { [a, a] };
+                        for bx in m(ax).into_iter().filter(|b| (x0..x1).contains(b)) {
+                            for by in m(ay).into_iter().filter(|b| (y0..y1).contains(b)) {
+                                let cx_ = bx.rem_euclid(mx as i64) as usize;
+                                let cy_ = by.rem_euclid(my as i64) as usize;
+                                img[cx_ * my + cy_] = v;
+                            }
+                        }
                     }
                 }
                 fy.process_with_scratch(img, scratch);
