@@ -249,7 +249,8 @@ pub(super) fn drive_rows_indexed<W: Send>(
     };
     // Two batches: the pool runs one while this thread reads the next into the other (its
     // reader's own parallel work shares the pool), so reading does not stop the probes.
-    let (mut rows, mut next): (Vec<(Point, Vec<f32>)>, Vec<(Point, Vec<f32>)>) = Default::default();
+    let mut rows: Vec<(Point, Vec<f32>)> = Vec::new();
+    let mut next: Vec<(Point, Vec<f32>)> = Vec::new();
     if !range.is_empty() {
         let _t = timings::section("read rows", read_kind(src));
         read(src, range.start, &mut rows)?;

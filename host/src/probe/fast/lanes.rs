@@ -99,119 +99,117 @@ impl Lanes for Portable {
 }
 
 #[cfg(target_arch = "x86_64")]
-pub(super) use avx::Avx;
+use core::arch::x86_64::{__m256, __m256d};
+#[cfg(target_arch = "x86_64")]
+use pulp::x86::V3;
 
 #[cfg(target_arch = "x86_64")]
-mod avx {
-    use super::{Lanes, Portable};
-    use core::arch::x86_64::{__m256, __m256d};
-    use num_complex::Complex32;
-    use pulp::x86::V3;
+/// Four complex values per 256-bit vector (x86-64-v3: AVX2 + FMA, Haswell and Zen 1 on).
+#[derive(Clone, Copy)]
+pub(crate) struct Avx(pub(crate) V3);
 
-    /// Four complex values per 256-bit vector (x86-64-v3: AVX2 + FMA, Haswell and Zen 1 on).
-    #[derive(Clone, Copy)]
-    pub(in super::super) struct Avx(pub(in super::super) V3);
+/// `a·b` per complex lane: `(a.re·b.re − a.im·b.im, a.re·b.im + a.im·b.re)`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn cmul(s: V3, a: __m256, b: __m256) -> __m256 {
+    let ba = s.avx._mm256_permute_ps::<0b10_11_00_01>(b);
+    let re = s.avx._mm256_moveldup_ps(a);
+    let im = s.avx._mm256_movehdup_ps(a);
+    s.avx
+        ._mm256_addsub_ps(s.avx._mm256_mul_ps(re, b), s.avx._mm256_mul_ps(im, ba))
+}
 
-    /// `a·b` per complex lane: `(a.re·b.re − a.im·b.im, a.re·b.im + a.im·b.re)`.
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn load(x: &[Complex32]) -> __m256 {
+    let a: &[f32; 8] = bytemuck::cast_slice::<Complex32, f32>(x)
+        .try_into()
+        .unwrap_or(&[0.0; 8]);
+    pulp::cast(*a)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn store(x: &mut [Complex32], v: __m256) {
+    let v: [f32; 8] = pulp::cast(v);
+    bytemuck::cast_slice_mut::<Complex32, f32>(x).copy_from_slice(&v);
+}
+
+#[cfg(target_arch = "x86_64")]
+impl Lanes for Avx {
     #[inline(always)]
-    fn cmul(s: V3, a: __m256, b: __m256) -> __m256 {
-        let ba = s.avx._mm256_permute_ps::<0b10_11_00_01>(b);
-        let re = s.avx._mm256_moveldup_ps(a);
-        let im = s.avx._mm256_movehdup_ps(a);
-        s.avx
-            ._mm256_addsub_ps(s.avx._mm256_mul_ps(re, b), s.avx._mm256_mul_ps(im, ba))
-    }
-
-    #[inline(always)]
-    fn load(x: &[Complex32]) -> __m256 {
-        let a: &[f32; 8] = bytemuck::cast_slice::<Complex32, f32>(x)
-            .try_into()
-            .unwrap_or(&[0.0; 8]);
-        pulp::cast(*a)
-    }
-
-    #[inline(always)]
-    fn store(x: &mut [Complex32], v: __m256) {
-        let v: [f32; 8] = pulp::cast(v);
-        bytemuck::cast_slice_mut::<Complex32, f32>(x).copy_from_slice(&v);
-    }
-
-    impl Lanes for Avx {
-        #[inline(always)]
-        fn mul(self, dst: &mut [Complex32], a: &[Complex32], b: &[Complex32]) {
-            let n = dst.len().min(a.len()).min(b.len());
-            let (dst, a, b) = (&mut dst[..n], &a[..n], &b[..n]);
-            let mut d4 = dst.chunks_exact_mut(4);
-            let (mut a4, mut b4) = (a.chunks_exact(4), b.chunks_exact(4));
-            for ((d, a), b) in (&mut d4).zip(&mut a4).zip(&mut b4) {
-                store(d, cmul(self.0, load(a), load(b)));
-            }
-            Portable.mul(d4.into_remainder(), a4.remainder(), b4.remainder());
+    fn mul(self, dst: &mut [Complex32], a: &[Complex32], b: &[Complex32]) {
+        let n = dst.len().min(a.len()).min(b.len());
+        let (dst, a, b) = (&mut dst[..n], &a[..n], &b[..n]);
+        let mut d4 = dst.chunks_exact_mut(4);
+        let (mut a4, mut b4) = (a.chunks_exact(4), b.chunks_exact(4));
+        for ((d, a), b) in (&mut d4).zip(&mut a4).zip(&mut b4) {
+            store(d, cmul(self.0, load(a), load(b)));
         }
+        Portable.mul(d4.into_remainder(), a4.remainder(), b4.remainder());
+    }
 
-        #[inline(always)]
-        fn accumulate(
-            self,
-            z: &[Complex32],
-            p: &mut [Complex32],
-            step: &[Complex32],
-            sum: &mut [Complex32],
-        ) {
-            let n = z.len().min(p.len()).min(step.len()).min(sum.len());
-            let (z, p, step, sum) = (&z[..n], &mut p[..n], &step[..n], &mut sum[..n]);
-            let mut p4 = p.chunks_exact_mut(4);
-            let mut s4 = sum.chunks_exact_mut(4);
-            let (mut z4, mut t4) = (z.chunks_exact(4), step.chunks_exact(4));
-            for (((z, p), t), s) in (&mut z4).zip(&mut p4).zip(&mut t4).zip(&mut s4) {
-                let pv = load(p);
-                let zp = cmul(self.0, load(z), pv);
-                store(s, self.0.avx._mm256_add_ps(load(s), zp));
-                store(p, cmul(self.0, pv, load(t)));
-            }
-            Portable.accumulate(
-                z4.remainder(),
-                p4.into_remainder(),
-                t4.remainder(),
-                s4.into_remainder(),
-            );
+    #[inline(always)]
+    fn accumulate(
+        self,
+        z: &[Complex32],
+        p: &mut [Complex32],
+        step: &[Complex32],
+        sum: &mut [Complex32],
+    ) {
+        let n = z.len().min(p.len()).min(step.len()).min(sum.len());
+        let (z, p, step, sum) = (&z[..n], &mut p[..n], &step[..n], &mut sum[..n]);
+        let mut p4 = p.chunks_exact_mut(4);
+        let mut s4 = sum.chunks_exact_mut(4);
+        let (mut z4, mut t4) = (z.chunks_exact(4), step.chunks_exact(4));
+        for (((z, p), t), s) in (&mut z4).zip(&mut p4).zip(&mut t4).zip(&mut s4) {
+            let pv = load(p);
+            let zp = cmul(self.0, load(z), pv);
+            store(s, self.0.avx._mm256_add_ps(load(s), zp));
+            store(p, cmul(self.0, pv, load(t)));
         }
+        Portable.accumulate(
+            z4.remainder(),
+            p4.into_remainder(),
+            t4.remainder(),
+            s4.into_remainder(),
+        );
+    }
 
-        /// Blocks of 4 × 4 complex values through registers (unpack and swap halves).
-        #[inline(always)]
-        fn transpose(
-            self,
-            src: &[Complex32],
-            stride: usize,
-            n: usize,
-            cols: usize,
-            dst: &mut [Complex32],
-        ) {
-            let fits = n.is_multiple_of(4)
-                && cols.is_multiple_of(4)
-                && cols <= stride
-                && src.len() >= n * stride
-                && dst.len() >= cols * n;
-            if !fits {
-                return Portable.transpose(src, stride, n, cols, dst);
-            }
-            let a = &self.0.avx;
-            for c0 in (0..cols).step_by(4) {
-                for r0 in (0..n).step_by(4) {
-                    let row = |k: usize| -> __m256d {
-                        pulp::cast(load(&src[(r0 + k) * stride + c0..][..4]))
-                    };
-                    let (a0, a1, a2, a3) = (row(0), row(1), row(2), row(3));
-                    let (t0, t1) = (a._mm256_unpacklo_pd(a0, a1), a._mm256_unpackhi_pd(a0, a1));
-                    let (t2, t3) = (a._mm256_unpacklo_pd(a2, a3), a._mm256_unpackhi_pd(a2, a3));
-                    let o = [
-                        a._mm256_permute2f128_pd::<0x20>(t0, t2),
-                        a._mm256_permute2f128_pd::<0x20>(t1, t3),
-                        a._mm256_permute2f128_pd::<0x31>(t0, t2),
-                        a._mm256_permute2f128_pd::<0x31>(t1, t3),
-                    ];
-                    for (k, o) in o.into_iter().enumerate() {
-                        store(&mut dst[(c0 + k) * n + r0..][..4], pulp::cast(o));
-                    }
+    /// Blocks of 4 × 4 complex values through registers (unpack and swap halves).
+    #[inline(always)]
+    fn transpose(
+        self,
+        src: &[Complex32],
+        stride: usize,
+        n: usize,
+        cols: usize,
+        dst: &mut [Complex32],
+    ) {
+        let fits = n.is_multiple_of(4)
+            && cols.is_multiple_of(4)
+            && cols <= stride
+            && src.len() >= n * stride
+            && dst.len() >= cols * n;
+        if !fits {
+            return Portable.transpose(src, stride, n, cols, dst);
+        }
+        let a = &self.0.avx;
+        for c0 in (0..cols).step_by(4) {
+            for r0 in (0..n).step_by(4) {
+                let row =
+                    |k: usize| -> __m256d { pulp::cast(load(&src[(r0 + k) * stride + c0..][..4])) };
+                let (a0, a1, a2, a3) = (row(0), row(1), row(2), row(3));
+                let (t0, t1) = (a._mm256_unpacklo_pd(a0, a1), a._mm256_unpackhi_pd(a0, a1));
+                let (t2, t3) = (a._mm256_unpacklo_pd(a2, a3), a._mm256_unpackhi_pd(a2, a3));
+                let o = [
+                    a._mm256_permute2f128_pd::<0x20>(t0, t2),
+                    a._mm256_permute2f128_pd::<0x20>(t1, t3),
+                    a._mm256_permute2f128_pd::<0x31>(t0, t2),
+                    a._mm256_permute2f128_pd::<0x31>(t1, t3),
+                ];
+                for (k, o) in o.into_iter().enumerate() {
+                    store(&mut dst[(c0 + k) * n + r0..][..4], pulp::cast(o));
                 }
             }
         }
