@@ -2,7 +2,8 @@
 //! the scan): stage 1 (band spectra) of every row once, handed to the probes sequentially ([`drive`];
 //! [`drive_probes`] for one kernel probe per accumulator state, pushed in parallel) or to one worker per thread in
 //! parallel ([`drive_rows`]); element-wise probes over voxel chunks ([`elementwise`]).
-//! Memory: `2·threads` rows of histograms and one row buffer per worker, never the capture.
+//! Memory: `4·threads` rows of histograms (a batch read while another is worked on) and one
+//! row buffer per worker, never the capture.
 
 use super::wave::*;
 use crate::budget;
@@ -164,9 +165,10 @@ pub(super) fn load_row<'r>(
 
 /// Reads rows in batches and hands each to one of `workers` in parallel (one worker per
 /// thread, each with its own row buffer), so stage 1 and the per-row probe work use every
-/// core. `work` gets the row's scan: `scan` itself, or for a paired or confocal capture (where
-/// `scan` only sizes the buffers: one SPAD) a scan of the row's own SPAD spot. Memory:
-/// `2·threads` rows of histograms, never the whole capture.
+/// core; the next batch is read while the pool works on one. `work` gets the row's scan:
+/// `scan` itself, or for a paired or confocal capture (where `scan` only sizes the buffers:
+/// one SPAD) a scan of the row's own SPAD spot. Memory:
+/// `4·threads` rows of histograms (two batches), never the whole capture.
 ///
 /// Which worker sums which rows depends on the row's index only ([`worker_of`]: row `l` to
 /// worker `l mod workers`, each worker's rows in ascending order), never on the thread that
@@ -229,18 +231,11 @@ pub(super) fn drive_rows_indexed<W: Send>(
     let range = src.rows();
     let bar = Pass::start(exec, label, range.len());
     let batch = row_batch();
-    // (laser spot, histograms); a paired row's own SPAD spot is `g.spads[l]`.
-    let mut rows: Vec<(Point, Vec<f32>)> = Vec::new();
-    for start in range.clone().step_by(batch) {
-        let end = (start + batch).min(range.end);
-        rows.resize_with(end - start, || ([0.0; 3], Vec::new()));
-        {
-            let _t = timings::section("read rows", read_kind(src));
-            src.read_rows(start, &mut rows)?;
-            compensate_all(&g, wave, start, &mut rows);
-        }
-        let _t = timings::section("rows: stage 1 and probes", Kind::Parallel);
-        // Each worker takes its own rows of the batch, in order, on whichever thread.
+    // Stage 1 and the probes of one batch of rows `start..` (laser spot, histograms); a
+    // paired row's own SPAD spot is `g.spads[l]`. Each worker takes its own rows of the
+    // batch, in order, on whichever thread.
+    let run = |slots: &mut [Slot<W>], start: usize, rows: &[(Point, Vec<f32>)]| -> Result<()> {
+        let end = start + rows.len();
         slots.par_iter_mut().enumerate().try_for_each(|(k, slot)| {
             let Slot {
                 worker,
@@ -264,8 +259,41 @@ pub(super) fn drive_rows_indexed<W: Send>(
                 work(worker, l, scan, &row)?;
             }
             Ok::<_, Error>(())
-        })?;
-        bar.advance(end - start);
+        })
+    };
+    let read = |src: &mut dyn RowSource, start: usize, rows: &mut Vec<(Point, Vec<f32>)>| {
+        let end = (start + batch).min(range.end);
+        rows.resize_with(end - start, || ([0.0; 3], Vec::new()));
+        src.read_rows(start, rows)?;
+        compensate_all(&g, wave, start, rows);
+        Ok::<_, Error>(())
+    };
+    // Two batches: the pool runs one while this thread reads the next into the other (its
+    // reader's own parallel work shares the pool), so reading does not stop the probes.
+    let mut rows: Vec<(Point, Vec<f32>)> = Vec::new();
+    let mut next: Vec<(Point, Vec<f32>)> = Vec::new();
+    if !range.is_empty() {
+        let _t = timings::section("read rows", read_kind(src));
+        read(src, range.start, &mut rows)?;
+    }
+    for start in range.clone().step_by(batch) {
+        let ahead = start + batch;
+        let mut done = Ok(());
+        {
+            let _t = timings::section("rows, next batch read", Kind::Parallel);
+            rayon::in_place_scope(|s| {
+                let (rows, done, slots) = (&rows, &mut done, &mut slots);
+                s.spawn(move |_| *done = run(slots, start, rows));
+                if ahead < range.end {
+                    read(src, ahead, &mut next)
+                } else {
+                    Ok(())
+                }
+            })?;
+        }
+        done?;
+        bar.advance(rows.len());
+        std::mem::swap(&mut rows, &mut next);
     }
     Ok(slots.into_iter().map(|s| s.worker).collect())
 }
@@ -273,8 +301,8 @@ pub(super) fn drive_rows_indexed<W: Send>(
 /// Checks what a pass over `g` holds at once against the memory budget ([`budget`]): the
 /// kernel's tables (`2N + J + Ks` f32), the band-DFT table (at most
 /// [`fast::band::MAX_TABLE_BYTES`](crate::probe::fast::band::MAX_TABLE_BYTES)), and per thread
-/// a row buffer (`Ks·(2J + 3)` f32) and two rows of histograms, plus `extra` bytes (probe
-/// states, outputs). `what` names the pass.
+/// a row buffer (`Ks·(2J + 3)` f32) and four rows of histograms (a batch being read while
+/// another is worked on), plus `extra` bytes (probe states, outputs). `what` names the pass.
 ///
 /// # Errors
 /// [`Error::Memory`] naming the pass, the DFT sizes and σ.
@@ -290,7 +318,7 @@ pub(super) fn memory_plan(g: &Geometry, cfg: &Config, extra: u128, what: &str) -
 }
 
 /// What every pass over `g` holds before its probes' states and outputs: the kernel's tables,
-/// the band-DFT table, and per thread a row buffer and two rows of histograms.
+/// the band-DFT table, and per thread a row buffer and four rows of histograms (two batches).
 pub(super) fn pass_plan(g: &Geometry, cfg: &Config) -> budget::Plan {
     let threads = rayon::current_num_threads() as u128;
     let ks = g.spads_per_row();
@@ -311,8 +339,8 @@ pub(super) fn pass_plan(g: &Geometry, cfg: &Config) -> budget::Plan {
         budget::bytes(RowBuffer::len(cfg, ks), 4 * threads),
     )
     .add(
-        format!("{threads} × 2 rows of histograms"),
-        budget::bytes(ks.saturating_mul(g.nt), 8 * threads),
+        format!("{threads} × 4 rows of histograms (two batches)"),
+        budget::bytes(ks.saturating_mul(g.nt), 16 * threads),
     );
     plan
 }

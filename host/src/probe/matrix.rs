@@ -32,7 +32,7 @@
 //! 10 × 10 matrix). If the accumulators of all
 //! foci do not fit beside the result, the foci are split into passes (each reads the capture
 //! once more); if not even one focus fits, the error names `--from`/`--to` (matrix) or
-//! `--pattern` (relight). Per-thread row buffers: `2·threads` rows of histograms, as every probe.
+//! `--pattern` (relight). Per-thread row buffers: `4·threads` rows of histograms (two batches), as every probe.
 
 use super::column::{Columns, column_aliased, column_amplitudes, factorised_columns};
 use super::crop::{Crop, Reach, with_crop};

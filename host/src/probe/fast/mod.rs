@@ -21,6 +21,7 @@
 pub(crate) mod aligned;
 pub mod band;
 pub mod confocal;
+mod lanes;
 pub mod lookup;
 pub mod phasor;
 pub mod planar;
