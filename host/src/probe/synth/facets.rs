@@ -600,10 +600,9 @@ pub fn refine_facets(
                     }
                 }
             }
-            let Some((f, gain, a)) = best.filter(|b| b.1 >= grow_gain * energy) else {
+            let Some((f, _, a)) = best.filter(|b| b.1 >= grow_gain * energy) else {
                 break;
             };
-            let _ = gain;
             sub.legs(&f, pitch, &mut buf, &mut legs);
             sub.add(&legs, -a, &mut r);
             facets.push(f);

@@ -3,7 +3,7 @@
 //! ([`super::refine_facets`]), and the wavelength of the image to read them from.
 //!
 //! Per cluster, the columns' centres get a least-squares plane (the smallest principal axis).
-//! A cluster whose RMS distance to it exceeds `split` is split in two by `k`-planes (seeded
+//! A cluster whose RMS distance to it exceeds `split_tol` is split in two by `k`-planes (seeded
 //! by the two most different column normals, then points assigned to the nearer plane), at
 //! most twice (four facets per cluster), when that cuts the squared residual at least 4× and
 //! the two planes meet at 35° or more (the depth map of one plane bends by up to about 25°
@@ -172,12 +172,12 @@ fn split(
     }
 }
 
-/// Planar facets from the column patches of [`Surfels::from_direct`] (module docs): `split`
+/// Planar facets from the column patches of [`Surfels::from_direct`] (module docs): `split_tol`
 /// the RMS distance (m) above which a cluster is split, `pitch` the column pitch (m) by half
 /// of which the extents are widened.
 ///
 /// # Errors
-/// `surfels` without patches, or `split`/`pitch` not positive and finite.
+/// `surfels` without patches, or `split_tol`/`pitch` not positive and finite.
 pub fn facets_from_surfels(s: &Surfels, split_tol: f64, pitch: f64) -> Result<Vec<Facet>> {
     if s.patches.is_empty() {
         return Err(Error::arg(
@@ -186,7 +186,7 @@ pub fn facets_from_surfels(s: &Surfels, split_tol: f64, pitch: f64) -> Result<Ve
         ));
     }
     if !(split_tol.is_finite() && split_tol > 0.0) {
-        return Err(Error::arg("split", "must be positive and finite (m)"));
+        return Err(Error::arg("split_tol", "must be positive and finite (m)"));
     }
     if !(pitch.is_finite() && pitch > 0.0) {
         return Err(Error::arg("pitch", "must be positive and finite (m)"));
