@@ -450,3 +450,20 @@ pub(super) fn elementwise(
     acc.resize(voxels.len(), Complex64::new(0.0, 0.0));
     Ok((acc, report))
 }
+
+/// The diagonal of `points` by an FFT path that cannot evaluate the voxels `skip` marks (paths
+/// outside its guard): `core` gets those voxels as band-path points and returns the grid's
+/// accumulators (skipped ones at 0) and the band path's; the band path's are put back in place.
+pub(super) fn with_band_fallback(
+    points: &[Point],
+    skip: &[bool],
+    core: impl FnOnce(&[Point]) -> Result<(Vec<Complex64>, Vec<Complex64>, Report)>,
+) -> Result<(Vec<Complex64>, Report)> {
+    let fb_idx: Vec<usize> = (0..skip.len()).filter(|&i| skip[i]).collect();
+    let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| points[i]).collect();
+    let (mut acc, fb_acc, report) = core(&fb_pts)?;
+    for (&i, a) in fb_idx.iter().zip(fb_acc) {
+        acc[i] = a;
+    }
+    Ok((acc, report))
+}

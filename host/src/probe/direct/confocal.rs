@@ -121,13 +121,9 @@ pub(super) fn direct_convolution(
     } else {
         (conv, outside_guard(&g, cfg, legs, &volume.points))
     };
-    let fb_idx: Vec<usize> = (0..skip.len()).filter(|&i| skip[i]).collect();
-    let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| volume.points[i]).collect();
-    let (mut acc, fb_acc, report) = convolution_core(src, job, &conv, &skip, &fb_pts, legs)?;
-    for (&i, a) in fb_idx.iter().zip(fb_acc) {
-        acc[i] = a;
-    }
-    Ok((acc, report))
+    with_band_fallback(&volume.points, &skip, |fb_pts| {
+        convolution_core(src, job, &conv, &skip, fb_pts, legs)
+    })
 }
 
 /// The confocal convolution `conv` over its voxel grid (voxels with `skip` left at 0), and

@@ -285,13 +285,9 @@ pub(super) fn direct_planar(
     legs: &(Vec<f64>, Vec<f64>),
 ) -> Result<(Vec<Complex64>, Report)> {
     let skip = outside_guard(src.geometry(), job.cfg, legs, &volume.points);
-    let fb_idx: Vec<usize> = (0..skip.len()).filter(|&i| skip[i]).collect();
-    let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| volume.points[i]).collect();
-    let (mut acc, fb_acc, report) = planar_core(src, job, &volume.points, planar, &skip, &fb_pts)?;
-    for (&i, a) in fb_idx.iter().zip(fb_acc) {
-        acc[i] = a;
-    }
-    Ok((acc, report))
+    with_band_fallback(&volume.points, &skip, |fb_pts| {
+        planar_core(src, job, &volume.points, planar, &skip, fb_pts)
+    })
 }
 
 /// The planar convolution over the voxels `pts` (its grid; those with `skip` left at 0) and
