@@ -168,7 +168,7 @@ fn planar_diagonal(c: &mut Criterion) {
         let sp = spads(case.ns);
         let (vox, shape) = voxels(case.ns, case.r, case.nz);
         let planar = Planar::new(&cfg, &sp, &vox, shape).unwrap();
-        let mut scratch = planar.scratch();
+        let mut scratch = vltm::probe::fast::planar::Scratch::default();
         let (mx, my, slices) = planar.shape();
         eprintln!(
             "planar {}: Ks = {}, Kv = {}, FFT {mx}×{my}, {slices} slices, κ̂ {:.1} MB shared, \
@@ -244,7 +244,7 @@ fn column_image(c: &mut Criterion) {
                     (d, 1.0)
                 },
                 &skip,
-                &mut planar.scratch(),
+                &mut vltm::probe::fast::planar::Scratch::default(),
                 &mut acc,
             );
             black_box(acc[0])
@@ -396,15 +396,12 @@ fn confocal_diagonal(c: &mut Criterion) {
                 })
             })
             .collect();
-        let conv = Confocal::new(&cfg, &wall, &vox, [n, n, nz])
-            .unwrap()
-            .with_guard(0.0);
+        let conv = Confocal::new(&cfg, &wall, &vox, [n, n, nz]).unwrap();
         let (mx, my, slices) = conv.shape();
         println!(
             "confocal 64x64 wall, {nz} slices: J = {j}, FFT {mx}×{my}, {slices} slices, \
-             wall spectra {:.1} MB, {:.2} Gflop",
+             wall spectra {:.1} MB",
             conv.spectra_bytes() as f64 / 1e6,
-            conv.flops() / 1e9
         );
         let mut spectra = spectra_of(&conv);
         if nz == 11 {
@@ -421,7 +418,7 @@ fn confocal_diagonal(c: &mut Criterion) {
         let mut acc = vec![Complex64::new(0.0, 0.0); vox.len()];
         g.throughput(Throughput::Elements(vox.len() as u64));
         g.bench_function(BenchmarkId::new("image_64x64", nz), |b| {
-            b.iter(|| conv.image(black_box(&spectra), &skip, &mut acc));
+            b.iter(|| conv.image(Some(0.0), black_box(&spectra), &skip, &mut acc));
         });
     }
     g.finish();

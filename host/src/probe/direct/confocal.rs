@@ -9,7 +9,7 @@
 //! `RowBuffer::load_with` does, and each spectrum placed on the wall image. Paths outside the
 //! guard interval contribute nothing, as on the band path: when all rows share one leg
 //! offset `d1 + d4 − t0` (wall-to-wall time axes) the convolution kernel is zeroed where the
-//! path leaves the guard ([`Confocal::with_guard`]); otherwise (legs in the time axis) the
+//! path leaves the guard (`guard` of [`Confocal::run`]); otherwise (legs in the time axis) the
 //! voxels with such a path are evaluated on the band path in the same pass (kernel probes
 //! over voxel chunks, one `Scan` per row), as the planar path does.
 //!
@@ -105,34 +105,40 @@ pub(super) fn direct_convolution(
     src: &mut dyn RowSource,
     job: Job<'_>,
     volume: &Volume,
-    conv: Confocal,
+    conv: &Confocal,
     legs: &(Vec<f64>, Vec<f64>),
 ) -> Result<(Vec<Complex64>, Report)> {
-    let cfg = job.cfg;
     let g = src.geometry().clone();
-    let (legs1, legs4) = legs;
-    let offsets: Vec<f32> = legs1
-        .iter()
-        .zip(legs4)
-        .map(|(a, b)| (a + b - cfg.t0()) as f32)
-        .collect();
-    let (conv, skip) = if offsets.iter().all(|&x| x == offsets[0]) {
-        (conv.with_guard(offsets[0]), vec![false; volume.len()])
-    } else {
-        (conv, outside_guard(&g, cfg, legs, &volume.points))
+    let guard = common_offset(job.cfg, legs);
+    let skip = match guard {
+        Some(_) => vec![false; volume.len()],
+        None => outside_guard(&g, job.cfg, legs, &volume.points),
     };
     with_band_fallback(&volume.points, &skip, |fb_pts| {
-        convolution_core(src, job, &conv, &skip, fb_pts, legs)
+        convolution_core(src, job, conv, guard, &skip, fb_pts, legs)
     })
 }
 
-/// The confocal convolution `conv` over its voxel grid (voxels with `skip` left at 0), and
-/// the band path's accumulators of the points `fb_pts`, in one pass over the rows (`(d1, d4)`:
-/// the device legs of the wall points).
+/// The rows' common leg offset `d1 + d4 − t0` (`f32`, m) when every row has the same one
+/// (wall-to-wall time axes): then the convolution applies the guard in its kernel.
+pub(super) fn common_offset(cfg: &Config, (legs1, legs4): &(Vec<f64>, Vec<f64>)) -> Option<f32> {
+    let mut offsets = legs1
+        .iter()
+        .zip(legs4)
+        .map(|(a, b)| (a + b - cfg.t0()) as f32);
+    let first = offsets.next()?;
+    offsets.all(|x| x == first).then_some(first)
+}
+
+/// The confocal convolution `conv` over its voxel grid (voxels with `skip` left at 0; the
+/// guard in its kernel at the rows' common offset `guard`, [`common_offset`]), and the band
+/// path's accumulators of the points `fb_pts`, in one pass over the rows (`(d1, d4)`: the
+/// device legs of the wall points): [`Confocal::run`] with this file's row reader.
 pub(super) fn convolution_core(
     src: &mut dyn RowSource,
     job: Job<'_>,
     conv: &Confocal,
+    guard: Option<f32>,
     skip: &[bool],
     fb_pts: &[Point],
     (legs1, legs4): &(Vec<f64>, Vec<f64>),
@@ -161,18 +167,15 @@ pub(super) fn convolution_core(
     let dft = BandDft::new(cfg);
     let (nt, j_n) = (g.nt, cfg.bins());
     let batch = ROWS_PER_GEMM * rayon::current_num_threads().max(1);
-    let mut spectra = conv.spectra();
     let mut hists = vec![0.0f32; batch * nt];
-    let mut band = vec![Complex32::new(0.0, 0.0); batch * j_n];
     let mut ungated = vec![Complex32::new(0.0, 0.0); batch];
     let mut row = Vec::new();
     let mut lasers = vec![[0.0f32; 3]; batch];
     let mut report = Report::default();
     let bar = Pass::start(exec, "direct", g.lasers.len());
-    let rows_t =
-        crate::timings::section("rows: read, band spectra", crate::timings::Kind::Parallel);
-    for start in (0..g.lasers.len()).step_by(batch) {
-        let n = batch.min(g.lasers.len() - start);
+    // One batch of rows: read, stage 1 as sgemms, the band path's points, then folded.
+    let fill = |start: usize, band: &mut [Complex32]| -> Result<()> {
+        let n = band.len() / j_n;
         for (k, h) in hists.chunks_exact_mut(nt).take(n).enumerate() {
             let x_l = src.read_row(start + k, &mut row)?;
             lasers[k] = x_l;
@@ -189,7 +192,7 @@ pub(super) fn convolution_core(
         }
         hists[..n * nt]
             .par_chunks(ROWS_PER_GEMM * nt)
-            .zip(band[..n * j_n].par_chunks_mut(ROWS_PER_GEMM * j_n))
+            .zip(band.par_chunks_mut(ROWS_PER_GEMM * j_n))
             .zip(ungated[..n].par_chunks_mut(ROWS_PER_GEMM))
             .for_each(|((h, b), u)| dft.apply(h, b, u));
         if !chunks.is_empty() {
@@ -208,24 +211,16 @@ pub(super) fn convolution_core(
                     .try_for_each(|p| p.push_row(&scan, &r))?;
             }
         }
-        for k in 0..n {
+        for (k, hg) in band.chunks_exact_mut(j_n).enumerate() {
             let l = start + k;
-            let x = legs1[l] + legs4[l] - cfg.t0();
-            let hg = &mut band[k * j_n..(k + 1) * j_n];
-            fold(cfg, &gate, x, hg);
-            conv.place(&mut spectra, l, hg);
+            fold(cfg, &gate, legs1[l] + legs4[l] - cfg.t0(), hg);
         }
         report.rows += n as u64;
         bar.advance(n);
-    }
+        Ok(())
+    };
+    let acc = conv.run(guard, batch, skip, fill)?;
     drop(bar);
-    drop(rows_t);
-    let _t = crate::timings::section("confocal image", crate::timings::Kind::Parallel);
-    conv.forward(&mut spectra);
-    let mut acc = vec![Complex64::new(0.0, 0.0); skip.len()];
-    conv.image(&spectra, skip, &mut acc);
-    drop(_t);
-    drop(spectra);
     // The points on the band path: their accumulators are their amplitudes.
     let fb_acc = probes
         .iter()

@@ -169,7 +169,7 @@ fn evaluate(
     match how {
         Diagonal::Resampled(rs, engine) => direct_resampled(src, job, volume, &rs, engine, legs),
         Diagonal::Planar(p) => direct_planar(src, job, volume, &p, legs),
-        Diagonal::Convolution(c) => confocal::direct_convolution(src, job, volume, *c, legs),
+        Diagonal::Convolution(c) => confocal::direct_convolution(src, job, volume, &c, legs),
         Diagonal::Phasor(p, plan) => direct_phasor(src, job, volume, &p, &plan),
         Diagonal::Lookup(plan) => direct_lookup(src, job, volume, &plan),
         Diagonal::Band => elementwise(
@@ -322,7 +322,7 @@ pub(super) fn planar_core(
             )?)
         };
         workers.push(DiagWorker {
-            scratch: planar.scratch(),
+            scratch: planar::Scratch::default(),
             acc: vec![Complex64::new(0.0, 0.0); pts.len()],
             fallback,
             rows: 0,
@@ -391,27 +391,19 @@ fn direct_resampled(
     let none = vec![false; sup.len()];
     // A confocal capture whose rows share one leg offset (wall-to-wall time axes): the guard
     // in the convolution's kernel, as on the aligned path, no band-path voxels.
-    let (legs1, legs4) = legs;
-    let offsets: Vec<f32> = legs1
-        .iter()
-        .zip(legs4)
-        .map(|(a, b)| (a + b - cfg.t0()) as f32)
-        .collect();
-    let uniform = offsets.iter().all(|&x| x == offsets[0]);
-    let engine = match engine {
-        Engine::Confocal(c) if uniform => Engine::Confocal(Box::new((*c).with_guard(offsets[0]))),
-        e => e,
-    };
-    let outside = match &engine {
-        Engine::Planar(_) => outside_guard(&g, cfg, legs, &volume.points),
-        Engine::Confocal(_) if uniform => vec![false; volume.len()],
-        Engine::Confocal(_) => confocal::outside_guard(&g, cfg, legs, &volume.points),
+    let guard = confocal::common_offset(cfg, legs);
+    let outside = match (&engine, guard) {
+        (Engine::Planar(_), _) => outside_guard(&g, cfg, legs, &volume.points),
+        (Engine::Confocal(_), Some(_)) => vec![false; volume.len()],
+        (Engine::Confocal(_), None) => confocal::outside_guard(&g, cfg, legs, &volume.points),
     };
     let fb_idx: Vec<usize> = (0..outside.len()).filter(|&i| outside[i]).collect();
     let fb_pts: Vec<Point> = fb_idx.iter().map(|&i| volume.points[i]).collect();
     let (sup_acc, fb_acc, report) = match &engine {
         Engine::Planar(p) => planar_core(src, job, &sup.points, p, &none, &fb_pts)?,
-        Engine::Confocal(c) => confocal::convolution_core(src, job, c, &none, &fb_pts, legs)?,
+        Engine::Confocal(c) => {
+            confocal::convolution_core(src, job, c, guard, &none, &fb_pts, legs)?
+        }
     };
     let _t = crate::timings::section("resampling", crate::timings::Kind::Parallel);
     let mut acc = rs.apply(&sup_acc);

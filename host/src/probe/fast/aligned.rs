@@ -131,7 +131,7 @@ pub fn suggested_volume(g: &Geometry) -> Option<String> {
     let wall = if g.confocal { &g.lasers } else { &g.spads };
     let lam = crate::probe::wave::default_wavelength(g);
     let xy: [(f64, f64, usize); 2] =
-        match crate::probe::fast::planar::wall_lattice(wall, 1e-5 * lam) {
+        match crate::probe::fast::lattice::wall_lattice(wall, 1e-5 * lam) {
             Ok((origin, pitch, n, _)) => {
                 [0, 1].map(|i| (origin[i], origin[i] + (n[i] - 1) as f64 * pitch[i], n[i]))
             }

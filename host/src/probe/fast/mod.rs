@@ -10,6 +10,8 @@
 //!   a few SPADs (paired and confocal scans) (`rustfft`, `pulp` dispatch).
 //! * [`lookup`]: the gated baseband + lookup diagonal (§B.2.4, [`LookupDiagonal`]): one inverse FFT per SPAD and
 //!   row, then a cubic interpolation per (voxel, SPAD), for any geometry (`rustfft`).
+//! * `lattice`: the wall lattice and the voxel grid's layout for a 2-D convolution, shared by
+//!   the FFT paths and read by the planner.
 //! * [`resample`]: volumes off the wall's lattice computed on a support grid the FFT paths
 //!   take and resampled to the asked voxels within a stated bound.
 //! * `aligned`: the nearest grid the FFT paths take, the depths the time window reaches and
@@ -22,6 +24,7 @@ pub(crate) mod aligned;
 pub mod band;
 pub mod confocal;
 mod lanes;
+pub(crate) mod lattice;
 pub mod lookup;
 pub mod phasor;
 pub mod planar;

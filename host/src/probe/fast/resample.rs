@@ -50,7 +50,7 @@
 //! `support x × asked y × slices` amplitudes.
 
 use crate::io::capture::Geometry;
-use crate::probe::fast::planar::wall_lattice;
+use crate::probe::fast::lattice::wall_lattice;
 use crate::volume::Volume;
 use num_complex::Complex64;
 use rayon::prelude::*;

@@ -18,7 +18,7 @@
 //! | band | `Kv·Ks·(14J + 60)` per row ([`band_flops`]) | any geometry, every gate | a kernel probe state per voxel chunk |
 //! | lookup | per row `Ks·5L·log₂L + 76·Kv·Ks` on a SPAD grid ([`lookup_row_flops`]); per scan `R·(5L·log₂L + 76·Kv + 40N)` on paired and confocal scans ([`lookup_scan_flops`]) | the Gaussian diagonal, any geometry | the grid's carrier and FFT plan, per thread a scratch (`L` spectrum, `Ks·(L + 8)` tables) and `Kv` accumulators ([`lookup_plan`]) |
 //! | planar | per row `J·(F + S·(6M + 0.75F)) + 8·Kv·J`, `F = 5M·log₂M`; a column images once and adds `S·J·F` for its table ([`planar_flops`]) | a regular SPAD lattice and a wall-parallel voxel grid whose x–y pitch divides it (the diagonal, Gaussian-gated columns) | the kernel table `S·J·M` and per thread `3·J·M` scratch (complex `f32`) |
-//! | confocal convolution | per scan `J·F/2 + S·J·(F + 12M) + S·F/2` (`Confocal::flops`) | a confocal scan on a regular lattice, such a voxel grid | the wall spectra `J·M` (twice with transposed twins), a batch of rows, per worker `~5M` (complex `f32`) |
+//! | confocal convolution | per scan `J·F/2 + S·J·(F + 12M) + S·F/2` ([`convolution_flops`]) | a confocal scan on a regular lattice, such a voxel grid | the wall spectra `J·M` (twice with transposed twins), a batch of rows, per worker `~5M` (complex `f32`) |
 //! | resampled FFT | the FFT path's flops on the support grid plus `32·TAPS·(sx·ny + nx·ny)·nz` (`Resample::flops`) | a regular wall-parallel grid off the lattice whose resampling bound is at most [`resample::MAX_ERROR`](crate::probe::resample::MAX_ERROR) | the support grid's buffers (as above, over the support grid) and the resampling's intermediate and output (16 bytes per value) |
 //! | phasor | per scan `R·Ks·(5N·log₂N + 5L·log₂L + 4T + 7.5·Kv)` ([`phasor_flops`]), counted [`PHASOR_COST`] times against the FFT paths | the Gaussian diagonal on rows of at most [`PHASOR_MAX_SPADS`] SPADs | the tables of a batch of rows (16 bytes per entry) and per thread an FFT buffer of `N + L` complex `f32` ([`phasor_plan`]) |
 //!
@@ -61,8 +61,9 @@ mod note;
 pub(super) use cost::phasor_batch;
 pub use note::fft_note;
 
+use super::fast::lattice::{self, Layout};
 use super::fast::resample::Resample;
-use super::fast::{Confocal, Phasor, Planar, confocal, planar};
+use super::fast::{Confocal, Phasor, Planar, confocal};
 use super::gate::ColumnGate;
 use crate::budget;
 use crate::error::{Error, Result};
@@ -103,6 +104,16 @@ fn planar_flops(
         PlanarUse::Diagonal => per_row,
         PlanarUse::Column => per_row + slices as f64 * j * f,
     }
+}
+
+/// Flops of the confocal convolution of FFT size `(Mx, My)` over `slices` sub-grids, per
+/// scan: the forward transforms `J·F/2` and the image `S·J·(F + 12M) + S·F/2` (`F = 5M·log₂M`;
+/// an upper bound, `fast::confocal`'s module docs).
+fn convolution_flops((mx, my, slices): (usize, usize, usize), cfg: &Config) -> f64 {
+    let m = (mx * my) as f64;
+    let f = 5.0 * m * m.log2();
+    let (j, s) = (cfg.bins() as f64, slices as f64);
+    j * f / 2.0 + s * j * (f + 12.0 * m) + s * f / 2.0
 }
 
 // ---------------------------------------------------------------------------------------
@@ -205,32 +216,28 @@ fn diagonal_path(
     path: EvalPath,
 ) -> Result<Diagonal> {
     let r = Rivals::new(pass, g, cfg, volume.len(), path)?;
-    // The confocal convolution of a confocal scan, the planar one over a SPAD grid.
+    // The confocal convolution of a confocal scan, the planar one over a SPAD grid: their
+    // layout first (the engine is built only if it is chosen).
     let exact = if g.confocal {
-        build_convolution(g, cfg, volume, path).map(|c| c.map(Exact::Convolution))
+        convolution_layout(g, cfg, volume, path)
     } else {
-        build_planar(&g.spads, cfg, volume, path).map(|p| p.map(Exact::Planar))
+        planar_layout(&g.spads, cfg, volume, path)
     };
     // Off the wall's lattice: the FFT path on a support grid, resampled.
-    if !matches!(exact, Some(Ok(_)))
-        && let Some((rs, engine)) = resampled(g, cfg, volume, path, r.resampled)?
+    if let Some(Err(why)) = &exact
+        && let Some((rs, engine)) = resampled(g, cfg, volume, path, r.resampled, why)?
     {
         return Ok(Diagonal::Resampled(Box::new(rs), engine));
     }
-    match exact {
-        Some(Ok(Exact::Convolution(c))) => {
-            if let Some(c) = decide_convolution(Some(Ok(c)), path, r.fft)? {
-                return Ok(Diagonal::Convolution(Box::new(c)));
-            }
+    if g.confocal {
+        if let Some(c) = decide_convolution(exact, cfg, path, r.fft)? {
+            return Ok(Diagonal::Convolution(Box::new(c)));
         }
-        Some(Ok(Exact::Planar(p))) => {
-            let n = volume.len();
-            if let Some(p) = decide_planar(Some(Ok(p)), cfg, n, path, PlanarUse::Diagonal, r.fft)? {
-                return Ok(Diagonal::Planar(Box::new(p)));
-            }
+    } else {
+        let n = volume.len();
+        if let Some(p) = decide_planar(exact, cfg, n, path, PlanarUse::Diagonal, r.fft)? {
+            return Ok(Diagonal::Planar(Box::new(p)));
         }
-        Some(Err(why)) => refuse_fft(why, path)?,
-        None => {}
     }
     if let Some((p, plan)) = r
         .phasor
@@ -299,13 +306,6 @@ pub(super) fn cosine(
     Ok(Choice::new(how, g, volume, cfg))
 }
 
-/// An exact FFT path built for the diagonal: the planar convolution over a SPAD grid or the
-/// confocal one over a confocal scan.
-enum Exact {
-    Planar(Planar),
-    Convolution(Confocal),
-}
-
 /// Refuses the forced planar path with why the exact FFT path does not apply (`why`); under
 /// another path nothing.
 fn refuse_fft(why: String, path: EvalPath) -> Result<()> {
@@ -329,58 +329,63 @@ fn planar(
     usage: PlanarUse,
     rival: f64,
 ) -> Result<Option<Planar>> {
-    let built = build_planar(spads, cfg, volume, path);
-    decide_planar(built, cfg, volume.len(), path, usage, rival)
+    let lay = planar_layout(spads, cfg, volume, path);
+    decide_planar(lay, cfg, volume.len(), path, usage, rival)
 }
 
-/// [`planar`]'s convolution built, or why it does not apply; `None` when `path` excludes it.
-fn build_planar(
+/// [`planar`]'s layout of the SPADs and `volume` (lattice tolerance `1e-5·λ`), or why it does
+/// not apply; `None` when `path` excludes it.
+fn planar_layout(
     spads: &[Point],
     cfg: &Config,
     volume: &Volume,
     path: EvalPath,
-) -> Option<Result<Planar, String>> {
+) -> Option<Result<Layout, String>> {
     if matches!(path, EvalPath::Band | EvalPath::Lookup | EvalPath::Phasor) {
         return None;
     }
     Some(if volume.axes.is_none() {
         Err("the volume is a point list, not a grid".to_string())
     } else {
-        Planar::new(cfg, spads, &volume.points, volume.shape)
+        lattice::layout(spads, &volume.points, volume.shape, 1e-5 * cfg.wavelength())
     })
 }
 
-/// [`planar`]'s decision on the convolution `built` ([`build_planar`]) over `n_voxels`.
+/// [`planar`]'s decision on the layout `lay` ([`planar_layout`]) over `n_voxels`: the
+/// convolution built when it is forced or costs less than `rival`.
 ///
 /// # Errors
 /// [`Error::Argument`] (`path`) when the planar path is forced and does not apply.
 fn decide_planar(
-    built: Option<Result<Planar, String>>,
+    lay: Option<Result<Layout, String>>,
     cfg: &Config,
     n_voxels: usize,
     path: EvalPath,
     usage: PlanarUse,
     rival: f64,
 ) -> Result<Option<Planar>> {
-    match (built, path) {
-        (None, _) => Ok(None),
-        (Some(Err(e)), _) => refuse_fft(e, path).map(|()| None),
-        (Some(Ok(p)), EvalPath::Planar) => Ok(Some(p)),
-        (Some(Ok(p)), _) => {
-            let planar = planar_flops(p.shape(), cfg, n_voxels, usage);
-            Ok((planar < rival).then_some(p))
-        }
+    let lay = match lay {
+        None => return Ok(None),
+        Some(Err(e)) => return refuse_fft(e, path).map(|()| None),
+        Some(Ok(lay)) => lay,
+    };
+    if path != EvalPath::Planar && planar_flops(lay.size(), cfg, n_voxels, usage) >= rival {
+        return Ok(None);
+    }
+    match Planar::with_layout(cfg, lay) {
+        Ok(p) => Ok(Some(p)),
+        Err(e) => refuse_fft(e, path).map(|()| None),
     }
 }
 
-/// The confocal convolution for this probe built, or why it does not apply; `None` when
-/// `path` excludes it.
-fn build_convolution(
+/// The confocal convolution's layout of the scanned wall points and `volume`, or why it does
+/// not apply; `None` when `path` excludes it.
+fn convolution_layout(
     g: &Geometry,
     cfg: &Config,
     volume: &Volume,
     path: EvalPath,
-) -> Option<Result<Confocal, String>> {
+) -> Option<Result<Layout, String>> {
     if matches!(path, EvalPath::Band | EvalPath::Lookup | EvalPath::Phasor) {
         return None;
     }
@@ -393,33 +398,46 @@ fn build_convolution(
     } else if volume.axes.is_none() {
         Err("the volume is a point list, not a grid".to_string())
     } else {
-        Confocal::new(cfg, &g.lasers, &volume.points, volume.shape)
+        lattice::layout(
+            &g.lasers,
+            &volume.points,
+            volume.shape,
+            1e-5 * cfg.wavelength(),
+        )
     })
 }
 
-/// The confocal convolution `built` ([`build_convolution`]) if it applies and (for
-/// [`EvalPath::Auto`]) it costs fewer flops than `rival` (the cheapest other path, whole scan).
+/// The confocal convolution on the layout `lay` ([`convolution_layout`]), built if it applies
+/// and is forced or (for [`EvalPath::Auto`]) costs fewer flops than `rival` (the cheapest
+/// other path, whole scan).
 ///
 /// # Errors
 /// [`Error::Argument`] (`path`) when the planar path is forced and does not apply.
 fn decide_convolution(
-    built: Option<Result<Confocal, String>>,
+    lay: Option<Result<Layout, String>>,
+    cfg: &Config,
     path: EvalPath,
     rival: f64,
 ) -> Result<Option<Confocal>> {
-    match (built, path) {
-        (None, _) => Ok(None),
-        (Some(Err(e)), _) => refuse_fft(e, path).map(|()| None),
-        (Some(Ok(c)), EvalPath::Planar) => Ok(Some(c)),
-        (Some(Ok(c)), _) => Ok((c.flops() < rival).then_some(c)),
+    let lay = match lay {
+        None => return Ok(None),
+        Some(Err(e)) => return refuse_fft(e, path).map(|()| None),
+        Some(Ok(lay)) => lay,
+    };
+    if path != EvalPath::Planar && convolution_flops(lay.size(), cfg) >= rival {
+        return Ok(None);
+    }
+    match Confocal::with_layout(cfg, lay) {
+        Ok(c) => Ok(Some(c)),
+        Err(e) => refuse_fft(e, path).map(|()| None),
     }
 }
 
 /// The resampled FFT path ([`crate::probe::resample`]) for `volume`: `None` when it is not the
-/// one to take — a forced band, lookup or phasor path, a point list, a paired scan, a volume
-/// on the wall's lattice (the exact FFT path's case) or, under [`EvalPath::Auto`], when resampling
-/// does not apply, its buffers do not fit the budget or it costs more than `rival` (flops of
-/// the whole scan).
+/// one to take — a forced band, lookup or phasor path, a point list, a paired scan or, under
+/// [`EvalPath::Auto`], when resampling does not apply, its buffers do not fit the budget or it
+/// costs more than `rival` (flops of the whole scan). Called only for a volume off the wall's
+/// lattice: `exact` says why the exact FFT path does not lay it out.
 ///
 /// # Errors
 /// With the planar path forced: [`Error::Argument`] (`path`) naming why neither the exact nor
@@ -431,6 +449,7 @@ fn resampled(
     volume: &Volume,
     path: EvalPath,
     rival: f64,
+    exact: &str,
 ) -> Result<Option<(Resample, Engine)>> {
     // A paired scan (laser and SPAD apart) has no FFT path, exact or resampled: the
     // confocal path's choice names why.
@@ -443,10 +462,6 @@ fn resampled(
     let _t = crate::timings::section("planning: FFT path", crate::timings::Kind::Serial);
     let wall = if g.confocal { &g.lasers } else { &g.spads };
     let tol = 1e-5 * cfg.wavelength();
-    let exact = match planar::layout(wall, &volume.points, volume.shape, tol) {
-        Ok(_) => return Ok(None),
-        Err(e) => e,
-    };
     let forced = path == EvalPath::Planar;
     let fail = |why: String| -> Result<Option<(Resample, Engine)>> {
         if forced {
@@ -465,7 +480,7 @@ fn resampled(
         Err(e) => return fail(e),
     };
     let sup = &rs.support;
-    let lay = match planar::layout(wall, &sup.points, sup.shape, tol) {
+    let lay = match lattice::layout(wall, &sup.points, sup.shape, tol) {
         Ok(l) => l,
         Err(e) => return fail(e),
     };
@@ -523,21 +538,20 @@ fn resampled(
         return if forced { Err(e) } else { Ok(None) };
     }
     let engine = if g.confocal {
-        let c = match Confocal::with_layout(cfg, lay) {
-            Ok(c) => c,
-            Err(e) => return fail(e),
-        };
-        if !forced && c.flops() + rs.flops() >= rival {
+        if !forced && convolution_flops(lay.size(), cfg) + rs.flops() >= rival {
             return Ok(None);
         }
-        Engine::Confocal(Box::new(c))
+        match Confocal::with_layout(cfg, lay) {
+            Ok(c) => Engine::Confocal(Box::new(c)),
+            Err(e) => return fail(e),
+        }
     } else {
         let rows = g.lasers.len() as f64;
         let cost = planar_flops((mx, my, slices), cfg, sup.len(), PlanarUse::Diagonal) * rows;
         if !forced && cost + rs.flops() >= rival {
             return Ok(None);
         }
-        match Planar::new(cfg, &g.spads, &sup.points, sup.shape) {
+        match Planar::with_layout(cfg, lay) {
             Ok(p) => Engine::Planar(Box::new(p)),
             Err(e) => return fail(e),
         }

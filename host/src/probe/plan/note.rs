@@ -5,7 +5,7 @@ use super::cost::PHASOR_MAX_SPADS;
 use crate::exec::EvalPath;
 use crate::io::capture::Geometry;
 use crate::probe::fast::aligned::{aligned_volume, suggested_volume};
-use crate::probe::fast::planar;
+use crate::probe::fast::lattice;
 use crate::probe::wave::default_wavelength;
 use crate::volume::Volume;
 
@@ -44,7 +44,7 @@ fn aligned_hint(g: &Geometry, volume: &Volume, wavelength: f64, path: EvalPath) 
     let spec = aligned_volume(g, volume)?;
     let v = Volume::parse(&spec).ok()?;
     let wall = if g.confocal { &g.lasers } else { &g.spads };
-    planar::layout(wall, &v.points, v.shape, 1e-5 * wavelength).ok()?;
+    lattice::layout(wall, &v.points, v.shape, 1e-5 * wavelength).ok()?;
     Some(spec)
 }
 
@@ -55,7 +55,7 @@ fn aligned_hint(g: &Geometry, volume: &Volume, wavelength: f64, path: EvalPath) 
 pub fn fft_note(g: &Geometry, volume: Option<&Volume>) -> String {
     let wall = if g.confocal { &g.lasers } else { &g.spads };
     let tol = 1e-5 * default_wavelength(g);
-    let (origin, pitch, n, _) = match planar::wall_lattice(wall, tol) {
+    let (origin, pitch, n, _) = match lattice::wall_lattice(wall, tol) {
         Ok(l) => l,
         Err(e) => {
             return format!(
@@ -80,7 +80,7 @@ pub fn fft_note(g: &Geometry, volume: Option<&Volume>) -> String {
     if let Some(v) = volume {
         let what = if v.axes.is_none() {
             "a point list: the lookup or band path".to_string()
-        } else if planar::layout(wall, &v.points, v.shape, tol).is_ok() {
+        } else if lattice::layout(wall, &v.points, v.shape, tol).is_ok() {
             "on the wall's lattice: the FFT path".to_string()
         } else {
             match aligned_volume(g, v) {

@@ -35,8 +35,12 @@
 //! the lookup or band path).
 //!
 //! Equality with the band sum: the same band sum up to `f32` FFT rounding, **for paths
-//! inside the guard interval**; the caller evaluates the voxels that have a path outside
-//! [`vltm_kernel::Config::guard`] on the band path, as for the planar path.
+//! inside the guard interval**: when the rows share one leg offset the guard is applied in the
+//! kernel itself (`guard` of [`Confocal::run`]); otherwise the caller evaluates the voxels that
+//! have a path outside [`vltm_kernel::Config::guard`] on the band path, as for the planar path.
+//!
+//! A pass calls [`Confocal::run`] once: it takes the rows' spectra batch by batch from the
+//! caller, places them, transforms and images. The steps are public for benchmarks.
 //!
 //! Cost: `J·F(M)/2` (forward) `+ S·J·(F(M) + 12M) + S·F(M)/2` flops (S = slices × phases,
 //! `F(M) = 5M·log₂M`; an upper bound: mirrored offsets and twins cut the kernel transforms
@@ -46,7 +50,8 @@
 //! image, two kernel spectra, the sum and a twin's) and 12 bytes per computed kernel cell,
 //! the output.
 
-use super::planar::{Layout, MAX_TABLE_BYTES, SubGrid, layout, transpose};
+use super::lattice::{Layout, SubGrid, layout};
+use super::planar::{MAX_TABLE_BYTES, transpose};
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
 use rustfft::{Fft, FftPlanner};
@@ -57,9 +62,6 @@ use vltm_kernel::{Config, Point};
 pub struct Confocal {
     cfg: Config,
     lay: Layout,
-    /// The rows' common leg offset `d1 + d4 − t0` (m), when the guard is applied in the
-    /// kernel ([`Confocal::with_guard`]).
-    guard_offset: Option<f32>,
     /// Per sub-grid, the later sub-grid whose kernel is its transpose ([`twins`]).
     twin: Vec<Option<usize>>,
     fy: Arc<dyn Fft<f32>>,
@@ -279,7 +281,6 @@ impl Confocal {
         let mut planner = FftPlanner::<f32>::new();
         Ok(Self {
             cfg: *cfg,
-            guard_offset: None,
             twin,
             fy: planner.plan_fft_forward(lay.my),
             fx: planner.plan_fft_forward(lay.mx),
@@ -289,29 +290,9 @@ impl Confocal {
         })
     }
 
-    /// Applies the kernel's guard in the convolution itself: when every row has the same leg
-    /// offset `offset = d1 + d4 − t0` (always so for wall-to-wall time axes), whether a path
-    /// is inside [`Config::guard`] depends on its offset `x_v − x_l` only, so the kernel
-    /// `κ` is set to 0 where `2d + offset` (in `f32`, the kernel's comparison) is outside and
-    /// no voxel needs the band path. Without it, the caller must evaluate the voxels with a
-    /// path outside the guard otherwise.
-    #[must_use]
-    pub fn with_guard(mut self, offset: f32) -> Self {
-        self.guard_offset = Some(offset);
-        self
-    }
-
     /// FFT size `(Mx, My)` and number of (depth, phase) slices.
     pub fn shape(&self) -> (usize, usize, usize) {
         (self.lay.mx, self.lay.my, self.lay.subgrids.len())
-    }
-
-    /// Flops of [`Confocal::forward`] and [`Confocal::image`] (the model of the module docs).
-    pub fn flops(&self) -> f64 {
-        let m = (self.lay.mx * self.lay.my) as f64;
-        let f = 5.0 * m * m.log2();
-        let (j, s) = (self.cfg.bins() as f64, self.lay.subgrids.len() as f64);
-        j * f / 2.0 + s * j * (f + 12.0 * m) + s * f / 2.0
     }
 
     /// Length of the spectra buffer: `J·Mx·My` complex values.
@@ -323,6 +304,44 @@ impl Confocal {
     /// transposed spectra when the layout has transposed twins).
     pub fn spectra_bytes(&self) -> usize {
         self.spectra_len() * 8
+    }
+
+    /// The whole convolution of a pass over the capture's rows: `fill(start, band)` writes the
+    /// folded band spectra `HG` (module docs) of rows `start..start + n` into `band` (`n·J`
+    /// values, `n ≤ batch`, rows in order); each is placed at its wall point
+    /// ([`Confocal::place`]), then the forward transforms ([`Confocal::forward`]) and the image
+    /// ([`Confocal::image`] with `guard`) give `A(v)` of every voxel with `skip[v] == false`
+    /// (0 elsewhere). Memory: the spectra ([`Confocal::spectra_bytes`]), one batch of
+    /// `batch·J` complex `f32` and the output.
+    ///
+    /// # Errors
+    /// The first error of `fill`, at once.
+    pub fn run<E>(
+        &self,
+        guard: Option<f32>,
+        batch: usize,
+        skip: &[bool],
+        mut fill: impl FnMut(usize, &mut [Complex32]) -> Result<(), E>,
+    ) -> Result<Vec<Complex64>, E> {
+        let (rows, j_n, batch) = (self.lay.cell.len(), self.cfg.bins(), batch.max(1));
+        let mut spectra = self.spectra();
+        let mut band = vec![Complex32::new(0.0, 0.0); batch.min(rows) * j_n];
+        let rows_t =
+            crate::timings::section("rows: read, band spectra", crate::timings::Kind::Parallel);
+        for start in (0..rows).step_by(batch) {
+            let n = batch.min(rows - start);
+            let band = &mut band[..n * j_n];
+            fill(start, band)?;
+            for (k, hg) in band.chunks_exact(j_n).enumerate() {
+                self.place(&mut spectra, start + k, hg);
+            }
+        }
+        drop(rows_t);
+        let _t = crate::timings::section("confocal image", crate::timings::Kind::Parallel);
+        self.forward(&mut spectra);
+        let mut acc = vec![Complex64::new(0.0, 0.0); skip.len()];
+        self.image(guard, &spectra, skip, &mut acc);
+        Ok(acc)
     }
 
     /// A zeroed spectra buffer ([`Confocal::spectra_len`]).
@@ -374,9 +393,22 @@ impl Confocal {
     /// Adds `A(v)` (module docs) to `acc[v]` for every voxel with `skip[v] == false`, from
     /// spectra made by [`Confocal::forward`]. Slices and runs of bins in parallel.
     ///
+    /// `guard`: the kernel's guard applied in the convolution itself. When every row has the
+    /// same leg offset `offset = d1 + d4 − t0` (always so for wall-to-wall time axes), whether
+    /// a path is inside [`Config::guard`] depends on its offset `x_v − x_l` only, so `κ` is
+    /// set to 0 where `2d + offset` (in `f32`, the kernel's comparison) is outside and no
+    /// voxel needs the band path. With `None`, the caller evaluates the voxels with a path
+    /// outside the guard otherwise.
+    ///
     /// # Panics
     /// If `spectra` is not [`Confocal::spectra_len`] long.
-    pub fn image(&self, spectra: &[Complex32], skip: &[bool], acc: &mut [Complex64]) {
+    pub fn image(
+        &self,
+        guard: Option<f32>,
+        spectra: &[Complex32],
+        skip: &[bool],
+        acc: &mut [Complex64],
+    ) {
         assert_eq!(spectra.len(), self.spectra_len(), "spectra");
         let bins = self.cfg.bins();
         let (mx, my) = (self.lay.mx, self.lay.my);
@@ -415,7 +447,12 @@ impl Confocal {
         let job = |i: usize| {
             let sg = &self.lay.subgrids[i];
             let twin = self.twin[i].map(|t| &self.lay.subgrids[t]);
-            (sg, twin, twin.map(|_| &spectra_t[..]), self.table(sg))
+            (
+                sg,
+                twin,
+                twin.map(|_| &spectra_t[..]),
+                self.table(sg, guard),
+            )
         };
         let parts: Vec<Vec<(u32, Complex64)>> = if runs == 1 {
             jobs.par_iter()
@@ -518,8 +555,9 @@ impl Confocal {
 
     /// The kernel table of slice `sg` ([`Table`]): `w(d)²/M·e^{iν_j 2d}` per computed cell.
     /// Mirrored offsets are copies when the mirror centre is an integer within `1e-6·λ`
-    /// (a tenth of the lattice tolerance of [`layout`]).
-    fn table(&self, sg: &SubGrid) -> Table {
+    /// (a tenth of the lattice tolerance of [`layout`]). With `guard` (the rows' common leg
+    /// offset, [`Confocal::image`]) the cells whose path leaves the guard are 0.
+    fn table(&self, sg: &SubGrid, guard: Option<f32>) -> Table {
         let (mx, my) = (self.lay.mx, self.lay.my);
         let tol = 1e-6 * self.cfg.wavelength();
         let rows = AxisKernel::new(self.lay.nsx, sg.cx, mx, sg.dx, self.lay.px, tol);
@@ -548,7 +586,7 @@ impl Confocal {
         let k0 = self.cfg.k_lo() as f64;
         let (g_lo, g_hi) = self.cfg.guard();
         let inside = |d: f64| {
-            self.guard_offset.is_none_or(|off| {
+            guard.is_none_or(|off| {
                 let d = d as f32;
                 let rel = d + d + off;
                 rel >= g_lo as f32 && rel <= g_hi as f32

@@ -104,7 +104,7 @@ fn equals_the_direct_sum_at(x0: f32, wall_ny: usize, ny: usize, nz: usize, twins
     let mut skip = vec![false; voxels.len()];
     skip[3] = true;
     let mut acc = vec![Complex64::new(0.0, 0.0); voxels.len()];
-    c.image(&spectra, &skip, &mut acc);
+    c.image(None, &spectra, &skip, &mut acc);
     let mut worst = 0.0f64;
     let mut scale = 0.0f64;
     for (i, (v, a)) in voxels.iter().zip(&acc).enumerate() {
