@@ -49,6 +49,11 @@
 //! when a layout has transposed twins, for `X̂ᵀ`), per worker about `5M` complex `f32` (the
 //! image, two kernel spectra, the sum and a twin's) and 12 bytes per computed kernel cell,
 //! the output.
+//!
+//! Threads: the bins' forward transforms and the sub-grids in parallel; a few sub-grids are
+//! split into runs of bins by a rule of the problem's size only (`IMAGE_TASKS`), each run
+//! summed in bin order and the runs added in order, so the image is bit-identical on any
+//! number of threads (tested).
 
 use super::lattice::{Layout, SubGrid, layout};
 use super::planar::{MAX_TABLE_BYTES, transpose};
@@ -57,6 +62,11 @@ use rayon::prelude::*;
 use rustfft::{Fft, FftPlanner};
 use std::sync::Arc;
 use vltm_kernel::{Config, Point};
+
+/// Tasks of [`Confocal::image`] when a few sub-grids are split into runs of bins: enough
+/// for a many-core pool, fixed so that the split (and so the rounding) never depends on the
+/// number of threads. Memory: up to this many partial sums of `M` complex (`2M` with twins).
+const IMAGE_TASKS: usize = 32;
 
 /// Precomputed confocal convolution for one (wall grid, voxel grid, configuration).
 pub struct Confocal {
@@ -150,6 +160,21 @@ struct BinSum {
     /// The transposed sum of the slice's twin (empty without one).
     sum_t: Vec<Complex32>,
     fft: Vec<Complex32>,
+}
+
+impl BinSum {
+    /// Drops everything but the sums (a run's partial sum waiting to be added).
+    fn shrink_to_sums(&mut self) {
+        for v in [
+            &mut self.img,
+            &mut self.spec,
+            &mut self.spec2,
+            &mut self.fft,
+        ] {
+            *v = Vec::new();
+        }
+        self.phase = Vec::new();
+    }
 }
 
 /// Per sub-grid of `lay`, the later sub-grid at the same depth whose kernel is its
@@ -433,10 +458,12 @@ impl Confocal {
         let jobs: Vec<usize> = (0..self.lay.subgrids.len())
             .filter(|&i| !is_twin[i])
             .collect();
-        // Runs of bins per sub-grid: enough tasks for the pool (8 per thread), else one run
-        // per sub-grid with its worker state reused from one sub-grid to the next.
-        let threads = rayon::current_num_threads();
-        let runs = (8 * threads)
+        // Runs of bins per sub-grid: about IMAGE_TASKS tasks in all (at least 8 pairs of
+        // bins each), else one run per sub-grid with its worker state reused from one
+        // sub-grid to the next. The split depends on the problem only, never on the number of
+        // threads: each run's sum is made in bin order and the runs are added in order, so the
+        // image is the same on any number of threads.
+        let runs = IMAGE_TASKS
             .div_ceil(jobs.len().max(1))
             .min(bins.div_ceil(16))
             .max(1);
@@ -472,22 +499,28 @@ impl Confocal {
             jobs.par_iter()
                 .map(|&i| {
                     let (sg, twin, xt, table) = job(i);
-                    let sum = (0..pairs)
+                    let cells = table.step.len();
+                    let parts: Vec<BinSum> = (0..runs)
                         .into_par_iter()
-                        .with_min_len(per)
-                        .fold(
-                            || self.bin_sum(table.step.len(), twin.is_some()),
-                            |mut b, p| {
+                        .map(|r| {
+                            let mut b = self.bin_sum(cells, twin.is_some());
+                            for p in r * per..((r + 1) * per).min(pairs) {
                                 self.add_pair(&table, spectra, xt, p, &mut b);
-                                b
-                            },
-                        )
-                        .reduce_with(|mut a, b| {
-                            a.sum.iter_mut().zip(&b.sum).for_each(|(x, y)| *x += y);
-                            a.sum_t.iter_mut().zip(&b.sum_t).for_each(|(x, y)| *x += y);
-                            a
-                        });
-                    sum.map_or_else(Vec::new, |mut b| self.finish(&mut b, sg, twin, skip))
+                            }
+                            // Only the sums travel on (the scratch is dropped here).
+                            b.shrink_to_sums();
+                            b
+                        })
+                        .collect();
+                    let sum = parts.into_iter().reduce(|mut a, b| {
+                        a.sum.iter_mut().zip(&b.sum).for_each(|(x, y)| *x += y);
+                        a.sum_t.iter_mut().zip(&b.sum_t).for_each(|(x, y)| *x += y);
+                        a
+                    });
+                    sum.map_or_else(Vec::new, |b| {
+                        let mut b = self.with_scratch(b, twin.is_some());
+                        self.finish(&mut b, sg, twin, skip)
+                    })
                 })
                 .collect()
         };
@@ -515,6 +548,16 @@ impl Confocal {
             sum: vec![zero; m],
             sum_t: if twin { vec![zero; m] } else { Vec::new() },
             fft: vec![zero; flen],
+        }
+    }
+
+    /// `b`'s sums with fresh scratch buffers (as [`Self::bin_sum`] makes them) for
+    /// [`Self::finish`].
+    fn with_scratch(&self, b: BinSum, twin: bool) -> BinSum {
+        BinSum {
+            sum: b.sum,
+            sum_t: b.sum_t,
+            ..self.bin_sum(0, twin)
         }
     }
 

@@ -9,7 +9,8 @@ use vltm_kernel::Params;
 /// mirror (every offset computed).
 #[test]
 fn equals_the_direct_sum() {
-    // On 1 thread (one run of bins per sub-grid, the worker state reused) and 2 (runs).
+    // Sub-grids split into runs of bins (8 sub-grids) and not (16, with twins), on 1 and 2
+    // threads.
     for threads in [1, 2] {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
@@ -22,6 +23,35 @@ fn equals_the_direct_sum() {
             // A square wall and grid: the phases (0, 1) and (1, 0) are twins.
             equals_the_direct_sum_at(-0.2, 5, 9, 4, 4);
         });
+    }
+}
+
+/// The image is the same bit for bit on 1, 2 and 3 threads, with the sub-grids split into
+/// runs of bins (whose split never depends on the number of threads) and without.
+#[test]
+fn same_image_on_any_number_of_threads() {
+    let image = |threads: usize, nz: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        pool.install(|| equals_the_direct_sum_at(-0.2131, 4, 7, nz, 0))
+    };
+    let bits = |a: &[Complex64]| -> Vec<(u64, u64)> {
+        a.iter().map(|c| (c.re.to_bits(), c.im.to_bits())).collect()
+    };
+    for (nz, runs) in [(1, true), (16, false)] {
+        let cfg = test_config();
+        let jobs = nz * 4;
+        let split = IMAGE_TASKS.div_ceil(jobs).min(cfg.bins().div_ceil(16)) > 1;
+        assert_eq!(split, runs, "{nz} slices: runs of bins {runs}");
+        let one = bits(&image(1, nz));
+        for threads in [2, 3] {
+            assert!(
+                one == bits(&image(threads, nz)),
+                "{nz} slices, {threads} threads"
+            );
+        }
     }
 }
 
@@ -69,12 +99,24 @@ fn mirrored_offsets() {
     assert!(off.copies.is_empty() && off.computed.len() == 9);
 }
 
-fn equals_the_direct_sum_at(x0: f32, wall_ny: usize, ny: usize, nz: usize, twins: usize) {
-    let cfg = Config::try_new(&Params {
+/// The configuration of the tests on a small grid (λ = σ = 0.1 m, 120 bins of 0.01 m).
+fn test_config() -> Config {
+    Config::try_new(&Params {
         sigma: Some(0.1),
         ..Params::new(0.1, 120, 0.01)
     })
-    .unwrap();
+    .unwrap()
+}
+
+/// [`equals_the_direct_sum`] on one layout; returns the image.
+fn equals_the_direct_sum_at(
+    x0: f32,
+    wall_ny: usize,
+    ny: usize,
+    nz: usize,
+    twins: usize,
+) -> Vec<Complex64> {
+    let cfg = test_config();
     let wall: Vec<Point> = (0..5)
         .flat_map(|i| (0..wall_ny).map(move |k| [0.1 * i as f32 - 0.2, 0.1 * k as f32, 0.0]))
         .collect();
@@ -129,4 +171,5 @@ fn equals_the_direct_sum_at(x0: f32, wall_ny: usize, ny: usize, nz: usize, twins
     assert_eq!(acc[3], Complex64::new(0.0, 0.0), "skipped voxel untouched");
     assert!(scale > 1.0, "a real signal: {scale}");
     assert!(worst <= 2e-5 * scale, "worst {worst:e} of {scale:e}");
+    acc
 }
