@@ -124,8 +124,12 @@ mod energy;
 mod fit;
 mod model;
 mod options;
+mod synthesis;
 
 pub use corrected::LeakCorrected;
 pub use energy::GateEnergy;
 pub use fit::DirectModel;
 pub use options::{LeakMethod, LeakOptions, cell_radius};
+pub use synthesis::{
+    MAX_GROWN, MAX_SWEEPS, ModelOptions, ModelOutcome, SurfaceModel, model_of_capture,
+};
