@@ -529,8 +529,9 @@ pub enum Surf {
     /// Stage 1, the oracle: `scene.json`'s boxes (validates the renderer and the subtraction).
     Oracle,
     /// Stage 2, the method: the library's pipeline on each capture alone
-    /// (`vltm::probe::model_of_capture`, its image grid derived from the capture unless the
-    /// environment's `SURFEL_VOLUME` names one).
+    /// (`vltm::probe::model_of_capture`) on the image grid [`SURFEL_VOLUME`] (the
+    /// environment's `SURFEL_VOLUME` to change it; `default` for the grid the library derives
+    /// from the capture).
     Capture,
 }
 
@@ -546,9 +547,8 @@ pub fn surfel_epsilon() -> f32 {
 /// Sweeps of the geometry refinement.
 pub const SWEEPS: usize = 4;
 
-/// The grid the surfels of the `SURFEL_METHOD=patches` experiment are read from (pitch
-/// 0.05 × 0.05 × 0.01 m; the library's default grid for these captures spans the same x–y at
-/// the same pitch and z 0.5–2.0 m).
+/// The grid the surfels of Stage 2 are read from (pitch 0.05 × 0.05 × 0.01 m; the library's
+/// default grid for these captures spans the same x–y at the same pitch and z 0.5–2.0 m).
 pub const SURFEL_VOLUME: &str = "-0.75:0.75:31,-0.75:0.75:31,0.5:1.4:91";
 
 /// One scene measured with the direct light removed by the fitted surfel model (module
@@ -566,7 +566,11 @@ pub fn measure_synth(
     let d = probe::direct(&mut c.all, &c.vol, &s.wave, EXEC).expect("direct");
     let mask = probe::gamma_mask(&d.values, s.epsilon);
     let spec = std::env::var("SURFEL_VOLUME").unwrap_or_else(|_| SURFEL_VOLUME.to_string());
-    let fine = Volume::parse(&spec).expect("SURFEL_VOLUME");
+    let fine = if spec == "default" {
+        Volume::parse(SURFEL_VOLUME).expect("SURFEL_VOLUME")
+    } else {
+        Volume::parse(&spec).expect("SURFEL_VOLUME")
+    };
     let sub: usize = std::env::var("SURFEL_SUB")
         .ok()
         .and_then(|v| v.parse().ok())
@@ -605,12 +609,12 @@ pub fn measure_synth(
                     );
                     return fit(cap, r.surfels);
                 }
-                // The library's pipeline (`probe::model_of_capture`), its grid derived from
-                // the capture unless SURFEL_VOLUME names one; the fit itself runs below.
+                // The library's pipeline (`probe::model_of_capture`) on the grid the
+                // documented numbers were measured on ([`SURFEL_VOLUME`], or the environment's);
+                // `SURFEL_VOLUME=default` takes the grid the library derives from the capture
+                // (what `vltm --leak-correct model` runs).
                 let mopts = probe::ModelOptions {
-                    volume: std::env::var("SURFEL_VOLUME")
-                        .ok()
-                        .map(|v| Volume::parse(&v).expect("SURFEL_VOLUME")),
+                    volume: (spec != "default").then(|| fine.clone()),
                     wavelength: wave.wavelength,
                     epsilon: surfel_epsilon(),
                     sub,

@@ -247,11 +247,13 @@ fn lateral_step(v: &Volume) -> f64 {
 }
 
 /// An error of a step of the pipeline: a read error is returned, anything else becomes the
-/// reason the model is not used.
+/// reason the model is not used (an argument error's message without the internal parameter
+/// it names; other parameters written `$name`).
 fn reason(e: Error) -> Result<String> {
     match e {
         Error::Io { .. } | Error::Format { .. } => Err(e),
-        e => Ok(e.to_string()),
+        Error::Argument { msg, .. } => Ok(msg),
+        e => Ok(e.render(|p: &str| format!("${p}"))),
     }
 }
 
