@@ -355,7 +355,11 @@ pub fn model_of_capture(
         Ok(x) => x,
         Err(e) => return Ok(unexplained(reason(e)?)),
     };
-    if let Some(p) = surfels.points.iter().find(|p| !(p[2] > wall_z)) {
+    if let Some(p) = surfels
+        .points
+        .iter()
+        .find(|p| p[2].is_nan() || p[2] <= wall_z)
+    {
         return Ok(unexplained(format!(
             "a refined surface at z = {:.3} m lies at or behind the relay wall (z = {wall_z:.3} m)",
             p[2]
