@@ -528,7 +528,10 @@ pub fn print_ceilings(scene: &str, r: &SceneResult) {
 pub enum Surf {
     /// Stage 1, the oracle: `scene.json`'s boxes (validates the renderer and the subtraction).
     Oracle,
-    /// Stage 2, the method: each capture's own direct-light volume ([`SURFEL_VOLUME`]).
+    /// Stage 2, the method: the library's pipeline on each capture alone
+    /// (`vltm::probe::model_of_capture`) on the image grid [`SURFEL_VOLUME`] (the
+    /// environment's `SURFEL_VOLUME` to change it; `default` for the grid the library derives
+    /// from the capture).
     Capture,
 }
 
@@ -544,7 +547,8 @@ pub fn surfel_epsilon() -> f32 {
 /// Sweeps of the geometry refinement.
 pub const SWEEPS: usize = 4;
 
-/// The grid the surfels of Stage 2 are read from (pitch 0.05 × 0.05 × 0.01 m).
+/// The grid the surfels of Stage 2 are read from (pitch 0.05 × 0.05 × 0.01 m; the library's
+/// default grid for these captures spans the same x–y at the same pitch and z 0.5–2.0 m).
 pub const SURFEL_VOLUME: &str = "-0.75:0.75:31,-0.75:0.75:31,0.5:1.4:91";
 
 /// One scene measured with the direct light removed by the fitted surfel model (module
@@ -562,15 +566,22 @@ pub fn measure_synth(
     let d = probe::direct(&mut c.all, &c.vol, &s.wave, EXEC).expect("direct");
     let mask = probe::gamma_mask(&d.values, s.epsilon);
     let spec = std::env::var("SURFEL_VOLUME").unwrap_or_else(|_| SURFEL_VOLUME.to_string());
-    let fine = Volume::parse(&spec).unwrap();
+    let fine = if spec == "default" {
+        Volume::parse(SURFEL_VOLUME).expect("SURFEL_VOLUME")
+    } else {
+        Volume::parse(&spec).expect("SURFEL_VOLUME")
+    };
     let sub: usize = std::env::var("SURFEL_SUB")
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(5);
     let boxes = c.boxes.clone();
-    let surfels = |cap: &mut Capture| -> Surfels {
+    let fit = |cap: &mut Capture, surfels: Surfels| {
+        SynthModel::fit(cap, surfels, opts, EXEC).expect("fit")
+    };
+    let model = |cap: &mut Capture| -> SynthModel {
         match surf {
-            Surf::Oracle => c_boxes_surfels(&boxes, 100.0),
+            Surf::Oracle => fit(cap, c_boxes_surfels(&boxes, 100.0)),
             Surf::Capture => {
                 let wave = Wave {
                     wavelength: std::env::var("SURFEL_LAMBDA")
@@ -580,12 +591,13 @@ pub fn measure_synth(
                     sigma: None,
                     ..s.wave
                 };
-                let d = probe::direct(cap, &fine, &wave, EXEC).expect("direct, fine");
-                let raw = Surfels::from_direct(&fine, &d.values, surfel_epsilon(), sub, 0.0)
-                    .expect("surfels");
-                let g = &cap.geometry;
-                let scale: Vec<f64> = (0..g.lasers.len()).map(|l| g.laser_falloff_at(l)).collect();
                 if std::env::var("SURFEL_METHOD").is_ok_and(|m| m == "patches") {
+                    let d = probe::direct(cap, &fine, &wave, EXEC).expect("direct, fine");
+                    let raw = Surfels::from_direct(&fine, &d.values, surfel_epsilon(), sub, 0.0)
+                        .expect("surfels");
+                    let g = &cap.geometry;
+                    let scale: Vec<f64> =
+                        (0..g.lasers.len()).map(|l| g.laser_falloff_at(l)).collect();
                     let r = probe::synth::refine(cap, &raw, &scale, SWEEPS, 0.02, EXEC)
                         .expect("refine");
                     eprintln!(
@@ -595,13 +607,31 @@ pub fn measure_synth(
                         r.before,
                         r.after
                     );
-                    return r.surfels;
+                    return fit(cap, r.surfels);
                 }
-                let pitch = fine.axes.map_or(0.05, |a| f64::from(a[0][1] - a[0][0]))
-                    / (fine.shape[0].max(2) - 1) as f64;
-                let facets =
-                    probe::synth::facets_from_surfels(&raw, 0.25 * pitch, pitch).expect("facets");
-                for f in &facets {
+                // The library's pipeline (`probe::model_of_capture`) on the grid the
+                // documented numbers were measured on ([`SURFEL_VOLUME`], or the environment's);
+                // `SURFEL_VOLUME=default` takes the grid the library derives from the capture
+                // (what `vltm --leak-correct model` runs).
+                let mopts = probe::ModelOptions {
+                    volume: (spec != "default").then(|| fine.clone()),
+                    wavelength: wave.wavelength,
+                    epsilon: surfel_epsilon(),
+                    sub,
+                    per_facet: !std::env::var("FACET_CLUSTERS").is_ok_and(|m| m == "source"),
+                    fit: *opts,
+                    min_explained: 0.0,
+                    ..probe::ModelOptions::default()
+                };
+                let m = match probe::model_of_capture(cap, &s.wave, &mopts, EXEC)
+                    .expect("surface model")
+                {
+                    probe::ModelOutcome::Fitted(m) => m,
+                    probe::ModelOutcome::Unexplained { reason, .. } => {
+                        panic!("surface model: {reason}")
+                    }
+                };
+                for f in &m.initial {
                     let (ang, off) = facet_error(&boxes, f);
                     eprintln!(
                         "  initial facet of cluster {}: normal {:.3?} extent {:.3?}: {ang:.1}°, {:.1} mm off the nearest face",
@@ -611,23 +641,18 @@ pub fn measure_synth(
                         off * 1e3
                     );
                 }
-                let t = std::time::Instant::now();
-                let r = probe::synth::refine_facets(
-                    cap,
-                    &facets,
-                    &scale,
-                    &probe::synth::FacetOptions::default(),
-                    EXEC,
-                )
-                .expect("refine facets");
+                let r = &m.facets;
                 eprintln!(
-                    "refined {} facets (+{} grown) in {} sweeps, {:.1} s: explained {:.4} -> {:.4}",
-                    facets.len(),
+                    "refined {} facets (+{} grown) in {} sweeps; the pipeline took {:.1} s: explained {:.4} -> {:.4} (subset), {:.4} (fit); image grid {:?} {:?}",
+                    m.initial.len(),
                     r.grown,
                     r.sweeps,
-                    t.elapsed().as_secs_f64(),
+                    m.seconds,
                     r.before,
-                    r.after
+                    r.after,
+                    m.explained,
+                    m.volume.shape,
+                    m.volume.axes
                 );
                 for (f, a) in r.facets.iter().zip(&r.amplitudes) {
                     eprintln!(
@@ -642,15 +667,12 @@ pub fn measure_synth(
                         facet_error(&boxes, f).1 * 1e3
                     );
                 }
-                let per_facet = !std::env::var("FACET_CLUSTERS").is_ok_and(|m| m == "source");
-                r.surfels(0.01, per_facet).expect("facet surfels")
+                m.model
             }
         }
     };
-    let sa = surfels(&mut c.all);
-    let sk = surfels(&mut c.direct);
-    let ma = SynthModel::fit(&mut c.all, sa, opts, EXEC).expect("fit, full");
-    let mk = SynthModel::fit(&mut c.direct, sk, opts, EXEC).expect("fit, control");
+    let ma = model(&mut c.all);
+    let mk = model(&mut c.direct);
     let opts_i = IndirectOptions {
         epsilon: s.epsilon,
         shell: s.r0.map(|r0| Shell {

@@ -169,11 +169,21 @@ pub(crate) enum Command {
         /// higher-order (Eq. 18 with Eq. 17: the paper's ">= 3rd bounce"), none.
         #[arg(long, value_enum, default_value_t = GateArg::TwoBounce)]
         gate: GateArg,
-        /// Remove the capture's direct light before the columns (the default): zero, per
-        /// laser/SPAD pair, the bins where a 3-vertex return of a Γ voxel can arrive (see
-        /// docs/indirect-light.md).
-        #[arg(long, conflicts_with = "no_leak_correct")]
-        leak_correct: bool,
+        /// How the capture's direct light is removed before the columns: gate (the default;
+        /// alone, `--leak-correct` means it) zeroes, per laser/SPAD pair, the bins where a
+        /// 3-vertex return of a Γ voxel can arrive; model subtracts a surface model fitted to
+        /// the capture, falling back to gate (with a warning saying why) when it explains
+        /// less than 99 % of the energy (see docs/indirect-light.md).
+        #[arg(
+            long,
+            value_enum,
+            value_name = "METHOD",
+            num_args = 0..=1,
+            default_value_t = LeakArg::Gate,
+            default_missing_value = "gate",
+            conflicts_with = "no_leak_correct"
+        )]
+        leak_correct: LeakArg,
         /// The paper's Eq. 17 on the capture as it is (no leak correction).
         #[arg(long)]
         no_leak_correct: bool,
@@ -402,12 +412,22 @@ impl WaveArgs {
 /// The leak correction of `column`, `row` and `relight`: on by default, as `indirect`'s.
 #[derive(Args, Debug)]
 pub(crate) struct LeakArgs {
-    /// Remove the capture's direct light first (the default, as `indirect`): zero, per
-    /// laser/SPAD pair, the bins where a 3-vertex return of a voxel of Γ (direct light above
-    /// --leak-epsilon of the maximum) can arrive (see docs/indirect-light.md). Accepted for
-    /// scripts; it changes nothing.
-    #[arg(long, conflicts_with = "no_leak_correct")]
-    pub(crate) leak_correct: bool,
+    /// How the capture's direct light is removed first (as `indirect`): gate (the default;
+    /// alone, `--leak-correct` means it) zeroes, per laser/SPAD pair, the bins where a
+    /// 3-vertex return of a voxel of Γ (direct light above --leak-epsilon of the maximum) can
+    /// arrive; model subtracts a surface model fitted to the capture, falling back to gate
+    /// (with a warning saying why) when it explains less than 99 % of the energy (see
+    /// docs/indirect-light.md).
+    #[arg(
+        long,
+        value_enum,
+        value_name = "METHOD",
+        num_args = 0..=1,
+        default_value_t = LeakArg::Gate,
+        default_missing_value = "gate",
+        conflicts_with = "no_leak_correct"
+    )]
+    pub(crate) leak_correct: LeakArg,
     /// The capture as it is (no leak correction): the capture's direct light passes the
     /// gate near the projector's own surface.
     #[arg(long)]
@@ -418,10 +438,20 @@ pub(crate) struct LeakArgs {
 }
 
 impl LeakArgs {
-    /// The Γ threshold of the correction, `None` with `--no-leak-correct`.
-    pub(crate) fn epsilon(&self) -> Option<f32> {
-        (!self.no_leak_correct).then_some(self.leak_epsilon)
+    /// The method asked for, `None` with `--no-leak-correct`.
+    pub(crate) fn method(&self) -> Option<LeakArg> {
+        (!self.no_leak_correct).then_some(self.leak_correct)
     }
+}
+
+/// `--leak-correct`'s methods.
+#[derive(ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) enum LeakArg {
+    /// Zero the time windows of Γ's direct returns.
+    Gate,
+    /// Subtract a surface model fitted to the capture (the windows when it explains too
+    /// little).
+    Model,
 }
 
 /// `vltm relight`.

@@ -8,7 +8,7 @@ use vltm::io;
 use vltm::probe::{self, ColumnGate, Gamma, IndirectOptions, LeakOptions, Shell};
 use vltm::volume::{Volume, parse_point};
 
-use crate::args::{Command, DiagGateArg};
+use crate::args::{Command, DiagGateArg, LeakArg};
 use crate::console::{Failure, say};
 use crate::outputs::{Out, prepare_output, refuse_overwriting_inputs};
 use crate::summary::{Label, finish};
@@ -164,7 +164,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                 .transpose()?
                 .unwrap_or(Shell::ALL);
             let cuts = shells.as_deref().map(Shell::parse_cuts).transpose()?;
-            let leak_epsilon = leak.epsilon();
+            let leak = leak::Leak::of(&leak, &capture)?;
             if partial::wanted(&common)? {
                 if cuts.is_some() || mask_epsilon.is_some() {
                     return Err(vltm::Error::arg(
@@ -173,7 +173,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                     )
                     .into());
                 }
-                if leak_epsilon.is_some() {
+                if leak.method.is_some() {
                     return Err(vltm::Error::arg(
                         "partial",
                         "a partial column cannot be leak-corrected (its Γ needs the direct light of the whole capture): add $no_leak_correct, or run the column over the whole scan",
@@ -201,22 +201,24 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                     ),
                     None => None,
                 };
-                let mut o = leak::corrected(rows, &volume, leak_epsilon, &common, |src| {
-                    probe::column(src, a, &volume, g, shell, &common.wave(), common.exec())
-                })?;
+                let (mut o, used) =
+                    leak::corrected(rows, &volume, &leak, (&w, common.exec()), |src| {
+                        probe::column(src, a, &volume, g, shell, &w, common.exec())
+                    })?;
                 if let Some(m) = &mask {
                     o.values
                         .iter_mut()
                         .zip(m)
                         .for_each(|(x, &k)| *x *= f32::from(u8::from(k)));
                 }
-                Ok::<_, Failure>(o)
+                Ok::<_, Failure>((o, used))
             })?;
+            let (o, used) = o;
             let words = title::ColumnWords {
                 gate: title::arg(&gate),
                 shell: shell_arg.as_deref(),
                 mask_epsilon,
-                leak_correct: leak_epsilon.is_some(),
+                leak: used,
             };
             let title = title::column(a, &words, &o.config);
             match cuts {
@@ -242,10 +244,11 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
             direct,
             shells,
             gate,
-            leak_correct: _,
+            leak_correct,
             no_leak_correct,
             common,
         } => {
+            let method = (!no_leak_correct).then_some(leak_correct);
             let volume = Volume::parse(&common.volume)?;
             let shell = match (shell, min_separation) {
                 (Some(s), _) => Some(Shell::parse(&s)?),
@@ -290,6 +293,13 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                     )
                     .into());
                 }
+                if method == Some(LeakArg::Model) {
+                    return Err(vltm::Error::arg(
+                        "partial",
+                        "the surface model is fitted to the whole capture: a partial in-focus sum takes $leak_correct gate (or $no_leak_correct)",
+                    )
+                    .into());
+                }
                 let gamma = Gamma::of(d, epsilon, "epsilon")?.mask;
                 // The leak gate corrects each row on its own (Γ's return times only): a part
                 // is corrected exactly as one pass corrects those rows.
@@ -297,10 +307,11 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                 let task = probe::Task::Indirect { gamma, shell, leak };
                 return partial::run(&common, &capture, task);
             }
+            let leak = leak::Leak::new(method, epsilon, &capture)?;
             let mut c = open::capture(&common, &capture)?;
             let sigma = common.wave().config(c.geometry())?.sigma();
             let run = input::with_prep(&common.input, &mut *c, &volume.points, sigma, |rows| {
-                split::indirect_run(&common, rows, &volume, &opts, cuts, direct)
+                split::indirect_run(&common, rows, &volume, (&opts, &leak), cuts, direct)
             })?;
             split::indirect_write(&common, &capture, &volume, &opts, &run)?;
             if !common.wave.compensate_laser && io::laser_falloff_in_data(&capture)?.0 {

@@ -99,8 +99,9 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
     }
     // The capture's direct light is removed over --volume (Γ's volume) by default, as in
     // `column` and `row`; without a volume there is nothing to fit it to.
-    let leak = match (&a.volume, a.leak.epsilon()) {
-        (Some(spec), Some(e)) => Some((Volume::parse(spec)?, e)),
+    let leak = leak::Leak::of(&a.leak, &a.capture)?;
+    let volume = match (&a.volume, leak.method) {
+        (Some(spec), Some(_)) => Some(Volume::parse(spec)?),
         (None, Some(_)) => {
             say!(
                 "matrix: not leak-corrected: give --volume (the volume whose direct light is removed, as column's) or --no-leak-correct"
@@ -109,26 +110,11 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
         }
         (_, None) => None,
     };
-    let m = match &leak {
-        Some((volume, e)) => {
-            let model = probe::fit_over_volume(
-                &mut *src,
-                volume,
-                *e,
-                &wave,
-                &probe::LeakOptions::default(),
-                exec(),
-            )?;
-            say!(
-                "leak correction (--no-leak-correct to skip): {:.4} of the capture's energy was in the 3-vertex windows of Γ's {} voxels and removed ({:.2} s)",
-                model.explained,
-                model.points().len(),
-                model.seconds
-            );
-            let mut lc = probe::LeakCorrected::new(&mut *src, &model);
-            probe::matrix(&mut lc, &from, &to, &wave, exec())?
-        }
-        None => probe::matrix(&mut *src, &from, &to, &wave, exec())?,
+    let (m, used) = match &volume {
+        Some(volume) => leak::corrected(&mut *src, volume, &leak, (&wave, exec()), |s| {
+            probe::matrix(s, &from, &to, &wave, exec())
+        })?,
+        None => (probe::matrix(&mut *src, &from, &to, &wave, exec())?, None),
     };
     let texts = [
         ("from", a.from.trim().to_string()),
@@ -137,7 +123,14 @@ pub(crate) fn matrix(a: MatrixArgs) -> Result<(), Failure> {
     ];
     let numbers = [
         ("epsilon", f64::from(a.epsilon)),
-        ("leak_correct", f64::from(u8::from(leak.is_some()))),
+        (
+            "leak_correct",
+            match used {
+                None => 0.0,
+                Some(leak::Used::Gate) => 1.0,
+                Some(leak::Used::Model) => 2.0,
+            },
+        ),
         ("leak_epsilon", f64::from(a.leak.leak_epsilon)),
         (
             "compensate_laser",
@@ -175,25 +168,23 @@ pub(crate) fn relight(a: RelightArgs) -> Result<(), Failure> {
         "relight",
         "split the scan with `vltm matrix $from FOCI $to SPEC $rows A:B $partial F` (with $no_leak_correct, relighting is a weighted sum of the matrix's rows)",
     )?;
+    let leak = leak::Leak::of(&a.leak, &a.capture)?;
     let mut src = open::capture(c, &a.capture)?;
     let sigma = c.wave().config(src.geometry())?.sigma();
     let reach: Vec<Point> = volume.points.iter().chain(&pattern.foci).copied().collect();
     let r = input::with_prep(&c.input, &mut *src, &reach, sigma, |rows| {
         probe::check_relight(rows.geometry(), &pattern, &volume, &c.wave())?;
-        leak::corrected(rows, &volume, a.leak.epsilon(), c, |src| {
+        leak::corrected(rows, &volume, &leak, (&c.wave(), c.exec()), |src| {
             probe::relight(src, &pattern, &volume, &c.wave(), c.exec())
         })
     })?;
+    let (r, used) = r;
     say!(
         "pattern: {} foci with non-zero weight, {} pass(es) over the capture",
         pattern.foci.len(),
         r.passes
     );
-    let title = title::relight(
-        pattern.foci.len(),
-        a.leak.epsilon().is_some(),
-        &r.output.config,
-    );
+    let title = title::relight(pattern.foci.len(), used, &r.output.config);
     let marks: Vec<(Point, String)> = pattern
         .foci
         .iter()
@@ -227,19 +218,21 @@ pub(crate) fn row(a: RowArgs) -> Result<(), Failure> {
         "row",
         "split the scan with `vltm matrix $from SPEC $to X,Y,Z $rows A:B $partial F` (with $no_leak_correct, the row is the matrix's column at x_b)",
     )?;
+    let leak = leak::Leak::of(&a.leak, &a.capture)?;
     let mut src = open::capture(c, &a.capture)?;
     let sigma = c.wave().config(src.geometry())?.sigma();
     let mut reach = volume.points.clone();
     reach.push(b);
     let o = input::with_prep(&c.input, &mut *src, &reach, sigma, |rows| {
         probe::check_row(rows.geometry(), b, &volume, &c.wave())?;
-        leak::corrected(rows, &volume, a.leak.epsilon(), c, |src| {
+        leak::corrected(rows, &volume, &leak, (&c.wave(), c.exec()), |src| {
             probe::row(src, b, &volume, &c.wave(), c.exec())
         })
     })?;
+    let (o, used) = o;
     let label = Label {
         probe: "row",
-        title: title::row(b, a.leak.epsilon().is_some(), &o.config),
+        title: title::row(b, used, &o.config),
         focus: None,
         marks: vec![(b, "x_b".to_string())],
     };

@@ -14,8 +14,9 @@ use vltm::probe::{self, Gamma, IndirectOptions, Shell};
 use vltm::volume::Volume;
 use vltm_kernel::Point;
 
-use crate::args::Common;
+use crate::args::{Common, LeakArg};
 use crate::console::{Failure, say};
+use crate::leak::{Leak, fit_model, say_gate};
 use crate::outputs::{Part, write_parts};
 use crate::summary::summarize;
 
@@ -110,7 +111,7 @@ pub(crate) fn indirect_run(
     c: &Common,
     src: &mut dyn RowSource,
     volume: &Volume,
-    opts: &IndirectOptions,
+    (opts, leak): (&IndirectOptions, &Leak),
     cuts: Option<[Shell; 3]>,
     direct: Option<Vec<f32>>,
 ) -> Result<IndirectRun, Failure> {
@@ -126,14 +127,30 @@ pub(crate) fn indirect_run(
         }
     };
     let wave = c.wave();
+    // `--leak-correct model`: pass 2 on the capture minus the model, or the windows when the
+    // model is not used (fit_model has said why).
+    let model = match leak.method {
+        Some(LeakArg::Model) => fit_model(src, &wave, leak.falloff, c.exec())?,
+        _ => None,
+    };
+    let opts = &IndirectOptions {
+        leak: if model.is_some() { None } else { opts.leak },
+        ..*opts
+    };
+    let mut subtracted;
+    let src: &mut dyn RowSource = match &model {
+        Some(m) => {
+            subtracted = m.subtracted(src);
+            &mut subtracted
+        }
+        None => src,
+    };
     // The summary and the provenance record the configuration pass 2 ran on.
     let (sums, report, shells, cfg): (Vec<Vec<f32>>, _, Vec<Shell>, _) = match &cuts {
         None => {
             let o = probe::indirect_over(src, volume, &gamma, opts, &wave, c.exec())?;
             if let Some(e) = o.explained {
-                say!(
-                    "leak correction (--no-leak-correct to skip): {e:.4} of the capture's energy was in the 3-vertex windows of Γ and removed"
-                );
+                say_gate(e, None, None);
             }
             (vec![o.values], o.report, vec![o.shell], o.config)
         }

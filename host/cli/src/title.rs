@@ -5,6 +5,8 @@
 use clap::ValueEnum;
 use vltm_kernel::{Config, Point};
 
+use crate::leak::Used;
+
 /// A point as typed on the command line: `X,Y,Z` with the shortest decimals.
 fn point(p: Point) -> String {
     format!("{},{},{}", p[0], p[1], p[2])
@@ -34,8 +36,8 @@ pub(crate) struct ColumnWords<'a> {
     pub(crate) shell: Option<&'a str>,
     /// `--mask-epsilon E` when given.
     pub(crate) mask_epsilon: Option<f32>,
-    /// Whether the capture's direct light was removed first.
-    pub(crate) leak_correct: bool,
+    /// How the capture's direct light was removed first (`None`: it was not).
+    pub(crate) leak: Option<Used>,
 }
 
 /// `column --focus X,Y,Z --gate G [--shell ..] [--mask-epsilon ..] (λ, σ; correction)`.
@@ -47,7 +49,7 @@ pub(crate) fn column(focus: Point, w: &ColumnWords<'_>, cfg: &Config) -> String 
     if let Some(e) = w.mask_epsilon {
         t += &format!(" --mask-epsilon {e}");
     }
-    t + &wave(cfg, correction(w.leak_correct))
+    t + &wave(cfg, correction(w.leak))
 }
 
 /// A column merged from partial states (`vltm merge`): parts are never leak-corrected.
@@ -58,23 +60,24 @@ pub(crate) fn merged_column(focus: Point, cfg: &Config) -> String {
     ) + &wave(cfg, "")
 }
 
-/// The words of the leak correction: `leak-corrected`, or the flag that turned it off.
-fn correction(on: bool) -> &'static str {
-    if on {
-        "leak-corrected"
-    } else {
-        "--no-leak-correct"
+/// The words of the leak correction: `leak-corrected` (the windows), `surface model
+/// subtracted`, or the flag that turned it off.
+fn correction(leak: Option<Used>) -> &'static str {
+    match leak {
+        Some(Used::Gate) => "leak-corrected",
+        Some(Used::Model) => "surface model subtracted",
+        None => "--no-leak-correct",
     }
 }
 
 /// `row --focus X,Y,Z (λ, σ; two-bounce gate, correction)`.
-pub(crate) fn row(focus: Point, leak: bool, cfg: &Config) -> String {
+pub(crate) fn row(focus: Point, leak: Option<Used>, cfg: &Config) -> String {
     let extra = format!("two-bounce gate, {}", correction(leak));
     format!("row --focus {}", point(focus)) + &wave(cfg, &extra)
 }
 
 /// `relight --pattern: N foci (λ, σ; two-bounce gate, correction)`.
-pub(crate) fn relight(foci: usize, leak: bool, cfg: &Config) -> String {
+pub(crate) fn relight(foci: usize, leak: Option<Used>, cfg: &Config) -> String {
     let extra = format!("two-bounce gate, {}", correction(leak));
     format!("relight --pattern: {foci} foci") + &wave(cfg, &extra)
 }
@@ -101,7 +104,7 @@ mod tests {
             gate: arg(&GateArg::TwoBounce),
             shell: None,
             mask_epsilon: None,
-            leak_correct: true,
+            leak: Some(Used::Gate),
         };
         let t = column([-0.5, 0.0, 0.75], &w, &cfg());
         assert_eq!(
@@ -113,7 +116,7 @@ mod tests {
             gate: arg(&GateArg::HigherOrder),
             shell: Some("0.3:2"),
             mask_epsilon: Some(0.2),
-            leak_correct: false,
+            leak: None,
         };
         assert_eq!(
             column([0.1, 0.0, 0.8], &w, &cfg()),
@@ -124,12 +127,16 @@ mod tests {
     #[test]
     fn other_titles_carry_focus_and_wave() {
         assert_eq!(
-            row([0.25, 0.0, 0.9], true, &cfg()),
+            row([0.25, 0.0, 0.9], Some(Used::Gate), &cfg()),
             "row --focus 0.25,0,0.9 (λ = 0.400 m, σ = 0.267 m; two-bounce gate, leak-corrected)"
         );
         assert_eq!(
-            relight(3, false, &cfg()),
+            relight(3, None, &cfg()),
             "relight --pattern: 3 foci (λ = 0.400 m, σ = 0.267 m; two-bounce gate, --no-leak-correct)"
+        );
+        assert_eq!(
+            row([0.25, 0.0, 0.9], Some(Used::Model), &cfg()),
+            "row --focus 0.25,0,0.9 (λ = 0.400 m, σ = 0.267 m; two-bounce gate, surface model subtracted)"
         );
         assert_eq!(
             merged_column([0.1, 0.0, 0.8], &cfg()),

@@ -53,7 +53,10 @@ pub use indirect::{
     IndirectOptions, IndirectOutput, PairSums, fit_over_volume, indirect, indirect_over,
     indirect_shells,
 };
-pub use leak::{DirectModel, GateEnergy, LeakCorrected, LeakMethod, LeakOptions, cell_radius};
+pub use leak::{
+    DirectModel, GateEnergy, LeakCorrected, LeakMethod, LeakOptions, MAX_GROWN, MAX_SWEEPS,
+    ModelOptions, ModelOutcome, SurfaceModel, cell_radius, model_of_capture,
+};
 pub use matrix::{
     MATRIX_BYTES_PER_ELEMENT, Matrix, Pattern, Relit, check_relight, matrix, relight,
 };

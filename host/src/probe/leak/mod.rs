@@ -44,6 +44,14 @@
 //!   on the path-traced two_patches (pitch 0.1/0.05 m, λ = 0.4 m), but 1.01× on the 16×16 panel
 //!   scene (pitch 0.06 m, λ = 0.133 m), where it explains only 83 % of the demodulated energy.
 //!
+//! * **The surface model** ([`model_of_capture`], module `synthesis`; `--leak-correct model`):
+//!   not a [`LeakMethod`] but a source of its own. Planar surfaces read from the capture's
+//!   direct-light image, refined against the capture and fitted by [`crate::probe::synth`];
+//!   the probes run on the capture minus its render ([`crate::probe::synth::Synthesized`]),
+//!   uncorrected. It keeps the indirect light in the direct light's bins; when it explains
+//!   less than 99 % of the capture's energy (or cannot be built) the caller falls back to the
+//!   gate ([`ModelOutcome::Unexplained`] says why).
+//!
 //! [`DirectModel::explained`] reports the fraction of the capture's energy `Σ H²` in the zeroed
 //! windows (gate) or of the demodulated energy the model explains (fit).
 //!
@@ -124,8 +132,12 @@ mod energy;
 mod fit;
 mod model;
 mod options;
+mod synthesis;
 
 pub use corrected::LeakCorrected;
 pub use energy::GateEnergy;
 pub use fit::DirectModel;
 pub use options::{LeakMethod, LeakOptions, cell_radius};
+pub use synthesis::{
+    MAX_GROWN, MAX_SWEEPS, ModelOptions, ModelOutcome, SurfaceModel, model_of_capture,
+};

@@ -105,7 +105,11 @@ impl Default for SynthOptions {
 }
 
 impl SynthOptions {
-    fn check(&self) -> Result<()> {
+    /// Checks the options.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] naming `max_shift`, `local_shift` or `max_width` out of range.
+    pub fn check(&self) -> Result<()> {
         let ok = |x: f64, hi: f64| x.is_finite() && (0.0..=hi).contains(&x);
         if !ok(self.max_shift, 50.0) {
             return Err(Error::arg("max_shift", "must lie in [0, 50] bins"));

@@ -1,0 +1,561 @@
+//! The surface model of a capture (analysis by synthesis, Stage 2 of issue 34): the whole
+//! pipeline from the capture alone to a fitted model of its direct light, which
+//! [`Synthesized`] subtracts row by row (`--leak-correct model` in the command line).
+//!
+//! # Pipeline ([`model_of_capture`])
+//!
+//! 1. **Direct-light image** at the wavelength [`geometry_wavelength`] (half the wall's pitch),
+//!    or the shortest whose band the bins resolve, `2.2·Δt·(1 + 3m/4π)` (`m` the band's
+//!    half-width, σ = 2λ/3), when that is longer (the user's other wave options kept), on a
+//!    fine grid ([`ModelOptions::volume`], or by default: x–y the laser and SPAD spots'
+//!    extent widened by one step, at a step of about half that wavelength that divides the
+//!    wall's pitch, so that the FFT path takes it; z the depths the time window reaches
+//!    ([`window_depths`]) at a step of one bin `Δt`, at most 512 depths).
+//! 2. **Surfels** of the columns brighter than [`ModelOptions::epsilon`] of the maximum
+//!    ([`Surfels::from_direct`]), split into planar **facets** ([`facets_from_surfels`], split
+//!    tolerance [`ModelOptions::split_tol`] × the grid's lateral step).
+//! 3. The facets' poses and edges **refined** and missing faces grown against the capture
+//!    ([`refine_facets`], [`ModelOptions::facets`]: at most `sweeps` sweeps per round and
+//!    `grow` rounds), then sampled every `facets.pitch` metres as surfels.
+//! 4. The surfels' render **fitted** to the capture ([`SynthModel::fit`],
+//!    [`ModelOptions::fit`]); the energy it explains is [`SurfaceModel::explained`].
+//!
+//! # When the model is not used ([`ModelOutcome::Unexplained`])
+//!
+//! A paired or confocal scan (the model needs a SPAD grid seen from every laser row), a wall
+//! of a single spot, no surface in the image, a fit that fails or is not finite, a surface at
+//! or behind the relay wall, buffers over the memory budget, or a model that explains less
+//! than [`ModelOptions::min_explained`] of the capture's energy (default 0.99): the caller
+//! falls back to the time windows ([`super::LeakMethod::Gate`]) and says why
+//! ([`ModelOutcome::Unexplained`] holds the reason, one line). Options out of range and read
+//! errors are errors.
+//!
+//! # Cost and memory
+//!
+//! Passes over the capture: one for the direct-light image (its planner's path), one over at
+//! most 64 × 64 laser rows × SPADs for the refinement, two for the fit; then the probes read
+//! the capture minus the model (each row rendered once more). Memory, checked against the
+//! budget before the first pass: the image (`4·V` bytes, plus its pass's own plan), the column
+//! surfels (`≤ 64·nx·ny·sub²` bytes), the refinement's subset and residual
+//! (`16·pairs·Nt` bytes); and before the fit, its SPAD tables (`8·K·S` bytes).
+
+use crate::budget;
+use crate::error::{Error, Result};
+use crate::exec::Exec;
+use crate::io::capture::{Geometry, RowSource};
+use crate::probe::direct::direct;
+use crate::probe::fast::aligned::window_depths;
+use crate::probe::synth::{
+    Facet, FacetFit, FacetOptions, Surfels, SynthModel, SynthOptions, Synthesized,
+    facets_from_surfels, geometry_wavelength, refine_facets,
+};
+use crate::probe::wave::Wave;
+use crate::volume::Volume;
+use std::time::Instant;
+
+/// How [`model_of_capture`] builds the surface model (each checked by [`ModelOptions::check`]).
+#[derive(Clone, Debug, PartialEq)]
+pub struct ModelOptions {
+    /// The grid of the direct-light image the surfaces are read from (`None`: derived from the
+    /// capture, see the module docs).
+    pub volume: Option<Volume>,
+    /// The image's wavelength (m; `None`: [`geometry_wavelength`]).
+    pub wavelength: Option<f64>,
+    /// Columns brighter than this fraction of the image's maximum get surfels (default 0.1).
+    pub epsilon: f32,
+    /// Surfels per column side (default 5).
+    pub sub: usize,
+    /// A cluster whose RMS distance to its plane exceeds this many lateral steps of the grid
+    /// is split (default 0.25).
+    pub split_tol: f64,
+    /// The refinement of the facets (sweeps, surfel pitch, growth).
+    pub facets: FacetOptions,
+    /// One cluster (reflectance, gains) per facet (default) or per cluster of the image.
+    pub per_facet: bool,
+    /// The fit of the render to the capture.
+    pub fit: SynthOptions,
+    /// The model is used when it explains at least this fraction of the capture's energy
+    /// (default 0.99).
+    pub min_explained: f64,
+}
+
+impl Default for ModelOptions {
+    fn default() -> Self {
+        Self {
+            volume: None,
+            wavelength: None,
+            epsilon: 0.1,
+            sub: 5,
+            split_tol: 0.25,
+            facets: FacetOptions::default(),
+            per_facet: true,
+            fit: SynthOptions::default(),
+            min_explained: 0.99,
+        }
+    }
+}
+
+/// The most sweeps per round of the refinement.
+pub const MAX_SWEEPS: usize = 100;
+/// The most facets grown.
+pub const MAX_GROWN: usize = 32;
+
+impl ModelOptions {
+    /// Checks every option once.
+    ///
+    /// # Errors
+    /// [`Error::Argument`] naming the option out of range: `surfel_volume` (not a grid with at
+    /// least 3 depths), `surfel_wavelength` (not positive and finite), `surfel_epsilon`
+    /// (outside (0, 1)), `surfel_sub` (outside 1..=16), `split_tol` (not positive and finite),
+    /// `sweeps` (outside 1..=[`MAX_SWEEPS`]), `grow` (over [`MAX_GROWN`]), `pitch` (outside
+    /// (0, 0.5] m), `grow_gain` (outside (0, 1)), `min_explained` (outside [0, 1]), and the
+    /// fit's options ([`SynthOptions::check`]).
+    pub fn check(&self) -> Result<()> {
+        if let Some(v) = &self.volume
+            && (v.axes.is_none() || v.shape[2] < 3)
+        {
+            return Err(Error::arg(
+                "surfel_volume",
+                "must be a grid (x, y and z ranges) with at least 3 depths",
+            ));
+        }
+        if let Some(w) = self.wavelength
+            && !(w.is_finite() && w > 0.0)
+        {
+            return Err(Error::arg(
+                "surfel_wavelength",
+                "must be positive and finite (m)",
+            ));
+        }
+        if !(self.epsilon > 0.0 && self.epsilon < 1.0) {
+            return Err(Error::arg("surfel_epsilon", "must lie in (0, 1)"));
+        }
+        if !(1..=16).contains(&self.sub) {
+            return Err(Error::arg("surfel_sub", "must lie in 1..=16"));
+        }
+        if !(self.split_tol.is_finite() && self.split_tol > 0.0) {
+            return Err(Error::arg(
+                "split_tol",
+                "must be positive and finite (lateral steps)",
+            ));
+        }
+        let f = &self.facets;
+        if !(1..=MAX_SWEEPS).contains(&f.sweeps) {
+            return Err(Error::arg(
+                "sweeps",
+                format!("must lie in 1..={MAX_SWEEPS}"),
+            ));
+        }
+        if f.grow > MAX_GROWN {
+            return Err(Error::arg("grow", format!("must be at most {MAX_GROWN}")));
+        }
+        if !(f.pitch.is_finite() && f.pitch > 0.0 && f.pitch <= 0.5) {
+            return Err(Error::arg("pitch", "must lie in (0, 0.5] m"));
+        }
+        if !(f.grow_gain.is_finite() && f.grow_gain > 0.0 && f.grow_gain < 1.0) {
+            return Err(Error::arg("grow_gain", "must lie in (0, 1)"));
+        }
+        if !(self.min_explained.is_finite() && (0.0..=1.0).contains(&self.min_explained)) {
+            return Err(Error::arg("min_explained", "must lie in [0, 1]"));
+        }
+        self.fit.check()
+    }
+}
+
+/// A fitted surface model of a capture's direct light.
+#[derive(Clone, Debug)]
+pub struct SurfaceModel {
+    /// The fitted render ([`Synthesized`] subtracts it).
+    pub model: SynthModel,
+    /// The facets read from the direct-light image, before their refinement.
+    pub initial: Vec<Facet>,
+    /// The refined facets (diagnostics: poses, edges, amplitudes, sweeps).
+    pub facets: FacetFit,
+    /// The grid of the direct-light image.
+    pub volume: Volume,
+    /// Fraction of the capture's energy `Σ H²` the model explains ([`SynthModel::explained`]).
+    pub explained: f64,
+    /// Wall-clock seconds of the whole pipeline.
+    pub seconds: f64,
+}
+
+impl SurfaceModel {
+    /// The capture `src` minus the model, row by row.
+    pub fn subtracted<'a>(&'a self, src: &'a mut dyn RowSource) -> Synthesized<'a> {
+        Synthesized::new(src, &self.model)
+    }
+}
+
+/// What [`model_of_capture`] found.
+#[derive(Clone, Debug)]
+pub enum ModelOutcome {
+    /// The model explains enough of the capture: subtract it.
+    Fitted(Box<SurfaceModel>),
+    /// The model cannot be used; the reason, one line (other parameters written `$name`), and
+    /// the model when one was fitted (it explains too little).
+    Unexplained {
+        /// Why, e.g. `the surface model explains 95.2 % of the energy (< 99 %)`.
+        reason: String,
+        /// The model that explains too little, if one was fitted.
+        model: Option<Box<SurfaceModel>>,
+    },
+}
+
+/// The default grid of the direct-light image (module docs), or why there is none.
+fn default_volume(g: &Geometry, lam: f64) -> std::result::Result<Volume, String> {
+    // Half the wavelength, rounded to divide the wall's pitch (the FFT path's lattice).
+    let pitch = f64::from(
+        vltm_kernel::geometry::pitch(&g.lasers, g.laser_shape)
+            .max(vltm_kernel::geometry::pitch(&g.spads, g.spad_shape)),
+    );
+    let step = if pitch > 0.0 {
+        pitch / (pitch / (0.5 * lam)).round().max(1.0)
+    } else {
+        0.5 * lam
+    };
+    let (lo, hi) = g.lasers.iter().chain(&g.spads).fold(
+        ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]),
+        |(lo, hi), p| {
+            (
+                [lo[0].min(f64::from(p[0])), lo[1].min(f64::from(p[1]))],
+                [hi[0].max(f64::from(p[0])), hi[1].max(f64::from(p[1]))],
+            )
+        },
+    );
+    let dz = g.dt.max(1e-4);
+    let Some((near, far)) = window_depths(g, dz) else {
+        return Err("the capture's time window reaches no depth in front of the wall".into());
+    };
+    let nz = (((far - near) / dz).floor() as usize + 1).clamp(3, 512);
+    let n = |i: usize| ((hi[i] - lo[i]) / step).round() as usize + 3;
+    let (a, b) = ([lo[0] - step, lo[1] - step], [hi[0] + step, hi[1] + step]);
+    Volume::grid(
+        [a[0] as f32, a[1] as f32, near as f32],
+        [b[0] as f32, b[1] as f32, far as f32],
+        [n(0), n(1), nz],
+    )
+    .map_err(|e| format!("no grid for the direct-light image: {e}"))
+}
+
+/// Lateral step of a grid (the coarser of x and y).
+fn lateral_step(v: &Volume) -> f64 {
+    let step = |i: usize| match v.axes {
+        Some(a) if v.shape[i] > 1 => f64::from(a[i][1] - a[i][0]).abs() / (v.shape[i] - 1) as f64,
+        _ => 0.0,
+    };
+    step(0).max(step(1))
+}
+
+/// An error of a step of the pipeline: a read error is returned, anything else becomes the
+/// reason the model is not used (an argument error's message without the internal parameter
+/// it names; other parameters written `$name`).
+fn reason(e: Error) -> Result<String> {
+    match e {
+        Error::Io { .. } | Error::Format { .. } => Err(e),
+        Error::Argument { msg, .. } => Ok(msg),
+        e => Ok(e.render(|p: &str| format!("${p}"))),
+    }
+}
+
+/// Builds and fits the surface model of `src`'s direct light from the capture alone (module
+/// docs): `wave` the probes' wave options (the image takes their weights, band and laser
+/// compensation at its own wavelength), `opts` checked first.
+///
+/// # Errors
+/// Options out of range ([`ModelOptions::check`]) and read errors. Everything else that
+/// keeps the model from being used is a [`ModelOutcome::Unexplained`], never a panic.
+pub fn model_of_capture(
+    src: &mut dyn RowSource,
+    wave: &Wave,
+    opts: &ModelOptions,
+    exec: Exec<'_>,
+) -> Result<ModelOutcome> {
+    opts.check()?;
+    let t = Instant::now();
+    let unexplained = |reason: String| ModelOutcome::Unexplained {
+        reason,
+        model: None,
+    };
+    let g = src.geometry().clone();
+    if g.confocal {
+        return Ok(unexplained(
+            "the surface model needs a SPAD grid seen from every laser row, not a paired or confocal scan".into(),
+        ));
+    }
+    // The shortest wavelength whose band (at σ = 2λ/3) stays below the bins' Nyquist
+    // frequency, with a margin of 10 %.
+    let shortest = 2.2 * g.dt * (1.0 + 3.0 * wave.band_half_width / (4.0 * std::f64::consts::PI));
+    let by_geometry = geometry_wavelength(&g).map(|l| l.max(shortest));
+    let Some(lam) = opts.wavelength.or(by_geometry) else {
+        return Ok(unexplained(
+            "a single laser or SPAD spot gives no image to read surfaces from".into(),
+        ));
+    };
+    let volume = match &opts.volume {
+        Some(v) => v.clone(),
+        None => match default_volume(&g, lam) {
+            Ok(v) => v,
+            Err(r) => return Ok(unexplained(r)),
+        },
+    };
+    // The buffers known before the first pass, checked together.
+    let pairs = g.lasers.len().min(64) * g.spads.len().min(64);
+    let mut plan = budget::Plan::new();
+    plan.add(
+        "the direct-light image",
+        budget::bytes(volume.len(), 4 + 12),
+    )
+    .add(
+        "the column surfels",
+        budget::bytes(
+            volume.shape[0] * volume.shape[1],
+            64 * (opts.sub * opts.sub) as u128,
+        ),
+    )
+    .add(
+        "the refinement's subset and residual",
+        budget::bytes(pairs.saturating_mul(g.nt), 16),
+    );
+    if let Err(e) = plan.check(|| "the surface model".into()) {
+        return Ok(unexplained(reason(e)?));
+    }
+    let image_wave = Wave {
+        wavelength: Some(lam),
+        sigma: None,
+        ..*wave
+    };
+    let d = match direct(src, &volume, &image_wave, exec) {
+        Ok(d) => d,
+        Err(e) => return Ok(unexplained(reason(e)?)),
+    };
+    let wall_z = g
+        .lasers
+        .iter()
+        .chain(&g.spads)
+        .map(|p| f64::from(p[2]))
+        .fold(f64::NEG_INFINITY, f64::max);
+    let step = lateral_step(&volume);
+    let mut steps = || -> Result<(Vec<Facet>, FacetFit, Surfels)> {
+        let raw = Surfels::from_direct(&volume, &d.values, opts.epsilon, opts.sub, wall_z)?;
+        let initial = facets_from_surfels(&raw, opts.split_tol * step, step)?;
+        let scale: Vec<f64> = (0..g.lasers.len())
+            .map(|l| {
+                if opts.fit.laser_falloff {
+                    g.laser_falloff_at(l)
+                } else {
+                    1.0
+                }
+            })
+            .collect();
+        let fit = refine_facets(src, &initial, &scale, &opts.facets, exec)?;
+        let surfels = fit.surfels(opts.facets.pitch, opts.per_facet)?;
+        Ok((initial, fit, surfels))
+    };
+    let (initial, facets, surfels) = match steps() {
+        Ok(x) => x,
+        Err(e) => return Ok(unexplained(reason(e)?)),
+    };
+    if let Some(p) = surfels
+        .points
+        .iter()
+        .find(|p| p[2].is_nan() || p[2] <= wall_z)
+    {
+        return Ok(unexplained(format!(
+            "a refined surface at z = {:.3} m lies at or behind the relay wall (z = {wall_z:.3} m)",
+            p[2]
+        )));
+    }
+    let tables = budget::bytes(surfels.len().saturating_mul(g.spads.len()), 8);
+    if let Err(e) = budget::check(|| "the surface model's SPAD tables".into(), tables) {
+        return Ok(unexplained(reason(e)?));
+    }
+    let fit_opts = SynthOptions {
+        max_bytes: opts
+            .fit
+            .max_bytes
+            .min(usize::try_from(budget::get()).unwrap_or(usize::MAX)),
+        ..opts.fit
+    };
+    let model = match SynthModel::fit(src, surfels, &fit_opts, exec) {
+        Ok(m) => m,
+        Err(e) => return Ok(unexplained(reason(e)?)),
+    };
+    let explained = model.explained;
+    let out = Box::new(SurfaceModel {
+        model,
+        initial,
+        facets,
+        volume,
+        explained,
+        seconds: t.elapsed().as_secs_f64(),
+    });
+    if !(explained.is_finite() && explained >= 0.0) {
+        return Ok(unexplained(format!(
+            "the surface model's fit diverged (energy explained {explained})"
+        )));
+    }
+    if explained < opts.min_explained {
+        return Ok(ModelOutcome::Unexplained {
+            reason: format!(
+                "the surface model explains {:.1} % of the energy (< {} %)",
+                (1000.0 * explained).floor() / 10.0,
+                (1000.0 * opts.min_explained).round() / 10.0
+            ),
+            model: Some(out),
+        });
+    }
+    Ok(ModelOutcome::Fitted(out))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::io::capture::Capture;
+    use crate::sim::{Aperture, Scene, Setup};
+
+    const EXEC: Exec<'static> = Exec {
+        progress: None,
+        path: crate::exec::EvalPath::Auto,
+    };
+
+    /// A dark capture: 4×4 lasers × 4×4 SPADs, 300 bins of 1 cm from 1 m.
+    fn dark() -> Capture {
+        let mut g = Scene::new(Setup::new(
+            Aperture::grid([4, 4], [1.0, 1.0], [0.0, 0.0]),
+            Aperture::grid([4, 4], [1.0, 1.0], [0.0, 0.0]),
+            300,
+            0.01,
+        ))
+        .geometry();
+        g.t0 = 1.0;
+        let n = g.lasers.len() * g.spads.len() * g.nt;
+        Capture {
+            geometry: g,
+            data: vec![0.0; n],
+        }
+    }
+
+    #[test]
+    fn bad_options_are_refused_naming_them() {
+        let d = ModelOptions::default;
+        let facets = |f: FacetOptions| ModelOptions { facets: f, ..d() };
+        let fd = FacetOptions::default;
+        let cases: Vec<(ModelOptions, &str)> = vec![
+            (
+                ModelOptions {
+                    volume: Some(Volume::parse("0,0,1;0,0,1.1").expect("points")),
+                    ..d()
+                },
+                "surfel_volume",
+            ),
+            (
+                ModelOptions {
+                    volume: Some(Volume::parse("-0.5:0.5:5,-0.5:0.5:5,1:1.1:2").expect("grid")),
+                    ..d()
+                },
+                "surfel_volume",
+            ),
+            (
+                ModelOptions {
+                    wavelength: Some(-0.1),
+                    ..d()
+                },
+                "surfel_wavelength",
+            ),
+            (
+                ModelOptions {
+                    epsilon: 1.0,
+                    ..d()
+                },
+                "surfel_epsilon",
+            ),
+            (ModelOptions { sub: 0, ..d() }, "surfel_sub"),
+            (
+                ModelOptions {
+                    split_tol: f64::NAN,
+                    ..d()
+                },
+                "split_tol",
+            ),
+            (facets(FacetOptions { sweeps: 0, ..fd() }), "sweeps"),
+            (
+                facets(FacetOptions {
+                    sweeps: MAX_SWEEPS + 1,
+                    ..fd()
+                }),
+                "sweeps",
+            ),
+            (
+                facets(FacetOptions {
+                    grow: MAX_GROWN + 1,
+                    ..fd()
+                }),
+                "grow",
+            ),
+            (facets(FacetOptions { pitch: 0.0, ..fd() }), "pitch"),
+            (
+                facets(FacetOptions {
+                    grow_gain: 1.0,
+                    ..fd()
+                }),
+                "grow_gain",
+            ),
+            (
+                ModelOptions {
+                    min_explained: 1.5,
+                    ..d()
+                },
+                "min_explained",
+            ),
+            (
+                ModelOptions {
+                    fit: SynthOptions {
+                        max_shift: -1.0,
+                        ..SynthOptions::default()
+                    },
+                    ..d()
+                },
+                "max_shift",
+            ),
+        ];
+        let mut cap = dark();
+        for (o, name) in cases {
+            match model_of_capture(&mut cap, &Wave::default(), &o, EXEC) {
+                Err(Error::Argument { arg, msg }) => assert_eq!(arg, name, "{msg}"),
+                other => panic!("{name}: {other:?}"),
+            }
+        }
+        assert!(ModelOptions::default().check().is_ok());
+    }
+
+    #[test]
+    fn captures_the_model_cannot_explain_are_reasons_not_errors() {
+        let mut cap = dark();
+        let why = |cap: &mut Capture| match model_of_capture(
+            cap,
+            &Wave::default(),
+            &ModelOptions::default(),
+            EXEC,
+        ) {
+            Ok(ModelOutcome::Unexplained { reason, model }) => {
+                assert!(model.is_none());
+                assert_eq!(reason.lines().count(), 1, "{reason}");
+                reason
+            }
+            other => panic!("{other:?}"),
+        };
+        // No light: the image is zero.
+        let r = why(&mut cap);
+        assert!(r.contains("zero"), "{r}");
+        // A paired scan: refused before any pass.
+        cap.geometry.confocal = true;
+        let r = why(&mut cap);
+        assert!(r.contains("paired or confocal"), "{r}");
+        // A window that reaches no depth in front of the wall.
+        cap.geometry.confocal = false;
+        cap.geometry.t0 = -10.0;
+        cap.geometry.dt = 0.001;
+        let r = why(&mut cap);
+        assert!(r.contains("time window"), "{r}");
+    }
+}
