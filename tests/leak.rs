@@ -683,11 +683,12 @@ fn synthesis_with_the_capture_geometry_keeps_the_indirect_light_on_panel_figure(
         );
         eprintln!("{what}");
         // Measured (2026-12-05, growth of 4–16 cm strips at the parent's amplitude): figure
-        // 89.6×, kept 0.892, Pearson 0.991; the panel's row was not reached then.
-        let floor = if o.name == "panel" { 30.0 } else { 40.0 };
+        // 89.6×, kept 0.892, Pearson 0.991; panel 68.6×, kept 0.952, Pearson 0.993.
+        let floor = if o.name == "panel" { 45.0 } else { 60.0 };
         assert!(o.ratio() >= floor, "{what}");
         assert!((0.85..=1.1).contains(&o.kept()), "{what}");
-        assert!(o.pearson >= 0.95, "{what}");
+        assert!(o.pearson >= 0.98, "{what}");
     }
+    eprintln!("all of Γ: Pearson {:.3}", r.pearson);
     assert!(r.pearson >= 0.95, "Pearson over Γ {}", r.pearson);
 }
