@@ -38,9 +38,7 @@
 //! inside the guard interval**: when the rows share one leg offset the guard is applied in the
 //! kernel itself (`guard` of [`Confocal::run`]); otherwise the caller evaluates the voxels that
 //! have a path outside [`vltm_kernel::Config::guard`] on the band path, as for the planar path.
-//!
-//! A pass calls [`Confocal::run`] once: it takes the rows' spectra batch by batch from the
-//! caller, places them, transforms and images. The steps are public for benchmarks.
+//! A pass calls [`Confocal::run`] once (the steps are public for benchmarks).
 //!
 //! Cost: `J·F(M)/2` (forward) `+ S·J·(F(M) + 12M) + S·F(M)/2` flops (S = slices × phases,
 //! `F(M) = 5M·log₂M`; an upper bound: mirrored offsets and twins cut the kernel transforms
@@ -63,9 +61,8 @@ use rustfft::{Fft, FftPlanner};
 use std::sync::Arc;
 use vltm_kernel::{Config, Point};
 
-/// Tasks of [`Confocal::image`] when a few sub-grids are split into runs of bins: enough
-/// for a many-core pool, fixed so that the split (and so the rounding) never depends on the
-/// number of threads. Memory: up to this many partial sums of `M` complex (`2M` with twins).
+/// Tasks of [`Confocal::image`] over a few sub-grids split into runs of bins, fixed so that
+/// the rounding never depends on the threads. Memory: as many partial sums of `M` complex.
 const IMAGE_TASKS: usize = 32;
 
 /// Precomputed confocal convolution for one (wall grid, voxel grid, configuration).
