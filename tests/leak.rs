@@ -651,11 +651,9 @@ fn synthesis_with_the_oracle_geometry_keeps_the_indirect_light() {
 /// Stage 2 of the analysis by synthesis on `panel_figure`, geometry from the capture alone
 /// (`vltm::probe::synth`: planes read from a direct-light image at half the wall's pitch,
 /// rectangles refined and grown against the capture, then the model fitted and subtracted;
-/// the control with its own model, Γ from the full capture's diagonal). Measured 2026-11-29:
-/// figure 13.3× its control, kept 0.96, Pearson 0.974; panel 51.6×, 0.96, 0.992; all of Γ
-/// 0.976; both models explain ≥ 0.99 of their capture's energy. The figure misses the issue's
-/// 20× for the lit object (its second visible face is not found); the corner, whose
-/// direct-light image does not show the two panels' planes, is not asserted
+/// the control with its own model, Γ from the full capture's diagonal). Both models explain
+/// ≥ 0.99 of their capture's energy; the measured figures are beside the bands. The corner,
+/// whose direct-light image does not show the two panels' planes, is not asserted
 /// (docs/indirect-light.md, Stage 2).
 #[test]
 fn synthesis_with_the_capture_geometry_keeps_the_indirect_light_on_panel_figure() {
@@ -682,13 +680,14 @@ fn synthesis_with_the_capture_geometry_keeps_the_indirect_light_on_panel_figure(
             o.pearson
         );
         eprintln!("{what}");
-        // Measured (2026-12-05, growth of 4–16 cm strips at the parent's amplitude): figure
-        // 89.6×, kept 0.892, Pearson 0.991; panel 68.6×, kept 0.952, Pearson 0.993.
-        let floor = if o.name == "panel" { 45.0 } else { 60.0 };
-        assert!(o.ratio() >= floor, "{what}");
+        // Measured (2026-12-05, the refinement on a subset of 16 × 16 laser rows × SPADs):
+        // figure 90.3×, kept 0.909, Pearson 0.993; panel 94.1×, kept 0.980, Pearson 0.995
+        // (on all 64 × 64: figure 89.6×, 0.892, 0.991; panel 68.6×, 0.952, 0.993).
+        assert!(o.ratio() >= 60.0, "{what}");
         assert!((0.85..=1.1).contains(&o.kept()), "{what}");
         assert!(o.pearson >= 0.98, "{what}");
     }
+    // Measured 0.993 (0.991 on the 32 × 32 subset).
     eprintln!("all of Γ: Pearson {:.3}", r.pearson);
-    assert!(r.pearson >= 0.95, "Pearson over Γ {}", r.pearson);
+    assert!(r.pearson >= 0.98, "Pearson over Γ {}", r.pearson);
 }
