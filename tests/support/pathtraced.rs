@@ -529,9 +529,9 @@ pub enum Surf {
     /// Stage 1, the oracle: `scene.json`'s boxes (validates the renderer and the subtraction).
     Oracle,
     /// Stage 2, the method: the library's pipeline on each capture alone
-    /// (`vltm::probe::model_of_capture`) on the image grid [`SURFEL_VOLUME`] (the
-    /// environment's `SURFEL_VOLUME` to change it; `default` for the grid the library derives
-    /// from the capture).
+    /// (`vltm::probe::model_of_capture`) on the image grid the library derives from the
+    /// capture, as `vltm --leak-correct model` runs it (the environment's `SURFEL_VOLUME`, a
+    /// volume spec or `fixed` for [`SURFEL_VOLUME`], to change it).
     Capture,
 }
 
@@ -547,8 +547,9 @@ pub fn surfel_epsilon() -> f32 {
 /// Sweeps of the geometry refinement.
 pub const SWEEPS: usize = 4;
 
-/// The grid the surfels of Stage 2 are read from (pitch 0.05 × 0.05 × 0.01 m; the library's
-/// default grid for these captures spans the same x–y at the same pitch and z 0.5–2.0 m).
+/// A fixed grid for the surfels of Stage 2 (`SURFEL_VOLUME=fixed`; pitch 0.05 × 0.05 × 0.01
+/// m, the grid of the measurements before 2026-12-05). The library's default grid for these
+/// captures spans the same x–y at the same pitch and z 0.5–2.0 m every 0.02 m.
 pub const SURFEL_VOLUME: &str = "-0.75:0.75:31,-0.75:0.75:31,0.5:1.4:91";
 
 /// One scene measured with the direct light removed by the fitted surfel model (module
@@ -565,8 +566,8 @@ pub fn measure_synth(
     use probe::synth::{Surfels, SynthModel, Synthesized};
     let d = probe::direct(&mut c.all, &c.vol, &s.wave, EXEC).expect("direct");
     let mask = probe::gamma_mask(&d.values, s.epsilon);
-    let spec = std::env::var("SURFEL_VOLUME").unwrap_or_else(|_| SURFEL_VOLUME.to_string());
-    let fine = if spec == "default" {
+    let spec = std::env::var("SURFEL_VOLUME").unwrap_or_else(|_| "default".to_string());
+    let fine = if spec == "default" || spec == "fixed" {
         Volume::parse(SURFEL_VOLUME).expect("SURFEL_VOLUME")
     } else {
         Volume::parse(&spec).expect("SURFEL_VOLUME")
@@ -609,10 +610,9 @@ pub fn measure_synth(
                     );
                     return fit(cap, r.surfels);
                 }
-                // The library's pipeline (`probe::model_of_capture`) on the grid the
-                // documented numbers were measured on ([`SURFEL_VOLUME`], or the environment's);
-                // `SURFEL_VOLUME=default` takes the grid the library derives from the capture
-                // (what `vltm --leak-correct model` runs).
+                // The library's pipeline (`probe::model_of_capture`) on the grid it derives
+                // from the capture (what `vltm --leak-correct model` runs), or the
+                // environment's (`SURFEL_VOLUME=fixed`: [`SURFEL_VOLUME`]).
                 let mopts = probe::ModelOptions {
                     volume: (spec != "default").then(|| fine.clone()),
                     wavelength: wave.wavelength,

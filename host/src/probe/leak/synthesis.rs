@@ -10,7 +10,8 @@
 //!    fine grid ([`ModelOptions::volume`], or by default: x–y the laser and SPAD spots'
 //!    extent widened by one step, at a step of about half that wavelength that divides the
 //!    wall's pitch, so that the FFT path takes it; z the depths the time window reaches
-//!    ([`window_depths`]) at a step of one bin `Δt`, at most 512 depths).
+//!    ([`window_depths`]) at a step of two bins `2·Δt`, at most 512 depths: the brightest
+//!    depth of a column is refined by a parabola, and the refinement corrects centimetres).
 //! 2. **Surfels** of the columns brighter than [`ModelOptions::epsilon`] of the maximum
 //!    ([`Surfels::from_direct`]), split into planar **facets** ([`facets_from_surfels`], split
 //!    tolerance [`ModelOptions::split_tol`] × the grid's lateral step).
@@ -230,7 +231,7 @@ fn default_volume(g: &Geometry, lam: f64) -> std::result::Result<Volume, String>
             )
         },
     );
-    let dz = g.dt.max(1e-4);
+    let dz = (2.0 * g.dt).max(1e-4);
     let Some((near, far)) = window_depths(g, dz) else {
         return Err("the capture's time window reaches no depth in front of the wall".into());
     };
