@@ -1953,7 +1953,7 @@ fn leak_correct_model_on_the_command_line() {
         "the model and the windows remove different light"
     );
     // The fallback: one warning line naming why, then the windows, as `--leak-correct gate`.
-    let small = ["--max-memory", "8M"];
+    let small = ["--max-memory", "4M"];
     let (out, err, fell) = run(
         "f.npy",
         &[&small[..], &["--leak-correct", "model"]].concat(),

@@ -697,10 +697,10 @@ fn synthesis_with_the_capture_geometry_keeps_the_indirect_light_on_panel_figure(
             o.pearson
         );
         eprintln!("{what}");
-        // Measured (2026-12-05, growth of 4–16 cm strips at the parent's amplitude): figure
-        // 89.6×, kept 0.892, Pearson 0.991; panel 68.6×, kept 0.952, Pearson 0.993.
-        let floor = if o.name == "panel" { 45.0 } else { 60.0 };
-        assert!(o.ratio() >= floor, "{what}");
+        // Measured (2026-12-05, the refinement on a subset of 16 × 16 laser rows × SPADs):
+        // figure 90.3×, kept 0.909, Pearson 0.993; panel 94.1×, kept 0.980, Pearson 0.995
+        // (on all 64 × 64: figure 89.6×, 0.892, 0.991; panel 68.6×, 0.952, 0.993).
+        assert!(o.ratio() >= 60.0, "{what}");
         assert!((0.85..=1.1).contains(&o.kept()), "{what}");
         assert!(o.pearson >= 0.98, "{what}");
     }
@@ -708,7 +708,8 @@ fn synthesis_with_the_capture_geometry_keeps_the_indirect_light_on_panel_figure(
         "seed 0: all of Γ: Pearson {:.3}; explained {:.4} / {:.4}",
         r.pearson, ma.explained, mk.explained
     );
-    assert!(r.pearson >= 0.95, "Pearson over Γ {}", r.pearson);
+    // Measured 0.993 (0.991 on the 32 × 32 subset).
+    assert!(r.pearson >= 0.98, "Pearson over Γ {}", r.pearson);
     eprintln!("seed 0 done after {:.0} s", t0.elapsed().as_secs_f64());
     let (r1, noise) = synth_seed_one(&mut c, &s, other, &ma, &m1, &mk);
     assert!(

@@ -33,11 +33,12 @@
 //! # Cost and memory
 //!
 //! Passes over the capture: one for the direct-light image (its planner's path), one over at
-//! most 64 × 64 laser rows × SPADs for the refinement, two for the fit; then the probes read
-//! the capture minus the model (each row rendered once more). Memory, checked against the
-//! budget before the first pass: the image (`4·V` bytes, plus its pass's own plan), the column
-//! surfels (`≤ 64·nx·ny·sub²` bytes), the refinement's subset and residual
-//! (`16·pairs·Nt` bytes); and before the fit, its SPAD tables (`8·K·S` bytes).
+//! most [`FacetOptions::subset`]² laser rows × SPADs (16 × 16 by default) for the refinement,
+//! two for the fit; then the probes read the capture minus the model (each row rendered once
+//! more). Memory, checked against the budget before the first pass: the image (`4·V` bytes,
+//! plus its pass's own plan), the column surfels (`≤ 64·nx·ny·sub²` bytes), the refinement's
+//! subset, residual and Levenberg–Marquardt columns (`96·pairs·Nt` bytes); and before the
+//! fit, its SPAD tables (`8·K·S` bytes).
 
 use crate::budget;
 use crate::error::{Error, Result};
@@ -50,6 +51,7 @@ use crate::probe::synth::{
     facets_from_surfels, geometry_wavelength, refine_facets,
 };
 use crate::probe::wave::Wave;
+use crate::timings::{self, Kind};
 use crate::volume::Volume;
 use std::time::Instant;
 
@@ -108,7 +110,7 @@ impl ModelOptions {
     /// least 3 depths), `surfel_wavelength` (not positive and finite), `surfel_epsilon`
     /// (outside (0, 1)), `surfel_sub` (outside 1..=16), `split_tol` (not positive and finite),
     /// `sweeps` (outside 1..=[`MAX_SWEEPS`]), `grow` (over [`MAX_GROWN`]), `pitch` (outside
-    /// (0, 0.5] m), `grow_gain` (outside (0, 1)), `min_explained` (outside [0, 1]), and the
+    /// (0, 0.5] m), `grow_gain` (outside (0, 1)), `subset` (outside 1..=256), `min_explained` (outside [0, 1]), and the
     /// fit's options ([`SynthOptions::check`]).
     pub fn check(&self) -> Result<()> {
         if let Some(v) = &self.volume
@@ -154,6 +156,12 @@ impl ModelOptions {
         }
         if !(f.grow_gain.is_finite() && f.grow_gain > 0.0 && f.grow_gain < 1.0) {
             return Err(Error::arg("grow_gain", "must lie in (0, 1)"));
+        }
+        if !(1..=256).contains(&f.subset) {
+            return Err(Error::arg(
+                "subset",
+                "must lie in 1..=256 laser rows and SPADs",
+            ));
         }
         if !(self.min_explained.is_finite() && (0.0..=1.0).contains(&self.min_explained)) {
             return Err(Error::arg("min_explained", "must lie in [0, 1]"));
@@ -299,7 +307,7 @@ pub fn model_of_capture(
         },
     };
     // The buffers known before the first pass, checked together.
-    let pairs = g.lasers.len().min(64) * g.spads.len().min(64);
+    let pairs = g.lasers.len().min(opts.facets.subset) * g.spads.len().min(opts.facets.subset);
     let mut plan = budget::Plan::new();
     plan.add(
         "the direct-light image",
@@ -313,8 +321,8 @@ pub fn model_of_capture(
         ),
     )
     .add(
-        "the refinement's subset and residual",
-        budget::bytes(pairs.saturating_mul(g.nt), 16),
+        "the refinement's subset, residual and Levenberg–Marquardt columns",
+        budget::bytes(pairs.saturating_mul(g.nt), 8 * 12),
     );
     if let Err(e) = plan.check(|| "the surface model".into()) {
         return Ok(unexplained(reason(e)?));
@@ -347,7 +355,10 @@ pub fn model_of_capture(
                 }
             })
             .collect();
-        let fit = refine_facets(src, &initial, &scale, &opts.facets, exec)?;
+        let fit = {
+            let _t = timings::section("direct-light model: facets", Kind::Parallel);
+            refine_facets(src, &initial, &scale, &opts.facets, exec)?
+        };
         let surfels = fit.surfels(opts.facets.pitch, opts.per_facet)?;
         Ok((initial, fit, surfels))
     };
@@ -493,6 +504,7 @@ mod tests {
                 "grow",
             ),
             (facets(FacetOptions { pitch: 0.0, ..fd() }), "pitch"),
+            (facets(FacetOptions { subset: 0, ..fd() }), "subset"),
             (
                 facets(FacetOptions {
                     grow_gain: 1.0,

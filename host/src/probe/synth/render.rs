@@ -116,12 +116,22 @@ impl Renderer {
             if a == 0.0 {
                 continue;
             }
-            let f = ((tl + f64::from(self.ts[i])) * scale + pad).floor();
-            if f >= 0.0 && f < nf as f64 {
-                fine[self.surfels.cluster[k] * nf + f as usize] += a;
+            if let Some(f) = bin_of((tl + f64::from(self.ts[i])) * scale + pad, nf) {
+                fine[self.surfels.cluster[k] * nf + f] += a;
             }
         }
     }
+}
+
+/// `floor(x)` when it lies in `0..n`, else `None` (NaN included): the renders' binning.
+///
+/// A truncating cast, not `f64::floor`: the same bins for every `x`, but without the libm
+/// call that `floor` is on baseline x86-64 (16 % of a refinement's time, measured with
+/// `perf` on panel/figure).
+#[inline]
+pub(super) fn bin_of(x: f64, n: usize) -> Option<usize> {
+    // For x ≥ 0 truncation is floor; NaN fails both comparisons (and casts to 0, unused).
+    (x >= 0.0 && x < n as f64).then_some(x as usize)
 }
 
 /// A Gaussian blur of `sigma` fine samples (none when 0), unit sum, radius 4σ.
