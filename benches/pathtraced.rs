@@ -18,7 +18,10 @@
 //! `cargo bench --bench pathtraced -- synth` prints instead the analysis by synthesis
 //! (`vltm::probe::synth`): Stage 1 with the oracle geometry of `scene.json`, Stage 2 with
 //! surfels from each capture's own direct light (`-- synth capture` for Stage 2 only;
-//! `SURFEL_EPSILON`, `SURFEL_VOLUME` and `SURFEL_SUB` change where its surfels come from).
+//! `SURFEL_EPSILON`, `SURFEL_VOLUME` and `SURFEL_SUB` change where its surfels come from);
+//! Stage 2 prints seed 0 and, where `fixtures/pathtraced/seed1` holds the scene, seed 1 and
+//! the noise share; `-- synth capture robust` measures the captures blurred by an unknown
+//! response and delayed (docs/indirect-light.md, Stage 2).
 //! Not a timing benchmark: it measures fidelity. Takes about a minute per setup and scene.
 
 #[path = "../tests/support/pathtraced.rs"]
@@ -320,19 +323,46 @@ fn same_object(c: &mut Captures, s: &Setup, idx: &[usize]) -> [f64; 3] {
 }
 
 /// Stage 1 (oracle geometry) and Stage 2 (geometry from the capture) of the analysis by
-/// synthesis (`vltm::probe::synth`), both scenes, the same settings.
+/// synthesis (`vltm::probe::synth`), both scenes, the same settings. Stage 2 adds, where
+/// `fixtures/pathtraced/seed1/<scene>_all` exists, the rows of that seed-1 re-render as the
+/// full capture (control, its model and truth of seed 0) and the noise share. With `robust`,
+/// every capture is first convolved with a 40 ps FWHM Gaussian response and delayed by 6 ps
+/// (`pathtraced::blurred`; the model is told neither).
 fn synth() {
-    use vltm::probe::synth::SynthOptions;
+    use vltm::probe::synth::{SynthModel, SynthOptions};
     let local = std::env::args().any(|a| a == "global");
+    let robust = std::env::args().any(|a| a == "robust");
     let opts = SynthOptions {
         per_histogram: !local,
         ..SynthOptions::default()
     };
+    let s = defaults();
     println!(
         "| stage | scene | object | Γ | corrected I_i vs control | kept | Pearson with the truth | explained: full / control | fit s |"
     );
     println!("|---|---|---|---|---|---|---|---|---|");
     let only2 = std::env::args().any(|a| a == "capture");
+    let mut shares = Vec::new();
+    let row = |stage: &str, scene: &str, r: &SceneResult, ma: &SynthModel, mk: &SynthModel| {
+        for o in &r.rows {
+            println!(
+                "| {stage} | {scene} | {} | {}/{} | {:.1}× | {:.3} | {:.3} | {:.4} / {:.4} | {:.1} |",
+                o.name,
+                o.in_gamma,
+                o.voxels,
+                o.ratio(),
+                o.kept(),
+                o.pearson,
+                ma.explained,
+                mk.explained,
+                ma.seconds
+            );
+        }
+        println!(
+            "| {stage} | {scene} | all of Γ | {} | | | {:.3} | | |",
+            r.gamma, r.pearson
+        );
+    };
     for (stage, surf) in [("1 oracle", Surf::Oracle), ("2 capture", Surf::Capture)] {
         if only2 && surf == Surf::Oracle {
             continue;
@@ -342,24 +372,51 @@ fn synth() {
                 continue;
             }
             let mut c = load(scene);
-            let (r, e) = measure_synth(&mut c, &defaults(), surf, &opts);
-            for o in &r.rows {
-                println!(
-                    "| {stage} | {scene} | {} | {}/{} | {:.1}× | {:.3} | {:.3} | {:.4} / {:.4} | {:.1} |",
-                    o.name,
-                    o.in_gamma,
-                    o.voxels,
-                    o.ratio(),
-                    o.kept(),
-                    o.pearson,
-                    e[0].0,
-                    e[1].0,
-                    e[0].1
+            let stage = if robust {
+                blur_all(&mut c, 40.0, 6.0);
+                format!("{stage}, blurred 40 ps + 6 ps")
+            } else {
+                stage.to_string()
+            };
+            let boxes = c.boxes.clone();
+            let models = surface_models(vec![&mut c.all, &mut c.direct], &boxes, &s, surf, &opts);
+            let [ma, mk]: [_; 2] = models.try_into().unwrap_or_else(|_| unreachable!());
+            let r = measure_models(&mut c, &s, &ma, &mk);
+            if robust {
+                eprintln!(
+                    "{scene}: fitted response width {:.3} / {:.3} bin, delay {:.3} / {:.3} bin (full / control)",
+                    ma.width, mk.width, ma.shift, mk.shift
                 );
             }
+            row(&format!("{stage}, seed 0"), scene, &r, &ma, &mk);
+            let p = seed1_path(scene);
+            if surf == Surf::Oracle || robust || !p.is_file() {
+                continue;
+            }
+            let mut other = vltm::io::open(&p).expect("seed-1 capture");
+            let m1 = surface_model(&mut other, &boxes, &s, surf, &opts);
+            let (r1, noise) = synth_seed_one(&mut c, &s, other, &ma, &m1, &mk);
+            row(&format!("{stage}, seed 1"), scene, &r1, &m1, &mk);
+            shares.push((scene, r, noise));
+        }
+    }
+    if shares.is_empty() {
+        return;
+    }
+    println!();
+    println!(
+        "Noise share of Stage 2: the I_i of the noise-only capture ((H_seed0 − M_seed0) − (H_seed1 − M_seed1))/√2 (each render minus its own model) over the seed-0 corrected I_i; and of (H_seed0 − H_seed1)/√2 with no model:"
+    );
+    println!();
+    println!("| scene | object | noise share, model-corrected | noise share, no model |");
+    println!("|---|---|---|---|");
+    for (scene, r, noise) in &shares {
+        for (o, n) in r.rows.iter().zip(noise) {
             println!(
-                "| {stage} | {scene} | all of Γ | {} | | | {:.3} | | |",
-                r.gamma, r.pearson
+                "| {scene} | {} | {:.4} | {:.4} |",
+                o.name,
+                n.corrected / o.full,
+                n.plain / o.full
             );
         }
     }

@@ -774,8 +774,9 @@ fn fixture_data_files() -> Vec<String> {
     out
 }
 
-/// The most bytes `fixtures/` may hold: the repository stays lean.
-const FIXTURES_MAX_BYTES: u64 = 30_000_000;
+/// The most bytes `fixtures/` may hold: the repository stays lean (32.8 MB with the seed-1
+/// render of `pathtraced/seed1/`, the Stage-2 headline of issue 34).
+const FIXTURES_MAX_BYTES: u64 = 34_000_000;
 
 /// Every data file of `fixtures/` is listed in `fixtures/SHA256SUMS` with its checksum, every
 /// listed file is there and whole, its provenance is in a `fixtures/…/README.md`, and the

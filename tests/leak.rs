@@ -651,29 +651,44 @@ fn synthesis_with_the_oracle_geometry_keeps_the_indirect_light() {
 /// Stage 2 of the analysis by synthesis on `panel_figure`, geometry from the capture alone
 /// (`vltm::probe::synth`: planes read from a direct-light image at half the wall's pitch,
 /// rectangles refined and grown against the capture, then the model fitted and subtracted;
-/// the control with its own model, Γ from the full capture's diagonal). Both models explain
-/// ≥ 0.99 of their capture's energy; the measured figures are beside the bands. The corner,
-/// whose direct-light image does not show the two panels' planes, is not asserted
+/// the control with its own model, Γ from the full capture's diagonal), on the seed-0 capture
+/// and on its seed-1 re-render (`fixtures/pathtraced/seed1`, whose Monte Carlo noise the
+/// truth does not share; the control, its model and the truth stay seed 0), with the noise
+/// share: the `I_i` of `((H0 − M0) − (H1 − M1))/√2` as a share of the corrected `I_i`.
+/// Every model explains ≥ 0.99 of its capture's energy; the measured figures are beside the
+/// bands. The corner, whose direct-light image does not show the two panels' planes, is not asserted
 /// (docs/indirect-light.md, Stage 2).
 #[test]
 fn synthesis_with_the_capture_geometry_keeps_the_indirect_light_on_panel_figure() {
-    use pathtraced::{Surf, defaults, load, measure_synth};
+    use pathtraced::{
+        Surf, defaults, load, measure_models, seed1_path, surface_models, synth_seed_one,
+    };
+    let t0 = std::time::Instant::now();
+    let (s, opts) = (defaults(), probe::synth::SynthOptions::default());
     let mut c = load("panel_figure");
-    let (r, e) = measure_synth(
-        &mut c,
-        &defaults(),
+    let boxes = c.boxes.clone();
+    // The three models (seed 0, its control, seed 1) fitted at once, in threads of their own;
+    // the control's serves both seeds.
+    let mut other = io::open(&seed1_path("panel_figure")).expect("seed-1 capture");
+    let models = surface_models(
+        vec![&mut c.all, &mut c.direct, &mut other],
+        &boxes,
+        &s,
         Surf::Capture,
-        &probe::synth::SynthOptions::default(),
+        &opts,
     );
+    let [ma, mk, m1]: [_; 3] = models.try_into().unwrap_or_else(|_| unreachable!());
+    eprintln!("models fitted after {:.0} s", t0.elapsed().as_secs_f64());
+    let r = measure_models(&mut c, &s, &ma, &mk);
     assert!(
-        e[0].0 >= 0.99 && e[1].0 >= 0.99,
+        ma.explained >= 0.99 && mk.explained >= 0.99,
         "the models explain {} (full) and {} (control)",
-        e[0].0,
-        e[1].0
+        ma.explained,
+        mk.explained
     );
     for o in &r.rows {
         let what = format!(
-            "{}: {:.1}× the control, kept {:.3}, Pearson {:.3}",
+            "seed 0, {}: {:.1}× the control, kept {:.3}, Pearson {:.3}",
             o.name,
             o.ratio(),
             o.kept(),
@@ -688,7 +703,128 @@ fn synthesis_with_the_capture_geometry_keeps_the_indirect_light_on_panel_figure(
         assert!((0.85..=1.1).contains(&o.kept()), "{what}");
         assert!(o.pearson >= 0.98, "{what}");
     }
+    eprintln!(
+        "seed 0: all of Γ: Pearson {:.3}; explained {:.4} / {:.4}",
+        r.pearson, ma.explained, mk.explained
+    );
     // Measured 0.994.
-    eprintln!("all of Γ: Pearson {:.3}", r.pearson);
     assert!(r.pearson >= 0.98, "Pearson over Γ {}", r.pearson);
+    eprintln!("seed 0 done after {:.0} s", t0.elapsed().as_secs_f64());
+    let (r1, noise) = synth_seed_one(&mut c, &s, other, &ma, &m1, &mk);
+    assert!(
+        m1.explained >= 0.99,
+        "the seed-1 model explains {}",
+        m1.explained
+    );
+    for ((o, n), o0) in r1.rows.iter().zip(&noise).zip(&r.rows) {
+        let what = format!(
+            "seed 1, {}: {:.1}× the control, kept {:.3}, Pearson {:.3}; noise share {:.4} (seed 0's corrected I_i), {:.4} without the model",
+            o.name,
+            o.ratio(),
+            o.kept(),
+            o.pearson,
+            n.corrected / o0.full,
+            n.plain / o0.full
+        );
+        eprintln!("{what}");
+        // Measured (2026-12-05, the refinement on a 16 × 16 subset): figure 88.6×, kept 0.892,
+        // Pearson 0.980, noise share 0.0072; panel 90.1×, kept 0.939, Pearson 0.989, noise
+        // share 0.0107 (issue 34: lit object ≥ 20×, projector's surface ≥ 10×, kept 0.8–1.25,
+        // Pearson ≥ 0.95).
+        assert!(o.ratio() >= 60.0, "{what}");
+        assert!((0.85..=1.1).contains(&o.kept()), "{what}");
+        assert!(o.pearson >= 0.96, "{what}");
+        assert!(n.corrected / o0.full <= 0.03, "{what}");
+    }
+    eprintln!(
+        "seed 1: all of Γ: Pearson {:.3}; explained {:.4}; {:.0} s in all",
+        r1.pearson,
+        m1.explained,
+        t0.elapsed().as_secs_f64()
+    );
+    // Measured 0.988.
+    assert!(r1.pearson >= 0.97, "seed 1: Pearson over Γ {}", r1.pearson);
+}
+
+/// Stage 2 on `panel_figure` with every capture (full, control, truth) convolved with a
+/// Gaussian response of 40 ps FWHM (σ ≈ 0.51 bin of 33.4 ps) and delayed by 6 ps (0.18 bin),
+/// each bin the Gaussian integrated over it (`pathtraced::blurred`); the model is told
+/// neither: it fits its response width (≤ 1 bin) and global delay (± 1 bin) itself (it found
+/// 0.5 bin and 0). Issue 34 asks ≥ 10× and Pearson ≥ 0.9 here.
+#[test]
+fn synthesis_with_the_capture_geometry_survives_an_unknown_response_and_delay() {
+    use pathtraced::{Surf, blur_all, defaults, load, measure_models, surface_models};
+    let t0 = std::time::Instant::now();
+    let (s, opts) = (defaults(), probe::synth::SynthOptions::default());
+    let mut c = load("panel_figure");
+    blur_all(&mut c, 40.0, 6.0);
+    let boxes = c.boxes.clone();
+    let models = surface_models(
+        vec![&mut c.all, &mut c.direct],
+        &boxes,
+        &s,
+        Surf::Capture,
+        &opts,
+    );
+    let [ma, mk]: [_; 2] = models.try_into().unwrap_or_else(|_| unreachable!());
+    let r = measure_models(&mut c, &s, &ma, &mk);
+    eprintln!(
+        "blurred: models' width {:.3} / {:.3} bin, delay {:.3} / {:.3} bin, explained {:.4} / {:.4}",
+        ma.width, mk.width, ma.shift, mk.shift, ma.explained, mk.explained
+    );
+    for o in &r.rows {
+        let what = format!(
+            "blurred, {}: {:.1}× the control, kept {:.3}, Pearson {:.3}",
+            o.name,
+            o.ratio(),
+            o.kept(),
+            o.pearson
+        );
+        eprintln!("{what}");
+        // Measured (2026-12-05, the refinement on a 16 × 16 subset): figure 31.7×, kept 0.854,
+        // Pearson 0.982; panel 40.1×, kept 0.922, Pearson 0.996 (on all 64 × 64: figure 44.0×,
+        // 0.863, 0.948; panel 42.8×, 0.941, 0.991).
+        assert!(o.ratio() >= 20.0, "{what}");
+        assert!((0.8..=1.1).contains(&o.kept()), "{what}");
+        assert!(o.pearson >= 0.93, "{what}");
+    }
+    eprintln!(
+        "blurred: all of Γ: Pearson {:.3}; {:.0} s",
+        r.pearson,
+        t0.elapsed().as_secs_f64()
+    );
+    // Measured 0.989 (0.977 on all 64 × 64).
+    assert!(r.pearson >= 0.95, "blurred: Pearson over Γ {}", r.pearson);
+}
+
+/// The robustness case's response (`pathtraced::blur_kernel`): 40 ps FWHM and 6 ps on bins of
+/// 0.01 m (33.36 ps) is a Gaussian of σ = 0.509 bin centred 0.180 bin late; integrated over
+/// each bin, its weights sum to 1, their mean is the delay and their variance σ² + 1/12 (the
+/// bin's own width), both up to the aliasing of so narrow a Gaussian on the bins (measured
+/// mean 0.1782 bin for 0.1799, variance 0.3398 for 0.3427, as erf gives them).
+#[test]
+fn the_robustness_response_has_its_width_and_delay() {
+    let (first, w) = pathtraced::blur_kernel(0.01, 40.0, 6.0);
+    let sum: f64 = w.iter().sum();
+    let m: f64 = w
+        .iter()
+        .enumerate()
+        .map(|(j, x)| (first + j as isize) as f64 * x)
+        .sum();
+    let v: f64 = w
+        .iter()
+        .enumerate()
+        .map(|(j, x)| ((first + j as isize) as f64 - m).powi(2) * x)
+        .sum();
+    let c = 299_792_458.0e-12;
+    let sigma = 40.0 * c / (8.0 * 2f64.ln()).sqrt() / 0.01;
+    near("weights' sum", sum, 1.0, 1e-12);
+    near("delay (bins)", m, 6.0 * c / 0.01, 0.02);
+    near("variance (bins²)", v, sigma * sigma + 1.0 / 12.0, 0.02);
+    near("delay (bins), as erf gives it", m, 0.178_153, 1e-4);
+    near("variance (bins²), as erf gives it", v, 0.339_751, 1e-4);
+    assert!(
+        (sigma - 0.509).abs() < 1e-3 && (6.0 * c / 0.01 - 0.180).abs() < 1e-3,
+        "σ {sigma} bin"
+    );
 }

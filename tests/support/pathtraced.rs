@@ -16,6 +16,10 @@ use vltm::kernel::Point;
 use vltm::probe::{self, Exec, IndirectOptions, LeakOptions, Shell, Wave};
 use vltm::volume::Volume;
 
+#[path = "pathtraced_stage2.rs"]
+mod stage2;
+pub use stage2::*;
+
 const EXEC: Exec<'static> = Exec {
     progress: None,
     path: vltm::probe::EvalPath::Auto,
@@ -563,9 +567,24 @@ pub fn measure_synth(
     surf: Surf,
     opts: &probe::synth::SynthOptions,
 ) -> (SceneResult, [(f64, f64); 2]) {
-    use probe::synth::{Surfels, SynthModel, Synthesized};
-    let d = probe::direct(&mut c.all, &c.vol, &s.wave, EXEC).expect("direct");
-    let mask = probe::gamma_mask(&d.values, s.epsilon);
+    let boxes = c.boxes.clone();
+    let [ma, mk]: [_; 2] = surface_models(vec![&mut c.all, &mut c.direct], &boxes, s, surf, opts)
+        .try_into()
+        .unwrap_or_else(|_| unreachable!());
+    let r = measure_models(c, s, &ma, &mk);
+    (r, [(ma.explained, ma.seconds), (mk.explained, mk.seconds)])
+}
+
+/// The surfel model of `cap`'s direct light (`surf`: the oracle geometry of `boxes`, or the
+/// library's pipeline on the capture alone; `boxes` then serve only the printed diagnostics).
+pub fn surface_model(
+    cap: &mut Capture,
+    boxes: &[serde_json::Value],
+    s: &Setup,
+    surf: Surf,
+    opts: &probe::synth::SynthOptions,
+) -> probe::synth::SynthModel {
+    use probe::synth::{Surfels, SynthModel};
     let spec = std::env::var("SURFEL_VOLUME").unwrap_or_else(|_| "default".to_string());
     let fine = if spec == "default" || spec == "fixed" {
         Volume::parse(SURFEL_VOLUME).expect("SURFEL_VOLUME")
@@ -576,103 +595,109 @@ pub fn measure_synth(
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(5);
-    let boxes = c.boxes.clone();
     let fit = |cap: &mut Capture, surfels: Surfels| {
         SynthModel::fit(cap, surfels, opts, EXEC).expect("fit")
     };
-    let model = |cap: &mut Capture| -> SynthModel {
-        match surf {
-            Surf::Oracle => fit(cap, c_boxes_surfels(&boxes, 100.0)),
-            Surf::Capture => {
-                let wave = Wave {
-                    wavelength: std::env::var("SURFEL_LAMBDA")
-                        .ok()
-                        .and_then(|v| v.parse().ok())
-                        .or_else(|| probe::synth::geometry_wavelength(&cap.geometry)),
-                    sigma: None,
-                    ..s.wave
-                };
-                if std::env::var("SURFEL_METHOD").is_ok_and(|m| m == "patches") {
-                    let d = probe::direct(cap, &fine, &wave, EXEC).expect("direct, fine");
-                    let raw = Surfels::from_direct(&fine, &d.values, surfel_epsilon(), sub, 0.0)
-                        .expect("surfels");
-                    let g = &cap.geometry;
-                    let scale: Vec<f64> =
-                        (0..g.lasers.len()).map(|l| g.laser_falloff_at(l)).collect();
-                    let r = probe::synth::refine(cap, &raw, &scale, SWEEPS, 0.02, EXEC)
-                        .expect("refine");
-                    eprintln!(
-                        "refined {} patches ({} kept): explained {:.4} -> {:.4}",
-                        raw.patches.len(),
-                        r.surfels.patches.len(),
-                        r.before,
-                        r.after
-                    );
-                    return fit(cap, r.surfels);
-                }
-                // The library's pipeline (`probe::model_of_capture`) on the grid it derives
-                // from the capture (what `vltm --leak-correct model` runs), or the
-                // environment's (`SURFEL_VOLUME=fixed`: [`SURFEL_VOLUME`]).
-                let mopts = probe::ModelOptions {
-                    volume: (spec != "default").then(|| fine.clone()),
-                    wavelength: wave.wavelength,
-                    epsilon: surfel_epsilon(),
-                    sub,
-                    per_facet: !std::env::var("FACET_CLUSTERS").is_ok_and(|m| m == "source"),
-                    fit: *opts,
-                    min_explained: 0.0,
-                    ..probe::ModelOptions::default()
-                };
-                let m = match probe::model_of_capture(cap, &s.wave, &mopts, EXEC)
-                    .expect("surface model")
-                {
+    match surf {
+        Surf::Oracle => fit(cap, c_boxes_surfels(boxes, 100.0)),
+        Surf::Capture => {
+            let wave = Wave {
+                wavelength: std::env::var("SURFEL_LAMBDA")
+                    .ok()
+                    .and_then(|v| v.parse().ok())
+                    .or_else(|| probe::synth::geometry_wavelength(&cap.geometry)),
+                sigma: None,
+                ..s.wave
+            };
+            if std::env::var("SURFEL_METHOD").is_ok_and(|m| m == "patches") {
+                let d = probe::direct(cap, &fine, &wave, EXEC).expect("direct, fine");
+                let raw = Surfels::from_direct(&fine, &d.values, surfel_epsilon(), sub, 0.0)
+                    .expect("surfels");
+                let g = &cap.geometry;
+                let scale: Vec<f64> = (0..g.lasers.len()).map(|l| g.laser_falloff_at(l)).collect();
+                let r =
+                    probe::synth::refine(cap, &raw, &scale, SWEEPS, 0.02, EXEC).expect("refine");
+                eprintln!(
+                    "refined {} patches ({} kept): explained {:.4} -> {:.4}",
+                    raw.patches.len(),
+                    r.surfels.patches.len(),
+                    r.before,
+                    r.after
+                );
+                return fit(cap, r.surfels);
+            }
+            // The library's pipeline (`probe::model_of_capture`) on the grid it derives from
+            // the capture (what `vltm --leak-correct model` runs), or the environment's
+            // (`SURFEL_VOLUME=fixed`: [`SURFEL_VOLUME`]).
+            let mopts = probe::ModelOptions {
+                volume: (spec != "default").then(|| fine.clone()),
+                wavelength: wave.wavelength,
+                epsilon: surfel_epsilon(),
+                sub,
+                per_facet: !std::env::var("FACET_CLUSTERS").is_ok_and(|m| m == "source"),
+                fit: *opts,
+                min_explained: 0.0,
+                ..probe::ModelOptions::default()
+            };
+            let m =
+                match probe::model_of_capture(cap, &s.wave, &mopts, EXEC).expect("surface model") {
                     probe::ModelOutcome::Fitted(m) => m,
                     probe::ModelOutcome::Unexplained { reason, .. } => {
                         panic!("surface model: {reason}")
                     }
                 };
-                for f in &m.initial {
-                    let (ang, off) = facet_error(&boxes, f);
-                    eprintln!(
-                        "  initial facet of cluster {}: normal {:.3?} extent {:.3?}: {ang:.1}°, {:.1} mm off the nearest face",
-                        f.cluster,
-                        f.normal,
-                        f.extent,
-                        off * 1e3
-                    );
-                }
-                let r = &m.facets;
+            for f in &m.initial {
+                let (ang, off) = facet_error(boxes, f);
                 eprintln!(
-                    "refined {} facets (+{} grown) in {} sweeps; the pipeline took {:.1} s: explained {:.4} -> {:.4} (subset), {:.4} (fit); image grid {:?} {:?}",
-                    m.initial.len(),
-                    r.grown,
-                    r.sweeps,
-                    m.seconds,
-                    r.before,
-                    r.after,
-                    m.explained,
-                    m.volume.shape,
-                    m.volume.axes
+                    "  initial facet of cluster {}: normal {:.3?} extent {:.3?}: {ang:.1}°, {:.1} mm off the nearest face",
+                    f.cluster,
+                    f.normal,
+                    f.extent,
+                    off * 1e3
                 );
-                for (f, a) in r.facets.iter().zip(&r.amplitudes) {
-                    eprintln!(
-                        "  facet of cluster {}: centre {:.3?} normal {:.3?} extent {:.3?} area {:.3} amp {:.2}: {:.1}°, {:.1} mm",
-                        f.cluster,
-                        f.centre,
-                        f.normal,
-                        f.extent,
-                        f.area(),
-                        a,
-                        facet_error(&boxes, f).0,
-                        facet_error(&boxes, f).1 * 1e3
-                    );
-                }
-                m.model
             }
+            let r = &m.facets;
+            eprintln!(
+                "refined {} facets (+{} grown) in {} sweeps; the pipeline took {:.1} s: explained {:.4} -> {:.4} (subset), {:.4} (fit); image grid {:?} {:?}",
+                m.initial.len(),
+                r.grown,
+                r.sweeps,
+                m.seconds,
+                r.before,
+                r.after,
+                m.explained,
+                m.volume.shape,
+                m.volume.axes
+            );
+            for (f, a) in r.facets.iter().zip(&r.amplitudes) {
+                eprintln!(
+                    "  facet of cluster {}: centre {:.3?} normal {:.3?} extent {:.3?} area {:.3} amp {:.2}: {:.1}°, {:.1} mm",
+                    f.cluster,
+                    f.centre,
+                    f.normal,
+                    f.extent,
+                    f.area(),
+                    a,
+                    facet_error(boxes, f).0,
+                    facet_error(boxes, f).1 * 1e3
+                );
+            }
+            m.model
         }
-    };
-    let ma = model(&mut c.all);
-    let mk = model(&mut c.direct);
+    }
+}
+
+/// [`measure_synth`] with the models given: `ma` fitted to `c.all`, `mk` to `c.direct` (Γ
+/// from `c.all`'s diagonal, the truth uncorrected).
+pub fn measure_models(
+    c: &mut Captures,
+    s: &Setup,
+    ma: &probe::synth::SynthModel,
+    mk: &probe::synth::SynthModel,
+) -> SceneResult {
+    use probe::synth::Synthesized;
+    let d = probe::direct(&mut c.all, &c.vol, &s.wave, EXEC).expect("direct");
+    let mask = probe::gamma_mask(&d.values, s.epsilon);
     let opts_i = IndirectOptions {
         epsilon: s.epsilon,
         shell: s.r0.map(|r0| Shell {
@@ -683,7 +708,7 @@ pub fn measure_synth(
         ..IndirectOptions::default()
     };
     let f = probe::indirect_over(
-        &mut Synthesized::new(&mut c.all, &ma),
+        &mut Synthesized::new(&mut c.all, ma),
         &c.vol,
         &mask,
         &opts_i,
@@ -692,7 +717,7 @@ pub fn measure_synth(
     )
     .expect("full");
     let k = probe::indirect_over(
-        &mut Synthesized::new(&mut c.direct, &mk),
+        &mut Synthesized::new(&mut c.direct, mk),
         &c.vol,
         &mask,
         &opts_i,
@@ -725,7 +750,7 @@ pub fn measure_synth(
             }
         })
         .collect();
-    let r = SceneResult {
+    SceneResult {
         gamma: g.len(),
         r0: f.shell.r0,
         pearson: pearson(&f.values, &t.values, &g),
@@ -735,6 +760,5 @@ pub fn measure_synth(
         rows,
         maps: [f.values, k.values, t.values, nan.clone(), nan],
         mask,
-    };
-    (r, [(ma.explained, ma.seconds), (mk.explained, mk.seconds)])
+    }
 }
