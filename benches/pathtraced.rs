@@ -10,7 +10,8 @@
 //! A second table gives the ceilings of a window-based correction (the truth put through the
 //! same windows: kept and Pearson with the truth) and the oracle subtraction
 //! `H_all − H_control` with no windows, which validates the measuring chain. With
-//! `PATHTRACED_SEED1=<dir>` (a folder holding `<scene>_all/<scene>_all.hdf5` rendered with
+//! a seed-1 render of a scene's full capture (the committed `fixtures/pathtraced/seed1`, or
+//! `PATHTRACED_SEED1=<dir>`, a folder holding `<scene>_all/<scene>_all.hdf5` rendered with
 //! another seed: `SEED=1 fixtures/pathtraced/render.sh`), a third table gives the figures of
 //! that render and the `I_i` of the noise-only capture `(H_seed0 − H_seed1)/√2`.
 //! `PATHTRACED_DIR=<dir>` measures another set of the same scenes' captures instead (for
@@ -57,10 +58,16 @@ fn main() {
         let r = measure(&mut c, &defaults());
         print(scene, "defaults", &r);
         ceilings.push((scene, r.clone()));
-        if let Some(dir) = std::env::var_os("PATHTRACED_SEED1") {
-            let p = std::path::Path::new(&dir)
+        // The seed-1 render of `PATHTRACED_SEED1`, or the committed one where there is one
+        // (`fixtures/pathtraced/seed1`: panel/figure).
+        let given = std::env::var_os("PATHTRACED_SEED1");
+        let p = match &given {
+            Some(dir) => std::path::Path::new(dir)
                 .join(format!("{scene}_all"))
-                .join(format!("{scene}_all.hdf5"));
+                .join(format!("{scene}_all.hdf5")),
+            None => seed1_path(scene),
+        };
+        if given.is_some() || p.is_file() {
             match vltm::io::open(&p) {
                 Ok(other) => {
                     let (r1, n, avg) = seed_one(&mut c, other);
