@@ -20,7 +20,8 @@
 //! visits every facet, tries each of its 7 parameters `± step` (offset and edges from 2 and
 //! 4 cm, tilts from 4°) with the optimal amplitude `a = max(0, ⟨R + a_f m_f, m⟩/‖m‖²)`, and
 //! keeps the best (the current pose among them: the residual never grows). A facet none of
-//! whose moves helps halves its steps. After the coordinate moves, one Levenberg–Marquardt
+//! whose moves helps halves its steps; one whose steps are below 1/64 of their start is
+//! settled and left alone while the others' sweeps go on (a round ends when all are). After the coordinate moves, one Levenberg–Marquardt
 //! step on the 7 parameters and the amplitude together (central differences at half the
 //! steps, damping `10⁻³…1`) is kept when it does better: it makes the coupled moves (a tilt
 //! with the offset and edges it drags along) that single coordinates cannot.
@@ -663,6 +664,10 @@ pub fn refine_facets(
             }
             ran += 1;
             for fi in 0..facets.len() {
+                if scale[fi] < 1.0 / 64.0 {
+                    // Settled: its steps are below the round's end (the others' go on).
+                    continue;
+                }
                 // R' = R + a_f m_f.
                 sub.legs(&facets[fi], pitch, &mut buf, &mut legs);
                 sub.add(&legs, amp[fi], &mut r);
