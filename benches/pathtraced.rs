@@ -283,7 +283,7 @@ fn seed_one(
 /// pairs with both x_a and x_b on that object only (Γ restricted to `idx` for the pairs; the
 /// full capture and the control corrected with the windows of the whole Γ, as the defaults).
 fn same_object(c: &mut Captures, s: &Setup, idx: &[usize]) -> [f64; 3] {
-    use vltm::probe::{self, DirectModel, Exec, IndirectOptions, LeakCorrected, Shell};
+    use vltm::probe::{self, DirectModel, Exec, LeakCorrected};
     let exec = Exec {
         progress: None,
         path: probe::EvalPath::Auto,
@@ -307,15 +307,7 @@ fn same_object(c: &mut Captures, s: &Setup, idx: &[usize]) -> [f64; 3] {
     for &i in idx {
         mask[i] = full[i];
     }
-    let opts = IndirectOptions {
-        epsilon: s.epsilon,
-        shell: s.r0.map(|r0| Shell {
-            r0,
-            r1: f32::INFINITY,
-        }),
-        leak: None,
-        ..IndirectOptions::default()
-    };
+    let opts = s.uncorrected();
     let f = {
         let mut src = LeakCorrected::new(&mut c.all, &model);
         probe::indirect_over(&mut src, &c.vol, &mask, &opts, &s.wave, exec).unwrap()

@@ -236,6 +236,22 @@ pub struct Setup {
     pub leak: Option<LeakOptions>,
 }
 
+impl Setup {
+    /// The in-focus indirect light's options with no leak correction (ε, r0): for a capture
+    /// whose direct light is removed another way (a model subtracted) or not at all.
+    pub fn uncorrected(&self) -> IndirectOptions {
+        IndirectOptions {
+            epsilon: self.epsilon,
+            shell: self.r0.map(|r0| Shell {
+                r0,
+                r1: f32::INFINITY,
+            }),
+            leak: None,
+            ..IndirectOptions::default()
+        }
+    }
+}
+
 /// vltm indirect's defaults on a tal capture (λ = 2 × pitch, σ = 2λ/3, ε = 0.1, r0 = 1.5σ,
 /// leak correction by gating) plus `--compensate-laser`, stated explicitly: it is off by
 /// default, and the renders hold the laser's falloff (docs/indirect-light.md).
@@ -698,15 +714,7 @@ pub fn measure_models(
     use probe::synth::Synthesized;
     let d = probe::direct(&mut c.all, &c.vol, &s.wave, EXEC).expect("direct");
     let mask = probe::gamma_mask(&d.values, s.epsilon);
-    let opts_i = IndirectOptions {
-        epsilon: s.epsilon,
-        shell: s.r0.map(|r0| Shell {
-            r0,
-            r1: f32::INFINITY,
-        }),
-        leak: None,
-        ..IndirectOptions::default()
-    };
+    let opts_i = s.uncorrected();
     let f = probe::indirect_over(
         &mut Synthesized::new(&mut c.all, ma),
         &c.vol,

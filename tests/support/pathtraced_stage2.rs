@@ -9,7 +9,7 @@ use super::{
 };
 use std::path::{Path, PathBuf};
 use vltm::io::Capture;
-use vltm::probe::{self, IndirectOptions, Shell, synth::SynthModel};
+use vltm::probe::{self, synth::SynthModel};
 
 /// `fixtures/pathtraced/seed1/<scene>_all/<scene>_all.hdf5`: the full capture rendered with
 /// seed 1 (fixtures/pathtraced/README.md).
@@ -65,15 +65,7 @@ pub fn synth_seed_one(
 ) -> (SceneResult, Vec<NoiseRow>) {
     let d = probe::direct(&mut c.all, &c.vol, &s.wave, EXEC).expect("direct");
     let mask = probe::gamma_mask(&d.values, s.epsilon);
-    let opts = IndirectOptions {
-        epsilon: s.epsilon,
-        shell: s.r0.map(|r0| Shell {
-            r0,
-            r1: f32::INFINITY,
-        }),
-        leak: None,
-        ..IndirectOptions::default()
-    };
+    let opts = s.uncorrected();
     let half = core::f32::consts::FRAC_1_SQRT_2;
     let mut n = subtract(
         &model_subtracted(&c.all, m0),
