@@ -133,6 +133,7 @@ fn tasks(volume: &Volume, p: &Path) -> Vec<(String, Task, EvalPath)> {
     vec![
         ("direct band".into(), Task::Direct, EvalPath::Band),
         ("direct lookup".into(), Task::Direct, EvalPath::Lookup),
+        ("direct phasor".into(), Task::Direct, EvalPath::Phasor),
         ("direct planar".into(), Task::Direct, EvalPath::Planar),
         (
             "column two-bounce planar".into(),

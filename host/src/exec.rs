@@ -35,7 +35,7 @@ pub enum EvalPath {
     /// least of planar (when the SPADs — for a confocal capture the scanned wall points — form
     /// a regular grid and the volume is a wall-parallel grid whose pitch divides its pitch, or
     /// any other regular wall-parallel grid resampled from such a grid within its stated
-    /// bound, [`crate::probe::resample`]), phasor (rows of few SPADs), lookup and band; for
+    /// bound, [`crate::probe::resample`]), phasor, lookup and band; for
     /// Gaussian-gated columns planar
     /// or band.
     #[default]
@@ -52,8 +52,9 @@ pub enum EvalPath {
     /// geometry (confocal captures included); an error for columns.
     Lookup,
     /// Diagonal only: the full-phasor table per histogram with 8 voxels per vector
-    /// ([`crate::probe::fast::phasor`]), for rows of few SPADs (paired and confocal scans,
-    /// short SPAD lines); an error for columns.
+    /// ([`crate::probe::fast::phasor`]), any geometry (`auto` takes it on paired and confocal
+    /// scans and on SPAD grids off the FFT path where it beats the lookup); an error for
+    /// columns.
     Phasor,
 }
 

@@ -273,8 +273,7 @@ pub(crate) struct Common {
     /// Evaluation path: auto (the cheapest that applies), band (the kernel's band sum, any
     /// geometry), planar (FFT convolution over a SPAD grid or a confocal wall grid; diagonal and two-bounce columns),
     /// lookup (baseband + cubic interpolation; diagonal only), phasor (a full-phasor table per
-    /// histogram, 8 voxels per vector; diagonal of paired and confocal scans and short SPAD
-    /// lines). For indirect it applies to
+    /// histogram, 8 voxels per vector; diagonal only, any scan). For indirect it applies to
     /// pass 1 (the diagonal); pass 2 images its Γ columns with the band sum.
     #[arg(long, value_enum, default_value_t = PathArg::Auto)]
     pub(crate) path: PathArg,

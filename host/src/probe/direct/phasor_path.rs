@@ -9,7 +9,7 @@ use crate::error::Result;
 use crate::io::capture::RowSource;
 use crate::probe::drive::*;
 use crate::probe::fast::{Phasor, phasor};
-use crate::probe::plan::phasor_batch;
+use crate::probe::plan::{PHASOR_FEW_SPADS, phasor_batch};
 use crate::volume::Volume;
 use num_complex::Complex64;
 use rayon::prelude::*;
@@ -62,7 +62,7 @@ pub(super) fn direct_phasor(
         .div_ceil(4 * threads)
         .next_multiple_of(PHASOR_TILE)
         .max(PHASOR_TILE);
-    let batch = phasor_batch(threads);
+    let batch = phasor_batch(ks);
     let tl = ph.table_len();
     let mut tables = vec![[0.0f32; 4]; batch * ks * tl];
     let mut entries = vec![Histogram::default(); batch * ks];
@@ -126,6 +126,10 @@ pub(super) fn direct_phasor(
         {
             let _t = timings::section("phasor voxels", Kind::Parallel);
             let (es, ts) = (&entries[..ne], &tables[..ne * tl]);
+            // The `f32` partial sums go into the `f64` accumulators once per batch of rows of
+            // few SPADs, once per row of more: a scan split at any row then merges to the
+            // same sums up to the `f64` rounding of the merge.
+            let group = if ks > PHASOR_FEW_SPADS { ks } else { ne.max(1) };
             acc.par_chunks_mut(chunk)
                 .zip(vx.par_chunks(chunk))
                 .zip(vy.par_chunks(chunk))
@@ -133,11 +137,13 @@ pub(super) fn direct_phasor(
                 .zip(re.par_chunks_mut(chunk))
                 .zip(im.par_chunks_mut(chunk))
                 .for_each(|(((((a, x), y), z), re), im)| {
-                    re.fill(0.0);
-                    im.fill(0.0);
-                    ph.accumulate(es, ts, x, y, z, re, im);
-                    for ((a, r), i) in a.iter_mut().zip(&*re).zip(&*im) {
-                        *a += Complex64::new(f64::from(*r), f64::from(*i));
+                    for (es, ts) in es.chunks(group).zip(ts.chunks(group * tl)) {
+                        re.fill(0.0);
+                        im.fill(0.0);
+                        ph.accumulate(es, ts, x, y, z, re, im);
+                        for ((a, r), i) in a.iter_mut().zip(&*re).zip(&*im) {
+                            *a += Complex64::new(f64::from(*r), f64::from(*i));
+                        }
                     }
                 });
         }

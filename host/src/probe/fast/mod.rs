@@ -6,8 +6,9 @@
 //!   (`rustfft`), for the diagonal per row and for imaging factorised columns.
 //! * [`confocal`]: the same FFT convolution for confocal scans (laser and SPAD at each wall
 //!   point): per slice one inverse FFT of `Σ_j X̂_j·κ̂_j`, no stored kernel table (`rustfft`).
-//! * [`phasor`]: the full-phasor table per histogram, 8 voxels per vector, for rows of one or
-//!   a few SPADs (paired and confocal scans) (`rustfft`, `pulp` dispatch).
+//! * [`phasor`]: the full-phasor table per histogram, 8 voxels per vector, for the diagonal of
+//!   any scan (paired and confocal scans; SPAD grids off the FFT path) (`rustfft`, `pulp`
+//!   dispatch).
 //! * [`lookup`]: the gated baseband + lookup diagonal (§B.2.4, [`LookupDiagonal`]): one inverse FFT per SPAD and
 //!   row, then a cubic interpolation per (voxel, SPAD), for any geometry (`rustfft`).
 //! * `lattice`: the wall lattice and the voxel grid's layout for a 2-D convolution, shared by

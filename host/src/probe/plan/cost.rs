@@ -2,7 +2,7 @@
 //! memory plans that decide whether a path competes.
 
 use crate::budget;
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::exec::EvalPath;
 use crate::io::capture::Geometry;
 use crate::probe::drive::{pass_name, pass_plan};
@@ -105,14 +105,18 @@ pub(super) fn lookup_plan(
     plan
 }
 
-/// Most SPADs per row for which the phasor path is planned (beyond, the lookup's blocks of 8
-/// SPADs use their lanes).
-pub(super) const PHASOR_MAX_SPADS: usize = 8;
+/// Rows of at most this many SPADs (paired and confocal rows, SPAD lines) make a phasor batch
+/// of 128 rows and add their `f32` partial sums once per batch; rows of more, once per row.
+pub(crate) const PHASOR_FEW_SPADS: usize = 8;
 
-/// Rows per batch of the phasor path: its tables are built in parallel, then every voxel
-/// tile sums the batch's rows in order.
-pub(crate) fn phasor_batch(threads: usize) -> usize {
-    (32 * threads).max(128)
+/// Rows of `ks` SPADs per batch of the phasor path: its tables are built in parallel, then
+/// every voxel tile sums the batch's rows in order into `f32` partial sums. 128 rows of up to
+/// 8 SPADs (paired and confocal rows, SPAD lines); rows of more SPADs the same 1,024
+/// histograms, at least one row (a 16 × 16 SPAD grid: 4 rows), so that the batch's tables
+/// and its partial sums do not grow with the SPAD grid. The batch does not depend on the
+/// number of threads, so neither do the sums.
+pub(crate) fn phasor_batch(ks: usize) -> usize {
+    (128 * PHASOR_FEW_SPADS / ks.max(PHASOR_FEW_SPADS)).max(1)
 }
 
 /// The phasor path's plan for `g` (its table for the default tolerance) and what it holds
@@ -124,18 +128,10 @@ pub(super) fn phasor_plan(
     n_voxels: usize,
 ) -> Result<(Phasor, phasor::Sizes, budget::Plan)> {
     let ks = g.spads_per_row();
-    if ks > PHASOR_MAX_SPADS {
-        return Err(Error::arg(
-            "path",
-            format!(
-                "the phasor path takes rows of at most {PHASOR_MAX_SPADS} SPADs (paired and confocal scans, short SPAD lines); these rows have {ks}"
-            ),
-        ));
-    }
     let ph = Phasor::new(cfg, phasor::TOLERANCE)?;
     let sizes = ph.sizes();
     let threads = rayon::current_num_threads().max(1);
-    let rows = phasor_batch(threads);
+    let rows = phasor_batch(ks);
     let mut plan = pass.clone();
     plan.add(
         "the states and outputs of direct light",
@@ -185,7 +181,8 @@ impl Rivals {
     /// The rivals over `n_voxels` of the (cropped) capture `g` for `path`.
     ///
     /// # Errors
-    /// [`Error::Argument`] (`path`) naming why a forced phasor path does not apply.
+    /// A configuration the phasor table cannot meet its bound for, when the phasor path is
+    /// forced ([`Phasor::new`]).
     pub(super) fn new(
         pass: &budget::Plan,
         g: &Geometry,

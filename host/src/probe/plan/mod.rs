@@ -20,14 +20,14 @@
 //! | planar | per row `J·(F + S·(6M + 0.75F)) + 8·Kv·J`, `F = 5M·log₂M`; a column images once and adds `S·J·F` for its table ([`planar_flops`]) | a regular SPAD lattice and a wall-parallel voxel grid whose x–y pitch divides it (the diagonal, Gaussian-gated columns) | the kernel table `S·J·M` and per thread `3·J·M` scratch (complex `f32`) |
 //! | confocal convolution | per scan `J·F/2 + S·J·(F + 12M) + S·F/2` ([`convolution_flops`]) | a confocal scan on a regular lattice, such a voxel grid | the wall spectra `J·M` (twice with transposed twins), a batch of rows, per worker `~5M` (complex `f32`) |
 //! | resampled FFT | the FFT path's flops on the support grid plus `32·TAPS·(sx·ny + nx·ny)·nz` (`Resample::flops`) | a regular wall-parallel grid off the lattice whose resampling bound is at most [`resample::MAX_ERROR`](crate::probe::resample::MAX_ERROR) | the support grid's buffers (as above, over the support grid) and the resampling's intermediate and output (16 bytes per value) |
-//! | phasor | per scan `R·Ks·(5N·log₂N + 5L·log₂L + 4T + 7.5·Kv)` ([`phasor_flops`]), counted [`PHASOR_COST`] times against the FFT paths | the Gaussian diagonal on rows of at most [`PHASOR_MAX_SPADS`] SPADs | the tables of a batch of rows (16 bytes per entry) and per thread an FFT buffer of `N + L` complex `f32` ([`phasor_plan`]) |
+//! | phasor | per scan `R·Ks·(5N·log₂N + 5L·log₂L + 4T + 7.5·Kv)` ([`phasor_flops`]), counted [`PHASOR_COST`] times against the FFT paths | the Gaussian diagonal, any geometry (rows of any number of SPADs) | the tables of a batch of rows (16 bytes per entry) and per thread an FFT buffer of `N + L` complex `f32` ([`phasor_plan`]) |
 //!
 //! # When each is chosen
 //!
 //! A forced path ([`EvalPath::Band`], [`EvalPath::Planar`], [`EvalPath::Lookup`], [`EvalPath::Phasor`]) runs
 //! where it applies and is refused in one line naming why where it does not (the planar path:
-//! neither on the lattice nor resampled within the bound; the phasor path: rows of more than
-//! [`PHASOR_MAX_SPADS`] SPADs; the lookup and phasor paths for columns; any fast path for the
+//! neither on the lattice nor resampled within the bound; the lookup and phasor paths for
+//! columns; any fast path for the
 //! un-gated and higher-order diagonals). Under [`EvalPath::Auto`] the diagonal ([`diagonal`])
 //! takes, in this order:
 //!
@@ -58,7 +58,7 @@
 mod cost;
 mod note;
 
-pub(super) use cost::phasor_batch;
+pub(super) use cost::{PHASOR_FEW_SPADS, phasor_batch};
 pub use note::fft_note;
 
 use super::fast::lattice::{self, Layout};

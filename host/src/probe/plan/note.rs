@@ -1,7 +1,6 @@
 //! The notes of the path chosen: the progress label a pass carries (`path lookup; the FFT path
 //! would take …`), the aligned grid a probe reports, and `vltm info`'s line on the FFT paths.
 
-use super::cost::PHASOR_MAX_SPADS;
 use crate::exec::EvalPath;
 use crate::io::capture::Geometry;
 use crate::probe::fast::aligned::{aligned_volume, suggested_volume};
@@ -59,7 +58,7 @@ pub fn fft_note(g: &Geometry, volume: Option<&Volume>) -> String {
         Ok(l) => l,
         Err(e) => {
             return format!(
-                "no FFT path: the wall points are not a regular lattice in one plane ({e}); direct light takes the phasor path (rows of up to {PHASOR_MAX_SPADS} SPADs), the lookup or the band path"
+                "no FFT path: the wall points are not a regular lattice in one plane ({e}); direct light takes the phasor, the lookup or the band path"
             );
         }
     };
@@ -72,23 +71,23 @@ pub fn fft_note(g: &Geometry, volume: Option<&Volume>) -> String {
         format!("{}:{}:{}", f(origin[i]), f(end), n[i])
     };
     let mut s = format!(
-        "FFT path for wall-parallel grids of x-y pitch {} x {} m (the wall's) or an integer divisor, any offset and extent, e.g. $volume {}; other regular grids are resampled from such a grid where λ and σ allow it (the probe says so), else they take the lookup path",
+        "FFT path for wall-parallel grids of x-y pitch {} x {} m (the wall's) or an integer divisor, any offset and extent, e.g. $volume {}; other regular grids are resampled from such a grid where λ and σ allow it (the probe says so), else they take the phasor, lookup or band path (the cheapest)",
         f(pitch[0]),
         f(pitch[1]),
         suggested_volume(g).unwrap_or_else(|| format!("{},{},Z0:Z1:NZ", axis(0), axis(1)))
     );
     if let Some(v) = volume {
         let what = if v.axes.is_none() {
-            "a point list: the lookup or band path".to_string()
+            "a point list: the phasor, lookup or band path".to_string()
         } else if lattice::layout(wall, &v.points, v.shape, tol).is_ok() {
             "on the wall's lattice: the FFT path".to_string()
         } else {
             match aligned_volume(g, v) {
                 Some(a) => format!(
-                    "off the wall's lattice: resampled from a finer aligned grid where λ and σ allow it, else the lookup path; the nearest aligned grid is $volume {a}"
+                    "off the wall's lattice: resampled from a finer aligned grid where λ and σ allow it, else the phasor or lookup path; the nearest aligned grid is $volume {a}"
                 ),
                 None => {
-                    "off the wall's lattice: resampled where λ and σ allow it, else the lookup path"
+                    "off the wall's lattice: resampled where λ and σ allow it, else the phasor or lookup path"
                         .to_string()
                 }
             }
