@@ -38,7 +38,7 @@
 //! two for the fit; then the probes read the capture minus the model (each row rendered once
 //! more). Memory, checked against the budget before the first pass: the image (`4·V` bytes,
 //! plus its pass's own plan), the column surfels (`≤ 64·nx·ny·sub²` bytes), the refinement's
-//! subset, residual and Levenberg–Marquardt columns (`96·pairs·Nt` bytes); and before the
+//! residual and its renders of a facet and 14 moves (`128·pairs·Nt` bytes); and before the
 //! fit, its SPAD tables (`8·K·S` bytes).
 
 use crate::budget;
@@ -322,8 +322,8 @@ pub fn model_of_capture(
         ),
     )
     .add(
-        "the refinement's subset, residual and Levenberg–Marquardt columns",
-        budget::bytes(pairs.saturating_mul(g.nt), 8 * 12),
+        "the refinement's residual and its renders of a facet and 14 moves",
+        budget::bytes(pairs.saturating_mul(g.nt), 8 * 16),
     );
     if let Err(e) = plan.check(|| "the surface model".into()) {
         return Ok(unexplained(reason(e)?));

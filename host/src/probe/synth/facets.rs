@@ -21,10 +21,13 @@
 //! 4 cm, tilts from 4°) with the optimal amplitude `a = max(0, ⟨R + a_f m_f, m⟩/‖m‖²)`, and
 //! keeps the best (the current pose among them: the residual never grows). A facet none of
 //! whose moves helps halves its steps; one whose steps are below 1/64 of their start is
-//! settled and left alone while the others' sweeps go on (a round ends when all are). After the coordinate moves, one Levenberg–Marquardt
-//! step on the 7 parameters and the amplitude together (central differences at half the
-//! steps, damping `10⁻³…1`) is kept when it does better: it makes the coupled moves (a tilt
-//! with the offset and edges it drags along) that single coordinates cannot.
+//! settled and left alone while the others' sweeps go on (a round ends when all are). Then
+//! one Levenberg–Marquardt step from the facet's pose on the 7 parameters and the amplitude
+//! together (damping `10⁻³…1`) is kept when it does better still: it makes the coupled moves
+//! (a tilt with the offset and edges it drags along) that single coordinates cannot. Its
+//! Jacobian is the coordinate moves' own renders as central differences (`(m₊ − m₋)/2h` at
+//! the current steps; one-sided against the facet's render where a move collapsed it), so it
+//! costs no render but its trials.
 //!
 //! **Growth**: after the sweeps, facets 4, 8 and 16 cm wide attached to each edge of each lit
 //! facet and folded by ±20…90° are scored against the residual; the best joins when it
@@ -39,162 +42,27 @@
 //! return per bin and row, as the renderer bins them). Returns are binned without blur and
 //! delay: [`super::SynthModel::fit`] fits those after.
 //!
-//! Cost: per facet and sweep, about 36 renders of `K_f` surfels (`K_f` = area / pitch²) for
-//! each of the `≤ subset²` pairs (17 for the coordinate moves, 15 for the Levenberg–Marquardt
-//! columns, up to 4 for its dampings), each after `K_f·(L + S)` legs; per growth round 96
-//! candidate strips per lit facet. A render is a scatter of one return per surfel into the
-//! pair's histogram, a run of returns in one bin summed before it is stored. On panel/figure
-//! (8×8 × 8×8, 300 bins; 2 facets grown to 3, 24 sweeps) the whole pipeline took 260 s per
-//! capture with a subset of 64 × 64 (every histogram there), 104 s with 32 × 32 and 35–41 s
-//! with 16 × 16, on 2 cores shared with other jobs; the refined geometry stayed within 0.1–1°
-//! and 0.1–3 mm of `scene.json` at every size (tests/leak.rs prints it). Memory: the subset and
-//! its residual (`pairs·Nt` f64 each), the Levenberg–Marquardt columns (`9·pairs·Nt` f64)
-//! and the legs (`16·K_f·(L + S)` bytes).
+//! Cost: per facet and sweep, 15 renders of `K_f` surfels (`K_f` = area / pitch²) for each
+//! of the `≤ subset²` pairs (the facet's and its 14 coordinate moves', kept) and 1–4 for the
+//! Levenberg–Marquardt trials, each after `K_f·(L + S)` legs; per growth round 96 candidate
+//! strips per lit facet. A render ([`super::subset`]) computes every surfel's bin in vectors,
+//! then scatters the returns into 4 interleaved copies of the pair's histogram (neighbouring
+//! surfels mostly share a bin: one copy would chain their stores). On panel/figure (8×8 ×
+//! 8×8, 300 bins; 2 facets grown to 3, 24 sweeps) the refinement takes about 1.2 s on 2 idle
+//! cores (the whole pipeline took 260 s per capture with a subset of 64 × 64, every histogram
+//! there, before the renders were made faster; the refined geometry stayed within 0.1–1° and
+//! 0.1–3 mm of `scene.json` at subsets of 64, 32 and 16: tests/leak.rs prints it). Memory:
+//! the subset's residual, the facet's render and its 14 moves' (`16·pairs·Nt` f64) and the
+//! legs (`16·K_f·(L + S)` bytes).
 
-use super::linalg::solve;
-use super::render::{bin_of, leg};
+use super::facet::Facet;
+use super::subset::{Column, Legs, Src, Subset, dots};
 use super::surfels::Surfels;
-use super::vec3::{V3, cross, dot, rotate, unit};
 use crate::error::{Error, Result};
 use crate::exec::{Exec, Pass};
-use crate::io::capture::{Geometry, RowSource};
+use crate::io::capture::RowSource;
 use rayon::prelude::*;
 use vltm_kernel::geometry::dist64;
-
-/// A planar rectangle of a hidden surface (metres, the capture's frame).
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Facet {
-    /// A point of the plane; the extent is measured from it.
-    pub centre: V3,
-    /// Unit normal, toward the wall (the side that is lit).
-    pub normal: V3,
-    /// First in-plane unit axis (`v × normal`).
-    pub u: V3,
-    /// Second in-plane unit axis (the in-plane direction of +y, or of +x for a horizontal
-    /// facet).
-    pub v: V3,
-    /// `[u0, u1, v0, v1]`: the rectangle spans `u ∈ [u0, u1]`, `v ∈ [v0, v1]` from `centre`.
-    pub extent: [f64; 4],
-    /// The cluster (object) the facet came from.
-    pub cluster: usize,
-}
-
-/// The parameters a refinement moves: `[offset, tilt about u, tilt about v, Δu0, Δu1, Δv0,
-/// Δv1]` (m, rad, m).
-type Pose = [f64; 7];
-
-impl Facet {
-    /// A facet through `centre` with normal `normal` (turned toward `toward`), its frame as in
-    /// the module docs and extent zero.
-    pub(super) fn framed(centre: V3, normal: V3, toward: V3, cluster: usize) -> Self {
-        let mut n = unit(normal);
-        if dot(n, toward) < 0.0 {
-            n = n.map(|x| -x);
-        }
-        let up = if n[1].abs() > 0.9 {
-            [1.0, 0.0, 0.0]
-        } else {
-            [0.0, 1.0, 0.0]
-        };
-        let v = unit(core::array::from_fn(|i| up[i] - dot(up, n) * n[i]));
-        let u = cross(v, n);
-        Self {
-            centre,
-            normal: n,
-            u,
-            v,
-            extent: [0.0; 4],
-            cluster,
-        }
-    }
-
-    /// This facet moved by `p` (tilts about its own centre-of-extent).
-    fn moved(&self, p: &Pose) -> Self {
-        let [d, a, b, e0, e1, e2, e3] = *p;
-        let [u0, u1, v0, v1] = self.extent;
-        // Pivot: the middle of the rectangle.
-        let (mu, mv) = (0.5 * (u0 + u1), 0.5 * (v0 + v1));
-        let pivot: V3 = core::array::from_fn(|i| self.centre[i] + mu * self.u[i] + mv * self.v[i]);
-        let (mut n, mut u, mut v) = (self.normal, self.u, self.v);
-        if a != 0.0 {
-            n = rotate(n, self.u, a);
-            v = rotate(v, self.u, a);
-        }
-        if b != 0.0 {
-            n = rotate(n, self.v, b);
-            u = rotate(u, self.v, b);
-        }
-        let centre = core::array::from_fn(|i| pivot[i] + d * self.normal[i]);
-        Self {
-            centre,
-            normal: n,
-            u,
-            v,
-            extent: [u0 - mu + e0, u1 - mu + e1, v0 - mv + e2, v1 - mv + e3],
-            cluster: self.cluster,
-        }
-    }
-
-    /// A facet of width `w` attached to edge `edge` (0: `u0`, 1: `u1`, 2: `v0`, 3: `v1`) of
-    /// this one, folded about that edge by `fold` radians (0: this plane continued).
-    fn attached(&self, edge: usize, fold: f64, w: f64) -> Self {
-        let [u0, u1, v0, v1] = self.extent;
-        let (mu, mv) = (0.5 * (u0 + u1), 0.5 * (v0 + v1));
-        let (axis, out, at) = match edge {
-            0 => (self.v, self.u.map(|x| -x), [u0, mv]),
-            1 => (self.v, self.u, [u1, mv]),
-            2 => (self.u, self.v.map(|x| -x), [mu, v0]),
-            _ => (self.u, self.v, [mu, v1]),
-        };
-        let out = rotate(out, axis, fold);
-        let normal = rotate(self.normal, axis, fold);
-        let centre =
-            core::array::from_fn(|i| self.centre[i] + at[0] * self.u[i] + at[1] * self.v[i]);
-        let (u, v, extent) = if edge < 2 {
-            (out, axis, [0.0, w, v0 - mv, v1 - mv])
-        } else {
-            (axis, out, [u0 - mu, u1 - mu, 0.0, w])
-        };
-        Self {
-            centre,
-            normal,
-            u,
-            v,
-            extent,
-            cluster: self.cluster,
-        }
-    }
-
-    /// Area (m²; zero when an extent has collapsed).
-    pub fn area(&self) -> f64 {
-        let [u0, u1, v0, v1] = self.extent;
-        (u1 - u0).max(0.0) * (v1 - v0).max(0.0)
-    }
-
-    /// Surfels every `pitch` metres or finer (at least one per side): `(point, area)`
-    /// into `out` (cleared); none when the facet has collapsed.
-    fn sample(&self, pitch: f64, out: &mut Vec<(V3, f64)>) {
-        out.clear();
-        let [u0, u1, v0, v1] = self.extent;
-        let (wu, wv) = (u1 - u0, v1 - v0);
-        if !(wu > 0.0 && wv > 0.0) {
-            return;
-        }
-        let nu = ((wu / pitch).ceil() as usize).clamp(1, 10_000);
-        let nv = ((wv / pitch).ceil() as usize).clamp(1, 10_000);
-        let a = wu * wv / (nu * nv) as f64;
-        for i in 0..nu {
-            let x = u0 + (i as f64 + 0.5) / nu as f64 * wu;
-            for j in 0..nv {
-                let y = v0 + (j as f64 + 0.5) / nv as f64 * wv;
-                out.push((
-                    core::array::from_fn(|k| self.centre[k] + x * self.u[k] + y * self.v[k]),
-                    a,
-                ));
-            }
-        }
-    }
-}
 
 /// What [`refine_facets`] found.
 #[derive(Clone, Debug)]
@@ -249,143 +117,6 @@ impl FacetFit {
     }
 }
 
-/// The subset of the capture a refinement works on, with its legs' geometry.
-struct Subset<'a> {
-    g: &'a Geometry,
-    lasers: Vec<usize>,
-    spads: Vec<usize>,
-    laser_scale: Vec<f64>,
-    /// Device legs (m) per subset laser and SPAD.
-    d1: Vec<f64>,
-    d4: Vec<f64>,
-    nt: usize,
-}
-
-/// One render's legs: per subset laser `[li·K + k]` and SPAD `[si·K + k]`, time (m, device
-/// leg included, `t0` subtracted on the laser side) and weight.
-#[derive(Default)]
-struct Legs {
-    tl: Vec<f64>,
-    wl: Vec<f64>,
-    ts: Vec<f64>,
-    ws: Vec<f64>,
-    k: usize,
-}
-
-impl Subset<'_> {
-    fn pairs(&self) -> usize {
-        self.lasers.len() * self.spads.len()
-    }
-
-    fn legs(&self, f: &Facet, pitch: f64, buf: &mut Vec<(V3, f64)>, out: &mut Legs) {
-        f.sample(pitch, buf);
-        let k_n = buf.len();
-        out.k = k_n;
-        let g = self.g;
-        let (nl, ns) = (self.lasers.len(), self.spads.len());
-        out.tl.resize(nl * k_n, 0.0);
-        out.wl.resize(nl * k_n, 0.0);
-        out.ts.resize(ns * k_n, 0.0);
-        out.ws.resize(ns * k_n, 0.0);
-        for (li, &l) in self.lasers.iter().enumerate() {
-            let (nw, sc) = (g.laser_normal(l), self.laser_scale[li]);
-            for (k, &(p, a)) in buf.iter().enumerate() {
-                let (d, w) = leg(g.lasers[l], nw, p, f.normal);
-                out.tl[li * k_n + k] = self.d1[li] + d - g.t0;
-                out.wl[li * k_n + k] = sc * a * w;
-            }
-        }
-        for (si, &s) in self.spads.iter().enumerate() {
-            let nw = g.spad_normal(s);
-            for (k, &(p, _)) in buf.iter().enumerate() {
-                let (d, w) = leg(g.spads[s], nw, p, f.normal);
-                out.ts[si * k_n + k] = self.d4[si] + d;
-                out.ws[si * k_n + k] = w;
-            }
-        }
-    }
-
-    /// Renders pair `(li, si)` of `legs` into `m` (length `nt`, zero on entry); returns the
-    /// range of bins touched.
-    #[inline]
-    fn render(&self, legs: &Legs, li: usize, si: usize, m: &mut [f64]) -> (usize, usize) {
-        let k_n = legs.k;
-        let (tl, wl) = (&legs.tl[li * k_n..][..k_n], &legs.wl[li * k_n..][..k_n]);
-        let (ts, ws) = (&legs.ts[si * k_n..][..k_n], &legs.ws[si * k_n..][..k_n]);
-        let inv = 1.0 / self.g.dt;
-        let (mut lo, mut hi) = (usize::MAX, 0);
-        // Neighbouring surfels mostly land in the same bin: a run is summed in a register
-        // and stored once (a store and a reload of the same bin per surfel would chain them).
-        let (mut run, mut acc) = (usize::MAX, 0.0f64);
-        for k in 0..k_n {
-            let w = wl[k] * ws[k];
-            if w == 0.0 {
-                continue;
-            }
-            if let Some(b) = bin_of((tl[k] + ts[k]) * inv, self.nt) {
-                if b == run {
-                    acc += w;
-                } else {
-                    if run != usize::MAX {
-                        m[run] += acc;
-                    }
-                    (run, acc) = (b, w);
-                    lo = lo.min(b);
-                    hi = hi.max(b);
-                }
-            }
-        }
-        if run != usize::MAX {
-            m[run] += acc;
-        }
-        (lo, hi)
-    }
-
-    /// `(⟨r, m⟩, ‖m‖²)` over the subset for the render of `legs`.
-    fn score(&self, legs: &Legs, r: &[f64]) -> (f64, f64) {
-        let (ns, nt) = (self.spads.len(), self.nt);
-        (0..self.pairs())
-            .into_par_iter()
-            .fold(
-                || (0.0, 0.0, vec![0.0f64; nt]),
-                |(mut dot, mut mm, mut m), i| {
-                    let (lo, hi) = self.render(legs, i / ns, i % ns, &mut m);
-                    if lo <= hi {
-                        let rr = &r[i * nt..(i + 1) * nt];
-                        for b in lo..=hi {
-                            dot += rr[b] * m[b];
-                            mm += m[b] * m[b];
-                            m[b] = 0.0;
-                        }
-                    }
-                    (dot, mm, m)
-                },
-            )
-            .map(|(d, m, _)| (d, m))
-            .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
-    }
-
-    /// `r += a · m` for the render of `legs`.
-    fn add(&self, legs: &Legs, a: f64, r: &mut [f64]) {
-        if a == 0.0 {
-            return;
-        }
-        let (ns, nt) = (self.spads.len(), self.nt);
-        r.par_chunks_mut(nt).enumerate().for_each_init(
-            || vec![0.0f64; nt],
-            |m, (i, rr)| {
-                let (lo, hi) = self.render(legs, i / ns, i % ns, m);
-                if lo <= hi {
-                    for b in lo..=hi {
-                        rr[b] += a * m[b];
-                        m[b] = 0.0;
-                    }
-                }
-            },
-        );
-    }
-}
-
 /// How [`refine_facets`] works.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct FacetOptions {
@@ -422,82 +153,6 @@ const FOLDS: [f64; 8] = [-90.0, -60.0, -40.0, -20.0, 20.0, 40.0, 60.0, 90.0];
 const GROW_WIDTHS: [f64; 3] = [0.04, 0.08, 0.16];
 /// A grown facet's amplitude lies within this factor of its parent's (module docs).
 const GROW_AMPLITUDE: f64 = 2.0;
-
-impl Subset<'_> {
-    /// The render of `legs` over the whole subset (`pairs·Nt`).
-    fn dense(&self, legs: &Legs) -> Vec<f64> {
-        let mut m = vec![0.0f64; self.pairs() * self.nt];
-        self.add(legs, 1.0, &mut m);
-        m
-    }
-
-    /// One Levenberg–Marquardt step of facet `f` (amplitude `a`, gain `gain` against `r`) on
-    /// its 7 parameters and its amplitude together, from central differences at half the
-    /// current steps (`scale · base`): the first damping of `10⁻³…1` whose pose raises the
-    /// gain, as `(facet, gain, amplitude, true)`; `None` when none does.
-    #[allow(clippy::too_many_arguments)]
-    fn levenberg_marquardt(
-        &self,
-        f: &Facet,
-        a: f64,
-        gain: f64,
-        r: &[f64],
-        pitch: f64,
-        scale: f64,
-        base: &[f64; 7],
-    ) -> Option<(Facet, f64, f64, bool)> {
-        let (mut legs, mut buf) = (Legs::default(), Vec::new());
-        self.legs(f, pitch, &mut buf, &mut legs);
-        let m0 = self.dense(&legs);
-        let mut cols: Vec<Vec<f64>> = Vec::with_capacity(8);
-        for p in 0..7 {
-            let h = 0.5 * base[p] * scale.max(1.0 / 32.0);
-            let mut pose = [0.0; 7];
-            pose[p] = h;
-            self.legs(&f.moved(&pose), pitch, &mut buf, &mut legs);
-            let mut d = self.dense(&legs);
-            pose[p] = -h;
-            self.legs(&f.moved(&pose), pitch, &mut buf, &mut legs);
-            self.add(&legs, -1.0, &mut d);
-            let k = a / (2.0 * h);
-            d.iter_mut().for_each(|x| *x *= k);
-            cols.push(d);
-        }
-        let e: Vec<f64> = r.iter().zip(&m0).map(|(r, m)| r - a * m).collect();
-        cols.push(m0);
-        const N: usize = 8;
-        let dotv = |x: &[f64], y: &[f64]| -> f64 { x.par_iter().zip(y).map(|(a, b)| a * b).sum() };
-        let mut gm = vec![0.0f64; N * N];
-        let mut b = vec![0.0f64; N];
-        for i in 0..N {
-            b[i] = dotv(&cols[i], &e);
-            for j in i..N {
-                let v = dotv(&cols[i], &cols[j]);
-                gm[i * N + j] = v;
-                gm[j * N + i] = v;
-            }
-        }
-        for mu in [1e-3, 1e-2, 1e-1, 1.0] {
-            let mut g2 = gm.clone();
-            (0..N).for_each(|i| g2[i * N + i] *= 1.0 + mu);
-            let mut d = vec![0.0f64; N];
-            if !solve(&g2, &b, &mut d) {
-                continue;
-            }
-            let cand = f.moved(&core::array::from_fn(|i| d[i]));
-            let [u0, u1, v0, v1] = cand.extent;
-            if u1 - u0 < pitch || v1 - v0 < pitch {
-                continue;
-            }
-            self.legs(&cand, pitch, &mut buf, &mut legs);
-            let (dd, mm) = self.score(&legs, r);
-            if dd > 0.0 && mm > 0.0 && dd * dd / mm > gain * (1.0 + 1e-9) {
-                return Some((cand, dd * dd / mm, dd / mm, true));
-            }
-        }
-        None
-    }
-}
 
 /// At most `n` of `0..len`, spread evenly.
 fn spread(len: usize, n: usize) -> Vec<usize> {
@@ -618,6 +273,9 @@ pub fn refine_facets(
         0.04,
     ];
     let mut scale = vec![1.0f64; facets.len()];
+    // The facet's render and its 14 coordinate moves' (also the Jacobian's differences).
+    let mut m0 = vec![0.0f64; r.len()];
+    let mut moves = vec![vec![0.0f64; r.len()]; 14];
     let bar = Pass::start(exec, "direct-light model: facets", (grow + 1) * sweeps);
     let mut ran = 0;
     let mut grown = 0;
@@ -670,42 +328,94 @@ pub fn refine_facets(
                 }
                 // R' = R + a_f m_f.
                 sub.legs(&facets[fi], pitch, &mut buf, &mut legs);
-                sub.add(&legs, amp[fi], &mut r);
-                let mut best = (facets[fi], 0.0f64, 0.0f64, false);
-                let (d, m) = sub.score(&legs, &r);
+                sub.dense_into(&legs, &mut m0);
+                let a_f = amp[fi];
+                r.par_iter_mut().zip(&m0).for_each(|(x, m)| *x += a_f * m);
+                // (facet, gain, amplitude, the render it came from: None for LM's).
+                let mut best = (facets[fi], 0.0f64, 0.0f64, Some(Src::M0));
+                let (d, m) = dots(&r, &m0);
                 if d > 0.0 && m > 0.0 {
-                    best = (facets[fi], d * d / m, d / m, false);
+                    best.1 = d * d / m;
+                    best.2 = d / m;
                 }
-                for p in 0..7 {
-                    for sign in [-1.0, 1.0] {
+                let a0 = best.2;
+                let mut cols = [Column {
+                    plus: Src::M0,
+                    minus: Src::M0,
+                    k: 0.0,
+                }; 7];
+                for (p, col) in cols.iter_mut().enumerate() {
+                    let h = base[p] * scale[fi];
+                    let mut have = [false; 2];
+                    for (side, sign) in [-1.0, 1.0].into_iter().enumerate() {
                         let mut pose = [0.0; 7];
-                        pose[p] = sign * base[p] * scale[fi];
+                        pose[p] = sign * h;
                         let cand = facets[fi].moved(&pose);
                         let [u0, u1, v0, v1] = cand.extent;
                         if u1 - u0 < pitch || v1 - v0 < pitch {
                             continue;
                         }
+                        let j = 2 * p + side;
                         sub.legs(&cand, pitch, &mut buf, &mut legs);
-                        let (d, m) = sub.score(&legs, &r);
+                        sub.dense_into(&legs, &mut moves[j]);
+                        have[side] = true;
+                        let (d, m) = dots(&r, &moves[j]);
                         if d > 0.0 && m > 0.0 && d * d / m > best.1 * (1.0 + 1e-9) {
-                            best = (cand, d * d / m, d / m, true);
+                            best = (cand, d * d / m, d / m, Some(Src::Move(j)));
                         }
                     }
+                    // The column of the Jacobian of a0·m at the facet's pose.
+                    *col = match have {
+                        [true, true] => Column {
+                            plus: Src::Move(2 * p + 1),
+                            minus: Src::Move(2 * p),
+                            k: a0 / (2.0 * h),
+                        },
+                        [false, true] => Column {
+                            plus: Src::Move(2 * p + 1),
+                            minus: Src::M0,
+                            k: a0 / h,
+                        },
+                        [true, false] => Column {
+                            plus: Src::M0,
+                            minus: Src::Move(2 * p),
+                            k: a0 / h,
+                        },
+                        [false, false] => *col,
+                    };
                 }
-                if best.2 > 0.0
-                    && let Some(lm) = sub
-                        .levenberg_marquardt(&best.0, best.2, best.1, &r, pitch, scale[fi], &base)
+                if a0 > 0.0
+                    && let Some((f, g, a)) = sub.levenberg_marquardt(
+                        &facets[fi],
+                        a0,
+                        best.1,
+                        &r,
+                        &m0,
+                        &moves,
+                        &cols,
+                        pitch,
+                    )
                 {
-                    best = lm;
+                    best = (f, g, a, None);
                 }
-                let (f, _, a, moved) = best;
-                if !moved {
+                let (f, _, a, from) = best;
+                if matches!(from, Some(Src::M0)) {
                     scale[fi] *= 0.5;
                 }
                 facets[fi] = f;
                 amp[fi] = a.max(0.0);
-                sub.legs(&facets[fi], pitch, &mut buf, &mut legs);
-                sub.add(&legs, -amp[fi], &mut r);
+                let a_f = amp[fi];
+                match from {
+                    Some(Src::M0) => r.par_iter_mut().zip(&m0).for_each(|(x, m)| *x -= a_f * m),
+                    Some(Src::Move(j)) => r
+                        .par_iter_mut()
+                        .zip(&moves[j])
+                        .for_each(|(x, m)| *x -= a_f * m),
+                    None => {
+                        sub.legs(&facets[fi], pitch, &mut buf, &mut legs);
+                        sub.add(&legs, -a_f, &mut r);
+                    }
+                }
             }
         }
     }

@@ -27,8 +27,8 @@
 //!
 //! 1. **Global**: one reflectance per cluster (non-negative least squares), with the response
 //!    width `w ∈ {0, ¼, …, max_width}` bins and a global delay (time zero) in `±max_shift`
-//!    bins at `Δt/8` chosen by the energy explained, on up to 4,096 histograms spread over the
-//!    scan.
+//!    bins at `Δt/8` chosen by the energy explained, on up to [`GLOBAL_HISTOGRAMS`] histograms
+//!    spread over the scan (one render per histogram, blurred by each width).
 //! 2. **Per histogram** ([`SynthOptions::per_histogram`], default): a gain per cluster
 //!    (non-negative) and a delay within `±local_shift` bins of the global one, per (laser,
 //!    SPAD) histogram. This absorbs the small errors of the geometry (a few mm of depth, a
@@ -43,22 +43,28 @@
 //!
 //! # Cost and memory
 //!
-//! Rendering one row costs `K·S` returns (`K` surfels, `S` SPADs), then per histogram and
-//! cluster a blur and a binning of `8·Nt` samples. Pass 1 adds `W·(2·8·max_shift + 1)`
-//! binnings per sampled histogram; pass 2 `2·8·local_shift + 1` per histogram; subtracting a
-//! row renders it once. Memory: `8·K·S` bytes of SPAD tables (checked against
-//! [`SynthOptions::max_bytes`]), `S·(C + 1)` values per row of gains and delays, one row and
-//! one fine histogram per thread.
+//! Rendering one row costs `K·S` returns (`K` surfels, `S` SPADs; the SPAD tables hold a
+//! SPAD's surfels contiguously), then per histogram and cluster a blur and a binning of
+//! `8·Nt` samples. Pass 1 renders each of its histograms once and adds `W` blurs and
+//! `W·(2·8·max_shift + 1)` binnings; pass 2 `2·8·local_shift + 1` binnings per histogram.
+//! Pass 2 keeps the model's histograms (`4·L·S·Nt` bytes, the size of the capture in `f32`)
+//! when they fit [`SynthOptions::max_bytes`] together with the tables: subtracting a row is
+//! then a difference; otherwise it renders the row again (the same values). Memory: `8·K·S`
+//! bytes of SPAD tables (checked against [`SynthOptions::max_bytes`]), `S·(C + 1)` values per
+//! row of gains and delays, the kept histograms, one row and one fine histogram per thread.
 
+mod facet;
 mod facets;
 mod linalg;
 mod planes;
 mod refine;
 mod render;
+mod subset;
 mod surfels;
 mod vec3;
 
-pub use facets::{Facet, FacetFit, FacetOptions, refine_facets};
+pub use facet::Facet;
+pub use facets::{FacetFit, FacetOptions, refine_facets};
 pub use planes::{facets_from_surfels, geometry_wavelength};
 pub use refine::{Refined, refine};
 pub use surfels::Surfels;
@@ -72,6 +78,11 @@ use rayon::prelude::*;
 use render::{Renderer, SUB, bin, blurred_prefix, kernel};
 use std::time::Instant;
 use vltm_kernel::Point;
+
+/// Histograms at most of the global fit (pass 1 of [`SynthModel::fit`]): its few parameters
+/// (a width, a delay, a reflectance per cluster) are pinned by far fewer, and each costs
+/// `W·(2·8·max_shift + 1)` binnings.
+pub const GLOBAL_HISTOGRAMS: usize = 1024;
 
 /// How [`SynthModel::fit`] fits the surfels' render to the capture.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -87,7 +98,8 @@ pub struct SynthOptions {
     /// Whether the model includes the physical laser's falloff (true when the capture holds
     /// it, as renders and raw captures do; default true).
     pub laser_falloff: bool,
-    /// Memory budget of the SPAD tables (bytes, default 2 GB).
+    /// Memory budget of the SPAD tables and the kept model histograms (bytes, default 2 GB;
+    /// the histograms are rendered again per row when they do not fit).
     pub max_bytes: usize,
 }
 
@@ -140,6 +152,9 @@ pub struct SynthModel {
     gains: Vec<f32>,
     /// Per histogram `l·S + s`: the delay in fine samples.
     shifts: Vec<i16>,
+    /// The model's histograms (`(l·S + s)·Nt + t`), kept by the fit when they fit the memory
+    /// budget with the SPAD tables; empty: [`SynthModel::subtract_row`] renders them again.
+    kept: Vec<f32>,
     /// Fraction of the capture's energy `Σ H²` the model explains (0..1).
     pub explained: f64,
     /// Wall-clock seconds of the fit.
@@ -170,8 +185,14 @@ struct Scratch {
 impl Scratch {
     /// Renders SPAD `s` of `row` and prefixes it blurred by `kern`, per cluster.
     fn render(&mut self, r: &Renderer, g: &Geometry, row: &[(f64, f64)], s: usize, kern: &[f64]) {
-        let c_n = r.surfels.clusters;
         r.spad(g, row, s, &mut self.fine);
+        self.blur(r, kern);
+    }
+
+    /// Prefixes the fine render of the last [`Scratch::render`] blurred by `kern`, per
+    /// cluster (the render is kept: one render serves every width of the global fit).
+    fn blur(&mut self, r: &Renderer, kern: &[f64]) {
+        let c_n = r.surfels.clusters;
         self.prefix.resize_with(c_n, Vec::new);
         self.bins.resize_with(c_n, Vec::new);
         for c in 0..c_n {
@@ -180,6 +201,22 @@ impl Scratch {
                 kern,
                 &mut self.prefix[c],
             );
+        }
+    }
+
+    /// The model's histogram `Σ_c a_c·bin_c` with a delay of `shift` fine samples into `out`
+    /// (overwritten), the gains `a` (per cluster) as the model stores them (`f32`).
+    fn model(&mut self, pad: usize, shift: isize, a: &[f32], out: &mut [f64]) {
+        out.fill(0.0);
+        for (c, &a) in a.iter().enumerate() {
+            if a == 0.0 {
+                continue;
+            }
+            let m = &mut self.bins[c];
+            m.resize(out.len(), 0.0);
+            bin(&self.prefix[c], pad, shift, m);
+            let a = f64::from(a);
+            out.iter_mut().zip(&*m).for_each(|(o, x)| *o += a * x);
         }
     }
 
@@ -262,7 +299,7 @@ impl SynthModel {
         let (l_n, s_n) = (g.lasers.len(), g.spads.len());
         let nt = g.nt;
         // Pass 1: the global fit over a spread subset of histograms.
-        let stride = (l_n * s_n).div_ceil(4096).max(1);
+        let stride = (l_n * s_n).div_ceil(GLOBAL_HISTOGRAMS).max(1);
         let widths: Vec<f64> = {
             let n = (opts.max_width * 4.0).floor() as usize;
             (0..=n).map(|i| i as f64 * 0.25).collect()
@@ -303,11 +340,13 @@ impl SynthModel {
                     |((mut ga, mut ba, mut e), mut sc, mut gm, mut b), (i, (_, h))| {
                         let l = start + i;
                         let row = renderer.laser_row(&g, l);
-                        for s in (0..s_n).filter(|s| (l * s_n + s) % stride == 0) {
+                        // Every `stride`-th histogram, the pattern moved by one SPAD per row.
+                        for s in (0..s_n).filter(|s| (l * s_n + s + l) % stride == 0) {
                             let hist = &h[s * nt..(s + 1) * nt];
                             e += hist.iter().map(|x| f64::from(*x).powi(2)).sum::<f64>();
+                            renderer.spad(&g, &row, s, &mut sc.fine);
                             for (wi, kern) in kerns.iter().enumerate() {
-                                sc.render(&renderer, &g, &row, s, kern);
+                                sc.blur(&renderer, kern);
                                 for (ji, &j) in shifts.iter().enumerate() {
                                     sc.normal(pad, j, hist, &mut gm, &mut b);
                                     let at = wi * shifts.len() + ji;
@@ -372,6 +411,7 @@ impl SynthModel {
             albedo,
             gains: Vec::new(),
             shifts: vec![shifts[ji] as i16; l_n * s_n],
+            kept: Vec::new(),
             explained: 0.0,
             seconds: 0.0,
             renderer,
@@ -386,6 +426,14 @@ impl SynthModel {
         };
         let bar = Pass::start(exec, "direct-light model: per histogram", l_n);
         let (mut total, mut resid) = (0.0f64, 0.0f64);
+        // The model's histograms are kept when they and the tables fit the budget.
+        let keep_all =
+            bytes.saturating_add(l_n.saturating_mul(s_n).saturating_mul(nt * 4)) <= opts.max_bytes;
+        let mut kept = if keep_all {
+            vec![0.0f32; l_n * s_n * nt]
+        } else {
+            Vec::new()
+        };
         let mut gains = vec![0.0f32; l_n * s_n * c_n];
         let mut hshift = vec![0i16; l_n * s_n];
         for start in (0..l_n).step_by(batch) {
@@ -394,10 +442,22 @@ impl SynthModel {
             read(src, start, &mut rows)?;
             let _t = timings::section("direct-light model", Kind::Parallel);
             let m = &model;
+            let kept_rows = if keep_all {
+                &mut kept[start * s_n * nt..end * s_n * nt]
+            } else {
+                &mut [][..]
+            };
+            let mut kept_rows: Vec<&mut [f32]> = if keep_all {
+                kept_rows.chunks_mut(s_n * nt).collect()
+            } else {
+                Vec::new()
+            };
+            kept_rows.resize_with(end - start, || &mut [][..]);
             let per_row: Vec<(Vec<f32>, Vec<i16>, f64, f64)> = rows
                 .par_iter()
+                .zip(kept_rows.into_par_iter())
                 .enumerate()
-                .map(|(i, (_, h))| {
+                .map(|(i, ((_, h), out))| {
                     let l = start + i;
                     let row = m.renderer.laser_row(&g, l);
                     let mut sc = Scratch::default();
@@ -405,6 +465,7 @@ impl SynthModel {
                         (vec![0.0; c_n * c_n], vec![0.0; c_n], vec![0.0; c_n]);
                     let mut out_g = vec![0.0f32; s_n * c_n];
                     let mut out_j = vec![0i16; s_n];
+                    let mut mh = vec![0.0f64; nt];
                     let (mut e, mut r) = (0.0, 0.0);
                     for s in 0..s_n {
                         let hist = &h[s * nt..(s + 1) * nt];
@@ -426,8 +487,15 @@ impl SynthModel {
                         }
                         r += (hh + keep.0).max(0.0);
                         out_j[s] = keep.1 as i16;
-                        for c in 0..c_n {
-                            out_g[s * c_n + c] = keep.2[c] as f32;
+                        let gs = &mut out_g[s * c_n..(s + 1) * c_n];
+                        for (o, a) in gs.iter_mut().zip(&keep.2) {
+                            *o = *a as f32;
+                        }
+                        if !out.is_empty() {
+                            sc.model(pad, keep.1, gs, &mut mh);
+                            for (o, x) in out[s * nt..(s + 1) * nt].iter_mut().zip(&mh) {
+                                *o = *x as f32;
+                            }
                         }
                     }
                     (out_g, out_j, e, r)
@@ -445,6 +513,7 @@ impl SynthModel {
         drop(bar);
         model.gains = gains;
         model.shifts = hshift;
+        model.kept = kept;
         model.explained = 1.0 - resid / total;
         if !model.explained.is_finite() {
             return Err(Error::arg(
@@ -461,27 +530,27 @@ impl SynthModel {
         &self.renderer.surfels
     }
 
-    /// Renders the model's histograms of laser row `l` and **subtracts** them from `out`
-    /// (`S·Nt`, SPAD-major, as read).
+    /// Subtracts the model's histograms of laser row `l` from `out` (`S·Nt`, SPAD-major, as
+    /// read): those the fit kept, else rendered again (the same values: each histogram summed
+    /// over its clusters in `f64`, then rounded to `f32` once).
     pub fn subtract_row(&self, l: usize, out: &mut [f32]) {
         let g = &self.geometry;
         let (nt, s_n, c_n) = (g.nt, g.spads.len(), self.renderer.surfels.clusters);
+        if !self.kept.is_empty() {
+            let m = &self.kept[l * s_n * nt..(l + 1) * s_n * nt];
+            out.iter_mut().zip(m).for_each(|(o, x)| *o -= x);
+            return;
+        }
         let row = self.renderer.laser_row(g, l);
         out.par_chunks_mut(nt).enumerate().take(s_n).for_each_init(
-            Scratch::default,
-            |sc, (s, h)| {
+            || (Scratch::default(), vec![0.0f64; nt]),
+            |(sc, m), (s, h)| {
                 sc.render(&self.renderer, g, &row, s, &self.kern);
                 let j = isize::from(self.shifts[l * s_n + s]);
-                let mut m = vec![0.0; nt];
-                for c in 0..c_n {
-                    let a = f64::from(self.gains[(l * s_n + s) * c_n + c]);
-                    if a == 0.0 {
-                        continue;
-                    }
-                    bin(&sc.prefix[c], self.renderer.pad, j, &mut m);
-                    for (o, x) in h.iter_mut().zip(&m) {
-                        *o -= (a * x) as f32;
-                    }
+                let a = &self.gains[(l * s_n + s) * c_n..(l * s_n + s + 1) * c_n];
+                sc.model(self.renderer.pad, j, a, m);
+                for (o, x) in h.iter_mut().zip(&*m) {
+                    *o -= *x as f32;
                 }
             },
         );

@@ -15,7 +15,7 @@
 //! Cost: `O(columns²)` per cluster for the seeds, a few 3 × 3 eigenproblems. Memory: the
 //! columns' centres and normals.
 
-use super::facets::Facet;
+use super::facet::Facet;
 use super::surfels::Surfels;
 use super::vec3::{V3, dot, unit};
 use crate::error::{Error, Result};

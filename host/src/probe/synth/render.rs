@@ -9,29 +9,32 @@ use vltm_kernel::geometry::dist64;
 /// Fine samples per capture bin: delays are resolved to `Δt / SUB`.
 pub(super) const SUB: usize = 8;
 
-/// Leg from a wall spot (normal `nw`) to surfel `k`: `(distance, cos_wall·cos_surfel / d²)`.
+/// Leg from a wall spot (normal `nw`) to surfel `k`: `(distance, cos_wall·cos_surfel / d²)`,
+/// written as `(v·n_w)(−v·n)/d⁴` with `v = p − spot` (one square root and one division; the
+/// distance as [`vltm_kernel::geometry::dist64`] computes it).
 #[inline]
 pub(super) fn leg(spot: [f32; 3], nw: [f64; 3], p: [f64; 3], n: [f64; 3]) -> (f64, f64) {
-    let d = dist64(&spot, &p);
+    let v: [f64; 3] = core::array::from_fn(|i| f64::from(spot[i]) - p[i]);
+    let d2 = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    let d = d2.sqrt();
     if d.is_nan() || d <= 0.0 {
         return (d, 0.0);
     }
-    let u: [f64; 3] = core::array::from_fn(|i| (p[i] - f64::from(spot[i])) / d);
-    let cw = (u[0] * nw[0] + u[1] * nw[1] + u[2] * nw[2]).max(0.0);
-    let cs = -(u[0] * n[0] + u[1] * n[1] + u[2] * n[2]);
-    (d, cw * cs.max(0.0) / (d * d))
+    // v points from the surfel to the spot: cos_wall = −v̂·n_w, cos_surfel = v̂·n.
+    let cw = (-(v[0] * nw[0] + v[1] * nw[1] + v[2] * nw[2])).max(0.0);
+    let cs = (v[0] * n[0] + v[1] * n[1] + v[2] * n[2]).max(0.0);
+    (d, cw * cs / (d2 * d2))
 }
 
-/// What the renderer needs of a capture and its surfels: SPAD legs per surfel (`[k][s]`),
+/// What the renderer needs of a capture and its surfels: SPAD legs per surfel (`[s][k]`),
 /// the per-laser scale (the physical laser's falloff), device legs and the fine grid.
 #[derive(Clone, Debug)]
 pub(super) struct Renderer {
     pub surfels: Surfels,
-    /// `d_ks + d4_s` (m), `[k * spads + s]`.
+    /// `d_ks + d4_s` (m), `[s * K + k]`: a SPAD's surfels are contiguous.
     ts: Vec<f32>,
-    /// `cos·cos / d²` of the SPAD leg, `[k * spads + s]`.
+    /// `cos·cos / d²` of the SPAD leg, `[s * K + k]`.
     gs: Vec<f32>,
-    spads: usize,
     laser_scale: Vec<f64>,
     d1: Vec<f64>,
     /// Padding of the fine grid on each side, in fine samples.
@@ -65,15 +68,15 @@ impl Renderer {
         let mut ts = vec![0.0f32; k_n * spads];
         let mut gs = vec![0.0f32; k_n * spads];
         use rayon::prelude::*;
-        ts.par_chunks_mut(spads.max(1))
-            .zip(gs.par_chunks_mut(spads.max(1)))
+        ts.par_chunks_mut(k_n.max(1))
+            .zip(gs.par_chunks_mut(k_n.max(1)))
             .enumerate()
-            .for_each(|(k, (t, w))| {
-                let (p, n) = (surfels.points[k], surfels.normals[k]);
-                for s in 0..spads {
-                    let (d, f) = leg(g.spads[s], g.spad_normal(s), p, n);
-                    t[s] = (d + d4[s]) as f32;
-                    w[s] = f as f32;
+            .for_each(|(s, (t, w))| {
+                let (x, nw) = (g.spads[s], g.spad_normal(s));
+                for k in 0..k_n {
+                    let (d, f) = leg(x, nw, surfels.points[k], surfels.normals[k]);
+                    t[k] = (d + d4[s]) as f32;
+                    w[k] = f as f32;
                 }
             });
         let pad = ((reach.max(0.0) + 2.0) * SUB as f64).ceil() as usize;
@@ -81,7 +84,6 @@ impl Renderer {
             surfels,
             ts,
             gs,
-            spads,
             laser_scale,
             d1,
             pad,
@@ -103,22 +105,20 @@ impl Renderer {
 
     /// The fine histograms of SPAD `s` for the laser leg `row`: `fine[c·nf + i]` for cluster
     /// `c`, every surfel's return deposited at `floor(τ/Δt·SUB)` (the render's own binning).
-    /// `fine` is resized and cleared.
+    /// `fine` is resized to `C·nf + 1` and cleared; its last value is a dump for the returns
+    /// outside the grid (no branch per surfel).
     pub fn spad(&self, g: &Geometry, row: &[(f64, f64)], s: usize, fine: &mut Vec<f64>) {
         let nf = self.nf;
+        let dump = self.surfels.clusters * nf;
         fine.clear();
-        fine.resize(self.surfels.clusters * nf, 0.0);
+        fine.resize(dump + 1, 0.0);
         let scale = SUB as f64 / g.dt;
         let pad = self.pad as f64;
-        for (k, &(tl, al)) in row.iter().enumerate() {
-            let i = k * self.spads + s;
-            let a = al * f64::from(self.gs[i]);
-            if a == 0.0 {
-                continue;
-            }
-            if let Some(f) = bin_of((tl + f64::from(self.ts[i])) * scale + pad, nf) {
-                fine[self.surfels.cluster[k] * nf + f] += a;
-            }
+        let k_n = self.surfels.len();
+        let (ts, gs) = (&self.ts[s * k_n..][..k_n], &self.gs[s * k_n..][..k_n]);
+        for (((&(tl, al), &t), &w), &c) in row.iter().zip(ts).zip(gs).zip(&self.surfels.cluster) {
+            let at = bin_of((tl + f64::from(t)) * scale + pad, nf).map_or(dump, |f| c * nf + f);
+            fine[at] += al * f64::from(w);
         }
     }
 }
@@ -129,7 +129,7 @@ impl Renderer {
 /// call that `floor` is on baseline x86-64 (16 % of a refinement's time, measured with
 /// `perf` on panel/figure).
 #[inline]
-pub(super) fn bin_of(x: f64, n: usize) -> Option<usize> {
+fn bin_of(x: f64, n: usize) -> Option<usize> {
     // For x ≥ 0 truncation is floor; NaN fails both comparisons (and casts to 0, unused).
     (x >= 0.0 && x < n as f64).then_some(x as usize)
 }
