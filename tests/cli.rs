@@ -1930,7 +1930,7 @@ fn leak_correct_model_on_the_command_line() {
         assert!(o.status.success(), "{a:?}: {}", text(&o.stderr));
         (text(&o.stdout), text(&o.stderr), npy(&f, SHAPE))
     };
-    // The model explains ≥ 99 % of this noise-free render (measured 0.9936).
+    // The model explains ≥ 99 % of this noise-free render (measured 0.9926).
     let (out, err, model) = run("m.npy", &["--leak-correct", "model"]);
     assert!(
         out.contains("leak correction (--leak-correct model): the surface model (")

@@ -696,9 +696,10 @@ fn synthesis_with_the_capture_geometry_keeps_the_indirect_light_on_panel_figure(
         );
         eprintln!("{what}");
         // Measured (2026-12-05, the library's image grid on the phasor path, the refinement on
-        // a subset of 16 × 16 laser rows × SPADs): figure 81.7×, kept 0.909, Pearson 0.993;
-        // panel 72.6×, kept 0.966, Pearson 0.995 (on all 64 × 64 histograms and a fixed grid:
-        // figure 89.6×, 0.892, 0.991; panel 68.6×, 0.952, 0.993).
+        // a subset of 16 × 16 laser rows × SPADs, its Levenberg–Marquardt step on the moves'
+        // renders): figure 78.1×, kept 0.866, Pearson 0.987; panel 88.6×, kept 0.922, Pearson
+        // 0.993 (on all 64 × 64 histograms and a fixed grid: figure 89.6×, 0.892, 0.991;
+        // panel 68.6×, 0.952, 0.993).
         assert!(o.ratio() >= 60.0, "{what}");
         assert!((0.85..=1.1).contains(&o.kept()), "{what}");
         assert!(o.pearson >= 0.98, "{what}");
@@ -728,8 +729,8 @@ fn synthesis_with_the_capture_geometry_keeps_the_indirect_light_on_panel_figure(
         );
         eprintln!("{what}");
         // Measured (2026-12-05, the refinement on a 16 × 16 subset, the image on the phasor
-        // path): figure 82.2×, kept 0.914, Pearson 0.988, noise share 0.0057; panel 72.3×,
-        // kept 0.963, Pearson 0.991, noise share 0.0075 (issue 34: lit object ≥ 20×,
+        // path): figure 86.2×, kept 0.956, Pearson 0.993, noise share 0.0097; panel 97.5×,
+        // kept 1.014, Pearson 0.992, noise share 0.0092 (issue 34: lit object ≥ 20×,
         // projector's surface ≥ 10×, kept 0.8–1.25, Pearson ≥ 0.95).
         assert!(o.ratio() >= 60.0, "{what}");
         assert!((0.85..=1.1).contains(&o.kept()), "{what}");
@@ -782,8 +783,8 @@ fn synthesis_with_the_capture_geometry_survives_an_unknown_response_and_delay() 
         );
         eprintln!("{what}");
         // Measured (2026-12-05, the refinement on a 16 × 16 subset, the image on the phasor
-        // path): figure 45.4×, kept 0.857, Pearson 0.980; panel 46.2×, kept 0.918, Pearson
-        // 0.994 (on all 64 × 64: figure 44.0×, 0.863, 0.948; panel 42.8×, 0.941, 0.991).
+        // path): figure 30.0×, kept 0.855, Pearson 0.956; panel 36.2×, kept 0.929, Pearson
+        // 0.990 (on all 64 × 64: figure 44.0×, 0.863, 0.948; panel 42.8×, 0.941, 0.991).
         assert!(o.ratio() >= 20.0, "{what}");
         assert!((0.8..=1.1).contains(&o.kept()), "{what}");
         assert!(o.pearson >= 0.93, "{what}");
