@@ -15,7 +15,8 @@
 //! another seed: `SEED=1 fixtures/pathtraced/render.sh`), a third table gives the figures of
 //! that render and the `I_i` of the noise-only capture `(H_seed0 − H_seed1)/√2`.
 //! `PATHTRACED_DIR=<dir>` measures another set of the same scenes' captures instead (for
-//! example all three rendered with seed 1).
+//! example all three rendered with seed 1, or at 16 × 16 lasers × 16 × 16 SPADs: `GRID=16`
+//! in `fixtures/pathtraced/render.sh`), in both tables and in `-- synth`.
 //! `cargo bench --bench pathtraced -- synth` prints instead the analysis by synthesis
 //! (`vltm::probe::synth`): Stage 1 with the oracle geometry of `scene.json`, Stage 2 with
 //! surfels from each capture's own direct light (`-- synth capture` for Stage 2 only;
@@ -370,7 +371,10 @@ fn synth() {
             if std::env::var("PATHTRACED_SCENE").is_ok_and(|s| s != scene) {
                 continue;
             }
-            let mut c = load(scene);
+            let mut c = match std::env::var_os("PATHTRACED_DIR") {
+                Some(d) => load_from(std::path::Path::new(&d), scene),
+                None => load(scene),
+            };
             let stage = if robust {
                 blur_all(&mut c, 40.0, 6.0);
                 format!("{stage}, blurred 40 ps + 6 ps")
@@ -388,7 +392,15 @@ fn synth() {
                 );
             }
             row(&format!("{stage}, seed 0"), scene, &r, &ma, &mk);
-            let p = seed1_path(scene);
+            // The seed-1 render: `PATHTRACED_SEED1`'s, else the committed one unless another
+            // set of captures is measured.
+            let p = match std::env::var_os("PATHTRACED_SEED1") {
+                Some(dir) => std::path::Path::new(&dir)
+                    .join(format!("{scene}_all"))
+                    .join(format!("{scene}_all.hdf5")),
+                None if std::env::var_os("PATHTRACED_DIR").is_some() => continue,
+                None => seed1_path(scene),
+            };
             if surf == Surf::Oracle || robust || !p.is_file() {
                 continue;
             }
