@@ -249,7 +249,7 @@ fn default_volume(g: &Geometry, lam: f64) -> std::result::Result<Volume, String>
 }
 
 /// Histograms at most of the direct-light image of [`model_of_capture`]: a larger capture is
-/// imaged from a regular sub-lattice of its laser spots ([`LaserLattice`]), every SPAD kept.
+/// imaged from a regular sub-lattice of its laser spots, every SPAD kept.
 /// The image only starts the facets, which are refined against every histogram; on the
 /// 16 × 16 × 16 × 16 panel/figure render the image from all 65,536 histograms took 22 s of
 /// the model's 27 s.
