@@ -118,6 +118,25 @@ fn allowance(path: EvalPath, tol: &Tol) -> f64 {
     }
 }
 
+/// [`compare`] of `auto`'s result against `truth` within `eps` plus what the path it took
+/// may add ([`allowance`]).
+fn compare_auto(
+    auto: &Output,
+    truth: &[f64],
+    scale: &[f64],
+    eps: f64,
+    tol: &Tol,
+    mask: &[bool],
+) -> Stat {
+    compare(
+        &auto.values,
+        truth,
+        scale,
+        eps + allowance(auto.path, tol),
+        mask,
+    )
+}
+
 /// Tolerances relative to `S` (module docs): vs the reference, between two evaluations of
 /// the same band sum, and the lookup path's interpolation.
 #[derive(Clone, Copy, Debug)]
@@ -798,13 +817,7 @@ fn planar_diagonal_matches_band() {
         let b = amplitudes(&band);
         let p = compare(&planar.values, &b, &scale, eps_pb, &inside);
         // Auto may pick the lookup or the phasor path.
-        let a = compare(
-            &auto.values,
-            &b,
-            &scale,
-            eps_pb + allowance(auto.path, &tol),
-            &inside,
-        );
+        let a = compare_auto(&auto, &b, &scale, eps_pb, &tol, &inside);
         s.max("planar/band err/tol", p.worst);
         s.max("planar/band err/S", p.rel);
         s.max("planar/band |ΔI|/max I", p.int);
@@ -960,13 +973,7 @@ fn lookup_diagonal_matches_reference_and_band() {
             );
             let br = compare(&band.values, &truth, &scale, tol.reference, &all);
             let lb = compare(&lookup.values, &b, &scale, tol.pb + tol.interp, &all);
-            let ab = compare(
-                &auto.values,
-                &b,
-                &scale,
-                tol.pb + allowance(auto.path, &tol),
-                &all,
-            );
+            let ab = compare_auto(&auto, &b, &scale, tol.pb, &tol, &all);
             // The phasor path on the same SPAD sets (any number of SPADs per row).
             let phasor = sc
                 .direct(EvalPath::Phasor)
@@ -1208,13 +1215,7 @@ fn confocal_diagonal_matches_reference_and_band() {
                 &all,
             );
             let lb = compare(&lookup.values, &b, &scale, tol.pb + tol.interp, &all);
-            let ab = compare(
-                &auto.values,
-                &b,
-                &scale,
-                tol.pb + allowance(auto.path, &tol),
-                &all,
-            );
+            let ab = compare_auto(&auto, &b, &scale, tol.pb, &tol, &all);
             s.max("band/ref err/tol", br.worst);
             s.max("lookup/ref err/tol", lr.worst);
             s.max("lookup/band err/tol", lb.worst);
@@ -1446,13 +1447,7 @@ fn planar_path_rejects_non_planar_inputs() {
             (sc.tol(Kind::Diagonal), sc.scales(Kind::Diagonal))
         };
         let all = vec![true; scale.len()];
-        let a = compare(
-            &auto.values,
-            &amplitudes(&band),
-            &scale,
-            tol.pb + allowance(auto.path, &tol),
-            &all,
-        );
+        let a = compare_auto(&auto, &amplitudes(&band), &scale, tol.pb, &tol, &all);
         assert!(a.worst <= 1.0, "{name}: auto vs band {a:?}");
         if !sc.capture.geometry.confocal {
             let msg = path_error(sc.column(EvalPath::Planar), name);
@@ -1686,13 +1681,7 @@ fn descending_voxel_axes() {
             let all = vec![true; scale.len()];
             let b = amplitudes(&band);
             let p = compare(&planar.values, &b, &scale, tol.pb, &all);
-            let a = compare(
-                &auto.values,
-                &b,
-                &scale,
-                tol.pb + allowance(auto.path, &tol),
-                &all,
-            );
+            let a = compare_auto(&auto, &b, &scale, tol.pb, &tol, &all);
             assert!(p.worst <= 1.0 && a.worst <= 1.0, "{p:?} {a:?}");
         }
     }
@@ -1945,8 +1934,7 @@ fn resampled_volumes_match_reference_and_band() {
                     let msg = path_error(forced, "off-lattice, not resampled");
                     prop_assert!(msg.contains("resampled"), "{} ({})", msg, why);
                     s.count("bound too large: forced planar an error", true);
-                    let allow = allowance(auto.path, &tol);
-                    let ab = compare(&auto.values, &b, &scale, tol.pb + allow, &all);
+                    let ab = compare_auto(&auto, &b, &scale, tol.pb, &tol, &all);
                     prop_assert!(ab.worst <= 1.0, "auto vs band: {ab:?}");
                     return Ok(());
                 }
@@ -1981,13 +1969,7 @@ fn resampled_volumes_match_reference_and_band() {
                 &all,
             );
             let pb = compare(&out.values, &b, &scale, tol.pb + fft + bound, &all);
-            let ab = compare(
-                &auto.values,
-                &b,
-                &scale,
-                tol.pb + fft + bound + allowance(auto.path, &tol),
-                &all,
-            );
+            let ab = compare_auto(&auto, &b, &scale, tol.pb + fft + bound, &tol, &all);
             s.max("resampled/ref err/tol", pr.worst);
             s.max("resampled/band err/tol", pb.worst);
             s.max("resampled/band err/S", pb.rel);

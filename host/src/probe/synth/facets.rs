@@ -155,6 +155,11 @@ const GROW_WIDTHS: [f64; 3] = [0.04, 0.08, 0.16];
 /// A grown facet's amplitude lies within this factor of its parent's (module docs).
 const GROW_AMPLITUDE: f64 = 2.0;
 
+/// `r += a·m`.
+fn axpy(a: f64, m: &[f64], r: &mut [f64]) {
+    r.par_iter_mut().zip(m).for_each(|(x, m)| *x += a * m);
+}
+
 /// At most `n` of `0..len`, spread evenly.
 fn spread(len: usize, n: usize) -> Vec<usize> {
     if len <= n {
@@ -354,7 +359,7 @@ pub fn refine_facets(
                 sub.legs(&facets[fi], pitch, &mut buf, &mut legs);
                 sub.dense_into(&legs, &mut m0);
                 let a_f = amp[fi];
-                r.par_iter_mut().zip(&m0).for_each(|(x, m)| *x += a_f * m);
+                axpy(a_f, &m0, &mut r);
                 // (facet, gain, amplitude, the render it came from: None for LM's).
                 let mut best = (facets[fi], 0.0f64, 0.0f64, Some(Src::M0));
                 let (d, m) = dots(&r, &m0);
@@ -428,16 +433,13 @@ pub fn refine_facets(
                 }
                 facets[fi] = f;
                 amp[fi] = a.max(0.0);
-                let a_f = amp[fi];
+                // R = R' − a_f m_f, from the kept render where the pose came from one.
                 match from {
-                    Some(Src::M0) => r.par_iter_mut().zip(&m0).for_each(|(x, m)| *x -= a_f * m),
-                    Some(Src::Move(j)) => r
-                        .par_iter_mut()
-                        .zip(&moves[j])
-                        .for_each(|(x, m)| *x -= a_f * m),
+                    Some(Src::M0) => axpy(-amp[fi], &m0, &mut r),
+                    Some(Src::Move(j)) => axpy(-amp[fi], &moves[j], &mut r),
                     None => {
                         sub.legs(&facets[fi], pitch, &mut buf, &mut legs);
-                        sub.add(&legs, -a_f, &mut r);
+                        sub.add(&legs, -amp[fi], &mut r);
                     }
                 }
             }
