@@ -23,7 +23,8 @@
 //! `SURFEL_EPSILON`, `SURFEL_VOLUME` and `SURFEL_SUB` change where its surfels come from);
 //! Stage 2 prints seed 0 and, where `fixtures/pathtraced/seed1` holds the scene, seed 1 and
 //! the noise share; `-- synth capture robust` measures the captures blurred by an unknown
-//! response and delayed (docs/indirect-light.md, Stage 2).
+//! response and delayed (docs/indirect-light.md, Stage 2); `PATHTRACED_LAMBDA=<m>` sets the
+//! probes' wavelength of `-- synth` (default twice the wall's pitch).
 //! Not a timing benchmark: it measures fidelity. Takes about a minute per setup and scene.
 
 #[path = "../tests/support/pathtraced.rs"]
@@ -336,7 +337,15 @@ fn synth() {
         per_histogram: !local,
         ..SynthOptions::default()
     };
-    let s = defaults();
+    let mut s = defaults();
+    // `PATHTRACED_LAMBDA=<m>`: the probes' wavelength instead of twice the wall's pitch (the
+    // model's own image keeps its wavelength).
+    if let Some(l) = std::env::var("PATHTRACED_LAMBDA")
+        .ok()
+        .and_then(|v| v.parse().ok())
+    {
+        s.wave.wavelength = Some(l);
+    }
     println!(
         "| stage | scene | object | Γ | corrected I_i vs control | kept | Pearson with the truth | explained: full / control | fit s |"
     );
