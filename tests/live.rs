@@ -326,6 +326,91 @@ fn replay_matches_the_offline_commands() {
     fails_with(&again, &["live.direct.part exists", "--resume"]);
 }
 
+/// `--leak-correct model`: at the end, the in-focus indirect light and the corrected column
+/// run on the stored rows minus the surface model, as `vltm indirect` and `vltm column` with
+/// `--leak-correct model` compute them on the finished file, and the run says so; a capture
+/// the model cannot explain (three point scatterers) falls back to the windows with the
+/// offline commands' warning and their results.
+#[test]
+fn replay_with_the_surface_model_matches_the_offline_commands() {
+    for (name, used) in [("two_patches", true), ("three_points", false)] {
+        let d = TempDir::new("live", &format!("model_{name}"));
+        let cap = npz_fixture(name);
+        let cap = cap.to_str().expect("utf-8");
+        let out = d.path("live.npy");
+        let o = vltm(&[
+            "live",
+            cap,
+            "--replay-rate",
+            "2000",
+            "--volume",
+            SPEC,
+            "--focus",
+            FOCUS,
+            "--leak-correct",
+            "model",
+            "--out",
+            out.to_str().expect("utf-8"),
+        ]);
+        ok(&o);
+        let (stdout, stderr) = (text(&o.stdout), text(&o.stderr));
+        let offline = |args: &[&str], file: &str| {
+            let p = d.path(file);
+            let mut a = args.to_vec();
+            a.extend(["--volume", SPEC, "--leak-correct", "model"]);
+            a.extend(["--out", p.to_str().expect("utf-8")]);
+            ok(&vltm(&a));
+            npy(&p)
+        };
+        let indirect = offline(&["indirect", cap], "indirect.npy");
+        let column = offline(&["column", cap, "--focus", FOCUS], "column.npy");
+        let live_indirect = npy(&d.path("live.indirect.npy"));
+        if indirect.iter().any(|x| *x != 0.0) {
+            close(
+                &live_indirect,
+                &indirect,
+                &format!("{name}: indirect light"),
+            );
+        } else {
+            // Three points leave no pair of Γ outside the windows: both are empty.
+            assert_eq!(live_indirect, indirect, "{name}: indirect light");
+        }
+        close(
+            &npy(&d.path("live.column0.corrected.npy")),
+            &column,
+            &format!("{name}: corrected column"),
+        );
+        if used {
+            assert!(
+                stdout.contains("leak correction (--leak-correct model): the surface model"),
+                "{name}: {stdout}"
+            );
+            // The model's result is not the windows' (the comparison above has teeth).
+            let gate = d.path("gate.npy");
+            ok(&vltm(&[
+                "indirect",
+                cap,
+                "--volume",
+                SPEC,
+                "--out",
+                gate.to_str().expect("utf-8"),
+            ]));
+            let (g, m) = (npy(&gate), indirect);
+            let peak = m.iter().fold(0f32, |a, x| a.max(x.abs()));
+            assert!(
+                g.iter().zip(&m).any(|(a, b)| (a - b).abs() > 1e-3 * peak),
+                "{name}: the model's indirect light equals the windows'"
+            );
+        } else {
+            assert!(
+                stderr.contains("leak correction: the surface model explains")
+                    && stderr.contains("using the time windows (--leak-correct gate)"),
+                "{name}: {stderr}"
+            );
+        }
+    }
+}
+
 #[test]
 fn follows_a_ptu_file_written_by_another_process() {
     let d = TempDir::new("live", "follow");

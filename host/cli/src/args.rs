@@ -532,6 +532,21 @@ pub(crate) struct LiveArgs {
     /// Skip the in-focus indirect light at the end.
     #[arg(long)]
     pub(crate) no_indirect: bool,
+    /// How the in-focus indirect light and the corrected columns at the end remove the
+    /// capture's direct light (as `vltm indirect`): gate (the default; alone,
+    /// `--leak-correct` means it) zeroes the bins where a 3-vertex return of Γ can arrive;
+    /// model subtracts a surface model fitted to the whole scan once it is in, falling back to
+    /// gate (with a warning saying why) when it explains less than 99 % of the energy.
+    #[arg(
+        long,
+        value_enum,
+        value_name = "METHOD",
+        num_args = 0..=1,
+        default_value_t = LeakArg::Gate,
+        default_missing_value = "gate",
+        conflicts_with = "no_leak_correct"
+    )]
+    pub(crate) leak_correct: LeakArg,
     /// In-focus indirect light without the leak correction (as `vltm indirect`).
     #[arg(long)]
     pub(crate) no_leak_correct: bool,

@@ -68,32 +68,46 @@ pub(crate) fn fit_model(
     falloff: bool,
     exec: Exec<'_>,
 ) -> Result<Option<SurfaceModel>, Failure> {
-    let opts = ModelOptions {
+    let opts = model_options(falloff);
+    match probe::model_of_capture(src, wave, &opts, exec)? {
+        ModelOutcome::Fitted(m) => {
+            let lit = m.facets.amplitudes.iter().filter(|&&a| a > 0.0).count();
+            say_model(lit, m.model.surfels().len(), m.explained, m.seconds);
+            Ok(Some(*m))
+        }
+        ModelOutcome::Unexplained { reason, .. } => {
+            warn_unused(&reason);
+            Ok(None)
+        }
+    }
+}
+
+/// `--leak-correct model`'s options for `capture`: the laser's falloff rendered when the
+/// capture holds it.
+pub(crate) fn model_options(falloff: bool) -> ModelOptions {
+    ModelOptions {
         fit: SynthOptions {
             laser_falloff: falloff,
             ..SynthOptions::default()
         },
         ..ModelOptions::default()
-    };
-    match probe::model_of_capture(src, wave, &opts, exec)? {
-        ModelOutcome::Fitted(m) => {
-            let lit = m.facets.amplitudes.iter().filter(|&&a| a > 0.0).count();
-            say!(
-                "leak correction (--leak-correct model): the surface model ({lit} facets, {} surfels) explains {:.4} of the capture's energy and is subtracted ({:.2} s)",
-                m.model.surfels().len(),
-                m.explained,
-                m.seconds
-            );
-            Ok(Some(*m))
-        }
-        ModelOutcome::Unexplained { reason, .. } => {
-            let reason = vltm::error::respell(&reason, flag);
-            crate::progress::BARS.warn(&format!(
-                "leak correction: {reason}; using the time windows (--leak-correct gate)"
-            ));
-            Ok(None)
-        }
     }
+}
+
+/// The line of a surface model that is subtracted: its lit facets, surfels, the energy it
+/// explains and its time.
+pub(crate) fn say_model(facets: usize, surfels: usize, explained: f64, seconds: f64) {
+    say!(
+        "leak correction (--leak-correct model): the surface model ({facets} facets, {surfels} surfels) explains {explained:.4} of the capture's energy and is subtracted ({seconds:.2} s)"
+    );
+}
+
+/// The warning of a surface model that is not used, with the library's `reason`.
+pub(crate) fn warn_unused(reason: &str) {
+    let reason = vltm::error::respell(reason, flag);
+    crate::progress::BARS.warn(&format!(
+        "leak correction: {reason}; using the time windows (--leak-correct gate)"
+    ));
 }
 
 /// The line of the time windows' correction.

@@ -152,10 +152,23 @@ pub fn drive(
             run.refill(rows)?;
         }
         let direct = views[0].values.clone();
-        let o = run.indirect(&direct, &opts)?;
+        // `--leak-correct model`: the surface model of the stored rows (the windows when it
+        // is not used; the run records which).
+        let model = if opts.leak.is_some() {
+            run.surface_model()?
+        } else {
+            None
+        };
+        let o = run.indirect(&direct, &opts, model.as_ref())?;
         let title = format!(
-            "in-focus indirect light (epsilon {}, r0 {:.3} m)",
-            opts.epsilon, o.shell.r0
+            "in-focus indirect light (epsilon {}, r0 {:.3} m{})",
+            opts.epsilon,
+            o.shell.r0,
+            if model.is_some() {
+                ", surface model subtracted"
+            } else {
+                ""
+            }
         );
         views.push(view(
             "indirect",
@@ -167,10 +180,15 @@ pub fn drive(
         // With the leak correction on (as for the indirect light), the columns once more over
         // the stored rows, corrected as `vltm column` corrects them.
         if opts.leak.is_some() {
-            let cols = run.corrected_columns(opts.epsilon)?;
+            let cols = run.corrected_columns(opts.epsilon, model.as_ref())?;
+            let how = if model.is_some() {
+                "surface model subtracted"
+            } else {
+                "leak-corrected"
+            };
             for (i, (o, a)) in cols.into_iter().zip(run.opts.focus.clone()).enumerate() {
                 let title = format!(
-                    "column --focus {},{},{} --gate two-bounce (leak-corrected, whole scan)",
+                    "column --focus {},{},{} --gate two-bounce ({how}, whole scan)",
                     a[0], a[1], a[2]
                 );
                 let marks = vec![(a, "x_a".to_string())];

@@ -3,7 +3,9 @@
 //! [`Follower`](crate::io::ptu::Follower); any capture replayed at a fixed rate, [`Replay`]), are folded into the direct light and the columns at
 //! the focus points as they come, and every `K` rows the current volumes, their figures and
 //! the partial states are written at once ([`crate::atomic`]). When the last row is in, the
-//! in-focus indirect light (whose Γ needs the whole diagonal) is computed over the whole scan.
+//! in-focus indirect light (whose Γ needs the whole diagonal) is computed over the whole scan,
+//! leak-corrected by the time windows or, with [`LiveOptions::model`], by a surface model
+//! fitted to the stored rows and subtracted ([`LiveRun::end_model`] says which).
 //!
 //! # Folding
 //!
@@ -40,8 +42,8 @@
 //!
 //! `probes` ([`LiveProbe`], [`LiveOptions`]: the probes, started from the states of an
 //! interrupted run), `run` ([`LiveRun`]: the rows received, the probes' states, folding),
-//! `end` (what needs the whole scan: the in-focus indirect light, the leak-corrected
-//! columns), `view` ([`View`]: a volume with its figure; the transient's plot), `outputs`
+//! `end` (what needs the whole scan: the surface model, the in-focus indirect light, the
+//! leak-corrected columns), `view` ([`View`]: a volume with its figure; the transient's plot), `outputs`
 //! ([`Outputs`]: the files a run writes, all or nothing), `drive` ([`drive()`]: the reader
 //! thread, batches, snapshots, the end), `source` ([`LiveSource`]: where the rows come from).
 //!
@@ -60,6 +62,6 @@ mod view;
 pub use drive::{Update, drive};
 pub use outputs::Outputs;
 pub use probes::{LiveOptions, LiveProbe};
-pub use run::LiveRun;
+pub use run::{EndModel, LiveRun};
 pub use source::{Arrival, LiveSource, Replay};
 pub use view::{View, view};

@@ -9,7 +9,7 @@ use crate::error::{Error, Result};
 use crate::exec::{EvalPath, Exec};
 use crate::io::capture::Capture;
 use crate::probe::partial::{self, Partial, Task};
-use crate::probe::{ColumnGate, IndirectOptions, Shell, Wave};
+use crate::probe::{ColumnGate, IndirectOptions, ModelOptions, Shell, Wave};
 use crate::volume::Volume;
 use vltm_kernel::Point;
 
@@ -39,6 +39,12 @@ pub struct LiveOptions {
     pub path: EvalPath,
     /// The in-focus indirect light at the end (`None`: not computed).
     pub indirect: Option<IndirectOptions>,
+    /// The end's leak correction by a surface model fitted to the stored rows
+    /// ([`crate::probe::model_of_capture`], `--leak-correct model`), when `indirect` asks for
+    /// a leak correction: the in-focus indirect light and the corrected columns then run on
+    /// the rows minus the model, or with the time windows when the model is not used
+    /// ([`super::LiveRun::end_model`] says which and why). `None`: the time windows.
+    pub model: Option<ModelOptions>,
     /// The capture's name, recorded in the states (informational).
     pub capture_name: String,
     /// The capture file's size in bytes, recorded in the states' capture identity: a

@@ -14,6 +14,24 @@ use crate::probe::partial::{self, Finished, Partial};
 use crate::probe::{ColumnGate, window_coverage};
 use vltm_kernel::Point;
 
+/// What the end's surface model ([`LiveOptions::model`]) came to.
+#[derive(Clone, Debug, PartialEq)]
+pub enum EndModel {
+    /// Subtracted from the stored rows before the indirect light and the corrected columns.
+    Used {
+        /// Its lit facets.
+        facets: usize,
+        /// Its surfels.
+        surfels: usize,
+        /// The fraction of the capture's energy (`Σ H²`) it explains.
+        explained: f64,
+        /// The model's time (s).
+        seconds: f64,
+    },
+    /// Not used: the time windows instead. Why, one line (other parameters written `$name`).
+    Unused(String),
+}
+
 /// The state of a live run: the rows received, the probes' states, the summed transient.
 #[derive(Debug)]
 pub struct LiveRun {
@@ -33,6 +51,8 @@ pub struct LiveRun {
     pub(super) photons: f64,
     pub(super) dwell: Vec<f64>,
     pub(super) warnings: Vec<String>,
+    /// What the end's surface model came to (set at the end when one was asked for).
+    pub(super) end_model: Option<EndModel>,
 }
 
 impl LiveRun {
@@ -84,6 +104,7 @@ impl LiveRun {
             photons: 0.0,
             dwell: Vec::new(),
             warnings,
+            end_model: None,
         })
     }
 
@@ -91,6 +112,12 @@ impl LiveRun {
     /// the volume lie in the capture's time window), as `direct` and `column` give them.
     pub fn warnings(&self) -> &[String] {
         &self.warnings
+    }
+
+    /// What the end's surface model ([`LiveOptions::model`]) came to: `None` before the end or
+    /// when none was asked for.
+    pub fn end_model(&self) -> Option<&EndModel> {
+        self.end_model.as_ref()
     }
 
     /// The geometry.

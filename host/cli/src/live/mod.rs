@@ -17,7 +17,7 @@ use vltm::probe::{self, IndirectOptions, LeakOptions, Partial};
 use vltm::volume::{Volume, parse_point};
 
 use crate::args::LiveArgs;
-use crate::args::PathArg;
+use crate::args::{LeakArg, PathArg};
 use crate::console::{Failure, say};
 use crate::open;
 use crate::outputs::{Out, prepare_output, refuse_overwriting_inputs, same_file};
@@ -261,6 +261,16 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
         leak: (!a.no_leak_correct).then(LeakOptions::default),
         ..Default::default()
     });
+    // `--leak-correct model`: the laser's falloff rendered when a replayed file holds it (a
+    // PTU stream of a real scan does not).
+    let model = match (a.leak_correct, &kind) {
+        (LeakArg::Model, _) if a.no_leak_correct || a.no_indirect => None,
+        (LeakArg::Model, Kind::Replay(_)) => Some(crate::leak::model_options(
+            io::laser_falloff_in_data(&a.source)?.0,
+        )),
+        (LeakArg::Model, _) => Some(crate::leak::model_options(false)),
+        (LeakArg::Gate, _) => None,
+    };
     let opts = LiveOptions {
         volume,
         focus,
@@ -273,6 +283,7 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
             PathArg::Phasor => EvalPath::Phasor,
         },
         indirect,
+        model,
         capture_name: name
             .file_name()
             .map_or_else(String::new, |f| f.to_string_lossy().into_owned()),
@@ -326,6 +337,16 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
                 s.publish(status_json(run, &line, views, true), views, run);
             }
             say!("{line}");
+            match run.end_model() {
+                Some(live::EndModel::Used {
+                    facets,
+                    surfels,
+                    explained,
+                    seconds,
+                }) => crate::leak::say_model(*facets, *surfels, *explained, *seconds),
+                Some(live::EndModel::Unused(reason)) => crate::leak::warn_unused(reason),
+                None => {}
+            }
             for v in views {
                 let p = v.peak.1;
                 // Live columns are folded row by row, before Γ exists: no leak correction.
