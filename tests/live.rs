@@ -218,26 +218,31 @@ fn free_port() -> u16 {
         .port()
 }
 
+/// `vltm live CAP --replay-rate RATE --volume SPEC --focus FOCUS ARGS --out OUT`.
+fn replay(cap: &str, rate: u32, args: &[&str], out: &Path) -> Output {
+    let rate = rate.to_string();
+    let mut a = vec![
+        "live",
+        cap,
+        "--replay-rate",
+        &rate,
+        "--volume",
+        SPEC,
+        "--focus",
+        FOCUS,
+    ];
+    a.extend(args);
+    a.extend(["--out", out.to_str().expect("utf-8")]);
+    vltm(&a)
+}
+
 #[test]
 fn replay_matches_the_offline_commands() {
     let d = TempDir::new("live", "replay");
     let cap = npz_fixture("two_patches");
     let cap = cap.to_str().expect("utf-8");
     let out = d.path("live.npy");
-    let o = vltm(&[
-        "live",
-        cap,
-        "--replay-rate",
-        "400",
-        "--volume",
-        SPEC,
-        "--focus",
-        FOCUS,
-        "--every",
-        "16",
-        "--out",
-        out.to_str().expect("utf-8"),
-    ]);
+    let o = replay(cap, 400, &["--every", "16"], &out);
     ok(&o);
     let err = text(&o.stderr);
     // The progress line: rows, photons/s, time per row against the dwell, ETA.
@@ -337,21 +342,7 @@ fn replay_with_the_surface_model_matches_the_offline_commands() {
         let d = TempDir::new("live", &format!("model_{name}"));
         let cap = npz_fixture(name);
         let cap = cap.to_str().expect("utf-8");
-        let out = d.path("live.npy");
-        let o = vltm(&[
-            "live",
-            cap,
-            "--replay-rate",
-            "2000",
-            "--volume",
-            SPEC,
-            "--focus",
-            FOCUS,
-            "--leak-correct",
-            "model",
-            "--out",
-            out.to_str().expect("utf-8"),
-        ]);
+        let o = replay(cap, 2000, &["--leak-correct", "model"], &d.path("live.npy"));
         ok(&o);
         let (stdout, stderr) = (text(&o.stdout), text(&o.stderr));
         let offline = |args: &[&str], file: &str| {

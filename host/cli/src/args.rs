@@ -169,24 +169,8 @@ pub(crate) enum Command {
         /// higher-order (Eq. 18 with Eq. 17: the paper's ">= 3rd bounce"), none.
         #[arg(long, value_enum, default_value_t = GateArg::TwoBounce)]
         gate: GateArg,
-        /// How the capture's direct light is removed before the columns: gate (the default;
-        /// alone, `--leak-correct` means it) zeroes, per laser/SPAD pair, the bins where a
-        /// 3-vertex return of a Γ voxel can arrive; model subtracts a surface model fitted to
-        /// the capture, falling back to gate (with a warning saying why) when it explains
-        /// less than 99 % of the energy (see docs/indirect-light.md).
-        #[arg(
-            long,
-            value_enum,
-            value_name = "METHOD",
-            num_args = 0..=1,
-            default_value_t = LeakArg::Gate,
-            default_missing_value = "gate",
-            conflicts_with = "no_leak_correct"
-        )]
-        leak_correct: LeakArg,
-        /// The paper's Eq. 17 on the capture as it is (no leak correction).
-        #[arg(long)]
-        no_leak_correct: bool,
+        #[command(flatten)]
+        leak: LeakMethodArgs,
         #[command(flatten)]
         common: Common,
     },
@@ -408,15 +392,17 @@ impl WaveArgs {
     }
 }
 
-/// The leak correction of `column`, `row` and `relight`: on by default, as `indirect`'s.
+/// `--leak-correct [METHOD]` and `--no-leak-correct`, the same in every command that removes
+/// the capture's direct light first (`indirect`, `column`, `row`, `relight`, `matrix`,
+/// `live`).
 #[derive(Args, Debug)]
-pub(crate) struct LeakArgs {
-    /// How the capture's direct light is removed first (as `indirect`): gate (the default;
-    /// alone, `--leak-correct` means it) zeroes, per laser/SPAD pair, the bins where a
-    /// 3-vertex return of a voxel of Γ (direct light above --leak-epsilon of the maximum) can
-    /// arrive; model subtracts a surface model fitted to the capture, falling back to gate
-    /// (with a warning saying why) when it explains less than 99 % of the energy (see
-    /// docs/indirect-light.md).
+pub(crate) struct LeakMethodArgs {
+    /// How the capture's direct light is removed first: gate (the default; alone,
+    /// `--leak-correct` means it) zeroes, per laser/SPAD pair, the bins where a 3-vertex return
+    /// of a voxel of Γ (the voxels whose direct light is above the command's threshold) can
+    /// arrive; model subtracts a surface model fitted to the capture (by `live`, to the whole
+    /// scan once it is in), falling back to gate (with a warning saying why) when it explains
+    /// less than 99 % of the energy (see docs/indirect-light.md).
     #[arg(
         long,
         value_enum,
@@ -427,10 +413,25 @@ pub(crate) struct LeakArgs {
         conflicts_with = "no_leak_correct"
     )]
     pub(crate) leak_correct: LeakArg,
-    /// The capture as it is (no leak correction): the capture's direct light passes the
-    /// gate near the projector's own surface.
+    /// The capture as it is, no leak correction (for `indirect`, the paper's Eq. 17): the
+    /// capture's direct light passes the gate near the projector's own surface.
     #[arg(long)]
     pub(crate) no_leak_correct: bool,
+}
+
+impl LeakMethodArgs {
+    /// The method asked for, `None` with `--no-leak-correct`.
+    pub(crate) fn method(&self) -> Option<LeakArg> {
+        (!self.no_leak_correct).then_some(self.leak_correct)
+    }
+}
+
+/// The leak correction of `column`, `row`, `relight` and `matrix`: on by default, as
+/// `indirect`'s.
+#[derive(Args, Debug)]
+pub(crate) struct LeakArgs {
+    #[command(flatten)]
+    pub(crate) how: LeakMethodArgs,
     /// Relative threshold of the Γ voxels whose direct returns the leak correction removes.
     #[arg(long, default_value_t = 0.1, value_name = "E")]
     pub(crate) leak_epsilon: f32,
@@ -439,7 +440,7 @@ pub(crate) struct LeakArgs {
 impl LeakArgs {
     /// The method asked for, `None` with `--no-leak-correct`.
     pub(crate) fn method(&self) -> Option<LeakArg> {
-        (!self.no_leak_correct).then_some(self.leak_correct)
+        self.how.method()
     }
 }
 
@@ -532,24 +533,8 @@ pub(crate) struct LiveArgs {
     /// Skip the in-focus indirect light at the end.
     #[arg(long)]
     pub(crate) no_indirect: bool,
-    /// How the in-focus indirect light and the corrected columns at the end remove the
-    /// capture's direct light (as `vltm indirect`): gate (the default; alone,
-    /// `--leak-correct` means it) zeroes the bins where a 3-vertex return of Γ can arrive;
-    /// model subtracts a surface model fitted to the whole scan once it is in, falling back to
-    /// gate (with a warning saying why) when it explains less than 99 % of the energy.
-    #[arg(
-        long,
-        value_enum,
-        value_name = "METHOD",
-        num_args = 0..=1,
-        default_value_t = LeakArg::Gate,
-        default_missing_value = "gate",
-        conflicts_with = "no_leak_correct"
-    )]
-    pub(crate) leak_correct: LeakArg,
-    /// In-focus indirect light without the leak correction (as `vltm indirect`).
-    #[arg(long)]
-    pub(crate) no_leak_correct: bool,
+    #[command(flatten)]
+    pub(crate) leak: LeakMethodArgs,
     #[command(flatten)]
     pub(crate) wave: WaveArgs,
     /// Evaluation path of the direct light and the columns (as the probes' --path).

@@ -244,11 +244,10 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
             direct,
             shells,
             gate,
-            leak_correct,
-            no_leak_correct,
+            leak,
             common,
         } => {
-            let method = (!no_leak_correct).then_some(leak_correct);
+            let method = leak.method();
             let volume = Volume::parse(&common.volume)?;
             let shell = match (shell, min_separation) {
                 (Some(s), _) => Some(Shell::parse(&s)?),
@@ -271,7 +270,7 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                 epsilon,
                 shell,
                 gate: gate.gate(),
-                leak: (!no_leak_correct).then(LeakOptions::default),
+                leak: method.map(|_| LeakOptions::default()),
                 ..Default::default()
             };
             let direct = match &direct {

@@ -109,39 +109,38 @@ impl LiveRun {
         self.whole_scan("live")?;
         let (wave, ex) = (self.opts.wave, exec(self.opts.path));
         let volume = &self.opts.volume;
-        let gate = ColumnGate::TwoBounce;
+        // The windows of Γ, fitted once, unless the model is subtracted.
+        let windows = match model {
+            Some(_) => None,
+            None => Some(crate::probe::fit_over_volume(
+                &mut self.capture,
+                volume,
+                epsilon,
+                &wave,
+                &crate::probe::LeakOptions::default(),
+                ex,
+            )?),
+        };
         let mut out = Vec::new();
-        if let Some(m) = model {
-            for &a in &self.opts.focus {
-                let mut src = m.subtracted(&mut self.capture);
-                let src: &mut dyn RowSource = &mut src;
-                out.push(crate::probe::column(
-                    src,
-                    a,
-                    volume,
-                    gate,
-                    Shell::ALL,
-                    &wave,
-                    ex,
-                )?);
-            }
-            return Ok(out);
-        }
-        let windows = crate::probe::fit_over_volume(
-            &mut self.capture,
-            volume,
-            epsilon,
-            &wave,
-            &crate::probe::LeakOptions::default(),
-            ex,
-        )?;
         for &a in &self.opts.focus {
-            let mut lc = crate::probe::LeakCorrected::new(&mut self.capture, &windows);
+            let (mut subtracted, mut gated);
+            let src: &mut dyn RowSource = match (model, &windows) {
+                (Some(m), _) => {
+                    subtracted = m.subtracted(&mut self.capture);
+                    &mut subtracted
+                }
+                (None, Some(w)) => {
+                    gated = crate::probe::LeakCorrected::new(&mut self.capture, w);
+                    &mut gated
+                }
+                // Not reached: without a model the windows are fitted above.
+                (None, None) => &mut self.capture,
+            };
             out.push(crate::probe::column(
-                &mut lc,
+                src,
                 a,
                 volume,
-                gate,
+                ColumnGate::TwoBounce,
                 Shell::ALL,
                 &wave,
                 ex,

@@ -168,7 +168,7 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
     tags.extend((0..focus.len()).map(|i| format!("column{i}")));
     if !a.no_indirect {
         tags.push("indirect".into());
-        if !a.no_leak_correct {
+        if a.leak.method().is_some() {
             // The columns once more at the end, leak-corrected over the stored rows.
             tags.extend((0..focus.len()).map(|i| format!("column{i}.corrected")));
         }
@@ -258,18 +258,18 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
     let wave = a.wave.wave();
     let indirect = (!a.no_indirect).then(|| IndirectOptions {
         epsilon: a.epsilon,
-        leak: (!a.no_leak_correct).then(LeakOptions::default),
+        leak: a.leak.method().map(|_| LeakOptions::default()),
         ..Default::default()
     });
     // `--leak-correct model`: the laser's falloff rendered when a replayed file holds it (a
     // PTU stream of a real scan does not).
-    let model = match (a.leak_correct, &kind) {
-        (LeakArg::Model, _) if a.no_leak_correct || a.no_indirect => None,
-        (LeakArg::Model, Kind::Replay(_)) => Some(crate::leak::model_options(
+    let model = match (a.leak.method(), &kind) {
+        (Some(LeakArg::Model), _) if a.no_indirect => None,
+        (Some(LeakArg::Model), Kind::Replay(_)) => Some(crate::leak::model_options(
             io::laser_falloff_in_data(&a.source)?.0,
         )),
-        (LeakArg::Model, _) => Some(crate::leak::model_options(false)),
-        (LeakArg::Gate, _) => None,
+        (Some(LeakArg::Model), _) => Some(crate::leak::model_options(false)),
+        (Some(LeakArg::Gate) | None, _) => None,
     };
     let opts = LiveOptions {
         volume,
