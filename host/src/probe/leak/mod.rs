@@ -139,6 +139,6 @@ pub use energy::GateEnergy;
 pub use fit::DirectModel;
 pub use options::{LeakMethod, LeakOptions, cell_radius};
 pub use synthesis::{
-    IMAGE_HISTOGRAMS, MAX_GROWN, MAX_SWEEPS, ModelOptions, ModelOutcome, SurfaceModel,
-    model_of_capture,
+    BOUNDS_MARGIN, IMAGE_HISTOGRAMS, MAX_FACETS, MAX_GROWN, MAX_SWEEPS, ModelOptions, ModelOutcome,
+    SurfaceModel, model_of_capture,
 };

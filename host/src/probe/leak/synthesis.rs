@@ -19,16 +19,21 @@
 //!    tolerance [`ModelOptions::split_tol`] × the grid's lateral step).
 //! 3. The facets' poses and edges **refined** and missing faces grown against the capture
 //!    ([`refine_facets`], [`ModelOptions::facets`]: at most `sweeps` sweeps per round and
-//!    `grow` rounds), then sampled every `facets.pitch` metres as surfels.
+//!    `grow` rounds, every corner inside the image's grid widened by [`BOUNDS_MARGIN`] of its
+//!    size on each side unless `facets.bounds` says otherwise), then sampled every
+//!    `facets.pitch` metres as surfels. Non-finite samples read as 0 in every pass, as the
+//!    probes read them.
 //! 4. The surfels' render **fitted** to the capture ([`SynthModel::fit`],
 //!    [`ModelOptions::fit`]); the energy it explains is [`SurfaceModel::explained`].
 //!
 //! # When the model is not used ([`ModelOutcome::Unexplained`])
 //!
 //! A paired or confocal scan (the model needs a SPAD grid seen from every laser row), a wall
-//! of a single spot, no surface in the image, a fit that fails or is not finite, a surface at
-//! or behind the relay wall, buffers over the memory budget, or a model that explains less
-//! than [`ModelOptions::min_explained`] of the capture's energy (default 0.99): the caller
+//! of a single spot, no surface in the image, an image that splits into more than
+//! [`ModelOptions::max_facets`] planar facets (default [`MAX_FACETS`]: a capture of noise
+//! splits into many), a fit that fails or is not finite, a surface at or behind the relay
+//! wall, buffers over the memory budget, or a model that explains less than
+//! [`ModelOptions::min_explained`] of the capture's energy (default 0.99): the caller
 //! falls back to the time windows ([`super::LeakMethod::Gate`]) and says why
 //! ([`ModelOutcome::Unexplained`] holds the reason, one line). Options out of range and read
 //! errors are errors.
@@ -82,7 +87,19 @@ pub struct ModelOptions {
     /// The model is used when it explains at least this fraction of the capture's energy
     /// (default 0.99).
     pub min_explained: f64,
+    /// An image that splits into more planar facets than this is not read as surfaces
+    /// (default [`MAX_FACETS`]): the refinement's time grows with the facets, and a capture
+    /// of noise splits into many.
+    pub max_facets: usize,
 }
+
+/// The default of [`ModelOptions::max_facets`].
+pub const MAX_FACETS: usize = 12;
+
+/// How far beyond the direct-light image's grid a facet may reach, as a fraction of the
+/// grid's size on each axis ([`FacetOptions::bounds`] when none is given; not toward the
+/// wall, which bounds it).
+pub const BOUNDS_MARGIN: f64 = 0.25;
 
 impl Default for ModelOptions {
     fn default() -> Self {
@@ -96,6 +113,7 @@ impl Default for ModelOptions {
             per_facet: true,
             fit: SynthOptions::default(),
             min_explained: 0.99,
+            max_facets: MAX_FACETS,
         }
     }
 }
@@ -113,8 +131,9 @@ impl ModelOptions {
     /// least 3 depths), `surfel_wavelength` (not positive and finite), `surfel_epsilon`
     /// (outside (0, 1)), `surfel_sub` (outside 1..=16), `split_tol` (not positive and finite),
     /// `sweeps` (outside 1..=[`MAX_SWEEPS`]), `grow` (over [`MAX_GROWN`]), `pitch` (outside
-    /// (0, 0.5] m), `grow_gain` (outside (0, 1)), `subset` (outside 1..=256), `min_explained` (outside [0, 1]), and the
-    /// fit's options ([`SynthOptions::check`]).
+    /// (0, 0.5] m), `grow_gain` (outside (0, 1)), `subset` (outside 1..=256), `bounds` (not a box of finite corners),
+    /// `min_explained` (outside [0, 1]), `max_facets` (outside 1..=64), and the fit's options
+    /// ([`SynthOptions::check`]).
     pub fn check(&self) -> Result<()> {
         if let Some(v) = &self.volume
             && (v.axes.is_none() || v.shape[2] < 3)
@@ -168,6 +187,17 @@ impl ModelOptions {
         }
         if !(self.min_explained.is_finite() && (0.0..=1.0).contains(&self.min_explained)) {
             return Err(Error::arg("min_explained", "must lie in [0, 1]"));
+        }
+        if !(1..=64).contains(&self.max_facets) {
+            return Err(Error::arg("max_facets", "must lie in 1..=64"));
+        }
+        if let Some([lo, hi]) = f.bounds
+            && !(0..3).all(|i| lo[i].is_finite() && hi[i].is_finite() && lo[i] < hi[i])
+        {
+            return Err(Error::arg(
+                "bounds",
+                "must be a box of finite corners, min below max on every axis (m)",
+            ));
         }
         self.fit.check()
     }
@@ -311,6 +341,24 @@ impl RowSource for LaserLattice<'_> {
     }
 }
 
+/// The default [`FacetOptions::bounds`]: the image's grid widened by [`BOUNDS_MARGIN`] of its
+/// size on each side, but not behind `wall_z`.
+fn bounds_of(v: &Volume, wall_z: f64) -> Option<[[f64; 3]; 2]> {
+    let a = v.axes?;
+    let (mut lo, mut hi) = ([0.0; 3], [0.0; 3]);
+    for i in 0..3 {
+        let (x0, x1) = (
+            f64::from(a[i][0].min(a[i][1])),
+            f64::from(a[i][0].max(a[i][1])),
+        );
+        let m = BOUNDS_MARGIN * (x1 - x0);
+        lo[i] = x0 - m;
+        hi[i] = x1 + m;
+    }
+    lo[2] = lo[2].max(wall_z);
+    (0..3).all(|i| lo[i] < hi[i]).then_some([lo, hi])
+}
+
 /// Lateral step of a grid (the coarser of x and y).
 fn lateral_step(v: &Volume) -> f64 {
     let step = |i: usize| match v.axes {
@@ -419,6 +467,20 @@ pub fn model_of_capture(
     let mut steps = || -> Result<(Vec<Facet>, FacetFit, Surfels)> {
         let raw = Surfels::from_direct(&volume, &d.values, opts.epsilon, opts.sub, wall_z)?;
         let initial = facets_from_surfels(&raw, opts.split_tol * step, step)?;
+        if initial.len() > opts.max_facets {
+            return Err(Error::arg(
+                "max_facets",
+                format!(
+                    "the direct-light image splits into {} planar facets, more than {} (not a scene of a few surfaces)",
+                    initial.len(),
+                    opts.max_facets
+                ),
+            ));
+        }
+        let facet_opts = FacetOptions {
+            bounds: opts.facets.bounds.or_else(|| bounds_of(&volume, wall_z)),
+            ..opts.facets
+        };
         let scale: Vec<f64> = (0..g.lasers.len())
             .map(|l| {
                 if opts.fit.laser_falloff {
@@ -430,7 +492,7 @@ pub fn model_of_capture(
             .collect();
         let fit = {
             let _t = timings::section("direct-light model: facets", Kind::Parallel);
-            refine_facets(src, &initial, &scale, &opts.facets, exec)?
+            refine_facets(src, &initial, &scale, &facet_opts, exec)?
         };
         let surfels = fit.surfels(opts.facets.pitch, opts.per_facet)?;
         Ok((initial, fit, surfels))
@@ -640,11 +702,32 @@ mod tests {
                 "grow_gain",
             ),
             (
+                facets(FacetOptions {
+                    bounds: Some([[0.0, 0.0, 1.0], [1.0, 1.0, 1.0]]),
+                    ..fd()
+                }),
+                "bounds",
+            ),
+            (
+                facets(FacetOptions {
+                    bounds: Some([[f64::NAN, 0.0, 0.0], [1.0, 1.0, 1.0]]),
+                    ..fd()
+                }),
+                "bounds",
+            ),
+            (
                 ModelOptions {
                     min_explained: 1.5,
                     ..d()
                 },
                 "min_explained",
+            ),
+            (
+                ModelOptions {
+                    max_facets: 0,
+                    ..d()
+                },
+                "max_facets",
             ),
             (
                 ModelOptions {
@@ -665,6 +748,128 @@ mod tests {
             }
         }
         assert!(ModelOptions::default().check().is_ok());
+    }
+
+    /// A capture of uniform noise on an 8 × 8 × 8 × 8 wall of 1 m, 175 bins of 2 cm from 1 m
+    /// (the geometry of `fixtures/two_patches.npz`).
+    fn noise() -> Capture {
+        let mut g = Scene::new(Setup::new(
+            Aperture::grid([8, 8], [1.0, 1.0], [0.0, 0.0]),
+            Aperture::grid([8, 8], [1.0, 1.0], [0.0, 0.0]),
+            175,
+            0.02,
+        ))
+        .geometry();
+        g.t0 = 1.0;
+        let n = g.lasers.len() * g.spads.len() * g.nt;
+        let mut x = 0x2545_f491_4f6c_dd1d_u64;
+        let data = (0..n)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                (x >> 40) as f32 / (1u64 << 24) as f32
+            })
+            .collect();
+        Capture { geometry: g, data }
+    }
+
+    /// A capture of noise: an image that splits into more facets than `max_facets` is given
+    /// up at once, naming the count; let through (every energy accepted), its facets stay
+    /// inside the image's grid widened by [`BOUNDS_MARGIN`] (without the bounds they spread
+    /// over tens of square metres within a few sweeps, and a sweep takes minutes).
+    #[test]
+    fn noise_is_not_read_as_surfaces_and_facets_stay_in_bounds() {
+        let mut cap = noise();
+        let few = ModelOptions {
+            max_facets: 1,
+            ..ModelOptions::default()
+        };
+        match model_of_capture(&mut cap, &Wave::default(), &few, EXEC) {
+            Ok(ModelOutcome::Unexplained {
+                reason,
+                model: None,
+            }) => {
+                assert!(
+                    reason.contains("planar facets, more than 1 (not a scene"),
+                    "{reason}"
+                );
+            }
+            other => panic!("{:?}", other.map(|_| ())),
+        }
+        let opts = ModelOptions {
+            max_facets: 64,
+            min_explained: 0.0,
+            facets: FacetOptions {
+                sweeps: 3,
+                grow: 0,
+                ..FacetOptions::default()
+            },
+            ..ModelOptions::default()
+        };
+        let m = match model_of_capture(&mut cap, &Wave::default(), &opts, EXEC) {
+            Ok(ModelOutcome::Fitted(m)) => m,
+            other => panic!("{:?}", other.map(|_| ())),
+        };
+        let [lo, hi] = bounds_of(&m.volume, 0.0).expect("bounds");
+        let areas: Vec<f64> = m.facets.facets.iter().map(Facet::area).collect();
+        eprintln!("{} facets, areas {areas:.3?} m²", areas.len());
+        let moved = m.facets.facets.iter().zip(&m.initial).any(|(f, i)| f != i);
+        assert!(
+            moved,
+            "the refinement moved no facet: the bounds were not tried"
+        );
+        for f in &m.facets.facets {
+            for c in f.corners() {
+                assert!(
+                    (0..3).all(|i| c[i] >= lo[i] && c[i] <= hi[i]),
+                    "corner {c:?} outside {lo:?}..{hi:?}"
+                );
+            }
+        }
+    }
+
+    /// Non-finite samples read as 0, as the probes read them: a capture with NaN and ±inf in
+    /// some bins gives the model of the same capture with zeros there (up to the rounding of
+    /// the refinement's parallel sums, whose order varies from run to run).
+    #[test]
+    fn non_finite_samples_read_as_zero() {
+        let opts = ModelOptions {
+            max_facets: 64,
+            min_explained: 0.0,
+            facets: FacetOptions {
+                sweeps: 2,
+                grow: 0,
+                ..FacetOptions::default()
+            },
+            ..ModelOptions::default()
+        };
+        let (mut bad, mut zeroed) = (noise(), noise());
+        for (k, i) in (0..bad.data.len()).step_by(997).enumerate() {
+            bad.data[i] = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][k % 3];
+            zeroed.data[i] = 0.0;
+        }
+        let fitted = |c: &mut Capture| match model_of_capture(c, &Wave::default(), &opts, EXEC) {
+            Ok(ModelOutcome::Fitted(m)) => m,
+            other => panic!("{:?}", other.map(|_| ())),
+        };
+        let (a, b) = (fitted(&mut bad), fitted(&mut zeroed));
+        assert!(
+            (a.explained - b.explained).abs() <= 1e-9,
+            "{} {}",
+            a.explained,
+            b.explained
+        );
+        assert_eq!(a.facets.facets.len(), b.facets.facets.len());
+        for (f, g) in a.facets.facets.iter().zip(&b.facets.facets) {
+            let near = |x: &[f64], y: &[f64]| x.iter().zip(y).all(|(p, q)| (p - q).abs() <= 1e-9);
+            assert!(
+                near(&f.centre, &g.centre)
+                    && near(&f.normal, &g.normal)
+                    && near(&f.extent, &g.extent),
+                "{f:?} vs {g:?}"
+            );
+        }
     }
 
     #[test]

@@ -107,6 +107,13 @@ impl Facet {
         }
     }
 
+    /// The rectangle's four corners.
+    pub fn corners(&self) -> [V3; 4] {
+        let [u0, u1, v0, v1] = self.extent;
+        [(u0, v0), (u1, v0), (u1, v1), (u0, v1)]
+            .map(|(a, b)| core::array::from_fn(|k| self.centre[k] + a * self.u[k] + b * self.v[k]))
+    }
+
     /// Area (m²; zero when an extent has collapsed).
     pub fn area(&self) -> f64 {
         let [u0, u1, v0, v1] = self.extent;

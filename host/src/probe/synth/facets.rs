@@ -133,6 +133,10 @@ pub struct FacetOptions {
     pub grow_gain: f64,
     /// Laser rows and SPADs of the subset, each at most (default 16: 256 histograms).
     pub subset: usize,
+    /// A box `[min, max]` (m) every facet's corners stay inside: a move, a
+    /// Levenberg–Marquardt step or a grown facet that leaves it is refused (`None`: no bound).
+    /// Without one, a capture of noise lets facets spread over tens of square metres.
+    pub bounds: Option<[[f64; 3]; 2]>,
 }
 
 impl Default for FacetOptions {
@@ -143,6 +147,7 @@ impl Default for FacetOptions {
             grow: 6,
             grow_gain: 2e-4,
             subset: 16,
+            bounds: None,
         }
     }
 }
@@ -213,7 +218,24 @@ pub fn refine_facets(
         grow,
         grow_gain,
         subset,
+        bounds,
     } = *opts;
+    if let Some([lo, hi]) = bounds
+        && !(0..3).all(|i| lo[i].is_finite() && hi[i].is_finite() && lo[i] < hi[i])
+    {
+        return Err(Error::arg(
+            "bounds",
+            "must be a box of finite corners, min below max on every axis (m)",
+        ));
+    }
+    // Whether a facet stays inside the bounds.
+    let inside = |f: &Facet| {
+        bounds.is_none_or(|[lo, hi]| {
+            f.corners()
+                .iter()
+                .all(|c| (0..3).all(|i| c[i] >= lo[i] && c[i] <= hi[i]))
+        })
+    };
     if !(1..=256).contains(&subset) {
         return Err(Error::arg(
             "subset",
@@ -263,7 +285,8 @@ pub fn refine_facets(
                 r[(li * ns + si) * nt..][..nt]
                     .iter_mut()
                     .zip(&row[s * nt..(s + 1) * nt])
-                    .for_each(|(o, x)| *o = f64::from(*x));
+                    // Non-finite samples read as 0, as the probes read them.
+                    .for_each(|(o, x)| *o = if x.is_finite() { f64::from(*x) } else { 0.0 });
             }
             bar.advance(1);
         }
@@ -322,6 +345,9 @@ pub fn refine_facets(
                         .flat_map(move |f| GROW_WIDTHS.into_iter().map(move |w| (e, f, w)))
                 }) {
                     let cand = facets[fi].attached(edge, fold.to_radians(), w);
+                    if !inside(&cand) {
+                        continue;
+                    }
                     sub.legs(&cand, pitch, &mut buf, &mut legs);
                     let (d, m) = sub.score(&legs, &r);
                     // The same object's reflectance: within a factor GROW_AMPLITUDE of the
@@ -389,7 +415,9 @@ pub fn refine_facets(
                         sub.dense_into(&legs, &mut moves[j]);
                         have[side] = true;
                         let (d, m) = dots(&r, &moves[j]);
-                        if d > 0.0 && m > 0.0 && d * d / m > best.1 * (1.0 + 1e-9) {
+                        // Outside the bounds: a column of the Jacobian, never a pose.
+                        if inside(&cand) && d > 0.0 && m > 0.0 && d * d / m > best.1 * (1.0 + 1e-9)
+                        {
                             best = (cand, d * d / m, d / m, Some(Src::Move(j)));
                         }
                     }
@@ -424,6 +452,7 @@ pub fn refine_facets(
                         &cols,
                         pitch,
                     )
+                    && inside(&f)
                 {
                     best = (f, g, a, None);
                 }

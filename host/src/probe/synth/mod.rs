@@ -565,7 +565,14 @@ fn read(src: &mut dyn RowSource, start: usize, rows: &mut [(Point, Vec<f32>)]) -
         Kind::Serial
     };
     let _t = timings::section("read rows", kind);
-    src.read_rows(start, rows)
+    src.read_rows(start, rows)?;
+    // Non-finite samples read as 0, as the probes read them (their summaries count them).
+    for (_, h) in rows.iter_mut() {
+        h.iter_mut()
+            .filter(|x| !x.is_finite())
+            .for_each(|x| *x = 0.0);
+    }
+    Ok(())
 }
 
 /// A [`RowSource`] that returns the capture minus the model's direct light, row by row.

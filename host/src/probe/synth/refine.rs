@@ -139,7 +139,7 @@ pub fn refine(
                 h[i * nt..(i + 1) * nt]
                     .iter_mut()
                     .zip(&row[s * nt..(s + 1) * nt])
-                    .for_each(|(o, x)| *o = f64::from(*x));
+                    .for_each(|(o, x)| *o = if x.is_finite() { f64::from(*x) } else { 0.0 });
                 i += 1;
             }
             bar.advance(1);

@@ -460,6 +460,13 @@ fn facet_refinement_refuses_bad_input() {
         }),
         "grow_gain"
     );
+    assert!(
+        bad(FacetOptions {
+            bounds: Some([[0.0, 0.0, 2.0], [1.0, 1.0, 1.0]]),
+            ..grown(0)
+        }),
+        "bounds"
+    );
     let g0 = geometry();
     let mut dark = Capture::new(
         g0.clone(),
