@@ -829,3 +829,48 @@ fn the_robustness_response_has_its_width_and_delay() {
         "σ {sigma} bin"
     );
 }
+
+/// A capture of photon counts (the two patches with Poisson noise of 100 counts at the peak
+/// and a background of 0.05 counts per bin, as `examples/live_scan.json` simulates them): no
+/// model explains its noise, so the surface model is used when it explains 99 % less the
+/// noise's share `Σ H / Σ H²`. The same light scaled by 1.5 (no longer counts) is held to the
+/// plain 99 % and falls back: the share is what lets the model through.
+#[test]
+fn photon_counts_are_held_to_the_rule_less_their_noise() {
+    let mut cap = io::open(&support::fixture("two_patches.npz")).expect("two_patches");
+    let row = cap.geometry.spads.len() * cap.geometry.nt;
+    vltm::sim::Noise {
+        peak_counts: 100.0,
+        background: 0.05,
+        seed: 7,
+    }
+    .apply(&mut cap.data, row)
+    .expect("noise");
+    let opts = probe::ModelOptions::default();
+    let m = match probe::model_of_capture(&mut cap, &Wave::default(), &opts, EXEC).unwrap() {
+        probe::ModelOutcome::Fitted(m) => m,
+        probe::ModelOutcome::Unexplained { reason, .. } => panic!("{reason}"),
+    };
+    let noise = m.photon_noise.expect("counts");
+    eprintln!(
+        "photon counts: explained {:.4}, photon noise {noise:.4}",
+        m.explained
+    );
+    assert!(
+        m.explained < opts.min_explained && m.explained >= opts.min_explained - noise,
+        "{} {noise}",
+        m.explained
+    );
+    cap.data.iter_mut().for_each(|x| *x *= 1.5);
+    match probe::model_of_capture(&mut cap, &Wave::default(), &opts, EXEC).unwrap() {
+        probe::ModelOutcome::Unexplained {
+            reason,
+            model: Some(m),
+        } => {
+            assert!(m.photon_noise.is_none());
+            assert!(reason.ends_with("(< 99 %)"), "{reason}");
+        }
+        probe::ModelOutcome::Fitted(_) => panic!("scaled counts were held to less than 99 %"),
+        probe::ModelOutcome::Unexplained { reason, .. } => panic!("no model: {reason}"),
+    }
+}

@@ -72,7 +72,12 @@ pub(crate) fn fit_model(
     match probe::model_of_capture(src, wave, &opts, exec)? {
         ModelOutcome::Fitted(m) => {
             let lit = m.facets.amplitudes.iter().filter(|&&a| a > 0.0).count();
-            say_model(lit, m.model.surfels().len(), m.explained, m.seconds);
+            say_model(
+                lit,
+                m.model.surfels().len(),
+                (m.explained, m.photon_noise),
+                m.seconds,
+            );
             Ok(Some(*m))
         }
         ModelOutcome::Unexplained { reason, .. } => {
@@ -95,10 +100,18 @@ pub(crate) fn model_options(falloff: bool) -> ModelOptions {
 }
 
 /// The line of a surface model that is subtracted: its lit facets, surfels, the energy it
-/// explains and its time.
-pub(crate) fn say_model(facets: usize, surfels: usize, explained: f64, seconds: f64) {
+/// explains (and the share of the capture's photon noise, for photon counts) and its time.
+pub(crate) fn say_model(
+    facets: usize,
+    surfels: usize,
+    (explained, noise): (f64, Option<f64>),
+    seconds: f64,
+) {
+    let noise = noise.map_or(String::new(), |n| {
+        format!(" (its photon noise holds {n:.4})")
+    });
     say!(
-        "leak correction (--leak-correct model): the surface model ({facets} facets, {surfels} surfels) explains {explained:.4} of the capture's energy and is subtracted ({seconds:.2} s)"
+        "leak correction (--leak-correct model): the surface model ({facets} facets, {surfels} surfels) explains {explained:.4} of the capture's energy{noise} and is subtracted ({seconds:.2} s)"
     );
 }
 

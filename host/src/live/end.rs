@@ -51,6 +51,7 @@ impl LiveRun {
                     facets: m.facets.amplitudes.iter().filter(|&&a| a > 0.0).count(),
                     surfels: m.model.surfels().len(),
                     explained: m.explained,
+                    photon_noise: m.photon_noise,
                     seconds: m.seconds,
                 });
                 Ok(Some(*m))

@@ -25,6 +25,9 @@ pub enum EndModel {
         surfels: usize,
         /// The fraction of the capture's energy (`Σ H²`) it explains.
         explained: f64,
+        /// The share of that energy the photon noise of a capture of counts holds
+        /// ([`crate::probe::SurfaceModel::photon_noise`]).
+        photon_noise: Option<f64>,
         /// The model's time (s).
         seconds: f64,
     },

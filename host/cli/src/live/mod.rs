@@ -342,8 +342,16 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
                     facets,
                     surfels,
                     explained,
+                    photon_noise,
                     seconds,
-                }) => crate::leak::say_model(*facets, *surfels, *explained, *seconds),
+                }) => {
+                    crate::leak::say_model(
+                        *facets,
+                        *surfels,
+                        (*explained, *photon_noise),
+                        *seconds,
+                    );
+                }
                 Some(live::EndModel::Unused(reason)) => crate::leak::warn_unused(reason),
                 None => {}
             }

@@ -33,7 +33,9 @@
 //! [`ModelOptions::max_facets`] planar facets (default [`MAX_FACETS`]: a capture of noise
 //! splits into many), a fit that fails or is not finite, a surface at or behind the relay
 //! wall, buffers over the memory budget, or a model that explains less than
-//! [`ModelOptions::min_explained`] of the capture's energy (default 0.99): the caller
+//! [`ModelOptions::min_explained`] of the capture's energy (default 0.99; for a capture of
+//! photon counts, every sample a non-negative integer, less the share `Σ H / Σ H²` of their
+//! Poisson noise, which no model explains: [`SurfaceModel::photon_noise`]): the caller
 //! falls back to the time windows ([`super::LeakMethod::Gate`]) and says why
 //! ([`ModelOutcome::Unexplained`] holds the reason, one line). Options out of range and read
 //! errors are errors.
@@ -85,7 +87,8 @@ pub struct ModelOptions {
     /// The fit of the render to the capture.
     pub fit: SynthOptions,
     /// The model is used when it explains at least this fraction of the capture's energy
-    /// (default 0.99).
+    /// (default 0.99), less the share of its photon noise when the capture holds photon
+    /// counts ([`SurfaceModel::photon_noise`]).
     pub min_explained: f64,
     /// An image that splits into more planar facets than this is not read as surfaces
     /// (default [`MAX_FACETS`]): the refinement's time grows with the facets, and a capture
@@ -216,6 +219,10 @@ pub struct SurfaceModel {
     pub volume: Volume,
     /// Fraction of the capture's energy `Σ H²` the model explains ([`SynthModel::explained`]).
     pub explained: f64,
+    /// The fraction of the energy a capture of photon counts holds as Poisson noise
+    /// ([`SynthModel::photon_noise`]); the model must explain
+    /// [`ModelOptions::min_explained`] less this.
+    pub photon_noise: Option<f64>,
     /// Wall-clock seconds of the whole pipeline.
     pub seconds: f64,
 }
@@ -526,13 +533,14 @@ pub fn model_of_capture(
         Ok(m) => m,
         Err(e) => return Ok(unexplained(reason(e)?)),
     };
-    let explained = model.explained;
+    let (explained, photon_noise) = (model.explained, model.photon_noise);
     let out = Box::new(SurfaceModel {
         model,
         initial,
         facets,
         volume,
         explained,
+        photon_noise,
         seconds: t.elapsed().as_secs_f64(),
     });
     if !(explained.is_finite() && explained >= 0.0) {
@@ -540,12 +548,19 @@ pub fn model_of_capture(
             "the surface model's fit diverged (energy explained {explained})"
         )));
     }
-    if explained < opts.min_explained {
+    // Photon counts: their Poisson noise is energy no model explains.
+    let noise = photon_noise.unwrap_or(0.0);
+    if explained < opts.min_explained - noise {
+        let pct = |x: f64| (1000.0 * x).round() / 10.0;
+        let less = match photon_noise {
+            Some(n) => format!(" less its photon noise's {} %", pct(n)),
+            None => String::new(),
+        };
         return Ok(ModelOutcome::Unexplained {
             reason: format!(
-                "the surface model explains {:.1} % of the energy (< {} %)",
+                "the surface model explains {:.1} % of the energy (< {} %{less})",
                 (1000.0 * explained).floor() / 10.0,
-                (1000.0 * opts.min_explained).round() / 10.0
+                pct(opts.min_explained)
             ),
             model: Some(out),
         });

@@ -157,6 +157,11 @@ pub struct SynthModel {
     kept: Vec<f32>,
     /// Fraction of the capture's energy `Σ H²` the model explains (0..1).
     pub explained: f64,
+    /// When every sample of the capture is a non-negative integer (photon counts): the
+    /// fraction of its energy that their Poisson noise holds, `Σ H / Σ H²` (the expected
+    /// `Σ (H − E[H])²` is `Σ E[H]`), which no model explains. `None` for other data (a
+    /// render, a preprocessed capture).
+    pub photon_noise: Option<f64>,
     /// Wall-clock seconds of the fit.
     pub seconds: f64,
 }
@@ -413,6 +418,7 @@ impl SynthModel {
             shifts: vec![shifts[ji] as i16; l_n * s_n],
             kept: Vec::new(),
             explained: 0.0,
+            photon_noise: None,
             seconds: 0.0,
             renderer,
         };
@@ -426,6 +432,8 @@ impl SynthModel {
         };
         let bar = Pass::start(exec, "direct-light model: per histogram", l_n);
         let (mut total, mut resid) = (0.0f64, 0.0f64);
+        // Σ H and whether every sample is a count (a non-negative integer).
+        let (mut counts, mut integral) = (0.0f64, true);
         // The model's histograms are kept when they and the tables fit the budget.
         let keep_all =
             bytes.saturating_add(l_n.saturating_mul(s_n).saturating_mul(nt * 4)) <= opts.max_bytes;
@@ -453,6 +461,10 @@ impl SynthModel {
                 Vec::new()
             };
             kept_rows.resize_with(end - start, || &mut [][..]);
+            for (_, h) in rows.iter() {
+                counts += h.iter().map(|&x| f64::from(x)).sum::<f64>();
+                integral = integral && h.iter().all(|&x| x >= 0.0 && x == x.trunc());
+            }
             let per_row: Vec<(Vec<f32>, Vec<i16>, f64, f64)> = rows
                 .par_iter()
                 .zip(kept_rows.into_par_iter())
@@ -515,6 +527,7 @@ impl SynthModel {
         model.shifts = hshift;
         model.kept = kept;
         model.explained = 1.0 - resid / total;
+        model.photon_noise = (integral && total > 0.0).then(|| counts / total);
         if !model.explained.is_finite() {
             return Err(Error::arg(
                 "leak_correct",
