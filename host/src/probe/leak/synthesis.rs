@@ -579,21 +579,27 @@ mod tests {
         path: crate::exec::EvalPath::Auto,
     };
 
-    /// A dark capture: 4×4 lasers × 4×4 SPADs, 300 bins of 1 cm from 1 m.
-    fn dark() -> Capture {
+    /// `n × n` lasers × `n × n` SPADs over a wall of 1 m, `nt` bins of `dt` from 1 m; the
+    /// samples from `value(i)`.
+    fn wall(n: usize, nt: usize, dt: f64, value: impl FnMut(usize) -> f32) -> Capture {
         let mut g = Scene::new(Setup::new(
-            Aperture::grid([4, 4], [1.0, 1.0], [0.0, 0.0]),
-            Aperture::grid([4, 4], [1.0, 1.0], [0.0, 0.0]),
-            300,
-            0.01,
+            Aperture::grid([n, n], [1.0, 1.0], [0.0, 0.0]),
+            Aperture::grid([n, n], [1.0, 1.0], [0.0, 0.0]),
+            nt,
+            dt,
         ))
         .geometry();
         g.t0 = 1.0;
-        let n = g.lasers.len() * g.spads.len() * g.nt;
+        let len = g.lasers.len() * g.spads.len() * g.nt;
         Capture {
             geometry: g,
-            data: vec![0.0; n],
+            data: (0..len).map(value).collect(),
         }
+    }
+
+    /// A dark capture: 4×4 lasers × 4×4 SPADs, 300 bins of 1 cm from 1 m.
+    fn dark() -> Capture {
+        wall(4, 300, 0.01, |_| 0.0)
     }
 
     /// A capture of more than [`IMAGE_HISTOGRAMS`] histograms is imaged from every second
@@ -768,25 +774,28 @@ mod tests {
     /// A capture of uniform noise on an 8 × 8 × 8 × 8 wall of 1 m, 175 bins of 2 cm from 1 m
     /// (the geometry of `fixtures/two_patches.npz`).
     fn noise() -> Capture {
-        let mut g = Scene::new(Setup::new(
-            Aperture::grid([8, 8], [1.0, 1.0], [0.0, 0.0]),
-            Aperture::grid([8, 8], [1.0, 1.0], [0.0, 0.0]),
-            175,
-            0.02,
-        ))
-        .geometry();
-        g.t0 = 1.0;
-        let n = g.lasers.len() * g.spads.len() * g.nt;
         let mut x = 0x2545_f491_4f6c_dd1d_u64;
-        let data = (0..n)
-            .map(|_| {
-                x ^= x << 13;
-                x ^= x >> 7;
-                x ^= x << 17;
-                (x >> 40) as f32 / (1u64 << 24) as f32
-            })
-            .collect();
-        Capture { geometry: g, data }
+        wall(8, 175, 0.02, |_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            (x >> 40) as f32 / (1u64 << 24) as f32
+        })
+    }
+
+    /// Options that let any capture through (up to 64 facets, every energy accepted), with
+    /// `sweeps` sweeps and no growth: quick.
+    fn lenient(sweeps: usize) -> ModelOptions {
+        ModelOptions {
+            max_facets: 64,
+            min_explained: 0.0,
+            facets: FacetOptions {
+                sweeps,
+                grow: 0,
+                ..FacetOptions::default()
+            },
+            ..ModelOptions::default()
+        }
     }
 
     /// A capture of noise: an image that splits into more facets than `max_facets` is given
@@ -812,16 +821,7 @@ mod tests {
             }
             other => panic!("{:?}", other.map(|_| ())),
         }
-        let opts = ModelOptions {
-            max_facets: 64,
-            min_explained: 0.0,
-            facets: FacetOptions {
-                sweeps: 3,
-                grow: 0,
-                ..FacetOptions::default()
-            },
-            ..ModelOptions::default()
-        };
+        let opts = lenient(3);
         let m = match model_of_capture(&mut cap, &Wave::default(), &opts, EXEC) {
             Ok(ModelOutcome::Fitted(m)) => m,
             other => panic!("{:?}", other.map(|_| ())),
@@ -849,16 +849,7 @@ mod tests {
     /// the refinement's parallel sums, whose order varies from run to run).
     #[test]
     fn non_finite_samples_read_as_zero() {
-        let opts = ModelOptions {
-            max_facets: 64,
-            min_explained: 0.0,
-            facets: FacetOptions {
-                sweeps: 2,
-                grow: 0,
-                ..FacetOptions::default()
-            },
-            ..ModelOptions::default()
-        };
+        let opts = lenient(2);
         let (mut bad, mut zeroed) = (noise(), noise());
         for (k, i) in (0..bad.data.len()).step_by(997).enumerate() {
             bad.data[i] = [f32::NAN, f32::INFINITY, f32::NEG_INFINITY][k % 3];
