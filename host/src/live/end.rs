@@ -12,18 +12,14 @@ use crate::probe::{
 };
 
 impl LiveRun {
-    /// Checks that every row is stored (`what` names the caller in the error).
-    fn whole_scan(&self, what: &str) -> Result<()> {
+    /// Checks that every row is stored: else an error naming `arg`, saying that `what` needs
+    /// the whole scan.
+    fn whole_scan(&self, arg: &str, what: &str) -> Result<()> {
         if self.received < self.total_rows() || self.stored_from > 0 {
             return Err(Error::arg(
-                what,
+                arg,
                 format!(
-                    "the {} needs the whole scan: {} of {} rows are in",
-                    if what == "indirect" {
-                        "in-focus indirect light"
-                    } else {
-                        "leak correction"
-                    },
+                    "the {what} needs the whole scan: {} of {} rows are in",
                     self.received - self.stored_from,
                     self.total_rows()
                 ),
@@ -43,7 +39,7 @@ impl LiveRun {
         let Some(opts) = self.opts.model.clone() else {
             return Ok(None);
         };
-        self.whole_scan("leak_correct")?;
+        self.whole_scan("leak_correct", "leak correction")?;
         let (wave, ex) = (self.opts.wave, exec(self.opts.path));
         match model_of_capture(&mut self.capture, &wave, &opts, ex)? {
             ModelOutcome::Fitted(m) => {
@@ -76,7 +72,7 @@ impl LiveRun {
         opts: &IndirectOptions,
         model: Option<&SurfaceModel>,
     ) -> Result<IndirectOutput> {
-        self.whole_scan("indirect")?;
+        self.whole_scan("indirect", "in-focus indirect light")?;
         let gamma = gamma_mask(direct, opts.epsilon);
         let (volume, wave, ex) = (&self.opts.volume, self.opts.wave, exec(self.opts.path));
         let mut o = match model {
@@ -107,35 +103,37 @@ impl LiveRun {
         epsilon: f32,
         model: Option<&SurfaceModel>,
     ) -> Result<Vec<crate::probe::Output>> {
-        self.whole_scan("live")?;
+        self.whole_scan("live", "leak correction")?;
         let (wave, ex) = (self.opts.wave, exec(self.opts.path));
         let volume = &self.opts.volume;
-        // The windows of Γ, fitted once, unless the model is subtracted.
-        let windows = match model {
-            Some(_) => None,
-            None => Some(crate::probe::fit_over_volume(
-                &mut self.capture,
-                volume,
-                epsilon,
-                &wave,
-                &crate::probe::LeakOptions::default(),
-                ex,
-            )?),
+        // The model subtracted, or the windows of Γ fitted once.
+        let windows;
+        let fix = match model {
+            Some(m) => Fix::Model(m),
+            None => {
+                windows = crate::probe::fit_over_volume(
+                    &mut self.capture,
+                    volume,
+                    epsilon,
+                    &wave,
+                    &crate::probe::LeakOptions::default(),
+                    ex,
+                )?;
+                Fix::Windows(&windows)
+            }
         };
         let mut out = Vec::new();
         for &a in &self.opts.focus {
             let (mut subtracted, mut gated);
-            let src: &mut dyn RowSource = match (model, &windows) {
-                (Some(m), _) => {
+            let src: &mut dyn RowSource = match fix {
+                Fix::Model(m) => {
                     subtracted = m.subtracted(&mut self.capture);
                     &mut subtracted
                 }
-                (None, Some(w)) => {
+                Fix::Windows(w) => {
                     gated = crate::probe::LeakCorrected::new(&mut self.capture, w);
                     &mut gated
                 }
-                // Not reached: without a model the windows are fitted above.
-                (None, None) => &mut self.capture,
             };
             out.push(crate::probe::column(
                 src,
@@ -149,4 +147,13 @@ impl LiveRun {
         }
         Ok(out)
     }
+}
+
+/// How the end's columns are corrected.
+#[derive(Clone, Copy)]
+enum Fix<'a> {
+    /// The surface model subtracted.
+    Model(&'a SurfaceModel),
+    /// The time windows of Γ zeroed.
+    Windows(&'a crate::probe::DirectModel),
 }

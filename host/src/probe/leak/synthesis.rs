@@ -194,14 +194,7 @@ impl ModelOptions {
         if !(1..=64).contains(&self.max_facets) {
             return Err(Error::arg("max_facets", "must lie in 1..=64"));
         }
-        if let Some([lo, hi]) = f.bounds
-            && !(0..3).all(|i| lo[i].is_finite() && hi[i].is_finite() && lo[i] < hi[i])
-        {
-            return Err(Error::arg(
-                "bounds",
-                "must be a box of finite corners, min below max on every axis (m)",
-            ));
-        }
+        f.check_bounds()?;
         self.fit.check()
     }
 }
@@ -579,12 +572,17 @@ mod tests {
         path: crate::exec::EvalPath::Auto,
     };
 
-    /// `n × n` lasers × `n × n` SPADs over a wall of 1 m, `nt` bins of `dt` from 1 m; the
+    /// Grids of `lasers` and `spads` spots over a wall of 1 m, `nt` bins of `dt` from 1 m; the
     /// samples from `value(i)`.
-    fn wall(n: usize, nt: usize, dt: f64, value: impl FnMut(usize) -> f32) -> Capture {
+    fn wall(
+        lasers: [usize; 2],
+        spads: [usize; 2],
+        (nt, dt): (usize, f64),
+        value: impl FnMut(usize) -> f32,
+    ) -> Capture {
         let mut g = Scene::new(Setup::new(
-            Aperture::grid([n, n], [1.0, 1.0], [0.0, 0.0]),
-            Aperture::grid([n, n], [1.0, 1.0], [0.0, 0.0]),
+            Aperture::grid(lasers, [1.0, 1.0], [0.0, 0.0]),
+            Aperture::grid(spads, [1.0, 1.0], [0.0, 0.0]),
             nt,
             dt,
         ))
@@ -599,7 +597,7 @@ mod tests {
 
     /// A dark capture: 4×4 lasers × 4×4 SPADs, 300 bins of 1 cm from 1 m.
     fn dark() -> Capture {
-        wall(4, 300, 0.01, |_| 0.0)
+        wall([4, 4], [4, 4], (300, 0.01), |_| 0.0)
     }
 
     /// A capture of more than [`IMAGE_HISTOGRAMS`] histograms is imaged from every second
@@ -607,20 +605,7 @@ mod tests {
     /// a laser list and a paired scan are imaged whole.
     #[test]
     fn large_captures_are_imaged_from_a_laser_sub_lattice() {
-        let make = |lasers: [usize; 2], spads: [usize; 2]| {
-            let g = Scene::new(Setup::new(
-                Aperture::grid(lasers, [1.0, 1.0], [0.0, 0.0]),
-                Aperture::grid(spads, [1.0, 1.0], [0.0, 0.0]),
-                2,
-                0.01,
-            ))
-            .geometry();
-            let n = g.lasers.len() * g.spads.len() * g.nt;
-            Capture {
-                geometry: g,
-                data: (0..n).map(|i| i as f32).collect(),
-            }
-        };
+        let make = |lasers, spads| wall(lasers, spads, (2, 0.01), |i| i as f32);
         // 16 × 16 lasers × 128 SPADs = 32,768 histograms: every second row and column.
         let mut c = make([16, 16], [16, 8]);
         let full = c.geometry.clone();
@@ -775,7 +760,7 @@ mod tests {
     /// (the geometry of `fixtures/two_patches.npz`).
     fn noise() -> Capture {
         let mut x = 0x2545_f491_4f6c_dd1d_u64;
-        wall(8, 175, 0.02, |_| {
+        wall([8, 8], [8, 8], (175, 0.02), |_| {
             x ^= x << 13;
             x ^= x >> 7;
             x ^= x << 17;

@@ -152,6 +152,27 @@ impl Default for FacetOptions {
     }
 }
 
+impl FacetOptions {
+    /// Checks [`FacetOptions::bounds`].
+    ///
+    /// # Errors
+    /// [`Error::Argument`] naming `bounds` when it is not a box of finite corners, min below
+    /// max on every axis.
+    pub(crate) fn check_bounds(&self) -> Result<()> {
+        match self.bounds {
+            Some([lo, hi])
+                if !(0..3).all(|i| lo[i].is_finite() && hi[i].is_finite() && lo[i] < hi[i]) =>
+            {
+                Err(Error::arg(
+                    "bounds",
+                    "must be a box of finite corners, min below max on every axis (m)",
+                ))
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
 /// Folds tried at each edge (degrees; negative and positive: both ways about the edge).
 const FOLDS: [f64; 8] = [-90.0, -60.0, -40.0, -20.0, 20.0, 40.0, 60.0, 90.0];
 /// Widths of a grown facet before its refinement (m): a strip much narrower than the face it
@@ -220,14 +241,7 @@ pub fn refine_facets(
         subset,
         bounds,
     } = *opts;
-    if let Some([lo, hi]) = bounds
-        && !(0..3).all(|i| lo[i].is_finite() && hi[i].is_finite() && lo[i] < hi[i])
-    {
-        return Err(Error::arg(
-            "bounds",
-            "must be a box of finite corners, min below max on every axis (m)",
-        ));
-    }
+    opts.check_bounds()?;
     // Whether a facet stays inside the bounds.
     let inside = |f: &Facet| {
         bounds.is_none_or(|[lo, hi]| {

@@ -461,11 +461,7 @@ impl SynthModel {
                 Vec::new()
             };
             kept_rows.resize_with(end - start, || &mut [][..]);
-            for (_, h) in rows.iter() {
-                counts += h.iter().map(|&x| f64::from(x)).sum::<f64>();
-                integral = integral && h.iter().all(|&x| x >= 0.0 && x == x.trunc());
-            }
-            let per_row: Vec<(Vec<f32>, Vec<i16>, f64, f64)> = rows
+            let per_row: Vec<RowFit> = rows
                 .par_iter()
                 .zip(kept_rows.into_par_iter())
                 .enumerate()
@@ -479,10 +475,14 @@ impl SynthModel {
                     let mut out_j = vec![0i16; s_n];
                     let mut mh = vec![0.0f64; nt];
                     let (mut e, mut r) = (0.0, 0.0);
+                    // Σ H, and whether every sample is a count.
+                    let (mut c, mut int) = (0.0, true);
                     for s in 0..s_n {
                         let hist = &h[s * nt..(s + 1) * nt];
                         let hh: f64 = hist.iter().map(|x| f64::from(*x).powi(2)).sum();
                         e += hh;
+                        c += hist.iter().map(|&x| f64::from(x)).sum::<f64>();
+                        int = int && hist.iter().all(|&x| x >= 0.0 && x == x.trunc());
                         sc.render(&m.renderer, &g, &row, s, &m.kern);
                         let mut keep = (0.0f64, local[0], m.albedo.clone());
                         for &j in &local {
@@ -510,10 +510,12 @@ impl SynthModel {
                             }
                         }
                     }
-                    (out_g, out_j, e, r)
+                    (out_g, out_j, e, r, (c, int))
                 })
                 .collect();
-            for (i, (gg, jj, e, r)) in per_row.into_iter().enumerate() {
+            for (i, (gg, jj, e, r, (c, int))) in per_row.into_iter().enumerate() {
+                counts += c;
+                integral = integral && int;
                 let l = start + i;
                 gains[l * s_n * c_n..(l + 1) * s_n * c_n].copy_from_slice(&gg);
                 hshift[l * s_n..(l + 1) * s_n].copy_from_slice(&jj);
@@ -569,6 +571,10 @@ impl SynthModel {
         );
     }
 }
+
+/// One row of the fit's second pass: its per-histogram gains and delays, its energy `Σ H²`,
+/// its residual energy, and `(Σ H, whether every sample is a count)`.
+type RowFit = (Vec<f32>, Vec<i16>, f64, f64, (f64, bool));
 
 /// Reads rows `start..` into `rows`, timed as the probes time their reads.
 fn read(src: &mut dyn RowSource, start: usize, rows: &mut [(Point, Vec<f32>)]) -> Result<()> {
