@@ -44,7 +44,8 @@
 //! delay: [`super::SynthModel::fit`] fits those after.
 //!
 //! Cost: per facet and sweep, 15 renders of `K_f` surfels (`K_f` = area / pitch²) for each
-//! of the `≤ subset²` pairs (the facet's and its 14 coordinate moves', kept) and 1–4 for the
+//! of the `≤ subset²` pairs (the facet's and its 14 coordinate moves', kept; the moves
+//! rendered and scored in parallel, a task each) and 1–4 for the
 //! Levenberg–Marquardt trials, each after `K_f·(L + S)` legs; per growth round 96 candidate
 //! strips per lit facet. A render ([`super::subset`]) computes every surfel's bin in vectors,
 //! then scatters the returns into 4 interleaved copies of the pair's histogram (neighbouring
@@ -54,7 +55,7 @@
 //! there, before the renders were made faster; the refined geometry stayed within 0.1–1° and
 //! 0.1–3 mm of `scene.json` at subsets of 64, 32 and 16: tests/leak.rs prints it). Memory:
 //! the subset's residual, the facet's render and its 14 moves' (`16·pairs·Nt` f64) and the
-//! legs (`16·K_f·(L + S)` bytes).
+//! legs of each move (`14 · 16·K_f·(L + S)` bytes).
 
 use super::facet::Facet;
 use super::subset::{Column, Legs, Src, Subset, dots};
@@ -342,6 +343,8 @@ pub fn refine_facets(
     // The facet's render and its 14 coordinate moves' (also the Jacobian's differences).
     let mut m0 = vec![0.0f64; r.len()];
     let mut moves = vec![vec![0.0f64; r.len()]; 14];
+    // Per move, its samples and legs.
+    let mut scratch: Vec<(Vec<_>, Legs)> = (0..14).map(|_| Default::default()).collect();
     let bar = Pass::start(exec, "direct-light model: facets", (grow + 1) * sweeps);
     let mut ran = 0;
     let mut grown = 0;
@@ -413,22 +416,36 @@ pub fn refine_facets(
                     minus: Src::M0,
                     k: 0.0,
                 }; 7];
+                // The 14 coordinate moves (`2p` the minus side of parameter `p`), rendered and
+                // scored in parallel: `None` where the move collapses the facet.
+                let cands: [Option<Facet>; 14] = std::array::from_fn(|j| {
+                    let (p, sign) = (j / 2, if j % 2 == 0 { -1.0 } else { 1.0 });
+                    let mut pose = [0.0; 7];
+                    pose[p] = sign * base[p] * scale[fi];
+                    let cand = facets[fi].moved(&pose);
+                    let [u0, u1, v0, v1] = cand.extent;
+                    (u1 - u0 >= pitch && v1 - v0 >= pitch).then_some(cand)
+                });
+                let scores: Vec<Option<(f64, f64)>> = moves
+                    .par_iter_mut()
+                    .zip(scratch.par_iter_mut())
+                    .zip(&cands)
+                    .map(|((mv, (buf, legs)), cand)| {
+                        let cand = cand.as_ref()?;
+                        sub.legs(cand, pitch, buf, legs);
+                        sub.dense_into(legs, mv);
+                        Some(dots(&r, mv))
+                    })
+                    .collect();
                 for (p, col) in cols.iter_mut().enumerate() {
                     let h = base[p] * scale[fi];
                     let mut have = [false; 2];
-                    for (side, sign) in [-1.0, 1.0].into_iter().enumerate() {
-                        let mut pose = [0.0; 7];
-                        pose[p] = sign * h;
-                        let cand = facets[fi].moved(&pose);
-                        let [u0, u1, v0, v1] = cand.extent;
-                        if u1 - u0 < pitch || v1 - v0 < pitch {
-                            continue;
-                        }
+                    for (side, had) in have.iter_mut().enumerate() {
                         let j = 2 * p + side;
-                        sub.legs(&cand, pitch, &mut buf, &mut legs);
-                        sub.dense_into(&legs, &mut moves[j]);
-                        have[side] = true;
-                        let (d, m) = dots(&r, &moves[j]);
+                        let (Some(cand), Some((d, m))) = (cands[j], scores[j]) else {
+                            continue;
+                        };
+                        *had = true;
                         // Outside the bounds: a column of the Jacobian, never a pose.
                         if inside(&cand) && d > 0.0 && m > 0.0 && d * d / m > best.1 * (1.0 + 1e-9)
                         {

@@ -75,7 +75,7 @@ use crate::io::capture::{Geometry, RowSource};
 use crate::timings::{self, Kind};
 use linalg::nnls;
 use rayon::prelude::*;
-use render::{Renderer, SUB, bin, blurred_prefix, kernel};
+use render::{Renderer, SUB, bin, bin_range, bin_span, blurred_prefix, kernel};
 use std::time::Instant;
 use vltm_kernel::Point;
 
@@ -185,6 +185,11 @@ struct Scratch {
     fine: Vec<f64>,
     prefix: Vec<Vec<f64>>,
     bins: Vec<Vec<f64>>,
+    /// Per cluster, the fine samples `[lo, hi)` outside which its blurred render is zero (its
+    /// prefix constant): the bins and sums of [`Scratch::normal`] skip the rest.
+    support: Vec<(usize, usize)>,
+    /// Per cluster, the bins `[n0, n1)` of the last [`Scratch::normal`] that can be nonzero.
+    spans: Vec<(usize, usize)>,
 }
 
 impl Scratch {
@@ -200,12 +205,16 @@ impl Scratch {
         let c_n = r.surfels.clusters;
         self.prefix.resize_with(c_n, Vec::new);
         self.bins.resize_with(c_n, Vec::new);
+        self.support.resize(c_n, (0, 0));
         for c in 0..c_n {
-            blurred_prefix(
-                &self.fine[c * r.nf..(c + 1) * r.nf],
-                kern,
-                &mut self.prefix[c],
-            );
+            let p = &mut self.prefix[c];
+            blurred_prefix(&self.fine[c * r.nf..(c + 1) * r.nf], kern, p);
+            let steps = |i: &usize| p[i + 1] != p[*i];
+            let n = p.len() - 1;
+            self.support[c] = match (0..n).find(steps) {
+                Some(lo) => (lo, (lo..n).rfind(steps).map_or(lo, |i| i + 1)),
+                None => (0, 0),
+            };
         }
     }
 
@@ -227,24 +236,42 @@ impl Scratch {
 
     /// Bins every cluster with a delay of `shift` fine samples; the normal equations against
     /// `h` into `gm` (`C × C`) and `b` (`C`).
+    /// Only the bins a cluster's support reaches are binned and summed: the others are zero,
+    /// so the sums are the full ones (the same terms in the same order, less exact zeros).
     fn normal(&mut self, pad: usize, shift: isize, h: &[f32], gm: &mut [f64], b: &mut [f64]) {
         let c_n = self.prefix.len();
-        for c in 0..c_n {
-            self.bins[c].resize(h.len(), 0.0);
-            bin(&self.prefix[c], pad, shift, &mut self.bins[c]);
+        let nt = h.len();
+        self.spans.resize(c_n, (0, 0));
+        let spans = &mut self.spans;
+        for (((span, m), prefix), &support) in spans
+            .iter_mut()
+            .zip(&mut self.bins)
+            .zip(&self.prefix)
+            .zip(&self.support)
+        {
+            let (n0, n1) = bin_span(support, pad, shift, nt);
+            *span = (n0, n1);
+            m.resize(nt, 0.0);
+            bin_range(prefix, pad, shift, n0, &mut m[n0..n1]);
         }
         for i in 0..c_n {
-            b[i] = self.bins[i]
+            let (a0, a1) = spans[i];
+            b[i] = self.bins[i][a0..a1]
                 .iter()
-                .zip(h)
+                .zip(&h[a0..a1])
                 .map(|(m, y)| m * f64::from(*y))
                 .sum();
             for j in i..c_n {
-                let v: f64 = self.bins[i]
-                    .iter()
-                    .zip(&self.bins[j])
-                    .map(|(x, y)| x * y)
-                    .sum();
+                let (lo, hi) = (a0.max(spans[j].0), a1.min(spans[j].1));
+                let v: f64 = if lo < hi {
+                    self.bins[i][lo..hi]
+                        .iter()
+                        .zip(&self.bins[j][lo..hi])
+                        .map(|(x, y)| x * y)
+                        .sum()
+                } else {
+                    0.0
+                };
                 gm[i * c_n + j] = v;
                 gm[j * c_n + i] = v;
             }

@@ -184,11 +184,37 @@ pub(super) fn blurred_prefix(fine: &[f64], kern: &[f64], out: &mut Vec<f64>) {
 /// bin `n` sums the fine samples `[n·SUB − shift, (n + 1)·SUB − shift)` past the padding.
 #[inline]
 pub(super) fn bin(prefix: &[f64], pad: usize, shift: isize, out: &mut [f64]) {
+    bin_range(prefix, pad, shift, 0, out);
+}
+
+/// [`bin`] of the bins `first..first + out.len()` only.
+#[inline]
+pub(super) fn bin_range(prefix: &[f64], pad: usize, shift: isize, first: usize, out: &mut [f64]) {
     let base = pad as isize - shift;
-    for (n, o) in out.iter_mut().enumerate() {
+    for (n, o) in (first..).zip(out.iter_mut()) {
         let a = base + (n * SUB) as isize;
         let b = a + SUB as isize;
         let at = |i: isize| prefix[i.clamp(0, prefix.len() as isize - 1) as usize];
         *o = at(b) - at(a);
     }
+}
+
+/// The bins `[n0, n1)` (within `0..nt`) of [`bin`] that can be nonzero when the prefix is
+/// constant outside the fine samples `support = [lo, hi)`: bin `n` spans
+/// `[a, a + SUB)`, `a = pad − shift + n·SUB`, and differs from zero only when `a < hi` and
+/// `a + SUB > lo`. An empty support gives an empty range.
+pub(super) fn bin_span(
+    support: (usize, usize),
+    pad: usize,
+    shift: isize,
+    nt: usize,
+) -> (usize, usize) {
+    let (lo, hi) = (support.0 as isize, support.1 as isize);
+    if hi <= lo {
+        return (0, 0);
+    }
+    let (base, sub, n) = (pad as isize - shift, SUB as isize, nt as isize);
+    let n0 = ((lo - base - sub).div_euclid(sub) + 1).clamp(0, n);
+    let n1 = ((hi - 1 - base).div_euclid(sub) + 1).clamp(n0, n);
+    (n0 as usize, n1 as usize)
 }

@@ -481,3 +481,56 @@ fn facet_refinement_refuses_bad_input() {
     let w = geometry_wavelength(&g).unwrap();
     assert!((w - 0.5 / 3.0).abs() < 1e-6, "{w}");
 }
+
+/// The normal equations of a histogram bin and sum only the bins a cluster's support
+/// reaches: against the plain sums over every bin they are the same numbers, for delays
+/// that move the returns across the window and out of it at both ends, with and without a
+/// blur (equal as numbers: an empty sum is −0); the bins left out are zero, and the spans
+/// are not the whole window.
+#[test]
+fn normal_equations_skip_only_zero_bins() {
+    let g = geometry();
+    let r = Renderer::new(&g, patches(0.0), vec![1.0; g.lasers.len()], 4.0);
+    let c_n = r.surfels.clusters;
+    let hist: Vec<f32> = (0..g.nt).map(|i| ((i * 37) % 11) as f32 - 3.0).collect();
+    let (mut gm, mut b) = (vec![0.0; c_n * c_n], vec![0.0; c_n]);
+    let mut full = vec![0.0; g.nt];
+    let mut narrower = false;
+    for width in [0.0, 0.75] {
+        let kern = kernel(width * SUB as f64);
+        let mut sc = Scratch::default();
+        let row = r.laser_row(&g, 5);
+        sc.render(&r, &g, &row, 6, &kern);
+        for shift in (-2400..=2400).step_by(37) {
+            sc.normal(r.pad, shift, &hist, &mut gm, &mut b);
+            let bins: Vec<Vec<f64>> = (0..c_n)
+                .map(|c| {
+                    bin(&sc.prefix[c], r.pad, shift, &mut full);
+                    full.clone()
+                })
+                .collect();
+            for i in 0..c_n {
+                let (n0, n1) = sc.spans[i];
+                narrower |= n1 - n0 < g.nt;
+                assert!(
+                    bins[i][..n0]
+                        .iter()
+                        .chain(&bins[i][n1..])
+                        .all(|x| *x == 0.0),
+                    "a nonzero bin outside [{n0}, {n1}) at shift {shift}"
+                );
+                let want: f64 = bins[i]
+                    .iter()
+                    .zip(&hist)
+                    .map(|(m, y)| m * f64::from(*y))
+                    .sum();
+                assert!(b[i] == want, "b[{i}] at shift {shift}: {} != {want}", b[i]);
+                for j in 0..c_n {
+                    let want: f64 = bins[i].iter().zip(&bins[j]).map(|(x, y)| x * y).sum();
+                    assert!(gm[i * c_n + j] == want, "G[{i}, {j}] at shift {shift}");
+                }
+            }
+        }
+    }
+    assert!(narrower, "every span was the whole window");
+}
