@@ -55,7 +55,7 @@
 //! there, before the renders were made faster; the refined geometry stayed within 0.1–1° and
 //! 0.1–3 mm of `scene.json` at subsets of 64, 32 and 16: tests/leak.rs prints it). Memory:
 //! the subset's residual, the facet's render and its 14 moves' (`16·pairs·Nt` f64) and the
-//! legs of each move (`14 · 16·K_f·(L + S)` bytes).
+//! legs (`16·K_f·(L + S)` bytes per worker rendering a move).
 
 use super::facet::Facet;
 use super::subset::{Column, Legs, Src, Subset, dots};
@@ -343,8 +343,6 @@ pub fn refine_facets(
     // The facet's render and its 14 coordinate moves' (also the Jacobian's differences).
     let mut m0 = vec![0.0f64; r.len()];
     let mut moves = vec![vec![0.0f64; r.len()]; 14];
-    // Per move, its samples and legs.
-    let mut scratch: Vec<(Vec<_>, Legs)> = (0..14).map(|_| Default::default()).collect();
     let bar = Pass::start(exec, "direct-light model: facets", (grow + 1) * sweeps);
     let mut ran = 0;
     let mut grown = 0;
@@ -428,14 +426,16 @@ pub fn refine_facets(
                 });
                 let scores: Vec<Option<(f64, f64)>> = moves
                     .par_iter_mut()
-                    .zip(scratch.par_iter_mut())
                     .zip(&cands)
-                    .map(|((mv, (buf, legs)), cand)| {
-                        let cand = cand.as_ref()?;
-                        sub.legs(cand, pitch, buf, legs);
-                        sub.dense_into(legs, mv);
-                        Some(dots(&r, mv))
-                    })
+                    .map_init(
+                        || (Vec::new(), Legs::default()),
+                        |(buf, legs), (mv, cand)| {
+                            let cand = cand.as_ref()?;
+                            sub.legs(cand, pitch, buf, legs);
+                            sub.dense_into(legs, mv);
+                            Some(dots(&r, mv))
+                        },
+                    )
                     .collect();
                 for (p, col) in cols.iter_mut().enumerate() {
                     let h = base[p] * scale[fi];
