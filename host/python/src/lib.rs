@@ -20,6 +20,8 @@ use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 
 mod capture;
+mod leak;
+mod options;
 mod partial;
 mod run;
 mod volume;

@@ -4,6 +4,8 @@
 //! for bit).
 
 use crate::capture::{NativeCapture, prep_of};
+use crate::leak::{apply_mask, corrected, fallback_warning, falloff_of, surface_model};
+use crate::options::{column_gate, diagonal_gate, shell_of, wave_of};
 use crate::partial::{NativePartial, counters, report};
 use crate::volume::{NativeVolume, points_of};
 use crate::{arg, py_err};
@@ -17,90 +19,7 @@ use vltm::probe::{
     self, ColumnGate, Gamma, IndirectOptions, LeakCorrected, LeakOptions, Partial, Pattern, Shell,
     Task, Wave, partial,
 };
-use vltm_kernel::{Point, Weights};
-
-/// The wave options and the evaluation path, from Python keywords.
-fn wave_of(
-    wavelength: Option<f64>,
-    sigma: Option<f64>,
-    weights: &str,
-    band: f64,
-    compensate_laser: bool,
-    crop: bool,
-    path: &str,
-) -> PyResult<(Wave, EvalPath)> {
-    let (weights, cosine) = match weights {
-        "inv" => (Weights::Inv, false),
-        "one" => (Weights::One, false),
-        "cos" => (Weights::Inv, true),
-        w => {
-            return Err(arg(
-                "weights",
-                format!("expected inv, one or cos, found `{w}`"),
-            ));
-        }
-    };
-    let path = match path {
-        "auto" => EvalPath::Auto,
-        "band" => EvalPath::Band,
-        "planar" => EvalPath::Planar,
-        "lookup" => EvalPath::Lookup,
-        "phasor" => EvalPath::Phasor,
-        p => {
-            return Err(arg(
-                "path",
-                format!("expected auto, band, planar or lookup, found `{p}`"),
-            ));
-        }
-    };
-    let wave = Wave {
-        wavelength,
-        sigma,
-        weights,
-        cosine,
-        band_half_width: band,
-        compensate_laser,
-        auto_margin: true,
-        crop,
-    };
-    Ok((wave, path))
-}
-
-fn shell_of(name: &str, shell: Option<(f32, f32)>) -> PyResult<Option<Shell>> {
-    match shell {
-        None => Ok(None),
-        Some((r0, r1)) if r0 >= 0.0 && r1 > r0 => Ok(Some(Shell { r0, r1 })),
-        Some((r0, r1)) => Err(arg(
-            name,
-            format!("expected (r0, r1) with 0 <= r0 < r1 in metres, found ({r0}, {r1})"),
-        )),
-    }
-}
-
-fn column_gate(gate: &str) -> PyResult<ColumnGate> {
-    match gate {
-        "two-bounce" => Ok(ColumnGate::TwoBounce),
-        "higher-order" => Ok(ColumnGate::HigherOrder),
-        "none" => Ok(ColumnGate::None),
-        g => Err(arg(
-            "gate",
-            format!("expected two-bounce, higher-order or none, found `{g}`"),
-        )),
-    }
-}
-
-/// The diagonal's gates: `gaussian` is direct light.
-fn diagonal_gate(gate: &str) -> PyResult<ColumnGate> {
-    match gate {
-        "gaussian" => Ok(ColumnGate::TwoBounce),
-        "higher-order" => Ok(ColumnGate::HigherOrder),
-        "none" => Ok(ColumnGate::None),
-        g => Err(arg(
-            "gate",
-            format!("expected gaussian, none or higher-order, found `{g}`"),
-        )),
-    }
-}
+use vltm_kernel::Point;
 
 /// A finished probe.
 struct Done {
@@ -114,6 +33,10 @@ struct Done {
     direct: Option<Vec<f32>>,
     passes: Option<usize>,
     prep: Option<PrepReport>,
+    /// The leak correction that ran: `gate` (the windows) or `model`.
+    leak: Option<&'static str>,
+    /// Warnings beside the preprocessing's (a surface model not used, and why).
+    warnings: Vec<String>,
 }
 
 impl Done {
@@ -127,6 +50,8 @@ impl Done {
             direct: None,
             passes: None,
             prep: None,
+            leak: None,
+            warnings: Vec::new(),
         }
     }
 }
@@ -170,13 +95,38 @@ enum Job {
     },
 }
 
+impl Job {
+    /// Whether the job removes the capture's direct light first (the windows of Γ).
+    fn leaks(&self) -> bool {
+        match self {
+            Job::Column { leak_epsilon, .. }
+            | Job::Relight { leak_epsilon, .. }
+            | Job::Row { leak_epsilon, .. } => leak_epsilon.is_some(),
+            Job::Indirect { opts, .. } => opts.leak.is_some(),
+            Job::Direct { .. } | Job::Matrix { .. } => false,
+        }
+    }
+
+    /// The job without its windows (it runs on the capture minus the surface model).
+    fn without_leak(mut self) -> Self {
+        match &mut self {
+            Job::Column { leak_epsilon, .. }
+            | Job::Relight { leak_epsilon, .. }
+            | Job::Row { leak_epsilon, .. } => *leak_epsilon = None,
+            Job::Indirect { opts, .. } => opts.leak = None,
+            Job::Direct { .. } | Job::Matrix { .. } => {}
+        }
+        self
+    }
+}
+
 /// Runs a probe: `kind` is direct, column, indirect, matrix (`from_points` × the volume),
 /// relight (`pattern` (n, 4) foci and weights, or `pattern_spec`) or row; `rows` makes it
 /// partial. Options as the command line's (flags spelled as keywords).
 #[pyfunction]
 #[pyo3(signature = (capture, volume, kind, *, focus=None, gate="two-bounce", shell=None,
     shells=None, epsilon=0.1, direct=None, mask_epsilon=None, leak_correct=false,
-    leak_epsilon=0.1, wavelength=None, sigma=None, weights="inv", band=5.0,
+    leak_model=false, leak_epsilon=0.1, wavelength=None, sigma=None, weights="inv", band=5.0,
     compensate_laser=false, crop=true, path="auto", swap_roles=false, t_min=None, t_max=None, rebin=1,
     background=None, rows=None, amplitudes=false, from_points=None, pattern=None,
     pattern_spec=None))]
@@ -194,6 +144,7 @@ fn run<'py>(
     direct: Option<PyReadonlyArray1<'py, f32>>,
     mask_epsilon: Option<f32>,
     leak_correct: bool,
+    leak_model: bool,
     leak_epsilon: f32,
     wavelength: Option<f64>,
     sigma: Option<f64>,
@@ -325,6 +276,12 @@ fn run<'py>(
                 ));
             }
             if rows.is_some() {
+                if leak_correct && leak_model {
+                    return Err(arg(
+                        "rows",
+                        "the surface model is fitted to the whole capture: a partial in-focus sum takes leak_correct=\"gate\" (or False)",
+                    ));
+                }
                 if direct.is_none() {
                     return Err(arg(
                         "direct",
@@ -409,10 +366,11 @@ fn run<'py>(
         path: epath,
         ..Exec::default()
     };
+    let model = leak_correct && leak_model;
     let outcome = py
         .detach(|| {
             compute(
-                cap, vol, job, &wave, exec, prep, swap_roles, rows, amplitudes,
+                cap, vol, job, &wave, exec, prep, swap_roles, rows, amplitudes, model,
             )
         })
         .map_err(py_err)?;
@@ -457,6 +415,10 @@ fn extras(py: Python<'_>, rep: &Bound<'_, PyDict>, d: &Done) -> PyResult<()> {
     if let Some(p) = d.passes {
         rep.set_item("passes", p)?;
     }
+    if let Some(l) = d.leak {
+        rep.set_item("leak_correct", l)?;
+    }
+    let mut warnings = Vec::new();
     if let Some(p) = &d.prep {
         rep.set_item("preprocessing", &p.summary)?;
         let s = &p.stats;
@@ -466,9 +428,11 @@ fn extras(py: Python<'_>, rep: &Bound<'_, PyDict>, d: &Done) -> PyResult<()> {
         st.set_item("counts_in", s.counts_in)?;
         st.set_item("counts_out", s.counts_out)?;
         rep.set_item("preprocessing_stats", st)?;
-        if let Some(w) = &p.warning {
-            rep.set_item("warnings", vec![w.clone()])?;
-        }
+        warnings.extend(p.warning.clone());
+    }
+    warnings.extend(d.warnings.iter().cloned());
+    if !warnings.is_empty() {
+        rep.set_item("warnings", warnings)?;
     }
     Ok(())
 }
@@ -485,7 +449,14 @@ fn compute(
     swap_roles: bool,
     rows: Option<(usize, usize)>,
     amplitudes: bool,
+    model: bool,
 ) -> vltm::Result<Outcome> {
+    // `leak_correct="model"`: whether the capture holds the laser's falloff.
+    let falloff = if model && job.leaks() {
+        Some(falloff_of(cap)?)
+    } else {
+        None
+    };
     let mut src = cap.load(swap_roles)?;
     if let (Job::Matrix { from }, None) = (&job, rows) {
         let m = probe::matrix(&mut *src, from, &vol.points, wave, exec)?;
@@ -522,7 +493,8 @@ fn compute(
                 } if rows.is_none() => Some(*le),
                 _ => None,
             };
-            let ((p, explained), prep) = with_prep(
+            let mut warnings = Vec::new();
+            let ((p, explained, used), prep) = with_prep(
                 prep,
                 &mut *src,
                 &vol.points,
@@ -532,6 +504,24 @@ fn compute(
                         Some(le) => {
                             if let Job::Column { focus, gate, .. } = &job {
                                 probe::check_column(s.geometry(), *focus, vol, *gate, wave, exec)?;
+                            }
+                            if let Some(falloff) = falloff {
+                                match surface_model(s, wave, falloff, exec)? {
+                                    Ok(m) => {
+                                        let p = partial::accumulate(
+                                            &mut m.subtracted(s),
+                                            bytes,
+                                            &name,
+                                            vol,
+                                            &task,
+                                            wave,
+                                            exec,
+                                            r,
+                                        )?;
+                                        return Ok((p, Some(m.explained), Some("model")));
+                                    }
+                                    Err(reason) => warnings.push(fallback_warning(&reason)),
+                                }
                             }
                             let model = probe::fit_over_volume(
                                 s,
@@ -545,10 +535,11 @@ fn compute(
                             let p = partial::accumulate(
                                 &mut lc, bytes, &name, vol, &task, wave, exec, r,
                             )?;
-                            Ok((p, Some(model.explained)))
+                            Ok((p, Some(model.explained), Some("gate")))
                         }
                         None => Ok((
                             partial::accumulate(s, bytes, &name, vol, &task, wave, exec, r)?,
+                            None,
                             None,
                         )),
                     }
@@ -563,6 +554,8 @@ fn compute(
             d.amplitudes = f.amplitudes;
             d.explained = f.explained.or(explained);
             d.prep = prep;
+            d.leak = used;
+            d.warnings = warnings;
             return Ok(Outcome::Done(d));
         }
     }
@@ -572,11 +565,100 @@ fn compute(
         &mut *src,
         &vol.points,
         sigma,
-        |rows| one_pass(rows, vol, job, wave, exec),
+        |rows| whole_pass(rows, vol, job, wave, exec, falloff),
         |_| {},
     )?;
     d.prep = prep;
     Ok(Outcome::Done(d))
+}
+
+/// A whole-capture run on the (preprocessed) rows; with `falloff` (`leak_correct="model"`),
+/// on the rows minus the surface model, Γ (of `indirect` and of a column's `mask_epsilon`)
+/// still from the rows themselves, or, when the model is not used, with the windows and the
+/// reason as a warning.
+fn whole_pass(
+    rows: &mut dyn RowSource,
+    vol: &vltm::volume::Volume,
+    job: Job,
+    wave: &Wave,
+    exec: Exec<'_>,
+    falloff: Option<bool>,
+) -> vltm::Result<Done> {
+    let leaks = job.leaks();
+    let Some(falloff) = falloff.filter(|_| leaks) else {
+        let mut d = one_pass(rows, vol, job, wave, exec)?;
+        d.leak = leaks.then_some("gate");
+        return Ok(d);
+    };
+    // Bad input is refused before the model's passes.
+    match &job {
+        Job::Column { focus, gate, .. } => {
+            probe::check_column(rows.geometry(), *focus, vol, *gate, wave, exec)?
+        }
+        Job::Relight { pattern, .. } => probe::check_relight(rows.geometry(), pattern, vol, wave)?,
+        Job::Row { focus, .. } => probe::check_row(rows.geometry(), *focus, vol, wave)?,
+        _ => {}
+    }
+    // Γ from the capture's own direct light (the capture minus the model has little).
+    let (job, mask) = match job {
+        Job::Indirect {
+            opts,
+            shells,
+            direct: None,
+        } => {
+            let (_, d) = Gamma::measure(rows, vol, opts.epsilon, "epsilon", wave, exec)?;
+            let direct = Some(d.values);
+            (
+                Job::Indirect {
+                    opts,
+                    shells,
+                    direct,
+                },
+                None,
+            )
+        }
+        Job::Column {
+            focus,
+            gate,
+            shell,
+            shells,
+            mask_epsilon: Some(e),
+            leak_epsilon,
+        } => {
+            let (g, _) = Gamma::measure(rows, vol, e, "mask_epsilon", wave, exec)?;
+            let mask = g.non_empty("mask_epsilon")?.mask;
+            let job = Job::Column {
+                focus,
+                gate,
+                shell,
+                shells,
+                mask_epsilon: None,
+                leak_epsilon,
+            };
+            (job, Some(mask))
+        }
+        job => (job, None),
+    };
+    let mut d = match surface_model(rows, wave, falloff, exec)? {
+        Ok(m) => {
+            let mut d = one_pass(&mut m.subtracted(rows), vol, job.without_leak(), wave, exec)?;
+            d.explained = Some(m.explained);
+            d.leak = Some("model");
+            d
+        }
+        Err(reason) => {
+            let mut d = one_pass(rows, vol, job, wave, exec)?;
+            d.leak = Some("gate");
+            d.warnings.push(fallback_warning(&reason));
+            d
+        }
+    };
+    if let Some(m) = mask {
+        apply_mask(&mut d.out.values, &m);
+        d.parts.iter_mut().flatten().for_each(|p| apply_mask(p, &m));
+        d.gamma = Some(m);
+    }
+    Ok(d)
 }
 
 /// A whole-capture run on the (preprocessed) rows.
@@ -618,10 +700,7 @@ fn one_pass(
                 None => probe::column(rows, focus, vol, gate, shell, wave, exec)?,
             };
             if let Some(m) = &mask {
-                o.values
-                    .iter_mut()
-                    .zip(m)
-                    .for_each(|(x, &k)| *x *= f32::from(u8::from(k)));
+                apply_mask(&mut o.values, m);
             }
             let parts = shells.map(|cuts| {
                 cuts.iter()
@@ -710,25 +789,6 @@ fn one_pass(
             "a matrix is run over all rows above",
         )),
     }
-}
-
-/// `probe` on the rows of `src`, leak-corrected with Γ above `epsilon`·max over `vol` (as
-/// the command line's `row` and `relight`), or on `src` as it is for `None`; with the energy
-/// the correction removed.
-fn corrected<T>(
-    src: &mut dyn RowSource,
-    vol: &vltm::volume::Volume,
-    epsilon: Option<f32>,
-    wave: &Wave,
-    exec: Exec<'_>,
-    probe: impl FnOnce(&mut dyn RowSource) -> vltm::Result<T>,
-) -> vltm::Result<(T, Option<f64>)> {
-    let Some(e) = epsilon else {
-        return Ok((probe(src)?, None));
-    };
-    let model = probe::fit_over_volume(src, vol, e, wave, &LeakOptions::default(), exec)?;
-    let mut lc = LeakCorrected::new(src, &model);
-    Ok((probe(&mut lc)?, Some(model.explained)))
 }
 
 pub(crate) fn register(m: &Bound<'_, PyModule>) -> PyResult<()> {

@@ -53,6 +53,42 @@ def test_indirect_equals_cli_with_and_without_leak_correction(two_patches, tmp_p
     close(want, vltm.indirect(two_patches, vol, epsilon=0.2, direct=d))
 
 
+def test_leak_correct_model_equals_cli(tmp_path):
+    """``leak_correct="model"`` is the command line's ``--leak-correct model``: the surface
+    model subtracted where it explains >= 99 % (the simulated two patches), the windows with
+    a RuntimeWarning carrying the command line's reason where it does not (three point
+    scatterers); ``"gate"`` is ``True``; another value is refused naming ``leak_correct``;
+    a partial in-focus sum cannot take the model."""
+    vol = "-0.6:0.6:10,-0.6:0.6:10,0.5:1.2:8"
+    cap = str(FIXTURE)
+    want = cli_volume(tmp_path, "indirect", cap, "--volume", vol, "--epsilon", "0.2",
+                      "--leak-correct", "model")
+    got, rep = vltm.indirect(cap, vol, epsilon=0.2, leak_correct="model", report=True)
+    close(want, got)
+    assert rep["leak_correct"] == "model" and 0.99 <= rep["explained"] < 1.0
+    assert "warnings" not in rep
+    gate, rg = vltm.indirect(cap, vol, epsilon=0.2, leak_correct="gate", report=True)
+    assert rg["leak_correct"] == "gate"
+    close(vltm.indirect(cap, vol, epsilon=0.2), gate)
+    # The model keeps what the windows zero.
+    assert np.abs(got - gate).max() > 0.01 * gate.max()
+    focus = (-0.45, 0.0, 0.8)
+    want = cli_volume(tmp_path, "column", cap, "--volume", vol, "--focus",
+                      ",".join(map(str, focus)), "--leak-correct", "model")
+    close(want, vltm.column(cap, vol, focus, leak_correct="model"))
+    three = str(FIXTURE.parent / "three_points.npz")
+    with pytest.warns(RuntimeWarning, match=r"explains 86\.6 % of the energy \(< 99 %\); "
+                      r"using the time windows \(leak_correct=\"gate\"\)"):
+        got, rep = vltm.indirect(three, vol, epsilon=0.2, leak_correct="model", report=True)
+    assert rep["leak_correct"] == "gate"
+    assert np.array_equal(got, vltm.indirect(three, vol, epsilon=0.2, leak_correct="gate"))
+    with pytest.raises(vltm.ArgumentError, match="leak_correct"):
+        vltm.indirect(cap, vol, leak_correct="windows")
+    with pytest.raises(vltm.ArgumentError, match="rows"):
+        vltm.indirect(cap, vol, leak_correct="model", direct=vltm.direct(cap, vol),
+                      rows=slice(0, 8))
+
+
 def test_options_and_report(two_patches, tmp_path):
     want = cli_volume(tmp_path, "direct", str(two_patches), "--volume", GRID, "--wavelength",
                       "0.3", "--weights", "one", "--path", "band")

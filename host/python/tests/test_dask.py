@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import vltm
-from conftest import FOCUS, GRID, SMALL
+from conftest import FIXTURE, FOCUS, GRID, SMALL
 
 distributed = pytest.importorskip("distributed")
 
@@ -64,6 +64,11 @@ def test_dask_indirect(two_patches, client):
     close(vltm.indirect(two_patches, vol, epsilon=0.2, leak_correct=False),
           vltm.dask.indirect(two_patches, vol, client=client, epsilon=0.2, rows_per_task=16,
                              leak_correct=False))
+    # The surface model is fitted to the whole capture: one task, the in-process result.
+    npz = str(FIXTURE)
+    close(vltm.indirect(npz, vol, epsilon=0.2, leak_correct="model"),
+          vltm.dask.indirect(npz, vol, client=client, epsilon=0.2, rows_per_task=16,
+                             leak_correct="model"))
 
 
 def test_dask_matrix(two_patches, client):

@@ -42,6 +42,19 @@ def flag(name: str, x: Any) -> bool:
     return bool(x)
 
 
+def leak(name: str, x: Any) -> Tuple[bool, bool]:
+    """A probe's ``leak_correct``: ``True`` or ``"gate"`` (the time windows, the default),
+    ``"model"`` (the surface model, the windows its fallback) or ``False``; as (corrected,
+    model)."""
+    if isinstance(x, str):
+        if x in ("gate", "model"):
+            return True, x == "model"
+        raise fail(name, f"expected True, False, 'gate' or 'model', found {x!r}")
+    if not isinstance(x, (bool, np.bool_)):
+        raise fail(name, f"expected True, False, 'gate' or 'model', found {type(x).__name__} {x!r}")
+    return bool(x), False
+
+
 def text(name: str, x: Any) -> str:
     if not isinstance(x, str):
         raise fail(name, f"expected a string, found {type(x).__name__} {x!r}")

@@ -25,7 +25,7 @@ def relight(
     volume: Union[str, np.ndarray, Volume],
     pattern: Union[str, np.ndarray],
     *,
-    leak_correct: bool = True,
+    leak_correct: Union[bool, str] = True,
     leak_epsilon: float = 0.1,
     wavelength: Optional[float] = None,
     sigma: Optional[float] = None,
@@ -51,8 +51,8 @@ def relight(
     ``(n, 3)`` or ``(n, 4)`` array of foci (and weights), a voxel image of the volume's
     shape (its voxels are the foci, its values the weights), or the path of a float32
     ``.npy`` image. ``amplitudes=True`` also returns ``A_p`` (complex128);
-    ``report["passes"]`` the passes over the capture. ``leak_correct``, ``leak_epsilon`` as
-    :func:`column` (on by default). ``capture`` and ``volume`` as :func:`direct`."""
+    ``report["passes"]`` the passes over the capture. ``leak_correct`` (``True``/``"gate"``,
+    ``"model"`` or ``False``), ``leak_epsilon`` as :func:`column` (on by default). ``capture`` and ``volume`` as :func:`direct`."""
     vol = _volume(volume)
     spec, pts = None, None
     if isinstance(pattern, (str, os.PathLike)) and os.fspath(pattern).strip().endswith(".npy"):
@@ -78,9 +78,10 @@ def relight(
             raise ArgumentError(
                 f"argument `pattern`: expected x,y,z,w;... foci, an (n, 3) or (n, 4) array, or an image of the volume's shape {list(vol.shape)}, found shape {list(a.shape)}")
         pts = np.ascontiguousarray(pts, dtype=np.float64)
+    lc, lm = _check.leak("leak_correct", leak_correct)
     return _probe("relight", capture, vol, None, amplitudes, report, as_xarray,
                   {"pattern": spec, "leak_correct": leak_correct}, pattern=pts, pattern_spec=spec,
-                  leak_correct=_check.flag("leak_correct", leak_correct),
+                  leak_correct=lc, leak_model=lm,
                   leak_epsilon=_check.real("leak_epsilon", leak_epsilon),
                   **_options.checked(locals()))
 
@@ -91,7 +92,7 @@ def row(
     volume: Union[str, np.ndarray, Volume],
     focus: Sequence[float],
     *,
-    leak_correct: bool = True,
+    leak_correct: Union[bool, str] = True,
     leak_epsilon: float = 0.1,
     wavelength: Optional[float] = None,
     sigma: Optional[float] = None,
@@ -111,13 +112,15 @@ def row(
     """A row ``T(·, x_b)`` of the LTM (``vltm row``), float32 shaped like the volume: the
     virtual camera focused at ``x_b`` = ``focus`` (m, z > 0), the projector over ``volume``
     (two-bounce gate), streamed by laser rows without transposing the capture.
-    ``swap_roles`` is refused (a row is the transposed column already). ``leak_correct``,
-    ``leak_epsilon`` as :func:`column` (on by default). ``capture`` and ``volume`` as
+    ``swap_roles`` is refused (a row is the transposed column already). ``leak_correct``
+    (``True``/``"gate"``, ``"model"`` or ``False``), ``leak_epsilon`` as :func:`column` (on by
+    default). ``capture`` and ``volume`` as
     :func:`direct`."""
     f = _check.point("focus", focus)
+    lc, lm = _check.leak("leak_correct", leak_correct)
     return _probe("row", capture, volume, None, False, report, as_xarray,
                   {"gate": "two-bounce", "focus": list(f), "leak_correct": leak_correct},
-                  focus=list(f), leak_correct=_check.flag("leak_correct", leak_correct),
+                  focus=list(f), leak_correct=lc, leak_model=lm,
                   leak_epsilon=_check.real("leak_epsilon", leak_epsilon),
                   **_options.checked(locals()))
 

@@ -102,6 +102,7 @@ def run(
     direct: Optional[np.ndarray] = ...,
     mask_epsilon: Optional[float] = ...,
     leak_correct: bool = ...,
+    leak_model: bool = ...,
     leak_epsilon: float = ...,
     wavelength: Optional[float] = ...,
     sigma: Optional[float] = ...,

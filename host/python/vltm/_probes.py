@@ -122,7 +122,7 @@ def column(
     shell: Optional[Tuple[float, float]] = None,
     shells: Optional[Tuple[float, float]] = None,
     mask_epsilon: Optional[float] = None,
-    leak_correct: bool = True,
+    leak_correct: Union[bool, str] = True,
     leak_epsilon: float = 0.1,
     wavelength: Optional[float] = None,
     sigma: Optional[float] = None,
@@ -149,11 +149,15 @@ def column(
     ``[0, r1)``, middle ``[r1, r2)`` and far ``[r2, inf)`` light of one run, stacked as
     ``(3,) + shape`` (``vltm column --shells``; a ``shell`` dimension with ``as_xarray``).
     ``mask_epsilon`` zeroes every voxel whose direct light is not above ε·max (an extra
-    diagonal pass). ``leak_correct=True`` (the default, as ``vltm column``) removes the
-    capture's direct light first (the 3-vertex windows of Γ = direct light above
-    ``leak_epsilon``·max; ``report["explained"]`` the energy removed);
-    ``leak_correct=False`` is the column of the capture as it is (``--no-leak-correct``),
-    needed for partial states (``rows=``). ``amplitudes=True`` also returns the complex
+    diagonal pass). ``leak_correct=True`` (the default, as ``vltm column``; also
+    ``"gate"``) removes the capture's direct light first (the 3-vertex windows of Γ = direct
+    light above ``leak_epsilon``·max; ``report["explained"]`` the energy removed);
+    ``leak_correct="model"`` subtracts a surface model fitted to the capture instead
+    (``--leak-correct model``; ``report["explained"]`` the energy it explains), falling back
+    to the windows with a ``RuntimeWarning`` that says why when it explains less than 99 %
+    or cannot be fitted; ``report["leak_correct"]`` says which ran. ``leak_correct=False``
+    is the column of the capture as it is (``--no-leak-correct``), needed for partial
+    states (``rows=``). ``amplitudes=True`` also returns the complex
     amplitudes ``A(x_a, ·)`` (complex128, ``T = |A|²``, 0 outside ``shell``) of two-bounce
     and higher-order columns; the un-gated column has none. ``capture`` and ``volume`` as
     :func:`direct`."""
@@ -162,13 +166,14 @@ def column(
     le = _check.real("leak_epsilon", leak_epsilon)
     sh = None if shell is None else _check.pair("shell", shell)
     cut = _shells(shells)
+    lc, lm = _check.leak("leak_correct", leak_correct)
     attrs = {"gate": gate, "focus": list(f), "mask_epsilon": me, "shell": sh,
              "shells": None if shells is None else list(_check.pair("shells", shells)),
-             "leak_correct": leak_correct, "leak_epsilon": le if leak_correct else None}
+             "leak_correct": leak_correct, "leak_epsilon": le if lc else None}
     return _probe("column", capture, volume, rows, amplitudes, report, as_xarray, attrs,
                   _SHELLS if cut else None, focus=list(f), gate=_check.text("gate", gate),
                   shell=sh, shells=cut, mask_epsilon=me,
-                  leak_correct=_check.flag("leak_correct", leak_correct), leak_epsilon=le,
+                  leak_correct=lc, leak_model=lm, leak_epsilon=le,
                   **_options.checked(locals()))
 
 
@@ -183,7 +188,7 @@ def indirect(
     shells: Optional[Tuple[float, float]] = None,
     gate: str = "two-bounce",
     direct: Optional[np.ndarray] = None,
-    leak_correct: bool = True,
+    leak_correct: Union[bool, str] = True,
     wavelength: Optional[float] = None,
     sigma: Optional[float] = None,
     weights: str = "inv",
@@ -216,8 +221,13 @@ def indirect(
     removed first — per laser/SPAD pair the bins where a 3-vertex return of a Γ voxel can
     arrive are zeroed; one more pass over the capture measures the removed energy
     (``report["explained"]``). It uses the return times only, so each row is corrected on
-    its own and partial states (``rows=``) take it too. ``leak_correct=False``: the paper's
-    Eq. 17 on the capture as it is (``vltm indirect --no-leak-correct``)."""
+    its own and partial states (``rows=``) take it too (also ``"gate"``).
+    ``leak_correct="model"`` (``--leak-correct model``): a surface model fitted to the whole
+    capture is subtracted instead, keeping the indirect light inside the windows
+    (``report["explained"]`` the energy it explains); when it explains less than 99 % or
+    cannot be fitted, a ``RuntimeWarning`` says why and the windows are used
+    (``report["leak_correct"]`` says which ran); not with ``rows=``. ``leak_correct=False``:
+    the paper's Eq. 17 on the capture as it is (``vltm indirect --no-leak-correct``)."""
     eps = _check.real("epsilon", epsilon)
     ms = _check.real("min_separation", min_separation, none=True)
     sh = None if shell is None else _check.pair("shell", shell)
@@ -231,10 +241,10 @@ def indirect(
     if direct is not None:
         d = _check.array("direct", direct).ravel()
     cut = _shells(shells)
+    lc, lm = _check.leak("leak_correct", leak_correct)
     attrs = {"gate": gate, "epsilon": eps, "shell": sh, "leak_correct": leak_correct,
              "shells": None if shells is None else list(_check.pair("shells", shells))}
     return _probe("indirect", capture, volume, rows, False, report, as_xarray, attrs,
                   _SHELLS if cut else None, epsilon=eps, shell=sh, shells=cut, direct=d,
-                  gate=_check.text("gate", gate),
-                  leak_correct=_check.flag("leak_correct", leak_correct),
+                  gate=_check.text("gate", gate), leak_correct=lc, leak_model=lm,
                   **_options.checked(locals()))
