@@ -20,7 +20,8 @@
 //! 3. The facets' poses and edges **refined** and missing faces grown against the capture
 //!    ([`refine_facets`], [`ModelOptions::facets`]: at most `sweeps` sweeps per round and
 //!    `grow` rounds, every corner inside the image's grid widened by [`BOUNDS_MARGIN`] of its
-//!    size on each side unless `facets.bounds` says otherwise), then sampled every
+//!    size on each side unless `facets.bounds` says otherwise, at most `facets.work` surfel
+//!    returns laid out, [`crate::probe::synth::REFINE_WORK`] by default), then sampled every
 //!    `facets.pitch` metres as surfels. Non-finite samples read as 0 in every pass, as the
 //!    probes read them.
 //! 4. The surfels' render **fitted** to the capture ([`SynthModel::fit`],
@@ -31,7 +32,8 @@
 //! A paired or confocal scan (the model needs a SPAD grid seen from every laser row), a wall
 //! of a single spot, no surface in the image, an image that splits into more than
 //! [`ModelOptions::max_facets`] planar facets (default [`MAX_FACETS`]: a capture of noise
-//! splits into many), a fit that fails or is not finite, a surface at or behind the relay
+//! splits into many), a refinement that does not settle within `facets.work` surfel returns,
+//! a fit that fails or is not finite, a surface at or behind the relay
 //! wall, buffers over the memory budget, or a model that explains less than
 //! [`ModelOptions::min_explained`] of the capture's energy (default 0.99; for a capture of
 //! photon counts, every sample a non-negative integer, less the share `Σ H / Σ H²` of their
@@ -135,7 +137,8 @@ impl ModelOptions {
     /// (outside (0, 1)), `surfel_sub` (outside 1..=16), `split_tol` (not positive and finite),
     /// `sweeps` (outside 1..=[`MAX_SWEEPS`]), `grow` (over [`MAX_GROWN`]), `pitch` (outside
     /// (0, 0.5] m), `grow_gain` (outside (0, 1)), `subset` (outside 1..=256), `bounds` (not a box of finite corners),
-    /// `min_explained` (outside [0, 1]), `max_facets` (outside 1..=64), and the fit's options
+    /// `min_explained` (outside [0, 1]), `max_facets` (outside 1..=64), `work` (not positive
+    /// and finite), and the fit's options
     /// ([`SynthOptions::check`]).
     pub fn check(&self) -> Result<()> {
         if let Some(v) = &self.volume
@@ -195,6 +198,7 @@ impl ModelOptions {
             return Err(Error::arg("max_facets", "must lie in 1..=64"));
         }
         f.check_bounds()?;
+        f.check_work()?;
         self.fit.check()
     }
 }
@@ -706,6 +710,14 @@ mod tests {
             ),
             (facets(FacetOptions { pitch: 0.0, ..fd() }), "pitch"),
             (facets(FacetOptions { subset: 0, ..fd() }), "subset"),
+            (facets(FacetOptions { work: 0.0, ..fd() }), "work"),
+            (
+                facets(FacetOptions {
+                    work: f64::INFINITY,
+                    ..fd()
+                }),
+                "work",
+            ),
             (
                 facets(FacetOptions {
                     grow_gain: 1.0,
@@ -833,6 +845,36 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// A refinement that has not settled within its work budget ([`FacetOptions::work`]) is
+    /// given up with a reason that says so, before its sweeps run out: the noise capture let
+    /// through as above, with a budget of 10⁷ surfel returns (a sweep there lays out more),
+    /// against the same capture and options with the default budget, which it stays within.
+    #[test]
+    fn a_refinement_over_its_work_budget_is_given_up() {
+        let mut cap = noise();
+        let tight = ModelOptions {
+            facets: FacetOptions {
+                work: 1e7,
+                ..lenient(3).facets
+            },
+            ..lenient(3)
+        };
+        match model_of_capture(&mut cap, &Wave::default(), &tight, EXEC) {
+            Ok(ModelOutcome::Unexplained {
+                reason,
+                model: None,
+            }) => assert!(
+                reason.contains("did not settle within 1.0e7 surfel returns"),
+                "{reason}"
+            ),
+            other => panic!("{:?}", other.map(|_| ())),
+        }
+        assert!(matches!(
+            model_of_capture(&mut cap, &Wave::default(), &lenient(3), EXEC),
+            Ok(ModelOutcome::Fitted(_))
+        ));
     }
 
     /// Non-finite samples read as 0, as the probes read them: a capture with NaN and ±inf in

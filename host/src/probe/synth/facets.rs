@@ -138,7 +138,17 @@ pub struct FacetOptions {
     /// Levenberg–Marquardt step or a grown facet that leaves it is refused (`None`: no bound).
     /// Without one, a capture of noise lets facets spread over tens of square metres.
     pub bounds: Option<[[f64; 3]; 2]>,
+    /// Surfel returns (surfels rendered × the subset's histograms) the refinement may lay
+    /// out before it gives up (default [`REFINE_WORK`]); a refinement that has not settled by
+    /// then is an error naming `work`.
+    pub work: f64,
 }
+
+/// The default of [`FacetOptions::work`]: 6·10⁹ surfel returns, about 10 s on 2 cores. The
+/// path-traced captures need 0.8·10⁹ (panel/figure, 8 × 8 × 8 × 8 and 16 × 16 × 16 × 16
+/// alike: the subset is the same size), 3.7·10⁹ (the corner), the 8 × 8 fixtures 0.005–0.03·10⁹;
+/// captures of noise ran 14–38·10⁹ (24–58 s) before they fell back.
+pub const REFINE_WORK: f64 = 6e9;
 
 impl Default for FacetOptions {
     fn default() -> Self {
@@ -149,6 +159,7 @@ impl Default for FacetOptions {
             grow_gain: 2e-4,
             subset: 16,
             bounds: None,
+            work: REFINE_WORK,
         }
     }
 }
@@ -170,6 +181,21 @@ impl FacetOptions {
                 ))
             }
             _ => Ok(()),
+        }
+    }
+
+    /// Checks [`FacetOptions::work`].
+    ///
+    /// # Errors
+    /// [`Error::Argument`] naming `work` when it is not positive and finite.
+    pub(crate) fn check_work(&self) -> Result<()> {
+        if self.work.is_finite() && self.work > 0.0 {
+            Ok(())
+        } else {
+            Err(Error::arg(
+                "work",
+                "must be positive and finite (surfel returns)",
+            ))
         }
     }
 }
@@ -241,6 +267,7 @@ pub fn refine_facets(
         grow_gain,
         subset,
         bounds,
+        work,
     } = *opts;
     opts.check_bounds()?;
     // Whether a facet stays inside the bounds.
@@ -263,6 +290,7 @@ pub fn refine_facets(
     if !(grow_gain.is_finite() && grow_gain > 0.0 && grow_gain < 1.0) {
         return Err(Error::arg("grow_gain", "must lie in (0, 1)"));
     }
+    opts.check_work()?;
     let g = src.geometry().clone();
     if laser_scale.len() != g.lasers.len() {
         return Err(Error::arg(
@@ -288,6 +316,7 @@ pub fn refine_facets(
         lasers,
         spads,
         nt,
+        work: 0.into(),
     };
     let ns = sub.spads.len();
     let mut r = vec![0.0f64; sub.pairs() * nt];
@@ -346,7 +375,21 @@ pub fn refine_facets(
     let bar = Pass::start(exec, "direct-light model: facets", (grow + 1) * sweeps);
     let mut ran = 0;
     let mut grown = 0;
+    // The work so far against the budget, checked between a facet's steps.
+    let spent = |ran: usize| {
+        let w = sub.work.load(std::sync::atomic::Ordering::Relaxed) as f64;
+        if w > work {
+            return Err(Error::arg(
+                "work",
+                format!(
+                    "the facets' refinement did not settle within {work:.1e} surfel returns (after {ran} sweeps; not a scene of a few planar surfaces)"
+                ),
+            ));
+        }
+        Ok(())
+    };
     for round in 0..=grow {
+        spent(ran)?;
         if round > 0 {
             // Grow: the best facet attached to an edge of a lit one, if it explains enough.
             let mut best: Option<(Facet, f64, f64)> = None;
@@ -392,6 +435,7 @@ pub fn refine_facets(
             }
             ran += 1;
             for fi in 0..facets.len() {
+                spent(ran)?;
                 if scale[fi] < 1.0 / 64.0 {
                     // Settled: its steps are below the round's end (the others' go on).
                     continue;

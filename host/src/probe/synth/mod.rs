@@ -64,7 +64,7 @@ mod surfels;
 mod vec3;
 
 pub use facet::Facet;
-pub use facets::{FacetFit, FacetOptions, refine_facets};
+pub use facets::{FacetFit, FacetOptions, REFINE_WORK, refine_facets};
 pub use planes::{facets_from_surfels, geometry_wavelength};
 pub use refine::{Refined, refine};
 pub use surfels::Surfels;

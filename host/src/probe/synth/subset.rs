@@ -20,6 +20,9 @@ pub(super) struct Subset<'a> {
     pub(super) d1: Vec<f64>,
     pub(super) d4: Vec<f64>,
     pub(super) nt: usize,
+    /// Surfel returns laid out so far: every [`Subset::legs`] adds its surfels × the subset's
+    /// pairs (the refinement's work budget, [`super::facets::REFINE_WORK`]).
+    pub(super) work: std::sync::atomic::AtomicU64,
 }
 
 /// Interleaved copies of a histogram a render scatters into ([`Subset::render`]).
@@ -107,6 +110,10 @@ impl Subset<'_> {
         f.sample(pitch, buf);
         let k_n = buf.len();
         out.k = k_n;
+        self.work.fetch_add(
+            (k_n as u64).saturating_mul(self.pairs() as u64),
+            std::sync::atomic::Ordering::Relaxed,
+        );
         let g = self.g;
         let (nl, ns) = (self.lasers.len(), self.spads.len());
         out.tl.resize(nl * k_n, 0.0);
@@ -379,6 +386,7 @@ mod tests {
             d1: vec![0.0; 2],
             d4: vec![0.0; 3],
             nt,
+            work: 0.into(),
         };
         let k = 103;
         // Times in bins running through and past the window, a few returns per bin.
