@@ -37,7 +37,7 @@ pub(crate) fn wave_of(
         p => {
             return Err(arg(
                 "path",
-                format!("expected auto, band, planar or lookup, found `{p}`"),
+                format!("expected auto, band, planar, lookup or phasor, found `{p}`"),
             ));
         }
     };
