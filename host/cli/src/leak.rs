@@ -9,7 +9,6 @@ use std::path::Path;
 
 use vltm::exec::{Exec, Progress as _};
 use vltm::io::RowSource;
-use vltm::probe::synth::SynthOptions;
 use vltm::probe::{self, LeakOptions, ModelOptions, ModelOutcome, SurfaceModel, Wave};
 use vltm::volume::Volume;
 
@@ -68,7 +67,7 @@ pub(crate) fn fit_model(
     falloff: bool,
     exec: Exec<'_>,
 ) -> Result<Option<SurfaceModel>, Failure> {
-    let opts = model_options(falloff);
+    let opts = ModelOptions::with_laser_falloff(falloff);
     match probe::model_of_capture(src, wave, &opts, exec)? {
         ModelOutcome::Fitted(m) => {
             let lit = m.facets.amplitudes.iter().filter(|&&a| a > 0.0).count();
@@ -84,18 +83,6 @@ pub(crate) fn fit_model(
             warn_unused(&reason);
             Ok(None)
         }
-    }
-}
-
-/// `--leak-correct model`'s options for `capture`: the laser's falloff rendered when the
-/// capture holds it.
-pub(crate) fn model_options(falloff: bool) -> ModelOptions {
-    ModelOptions {
-        fit: SynthOptions {
-            laser_falloff: falloff,
-            ..SynthOptions::default()
-        },
-        ..ModelOptions::default()
     }
 }
 

@@ -7,7 +7,6 @@
 
 use vltm::exec::Exec;
 use vltm::io::RowSource;
-use vltm::probe::synth::SynthOptions;
 use vltm::probe::{
     self, LeakCorrected, LeakOptions, ModelOptions, ModelOutcome, SurfaceModel, Wave,
 };
@@ -34,13 +33,7 @@ pub(crate) fn surface_model(
     falloff: bool,
     exec: Exec<'_>,
 ) -> vltm::Result<Result<SurfaceModel, String>> {
-    let opts = ModelOptions {
-        fit: SynthOptions {
-            laser_falloff: falloff,
-            ..SynthOptions::default()
-        },
-        ..ModelOptions::default()
-    };
+    let opts = ModelOptions::with_laser_falloff(falloff);
     Ok(match probe::model_of_capture(src, wave, &opts, exec)? {
         ModelOutcome::Fitted(m) => Ok(*m),
         ModelOutcome::Unexplained { reason, .. } => {

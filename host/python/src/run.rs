@@ -600,45 +600,19 @@ fn whole_pass(
         _ => {}
     }
     // Γ from the capture's own direct light (the capture minus the model has little).
-    let (job, mask) = match job {
-        Job::Indirect {
-            opts,
-            shells,
-            direct: None,
-        } => {
+    let (mut job, mut mask) = (job, None);
+    match &mut job {
+        Job::Indirect { opts, direct, .. } if direct.is_none() => {
             let (_, d) = Gamma::measure(rows, vol, opts.epsilon, "epsilon", wave, exec)?;
-            let direct = Some(d.values);
-            (
-                Job::Indirect {
-                    opts,
-                    shells,
-                    direct,
-                },
-                None,
-            )
+            *direct = Some(d.values);
         }
-        Job::Column {
-            focus,
-            gate,
-            shell,
-            shells,
-            mask_epsilon: Some(e),
-            leak_epsilon,
-        } => {
-            let (g, _) = Gamma::measure(rows, vol, e, "mask_epsilon", wave, exec)?;
-            let mask = g.non_empty("mask_epsilon")?.mask;
-            let job = Job::Column {
-                focus,
-                gate,
-                shell,
-                shells,
-                mask_epsilon: None,
-                leak_epsilon,
-            };
-            (job, Some(mask))
+        Job::Column { mask_epsilon, .. } => {
+            if let Some(e) = mask_epsilon.take() {
+                mask = Some(column_mask(rows, vol, e, wave, exec)?);
+            }
         }
-        job => (job, None),
-    };
+        _ => {}
+    }
     let mut d = match surface_model(rows, wave, falloff, exec)? {
         Ok(m) => {
             let mut d = one_pass(&mut m.subtracted(rows), vol, job.without_leak(), wave, exec)?;
@@ -661,6 +635,18 @@ fn whole_pass(
     Ok(d)
 }
 
+/// A column's `mask_epsilon`: the voxels whose direct light in `rows` is above `e`·max.
+fn column_mask(
+    rows: &mut dyn RowSource,
+    vol: &vltm::volume::Volume,
+    e: f32,
+    wave: &Wave,
+    exec: Exec<'_>,
+) -> vltm::Result<Vec<bool>> {
+    let (g, _) = Gamma::measure(rows, vol, e, "mask_epsilon", wave, exec)?;
+    Ok(g.non_empty("mask_epsilon")?.mask)
+}
+
 /// A whole-capture run on the (preprocessed) rows.
 fn one_pass(
     rows: &mut dyn RowSource,
@@ -681,13 +667,9 @@ fn one_pass(
         } => {
             // Bad input is refused before the extra passes (Γ of the mask, the leak fit).
             probe::check_column(rows.geometry(), focus, vol, gate, wave, exec)?;
-            let mask = match mask_epsilon {
-                Some(e) => {
-                    let (g, _) = Gamma::measure(rows, vol, e, "mask_epsilon", wave, exec)?;
-                    Some(g.non_empty("mask_epsilon")?.mask)
-                }
-                None => None,
-            };
+            let mask = mask_epsilon
+                .map(|e| column_mask(rows, vol, e, wave, exec))
+                .transpose()?;
             let mut explained = None;
             let mut o = match leak_epsilon {
                 Some(le) => {

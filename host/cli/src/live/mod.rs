@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use vltm::exec::EvalPath;
 use vltm::io::{self, ptu};
 use vltm::live::{self, LiveOptions, LiveRun, LiveSource, Outputs, Update};
-use vltm::probe::{self, IndirectOptions, LeakOptions, Partial};
+use vltm::probe::{self, IndirectOptions, LeakOptions, ModelOptions, Partial};
 use vltm::volume::{Volume, parse_point};
 
 use crate::args::LiveArgs;
@@ -265,10 +265,10 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
     // PTU stream of a real scan does not).
     let model = match (a.leak.method(), &kind) {
         (Some(LeakArg::Model), _) if a.no_indirect => None,
-        (Some(LeakArg::Model), Kind::Replay(_)) => Some(crate::leak::model_options(
+        (Some(LeakArg::Model), Kind::Replay(_)) => Some(ModelOptions::with_laser_falloff(
             io::laser_falloff_in_data(&a.source)?.0,
         )),
-        (Some(LeakArg::Model), _) => Some(crate::leak::model_options(false)),
+        (Some(LeakArg::Model), _) => Some(ModelOptions::with_laser_falloff(false)),
         (Some(LeakArg::Gate) | None, _) => None,
     };
     let opts = LiveOptions {

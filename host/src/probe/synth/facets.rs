@@ -458,12 +458,13 @@ pub fn refine_facets(
                     minus: Src::M0,
                     k: 0.0,
                 }; 7];
-                // The 14 coordinate moves (`2p` the minus side of parameter `p`), rendered and
-                // scored in parallel: `None` where the move collapses the facet.
+                // The 14 coordinate moves (`2p` the minus side of parameter `p`, by `step[p]`),
+                // rendered and scored in parallel: `None` where the move collapses the facet.
+                let step: [f64; 7] = std::array::from_fn(|p| base[p] * scale[fi]);
                 let cands: [Option<Facet>; 14] = std::array::from_fn(|j| {
                     let (p, sign) = (j / 2, if j % 2 == 0 { -1.0 } else { 1.0 });
                     let mut pose = [0.0; 7];
-                    pose[p] = sign * base[p] * scale[fi];
+                    pose[p] = sign * step[p];
                     let cand = facets[fi].moved(&pose);
                     let [u0, u1, v0, v1] = cand.extent;
                     (u1 - u0 >= pitch && v1 - v0 >= pitch).then_some(cand)
@@ -482,7 +483,7 @@ pub fn refine_facets(
                     )
                     .collect();
                 for (p, col) in cols.iter_mut().enumerate() {
-                    let h = base[p] * scale[fi];
+                    let h = step[p];
                     let mut have = [false; 2];
                     for (side, had) in have.iter_mut().enumerate() {
                         let j = 2 * p + side;
