@@ -16,7 +16,8 @@
 //! Non-finite samples are not judged here: the probes read them as 0 and say so.
 //!
 //! Cost: one pass over each row as it is read (a max/min scan and every `stride`-th value
-//! copied); memory: [`SAMPLE`] f32 at most. The check never changes the data and never fails
+//! copied, both on the thread that reads the row, the rows of a batch in parallel); memory:
+//! [`SAMPLE`] f32 at most, and one row's sample per row of a batch. The check never changes the data and never fails
 //! a run: it only warns (the values are what the file holds; the user decides).
 
 use rayon::prelude::*;
@@ -80,12 +81,41 @@ impl Plausibility {
 
     /// Takes row `l`'s histograms (SPAD-major, `Nt` bins each) into the statistics.
     pub fn observe(&mut self, l: usize, row: &[f32]) {
-        self.observe_with(l, row, extremes(row));
+        let stats = self.row_stats(row);
+        self.observe_with(l, row, stats);
     }
 
-    /// [`Plausibility::observe`] with the row's [`extremes`] computed beforehand (on any
-    /// thread: the rows of a batch in parallel, then observed in order).
-    pub fn observe_with(&mut self, l: usize, row: &[f32], (hi, lo, negatives): (f32, f32, u64)) {
+    /// What row `row` contributes, computed on any thread (the rows of a batch in parallel,
+    /// then observed in order with [`Plausibility::observe_with`]): its [`extremes`] and,
+    /// while the sample has room, its every `stride`-th finite magnitude, gathered while the
+    /// row is still in this thread's cache.
+    pub fn row_stats(&self, row: &[f32]) -> RowStats {
+        let (hi, lo, negatives) = extremes(row);
+        let sample = if self.sample.len() < SAMPLE {
+            row.iter()
+                .step_by(self.stride)
+                .filter(|x| x.is_finite())
+                .map(|x| x.abs())
+                .collect()
+        } else {
+            Vec::new()
+        };
+        RowStats {
+            hi,
+            lo,
+            negatives,
+            sample,
+        }
+    }
+
+    /// [`Plausibility::observe`] with the row's [`RowStats`] computed beforehand.
+    pub fn observe_with(&mut self, l: usize, row: &[f32], stats: RowStats) {
+        let RowStats {
+            hi,
+            lo,
+            negatives,
+            sample,
+        } = stats;
         let at = |i: usize, value: f32| At {
             value,
             row: l,
@@ -105,16 +135,8 @@ impl Plausibility {
                 self.lowest = Some(at(i, row[i]));
             }
         }
-        if self.sample.len() < SAMPLE {
-            let room = SAMPLE - self.sample.len();
-            self.sample.extend(
-                row.iter()
-                    .step_by(self.stride)
-                    .filter(|x| x.is_finite())
-                    .map(|x| x.abs())
-                    .take(room),
-            );
-        }
+        let room = SAMPLE.saturating_sub(self.sample.len());
+        self.sample.extend(sample.into_iter().take(room));
     }
 
     /// One warning line when the rows seen hold implausible values, naming the worst one and
@@ -164,6 +186,19 @@ impl Plausibility {
         let (_, p, _) = nz.select_nth_unstable_by(m, f32::total_cmp);
         Some(f64::from(*p))
     }
+}
+
+/// One row's contribution to [`Plausibility`] ([`Plausibility::row_stats`]).
+#[derive(Clone, Debug, Default)]
+pub struct RowStats {
+    /// The largest finite magnitude (≥ 0).
+    hi: f32,
+    /// The lowest finite value (≤ 0).
+    lo: f32,
+    /// How many finite values are negative.
+    negatives: u64,
+    /// Every `stride`-th finite magnitude, in row order (empty once the sample is full).
+    sample: Vec<f32>,
 }
 
 /// The largest magnitude (≥ 0), the lowest value (≤ 0) and the number of negative values of
@@ -230,7 +265,7 @@ impl Watched {
         }
     }
 
-    fn observe(&mut self, l: usize, row: &[f32], ext: (f32, f32, u64)) {
+    fn observe(&mut self, l: usize, row: &[f32], stats: RowStats) {
         let Some(seen) = self.seen.get_mut(l) else {
             return;
         };
@@ -238,7 +273,7 @@ impl Watched {
             return;
         }
         *seen = true;
-        self.stats.observe_with(l, row, ext);
+        self.stats.observe_with(l, row, stats);
         self.left -= 1;
         if self.left == 0
             && let Some(w) = self.stats.verdict()
@@ -255,14 +290,16 @@ impl RowSource for Watched {
 
     fn read_row(&mut self, l: usize, out: &mut Vec<f32>) -> Result<Point> {
         let x = self.src.read_row(l, out)?;
-        self.observe(l, out, extremes(out));
+        let stats = self.stats.row_stats(out);
+        self.observe(l, out, stats);
         Ok(x)
     }
 
     fn read_rows(&mut self, first: usize, out: &mut [(Point, Vec<f32>)]) -> Result<()> {
         self.src.read_rows(first, out)?;
         // The rows' passes in parallel; the statistics in row order.
-        let ext: Vec<_> = out.par_iter().map(|(_, h)| extremes(h)).collect();
+        let stats = &self.stats;
+        let ext: Vec<_> = out.par_iter().map(|(_, h)| stats.row_stats(h)).collect();
         for ((l, (_, h)), e) in (first..).zip(out.iter()).zip(ext) {
             self.observe(l, h, e);
         }
