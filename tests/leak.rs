@@ -881,26 +881,50 @@ fn photon_counts_are_held_to_the_rule_less_their_noise() {
     }
 }
 
-/// Why `gate` stays the default (docs/indirect-light.md): on the simulator's two patches,
-/// each 16 point samples, the surface model explains ≥ 99 % of the capture and is used, yet
-/// it misses the point sampling, and the mean in-focus indirect light over each patch's Γ
-/// voxels stays within a few times its direct-only control's (measured 2.2×), where the
-/// windows leave the control at exactly 0. Γ comes from the full capture's diagonal for every
-/// run; the indirect-only truth (the full capture minus the direct-only one, uncorrected) is
-/// printed beside them. When a rule learns to refuse such a model, this test fails and the
-/// docs' reason changes with it.
-#[test]
-fn the_model_on_point_sampled_patches_leaves_their_direct_light() {
-    use support::cmd::{TempDir, npz_fixture, read_npy, text, vltm};
-    let t = TempDir::new("leak", "point-sampled");
-    let (full, direct) = (
-        npz_fixture("two_patches"),
-        npz_fixture("two_patches_direct"),
-    );
+/// Per patch of the two-patches scene (A left, B right): the mean in-focus indirect light over
+/// its Γ voxels of the full capture with the model and with the windows, of the direct-only
+/// control with each, and of the indirect-only truth (the full capture minus the control,
+/// uncorrected); Γ from the full capture's diagonal for every run (`--direct`), the volume of
+/// the README's tour. Also what the model said on the full capture.
+struct PatchRow {
+    name: &'static str,
+    voxels: usize,
+    model: f64,
+    model_control: f64,
+    gate: f64,
+    gate_control: f64,
+    truth: f64,
+}
+
+impl std::fmt::Display for PatchRow {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "patch {} ({} Γ voxels): model {:.4e} vs control {:.4e} ({:.2}×, kept {:.2}); windows {:.4e} vs control {:.1e} (kept {:.2}); truth {:.4e}",
+            self.name,
+            self.voxels,
+            self.model,
+            self.model_control,
+            self.model / self.model_control,
+            self.model / self.truth,
+            self.gate,
+            self.gate_control,
+            self.gate / self.truth,
+            self.truth
+        )
+    }
+}
+
+fn two_patch_rows(
+    t: &support::cmd::TempDir,
+    full: &std::path::Path,
+    direct: &std::path::Path,
+) -> (Vec<PatchRow>, String) {
+    use support::cmd::{read_npy, text, vltm};
     let truth = t.path("truth.npz");
     {
-        let mut c = io::open(&full).expect("two_patches");
-        let d = io::open(&direct).expect("two_patches_direct");
+        let mut c = io::open(full).expect("full");
+        let d = io::open(direct).expect("direct");
         c.data.iter_mut().zip(&d.data).for_each(|(x, y)| *x -= y);
         io::npz::write(&c, &truth).expect("truth.npz");
     }
@@ -915,38 +939,113 @@ fn the_model_on_point_sampled_patches_leaves_their_direct_light() {
         assert!(r.status.success(), "{name}: {said}");
         (read_npy(&out).0, said)
     };
-    let (full_model, said) = run(&full, "full", &["--leak-correct", "model"]);
-    assert!(said.contains("the surface model (2 facets"), "{said}");
+    let (model, said) = run(full, "full", &["--leak-correct", "model"]);
     let gamma_of = t.path("full.direct.npy").to_string_lossy().into_owned();
     let given = ["--direct", gamma_of.as_str()];
-    let (control_model, said) = run(
-        &direct,
-        "control",
-        &[given[0], given[1], "--leak-correct", "model"],
-    );
-    assert!(said.contains("the surface model ("), "{said}");
-    let (control_gate, _) = run(
-        &direct,
-        "control_gate",
-        &[given[0], given[1], "--leak-correct", "gate"],
-    );
+    let with = |c: &'static str| [given[0], given[1], "--leak-correct", c];
+    let (gate, _) = run(full, "full_gate", &with("gate"));
+    let (model_control, ctl) = run(direct, "control", &with("model"));
+    assert!(ctl.contains("the surface model ("), "{ctl}");
+    let (gate_control, _) = run(direct, "control_gate", &with("gate"));
     let (truth_i, _) = run(&truth, "truth", &[given[0], given[1], "--no-leak-correct"]);
     let (gamma, _) = read_npy(&t.path("full.gamma.npy"));
     let vol = Volume::parse(spec).expect("spec");
-    for (name, left) in [("A", true), ("B", false)] {
-        let idx: Vec<usize> = (0..vol.len())
-            .filter(|&i| gamma[i] > 0.0 && (vol.points[i][0] < 0.0) == left)
-            .collect();
-        let (m, k) = (mean(&full_model, &idx), mean(&control_model, &idx));
-        let what = format!(
-            "patch {name} ({} Γ voxels): model-corrected I_i {m:.4e} vs control {k:.4e}: {:.2}×; truth {:.4e}; the windows' control {:.1e}",
-            idx.len(),
-            m / k,
-            mean(&truth_i, &idx),
-            mean(&control_gate, &idx)
+    let rows = [("A", true), ("B", false)]
+        .into_iter()
+        .map(|(name, left)| {
+            let idx: Vec<usize> = (0..vol.len())
+                .filter(|&i| gamma[i] > 0.0 && (vol.points[i][0] < 0.0) == left)
+                .collect();
+            assert!(!idx.is_empty(), "no Γ voxel on patch {name}");
+            PatchRow {
+                name,
+                voxels: idx.len(),
+                model: mean(&model, &idx),
+                model_control: mean(&model_control, &idx),
+                gate: mean(&gate, &idx),
+                gate_control: mean(&gate_control, &idx),
+                truth: mean(&truth_i, &idx),
+            }
+        })
+        .collect();
+    (rows, said)
+}
+
+/// Why `gate` stays the default (docs/indirect-light.md): on the simulator's two patches,
+/// each 16 point samples, the surface model explains ≥ 99 % of the capture and is used, yet
+/// it misses the point sampling, and the mean in-focus indirect light over each patch's Γ
+/// voxels stays within a few times its direct-only control's (measured 2.2×), where the
+/// windows leave the control at exactly 0 and keep the whole of the indirect-only truth
+/// (0.99–1.01: the inter-reflection of two small patches arrives outside their direct light's
+/// windows). When a rule learns to refuse such a model, this test fails and the docs' reason
+/// changes with it.
+#[test]
+fn the_model_on_point_sampled_patches_leaves_their_direct_light() {
+    use support::cmd::{TempDir, npz_fixture};
+    let t = TempDir::new("leak", "point-sampled");
+    let (rows, said) = two_patch_rows(
+        &t,
+        &npz_fixture("two_patches"),
+        &npz_fixture("two_patches_direct"),
+    );
+    assert!(said.contains("the surface model (2 facets"), "{said}");
+    for r in &rows {
+        println!("{r}");
+        assert!(r.model / r.model_control < 5.0, "{r}");
+        assert!(r.gate_control == 0.0, "{r}");
+        assert!((0.99..=1.01).contains(&(r.gate / r.truth)), "{r}");
+    }
+}
+
+/// The same scene with each patch sampled at 16 × 16 points (0.75 cm apart, smooth
+/// transients, rendered here by `vltm simulate`): the model explains more (≥ 99.7 %) and its
+/// control falls, but the windows still do better on this scene: exactly 0 on the control and
+/// the whole truth kept, where the model's in-focus indirect light stays within 15× its
+/// control (measured 4.0× on A, 10.6× on B; kept 1.24 / 1.03). Its 0.2 % of direct light
+/// left over is still 200 times the energy of the two patches' inter-reflection (1·10⁻⁵ of
+/// `Σ H²`). So the windows are the better correction where indirect light arrives apart from
+/// the direct light of small objects, the model where it overlaps the direct light of extended
+/// surfaces (the path-traced panel and figure).
+#[test]
+fn on_finely_sampled_patches_the_windows_still_beat_the_model() {
+    use support::cmd::{TempDir, text, vltm};
+    let t = TempDir::new("leak", "finely-sampled");
+    let render = |stem: &str| {
+        let src = support::fixture(&format!("scenes/{stem}.json"));
+        let mut scene: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(&src).expect("scene")).expect("json");
+        for o in scene["objects"].as_array_mut().expect("objects") {
+            o["samples"] = 16.into();
+        }
+        let (json, out) = (
+            t.path(&format!("{stem}.json")),
+            t.path(&format!("{stem}.npz")),
         );
-        println!("{what}");
-        assert!(!idx.is_empty() && m / k < 5.0, "{what}");
-        assert!(mean(&control_gate, &idx) == 0.0, "{what}");
+        std::fs::write(&json, scene.to_string()).expect("write scene");
+        let r = vltm(&[
+            "simulate",
+            &json.to_string_lossy(),
+            "--out",
+            &out.to_string_lossy(),
+        ]);
+        assert!(r.status.success(), "{}", text(&r.stderr));
+        out
+    };
+    let (full, direct) = (render("two_patches"), render("two_patches_direct"));
+    let (rows, said) = two_patch_rows(&t, &full, &direct);
+    let explained: f64 = said
+        .split("explains ")
+        .nth(1)
+        .and_then(|x| x.split_whitespace().next())
+        .and_then(|x| x.parse().ok())
+        .unwrap_or_else(|| panic!("{said}"));
+    assert!(explained >= 0.997, "{said}");
+    for r in &rows {
+        println!("{r}");
+        let ratio = r.model / r.model_control;
+        assert!(ratio > 2.0 && ratio < 15.0, "{r}");
+        assert!((0.9..=1.4).contains(&(r.model / r.truth)), "{r}");
+        assert!(r.gate_control == 0.0, "{r}");
+        assert!((0.99..=1.01).contains(&(r.gate / r.truth)), "{r}");
     }
 }
