@@ -1,6 +1,43 @@
 //! Small dense solvers of the fits: `G a = b` by Gaussian elimination, and non-negative least
 //! squares from the normal equations. `c × c` systems, `c` the clusters or the parameters of
-//! one facet (≤ 8 in practice).
+//! one facet (≤ 8 in practice). And [`ordered_sum`], the fits' parallel sums in a fixed order.
+
+use rayon::prelude::*;
+
+/// `Σ_{i < n}` of what `fold(acc, scratch, i)` adds, on the thread pool, with the same bits on
+/// any number of threads: the indices in fixed chunks of `chunk`, each folded in index order
+/// into its own accumulator (`zero()`), the chunks' accumulators added in chunk order by
+/// `add(total, part)`. (A rayon `fold`/`reduce` splits where work is stolen, so its rounding
+/// follows the threads.) `scratch()` makes a worker's scratch, whose contents must not
+/// change the sums. Memory: one accumulator per chunk.
+pub(super) fn ordered_sum<A, S>(
+    n: usize,
+    chunk: usize,
+    scratch: impl Fn() -> S + Sync + Send,
+    zero: impl Fn() -> A + Sync + Send,
+    fold: impl Fn(&mut A, &mut S, usize) + Sync + Send,
+    add: impl Fn(&mut A, &A),
+) -> A
+where
+    A: Send,
+{
+    let chunk = chunk.max(1);
+    let parts: Vec<A> = (0..n.div_ceil(chunk))
+        .into_par_iter()
+        .map_init(scratch, |s, c| {
+            let mut a = zero();
+            for i in c * chunk..((c + 1) * chunk).min(n) {
+                fold(&mut a, s, i);
+            }
+            a
+        })
+        .collect();
+    let mut total = zero();
+    for p in &parts {
+        add(&mut total, p);
+    }
+    total
+}
 
 /// Non-negative least squares `min ‖y − Σ a_c m_c‖²` from the normal equations `G a = b`
 /// (`G` row-major `c × c`): the exact solution when it is non-negative, otherwise projected

@@ -357,19 +357,15 @@ impl SynthModel {
             rows.resize_with(end - start, || ([0.0; 3], Vec::new()));
             read(src, start, &mut rows)?;
             let _t = timings::section("direct-light model", Kind::Parallel);
-            let (gs, bs, e) = rows
+            // One accumulator per row, added in row order: the same bits on any number of
+            // threads (a rayon fold/reduce would round as its splits fall).
+            let per_row: Vec<_> = rows
                 .par_iter()
                 .enumerate()
-                .fold(
-                    || {
-                        (
-                            zero(),
-                            Scratch::default(),
-                            vec![0.0; c_n * c_n],
-                            vec![0.0; c_n],
-                        )
-                    },
-                    |((mut ga, mut ba, mut e), mut sc, mut gm, mut b), (i, (_, h))| {
+                .map_init(
+                    || (Scratch::default(), vec![0.0; c_n * c_n], vec![0.0; c_n]),
+                    |(sc, gm, b), (i, (_, h))| {
+                        let (mut ga, mut ba, mut e) = zero();
                         let l = start + i;
                         let row = renderer.laser_row(&g, l);
                         // Every `stride`-th histogram, the pattern moved by one SPAD per row.
@@ -380,31 +376,28 @@ impl SynthModel {
                             for (wi, kern) in kerns.iter().enumerate() {
                                 sc.blur(&renderer, kern);
                                 for (ji, &j) in shifts.iter().enumerate() {
-                                    sc.normal(pad, j, hist, &mut gm, &mut b);
+                                    sc.normal(pad, j, hist, gm, b);
                                     let at = wi * shifts.len() + ji;
                                     ga[at * c_n * c_n..(at + 1) * c_n * c_n]
                                         .iter_mut()
-                                        .zip(&gm)
+                                        .zip(gm.iter())
                                         .for_each(|(x, y)| *x += y);
                                     ba[at * c_n..(at + 1) * c_n]
                                         .iter_mut()
-                                        .zip(&b)
+                                        .zip(b.iter())
                                         .for_each(|(x, y)| *x += y);
                                 }
                             }
                         }
-                        ((ga, ba, e), sc, gm, b)
+                        (ga, ba, e)
                     },
                 )
-                .map(|(acc, ..)| acc)
-                .reduce(zero, |(mut a, mut b, e), (x, y, f)| {
-                    a.iter_mut().zip(&x).for_each(|(p, q)| *p += q);
-                    b.iter_mut().zip(&y).for_each(|(p, q)| *p += q);
-                    (a, b, e + f)
-                });
-            gsum.iter_mut().zip(&gs).for_each(|(p, q)| *p += q);
-            bsum.iter_mut().zip(&bs).for_each(|(p, q)| *p += q);
-            energy += e;
+                .collect();
+            for (gs, bs, e) in per_row {
+                gsum.iter_mut().zip(&gs).for_each(|(p, q)| *p += q);
+                bsum.iter_mut().zip(&bs).for_each(|(p, q)| *p += q);
+                energy += e;
+            }
             bar.advance(end - start);
         }
         drop(bar);

@@ -13,7 +13,9 @@
 //! Cost: per patch and sweep, `11·|p|` returns per histogram of the subset (`|p|` surfels per
 //! patch). Memory: the subset (`H·Nt` values, `H ≤ 4,096` histograms) and its residual.
 
+use super::linalg::ordered_sum;
 use super::render::leg;
+use super::subset::PAIR_CHUNK;
 use super::surfels::Surfels;
 use super::vec3::{cross, rotate};
 use crate::error::Result;
@@ -220,45 +222,39 @@ pub fn refine(
                     }
                 }
             };
-            let sums = pairs
-                .par_iter()
-                .enumerate()
-                .fold(
-                    || (vec![0.0f64; 2 * TRY.len()], Vec::new(), Vec::new()),
-                    |(mut acc, mut old, mut new), (i, &(l, s))| {
-                        render(l, s, pose[p], &mut old);
-                        let rr = &r[i * nt..(i + 1) * nt];
-                        // R' = R + a_p m_old on the touched bins, kept sparse.
-                        let rp = |b: usize, old: &[(usize, f64)]| {
-                            rr[b]
-                                + amp[p] * old.iter().filter(|x| x.0 == b).map(|x| x.1).sum::<f64>()
-                        };
-                        for (c, &d) in cand.iter().enumerate() {
-                            render(l, s, d, &mut new);
-                            new.sort_by_key(|x| x.0);
-                            let mut j = 0;
-                            while j < new.len() {
-                                let b = new[j].0;
-                                let mut v = 0.0;
-                                while j < new.len() && new[j].0 == b {
-                                    v += new[j].1;
-                                    j += 1;
-                                }
-                                acc[2 * c] += rp(b, &old) * v;
-                                acc[2 * c + 1] += v * v;
+            // In fixed chunks of pairs ([`ordered_sum`]): the same bits on any number of
+            // threads.
+            let sums = ordered_sum(
+                pairs.len(),
+                PAIR_CHUNK,
+                || (Vec::new(), Vec::new()),
+                || vec![0.0f64; 2 * TRY.len()],
+                |acc, (old, new), i| {
+                    let (l, s) = pairs[i];
+                    render(l, s, pose[p], old);
+                    let rr = &r[i * nt..(i + 1) * nt];
+                    // R' = R + a_p m_old on the touched bins, kept sparse.
+                    let rp = |b: usize, old: &[(usize, f64)]| {
+                        rr[b] + amp[p] * old.iter().filter(|x| x.0 == b).map(|x| x.1).sum::<f64>()
+                    };
+                    for (c, &d) in cand.iter().enumerate() {
+                        render(l, s, d, new);
+                        new.sort_by_key(|x| x.0);
+                        let mut j = 0;
+                        while j < new.len() {
+                            let b = new[j].0;
+                            let mut v = 0.0;
+                            while j < new.len() && new[j].0 == b {
+                                v += new[j].1;
+                                j += 1;
                             }
+                            acc[2 * c] += rp(b, old) * v;
+                            acc[2 * c + 1] += v * v;
                         }
-                        (acc, old, new)
-                    },
-                )
-                .map(|(a, ..)| a)
-                .reduce(
-                    || vec![0.0f64; 2 * TRY.len()],
-                    |mut a, b| {
-                        a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
-                        a
-                    },
-                );
+                    }
+                },
+                |t, p| t.iter_mut().zip(p).for_each(|(x, y)| *x += y),
+            );
             let mut best = (0usize, 0.0f64, 0.0f64);
             for c in 0..TRY.len() {
                 let (dot, mm) = (sums[2 * c], sums[2 * c + 1]);

@@ -4,7 +4,7 @@
 //! against the residual and the Levenberg–Marquardt step of one facet.
 
 use super::facet::Facet;
-use super::linalg::solve;
+use super::linalg::{ordered_sum, solve};
 use super::render::leg;
 use super::vec3::V3;
 use crate::io::capture::Geometry;
@@ -27,6 +27,14 @@ pub(super) struct Subset<'a> {
 
 /// Interleaved copies of a histogram a render scatters into ([`Subset::render`]).
 const LANES: usize = 4;
+
+/// Pairs per chunk of [`Subset::score`]'s sums (a render each) and of the refinement's move
+/// scores: fixed, so that the sums' order, hence their bits, do not follow the threads.
+pub(super) const PAIR_CHUNK: usize = 16;
+
+/// Bins per chunk of the sums over the whole subset's residual ([`dots`], the normal
+/// equations of a facet's step).
+const BIN_CHUNK: usize = 4096;
 
 /// The first loop of [`Subset::render`]: every surfel's index into the interleaved copies
 /// and its weight, and the range of bins, compiled for the CPU's vector extensions behind
@@ -195,29 +203,32 @@ impl Subset<'_> {
         (lo, hi)
     }
 
-    /// `(⟨r, m⟩, ‖m‖²)` over the subset for the render of `legs`.
+    /// `(⟨r, m⟩, ‖m‖²)` over the subset for the render of `legs` ([`ordered_sum`]: the same
+    /// bits on any number of threads).
     pub(super) fn score(&self, legs: &Legs, r: &[f64]) -> (f64, f64) {
         let (ns, nt) = (self.spads.len(), self.nt);
-        (0..self.pairs())
-            .into_par_iter()
-            .fold(
-                || (0.0, 0.0, Work::new(nt)),
-                |(mut dot, mut mm, mut w), i| {
-                    let (lo, hi) = self.render(legs, i / ns, i % ns, &mut w);
-                    let m = &mut w.m;
-                    if lo <= hi {
-                        let rr = &r[i * nt..(i + 1) * nt];
-                        for b in lo..=hi {
-                            dot += rr[b] * m[b];
-                            mm += m[b] * m[b];
-                            m[b] = 0.0;
-                        }
+        ordered_sum(
+            self.pairs(),
+            PAIR_CHUNK,
+            || Work::new(nt),
+            || (0.0, 0.0),
+            |(dot, mm), w, i| {
+                let (lo, hi) = self.render(legs, i / ns, i % ns, w);
+                let m = &mut w.m;
+                if lo <= hi {
+                    let rr = &r[i * nt..(i + 1) * nt];
+                    for b in lo..=hi {
+                        *dot += rr[b] * m[b];
+                        *mm += m[b] * m[b];
+                        m[b] = 0.0;
                     }
-                    (dot, mm, w)
-                },
-            )
-            .map(|(d, m, ..)| (d, m))
-            .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
+                }
+            },
+            |t, p| {
+                t.0 += p.0;
+                t.1 += p.1;
+            },
+        )
     }
 
     /// `r += a · m` for the render of `legs`.
@@ -277,33 +288,27 @@ impl Subset<'_> {
             Src::Move(j) => moves[j][i],
         };
         // The normal equations G = JᵀJ, b = Jᵀe (e = r − a·m0) in one pass over the subset.
-        let sums = (0..r.len())
-            .into_par_iter()
-            .fold(
-                || [0.0f64; N * N + N],
-                |mut acc, i| {
-                    let mut c = [0.0f64; N];
-                    for (x, col) in c.iter_mut().zip(cols) {
-                        *x = col.k * (at(col.plus, i) - at(col.minus, i));
+        let sums = ordered_sum(
+            r.len(),
+            BIN_CHUNK,
+            || (),
+            || [0.0f64; N * N + N],
+            |acc, _, i| {
+                let mut c = [0.0f64; N];
+                for (x, col) in c.iter_mut().zip(cols) {
+                    *x = col.k * (at(col.plus, i) - at(col.minus, i));
+                }
+                c[7] = m0[i];
+                let e = r[i] - a * m0[i];
+                for p in 0..N {
+                    acc[N * N + p] += c[p] * e;
+                    for q in p..N {
+                        acc[p * N + q] += c[p] * c[q];
                     }
-                    c[7] = m0[i];
-                    let e = r[i] - a * m0[i];
-                    for p in 0..N {
-                        acc[N * N + p] += c[p] * e;
-                        for q in p..N {
-                            acc[p * N + q] += c[p] * c[q];
-                        }
-                    }
-                    acc
-                },
-            )
-            .reduce(
-                || [0.0f64; N * N + N],
-                |mut x, y| {
-                    x.iter_mut().zip(&y).for_each(|(p, q)| *p += q);
-                    x
-                },
-            );
+                }
+            },
+            |t, p| t.iter_mut().zip(p).for_each(|(x, y)| *x += y),
+        );
         let mut gm = [0.0f64; N * N];
         for p in 0..N {
             for q in p..N {
@@ -352,12 +357,22 @@ pub(super) struct Column {
     pub(super) k: f64,
 }
 
-/// `(⟨r, m⟩, ‖m‖²)`.
+/// `(⟨r, m⟩, ‖m‖²)` ([`ordered_sum`]: the same bits on any number of threads).
 pub(super) fn dots(r: &[f64], m: &[f64]) -> (f64, f64) {
-    r.par_iter()
-        .zip(m)
-        .fold(|| (0.0, 0.0), |(d, q), (x, y)| (d + x * y, q + y * y))
-        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
+    ordered_sum(
+        r.len().min(m.len()),
+        BIN_CHUNK,
+        || (),
+        || (0.0, 0.0),
+        |(d, q), _, i| {
+            *d += r[i] * m[i];
+            *q += m[i] * m[i];
+        },
+        |t, p| {
+            t.0 += p.0;
+            t.1 += p.1;
+        },
+    )
 }
 
 #[cfg(test)]
