@@ -1103,3 +1103,39 @@ fn the_surface_model_is_the_same_on_any_number_of_threads() {
         }
     }
 }
+
+/// The surface model's memory plan counts the refinement's surfel legs at the facets' cap
+/// before the first pass: on one thread (three sets of legs of 65,536 surfels over the 8 × 8
+/// fixture's 16 + 16 spots of the subset, 107 MB), a budget of 60 MB refuses the model, names
+/// the buffer, and the run goes on with the windows, equal to `--leak-correct gate`.
+#[test]
+fn the_model_plans_its_refinement_s_legs() {
+    use support::cmd::{TempDir, npz_fixture, read_npy, text, vltm};
+    let t = TempDir::new("leak", "legs-plan");
+    let cap = npz_fixture("two_patches");
+    let run = |global: &[&str], correct: &str| {
+        let out = t.s(&format!("{correct}.npy"));
+        let c = cap.to_string_lossy();
+        let mut args = vec!["--threads", "1"];
+        args.extend_from_slice(global);
+        args.extend_from_slice(&[
+            "indirect",
+            &c,
+            "--volume",
+            "-0.6:0.6:13,-0.1:0.1:3,0.5:1.2:8",
+        ]);
+        args.extend_from_slice(&["--leak-correct", correct, "--out", &out]);
+        let r = vltm(&args);
+        let said = text(&r.stderr);
+        assert!(r.status.success(), "{said}");
+        (read_npy(std::path::Path::new(&out)).0, said)
+    };
+    let (tight, said) = run(&["--max-memory", "60M"], "model");
+    assert!(
+        said.contains("the refinement's surfel legs, 107 MB")
+            && said.contains("using the time windows"),
+        "{said}"
+    );
+    let (gate, _) = run(&[], "gate");
+    assert_eq!(tight, gate);
+}

@@ -120,17 +120,32 @@ impl Facet {
         (u1 - u0).max(0.0) * (v1 - v0).max(0.0)
     }
 
+    /// The sampling grid of [`Facet::sample`]: cells along `u` and `v` (each at most 10,000)
+    /// and the facet's sides; `None` for a facet of no area.
+    fn grid(&self, pitch: f64) -> Option<(usize, usize, f64, f64)> {
+        let [u0, u1, v0, v1] = self.extent;
+        let (wu, wv) = (u1 - u0, v1 - v0);
+        if !(wu > 0.0 && wv > 0.0) {
+            return None;
+        }
+        let nu = ((wu / pitch).ceil() as usize).clamp(1, 10_000);
+        let nv = ((wv / pitch).ceil() as usize).clamp(1, 10_000);
+        Some((nu, nv, wu, wv))
+    }
+
+    /// How many surfels [`Facet::sample`] lays out at `pitch` (0 for a facet of no area).
+    pub fn samples(&self, pitch: f64) -> usize {
+        self.grid(pitch).map_or(0, |(nu, nv, ..)| nu * nv)
+    }
+
     /// Surfels every `pitch` metres or finer (at least one per side): `(point, area)`
     /// into `out` (cleared); none when the facet has collapsed.
     pub(super) fn sample(&self, pitch: f64, out: &mut Vec<(V3, f64)>) {
         out.clear();
-        let [u0, u1, v0, v1] = self.extent;
-        let (wu, wv) = (u1 - u0, v1 - v0);
-        if !(wu > 0.0 && wv > 0.0) {
+        let [u0, _, v0, _] = self.extent;
+        let Some((nu, nv, wu, wv)) = self.grid(pitch) else {
             return;
-        }
-        let nu = ((wu / pitch).ceil() as usize).clamp(1, 10_000);
-        let nv = ((wv / pitch).ceil() as usize).clamp(1, 10_000);
+        };
         let a = wu * wv / (nu * nv) as f64;
         for i in 0..nu {
             let x = u0 + (i as f64 + 0.5) / nu as f64 * wu;

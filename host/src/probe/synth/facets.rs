@@ -142,6 +142,26 @@ pub struct FacetOptions {
     /// out before it gives up (default [`REFINE_WORK`]); a refinement that has not settled by
     /// then is an error naming `work`.
     pub work: f64,
+    /// Surfels a facet may hold at `pitch` (default [`MAX_FACET_SURFELS`]): a move, a
+    /// Levenberg–Marquardt step or a grown facet larger than this is refused before it is
+    /// rendered, and an initial facet larger than this is an error naming `max_surfels`. It
+    /// bounds the refinement's memory, which [`facet_legs_bytes`] states.
+    pub max_surfels: usize,
+}
+
+/// The default of [`FacetOptions::max_surfels`]: 65,536 surfels, 6.5 m² at the default pitch
+/// of 1 cm (the path-traced panel/figure's largest facet holds 3,000; the box the facets
+/// must stay in, a quarter wider than the image on every side, allows 14 m² on the 8 × 8
+/// fixtures).
+pub const MAX_FACET_SURFELS: usize = 1 << 16;
+
+/// Bytes the refinement's surfel legs take at most when `threads` render moves at once over a
+/// subset of `lasers × spads`: one set of legs per thread and two more (the facet's own and
+/// a Levenberg–Marquardt step's), each `16·(lasers + spads)` bytes per surfel for the legs
+/// and 32 for the surfel itself, at [`FacetOptions::max_surfels`] surfels.
+pub fn facet_legs_bytes(max_surfels: usize, lasers: usize, spads: usize, threads: usize) -> u128 {
+    let per_surfel = 16 * (lasers as u128 + spads as u128) + 32;
+    (threads as u128 + 2) * max_surfels as u128 * per_surfel
 }
 
 /// The default of [`FacetOptions::work`]: 6·10⁹ surfel returns, about 10 s on 2 cores. The
@@ -160,6 +180,7 @@ impl Default for FacetOptions {
             subset: 16,
             bounds: None,
             work: REFINE_WORK,
+            max_surfels: MAX_FACET_SURFELS,
         }
     }
 }
@@ -189,14 +210,19 @@ impl FacetOptions {
     /// # Errors
     /// [`Error::Argument`] naming `work` when it is not positive and finite.
     pub(crate) fn check_work(&self) -> Result<()> {
-        if self.work.is_finite() && self.work > 0.0 {
-            Ok(())
-        } else {
-            Err(Error::arg(
+        if !(self.work.is_finite() && self.work > 0.0) {
+            return Err(Error::arg(
                 "work",
                 "must be positive and finite (surfel returns)",
-            ))
+            ));
         }
+        if !(1..=MAX_FACET_SURFELS * 16).contains(&self.max_surfels) {
+            return Err(Error::arg(
+                "max_surfels",
+                format!("must lie in 1..={}", MAX_FACET_SURFELS * 16),
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -268,15 +294,17 @@ pub fn refine_facets(
         subset,
         bounds,
         work,
+        max_surfels,
     } = *opts;
     opts.check_bounds()?;
-    // Whether a facet stays inside the bounds.
+    // Whether a facet stays inside the bounds and within its surfels.
     let inside = |f: &Facet| {
-        bounds.is_none_or(|[lo, hi]| {
-            f.corners()
-                .iter()
-                .all(|c| (0..3).all(|i| c[i] >= lo[i] && c[i] <= hi[i]))
-        })
+        f.samples(pitch) <= max_surfels
+            && bounds.is_none_or(|[lo, hi]| {
+                f.corners()
+                    .iter()
+                    .all(|c| (0..3).all(|i| c[i] >= lo[i] && c[i] <= hi[i]))
+            })
     };
     if !(1..=256).contains(&subset) {
         return Err(Error::arg(
@@ -291,6 +319,16 @@ pub fn refine_facets(
         return Err(Error::arg("grow_gain", "must lie in (0, 1)"));
     }
     opts.check_work()?;
+    if let Some(f) = facets.iter().find(|f| f.samples(pitch) > max_surfels) {
+        return Err(Error::arg(
+            "max_surfels",
+            format!(
+                "a facet of {:.2} m² holds {} surfels at a pitch of {pitch} m, more than {max_surfels}",
+                f.area(),
+                f.samples(pitch)
+            ),
+        ));
+    }
     let g = src.geometry().clone();
     if laser_scale.len() != g.lasers.len() {
         return Err(Error::arg(
@@ -467,7 +505,8 @@ pub fn refine_facets(
                     pose[p] = sign * step[p];
                     let cand = facets[fi].moved(&pose);
                     let [u0, u1, v0, v1] = cand.extent;
-                    (u1 - u0 >= pitch && v1 - v0 >= pitch).then_some(cand)
+                    (u1 - u0 >= pitch && v1 - v0 >= pitch && cand.samples(pitch) <= max_surfels)
+                        .then_some(cand)
                 });
                 let scores: Vec<Option<(f64, f64)>> = moves
                     .par_iter_mut()
@@ -527,6 +566,7 @@ pub fn refine_facets(
                         &moves,
                         &cols,
                         pitch,
+                        max_surfels,
                     )
                     && inside(&f)
                 {

@@ -64,7 +64,9 @@ mod surfels;
 mod vec3;
 
 pub use facet::Facet;
-pub use facets::{FacetFit, FacetOptions, REFINE_WORK, refine_facets};
+pub use facets::{
+    FacetFit, FacetOptions, MAX_FACET_SURFELS, REFINE_WORK, facet_legs_bytes, refine_facets,
+};
 pub use planes::{facets_from_surfels, geometry_wavelength};
 pub use refine::{Refined, refine};
 pub use surfels::Surfels;

@@ -278,6 +278,7 @@ impl Subset<'_> {
         moves: &[Vec<f64>],
         cols: &[Column; 7],
         pitch: f64,
+        max_surfels: usize,
     ) -> Option<(Facet, f64, f64)> {
         if cols.iter().any(|c| c.k == 0.0) {
             return None;
@@ -327,7 +328,7 @@ impl Subset<'_> {
             }
             let cand = f.moved(&core::array::from_fn(|i| d[i]));
             let [u0, u1, v0, v1] = cand.extent;
-            if u1 - u0 < pitch || v1 - v0 < pitch {
+            if u1 - u0 < pitch || v1 - v0 < pitch || cand.samples(pitch) > max_surfels {
                 continue;
             }
             self.legs(&cand, pitch, &mut buf, &mut legs);
