@@ -133,7 +133,8 @@ impl Facet {
         Some((nu, nv, wu, wv))
     }
 
-    /// How many surfels [`Facet::sample`] lays out at `pitch` (0 for a facet of no area).
+    /// How many surfels the facet is sampled into at `pitch` (one per cell of a grid no coarser
+    /// than `pitch`, at most 10,000 per side; 0 for a facet of no area).
     pub fn samples(&self, pitch: f64) -> usize {
         self.grid(pitch).map_or(0, |(nu, nv, ..)| nu * nv)
     }
