@@ -1150,94 +1150,102 @@ fn the_model_plans_its_refinement_s_legs() {
 /// squares on direct light alone absorbs with a wrong pose; a term this cheap (76,500 pairs,
 /// 3 s for both scenes here) could give them a place in the fit. Not a product path: the
 /// renderer lives in this test.
+/// The two-bounce render of [`a_two_bounce_render_of_the_oracle_facets_explains_the_indirect_truth`]:
+/// every histogram of `c`'s geometry (laser-major), and the surfels and pairs it used.
+fn two_bounce_of_the_oracle(c: &pathtraced::Captures) -> (Vec<f64>, usize, usize) {
+    let s = pathtraced::oracle_surfels(c, 25.0);
+    let g = &c.indirect.geometry;
+    let k = s.points.len();
+    let sub = |a: [f64; 3], b: [f64; 3]| -> [f64; 3] { core::array::from_fn(|i| a[i] - b[i]) };
+    let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+    let spot = |p: [f32; 3]| p.map(f64::from);
+    // (distance, cos_wall·cos_surfel/d²) from a wall spot to surfel i.
+    let leg = |w: [f64; 3], nw: [f64; 3], i: usize| -> (f64, f64) {
+        let v = sub(w, s.points[i]);
+        let d = dot(v, v).sqrt();
+        let cw = (-dot(v, nw)).max(0.0) / d;
+        let cs = dot(v, s.normals[i]).max(0.0) / d;
+        (d, cw * cs / (d * d))
+    };
+    let mut pairs = Vec::new();
+    for a in 0..k {
+        for b in 0..k {
+            if s.cluster[a] == s.cluster[b] {
+                continue;
+            }
+            let v = sub(s.points[b], s.points[a]);
+            let d = dot(v, v).sqrt();
+            let ca = dot(v, s.normals[a]) / d;
+            let cb = -dot(v, s.normals[b]) / d;
+            if ca > 0.0 && cb > 0.0 {
+                pairs.push((a, b, d, ca * cb / (d * d) * s.areas[a] * s.areas[b]));
+            }
+        }
+    }
+    let (nl, ns, nt) = (g.lasers.len(), g.spads.len(), g.nt);
+    let legs_l: Vec<Vec<(f64, f64)>> = (0..nl)
+        .map(|l| {
+            (0..k)
+                .map(|i| leg(spot(g.lasers[l]), g.laser_normal(l), i))
+                .collect()
+        })
+        .collect();
+    let legs_s: Vec<Vec<(f64, f64)>> = (0..ns)
+        .map(|j| {
+            (0..k)
+                .map(|i| leg(spot(g.spads[j]), g.spad_normal(j), i))
+                .collect()
+        })
+        .collect();
+    let d1: Vec<f64> = (0..nl)
+        .map(|l| {
+            if g.legs_in_time {
+                vltm::kernel::geometry::dist64(&g.lasers[l], &g.laser_origin)
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    let d4: Vec<f64> = (0..ns)
+        .map(|j| {
+            if g.legs_in_time {
+                vltm::kernel::geometry::dist64(&g.spads[j], &g.sensor_origin)
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    use rayon::prelude::*;
+    let r: Vec<f64> = (0..nl * ns)
+        .into_par_iter()
+        .flat_map_iter(|ls| {
+            let (l, j) = (ls / ns, ls % ns);
+            let mut h = vec![0.0f64; nt];
+            let sc = g.laser_falloff_at(l);
+            for &(a, b, dab, gab) in &pairs {
+                let (dl, fl) = legs_l[l][a];
+                let (ds, fs) = legs_s[j][b];
+                let w = fl * fs * gab;
+                if w == 0.0 {
+                    continue;
+                }
+                let t = ((d1[l] + dl + dab + ds + d4[j] - g.t0) / g.dt).floor();
+                if t >= 0.0 && t < nt as f64 {
+                    h[t as usize] += sc * w;
+                }
+            }
+            h.into_iter()
+        })
+        .collect();
+    (r, k, pairs.len())
+}
+
 #[test]
 fn a_two_bounce_render_of_the_oracle_facets_explains_the_indirect_truth() {
     for scene in ["corner", "panel_figure"] {
         let c = pathtraced::load(scene);
-        let s = pathtraced::oracle_surfels(&c, 25.0);
-        let g = &c.indirect.geometry;
-        let k = s.points.len();
-        let sub = |a: [f64; 3], b: [f64; 3]| -> [f64; 3] { core::array::from_fn(|i| a[i] - b[i]) };
-        let dot = |a: [f64; 3], b: [f64; 3]| a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
-        let spot = |p: [f32; 3]| p.map(f64::from);
-        // (distance, cos_wall·cos_surfel/d²) from a wall spot to surfel i.
-        let leg = |w: [f64; 3], nw: [f64; 3], i: usize| -> (f64, f64) {
-            let v = sub(w, s.points[i]);
-            let d = dot(v, v).sqrt();
-            let cw = (-dot(v, nw)).max(0.0) / d;
-            let cs = dot(v, s.normals[i]).max(0.0) / d;
-            (d, cw * cs / (d * d))
-        };
-        let mut pairs = Vec::new();
-        for a in 0..k {
-            for b in 0..k {
-                if s.cluster[a] == s.cluster[b] {
-                    continue;
-                }
-                let v = sub(s.points[b], s.points[a]);
-                let d = dot(v, v).sqrt();
-                let ca = dot(v, s.normals[a]) / d;
-                let cb = -dot(v, s.normals[b]) / d;
-                if ca > 0.0 && cb > 0.0 {
-                    pairs.push((a, b, d, ca * cb / (d * d) * s.areas[a] * s.areas[b]));
-                }
-            }
-        }
-        let (nl, ns, nt) = (g.lasers.len(), g.spads.len(), g.nt);
-        let legs_l: Vec<Vec<(f64, f64)>> = (0..nl)
-            .map(|l| {
-                (0..k)
-                    .map(|i| leg(spot(g.lasers[l]), g.laser_normal(l), i))
-                    .collect()
-            })
-            .collect();
-        let legs_s: Vec<Vec<(f64, f64)>> = (0..ns)
-            .map(|j| {
-                (0..k)
-                    .map(|i| leg(spot(g.spads[j]), g.spad_normal(j), i))
-                    .collect()
-            })
-            .collect();
-        let d1: Vec<f64> = (0..nl)
-            .map(|l| {
-                if g.legs_in_time {
-                    vltm::kernel::geometry::dist64(&g.lasers[l], &g.laser_origin)
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let d4: Vec<f64> = (0..ns)
-            .map(|j| {
-                if g.legs_in_time {
-                    vltm::kernel::geometry::dist64(&g.spads[j], &g.sensor_origin)
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        use rayon::prelude::*;
-        let r: Vec<f64> = (0..nl * ns)
-            .into_par_iter()
-            .flat_map_iter(|ls| {
-                let (l, j) = (ls / ns, ls % ns);
-                let mut h = vec![0.0f64; nt];
-                let sc = g.laser_falloff_at(l);
-                for &(a, b, dab, gab) in &pairs {
-                    let (dl, fl) = legs_l[l][a];
-                    let (ds, fs) = legs_s[j][b];
-                    let w = fl * fs * gab;
-                    if w == 0.0 {
-                        continue;
-                    }
-                    let t = ((d1[l] + dl + dab + ds + d4[j] - g.t0) / g.dt).floor();
-                    if t >= 0.0 && t < nt as f64 {
-                        h[t as usize] += sc * w;
-                    }
-                }
-                h.into_iter()
-            })
-            .collect();
+        let (r, k, n_pairs) = two_bounce_of_the_oracle(&c);
+        let nt = c.indirect.geometry.nt;
         let t: Vec<f64> = c.indirect.data.iter().map(|&x| f64::from(x)).collect();
         let smooth = |x: &[f64]| -> Vec<f64> {
             x.chunks(nt)
@@ -1269,7 +1277,7 @@ fn a_two_bounce_render_of_the_oracle_facets_explains_the_indirect_truth() {
         let (_, expl3, p3) = stats(&smooth(&t), &smooth(&r));
         let what = format!(
             "{scene}: {k} surfels, {} pairs; truth holds {:.4} of the full capture's energy; scale {kk:.4e}; two-bounce render explains {expl:.3} of the truth (Pearson {p:.3}); 3-bin sums: {expl3:.3} (Pearson {p3:.3})",
-            pairs.len(),
+            n_pairs,
             tt / all
         );
         println!("{what}");
@@ -1280,4 +1288,57 @@ fn a_two_bounce_render_of_the_oracle_facets_explains_the_indirect_truth() {
         };
         assert!(expl >= least && p >= pearson && expl3 >= expl, "{what}");
     }
+}
+
+/// The corner's Stage 2 with most of its two-bounce light taken out before the fit (an oracle
+/// experiment: [`two_bounce_of_the_oracle`] scaled to the indirect-only truth, 0.81 of it,
+/// subtracted from the full capture; the model fitted to what is left, from the capture's own
+/// image, then subtracted from the full capture as in Stage 2): the in-focus indirect light
+/// keeps more of the truth (measured kept 0.91 / 0.85 against 0.57 / 0.49) but reaches only
+/// 5.5× / 7.0× its control (3.5× / 4.0× without), because the left panel still stretches past
+/// the apex (11.4°, 96 mm off, 1.08 m wide) and the model explains 95.5 %: the three-bounce
+/// light (2.8 % of the energy) and the noise (1.4 %) are left for a wrong pose to absorb, and
+/// the control's own left panel lands 6.5° off. So a two-bounce term alone does not make the
+/// corner work (docs/indirect-light.md).
+#[test]
+fn the_corner_without_its_two_bounce_light_still_misses_its_pose() {
+    use pathtraced::{Surf, defaults, load, measure_models, surface_models};
+    let (s, opts) = (defaults(), probe::synth::SynthOptions::default());
+    let mut c = load("corner");
+    let boxes = c.boxes.clone();
+    let (r, _, _) = two_bounce_of_the_oracle(&c);
+    let t: Vec<f64> = c.indirect.data.iter().map(|&x| f64::from(x)).collect();
+    let tr: f64 = t.iter().zip(&r).map(|(a, b)| a * b).sum();
+    let rr: f64 = r.iter().map(|x| x * x).sum();
+    let k = tr / rr;
+    let mut h = c.all.clone();
+    h.data
+        .iter_mut()
+        .zip(&r)
+        .for_each(|(x, y)| *x -= (k * y) as f32);
+    let models = surface_models(
+        vec![&mut h, &mut c.direct],
+        &boxes,
+        &s,
+        Surf::Capture,
+        &opts,
+    );
+    let [ma, mk]: [_; 2] = models.try_into().unwrap_or_else(|_| unreachable!());
+    let res = measure_models(&mut c, &s, &ma, &mk);
+    assert!(ma.explained < 0.97, "explained {}", ma.explained);
+    for o in &res.rows {
+        let what = format!(
+            "{}: {:.1}× the control, kept {:.3}, Pearson {:.3} (explained {:.4} / {:.4})",
+            o.name,
+            o.ratio(),
+            o.kept(),
+            o.pearson,
+            ma.explained,
+            mk.explained
+        );
+        println!("{what}");
+        assert!(o.ratio() > 4.0 && o.ratio() < 10.0, "{what}");
+        assert!((0.75..=1.0).contains(&o.kept()), "{what}");
+    }
+    println!("all of Γ: Pearson {:.3}", res.pearson);
 }
