@@ -1140,18 +1140,9 @@ fn the_model_plans_its_refinement_s_legs() {
     assert_eq!(tight, gate);
 }
 
-/// The measured basis of the corner's next step (docs/indirect-light.md): a two-bounce render
-/// of the oracle facets (every box face of `scene.json` at 4 cm surfels, each pair of surfels
-/// on different objects facing each other, no occlusion, no pulse, times binned as the direct
-/// render bins them, the laser's falloff applied) with one least-squares scale explains most
-/// of the indirect-only truth: measured 0.814 of its energy on the corner (Pearson 0.900;
-/// 0.921 and 0.958 over 3-bin sums) and 0.942 on panel/figure (Pearson 0.970; 0.980 and
-/// 0.990). The corner's inter-reflections are 4.6 % of its capture's energy, which least
-/// squares on direct light alone absorbs with a wrong pose; a term this cheap (76,500 pairs,
-/// 3 s for both scenes here) could give them a place in the fit. Not a product path: the
-/// renderer lives in this test.
-/// The two-bounce render of [`a_two_bounce_render_of_the_oracle_facets_explains_the_indirect_truth`]:
-/// every histogram of `c`'s geometry (laser-major), and the surfels and pairs it used.
+/// The two-bounce render of [`a_two_bounce_render_of_the_oracle_facets_explains_the_indirect_truth`]
+/// (test code, not a product path): every histogram of `c`'s geometry (laser-major), and the
+/// surfels and pairs it used.
 fn two_bounce_of_the_oracle(c: &pathtraced::Captures) -> (Vec<f64>, usize, usize) {
     let s = pathtraced::oracle_surfels(c, 25.0);
     let g = &c.indirect.geometry;
@@ -1183,38 +1174,25 @@ fn two_bounce_of_the_oracle(c: &pathtraced::Captures) -> (Vec<f64>, usize, usize
         }
     }
     let (nl, ns, nt) = (g.lasers.len(), g.spads.len(), g.nt);
-    let legs_l: Vec<Vec<(f64, f64)>> = (0..nl)
-        .map(|l| {
-            (0..k)
-                .map(|i| leg(spot(g.lasers[l]), g.laser_normal(l), i))
-                .collect()
-        })
-        .collect();
-    let legs_s: Vec<Vec<(f64, f64)>> = (0..ns)
-        .map(|j| {
-            (0..k)
-                .map(|i| leg(spot(g.spads[j]), g.spad_normal(j), i))
-                .collect()
-        })
-        .collect();
-    let d1: Vec<f64> = (0..nl)
-        .map(|l| {
-            if g.legs_in_time {
-                vltm::kernel::geometry::dist64(&g.lasers[l], &g.laser_origin)
-            } else {
-                0.0
-            }
-        })
-        .collect();
-    let d4: Vec<f64> = (0..ns)
-        .map(|j| {
-            if g.legs_in_time {
-                vltm::kernel::geometry::dist64(&g.spads[j], &g.sensor_origin)
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    // Per wall spot: its legs to every surfel, and its device leg (0 without legs in time).
+    let per_spot = |pts: &[[f32; 3]], normal: &dyn Fn(usize) -> [f64; 3], origin: &[f64; 3]| {
+        let legs: Vec<Vec<(f64, f64)>> = (0..pts.len())
+            .map(|i| (0..k).map(|q| leg(spot(pts[i]), normal(i), q)).collect())
+            .collect();
+        let device: Vec<f64> = pts
+            .iter()
+            .map(|p| {
+                if g.legs_in_time {
+                    vltm::kernel::geometry::dist64(p, origin)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        (legs, device)
+    };
+    let (legs_l, d1) = per_spot(&g.lasers, &|l| g.laser_normal(l), &g.laser_origin);
+    let (legs_s, d4) = per_spot(&g.spads, &|j| g.spad_normal(j), &g.sensor_origin);
     use rayon::prelude::*;
     let r: Vec<f64> = (0..nl * ns)
         .into_par_iter()
@@ -1240,6 +1218,22 @@ fn two_bounce_of_the_oracle(c: &pathtraced::Captures) -> (Vec<f64>, usize, usize
     (r, k, pairs.len())
 }
 
+/// The least-squares scale `k` of `r` against `t` (`min ‖t − k·r‖²`).
+fn ls_scale(t: &[f64], r: &[f64]) -> f64 {
+    let tr: f64 = t.iter().zip(r).map(|(a, b)| a * b).sum();
+    tr / r.iter().map(|x| x * x).sum::<f64>()
+}
+
+/// The measured basis of the corner's next step (docs/indirect-light.md): a two-bounce render
+/// of the oracle facets (every box face of `scene.json` at 4 cm surfels, each pair of surfels
+/// on different objects facing each other, no occlusion, no pulse, times binned as the direct
+/// render bins them, the laser's falloff applied) with one least-squares scale explains most
+/// of the indirect-only truth: measured 0.814 of its energy on the corner (Pearson 0.900;
+/// 0.921 and 0.958 over 3-bin sums) and 0.942 on panel/figure (Pearson 0.970; 0.980 and
+/// 0.990). The corner's inter-reflections are 4.6 % of its capture's energy, which least
+/// squares on direct light alone absorbs with a wrong pose; a term this cheap (76,500 pairs,
+/// 3 s for both scenes here) could give them a place in the fit. Not a product path: the
+/// renderer lives in this test.
 #[test]
 fn a_two_bounce_render_of_the_oracle_facets_explains_the_indirect_truth() {
     for scene in ["corner", "panel_figure"] {
@@ -1259,10 +1253,8 @@ fn a_two_bounce_render_of_the_oracle_facets_explains_the_indirect_truth() {
                 .collect()
         };
         let stats = |t: &[f64], r: &[f64]| {
-            let tr: f64 = t.iter().zip(r).map(|(a, b)| a * b).sum();
-            let rr: f64 = r.iter().map(|x| x * x).sum();
             let tt: f64 = t.iter().map(|x| x * x).sum();
-            let kk = tr / rr;
+            let kk = ls_scale(t, r);
             let res: f64 = t.iter().zip(r).map(|(a, b)| (a - kk * b).powi(2)).sum();
             let n = t.len() as f64;
             let (mt, mr) = (t.iter().sum::<f64>() / n, r.iter().sum::<f64>() / n);
@@ -1308,9 +1300,7 @@ fn the_corner_without_its_two_bounce_light_still_misses_its_pose() {
     let boxes = c.boxes.clone();
     let (r, _, _) = two_bounce_of_the_oracle(&c);
     let t: Vec<f64> = c.indirect.data.iter().map(|&x| f64::from(x)).collect();
-    let tr: f64 = t.iter().zip(&r).map(|(a, b)| a * b).sum();
-    let rr: f64 = r.iter().map(|x| x * x).sum();
-    let k = tr / rr;
+    let k = ls_scale(&t, &r);
     let mut h = c.all.clone();
     h.data
         .iter_mut()

@@ -17,8 +17,9 @@
 //!
 //! Cost: one pass over each row as it is read (a max/min scan and every `stride`-th value
 //! copied, both on the thread that reads the row, the rows of a batch in parallel); memory:
-//! [`SAMPLE`] f32 at most, and one row's sample per row of a batch. The check never changes the data and never fails
-//! a run: it only warns (the values are what the file holds; the user decides).
+//! [`SAMPLE`] f32 at most, and one row's sample per row of a batch. The check never changes
+//! the data and never fails a run: it only warns (the values are what the file holds; the
+//! user decides).
 
 use rayon::prelude::*;
 use std::path::Path;

@@ -189,14 +189,6 @@ impl Wave {
         }
         let _t = crate::timings::section("planning: time window", crate::timings::Kind::Parallel);
         let (d1, d4) = legs(g, &cfg);
-        let span = |pts: &[Point], legs: &[f64], v: &Point| {
-            pts.iter()
-                .zip(legs)
-                .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (p, d)| {
-                    let x = f64::from(dist(p, v)) + d;
-                    (a.min(x), b.max(x))
-                })
-        };
         let proj: Vec<(f64, f64)> = foci.iter().map(|a| span(&g.lasers, &d1, a)).collect();
         let cam: Vec<(f64, f64)> = voxels.par_iter().map(|b| span(&g.spads, &d4, b)).collect();
         let (lo, hi) = foci
@@ -229,6 +221,34 @@ impl Wave {
             ..*cfg.params()
         })?)
     }
+}
+
+/// The least and the largest `|p − v| + d` over the spots `pts` with their device legs `legs`
+/// (m): the span of one leg's path lengths to `v`. In 8 independent lanes with branch-free
+/// compares, so the loop vectorises (a `min`/`max` fold runs one scalar compare chain: 3 % of
+/// an exhaustive `direct`); extremes do not depend on the order.
+pub(super) fn span(pts: &[Point], legs: &[f64], v: &Point) -> (f64, f64) {
+    const W: usize = 8;
+    let (mut a, mut b) = ([f64::INFINITY; W], [f64::NEG_INFINITY; W]);
+    let mut step = |k: usize, p: &Point, d: f64| {
+        let x = f64::from(dist(p, v)) + d;
+        a[k] = if x < a[k] { x } else { a[k] };
+        b[k] = if x > b[k] { x } else { b[k] };
+    };
+    let (pc, dc) = (pts.chunks_exact(W), legs.chunks_exact(W));
+    let (pr, dr) = (pc.remainder(), dc.remainder());
+    for (p, d) in pc.zip(dc) {
+        for k in 0..W {
+            step(k, &p[k], d[k]);
+        }
+    }
+    for (p, d) in pr.iter().zip(dr) {
+        step(0, p, *d);
+    }
+    (
+        a.iter().fold(f64::INFINITY, |m, &x| m.min(x)),
+        b.iter().fold(f64::NEG_INFINITY, |m, &x| m.max(x)),
+    )
 }
 
 /// The device legs `d1_l`, `d4_s` of every laser and SPAD spot (0 without legs in time).

@@ -193,37 +193,11 @@ pub(super) fn outside_guard(
     voxels: &[Point],
 ) -> Vec<bool> {
     let (lo, hi) = cfg.guard();
-    // The extremes of `|p − v| + d` in 8 independent lanes (branch-free compares, so the
-    // loop vectorises; a `min`/`max` fold runs one scalar compare chain per voxel: 3 % of an
-    // exhaustive `direct`). Extremes do not depend on the order: the same result.
-    let range = |pts: &[Point], legs: &[f64], v: &Point| {
-        const W: usize = 8;
-        let (mut a, mut b) = ([f64::INFINITY; W], [f64::NEG_INFINITY; W]);
-        let mut step = |k: usize, p: &Point, d: f64| {
-            let x = dist(p, v) as f64 + d;
-            a[k] = if x < a[k] { x } else { a[k] };
-            b[k] = if x > b[k] { x } else { b[k] };
-        };
-        let (pc, dc) = (pts.chunks_exact(W), legs.chunks_exact(W));
-        let (pr, dr) = (pc.remainder(), dc.remainder());
-        for (p, d) in pc.zip(dc) {
-            for k in 0..W {
-                step(k, &p[k], d[k]);
-            }
-        }
-        for (p, d) in pr.iter().zip(dr) {
-            step(0, p, *d);
-        }
-        (
-            a.iter().fold(f64::INFINITY, |m, &x| m.min(x)),
-            b.iter().fold(f64::NEG_INFINITY, |m, &x| m.max(x)),
-        )
-    };
     voxels
         .par_iter()
         .map(|v| {
-            let (l0, l1) = range(&g.lasers, d1, v);
-            let (s0, s1) = range(&g.spads, d4, v);
+            let (l0, l1) = span(&g.lasers, d1, v);
+            let (s0, s1) = span(&g.spads, d4, v);
             // A margin of 1e-4·σ for the f32 path lengths of the kernel.
             let m = 1e-4 * cfg.sigma();
             l0 + s0 - cfg.t0() < lo + m || l1 + s1 - cfg.t0() > hi - m

@@ -828,6 +828,13 @@ mod tests {
         }
     }
 
+    /// [`lenient`] with its facets' options changed by `edit`.
+    fn lenient_with(sweeps: usize, edit: impl FnOnce(&mut FacetOptions)) -> ModelOptions {
+        let mut o = lenient(sweeps);
+        edit(&mut o.facets);
+        o
+    }
+
     /// A capture of noise: an image that splits into more facets than `max_facets` is given
     /// up at once, naming the count; let through (every energy accepted), its facets stay
     /// inside the image's grid widened by [`BOUNDS_MARGIN`] (without the bounds they spread
@@ -881,13 +888,7 @@ mod tests {
     #[test]
     fn a_refinement_over_its_work_budget_is_given_up() {
         let mut cap = noise();
-        let tight = ModelOptions {
-            facets: FacetOptions {
-                work: 1e7,
-                ..lenient(3).facets
-            },
-            ..lenient(3)
-        };
+        let tight = lenient_with(3, |f| f.work = 1e7);
         match model_of_capture(&mut cap, &Wave::default(), &tight, EXEC) {
             Ok(ModelOutcome::Unexplained {
                 reason,
@@ -937,13 +938,7 @@ mod tests {
     #[test]
     fn facets_stay_within_their_surfels_and_the_plan_counts_them() {
         let mut cap = noise();
-        let capped = ModelOptions {
-            facets: FacetOptions {
-                max_surfels: 10,
-                ..lenient(3).facets
-            },
-            ..lenient(3)
-        };
+        let capped = lenient_with(3, |f| f.max_surfels = 10);
         match model_of_capture(&mut cap, &Wave::default(), &capped, EXEC) {
             Ok(ModelOutcome::Unexplained {
                 reason,
