@@ -7,13 +7,16 @@
 //! kernel's `Complex32` spectra. The product runs in `matrixmultiply`'s `sgemm` (through
 //! `ndarray`; AVX2/FMA picked at run time), ≈ 60 % of one core's f32 peak instead of the
 //! kernel's portable integer-phase loop (3 GFLOP/s). The un-gated phasor
-//! `M_s = Σ_n H_s[n] e^{−iΩ nΔt}` is two more dot products per histogram.
+//! `M_s = Σ_n H_s[n] e^{−iΩ nΔt}` is two more rows of `W` (the carrier's cos and sin), so the
+//! row is read once, not three times (the product's 8-column panels leave room for them:
+//! 2J + 2 = 68 columns take the same 9 panels as 66).
 //!
 //! Numerics: `W` is made in `f64` with the exact integer phase `(k·n) mod N` and rounded to
 //! `f32` (error ≤ 6e-8, as the kernel's twiddle table); the sums are `f32` with sgemm's
 //! blocked order (error ≲ √Nt·2⁻²⁴ of `Σ|H|`, inside the property tests' `ε_f32`).
 //!
-//! Cost per row `2·Ks·Nt·(2J + 2)` flops; memory `(2J + 2)·Nt` f32 for `W`.
+//! Cost per row `2·Ks·Nt·(2J + 2)` flops; memory `(2J + 2)·Nt` f32 for `W` and, per call,
+//! `Ks·(2J + 2)` f32 for the product before it is split into spectra and phasors.
 //!
 //! **Large tables.** `W` grows as `J·Nt`, and `J` grows with `Nt` (the band is a fixed share of
 //! the DFT period), so `W` grows as `Nt²`: 100,000 bins would need 13 GB for a 40 kB capture.
@@ -70,8 +73,8 @@ pub struct BandDft {
     /// The band's first bin `k_lo` and the DFT period N.
     k_lo: i64,
     n: i64,
-    /// The table `W` (2J × Nt: row 2j = cos, row 2j+1 = sin of −2π k_j n/N), none above
-    /// [`MAX_TABLE_BYTES`], or the FFT.
+    /// The table `W` ((2J + 2) × Nt: row 2j = cos, row 2j+1 = sin of −2π k_j n/N, the last
+    /// two the carrier's), none above [`MAX_TABLE_BYTES`], or the FFT.
     method: Method,
     /// cos / sin of −Ω nΔt (the un-gated carrier), Nt each.
     carrier: [Vec<f32>; 2],
@@ -80,7 +83,7 @@ pub struct BandDft {
 impl BandDft {
     /// Bytes of the table `W` for `cfg` (saturating), whether or not it is made.
     pub fn table_bytes(cfg: &Config) -> u128 {
-        (2 * cfg.bins() as u128).saturating_mul(cfg.nt() as u128) * 4
+        (2 * cfg.bins() as u128 + 2).saturating_mul(cfg.nt() as u128) * 4
     }
 
     /// Builds `W` for `cfg` (cost `2J·Nt` sincos in `f64`, once), or no table above
@@ -107,7 +110,7 @@ impl BandDft {
     pub fn table(cfg: &Config) -> Self {
         let (nt, bins, n) = (cfg.nt(), cfg.bins(), cfg.n_fft() as i64);
         let w = (Self::table_bytes(cfg) <= MAX_TABLE_BYTES as u128).then(|| {
-            let mut w = Array2::<f32>::zeros((2 * bins, nt));
+            let mut w = Array2::<f32>::zeros((2 * bins + 2, nt));
             for j in 0..bins {
                 let k = (cfg.k_lo() + j as i64).rem_euclid(n);
                 for t in 0..nt {
@@ -116,6 +119,10 @@ impl BandDft {
                     w[[2 * j + 1, t]] = s as f32;
                 }
             }
+            for (t, (c, s)) in carrier(cfg).into_iter().enumerate() {
+                w[[2 * bins, t]] = c;
+                w[[2 * bins + 1, t]] = s;
+            }
             w
         });
         Self::with_method(cfg, w.map_or(Method::TableFree, Method::Table))
@@ -123,15 +130,8 @@ impl BandDft {
 
     fn with_method(cfg: &Config, method: Method) -> Self {
         let nt = cfg.nt();
-        let turns = -cfg.dt() / cfg.wavelength();
-        let phase = |t: usize| {
-            let x = t as f64 * turns;
-            std::f64::consts::TAU * (x - x.round())
-        };
-        let carrier = [
-            (0..nt).map(|t| phase(t).cos() as f32).collect(),
-            (0..nt).map(|t| phase(t).sin() as f32).collect(),
-        ];
+        let (cos, sin) = carrier(cfg).into_iter().unzip();
+        let carrier = [cos, sin];
         Self {
             nt,
             bins: cfg.bins(),
@@ -172,11 +172,22 @@ impl BandDft {
         }
         match &self.method {
             Method::Table(w) => {
+                // Spectra and phasors in one product (module docs), then split.
+                let cols = 2 * self.bins + 2;
+                let mut out = vec![0.0f32; ks * cols];
                 let a = ArrayView2::from_shape((ks, self.nt), hists).expect("checked shape");
-                let out: &mut [f32] = bytemuck::cast_slice_mut(band);
-                let mut c =
-                    ArrayViewMut2::from_shape((ks, 2 * self.bins), out).expect("checked shape");
+                let mut c = ArrayViewMut2::from_shape((ks, cols), &mut out).expect("checked shape");
                 general_mat_mul(1.0, &a, &w.t(), 0.0, &mut c);
+                let band: &mut [f32] = bytemuck::cast_slice_mut(band);
+                for ((o, b), m) in out
+                    .chunks_exact(cols)
+                    .zip(band.chunks_exact_mut(2 * self.bins))
+                    .zip(ungated.iter_mut())
+                {
+                    b.copy_from_slice(&o[..2 * self.bins]);
+                    *m = Complex32::new(o[2 * self.bins], o[2 * self.bins + 1]);
+                }
+                return;
             }
             Method::TableFree => self.apply_without_table(hists, band, ks),
             Method::Fft(fft) => self.apply_fft(fft.as_ref(), hists, band, ks),
@@ -252,6 +263,19 @@ impl BandDft {
             }
         }
     }
+}
+
+/// The un-gated carrier `e^{−iΩ nΔt}` per bin, as `f32` `(cos, sin)` (phase in `f64`,
+/// reduced to one turn).
+fn carrier(cfg: &Config) -> Vec<(f32, f32)> {
+    let turns = -cfg.dt() / cfg.wavelength();
+    (0..cfg.nt())
+        .map(|t| {
+            let x = t as f64 * turns;
+            let a = std::f64::consts::TAU * (x - x.round());
+            (a.cos() as f32, a.sin() as f32)
+        })
+        .collect()
 }
 
 /// `(cos, sin)` of `−2π (k·t mod n)/n`, the phase reduced exactly in integers.
