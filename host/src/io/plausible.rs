@@ -16,7 +16,9 @@
 //! Non-finite samples are not judged here: the probes read them as 0 and say so.
 //!
 //! Cost: one pass over each row as it is read (a max/min scan and every `stride`-th value
-//! copied, both on the thread that reads the row, the rows of a batch in parallel); memory:
+//! copied, both on the thread that reads the row, the rows of a batch in parallel; where a
+//! row beats a record, the record's position is looked up there too, in blocks of 64);
+//! memory:
 //! [`SAMPLE`] f32 at most, and one row's sample per row of a batch. The check never changes
 //! the data and never fails a run: it only warns (the values are what the file holds; the
 //! user decides).
@@ -106,7 +108,35 @@ impl Plausibility {
             lo,
             negatives,
             sample,
+            hi_at: None,
+            lo_at: None,
         }
+    }
+
+    /// [`Plausibility::row_stats`], and the positions of the row's extremes where they beat
+    /// the records seen so far (so that [`Plausibility::observe_with`] need not search the
+    /// row again, on the thread that observes the rows in order, long after it was read). A
+    /// row that beats the records now but not those of an earlier row of its batch costs a
+    /// search that is not used.
+    pub fn row_stats_located(&self, row: &[f32]) -> RowStats {
+        let mut s = self.row_stats(row);
+        if self.beats_largest(s.hi) {
+            s.hi_at = Some(position_of_largest(row, s.hi));
+        }
+        if self.beats_lowest(s.lo) {
+            s.lo_at = Some(position_of_lowest(row, s.lo));
+        }
+        s
+    }
+
+    /// Whether a row whose largest finite magnitude is `hi` sets a new record.
+    fn beats_largest(&self, hi: f32) -> bool {
+        hi > 0.0 && self.largest.is_none_or(|a| hi > a.value.abs())
+    }
+
+    /// Whether a row whose lowest finite value is `lo` sets a new record.
+    fn beats_lowest(&self, lo: f32) -> bool {
+        lo < 0.0 && self.lowest.is_none_or(|a| lo < a.value)
     }
 
     /// [`Plausibility::observe`] with the row's [`RowStats`] computed beforehand.
@@ -116,6 +146,8 @@ impl Plausibility {
             lo,
             negatives,
             sample,
+            hi_at,
+            lo_at,
         } = stats;
         let at = |i: usize, value: f32| At {
             value,
@@ -123,17 +155,16 @@ impl Plausibility {
             spad: i / self.nt,
             bin: i % self.nt,
         };
-        // Positions only when a record is beaten.
-        let finite = |x: f32| if x.is_finite() { x } else { 0.0 };
-        if hi > 0.0 && self.largest.is_none_or(|a| hi > a.value.abs()) {
-            let i = row.iter().position(|&x| finite(x).abs() == hi).unwrap_or(0);
-            self.largest = Some(at(i, row[i]));
+        // Positions only when a record is beaten (looked up already, or now).
+        if self.beats_largest(hi) {
+            let i = hi_at.unwrap_or_else(|| position_of_largest(row, hi));
+            self.largest = row.get(i).map(|&v| at(i, v));
         }
         if lo < 0.0 {
             self.negatives += negatives;
-            if self.lowest.is_none_or(|a| lo < a.value) {
-                let i = row.iter().position(|&x| finite(x) == lo).unwrap_or(0);
-                self.lowest = Some(at(i, row[i]));
+            if self.beats_lowest(lo) {
+                let i = lo_at.unwrap_or_else(|| position_of_lowest(row, lo));
+                self.lowest = row.get(i).map(|&v| at(i, v));
             }
         }
         let room = SAMPLE.saturating_sub(self.sample.len());
@@ -200,6 +231,36 @@ pub struct RowStats {
     negatives: u64,
     /// Every `stride`-th finite magnitude, in row order (empty once the sample is full).
     sample: Vec<f32>,
+    /// Where `hi` and `lo` first occur, when looked up ([`Plausibility::row_stats_located`]).
+    hi_at: Option<usize>,
+    lo_at: Option<usize>,
+}
+
+/// The first index whose finite magnitude is `hi` (non-finite samples read as 0), or 0.
+fn position_of_largest(row: &[f32], hi: f32) -> usize {
+    first_where(row, |x| {
+        if x.is_finite() {
+            x.abs() == hi
+        } else {
+            hi == 0.0
+        }
+    })
+}
+
+/// The first index whose finite value is `lo` (non-finite samples read as 0), or 0.
+fn position_of_lowest(row: &[f32], lo: f32) -> usize {
+    first_where(row, |x| if x.is_finite() { x == lo } else { lo == 0.0 })
+}
+
+/// The first index where `hit` holds, or 0: blocks of 64 tested branch-free (it
+/// vectorises), then the block that holds it one by one.
+fn first_where(row: &[f32], hit: impl Fn(f32) -> bool) -> usize {
+    const B: usize = 64;
+    row.chunks(B)
+        .enumerate()
+        .find(|(_, c)| c.iter().fold(false, |any, &x| any | hit(x)))
+        .and_then(|(k, c)| c.iter().position(|&x| hit(x)).map(|i| k * B + i))
+        .unwrap_or(0)
 }
 
 /// The largest magnitude (≥ 0), the lowest value (≤ 0) and the number of negative values of
@@ -300,7 +361,10 @@ impl RowSource for Watched {
         self.src.read_rows(first, out)?;
         // The rows' passes in parallel; the statistics in row order.
         let stats = &self.stats;
-        let ext: Vec<_> = out.par_iter().map(|(_, h)| stats.row_stats(h)).collect();
+        let ext: Vec<_> = out
+            .par_iter()
+            .map(|(_, h)| stats.row_stats_located(h))
+            .collect();
         for ((l, (_, h)), e) in (first..).zip(out.iter()).zip(ext) {
             self.observe(l, h, e);
         }
@@ -397,6 +461,56 @@ mod tests {
         assert_eq!(verdict(capture(sparse), true), None);
         let w = verdict(capture(|i| if i == 51 { 1e9 } else { sparse(i) }), true);
         assert!(w.is_some_and(|w| w.contains("bin 1")));
+    }
+
+    /// Records looked up on the reading threads (a batch) name the same values and positions
+    /// as a search at observation time (rows one by one): a tie goes to the earlier row, a
+    /// later row of the batch beats an earlier one, NaN reads as 0.
+    #[test]
+    fn batch_records_equal_row_by_row_records() {
+        let values = |i: usize| match i {
+            30 | 180 => -3.0,
+            290 => 6.1e37,
+            500 => f32::NAN,
+            _ => clean(i),
+        };
+        let read = |batch: bool| {
+            let said = std::rc::Rc::new(std::cell::RefCell::new(None));
+            let s = said.clone();
+            let mut w = Watched::new(
+                Box::new(capture(values)),
+                true,
+                Box::new(move |m: &str| *s.borrow_mut() = Some(m.to_string())),
+            );
+            if batch {
+                let mut rows = vec![([0.0; 3], Vec::new()); 4];
+                w.read_rows(0, &mut rows).expect("rows");
+            } else {
+                let mut row = Vec::new();
+                for l in 0..4 {
+                    w.read_row(l, &mut row).expect("row");
+                }
+            }
+            said.take().expect("a warning")
+        };
+        let (one, batch) = (read(false), read(true));
+        assert_eq!(one, batch);
+        // 290 = row 1, SPAD 2, bin 40; 30 = row 0, SPAD 0, bin 30.
+        assert!(
+            one.contains("value 6.1e37 at laser row 1, SPAD 2, bin 40"),
+            "{one}"
+        );
+        assert!(
+            one.contains("(the lowest, -3e0, at laser row 0, SPAD 0, bin 30)"),
+            "{one}"
+        );
+        for (at, n) in [(0, 1), (63, 64), (64, 65), (127, 300), (299, 300)] {
+            let mut v = vec![1.0f32; n];
+            v[at] = 2.0;
+            assert_eq!(position_of_largest(&v, 2.0), at);
+            v[at] = -2.0;
+            assert_eq!(position_of_lowest(&v, -2.0), at);
+        }
     }
 
     #[test]
