@@ -1,6 +1,7 @@
 //! The complex `f32` loops of the planar path's inverse pass ([`super::planar`]), portable and
 //! for AVX (through `pulp`'s safe wrappers, no `unsafe`): the pointwise product `X̂_j·κ̂_j`
-//! each voxel's `sum += z·p; p *= step`, and the transpose between the two inverse passes.
+//! each voxel's `sum += z·p; p *= step`, the transpose between the two inverse passes, and
+//! the voxels' leg phases `e^{2πi·a·d}` (the kernel's `cis_turns`, 8 lanes).
 //!
 //! Every value is computed by the operations of `num_complex`'s `Complex32` product (two
 //! products, then one subtraction or addition; AVX's `addsub` does the same in each lane, and
@@ -8,6 +9,7 @@
 //! bit (tested) and the same as before they were vectorised.
 
 use num_complex::Complex32;
+use vltm_kernel::cis_turns;
 
 /// `dst[c·stride + r] = src[r·cols + c]` for r < rows, c < cols: tiles of 16 rows, each
 /// destination row of a tile written as one contiguous run (the strided reads stay in L1).
@@ -53,6 +55,11 @@ pub(super) trait Lanes: Copy {
         cols: usize,
         dst: &mut [Complex32],
     );
+    /// `out[k] = cis_turns(a·d[k])` over the shorter of the two: the kernel's
+    /// [`vltm_kernel::cis_turns`] by the same operations in the same order (round to nearest
+    /// even, the quarter-turn reduction, the Taylor polynomials without fused multiply-adds),
+    /// so every version gives its bits.
+    fn cis(self, a: f32, d: &[f32], out: &mut [Complex32]);
 }
 
 /// Plain loops (the compiler's baseline vectorisation).
@@ -96,6 +103,13 @@ impl Lanes for Portable {
             }
         }
     }
+
+    #[inline(always)]
+    fn cis(self, a: f32, d: &[f32], out: &mut [Complex32]) {
+        for (o, &d) in out.iter_mut().zip(d) {
+            *o = cis_turns(a * d);
+        }
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -117,6 +131,68 @@ fn cmul(s: V3, a: __m256, b: __m256) -> __m256 {
     let im = s.avx._mm256_movehdup_ps(a);
     s.avx
         ._mm256_addsub_ps(s.avx._mm256_mul_ps(re, b), s.avx._mm256_mul_ps(im, ba))
+}
+
+/// [`vltm_kernel::cis_turns`] of 8 phases (turns) in lanes: see [`Lanes::cis`]. Returns
+/// the 8 values interleaved (`re, im` of the first four, then of the last four).
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn cis8(s: V3, t: __m256) -> [__m256; 2] {
+    const TAU: f32 = core::f32::consts::TAU;
+    let (a, i) = (&s.avx, &s.avx2);
+    let k = |x: f32| a._mm256_set1_ps(x);
+    // Round to nearest, ties to even, exceptions suppressed: `rintf`.
+    let rint = |x: __m256| a._mm256_round_ps::<0x08>(x);
+    let r = a._mm256_sub_ps(t, rint(t));
+    let q4 = rint(a._mm256_mul_ps(k(4.0), r));
+    let f = a._mm256_sub_ps(r, a._mm256_mul_ps(k(0.25), q4));
+    let x = a._mm256_mul_ps(k(TAU), f);
+    let x2 = a._mm256_mul_ps(x, x);
+    // `c + x2·p`, in the kernel's order.
+    let step = |c: f32, p: __m256| a._mm256_add_ps(k(c), a._mm256_mul_ps(x2, p));
+    let sp = step(
+        1.0,
+        step(
+            -1.0 / 6.0,
+            step(1.0 / 120.0, step(-1.0 / 5040.0, k(1.0 / 362_880.0))),
+        ),
+    );
+    let sin = a._mm256_mul_ps(x, sp);
+    let cos = step(
+        1.0,
+        step(
+            -0.5,
+            step(
+                1.0 / 24.0,
+                step(-1.0 / 720.0, step(1.0 / 40_320.0, k(-1.0 / 3_628_800.0))),
+            ),
+        ),
+    );
+    // Quadrant `q4 & 3` (NaN converts to i32::MIN, whose low bits are 0, as `as i32` gives 0).
+    let q = i._mm256_and_si256(a._mm256_cvtps_epi32(q4), a._mm256_set1_epi32(3));
+    let odd = a._mm256_castsi256_ps(i._mm256_cmpeq_epi32(
+        i._mm256_and_si256(q, a._mm256_set1_epi32(1)),
+        a._mm256_set1_epi32(1),
+    ));
+    let two = a._mm256_set1_epi32(2);
+    // −re for q ∈ {1, 2}, −im for q ∈ {2, 3}: bit 1 of q + 1 and of q, moved to the sign.
+    let neg_re = i._mm256_slli_epi32::<30>(
+        i._mm256_and_si256(i._mm256_add_epi32(q, a._mm256_set1_epi32(1)), two),
+    );
+    let neg_im = i._mm256_slli_epi32::<30>(i._mm256_and_si256(q, two));
+    let re = a._mm256_xor_ps(
+        a._mm256_blendv_ps(cos, sin, odd),
+        a._mm256_castsi256_ps(neg_re),
+    );
+    let im = a._mm256_xor_ps(
+        a._mm256_blendv_ps(sin, cos, odd),
+        a._mm256_castsi256_ps(neg_im),
+    );
+    let (lo, hi) = (a._mm256_unpacklo_ps(re, im), a._mm256_unpackhi_ps(re, im));
+    [
+        a._mm256_permute2f128_ps::<0x20>(lo, hi),
+        a._mm256_permute2f128_ps::<0x31>(lo, hi),
+    ]
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -214,6 +290,23 @@ impl Lanes for Avx {
             }
         }
     }
+
+    #[inline(always)]
+    fn cis(self, a: f32, d: &[f32], out: &mut [Complex32]) {
+        let n = d.len().min(out.len());
+        let (d, out) = (&d[..n], &mut out[..n]);
+        let mut o8 = out.chunks_exact_mut(8);
+        let mut d8 = d.chunks_exact(8);
+        let av = self.0.avx._mm256_set1_ps(a);
+        for (o, d) in (&mut o8).zip(&mut d8) {
+            let d: [f32; 8] = d.try_into().unwrap_or([0.0; 8]);
+            let t = self.0.avx._mm256_mul_ps(av, pulp::cast(d));
+            let [v0, v1] = cis8(self.0, t);
+            store(&mut o[..4], v0);
+            store(&mut o[4..], v1);
+        }
+        Portable.cis(a, d8.remainder(), o8.into_remainder());
+    }
 }
 
 #[cfg(test)]
@@ -253,6 +346,20 @@ mod tests {
             }
             assert_eq!(bits(&p1), bits(&p0), "phase, n = {n}");
             assert_eq!(bits(&s1), bits(&s0), "sum, n = {n}");
+        }
+        // Leg phases: ties of the rounding (halves and quarters of a turn), large and
+        // negative phases, NaN and infinities.
+        let mut d: Vec<f32> = (0..203).map(|i| (i as f32 - 101.0) * 0.125).collect();
+        d.extend((0..500).map(|i| (i as f32 * 0.6173).sin() * 1e4));
+        d.extend([f32::NAN, f32::INFINITY, -f32::INFINITY, 1e9, -0.0, 3e-8]);
+        for a in [1.0f32, 0.37, -2.5, 1234.5] {
+            for n in [0, 5, 8, d.len()] {
+                let mut want = vec![Complex32::default(); n];
+                let mut got = want.clone();
+                Portable.cis(a, &d[..n], &mut want);
+                v3.vectorize(|| Avx(v3).cis(a, &d[..n], &mut got));
+                assert_eq!(bits(&got), bits(&want), "cis, a = {a}, n = {n}");
+            }
         }
         for (stride, n, cols) in [(32, 32, 16), (8, 4, 8), (6, 9, 3), (12, 8, 4)] {
             let src: Vec<_> = (0..stride * n).map(|i| c(i, 0.3)).collect();

@@ -15,8 +15,8 @@
 //! precomputed `κ̂` and one inverse 2-D FFT. Both transforms are pruned: the forward pass
 //! skips the all-zero rows of the padded SPAD image, the inverse pass computes only the
 //! output rows that hold voxels. Transforms are `rustfft` (AVX), `f32`; the inverse pass goes
-//! bin by bin in buffers that stay in L1, its product, transpose and per-voxel sums in AVX
-//! lanes (`fast::lanes`; bit-identical to the portable loops, which
+//! bin by bin in buffers that stay in L1, its product, transpose, per-voxel sums and the
+//! voxels' leg phases in AVX lanes (`fast::lanes`; bit-identical to the portable loops, which
 //! [`Planar::set_portable`] forces).
 //!
 //! **Voxel pitch.** Voxels finer than the SPADs by an integer factor `r` per axis (`p_s =
@@ -49,7 +49,7 @@ use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
 use rustfft::{Fft, FftPlanner};
 use std::sync::Arc;
-use vltm_kernel::{Config, Point, cis_turns};
+use vltm_kernel::{Config, Point};
 
 /// Largest `κ̂` table accepted (bytes); larger problems are not planar.
 pub const MAX_TABLE_BYTES: usize = 2 << 30;
@@ -109,8 +109,9 @@ struct Work {
     p: Vec<Complex32>,
     step: Vec<Complex32>,
     sum: Vec<Complex32>,
-    /// Per output: the leg's weight `w_leg`.
+    /// Per output: the leg's weight `w_leg` and length `d_leg` (m).
     wt: Vec<f32>,
+    d: Vec<f32>,
 }
 
 impl std::fmt::Debug for Planar {
@@ -321,6 +322,7 @@ impl Planar {
             step: v(),
             sum: v(),
             wt: vec![0.0f32; n],
+            d: vec![0.0f32; n],
         }
     }
 
@@ -511,19 +513,25 @@ where
             step,
             sum,
             wt,
+            d,
         } = w;
-        let (ph, step, sum) = (&mut ph[..n], &mut step[..n], &mut sum[..n]);
-        // Each voxel's leg: its phase at the band's first bin and its step per bin (a
-        // skipped voxel: zero, and not emitted).
+        let (ph, step, sum, d) = (&mut ph[..n], &mut step[..n], &mut sum[..n], &mut d[..n]);
+        // Each voxel's leg: its phase at the band's first bin and its step per bin, in lanes
+        // (a skipped voxel: zero, and not emitted).
+        let skipped = |v: u32| skip.get(v as usize).copied().unwrap_or(true);
         for (o, &(_, v)) in slice.outputs.iter().enumerate() {
-            let v = v as usize;
-            let (a, b, wl) = if skip.get(v).copied().unwrap_or(true) {
-                (Complex32::new(0.0, 0.0), Complex32::new(0.0, 0.0), 0.0)
+            (d[o], wt[o]) = if skipped(v) {
+                (0.0, 0.0)
             } else {
-                let (d, wl) = leg(&voxels[v]);
-                (cis_turns(klo * d), cis_turns(inv * d), wl)
+                leg(&voxels[v as usize])
             };
-            (ph[o], step[o], wt[o]) = (a, b, wl);
+        }
+        lanes.cis(klo, d, ph);
+        lanes.cis(inv, d, step);
+        for (o, &(_, v)) in slice.outputs.iter().enumerate() {
+            if skipped(v) {
+                (ph[o], step[o]) = (Complex32::new(0.0, 0.0), Complex32::new(0.0, 0.0));
+            }
         }
         sum.fill(Complex32::new(0.0, 0.0));
         for (xj, kj) in x.chunks_exact(m).zip(kh.chunks_exact(m)).take(j_n) {
