@@ -54,9 +54,9 @@ pub use indirect::{
     indirect_shells,
 };
 pub use leak::{
-    BOUNDS_MARGIN, DirectModel, GateEnergy, IMAGE_HISTOGRAMS, LeakCorrected, LeakMethod,
-    LeakOptions, MAX_FACETS, MAX_GROWN, MAX_SWEEPS, ModelOptions, ModelOutcome, SurfaceModel,
-    cell_radius, model_of_capture,
+    AUTO_ADJACENCY, BOUNDS_MARGIN, DirectModel, GateEnergy, IMAGE_HISTOGRAMS, LeakCorrected,
+    LeakMethod, LeakOptions, MAX_FACETS, MAX_GROWN, MAX_SWEEPS, ModelOptions, ModelOutcome,
+    SurfaceModel, cell_radius, model_of_capture,
 };
 pub use matrix::{
     MATRIX_BYTES_PER_ELEMENT, Matrix, Pattern, Relit, check_relight, matrix, relight,

@@ -27,6 +27,9 @@ pub struct DirectModel {
     pub explained: f64,
     /// Half-width of the zeroed windows (gate method) (m of path).
     gate: Option<f64>,
+    /// Gate method, once its pass has read the capture: of the energy the windows leave, the
+    /// share within one window half-width of them ([`GateEnergy::adjacency`]).
+    pub adjacency: Option<f64>,
     /// Wall-clock seconds of the fit.
     pub seconds: f64,
 }
@@ -87,6 +90,7 @@ impl DirectModel {
             basis,
             explained: 0.0,
             gate: Some(opts.cells * cell + 3.0 * g.dt),
+            adjacency: None,
             seconds: 0.0,
         })
     }
@@ -111,6 +115,10 @@ impl DirectModel {
         let g = src.geometry().clone();
         if opts.method == LeakMethod::Gate {
             let mut model = Self::gate(&g, points, cell, wave, opts)?;
+            // One window half-width, in bins.
+            let reach = model
+                .gate
+                .map_or(0, |w| (w / g.dt).ceil().max(1.0) as usize);
             let bar = Pass::start(exec, "leak gate", g.lasers.len());
             let mut energy = GateEnergy::default();
             // Batches of rows: read (in parallel where the source can), then each row's
@@ -137,18 +145,18 @@ impl DirectModel {
                         let mut kept = row.clone();
                         model.subtract_row(start + i, &mut kept);
                         let mut e = GateEnergy::default();
-                        e.add(row, &kept);
+                        e.add_near(row, &kept, g.nt, reach);
                         e
                     })
                     .collect();
                 for e in per_row {
-                    energy.total += e.total;
-                    energy.cut += e.cut;
+                    energy.merge(&e);
                 }
                 bar.advance(end - start);
             }
             drop(bar);
             model.explained = energy.explained()?;
+            model.adjacency = energy.adjacency();
             model.seconds = t.elapsed().as_secs_f64();
             return Ok(model);
         }
@@ -265,6 +273,7 @@ impl DirectModel {
             basis,
             explained: (1.0 - resid / energy).clamp(0.0, 1.0),
             gate: None,
+            adjacency: None,
             seconds: t.elapsed().as_secs_f64(),
         })
     }

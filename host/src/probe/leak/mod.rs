@@ -137,7 +137,7 @@ mod synthesis;
 pub use corrected::LeakCorrected;
 pub use energy::GateEnergy;
 pub use fit::DirectModel;
-pub use options::{LeakMethod, LeakOptions, cell_radius};
+pub use options::{AUTO_ADJACENCY, LeakMethod, LeakOptions, cell_radius};
 pub use synthesis::{
     BOUNDS_MARGIN, IMAGE_HISTOGRAMS, MAX_FACETS, MAX_GROWN, MAX_SWEEPS, ModelOptions, ModelOutcome,
     SurfaceModel, model_of_capture,

@@ -484,6 +484,7 @@ impl Partial {
                     GateEnergy {
                         total: self.head.report.leak_total,
                         cut: self.head.report.leak_cut,
+                        near: 0.0,
                     }
                     .explained()?,
                 )
