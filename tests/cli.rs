@@ -2018,6 +2018,93 @@ fn leak_correct_model_on_the_command_line() {
     assert!(!t.path("x.npy").exists());
 }
 
+/// `--leak-correct auto` (docs/indirect-light.md): the windows' pass first, then the surface
+/// model only where the energy the windows leave lies next to them. On the two patches
+/// (compact: their inter-reflection arrives apart from their direct light) it says so with
+/// the adjacency and writes exactly what `--leak-correct gate` writes, for `indirect` and for
+/// a column; `live` (which chooses before the scan) and a partial in-focus sum (the model
+/// needs the whole capture) refuse it naming the flag. The path-traced case, where it picks
+/// the model, is in `tests/leak.rs`.
+#[test]
+fn leak_correct_auto_on_the_command_line() {
+    let t = TempDir::new("cli", "leak-auto");
+    let cap = npz_fixture("two_patches");
+    let cap = cap.to_str().expect("utf-8");
+    // The README's volume (windows of 5 cm voxels; on coarser voxels the windows widen and
+    // the adjacency grows: docs/indirect-light.md).
+    let (spec, shape) = ("-0.6:0.6:25,-0.2:0.2:5,0.5:1.2:15", [25, 5, 15]);
+    let run = |name: &str, cmd: &[&str], extra: &[&str]| {
+        let f = t.path(name);
+        let mut a = cmd.to_vec();
+        a.extend_from_slice(&["--volume", spec, "--progress", "none"]);
+        a.extend_from_slice(extra);
+        a.extend_from_slice(&["--out", f.to_str().expect("utf-8")]);
+        let o = vltm_in(&t.0, &a);
+        assert!(o.status.success(), "{a:?}: {}", text(&o.stderr));
+        (text(&o.stdout), npy(&f, shape))
+    };
+    let adjacency = |out: &str| -> f64 {
+        out.split("(--leak-correct auto): ")
+            .nth(1)
+            .and_then(|r| r.split_whitespace().next())
+            .and_then(|x| x.parse().ok())
+            .unwrap_or_else(|| panic!("no adjacency in {out}"))
+    };
+    for cmd in [vec!["indirect", cap], vec!["column", cap, "--focus", FOCUS]] {
+        let (out, auto) = run("a.npy", &cmd, &["--leak-correct", "auto"]);
+        let (_, gate) = run("g.npy", &cmd, &["--leak-correct", "gate"]);
+        // Measured 0.07.
+        let a = adjacency(&out);
+        assert!(a < 0.15, "{out}");
+        assert!(
+            out.contains("the windows (what they leave stands apart"),
+            "{out}"
+        );
+        assert!(!out.contains("surface model"), "{out}");
+        assert_eq!(auto, gate, "{cmd:?}: auto is the windows here");
+    }
+    let o = t.s("x.npy");
+    let d = t.s("d.npy");
+    ok(&t.0, &["direct", cap, "--volume", SPEC, "--out", &d]);
+    for bad in [
+        vec![
+            "live",
+            cap,
+            "--replay-rate",
+            "1000",
+            "--volume",
+            SPEC,
+            "--focus",
+            FOCUS,
+            "--leak-correct",
+            "auto",
+            "--out",
+            &o,
+        ],
+        vec![
+            "indirect",
+            cap,
+            "--volume",
+            SPEC,
+            "--direct",
+            &d,
+            "--rows",
+            ":40",
+            "--partial",
+            &o,
+            "--leak-correct",
+            "auto",
+        ],
+    ] {
+        let err = fails(&t.0, &bad, 2);
+        assert!(
+            err.contains("--leak-correct") && err.lines().count() == 1,
+            "{bad:?}: {err}"
+        );
+    }
+    assert!(!t.path("x.npy").exists());
+}
+
 /// A capture with no light at all (the two-patch fixture zeroed): every probe that forms Γ
 /// refuses it with an error naming its option — `indirect` and `matrix ... gamma`
 /// `--epsilon`, `column --mask-epsilon` that option, `column --leak-correct` that one —

@@ -402,7 +402,9 @@ pub(crate) struct LeakMethodArgs {
     /// of a voxel of Γ (the voxels whose direct light is above the command's threshold) can
     /// arrive; model subtracts a surface model fitted to the capture (by `live`, to the whole
     /// scan once it is in), falling back to gate (with a warning saying why) when it explains
-    /// less than 99 % of the energy (see docs/indirect-light.md).
+    /// less than 99 % of the energy; auto runs gate's pass and tries model only where the
+    /// energy the windows leave lies mostly next to them (extended surfaces; not for `live`
+    /// or a partial scan). See docs/indirect-light.md.
     #[arg(
         long,
         value_enum,
@@ -452,6 +454,9 @@ pub(crate) enum LeakArg {
     /// Subtract a surface model fitted to the capture (the windows when it explains too
     /// little).
     Model,
+    /// The windows, or the surface model where the light the windows leave lies next to them
+    /// (`vltm::probe::AUTO_ADJACENCY`).
+    Auto,
 }
 
 /// `vltm relight`.

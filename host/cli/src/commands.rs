@@ -292,10 +292,10 @@ pub(crate) fn run(cmd: Command) -> Result<(), Failure> {
                     )
                     .into());
                 }
-                if method == Some(LeakArg::Model) {
+                if matches!(method, Some(LeakArg::Model | LeakArg::Auto)) {
                     return Err(vltm::Error::arg(
                         "partial",
-                        "the surface model is fitted to the whole capture: a partial in-focus sum takes $leak_correct gate (or $no_leak_correct)",
+                        "the surface model (which $leak_correct auto may choose) is fitted to the whole capture: a partial in-focus sum takes $leak_correct gate (or $no_leak_correct)",
                     )
                     .into());
                 }

@@ -2,14 +2,17 @@
 //! default): `--leak-correct gate`, Γ over the probe's volume and the capture's direct-return
 //! windows of Γ zeroed as the rows stream in (`vltm::probe::leak`), or `--leak-correct
 //! model`, a surface model fitted to the capture and subtracted (`vltm::probe::model_of_capture`),
-//! with the windows as its fallback; and the lines that say which was used and what it
-//! removed.
+//! with the windows as its fallback, or `--leak-correct auto`, the windows' pass first and the
+//! model where the light they leave lies next to them ([`vltm::probe::AUTO_ADJACENCY`]); and
+//! the lines that say which was used and what it removed.
 
 use std::path::Path;
 
 use vltm::exec::{Exec, Progress as _};
 use vltm::io::RowSource;
-use vltm::probe::{self, LeakOptions, ModelOptions, ModelOutcome, SurfaceModel, Wave};
+use vltm::probe::{
+    self, AUTO_ADJACENCY, LeakOptions, ModelOptions, ModelOutcome, SurfaceModel, Wave,
+};
 use vltm::volume::Volume;
 
 use crate::args::{LeakArg, LeakArgs};
@@ -47,7 +50,7 @@ impl Leak {
         capture: &Path,
     ) -> Result<Self, Failure> {
         let falloff = match method {
-            Some(LeakArg::Model) => vltm::io::laser_falloff_in_data(capture)?.0,
+            Some(LeakArg::Model | LeakArg::Auto) => vltm::io::laser_falloff_in_data(capture)?.0,
             _ => false,
         };
         Ok(Self {
@@ -110,6 +113,25 @@ pub(crate) fn warn_unused(reason: &str) {
     ));
 }
 
+/// `--leak-correct auto`: whether to try the surface model after the windows' pass, from its
+/// adjacency ([`vltm::probe::GateEnergy::adjacency`]), and the line that says so.
+pub(crate) fn auto_tries_model(adjacency: Option<f64>) -> bool {
+    let a = adjacency.unwrap_or(0.0);
+    let model = a >= AUTO_ADJACENCY;
+    let (cmp, then) = if model {
+        (
+            ">=",
+            "trying the surface model (the windows cut through light that goes on past them)",
+        )
+    } else {
+        ("<", "the windows (what they leave stands apart from them)")
+    };
+    say!(
+        "leak correction (--leak-correct auto): {a:.2} of the energy the windows leave lies within one window half-width of them ({cmp} {AUTO_ADJACENCY}): {then}"
+    );
+    model
+}
+
 /// The line of the time windows' correction.
 pub(crate) fn say_gate(explained: f64, voxels: Option<usize>, seconds: Option<f64>) {
     let of = voxels.map_or_else(String::new, |n| format!("'s {n} voxels"));
@@ -138,7 +160,7 @@ pub(crate) fn corrected<T>(
     {
         return Ok((probe(&mut m.subtracted(src))?, Some(Used::Model)));
     }
-    let model = probe::fit_over_volume(
+    let gate = probe::fit_over_volume(
         src,
         volume,
         leak.epsilon,
@@ -147,10 +169,16 @@ pub(crate) fn corrected<T>(
         exec,
     )?;
     say_gate(
-        model.explained,
-        Some(model.points().len()),
-        Some(model.seconds),
+        gate.explained,
+        Some(gate.points().len()),
+        Some(gate.seconds),
     );
-    let mut lc = probe::LeakCorrected::new(src, &model);
+    if method == LeakArg::Auto
+        && auto_tries_model(gate.adjacency)
+        && let Some(m) = fit_model(src, wave, leak.falloff, exec)?
+    {
+        return Ok((probe(&mut m.subtracted(src))?, Some(Used::Model)));
+    }
+    let mut lc = probe::LeakCorrected::new(src, &gate);
     Ok((probe(&mut lc)?, Some(Used::Gate)))
 }

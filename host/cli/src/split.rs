@@ -16,7 +16,7 @@ use vltm_kernel::Point;
 
 use crate::args::{Common, LeakArg};
 use crate::console::{Failure, say};
-use crate::leak::{Leak, fit_model, say_gate};
+use crate::leak::{Leak, auto_tries_model, fit_model, say_gate};
 use crate::outputs::{Part, write_parts};
 use crate::summary::summarize;
 
@@ -128,9 +128,24 @@ pub(crate) fn indirect_run(
     };
     let wave = c.wave();
     // `--leak-correct model`: pass 2 on the capture minus the model, or the windows when the
-    // model is not used (fit_model has said why).
+    // model is not used (fit_model has said why). `auto`: the windows' pass over Γ first (the
+    // pass the windows make inside `indirect`), and the model where what they leave lies
+    // next to them.
     let model = match leak.method {
         Some(LeakArg::Model) => fit_model(src, &wave, leak.falloff, c.exec())?,
+        Some(LeakArg::Auto) => {
+            let pts: Vec<_> = (volume.points.iter().zip(&gamma))
+                .filter_map(|(p, &g)| g.then_some(*p))
+                .collect();
+            let lo = opts.leak.unwrap_or_default();
+            let cell = probe::cell_radius(volume);
+            let gate = probe::DirectModel::fit(src, &pts, cell, &wave, &lo, c.exec())?;
+            if auto_tries_model(gate.adjacency) {
+                fit_model(src, &wave, leak.falloff, c.exec())?
+            } else {
+                None
+            }
+        }
         _ => None,
     };
     let opts = &IndirectOptions {

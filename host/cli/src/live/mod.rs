@@ -270,6 +270,13 @@ pub(crate) fn run(a: LiveArgs) -> Result<(), Failure> {
         )),
         (Some(LeakArg::Model), _) => Some(ModelOptions::with_laser_falloff(false)),
         (Some(LeakArg::Gate) | None, _) => None,
+        (Some(LeakArg::Auto), _) => {
+            return Err(vltm::Error::arg(
+                "leak_correct",
+                "live corrects the rows as they arrive and chooses before the scan: pass $leak_correct gate or model",
+            )
+            .into());
+        }
     };
     let opts = LiveOptions {
         volume,
