@@ -2043,18 +2043,11 @@ fn leak_correct_auto_on_the_command_line() {
         assert!(o.status.success(), "{a:?}: {}", text(&o.stderr));
         (text(&o.stdout), npy(&f, shape))
     };
-    let adjacency = |out: &str| -> f64 {
-        out.split("(--leak-correct auto): ")
-            .nth(1)
-            .and_then(|r| r.split_whitespace().next())
-            .and_then(|x| x.parse().ok())
-            .unwrap_or_else(|| panic!("no adjacency in {out}"))
-    };
     for cmd in [vec!["indirect", cap], vec!["column", cap, "--focus", FOCUS]] {
         let (out, auto) = run("a.npy", &cmd, &["--leak-correct", "auto"]);
         let (_, gate) = run("g.npy", &cmd, &["--leak-correct", "gate"]);
         // Measured 0.07.
-        let a = adjacency(&out);
+        let a = support::cmd::auto_adjacency(&out);
         assert!(a < 0.15, "{out}");
         assert!(
             out.contains("the windows (what they leave stands apart"),

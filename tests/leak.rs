@@ -638,16 +638,12 @@ fn leak_correct_auto_tries_the_model_on_extended_surfaces() {
         let (v, _) = vltm::export::npy::read_f32(&out).expect("indirect.npy");
         (text, err, v)
     };
-    let adjacency = |out: &str| -> f64 {
-        out.split("(--leak-correct auto): ")
-            .nth(1)
-            .and_then(|r| r.split_whitespace().next())
-            .and_then(|x| x.parse().ok())
-            .unwrap_or_else(|| panic!("no adjacency in {out}"))
-    };
     let (out, err, auto) = run("panel_figure", "auto");
     println!("{out}");
-    assert!((0.6..=0.9).contains(&adjacency(&out)), "{out}");
+    assert!(
+        (0.6..=0.9).contains(&support::cmd::auto_adjacency(&out)),
+        "{out}"
+    );
     assert!(out.contains("trying the surface model"), "{out}");
     assert!(
         out.contains("the surface model (") && err.is_empty(),
@@ -657,7 +653,10 @@ fn leak_correct_auto_tries_the_model_on_extended_surfaces() {
     assert_eq!(auto, model, "auto is the model on panel/figure");
     let (out, err, auto) = run("corner", "auto");
     println!("{out}{err}");
-    assert!((0.6..=0.9).contains(&adjacency(&out)), "{out}");
+    assert!(
+        (0.6..=0.9).contains(&support::cmd::auto_adjacency(&out)),
+        "{out}"
+    );
     assert!(
         err.lines().count() == 1 && err.contains("(< 99 %); using the time windows"),
         "{err}"
@@ -1059,12 +1058,7 @@ fn auto_on_coarse_voxels_picks_the_model_where_it_is_worse() {
     ]);
     let said = text(&r.stdout);
     assert!(r.status.success(), "{said}{}", text(&r.stderr));
-    let adjacency: f64 = said
-        .split("(--leak-correct auto): ")
-        .nth(1)
-        .and_then(|x| x.split_whitespace().next())
-        .and_then(|x| x.parse().ok())
-        .unwrap_or_else(|| panic!("{said}"));
+    let adjacency = support::cmd::auto_adjacency(&said);
     assert!((0.5..=0.9).contains(&adjacency), "{said}");
     assert!(said.contains("the surface model ("), "{said}");
     // auto wrote the model's output (the helper's `full.npy`: the same volume and Γ).

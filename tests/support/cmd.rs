@@ -88,6 +88,15 @@ pub fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
+/// The adjacency a `--leak-correct auto` run printed on stdout (`out`).
+pub fn auto_adjacency(out: &str) -> f64 {
+    out.split("(--leak-correct auto): ")
+        .nth(1)
+        .and_then(|r| r.split_whitespace().next())
+        .and_then(|x| x.parse().ok())
+        .unwrap_or_else(|| panic!("no adjacency in {out}"))
+}
+
 /// The values and shape of a `.npy` volume; a failure names the file.
 pub fn read_npy(p: &Path) -> (Vec<f32>, Vec<usize>) {
     vltm::export::npy::read_f32(p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
