@@ -4,7 +4,10 @@
 //! for bit).
 
 use crate::capture::{NativeCapture, prep_of};
-use crate::leak::{apply_mask, corrected, fallback_warning, falloff_of, surface_model};
+use crate::leak::{
+    apply_mask, column_mask, corrected, fallback_warning, falloff_of, surface_model, tries_model,
+    whole_pass,
+};
 use crate::options::{column_gate, diagonal_gate, shell_of, wave_of};
 use crate::partial::{NativePartial, counters, report};
 use crate::volume::{NativeVolume, points_of};
@@ -22,25 +25,27 @@ use vltm::probe::{
 use vltm_kernel::Point;
 
 /// A finished probe.
-struct Done {
+pub(crate) struct Done {
     /// The main output (for shells: the whole column or the first shell's sum).
-    out: probe::Output,
+    pub(crate) out: probe::Output,
     /// Several volumes of one run (near, middle, far), if asked for.
-    parts: Option<Vec<Vec<f32>>>,
-    amplitudes: Option<Vec<num_complex::Complex64>>,
-    explained: Option<f64>,
-    gamma: Option<Vec<bool>>,
-    direct: Option<Vec<f32>>,
-    passes: Option<usize>,
-    prep: Option<PrepReport>,
+    pub(crate) parts: Option<Vec<Vec<f32>>>,
+    pub(crate) amplitudes: Option<Vec<num_complex::Complex64>>,
+    pub(crate) explained: Option<f64>,
+    pub(crate) gamma: Option<Vec<bool>>,
+    pub(crate) direct: Option<Vec<f32>>,
+    pub(crate) passes: Option<usize>,
+    pub(crate) prep: Option<PrepReport>,
     /// The leak correction that ran: `gate` (the windows) or `model`.
-    leak: Option<&'static str>,
+    pub(crate) leak: Option<&'static str>,
+    /// `leak_correct="auto"`: the windows' adjacency it chose by.
+    pub(crate) adjacency: Option<f64>,
     /// Warnings beside the preprocessing's (a surface model not used, and why).
-    warnings: Vec<String>,
+    pub(crate) warnings: Vec<String>,
 }
 
 impl Done {
-    fn of(out: probe::Output) -> Self {
+    pub(crate) fn of(out: probe::Output) -> Self {
         Self {
             out,
             parts: None,
@@ -51,6 +56,7 @@ impl Done {
             passes: None,
             prep: None,
             leak: None,
+            adjacency: None,
             warnings: Vec::new(),
         }
     }
@@ -65,7 +71,7 @@ enum Outcome {
 }
 
 /// What each probe needs beyond the shared options.
-enum Job {
+pub(crate) enum Job {
     Direct {
         gate: ColumnGate,
     },
@@ -97,7 +103,7 @@ enum Job {
 
 impl Job {
     /// Whether the job removes the capture's direct light first (the windows of Γ).
-    fn leaks(&self) -> bool {
+    pub(crate) fn leaks(&self) -> bool {
         match self {
             Job::Column { leak_epsilon, .. }
             | Job::Relight { leak_epsilon, .. }
@@ -108,7 +114,7 @@ impl Job {
     }
 
     /// The job without its windows (it runs on the capture minus the surface model).
-    fn without_leak(mut self) -> Self {
+    pub(crate) fn without_leak(mut self) -> Self {
         match &mut self {
             Job::Column { leak_epsilon, .. }
             | Job::Relight { leak_epsilon, .. }
@@ -126,7 +132,7 @@ impl Job {
 #[pyfunction]
 #[pyo3(signature = (capture, volume, kind, *, focus=None, gate="two-bounce", shell=None,
     shells=None, epsilon=0.1, direct=None, mask_epsilon=None, leak_correct=false,
-    leak_model=false, leak_epsilon=0.1, wavelength=None, sigma=None, weights="inv", band=5.0,
+    leak_model=false, leak_auto=false, leak_epsilon=0.1, wavelength=None, sigma=None, weights="inv", band=5.0,
     compensate_laser=false, crop=true, path="auto", swap_roles=false, t_min=None, t_max=None, rebin=1,
     background=None, rows=None, amplitudes=false, from_points=None, pattern=None,
     pattern_spec=None))]
@@ -145,6 +151,7 @@ fn run<'py>(
     mask_epsilon: Option<f32>,
     leak_correct: bool,
     leak_model: bool,
+    leak_auto: bool,
     leak_epsilon: f32,
     wavelength: Option<f64>,
     sigma: Option<f64>,
@@ -276,10 +283,10 @@ fn run<'py>(
                 ));
             }
             if rows.is_some() {
-                if leak_correct && leak_model {
+                if leak_correct && (leak_model || leak_auto) {
                     return Err(arg(
                         "rows",
-                        "the surface model is fitted to the whole capture: a partial in-focus sum takes leak_correct=\"gate\" (or False)",
+                        "the surface model (which leak_correct=\"auto\" may choose) is fitted to the whole capture: a partial in-focus sum takes leak_correct=\"gate\" (or False)",
                     ));
                 }
                 if direct.is_none() {
@@ -366,11 +373,21 @@ fn run<'py>(
         path: epath,
         ..Exec::default()
     };
-    let model = leak_correct && leak_model;
+    let model = leak_correct && (leak_model || leak_auto);
+    let auto = leak_correct && leak_auto;
     let outcome = py
         .detach(|| {
             compute(
-                cap, vol, job, &wave, exec, prep, swap_roles, rows, amplitudes, model,
+                cap,
+                vol,
+                job,
+                &wave,
+                exec,
+                prep,
+                swap_roles,
+                rows,
+                amplitudes,
+                (model, auto),
             )
         })
         .map_err(py_err)?;
@@ -418,6 +435,9 @@ fn extras(py: Python<'_>, rep: &Bound<'_, PyDict>, d: &Done) -> PyResult<()> {
     if let Some(l) = d.leak {
         rep.set_item("leak_correct", l)?;
     }
+    if let Some(a) = d.adjacency {
+        rep.set_item("adjacency", a)?;
+    }
     let mut warnings = Vec::new();
     if let Some(p) = &d.prep {
         rep.set_item("preprocessing", &p.summary)?;
@@ -449,7 +469,7 @@ fn compute(
     swap_roles: bool,
     rows: Option<(usize, usize)>,
     amplitudes: bool,
-    model: bool,
+    (model, auto): (bool, bool),
 ) -> vltm::Result<Outcome> {
     // `leak_correct="model"`: whether the capture holds the laser's falloff.
     let falloff = if model && job.leaks() {
@@ -494,6 +514,7 @@ fn compute(
                 _ => None,
             };
             let mut warnings = Vec::new();
+            let mut adjacency = None;
             let ((p, explained, used), prep) = with_prep(
                 prep,
                 &mut *src,
@@ -504,6 +525,22 @@ fn compute(
                         Some(le) => {
                             if let Job::Column { focus, gate, .. } = &job {
                                 probe::check_column(s.geometry(), *focus, vol, *gate, wave, exec)?;
+                            }
+                            // `auto`: the windows first, the model where they cut through light.
+                            let mut gate = None;
+                            let mut falloff = falloff;
+                            if auto {
+                                let g = probe::fit_over_volume(
+                                    s,
+                                    vol,
+                                    le,
+                                    wave,
+                                    &LeakOptions::default(),
+                                    exec,
+                                )?;
+                                adjacency = g.adjacency;
+                                falloff = falloff.filter(|_| tries_model(g.adjacency));
+                                gate = Some(g);
                             }
                             if let Some(falloff) = falloff {
                                 match surface_model(s, wave, falloff, exec)? {
@@ -523,14 +560,17 @@ fn compute(
                                     Err(reason) => warnings.push(fallback_warning(&reason)),
                                 }
                             }
-                            let model = probe::fit_over_volume(
-                                s,
-                                vol,
-                                le,
-                                wave,
-                                &LeakOptions::default(),
-                                exec,
-                            )?;
+                            let model = match gate {
+                                Some(g) => g,
+                                None => probe::fit_over_volume(
+                                    s,
+                                    vol,
+                                    le,
+                                    wave,
+                                    &LeakOptions::default(),
+                                    exec,
+                                )?,
+                            };
                             let mut lc = LeakCorrected::new(s, &model);
                             let p = partial::accumulate(
                                 &mut lc, bytes, &name, vol, &task, wave, exec, r,
@@ -555,6 +595,7 @@ fn compute(
             d.explained = f.explained.or(explained);
             d.prep = prep;
             d.leak = used;
+            d.adjacency = adjacency;
             d.warnings = warnings;
             return Ok(Outcome::Done(d));
         }
@@ -565,90 +606,15 @@ fn compute(
         &mut *src,
         &vol.points,
         sigma,
-        |rows| whole_pass(rows, vol, job, wave, exec, falloff),
+        |rows| whole_pass(rows, vol, job, wave, exec, (falloff, auto)),
         |_| {},
     )?;
     d.prep = prep;
     Ok(Outcome::Done(d))
 }
 
-/// A whole-capture run on the (preprocessed) rows; with `falloff` (`leak_correct="model"`),
-/// on the rows minus the surface model, Γ (of `indirect` and of a column's `mask_epsilon`)
-/// still from the rows themselves, or, when the model is not used, with the windows and the
-/// reason as a warning.
-fn whole_pass(
-    rows: &mut dyn RowSource,
-    vol: &vltm::volume::Volume,
-    job: Job,
-    wave: &Wave,
-    exec: Exec<'_>,
-    falloff: Option<bool>,
-) -> vltm::Result<Done> {
-    let leaks = job.leaks();
-    let Some(falloff) = falloff.filter(|_| leaks) else {
-        let mut d = one_pass(rows, vol, job, wave, exec)?;
-        d.leak = leaks.then_some("gate");
-        return Ok(d);
-    };
-    // Bad input is refused before the model's passes.
-    match &job {
-        Job::Column { focus, gate, .. } => {
-            probe::check_column(rows.geometry(), *focus, vol, *gate, wave, exec)?
-        }
-        Job::Relight { pattern, .. } => probe::check_relight(rows.geometry(), pattern, vol, wave)?,
-        Job::Row { focus, .. } => probe::check_row(rows.geometry(), *focus, vol, wave)?,
-        _ => {}
-    }
-    // Γ from the capture's own direct light (the capture minus the model has little).
-    let (mut job, mut mask) = (job, None);
-    match &mut job {
-        Job::Indirect { opts, direct, .. } if direct.is_none() => {
-            let (_, d) = Gamma::measure(rows, vol, opts.epsilon, "epsilon", wave, exec)?;
-            *direct = Some(d.values);
-        }
-        Job::Column { mask_epsilon, .. } => {
-            if let Some(e) = mask_epsilon.take() {
-                mask = Some(column_mask(rows, vol, e, wave, exec)?);
-            }
-        }
-        _ => {}
-    }
-    let mut d = match surface_model(rows, wave, falloff, exec)? {
-        Ok(m) => {
-            let mut d = one_pass(&mut m.subtracted(rows), vol, job.without_leak(), wave, exec)?;
-            d.explained = Some(m.explained);
-            d.leak = Some("model");
-            d
-        }
-        Err(reason) => {
-            let mut d = one_pass(rows, vol, job, wave, exec)?;
-            d.leak = Some("gate");
-            d.warnings.push(fallback_warning(&reason));
-            d
-        }
-    };
-    if let Some(m) = mask {
-        apply_mask(&mut d.out.values, &m);
-        d.parts.iter_mut().flatten().for_each(|p| apply_mask(p, &m));
-        d.gamma = Some(m);
-    }
-    Ok(d)
-}
-
-/// A column's `mask_epsilon`: the voxels whose direct light in `rows` is above `e`·max.
-fn column_mask(
-    rows: &mut dyn RowSource,
-    vol: &vltm::volume::Volume,
-    e: f32,
-    wave: &Wave,
-    exec: Exec<'_>,
-) -> vltm::Result<Vec<bool>> {
-    let (g, _) = Gamma::measure(rows, vol, e, "mask_epsilon", wave, exec)?;
-    Ok(g.non_empty("mask_epsilon")?.mask)
-}
-
 /// A whole-capture run on the (preprocessed) rows.
-fn one_pass(
+pub(crate) fn one_pass(
     rows: &mut dyn RowSource,
     vol: &vltm::volume::Volume,
     job: Job,

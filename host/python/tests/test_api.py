@@ -89,6 +89,33 @@ def test_leak_correct_model_equals_cli(tmp_path):
                       rows=slice(0, 8))
 
 
+def test_leak_correct_auto_equals_cli(tmp_path, capsys):
+    """``leak_correct="auto"`` is the command line's ``--leak-correct auto``: on the two
+    patches over 10 cm voxels the energy the windows leave lies apart from them, so auto is
+    the windows; over 20 cm voxels it lies next to them and auto takes the model; the
+    adjacency it chose by is in the report; a partial sum cannot take it."""
+    cap = str(FIXTURE)
+    focus = (-0.45, 0.0, 0.8)
+    for vol, used in [("-0.6:0.6:13,-0.2:0.2:3,0.5:1.2:8", "gate"),
+                      ("-0.6:0.6:7,-0.2:0.2:2,0.5:1.2:5", "model")]:
+        want = cli_volume(tmp_path, "indirect", cap, "--volume", vol, "--leak-correct", "auto")
+        got, rep = vltm.indirect(cap, vol, leak_correct="auto", report=True)
+        close(want, got)
+        assert rep["leak_correct"] == used, rep
+        assert (rep["adjacency"] >= 0.4) == (used == "model"), rep
+        assert np.array_equal(got, vltm.indirect(cap, vol, leak_correct=used))
+        want = cli_volume(tmp_path, "column", cap, "--volume", vol, "--focus",
+                          ",".join(map(str, focus)), "--leak-correct", "auto")
+        got, rep = vltm.column(cap, vol, focus, leak_correct="auto", report=True)
+        close(want, got)
+        assert "adjacency" in rep and rep["leak_correct"] in ("gate", "model"), rep
+    with pytest.raises(vltm.ArgumentError, match="rows"):
+        vltm.indirect(cap, vol, leak_correct="auto", direct=vltm.direct(cap, vol),
+                      rows=slice(0, 8))
+    with pytest.raises(vltm.ArgumentError, match="'auto'"):
+        vltm.column(cap, vol, focus, leak_correct="automatic")
+
+
 def test_options_and_report(two_patches, tmp_path):
     want = cli_volume(tmp_path, "direct", str(two_patches), "--volume", GRID, "--wavelength",
                       "0.3", "--weights", "one", "--path", "band")

@@ -69,6 +69,10 @@ def test_dask_indirect(two_patches, client):
     close(vltm.indirect(npz, vol, epsilon=0.2, leak_correct="model"),
           vltm.dask.indirect(npz, vol, client=client, epsilon=0.2, rows_per_task=16,
                              leak_correct="model"))
+    # auto decides on the whole capture: one task too.
+    close(vltm.indirect(npz, vol, epsilon=0.2, leak_correct="auto"),
+          vltm.dask.indirect(npz, vol, client=client, epsilon=0.2, rows_per_task=16,
+                             leak_correct="auto"))
 
 
 def test_dask_matrix(two_patches, client):

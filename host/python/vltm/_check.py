@@ -42,17 +42,18 @@ def flag(name: str, x: Any) -> bool:
     return bool(x)
 
 
-def leak(name: str, x: Any) -> Tuple[bool, bool]:
+def leak(name: str, x: Any) -> Tuple[bool, bool, bool]:
     """A probe's ``leak_correct``: ``True`` or ``"gate"`` (the time windows, the default),
-    ``"model"`` (the surface model, the windows its fallback) or ``False``; as (corrected,
-    model)."""
+    ``"model"`` (the surface model, the windows its fallback), ``"auto"`` (the windows, or
+    the model where the energy they leave lies next to them) or ``False``; as (corrected,
+    model, auto)."""
     if isinstance(x, str):
-        if x in ("gate", "model"):
-            return True, x == "model"
-        raise fail(name, f"expected True, False, 'gate' or 'model', found {x!r}")
+        if x in ("gate", "model", "auto"):
+            return True, x == "model", x == "auto"
+        raise fail(name, f"expected True, False, 'gate', 'model' or 'auto', found {x!r}")
     if not isinstance(x, (bool, np.bool_)):
-        raise fail(name, f"expected True, False, 'gate' or 'model', found {type(x).__name__} {x!r}")
-    return bool(x), False
+        raise fail(name, f"expected True, False, 'gate', 'model' or 'auto', found {type(x).__name__} {x!r}")
+    return bool(x), False, False
 
 
 def text(name: str, x: Any) -> str:

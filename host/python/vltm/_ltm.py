@@ -78,10 +78,10 @@ def relight(
             raise ArgumentError(
                 f"argument `pattern`: expected x,y,z,w;... foci, an (n, 3) or (n, 4) array, or an image of the volume's shape {list(vol.shape)}, found shape {list(a.shape)}")
         pts = np.ascontiguousarray(pts, dtype=np.float64)
-    lc, lm = _check.leak("leak_correct", leak_correct)
+    lc, lm, la = _check.leak("leak_correct", leak_correct)
     return _probe("relight", capture, vol, None, amplitudes, report, as_xarray,
                   {"pattern": spec, "leak_correct": leak_correct}, pattern=pts, pattern_spec=spec,
-                  leak_correct=lc, leak_model=lm,
+                  leak_correct=lc, leak_model=lm, leak_auto=la,
                   leak_epsilon=_check.real("leak_epsilon", leak_epsilon),
                   **_options.checked(locals()))
 
@@ -113,14 +113,14 @@ def row(
     virtual camera focused at ``x_b`` = ``focus`` (m, z > 0), the projector over ``volume``
     (two-bounce gate), streamed by laser rows without transposing the capture.
     ``swap_roles`` is refused (a row is the transposed column already). ``leak_correct``
-    (``True``/``"gate"``, ``"model"`` or ``False``), ``leak_epsilon`` as :func:`column` (on by
+    (``True``/``"gate"``, ``"model"``, ``"auto"`` or ``False``), ``leak_epsilon`` as :func:`column` (on by
     default). ``capture`` and ``volume`` as
     :func:`direct`."""
     f = _check.point("focus", focus)
-    lc, lm = _check.leak("leak_correct", leak_correct)
+    lc, lm, la = _check.leak("leak_correct", leak_correct)
     return _probe("row", capture, volume, None, False, report, as_xarray,
                   {"gate": "two-bounce", "focus": list(f), "leak_correct": leak_correct},
-                  focus=list(f), leak_correct=lc, leak_model=lm,
+                  focus=list(f), leak_correct=lc, leak_model=lm, leak_auto=la,
                   leak_epsilon=_check.real("leak_epsilon", leak_epsilon),
                   **_options.checked(locals()))
 

@@ -103,6 +103,7 @@ def run(
     mask_epsilon: Optional[float] = ...,
     leak_correct: bool = ...,
     leak_model: bool = ...,
+    leak_auto: bool = ...,
     leak_epsilon: float = ...,
     wavelength: Optional[float] = ...,
     sigma: Optional[float] = ...,

@@ -155,7 +155,10 @@ def column(
     ``leak_correct="model"`` subtracts a surface model fitted to the capture instead
     (``--leak-correct model``; ``report["explained"]`` the energy it explains), falling back
     to the windows with a ``RuntimeWarning`` that says why when it explains less than 99 %
-    or cannot be fitted; ``report["leak_correct"]`` says which ran. ``leak_correct=False``
+    or cannot be fitted; ``report["leak_correct"]`` says which ran. ``leak_correct="auto"``
+    (``--leak-correct auto``): the windows' pass first, then the model only where the energy
+    the windows leave lies mostly next to them (``report["adjacency"]``, the share it chose
+    by; at least ``0.4``). ``leak_correct=False``
     is the column of the capture as it is (``--no-leak-correct``), needed for partial
     states (``rows=``). ``amplitudes=True`` also returns the complex
     amplitudes ``A(x_a, ·)`` (complex128, ``T = |A|²``, 0 outside ``shell``) of two-bounce
@@ -166,14 +169,14 @@ def column(
     le = _check.real("leak_epsilon", leak_epsilon)
     sh = None if shell is None else _check.pair("shell", shell)
     cut = _shells(shells)
-    lc, lm = _check.leak("leak_correct", leak_correct)
+    lc, lm, la = _check.leak("leak_correct", leak_correct)
     attrs = {"gate": gate, "focus": list(f), "mask_epsilon": me, "shell": sh,
              "shells": None if shells is None else list(_check.pair("shells", shells)),
              "leak_correct": leak_correct, "leak_epsilon": le if lc else None}
     return _probe("column", capture, volume, rows, amplitudes, report, as_xarray, attrs,
                   _SHELLS if cut else None, focus=list(f), gate=_check.text("gate", gate),
                   shell=sh, shells=cut, mask_epsilon=me,
-                  leak_correct=lc, leak_model=lm, leak_epsilon=le,
+                  leak_correct=lc, leak_model=lm, leak_auto=la, leak_epsilon=le,
                   **_options.checked(locals()))
 
 
@@ -226,7 +229,10 @@ def indirect(
     capture is subtracted instead, keeping the indirect light inside the windows
     (``report["explained"]`` the energy it explains); when it explains less than 99 % or
     cannot be fitted, a ``RuntimeWarning`` says why and the windows are used
-    (``report["leak_correct"]`` says which ran); not with ``rows=``. ``leak_correct=False``:
+    (``report["leak_correct"]`` says which ran); not with ``rows=``. ``leak_correct="auto"``
+    (``--leak-correct auto``): the windows' pass over Γ first, then the model only where the
+    energy they leave lies mostly next to them (``report["adjacency"]``); not with ``rows=``.
+    ``leak_correct=False``:
     the paper's Eq. 17 on the capture as it is (``vltm indirect --no-leak-correct``)."""
     eps = _check.real("epsilon", epsilon)
     ms = _check.real("min_separation", min_separation, none=True)
@@ -241,10 +247,10 @@ def indirect(
     if direct is not None:
         d = _check.array("direct", direct).ravel()
     cut = _shells(shells)
-    lc, lm = _check.leak("leak_correct", leak_correct)
+    lc, lm, la = _check.leak("leak_correct", leak_correct)
     attrs = {"gate": gate, "epsilon": eps, "shell": sh, "leak_correct": leak_correct,
              "shells": None if shells is None else list(_check.pair("shells", shells))}
     return _probe("indirect", capture, volume, rows, False, report, as_xarray, attrs,
                   _SHELLS if cut else None, epsilon=eps, shell=sh, shells=cut, direct=d,
-                  gate=_check.text("gate", gate), leak_correct=lc, leak_model=lm,
+                  gate=_check.text("gate", gate), leak_correct=lc, leak_model=lm, leak_auto=la,
                   **_options.checked(locals()))

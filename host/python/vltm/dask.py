@@ -17,8 +17,9 @@ through unchanged and is checked on the client before any task starts. Options a
 cannot carry — the preprocessing (``t_min``, ``t_max``, ``rebin``, ``background``), the
 un-gated and higher-order diagonals, ``shells``, ``mask_epsilon``, a column's leak
 correction (on by default, as ``vltm column``: its Γ needs the whole capture; pass
-``leak_correct=False`` to split a column), ``leak_correct="model"`` (the surface model is
-fitted to the whole capture), a non-two-bounce indirect gate, and
+``leak_correct=False`` to split a column), ``leak_correct="model"`` and ``"auto"`` (the
+surface model is fitted to the whole capture, and auto decides on the whole capture), a
+non-two-bounce indirect gate, and
 ``relight``/``row`` (no partial states) — run as **one task** on a worker over the whole
 capture.
 
@@ -209,13 +210,14 @@ def indirect(capture: CaptureArg, volume: Any, *, client: Any = None,
     ``direct`` is given) to find Γ, round 2 the Γ columns; two passes over the rows, each
     split into tasks. ``leak_correct`` (default True, as :func:`vltm.indirect`): every task
     zeroes the direct-return windows of Γ in its own rows (the gate needs only Γ and the
-    geometry), and the removed energy adds up over the tasks; ``leak_correct="model"`` runs
-    as one task (the surface model is fitted to the whole capture)."""
+    geometry), and the removed energy adds up over the tasks; ``leak_correct="model"`` and
+    ``"auto"`` run as one task (the surface model is fitted to, and auto decides on, the
+    whole capture)."""
     _check(vltm.indirect, (volume,), options)
     src = _source(capture)
     if (not _splits(options, ("shells",)) or options.get("gate", "two-bounce") != "two-bounce"
-            or options.get("leak_correct") == "model"):
-        # The surface model is fitted to the whole capture: one task.
+            or options.get("leak_correct") in ("model", "auto")):
+        # The surface model is fitted to (and auto decides on) the whole capture: one task.
         return _one_task("indirect", src, (volume,), client, options)
     wave_keys = ("wavelength", "sigma", "weights", "band", "compensate_laser", "crop", "path",
                  "swap_roles")
