@@ -15,7 +15,7 @@ use vltm::probe::{
 use vltm_kernel::Point;
 
 use crate::capture::{NativeCapture, Store};
-use crate::run::{Done, Job, one_pass};
+use crate::job::Job;
 
 /// Whether the capture's file holds the physical laser's falloff (a y-tal render), which the
 /// model then renders (arrays and `.mat` captures hold none).
@@ -78,85 +78,10 @@ pub(crate) fn apply_mask(values: &mut [f32], mask: &[bool]) {
         .for_each(|(x, &k)| *x *= f32::from(u8::from(k)));
 }
 
-/// A whole-capture run on the (preprocessed) rows; with `falloff` (`leak_correct="model"`),
-/// on the rows minus the surface model, Γ (of `indirect` and of a column's `mask_epsilon`)
-/// still from the rows themselves, or, when the model is not used, with the windows and the
-/// reason as a warning.
-pub(crate) fn whole_pass(
-    rows: &mut dyn RowSource,
-    vol: &vltm::volume::Volume,
-    job: Job,
-    wave: &Wave,
-    exec: Exec<'_>,
-    (falloff, auto): (Option<bool>, bool),
-) -> vltm::Result<Done> {
-    let leaks = job.leaks();
-    let Some(falloff) = falloff.filter(|_| leaks) else {
-        let mut d = one_pass(rows, vol, job, wave, exec)?;
-        d.leak = leaks.then_some("gate");
-        return Ok(d);
-    };
-    // Bad input is refused before the model's passes.
-    match &job {
-        Job::Column { focus, gate, .. } => {
-            probe::check_column(rows.geometry(), *focus, vol, *gate, wave, exec)?
-        }
-        Job::Relight { pattern, .. } => probe::check_relight(rows.geometry(), pattern, vol, wave)?,
-        Job::Row { focus, .. } => probe::check_row(rows.geometry(), *focus, vol, wave)?,
-        _ => {}
-    }
-    // Γ from the capture's own direct light (the capture minus the model has little).
-    let (mut job, mut mask) = (job, None);
-    match &mut job {
-        Job::Indirect { opts, direct, .. } if direct.is_none() => {
-            let (_, d) = Gamma::measure(rows, vol, opts.epsilon, "epsilon", wave, exec)?;
-            *direct = Some(d.values);
-        }
-        Job::Column { mask_epsilon, .. } => {
-            if let Some(e) = mask_epsilon.take() {
-                mask = Some(column_mask(rows, vol, e, wave, exec)?);
-            }
-        }
-        _ => {}
-    }
-    // `auto`: the windows' pass first; the model only where they cut through light.
-    let adjacency = if auto {
-        gate_adjacency(rows, vol, &job, wave, exec)?
-    } else {
-        None
-    };
-    let model = if auto && !tries_model(adjacency) {
-        Err(None)
-    } else {
-        surface_model(rows, wave, falloff, exec)?.map_err(Some)
-    };
-    let mut d = match model {
-        Ok(m) => {
-            let mut d = one_pass(&mut m.subtracted(rows), vol, job.without_leak(), wave, exec)?;
-            d.explained = Some(m.explained);
-            d.leak = Some("model");
-            d
-        }
-        Err(reason) => {
-            let mut d = one_pass(rows, vol, job, wave, exec)?;
-            d.leak = Some("gate");
-            d.warnings.extend(reason.map(|r| fallback_warning(&r)));
-            d
-        }
-    };
-    d.adjacency = adjacency;
-    if let Some(m) = mask {
-        apply_mask(&mut d.out.values, &m);
-        d.parts.iter_mut().flatten().for_each(|p| apply_mask(p, &m));
-        d.gamma = Some(m);
-    }
-    Ok(d)
-}
-
 /// `leak_correct="auto"`: the adjacency of the windows `job` would use on `rows` (their pass:
 /// Γ of `indirect`, or the windows over the volume of a column, row or relight), as the
 /// command line's `--leak-correct auto` measures it.
-fn gate_adjacency(
+pub(crate) fn gate_adjacency(
     rows: &mut dyn RowSource,
     vol: &vltm::volume::Volume,
     job: &Job,

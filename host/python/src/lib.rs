@@ -20,6 +20,7 @@ use pyo3::exceptions::PyException;
 use pyo3::prelude::*;
 
 mod capture;
+mod job;
 mod leak;
 mod options;
 mod partial;

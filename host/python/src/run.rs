@@ -4,9 +4,10 @@
 //! for bit).
 
 use crate::capture::{NativeCapture, prep_of};
+use crate::job::Job;
 use crate::leak::{
-    apply_mask, column_mask, corrected, fallback_warning, falloff_of, surface_model, tries_model,
-    whole_pass,
+    apply_mask, column_mask, corrected, fallback_warning, falloff_of, gate_adjacency,
+    surface_model, tries_model,
 };
 use crate::options::{column_gate, diagonal_gate, shell_of, wave_of};
 use crate::partial::{NativePartial, counters, report};
@@ -68,62 +69,6 @@ enum Outcome {
     Done(Done),
     Matrix(probe::Matrix),
     Part(Box<Partial>),
-}
-
-/// What each probe needs beyond the shared options.
-pub(crate) enum Job {
-    Direct {
-        gate: ColumnGate,
-    },
-    Column {
-        focus: Point,
-        gate: ColumnGate,
-        shell: Shell,
-        shells: Option<[Shell; 3]>,
-        mask_epsilon: Option<f32>,
-        leak_epsilon: Option<f32>,
-    },
-    Indirect {
-        opts: IndirectOptions,
-        shells: Option<[Shell; 3]>,
-        direct: Option<Vec<f32>>,
-    },
-    Matrix {
-        from: Vec<Point>,
-    },
-    Relight {
-        pattern: Pattern,
-        leak_epsilon: Option<f32>,
-    },
-    Row {
-        focus: Point,
-        leak_epsilon: Option<f32>,
-    },
-}
-
-impl Job {
-    /// Whether the job removes the capture's direct light first (the windows of Γ).
-    pub(crate) fn leaks(&self) -> bool {
-        match self {
-            Job::Column { leak_epsilon, .. }
-            | Job::Relight { leak_epsilon, .. }
-            | Job::Row { leak_epsilon, .. } => leak_epsilon.is_some(),
-            Job::Indirect { opts, .. } => opts.leak.is_some(),
-            Job::Direct { .. } | Job::Matrix { .. } => false,
-        }
-    }
-
-    /// The job without its windows (it runs on the capture minus the surface model).
-    pub(crate) fn without_leak(mut self) -> Self {
-        match &mut self {
-            Job::Column { leak_epsilon, .. }
-            | Job::Relight { leak_epsilon, .. }
-            | Job::Row { leak_epsilon, .. } => *leak_epsilon = None,
-            Job::Indirect { opts, .. } => opts.leak = None,
-            Job::Direct { .. } | Job::Matrix { .. } => {}
-        }
-        self
-    }
 }
 
 /// Runs a probe: `kind` is direct, column, indirect, matrix (`from_points` × the volume),
@@ -613,8 +558,83 @@ fn compute(
     Ok(Outcome::Done(d))
 }
 
+/// A whole-capture run on the (preprocessed) rows; with `falloff` (`leak_correct="model"`),
+/// on the rows minus the surface model, Γ (of `indirect` and of a column's `mask_epsilon`)
+/// still from the rows themselves, or, when the model is not used, with the windows and the
+/// reason as a warning.
+fn whole_pass(
+    rows: &mut dyn RowSource,
+    vol: &vltm::volume::Volume,
+    job: Job,
+    wave: &Wave,
+    exec: Exec<'_>,
+    (falloff, auto): (Option<bool>, bool),
+) -> vltm::Result<Done> {
+    let leaks = job.leaks();
+    let Some(falloff) = falloff.filter(|_| leaks) else {
+        let mut d = one_pass(rows, vol, job, wave, exec)?;
+        d.leak = leaks.then_some("gate");
+        return Ok(d);
+    };
+    // Bad input is refused before the model's passes.
+    match &job {
+        Job::Column { focus, gate, .. } => {
+            probe::check_column(rows.geometry(), *focus, vol, *gate, wave, exec)?
+        }
+        Job::Relight { pattern, .. } => probe::check_relight(rows.geometry(), pattern, vol, wave)?,
+        Job::Row { focus, .. } => probe::check_row(rows.geometry(), *focus, vol, wave)?,
+        _ => {}
+    }
+    // Γ from the capture's own direct light (the capture minus the model has little).
+    let (mut job, mut mask) = (job, None);
+    match &mut job {
+        Job::Indirect { opts, direct, .. } if direct.is_none() => {
+            let (_, d) = Gamma::measure(rows, vol, opts.epsilon, "epsilon", wave, exec)?;
+            *direct = Some(d.values);
+        }
+        Job::Column { mask_epsilon, .. } => {
+            if let Some(e) = mask_epsilon.take() {
+                mask = Some(column_mask(rows, vol, e, wave, exec)?);
+            }
+        }
+        _ => {}
+    }
+    // `auto`: the windows' pass first; the model only where they cut through light.
+    let adjacency = if auto {
+        gate_adjacency(rows, vol, &job, wave, exec)?
+    } else {
+        None
+    };
+    let model = if auto && !tries_model(adjacency) {
+        Err(None)
+    } else {
+        surface_model(rows, wave, falloff, exec)?.map_err(Some)
+    };
+    let mut d = match model {
+        Ok(m) => {
+            let mut d = one_pass(&mut m.subtracted(rows), vol, job.without_leak(), wave, exec)?;
+            d.explained = Some(m.explained);
+            d.leak = Some("model");
+            d
+        }
+        Err(reason) => {
+            let mut d = one_pass(rows, vol, job, wave, exec)?;
+            d.leak = Some("gate");
+            d.warnings.extend(reason.map(|r| fallback_warning(&r)));
+            d
+        }
+    };
+    d.adjacency = adjacency;
+    if let Some(m) = mask {
+        apply_mask(&mut d.out.values, &m);
+        d.parts.iter_mut().flatten().for_each(|p| apply_mask(p, &m));
+        d.gamma = Some(m);
+    }
+    Ok(d)
+}
+
 /// A whole-capture run on the (preprocessed) rows.
-pub(crate) fn one_pass(
+fn one_pass(
     rows: &mut dyn RowSource,
     vol: &vltm::volume::Volume,
     job: Job,
