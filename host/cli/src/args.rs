@@ -454,8 +454,8 @@ pub(crate) enum LeakArg {
     /// Subtract a surface model fitted to the capture (the windows when it explains too
     /// little).
     Model,
-    /// The windows, or the surface model where the light the windows leave lies next to them
-    /// (`vltm::probe::AUTO_ADJACENCY`).
+    /// The windows, or the surface model where most of the energy the windows leave lies
+    /// within one window half-width of them (an adjacency of at least 0.4).
     Auto,
 }
 
