@@ -11,7 +11,7 @@ use std::path::Path;
 use vltm::exec::{Exec, Progress as _};
 use vltm::io::RowSource;
 use vltm::probe::{
-    self, AUTO_ADJACENCY, LeakOptions, ModelOptions, ModelOutcome, SurfaceModel, Wave,
+    self, AUTO_ADJACENCY, DirectModel, LeakOptions, ModelOptions, ModelOutcome, SurfaceModel, Wave,
 };
 use vltm::volume::Volume;
 
@@ -113,11 +113,11 @@ pub(crate) fn warn_unused(reason: &str) {
     ));
 }
 
-/// `--leak-correct auto`: whether to try the surface model after the windows' pass, from its
-/// adjacency ([`vltm::probe::GateEnergy::adjacency`]), and the line that says so.
-pub(crate) fn auto_tries_model(adjacency: Option<f64>) -> bool {
-    let a = adjacency.unwrap_or(0.0);
-    let model = a >= AUTO_ADJACENCY;
+/// `--leak-correct auto`: whether to try the surface model after the windows' pass `gate`
+/// ([`vltm::probe::DirectModel::auto_prefers_model`]), and the line that says so.
+pub(crate) fn auto_tries_model(gate: &DirectModel) -> bool {
+    let a = gate.adjacency.unwrap_or(0.0);
+    let model = gate.auto_prefers_model();
     let (cmp, then) = if model {
         (
             ">=",
@@ -174,7 +174,7 @@ pub(crate) fn corrected<T>(
         Some(gate.seconds),
     );
     if method == LeakArg::Auto
-        && auto_tries_model(gate.adjacency)
+        && auto_tries_model(&gate)
         && let Some(m) = fit_model(src, wave, leak.falloff, exec)?
     {
         return Ok((probe(&mut m.subtracted(src))?, Some(Used::Model)));

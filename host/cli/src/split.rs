@@ -134,13 +134,9 @@ pub(crate) fn indirect_run(
     let model = match leak.method {
         Some(LeakArg::Model) => fit_model(src, &wave, leak.falloff, c.exec())?,
         Some(LeakArg::Auto) => {
-            let pts: Vec<_> = (volume.points.iter().zip(&gamma))
-                .filter_map(|(p, &g)| g.then_some(*p))
-                .collect();
             let lo = opts.leak.unwrap_or_default();
-            let cell = probe::cell_radius(volume);
-            let gate = probe::DirectModel::fit(src, &pts, cell, &wave, &lo, c.exec())?;
-            if auto_tries_model(gate.adjacency) {
+            let gate = probe::fit_over_gamma(src, volume, &gamma, &wave, &lo, c.exec())?;
+            if auto_tries_model(&gate) {
                 fit_model(src, &wave, leak.falloff, c.exec())?
             } else {
                 None

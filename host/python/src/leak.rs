@@ -10,9 +10,9 @@
 use vltm::exec::Exec;
 use vltm::io::RowSource;
 use vltm::probe::{
-    self, Gamma, LeakCorrected, LeakOptions, ModelOptions, ModelOutcome, SurfaceModel, Wave,
+    self, DirectModel, Gamma, LeakCorrected, LeakOptions, ModelOptions, ModelOutcome,
+    SurfaceModel, Wave,
 };
-use vltm_kernel::Point;
 
 use crate::capture::{NativeCapture, Store};
 use crate::job::Job;
@@ -78,27 +78,26 @@ pub(crate) fn apply_mask(values: &mut [f32], mask: &[bool]) {
         .for_each(|(x, &k)| *x *= f32::from(u8::from(k)));
 }
 
-/// `leak_correct="auto"`: the adjacency of the windows `job` would use on `rows` (their pass:
-/// Γ of `indirect`, or the windows over the volume of a column, row or relight), as the
-/// command line's `--leak-correct auto` measures it.
-pub(crate) fn gate_adjacency(
+/// `leak_correct="auto"`: the windows `job` would use on `rows` (their pass: over Γ of
+/// `indirect`, or over the volume of a column, row or relight), as the command line's
+/// `--leak-correct auto` measures them first; `None` for a job without windows.
+pub(crate) fn auto_windows(
     rows: &mut dyn RowSource,
     vol: &vltm::volume::Volume,
     job: &Job,
     wave: &Wave,
     exec: Exec<'_>,
-) -> vltm::Result<Option<f64>> {
-    Ok(match job {
+) -> vltm::Result<Option<DirectModel>> {
+    let gate = LeakOptions::default();
+    Ok(Some(match job {
         Job::Indirect {
             opts,
             direct: Some(d),
             ..
         } => {
-            let pts: Vec<Point> = (vol.points.iter().zip(probe::gamma_mask(d, opts.epsilon)))
-                .filter_map(|(p, g)| g.then_some(*p))
-                .collect();
-            let (cell, lo) = (probe::cell_radius(vol), opts.leak.unwrap_or_default());
-            probe::DirectModel::fit(rows, &pts, cell, wave, &lo, exec)?.adjacency
+            let gamma = probe::gamma_mask(d, opts.epsilon);
+            let lo = opts.leak.unwrap_or(gate);
+            probe::fit_over_gamma(rows, vol, &gamma, wave, &lo, exec)?
         }
         Job::Column {
             leak_epsilon: Some(le),
@@ -111,14 +110,9 @@ pub(crate) fn gate_adjacency(
         | Job::Row {
             leak_epsilon: Some(le),
             ..
-        } => probe::fit_over_volume(rows, vol, *le, wave, &LeakOptions::default(), exec)?.adjacency,
-        _ => None,
-    })
-}
-
-/// Whether `auto` tries the surface model at this adjacency ([`probe::AUTO_ADJACENCY`]).
-pub(crate) fn tries_model(adjacency: Option<f64>) -> bool {
-    adjacency.unwrap_or(0.0) >= probe::AUTO_ADJACENCY
+        } => probe::fit_over_volume(rows, vol, *le, wave, &gate, exec)?,
+        _ => return Ok(None),
+    }))
 }
 
 /// A column's `mask_epsilon`: the voxels whose direct light in `rows` is above `e`·max.

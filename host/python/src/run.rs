@@ -6,8 +6,8 @@
 use crate::capture::{NativeCapture, prep_of};
 use crate::job::Job;
 use crate::leak::{
-    apply_mask, column_mask, corrected, fallback_warning, falloff_of, gate_adjacency,
-    surface_model, tries_model,
+    apply_mask, auto_windows, column_mask, corrected, fallback_warning, falloff_of,
+    surface_model,
 };
 use crate::options::{column_gate, diagonal_gate, shell_of, wave_of};
 use crate::partial::{NativePartial, counters, report};
@@ -484,7 +484,7 @@ fn compute(
                                     exec,
                                 )?;
                                 adjacency = g.adjacency;
-                                falloff = falloff.filter(|_| tries_model(g.adjacency));
+                                falloff = falloff.filter(|_| g.auto_prefers_model());
                                 gate = Some(g);
                             }
                             if let Some(falloff) = falloff {
@@ -600,12 +600,13 @@ fn whole_pass(
         _ => {}
     }
     // `auto`: the windows' pass first; the model only where they cut through light.
-    let adjacency = if auto {
-        gate_adjacency(rows, vol, &job, wave, exec)?
+    let windows = if auto {
+        auto_windows(rows, vol, &job, wave, exec)?
     } else {
         None
     };
-    let model = if auto && !tries_model(adjacency) {
+    let adjacency = windows.as_ref().and_then(|w| w.adjacency);
+    let model = if auto && !windows.is_some_and(|w| w.auto_prefers_model()) {
         Err(None)
     } else {
         surface_model(rows, wave, falloff, exec)?.map_err(Some)

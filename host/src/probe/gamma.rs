@@ -35,6 +35,16 @@ pub fn gamma_mask(direct: &[f32], epsilon: f32) -> Vec<bool> {
         .collect()
 }
 
+/// The points of `volume` where `mask` (a Γ of the volume) holds, in volume order.
+pub(crate) fn gamma_points(volume: &Volume, mask: &[bool]) -> Vec<Point> {
+    volume
+        .points
+        .iter()
+        .zip(mask)
+        .filter_map(|(p, &k)| k.then_some(*p))
+        .collect()
+}
+
 impl Gamma {
     /// Checks a relative threshold: `0 ≤ ε < 1`.
     ///
@@ -88,12 +98,7 @@ impl Gamma {
 
     /// The points of `volume` in Γ, in volume order.
     pub fn points(&self, volume: &Volume) -> Vec<Point> {
-        volume
-            .points
-            .iter()
-            .zip(&self.mask)
-            .filter_map(|(p, &k)| k.then_some(*p))
-            .collect()
+        gamma_points(volume, &self.mask)
     }
 
     /// Γ itself, or an error naming `param` when it is empty (no voxel of the volume has

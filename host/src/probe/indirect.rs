@@ -418,6 +418,23 @@ pub fn fit_over_volume(
 ) -> Result<DirectModel> {
     wave.refuse_cosine("the leak fit")?;
     let (gamma, _) = Gamma::measure(src, volume, epsilon, "leak_epsilon", wave, exec)?;
-    let pts = gamma.points(volume);
+    fit_over_gamma(src, volume, &gamma.mask, wave, opts, exec)
+}
+
+/// The windows [`indirect`] zeroes before its pair sums (`opts.leak`), over a Γ `gamma` of
+/// `volume` ([`DirectModel::fit`], one pass over `src`), for a caller that must see them first
+/// (the command line's `--leak-correct auto` reads their [`DirectModel::adjacency`]).
+///
+/// # Errors
+/// As [`DirectModel::fit`].
+pub fn fit_over_gamma(
+    src: &mut dyn RowSource,
+    volume: &Volume,
+    gamma: &[bool],
+    wave: &Wave,
+    opts: &LeakOptions,
+    exec: Exec<'_>,
+) -> Result<DirectModel> {
+    let pts = super::gamma::gamma_points(volume, gamma);
     DirectModel::fit(src, &pts, cell_radius(volume), wave, opts, exec)
 }

@@ -50,8 +50,8 @@ pub use fast::resample;
 pub use gamma::{Gamma, gamma_mask};
 pub use gate::ColumnGate;
 pub use indirect::{
-    IndirectOptions, IndirectOutput, PairSums, fit_over_volume, indirect, indirect_over,
-    indirect_shells,
+    IndirectOptions, IndirectOutput, PairSums, fit_over_gamma, fit_over_volume, indirect,
+    indirect_over, indirect_shells,
 };
 pub use leak::{
     AUTO_ADJACENCY, BOUNDS_MARGIN, DirectModel, GateEnergy, IMAGE_HISTOGRAMS, LeakCorrected,

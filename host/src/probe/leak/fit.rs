@@ -12,7 +12,7 @@ use std::time::Instant;
 use vltm_kernel::Point;
 
 use super::model::*;
-use super::options::{LeakMethod, LeakOptions};
+use super::options::{AUTO_ADJACENCY, LeakMethod, LeakOptions};
 
 /// The fitted direct-light model of a capture (see the module docs).
 #[derive(Clone, Debug)]
@@ -65,6 +65,12 @@ impl DirectModel {
             ));
         }
         Ok((basis, tab))
+    }
+
+    /// Whether `--leak-correct auto` tries the surface model after these windows: their
+    /// [`DirectModel::adjacency`] is at least [`AUTO_ADJACENCY`] (not measured: no).
+    pub fn auto_prefers_model(&self) -> bool {
+        self.adjacency.is_some_and(|a| a >= AUTO_ADJACENCY)
     }
 
     /// The gate method's model ([`LeakMethod::Gate`]) without reading the capture: it uses
