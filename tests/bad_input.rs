@@ -138,12 +138,21 @@ fn config_not_positive() {
         })
         .is_ok()
     );
+    // A negative margin shrinks the guard, down to −c_g·σ (σ = 2λ/3 here); below it, refused.
+    let cg_sigma = base().gate_support * base().sigma_or_default();
+    assert!(
+        Config::try_new(&Params {
+            margin: -cg_sigma,
+            ..base()
+        })
+        .is_ok()
+    );
     assert_eq!(
         err(Params {
-            margin: -0.01,
+            margin: -cg_sigma - 0.01,
             ..base()
         }),
-        ConfigError::Negative("margin")
+        ConfigError::BelowMinimum("margin")
     );
     // A positive d_min too small for the f32 weights (1/d_min = ∞) is out of range.
     for d_min in [1e-39, 1e-45, 1e-300] {
@@ -273,6 +282,7 @@ fn config_errors_display_their_parameter() {
         (ConfigError::EmptyTimeAxis, "nt"),
         (ConfigError::BandCrossesNyquist, "dt"),
         (ConfigError::SizeOverflow("n_fft"), "n_fft"),
+        (ConfigError::BelowMinimum("margin"), "margin"),
     ] {
         assert!(e.to_string().contains(needle), "{e}");
     }

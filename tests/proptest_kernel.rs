@@ -801,6 +801,19 @@ fn check(case: &Case) -> Result<(), TestCaseError> {
             o.probe
         );
     }
+    // The Gaussian diagonal under the tightest guard that holds its path times (a negative
+    // margin: a shorter period and band), against the same reference.
+    let truth = scene.reference(&p);
+    let span = tau_span(&truth, Target::Diagonal, &case.voxels);
+    let tight = support::prop::tighten_margin(p, span, 0.0);
+    let o = scene.compare(&tight, &truth, Target::Diagonal, Gate::Gaussian);
+    prop_assert!(
+        o.worst <= 1.0,
+        "tightened diagonal (margin {}): error {:.3}× the tolerance ({o:?})",
+        tight.margin,
+        o.worst
+    );
+    prop_assert_eq!(o.report.aliased, 0, "tightened diagonal");
     for o in scene.lookup_outcomes(&p, lookup_tolerance(case)) {
         prop_assert!(
             o.worst <= 1.0,
@@ -1102,6 +1115,44 @@ fn tolerance_detects_small_mistakes() {
         };
         assert!(o.worst > 3.0, "{}: mistake not detected ({o:?})", o.probe);
     }
+}
+
+/// A negative margin keeps the diagonal exact exactly while the guard holds every path time:
+/// at the tightest such guard the band is smaller and the sums still match the reference; a
+/// guard 3 bins tighter zeroes the shortest paths of the point scatterer and fails by > 3×.
+#[test]
+fn a_tightened_guard_matches_until_it_cuts_a_path() {
+    // The point scatterer (voxels[0]) has the shortest paths; the window starts 0.1 m before
+    // them, so the guard's lower end is what a negative margin moves.
+    let voxels = vec![[-0.2, 0.1, 0.6], [0.1, 0.0, 0.8], [0.3, -0.3, 1.0]];
+    let p0 = Params::new(0.1, 300, 0.01);
+    let geo = scene(&p0, voxels.clone(), [0.0, 0.0, 0.7], false, 7, 0.01).reference(&p0);
+    let p = Params {
+        t0: tau_span(&geo, Target::Diagonal, &voxels).0 - 0.1,
+        ..p0
+    };
+    let sc = scene(&p, voxels, [0.0, 0.0, 0.7], false, 7, 0.01);
+    let truth = sc.reference(&p);
+    let span = tau_span(&truth, Target::Diagonal, &sc.voxels);
+    let tight = support::prop::tighten_margin(p, span, 0.0);
+    let (c0, c1) = (
+        Config::try_new(&p).unwrap(),
+        Config::try_new(&tight).unwrap(),
+    );
+    assert!(tight.margin < 0.0 && c1.bins() < c0.bins(), "{tight:?}");
+    let (g0, g1) = c1.guard();
+    assert!(
+        g0 <= span.0 - p.t0 && g1 >= span.1 - p.t0,
+        "guard {g0}..{g1}, span {span:?}"
+    );
+    let o = sc.compare(&tight, &truth, Target::Diagonal, Gate::Gaussian);
+    assert!(o.worst <= 1.0, "tightest guard: {o:?}");
+    let cut = support::prop::tighten_margin(p, span, 3.0 * p.dt);
+    let o = sc.compare(&cut, &truth, Target::Diagonal, Gate::Gaussian);
+    assert!(
+        o.worst > 3.0,
+        "a guard 3 bins too tight not detected ({o:?})"
+    );
 }
 
 /// The lookup path's tolerance has teeth: a path-time error of half a grid step (t0 off by

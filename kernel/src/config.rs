@@ -12,7 +12,8 @@
 //! | c_g | [`Params::gate_support`] | gate support in σ for padding and the guard (default 5) |
 //! | Nt, Δt, t0 | `nt`, `dt`, `t0` | bin n is the point sample at `t_n = t0 + n·Δt` |
 //!
-//! Derived: the virtual DFT length `N = Nt + ⌈2·c_g·σ/Δt⌉ + ⌈2·margin/Δt⌉`, the band bins
+//! Derived: the virtual DFT length `N = Nt + ⌈2·c_g·σ/Δt⌉ + ⌈2·margin/Δt⌉` (a negative
+//! margin, down to `−c_g·σ`, shrinks it and [`Config::guard`] with it), the band bins
 //! `k_lo..=k_hi` around `k_c = NΔt/λ` with half-width `h = m·NΔt/(2πσ)` (DC and negative
 //! bins kept when the band reaches them), `ν_k = 2πk/(NΔt)` and the gate weights
 //! `Ĝ_k = σ√(2π)·exp(−σ²(ν_k − Ω)²/2)/(NΔt)`. Cost of validation: O(1); no memory.
@@ -70,9 +71,16 @@ pub struct Params {
     pub band_half_width: f64,
     /// Gate support c_g in units of σ (> 0, default 5): padding of the DFT and the guard.
     pub gate_support: f64,
-    /// Extra alias-free range in metres on both sides of the window (≥ 0, default 0): path
-    /// times within `margin` of the guarded window are still evaluated without wrap-around
-    /// by the factorised column (see [`Probe`](crate::Probe)). Costs `J` ∝ `N`.
+    /// Alias-free range in metres added on both sides of the guard interval (≥ `−c_g·σ`,
+    /// default 0; the DFT period grows by `2·margin`, and `J` ∝ `N` with it).
+    ///
+    /// * **Positive:** path times within `margin` of the guarded window are still evaluated
+    ///   without wrap-around by the factorised column (see [`Probe`](crate::Probe)).
+    /// * **Negative:** the period shrinks and the guard with it, by `2·|margin|` on each side
+    ///   ([`Config::guard`]); every probe zeroes the paths outside it, as it does at the
+    ///   default guard. For a caller that knows the span of path times it probes (a host
+    ///   that crops the time axis to its voxels' reach): a guard no wider than that span
+    ///   gives the same sums with a band up to `2·c_g·σ/(NΔt)` smaller.
     pub margin: f64,
     /// Number of bins per histogram (> 0).
     pub nt: usize,
@@ -234,7 +242,7 @@ impl Config {
     /// # Errors
     /// [`ConfigError`] naming the parameter: λ, σ, Δt, m, c_g, d_min ≤ 0 or non-finite;
     /// d_min whose f32 reciprocal overflows; t0, margin or a leg origin non-finite;
-    /// margin < 0; `nt = 0`; a band crossing the Nyquist bin; a DFT length over 2³⁰.
+    /// margin < −c_g·σ; `nt = 0`; a band crossing the Nyquist bin; a DFT length over 2³⁰.
     pub fn try_new(p: &Params) -> Result<Self, ConfigError> {
         let lam = positive("wavelength", p.wavelength)?;
         let sigma = positive("sigma", p.sigma_or_default())?;
@@ -246,8 +254,8 @@ impl Config {
             return Err(ConfigError::OutOfRange("d_min"));
         }
         finite("t0", p.t0)?;
-        if finite("margin", p.margin)? < 0.0 {
-            return Err(ConfigError::Negative("margin"));
+        if finite("margin", p.margin)? < -cg * sigma {
+            return Err(ConfigError::BelowMinimum("margin"));
         }
         if let Legs::FirstAndLast {
             laser_origin,
@@ -365,17 +373,26 @@ impl Config {
         (self.params.nt - 1) as f64 * self.params.dt
     }
     /// Guard interval of `τ − t0` (m): the Gaussian gate contributes nothing outside
-    /// `[−c_g·σ, (Nt−1)Δt + c_g·σ]`.
+    /// `[−c_g·σ, (Nt−1)Δt + c_g·σ]`, and every probe zeroes the paths outside it. A negative
+    /// [`Params::margin`] shrinks it on both sides by the period's shortfall
+    /// `s = (Nt−1)Δt + 2c_gσ − NΔt` (≈ `2·|margin|`), so that it never exceeds
+    /// [`Config::alias_free`].
     pub fn guard(&self) -> (f64, f64) {
         let a = self.params.gate_support * self.sigma;
-        (-a, self.window() + a)
+        if self.span() < self.window() + 2.0 * a {
+            self.alias_free()
+        } else {
+            (-a, self.window() + a)
+        }
     }
-    /// Interval of `τ − t0` (m) on which the band sum has no wrap-around: the guard
-    /// interval widened by the DFT's slack `NΔt − (Nt−1)Δt − 2c_gσ` (≥ `margin`).
+    /// Interval of `τ − t0` (m) on which the band sum has no wrap-around:
+    /// `[(Nt−1)Δt + c_gσ − NΔt, NΔt − c_gσ]`, i.e. the guard interval at margin 0 widened by
+    /// the DFT's slack `NΔt − (Nt−1)Δt − 2c_gσ` (≥ `2·margin`), and the guard itself when the
+    /// margin is negative. (A gate centred at `τ` reaches the samples' copies one period away
+    /// only beyond these bounds.)
     pub fn alias_free(&self) -> (f64, f64) {
-        let (lo, hi) = self.guard();
-        let slack = self.span() - self.window() - (hi - lo - self.window());
-        (lo - slack, hi + slack)
+        let a = self.params.gate_support * self.sigma;
+        (self.window() + a - self.span(), self.span() - a)
     }
     /// Samples of the higher-order gate's correction, `⌈c_g·σ/Δt⌉ + 1`.
     pub fn ho_support(&self) -> usize {
@@ -458,5 +475,45 @@ mod same_tests {
             assert_eq!(a.same(&b), a == b, "{p:?}");
             assert!(!a.same(&b), "{p:?}");
         }
+    }
+}
+
+#[cfg(test)]
+mod margin_tests {
+    use super::*;
+
+    /// A negative margin shrinks the period, the band and the guard together: the guard never
+    /// leaves the alias-free interval, equals it below margin 0, and is unchanged at margin 0;
+    /// below `−c_g·σ` the margin is refused by name.
+    #[test]
+    fn a_negative_margin_shrinks_the_period_and_the_guard() {
+        let base = Params::new(0.2, 500, 0.01);
+        let c0 = Config::try_new(&base).unwrap();
+        let a = base.gate_support * c0.sigma();
+        assert_eq!(c0.guard(), (-a, c0.window() + a));
+        let (af0, af1) = c0.alias_free();
+        assert!(af0 <= -a && af1 >= c0.window() + a);
+        let mut last = c0;
+        for m in [-0.1, -0.3, -0.5, -a] {
+            let c = Config::try_new(&Params { margin: m, ..base }).unwrap();
+            assert!(c.n_fft() < last.n_fft() && c.bins() <= last.bins(), "{m}");
+            assert!(c.n_fft() >= base.nt, "{m}");
+            let (g0, g1) = c.guard();
+            assert_eq!(c.alias_free(), (g0, g1), "{m}");
+            // Shrunk by 2·|margin| on each side, less N's slack at margin 0 (under 2 bins).
+            assert!((g0 - (-a - 2.0 * m)).abs() <= 2.0 * base.dt, "{m}: {g0}");
+            assert!(
+                (g1 - (c.window() + a + 2.0 * m)).abs() <= 2.0 * base.dt,
+                "{m}: {g1}"
+            );
+            last = c;
+        }
+        assert_eq!(
+            Config::try_new(&Params {
+                margin: -a - 1e-9,
+                ..base
+            }),
+            Err(ConfigError::BelowMinimum("margin"))
+        );
     }
 }

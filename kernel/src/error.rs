@@ -24,6 +24,9 @@ pub enum ConfigError {
     NotPositive(&'static str),
     /// The parameter must not be negative (zero is allowed).
     Negative(&'static str),
+    /// The parameter is below its least accepted value (`margin`: `−gate_support·σ`, where
+    /// the guard interval shrinks to the samples' window).
+    BelowMinimum(&'static str),
     /// The parameter is finite and positive but outside what the f32 arithmetic can carry
     /// (for `d_min`: its reciprocal, the largest leg weight, must be a finite f32).
     OutOfRange(&'static str),
@@ -54,6 +57,10 @@ impl fmt::Display for ConfigError {
             Self::NotPositive(p) => write!(f, "parameter `{p}` must be > 0"),
             Self::Negative(p) => write!(f, "parameter `{p}` must be >= 0"),
             Self::OutOfRange(p) => write!(f, "parameter `{p}` is out of the f32 range"),
+            Self::BelowMinimum(p) => write!(
+                f,
+                "parameter `{p}` is below its minimum (margin >= -gate_support*sigma)"
+            ),
             Self::EmptyTimeAxis => f.write_str("parameter `nt` must be > 0 (empty time axis)"),
             Self::BandCrossesNyquist => f.write_str(
                 "the frequency band crosses Nyquist: the time bin `dt` is too coarse for \

@@ -82,6 +82,27 @@ pub fn widen_margin(p: vltm_kernel::Params, (lo, hi): (f64, f64)) -> vltm_kernel
     }
 }
 
+/// `p` (margin 0) with the most negative margin whose `Config::guard` still holds the path
+/// times `lo..=hi` with `1e-4·σ` to spare (what `vltm`'s `direct` does with the crop on), and
+/// `extra` metres more (> 0: a guard too tight by that much); `p` itself when the guard
+/// cannot shrink.
+pub fn tighten_margin(
+    p: vltm_kernel::Params,
+    (lo, hi): (f64, f64),
+    extra: f64,
+) -> vltm_kernel::Params {
+    let cfg = vltm_kernel::Config::try_new(&p).expect("valid parameters");
+    let a = p.gate_support * cfg.sigma();
+    let slack = 1e-4 * cfg.sigma();
+    let (lo, hi) = (lo - p.t0 - slack + extra, hi - p.t0 + slack - extra);
+    let m = (-a).max(-(lo + a) / 2.0).max((hi - cfg.window() - a) / 2.0);
+    if m < 0.0 {
+        vltm_kernel::Params { margin: m, ..p }
+    } else {
+        p
+    }
+}
+
 /// The kernel's legs for a case's optional device positions `(laser, sensor)`: wall to wall
 /// without them.
 pub fn legs(devices: Option<([f64; 3], [f64; 3])>) -> vltm_kernel::Legs {
