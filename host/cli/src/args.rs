@@ -367,8 +367,9 @@ pub(crate) struct WaveArgs {
     /// Divide each laser row by the physical laser's cos θ / d² falloff to its spot.
     #[arg(long)]
     pub(crate) compensate_laser: bool,
-    /// Keep the whole time axis (by default it is cropped to the bins the probed voxels can
-    /// reach, with the gate's support, before the band transform).
+    /// Keep the whole time axis and the default DFT period (by default the axis is cropped to
+    /// the bins the probed voxels can reach, with the gate's support, before the band
+    /// transform, and `direct`'s period shrunk to its paths' span).
     #[arg(long)]
     pub(crate) no_crop: bool,
 }

@@ -20,6 +20,21 @@
 //! axis). A result on the cropped axis differs from the uncropped one only by the gate's tail
 //! beyond `c_g·σ` and the band truncation (both ≲ 4e-6 of the signal, `tests/proptest_fast.rs`).
 //! Cost of the bound: O(Kl + Ks + voxels); of the crop: one copy per row (`Cropped`).
+//!
+//! **The DFT period** ([`cut`], the diagonal's): the kernel pads the period by `2·c_g·σ` so
+//! that a path anywhere in its guard `[−c_g·σ, (Nt−1)Δt + c_g·σ]` is alias-free. The probed
+//! paths lie in `[lo, hi]`, so a period of `max(hi − t0, (Nt−1)Δt − (lo − t0)) + c_g·σ`
+//! suffices ([`tightened`]: a negative [`Params::margin`], which shrinks the kernel's guard to
+//! the paths' span): on a cropped axis, whose edges lie `c_g·σ` beyond the paths, the padding
+//! goes, and the band `J ∝ N` with every per-row cost shrinks by up to `2·c_g·σ/(NΔt)` (on the
+//! uncropped 16×16 × 16×16 × 800-bin capture of `docs/performance.md`, 9.8 → 8.4 m, `J` 33 →
+//! 29). Every path of `direct` but the band path takes it (the band path is what the firmware
+//! runs, and its states, made at the kernel's period, must merge with the host's); not the
+//! late gate (its paths are unbounded above), nor with the crop off. The sums equal those at
+//! the kernel's period to `f32` rounding on the exact paths (planar, confocal, band) and to
+//! their tables' tolerance on the interpolating ones (phasor, lookup, resampled); a part of a
+//! split scan takes the same decision as a whole pass, so parts still merge to one pass bit
+//! for bit.
 
 use super::wave::{Wave, legs};
 use crate::error::Result;
@@ -135,16 +150,16 @@ pub(super) fn bins(g: &Geometry, wave: &Wave, reach: Reach<'_>) -> Result<Option
     Ok(bins_of(g, &cfg, &legs(g, &cfg), reach))
 }
 
-/// [`bins`] with the crop on, from the capture's configuration `cfg` ([`Wave::config`]) and
-/// device legs `(d1, d4)` ([`legs`]).
-fn bins_of(
+/// The span `(lo, hi)` of path times (m, on the capture's clock, `t0` included) of every path
+/// `reach` probes, bounded over the boxes of its voxels and foci (module docs); `None` for an
+/// empty reach.
+fn path_span(
     g: &Geometry,
-    cfg: &Config,
     (d1, d4): &(Vec<f64>, Vec<f64>),
     reach: Reach<'_>,
-) -> Option<Range<usize>> {
+) -> Option<(f64, f64)> {
     let vb = Bbox::of(reach.voxels)?;
-    let (lo, hi) = match reach.foci {
+    Some(match reach.foci {
         None => {
             let (l0, l1) = leg_span(&g.lasers, d1, &vb);
             let (s0, s1) = leg_span(&g.spads, d4, &vb);
@@ -157,7 +172,18 @@ fn bins_of(
             let (m0, m1) = fb.between(&vb);
             (l0 + m0 + s0, l1 + m1 + s1)
         }
-    };
+    })
+}
+
+/// [`bins`] with the crop on, from the capture's configuration `cfg` ([`Wave::config`]) and
+/// device legs `(d1, d4)` ([`legs`]).
+fn bins_of(
+    g: &Geometry,
+    cfg: &Config,
+    legs: &(Vec<f64>, Vec<f64>),
+    reach: Reach<'_>,
+) -> Option<Range<usize>> {
+    let (lo, hi) = path_span(g, legs, reach)?;
     let pad = cfg.params().gate_support * cfg.sigma() + 2.0 * g.dt;
     let first = ((lo - pad - g.t0) / g.dt).floor();
     let last = ((hi + pad - g.t0) / g.dt).ceil() + 1.0;
@@ -174,6 +200,33 @@ fn bins_of(
         return None;
     }
     Some(start..end.max(start))
+}
+
+/// `cfg` (margin 0) with the most negative [`Params::margin`] whose [`Config::guard`] still
+/// holds every path time in `lo..=hi` (m, on the capture's clock) with `1e-4·σ` to spare (the
+/// kernel's `f32` path lengths, as the diagonal's guard check): the DFT
+/// period shrinks to `max(hi − t0, (Nt−1)Δt − (lo − t0)) + c_g·σ` instead of
+/// `(Nt−1)Δt + 2·c_g·σ`, and the band `J ∝ N` with it, at most by `2·c_g·σ` (a cropped axis,
+/// whose edges lie `c_g·σ` beyond the paths, reaches it). Paths outside `lo..=hi` are not
+/// probed, so the sums are those at margin 0 (the band's rounding aside: ≲ 1e-6 of the peak,
+/// `tests/proptest_kernel.rs`). `cfg` itself when nothing shrinks.
+///
+/// # Errors
+/// Configuration errors of the tightened parameters.
+pub(super) fn tightened(cfg: &Config, (lo, hi): (f64, f64)) -> Result<Config> {
+    let p = cfg.params();
+    if lo.partial_cmp(&hi).is_none_or(|o| o.is_gt()) {
+        return Ok(*cfg);
+    }
+    let a = p.gate_support * cfg.sigma();
+    let slack = 1e-4 * cfg.sigma();
+    let (lo, hi) = (lo - p.t0 - slack, hi - p.t0 + slack);
+    // Margin m < 0: guard ⊇ [−a − 2m, W + a + 2m] (N's ceiling only widens it).
+    let m = (-a).max(-(lo + a) / 2.0).max((hi - cfg.window() - a) / 2.0);
+    if p.margin != 0.0 || !m.is_finite() || m >= 0.0 {
+        return Ok(*cfg);
+    }
+    Ok(Config::try_new(&Params { margin: m, ..*p })?)
 }
 
 /// Runs `f` on the bins `bins` of `src` (`None`: on `src` itself).
@@ -274,6 +327,9 @@ pub(super) struct Cut<'s, 'p> {
     pub(super) crop: Option<Crop>,
     /// The configuration on the kept axis (the capture's own when nothing is cropped).
     pub(super) cfg: Config,
+    /// `cfg` with its DFT period shrunk to the reach's path times ([`tightened`]), with the
+    /// crop on, where that shortens it (the caller decides where to use it).
+    pub(super) shrunk: Option<Config>,
 }
 
 /// The source a [`Cut`] hands on.
@@ -303,7 +359,9 @@ impl Cut<'_, '_> {
 /// Cuts `src` to what `reach` needs (as [`bins`], with the crop on when `crop`), from the
 /// capture's configuration `base` ([`Wave::config`]) and device legs `legs` ([`legs`]): the
 /// configuration on the kept axis is `base` with the kept axis's `nt` and `t0` (what
-/// [`Wave::config`] makes of the cropped capture).
+/// [`Wave::config`] makes of the cropped capture) and, with the crop on, that configuration
+/// with its DFT period shrunk to the reach's path times ([`tightened`]; not for the late
+/// gate).
 ///
 /// # Errors
 /// [`Error::Argument`](crate::Error::Argument) (`--volume`) when the crop leaves no bins;
@@ -323,6 +381,18 @@ pub(super) fn cut<'s, 'p>(
         None
     };
     drop(t);
+    let span = if reach.late || !crop {
+        None
+    } else {
+        path_span(src.geometry(), legs, reach)
+    };
+    let shrunk = |cfg: &Config| -> Result<Option<Config>> {
+        let Some(span) = span else {
+            return Ok(None);
+        };
+        let t = tightened(cfg, span)?;
+        Ok((t.n_fft() < cfg.n_fft()).then_some(t))
+    };
     let Some(r) = bins else {
         return Ok(Cut {
             src: Kept::Whole(src),
@@ -330,6 +400,7 @@ pub(super) fn cut<'s, 'p>(
             labelled: None,
             crop: None,
             cfg: *base,
+            shrunk: shrunk(base)?,
         });
     };
     let crop = Crop {
@@ -344,6 +415,7 @@ pub(super) fn cut<'s, 'p>(
         t0: kept.t0,
         ..*base.params()
     })?;
+    let shrunk = shrunk(&cfg)?;
     let labelled = exec.progress.map(|p| Labelled {
         inner: p,
         note: crop.to_string(),
@@ -354,6 +426,7 @@ pub(super) fn cut<'s, 'p>(
         labelled,
         crop: Some(crop),
         cfg,
+        shrunk,
     })
 }
 

@@ -84,7 +84,8 @@ impl Amplitudes {
 }
 
 /// The accumulators of [`direct`] over the source's rows ([`RowSource::rows`]), with the
-/// configuration (of the time axis cropped to the voxels' reach, `crop`).
+/// configuration (of the time axis cropped to the voxels' reach, `crop`, and but on the band
+/// path with its period shrunk to the voxels' paths).
 pub(super) fn direct_acc(
     src: &mut dyn RowSource,
     volume: &Volume,
@@ -102,7 +103,8 @@ pub(super) fn direct_acc(
 
 /// [`direct_acc`] with the distance-only `wave`, and the wall cosines per row under `cosine`:
 /// the capture's configuration and device legs made once, the window checked, the time axis
-/// cut to the voxels' reach, then the planner's path carried out.
+/// cut to the voxels' reach (the period shrunk to their paths but on the band path), then the
+/// planner's path carried out.
 fn direct_acc_with(
     src: &mut dyn RowSource,
     volume: &Volume,
@@ -128,13 +130,21 @@ fn direct_acc_with(
         late: false,
     };
     let mut cut = crop::cut(src, wave.crop, &base, &legs, exec, reach)?;
-    let (crop, cfg) = (cut.crop, cut.cfg);
+    let (crop, cfg, shrunk) = (cut.crop, cut.cfg, cut.shrunk);
     let (src, exec) = cut.parts();
     let g = src.geometry();
-    let choice = if cosine {
-        plan::cosine(g, &cfg, volume, exec.path)?
-    } else {
-        plan::diagonal(g, &cfg, volume, exec.path)?
+    let plan = |cfg: &Config| {
+        if cosine {
+            plan::cosine(g, cfg, volume, exec.path)
+        } else {
+            plan::diagonal(g, cfg, volume, exec.path)
+        }
+    };
+    // The shorter period on every path but the band path, which keeps the kernel's: the
+    // firmware runs it, and its states merge with the host's (`crop` module docs).
+    let (cfg, choice) = match shrunk.map(|t| plan(&t).map(|c| (t, c))).transpose()? {
+        Some((t, c)) if !matches!(c.how, Diagonal::Band) => (t, c),
+        _ => (cfg, plan(&cfg)?),
     };
     // The pass's progress labels carry the planner's note (`direct (path lookup; …)`).
     let noted = exec.progress.map(|p| Labelled {
