@@ -208,8 +208,11 @@ fn bins_of(
 /// period shrinks to `max(hi − t0, (Nt−1)Δt − (lo − t0)) + c_g·σ` instead of
 /// `(Nt−1)Δt + 2·c_g·σ`, and the band `J ∝ N` with it, at most by `2·c_g·σ` (a cropped axis,
 /// whose edges lie `c_g·σ` beyond the paths, reaches it). Paths outside `lo..=hi` are not
-/// probed, so the sums are those at margin 0 (the band's rounding aside: ≲ 1e-6 of the peak,
-/// `tests/proptest_kernel.rs`). `cfg` itself when nothing shrinks.
+/// probed, so the sums are those at margin 0: to `f32` rounding on the exact paths (≲ 1e-6
+/// of the peak) and to their tables' tolerance on the interpolating ones
+/// (`tests/proptest_kernel.rs` checks the kernel under such a guard against the `f64`
+/// reference). `cfg` itself when nothing shrinks (a span past the guard, an empty span, a
+/// margin already set).
 ///
 /// # Errors
 /// Configuration errors of the tightened parameters.
@@ -537,5 +540,31 @@ mod tests {
         let e = with_crop(&mut c, &wave, Exec::default(), reach, |_, _, _| Ok(())).unwrap_err();
         let msg = e.to_string();
         assert!(msg.contains("`volume`") && !msg.contains('\n'), "{msg}");
+    }
+
+    /// The shrunk period holds the span it was made for, and only shrinks: a span reaching
+    /// past the guard, an empty span or a margin already set leave the configuration as it
+    /// was.
+    #[test]
+    fn tightened_guard_holds_the_span() {
+        let cfg = Wave {
+            wavelength: Some(0.1),
+            ..Wave::default()
+        }
+        .config(&geometry(1000))
+        .unwrap();
+        let (g0, g1) = cfg.guard();
+        let span = (0.3, 0.6);
+        let t = tightened(&cfg, span).unwrap();
+        assert!(t.params().margin < 0.0 && t.n_fft() < cfg.n_fft() && t.bins() < cfg.bins());
+        let (t0, t1) = t.guard();
+        assert!(g0 < t0 && t0 <= span.0 - cfg.t0() && t1 >= span.1 - cfg.t0() && t1 < g1);
+        assert_eq!(t.alias_free(), t.guard());
+        let past = (0.3, g1 + cfg.t0() + 1.0);
+        assert_eq!(tightened(&cfg, past).unwrap(), cfg);
+        let empty = (f64::INFINITY, f64::NEG_INFINITY);
+        assert_eq!(tightened(&cfg, empty).unwrap(), cfg);
+        assert_eq!(tightened(&t, span).unwrap(), t);
+        assert_eq!(tightened(&cfg, (f64::NAN, 0.5)).unwrap(), cfg);
     }
 }
