@@ -14,7 +14,7 @@ from conftest import FOCUS, MAT, SMALL, as_python, cli
 
 F = ",".join(map(str, FOCUS))
 # Voxels near the wall: their paths end before the capture's window does, so `direct` crops
-# the time axis (bins 0..362 of 400: J = 40 instead of 42).
+# the time axis (bins 0..362 of 400) and shrinks its DFT period to their paths: J = 32, not 42.
 NEAR = "-0.3:0.3:5,-0.3:0.3:5,0.5:0.8:4"
 PAT = "-0.25,0.15,0.7,1;0.25,0,0.9,0.5"
 
@@ -69,8 +69,9 @@ def test_crop_and_the_summary_configuration(two_patches, tmp_path, probe, crop):
     if not crop:
         assert rep["crop"] is None and rep["crop_bins"] is None
     if probe == "direct":
-        # The crop is not ignored: it changes the time axis, hence the band.
-        assert (rep["crop_bins"], rep["bins"]) == (((0, 362, 400), 40) if crop else (None, 42))
+        # The crop is not ignored: it changes the time axis and shrinks the DFT period to the
+        # voxels' paths (J 42 -> 32; at the kernel's period the cropped axis would give 40).
+        assert (rep["crop_bins"], rep["bins"]) == (((0, 362, 400), 32) if crop else (None, 42))
 
 
 def test_matrix_no_crop(two_patches, tmp_path):
