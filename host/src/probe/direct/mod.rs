@@ -84,8 +84,8 @@ impl Amplitudes {
 }
 
 /// The accumulators of [`direct`] over the source's rows ([`RowSource::rows`]), with the
-/// configuration (of the time axis cropped to the voxels' reach, `crop`, and but on the band
-/// path with its period shrunk to the voxels' paths).
+/// configuration (of the time axis cropped to the voxels' reach, `crop`, and, except on the
+/// band path, with its DFT period shrunk to the voxels' paths).
 pub(super) fn direct_acc(
     src: &mut dyn RowSource,
     volume: &Volume,
@@ -103,8 +103,8 @@ pub(super) fn direct_acc(
 
 /// [`direct_acc`] with the distance-only `wave`, and the wall cosines per row under `cosine`:
 /// the capture's configuration and device legs made once, the window checked, the time axis
-/// cut to the voxels' reach (the period shrunk to their paths but on the band path), then the
-/// planner's path carried out.
+/// cut to the voxels' reach (and, except on the band path, the DFT period shrunk to their
+/// paths), then the planner's path carried out.
 fn direct_acc_with(
     src: &mut dyn RowSource,
     volume: &Volume,
