@@ -183,7 +183,12 @@ fn bins_of(
     legs: &(Vec<f64>, Vec<f64>),
     reach: Reach<'_>,
 ) -> Option<Range<usize>> {
-    let (lo, hi) = path_span(g, legs, reach)?;
+    bins_for(g, cfg, path_span(g, legs, reach)?, reach.late)
+}
+
+/// [`bins_of`] from the reach's path span `(lo, hi)` ([`path_span`]); `late`: the late gate's
+/// (only the start is cropped).
+fn bins_for(g: &Geometry, cfg: &Config, (lo, hi): (f64, f64), late: bool) -> Option<Range<usize>> {
     let pad = cfg.params().gate_support * cfg.sigma() + 2.0 * g.dt;
     let first = ((lo - pad - g.t0) / g.dt).floor();
     let last = ((hi + pad - g.t0) / g.dt).ceil() + 1.0;
@@ -195,7 +200,7 @@ fn bins_of(
         }
     };
     let start = clamp(first);
-    let end = if reach.late { g.nt } else { clamp(last) };
+    let end = if late { g.nt } else { clamp(last) };
     if start == 0 && end == g.nt {
         return None;
     }
@@ -378,17 +383,13 @@ pub(super) fn cut<'s, 'p>(
     reach: Reach<'_>,
 ) -> Result<Cut<'s, 'p>> {
     let t = crate::timings::section("planning: crop", crate::timings::Kind::Serial);
-    let bins = if crop {
-        bins_of(src.geometry(), base, legs, reach)
-    } else {
-        None
-    };
+    // The reach's path span, made once: for the crop and for the shorter period.
+    let span = crop
+        .then(|| path_span(src.geometry(), legs, reach))
+        .flatten();
+    let bins = span.and_then(|s| bins_for(src.geometry(), base, s, reach.late));
     drop(t);
-    let span = if reach.late || !crop {
-        None
-    } else {
-        path_span(src.geometry(), legs, reach)
-    };
+    let span = span.filter(|_| !reach.late);
     let shrunk = |cfg: &Config| -> Result<Option<Config>> {
         let Some(span) = span else {
             return Ok(None);
