@@ -2,7 +2,8 @@
 //! scale (criterion, **one thread**: the host runs one row per core on top of this).
 //!
 //! * `stage1`: band spectra of one laser row, kernel `RowBuffer::load` (integer-phase DFT)
-//!   vs `fast::BandDft` (one sgemm), for Nt = 200 / 400 / 800 (exh16 geometry, 16×16 SPADs).
+//!   vs `fast::BandDft` (one sgemm), for Nt = 200 / 400 / 800 (exh16 geometry, 16×16 SPADs);
+//!   on a CPU with AVX-512 also the portable product beside the AVX-512 one (`fast::sgemm`).
 //! * `planar_diagonal`: one row of the planar-FFT diagonal for the exh16 setup (16×16 SPADs,
 //!   800 bins of 6 mm, λ = σ = 0.5 m, J = 33) over 16×16×24 voxels (pitch = SPAD pitch) and
 //!   32×32×24 (half pitch, 4 polyphase sub-grids), and for 8×8 / 32×32 SPAD grids (voxels
@@ -117,6 +118,20 @@ fn stage1(c: &mut Criterion) {
                 black_box(row.band()[0])
             });
         });
+        // The portable product (`matrixmultiply`), where `BandDft::new` took AVX-512 lanes.
+        if dft.uses_avx512() {
+            let portable = BandDft::portable_table(&cfg);
+            g.bench_function(BenchmarkId::new("sgemm_portable_load_with", nt), |b| {
+                b.iter(|| {
+                    let row = rows
+                        .load_with(&scan, [0.1, 0.0, 0.0], black_box(&h), |band, m| {
+                            portable.apply(&h, band, m);
+                        })
+                        .unwrap();
+                    black_box(row.band()[0])
+                });
+            });
+        }
     }
     g.finish();
 }

@@ -5,8 +5,11 @@
 //! (`k_j = k_lo + j`, the kernel's band), so `B[s][2j], B[s][2j+1]` are the
 //! real and imaginary parts of `Σ_n H_s[n] e^{−2πi k_j n/N}` — laid out exactly as the
 //! kernel's `Complex32` spectra. The product runs in `matrixmultiply`'s `sgemm` (through
-//! `ndarray`; AVX2/FMA picked at run time), ≈ 60 % of one core's f32 peak instead of the
-//! kernel's portable integer-phase loop (3 GFLOP/s). The un-gated phasor
+//! `ndarray`; AVX2/FMA picked at run time), ≈ 60 % of one core's AVX2 f32 peak instead of
+//! the kernel's portable integer-phase loop (3 GFLOP/s); on a CPU with AVX-512 in
+//! [`super::sgemm`]'s 16-lane tiles instead (`W` packed once; 18 % → 11 % of a one-thread
+//! exhaustive `direct`; [`BandDft::portable_table`] keeps `sgemm`, and both agree within the sums'
+//! rounding, tested). The un-gated phasor
 //! `M_s = Σ_n H_s[n] e^{−iΩ nΔt}` is two more rows of `W` (the carrier's cos and sin), so the
 //! row is read once, not three times (the product's 8-column panels leave room for them:
 //! 2J + 2 = 68 columns take the same 9 panels as 66).
@@ -47,8 +50,11 @@ pub const MAX_TABLE_BYTES: usize = 256 << 20;
 /// How stage 1 runs (module docs).
 #[derive(Clone)]
 enum Method {
-    /// The matrix product with the table `W`.
+    /// The matrix product with the table `W` (`matrixmultiply`).
     Table(Array2<f32>),
+    /// The same product with `W` packed for AVX-512 lanes ([`super::sgemm`]).
+    #[cfg(target_arch = "x86_64")]
+    Packed(super::sgemm::Packed),
     /// One band bin at a time, phasors by recurrence.
     TableFree,
     /// One N-point FFT per pair of histograms.
@@ -59,6 +65,8 @@ impl std::fmt::Debug for Method {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(match self {
             Self::Table(_) => "Table",
+            #[cfg(target_arch = "x86_64")]
+            Self::Packed(_) => "Packed",
             Self::TableFree => "TableFree",
             Self::Fft(_) => "Fft",
         })
@@ -81,9 +89,14 @@ pub struct BandDft {
 }
 
 impl BandDft {
-    /// Bytes of the table `W` for `cfg` (saturating), whether or not it is made.
+    /// Bytes of the table `W` for `cfg` (saturating), whether or not it is made: its
+    /// `2J + 2` rows padded to a multiple of 16, as [`super::sgemm`] holds them (the portable
+    /// product's table is at most this).
     pub fn table_bytes(cfg: &Config) -> u128 {
-        (2 * cfg.bins() as u128 + 2).saturating_mul(cfg.nt() as u128) * 4
+        (2 * cfg.bins() as u128 + 2)
+            .next_multiple_of(16)
+            .saturating_mul(cfg.nt() as u128)
+            * 4
     }
 
     /// Builds `W` for `cfg` (cost `2J·Nt` sincos in `f64`, once), or no table above
@@ -91,10 +104,15 @@ impl BandDft {
     pub fn new(cfg: &Config) -> Self {
         let table = Self::table_bytes(cfg) <= MAX_TABLE_BYTES as u128;
         if Self::fft_is_cheaper(cfg) || !table {
-            let fft = FftPlanner::<f32>::new().plan_fft_forward(cfg.n_fft());
-            return Self::with_method(cfg, Method::Fft(fft));
+            return Self::fft(cfg);
         }
         Self::table(cfg)
+    }
+
+    /// One FFT per pair of histograms, whatever the product would cost (module docs).
+    pub fn fft(cfg: &Config) -> Self {
+        let fft = FftPlanner::<f32>::new().plan_fft_forward(cfg.n_fft());
+        Self::with_method(cfg, Method::Fft(fft))
     }
 
     /// Whether one FFT per pair of histograms costs less than the matrix product (module docs:
@@ -106,23 +124,25 @@ impl BandDft {
     }
 
     /// The matrix product (or table-free sums above [`MAX_TABLE_BYTES`]), whatever the FFT
-    /// would cost.
+    /// would cost; in AVX-512 lanes where the CPU has them ([`super::sgemm`]).
     pub fn table(cfg: &Config) -> Self {
-        let (nt, bins, n) = (cfg.nt(), cfg.bins(), cfg.n_fft() as i64);
+        #[cfg(target_arch = "x86_64")]
+        if Self::table_bytes(cfg) <= MAX_TABLE_BYTES as u128
+            && let Some(mut p) = super::sgemm::Packed::zeros(2 * cfg.bins() + 2, cfg.nt())
+        {
+            entries(cfg, |c, t, x| p.set(c, t, x));
+            return Self::with_method(cfg, Method::Packed(p));
+        }
+        Self::portable_table(cfg)
+    }
+
+    /// [`BandDft::table`] with the portable product (`matrixmultiply`: AVX2 and FMA where the
+    /// CPU has them, never AVX-512), whatever the CPU; its spectra equal the AVX-512 ones
+    /// within the sums' rounding (tested).
+    pub fn portable_table(cfg: &Config) -> Self {
         let w = (Self::table_bytes(cfg) <= MAX_TABLE_BYTES as u128).then(|| {
-            let mut w = Array2::<f32>::zeros((2 * bins + 2, nt));
-            for j in 0..bins {
-                let k = (cfg.k_lo() + j as i64).rem_euclid(n);
-                for t in 0..nt {
-                    let (c, s) = phasor(k, t as i64, n);
-                    w[[2 * j, t]] = c as f32;
-                    w[[2 * j + 1, t]] = s as f32;
-                }
-            }
-            for (t, (c, s)) in carrier(cfg).into_iter().enumerate() {
-                w[[2 * bins, t]] = c;
-                w[[2 * bins + 1, t]] = s;
-            }
+            let mut w = Array2::<f32>::zeros((2 * cfg.bins() + 2, cfg.nt()));
+            entries(cfg, |c, t, x| w[[c, t]] = x);
             w
         });
         Self::with_method(cfg, w.map_or(Method::TableFree, Method::Table))
@@ -144,7 +164,20 @@ impl BandDft {
 
     /// Whether the table `W` was made (else the sums run table-free or by FFT).
     pub fn has_table(&self) -> bool {
-        matches!(self.method, Method::Table(_))
+        match self.method {
+            Method::Table(_) => true,
+            #[cfg(target_arch = "x86_64")]
+            Method::Packed(_) => true,
+            _ => false,
+        }
+    }
+
+    /// Whether the product runs in AVX-512 lanes ([`super::sgemm`]).
+    pub fn uses_avx512(&self) -> bool {
+        #[cfg(target_arch = "x86_64")]
+        return matches!(self.method, Method::Packed(_));
+        #[cfg(not(target_arch = "x86_64"))]
+        false
     }
 
     /// Whether the spectra come from one FFT per pair of histograms.
@@ -170,27 +203,42 @@ impl BandDft {
         if ks == 0 || self.nt == 0 {
             return;
         }
-        match &self.method {
+        // Spectra and phasors in one product (module docs), then split.
+        let mut out = Vec::new();
+        let cols = match &self.method {
             Method::Table(w) => {
-                // Spectra and phasors in one product (module docs), then split.
                 let cols = 2 * self.bins + 2;
-                let mut out = vec![0.0f32; ks * cols];
+                out.resize(ks * cols, 0.0f32);
                 let a = ArrayView2::from_shape((ks, self.nt), hists).expect("checked shape");
                 let mut c = ArrayViewMut2::from_shape((ks, cols), &mut out).expect("checked shape");
                 general_mat_mul(1.0, &a, &w.t(), 0.0, &mut c);
-                let band: &mut [f32] = bytemuck::cast_slice_mut(band);
-                for ((o, b), m) in out
-                    .chunks_exact(cols)
-                    .zip(band.chunks_exact_mut(2 * self.bins))
-                    .zip(ungated.iter_mut())
-                {
-                    b.copy_from_slice(&o[..2 * self.bins]);
-                    *m = Complex32::new(o[2 * self.bins], o[2 * self.bins + 1]);
-                }
-                return;
+                cols
             }
-            Method::TableFree => self.apply_without_table(hists, band, ks),
-            Method::Fft(fft) => self.apply_fft(fft.as_ref(), hists, band, ks),
+            #[cfg(target_arch = "x86_64")]
+            Method::Packed(p) => {
+                p.product(hists, &mut out);
+                p.stride()
+            }
+            Method::TableFree => {
+                self.apply_without_table(hists, band, ks);
+                0
+            }
+            Method::Fft(fft) => {
+                self.apply_fft(fft.as_ref(), hists, band, ks);
+                0
+            }
+        };
+        if cols > 0 {
+            let band: &mut [f32] = bytemuck::cast_slice_mut(band);
+            for ((o, b), m) in out
+                .chunks_exact(cols)
+                .zip(band.chunks_exact_mut(2 * self.bins))
+                .zip(ungated.iter_mut())
+            {
+                b.copy_from_slice(&o[..2 * self.bins]);
+                *m = Complex32::new(o[2 * self.bins], o[2 * self.bins + 1]);
+            }
+            return;
         }
         for (h, m) in hists.chunks_exact(self.nt).zip(ungated.iter_mut()) {
             *m = Complex32::new(dot(h, &self.carrier[0]), dot(h, &self.carrier[1]));
@@ -265,6 +313,23 @@ impl BandDft {
     }
 }
 
+/// Every entry `W[c][t]` of the table for `cfg` handed to `put(c, t, value)` (module docs).
+fn entries(cfg: &Config, mut put: impl FnMut(usize, usize, f32)) {
+    let (nt, bins, n) = (cfg.nt(), cfg.bins(), cfg.n_fft() as i64);
+    for j in 0..bins {
+        let k = (cfg.k_lo() + j as i64).rem_euclid(n);
+        for t in 0..nt {
+            let (c, s) = phasor(k, t as i64, n);
+            put(2 * j, t, c as f32);
+            put(2 * j + 1, t, s as f32);
+        }
+    }
+    for (t, (c, s)) in carrier(cfg).into_iter().enumerate() {
+        put(2 * bins, t, c);
+        put(2 * bins + 1, t, s);
+    }
+}
+
 /// The un-gated carrier `e^{−iΩ nΔt}` per bin, as `f32` `(cos, sin)` (phase in `f64`,
 /// reduced to one turn).
 fn carrier(cfg: &Config) -> Vec<(f32, f32)> {
@@ -300,43 +365,55 @@ fn dot(a: &[f32], b: &[f32]) -> f32 {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use vltm_kernel::{Params, RowBuffer, Scan};
 
-    /// The matrix product equals the kernel's own stage 1 on the same row.
-    #[test]
-    fn gemm_equals_kernel_stage1() {
+    /// The stage-1 tests' row: 300 bins of 12 mm (λ = 0.25 m), 7 SPADs on a line, and their
+    /// histograms (positive, uneven).
+    pub(crate) fn sample_row() -> (Config, Vec<[f32; 3]>, Vec<f32>) {
         let cfg = Config::try_new(&Params {
             t0: 0.3,
             ..Params::new(0.25, 300, 0.012)
         })
         .unwrap();
         let spads: Vec<[f32; 3]> = (0..7).map(|i| [0.1 * i as f32, 0.05, 0.0]).collect();
-        let mut tables = vec![0.0f32; Scan::tables_len(&cfg, spads.len())];
-        let scan = Scan::new(&cfg, &spads, &mut tables).unwrap();
-        let hists: Vec<f32> = (0..spads.len() * cfg.nt())
+        let hists = (0..spads.len() * cfg.nt())
             .map(|i| ((i * 7919) % 97) as f32 * 0.37)
             .collect();
+        (cfg, spads, hists)
+    }
+
+    /// The matrix product equals the kernel's own stage 1 on the same row.
+    #[test]
+    fn gemm_equals_kernel_stage1() {
+        let (cfg, spads, hists) = sample_row();
+        let mut tables = vec![0.0f32; Scan::tables_len(&cfg, spads.len())];
+        let scan = Scan::new(&cfg, &spads, &mut tables).unwrap();
         let mut b1 = vec![0.0f32; RowBuffer::len(&cfg, spads.len())];
         let mut b2 = b1.clone();
         let mut r1 = RowBuffer::new(&scan, &mut b1).unwrap();
-        let mut r2 = RowBuffer::new(&scan, &mut b2).unwrap();
         let laser = [0.3, 0.2, 0.0];
         let a = r1.load(&scan, laser, &hists).unwrap();
-        let dft = BandDft::table(&cfg);
-        let b = r2
-            .load_with(&scan, laser, &hists, |band, m| dft.apply(&hists, band, m))
-            .unwrap();
         let scale: f32 = hists.iter().map(|x| x.abs()).sum::<f32>() / spads.len() as f32;
         let g0 = cfg.gate_weight(cfg.bins() / 2) as f32;
-        for (x, y) in a.band().iter().zip(b.band()) {
-            assert!((x - y).norm() <= 2e-6 * scale * g0, "{x} vs {y}");
+        // The dispatched product (AVX-512 lanes where the CPU has them) and the portable one.
+        let dft = BandDft::table(&cfg);
+        let portable = BandDft::portable_table(&cfg);
+        assert!(!portable.uses_avx512() && portable.has_table());
+        for d in [&dft, &portable] {
+            let mut r2 = RowBuffer::new(&scan, &mut b2).unwrap();
+            let b = r2
+                .load_with(&scan, laser, &hists, |band, m| d.apply(&hists, band, m))
+                .unwrap();
+            for (x, y) in a.band().iter().zip(b.band()) {
+                assert!((x - y).norm() <= 2e-6 * scale * g0, "{d:?}: {x} vs {y}");
+            }
+            for (x, y) in a.ungated().iter().zip(b.ungated()) {
+                assert!((x - y).norm() <= 2e-6 * scale, "{d:?}: {x} vs {y}");
+            }
+            assert_eq!(a.offsets(), b.offsets());
         }
-        for (x, y) in a.ungated().iter().zip(b.ungated()) {
-            assert!((x - y).norm() <= 2e-6 * scale, "{x} vs {y}");
-        }
-        assert_eq!(a.offsets(), b.offsets());
         // The table-free sums give the same spectra.
         let mut free = BandDft::table(&cfg);
         free.method = Method::TableFree;

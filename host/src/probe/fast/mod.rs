@@ -1,7 +1,8 @@
 //! Host-only fast paths: the same band spectra and probes as the kernel,
 //! evaluated with libraries a workstation has.
 //!
-//! * [`band`]: stage 1 of a whole laser row as one `sgemm` (`matrixmultiply`).
+//! * [`band`]: stage 1 of a whole laser row as one `sgemm` (`matrixmultiply`), or
+//!   [`sgemm`]'s AVX-512 product where the CPU has it (`pulp` dispatch).
 //! * [`planar`]: the planar FFT convolution over a SPAD grid and wall-parallel voxel slices
 //!   (`rustfft`), for the diagonal per row and for imaging factorised columns.
 //! * [`confocal`]: the same FFT convolution for confocal scans (laser and SPAD at each wall
@@ -30,6 +31,8 @@ pub mod lookup;
 pub mod phasor;
 pub mod planar;
 pub mod resample;
+#[cfg(target_arch = "x86_64")]
+pub mod sgemm;
 
 pub use band::BandDft;
 pub use confocal::Confocal;

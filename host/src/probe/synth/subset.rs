@@ -178,13 +178,22 @@ impl Subset<'_> {
         w.idx.resize(k_n, 0);
         w.w.resize(k_n, 0.0);
         w.lanes.resize(LANES * (nt + 1), 0.0);
-        let (lo, hi) = pulp::Arch::new().dispatch(Bins {
+        let bins = Bins {
             t: (tl, ts),
             w: (wl, ws),
             idx: &mut w.idx,
             out: &mut w.w,
             nt,
-        });
+        };
+        // AVX2 also on AVX-512 CPUs, as before `pulp`'s `x86-v4` feature (on for
+        // `fast::sgemm`): the 512-bit build of this loop is not measured.
+        #[cfg(target_arch = "x86_64")]
+        let (lo, hi) = match pulp::x86::V3::try_new() {
+            Some(v3) => pulp::Simd::vectorize(v3, bins),
+            None => pulp::Arch::new().dispatch(bins),
+        };
+        #[cfg(not(target_arch = "x86_64"))]
+        let (lo, hi) = pulp::Arch::new().dispatch(bins);
         let lanes = &mut w.lanes[..LANES * (nt + 1)];
         for (&i, &x) in w.idx.iter().zip(&w.w) {
             lanes[i as usize] += x;
