@@ -142,7 +142,8 @@ pub(super) fn read_kind(src: &dyn RowSource) -> Kind {
 }
 
 /// Stage 1 of one row through the host's matrix product ([`BandDft`]); non-finite samples
-/// are zeroed in a copy (`clean`) for the product and counted by the kernel.
+/// are zeroed in a copy (`clean`) for the product and counted, and the row is read once more
+/// only where it has one (or its sums overflow).
 pub(super) fn load_row<'r>(
     rows: &'r mut RowBuffer<'_>,
     scan: &Scan<'_>,
@@ -151,15 +152,24 @@ pub(super) fn load_row<'r>(
     hist: &'r [f32],
     clean: &mut Vec<f32>,
 ) -> Result<Row<'r, f32>> {
-    let data: &[f32] = if all_finite(hist) {
-        hist
-    } else {
-        clean.clear();
-        clean.extend(hist.iter().map(|&x| if x.is_finite() { x } else { 0.0 }));
-        clean
-    };
-    Ok(rows.load_with(scan, x_l, hist, |band, ungated| {
-        dft.apply(data, band, ungated);
+    // The raw sums first: a NaN or ±∞ sample makes every sum of its histogram non-finite
+    // (`NaN·w`, `±∞·w`, `±∞·0` and any sum holding one are), and every band bin sums every
+    // sample, so finite spectra prove a finite row, which is then read once, not three times
+    // (a check, the sums, the kernel's count). Otherwise the row is counted and, if it has
+    // non-finite samples, summed again with them zeroed; finite samples whose sums overflow
+    // keep their overflowed sums, as before.
+    Ok(rows.load_counted(scan, x_l, hist, |band, ungated| {
+        dft.apply(hist, band, ungated);
+        if all_finite(bytemuck::cast_slice(band)) && all_finite(bytemuck::cast_slice(ungated)) {
+            return 0;
+        }
+        let bad = hist.iter().filter(|x| !x.is_finite()).count();
+        if bad > 0 {
+            clean.clear();
+            clean.extend(hist.iter().map(|&x| if x.is_finite() { x } else { 0.0 }));
+            dft.apply(clean, band, ungated);
+        }
+        u32::try_from(bad).unwrap_or(u32::MAX)
     })?)
 }
 
@@ -483,7 +493,73 @@ pub(super) fn with_band_fallback(
 
 #[cfg(test)]
 mod tests {
-    use super::all_finite;
+    use super::{all_finite, load_row};
+    use crate::probe::fast::BandDft;
+    use crate::probe::fast::band::tests::sample_row;
+    use vltm_kernel::{RowBuffer, Scan};
+
+    /// A row with NaN and ±∞ samples gives the spectra of the row with them zeroed and their
+    /// count, through every stage-1 method (the product, portable or in AVX-512 lanes, and
+    /// the FFT); a finite row counts none; finite samples whose sums overflow keep their
+    /// overflowed sums and count none (as the kernel's own `load` does).
+    #[test]
+    fn load_row_zeroes_and_counts_non_finite_samples() {
+        let (cfg, spads, finite) = sample_row();
+        let mut tables = vec![0.0f32; Scan::tables_len(&cfg, spads.len())];
+        let scan = Scan::new(&cfg, &spads, &mut tables).unwrap();
+        let n = finite.len();
+        let mut bad = finite.clone();
+        for (at, x) in [
+            (0, f32::NAN),
+            (n / 2, f32::INFINITY),
+            (n - 1, f32::NEG_INFINITY),
+        ] {
+            bad[at] = x;
+        }
+        let zeroed: Vec<f32> = bad
+            .iter()
+            .map(|&x| if x.is_finite() { x } else { 0.0 })
+            .collect();
+        let mut huge = finite.clone();
+        huge[5] = f32::MAX;
+        huge[6] = f32::MAX;
+        let len = RowBuffer::len(&cfg, spads.len());
+        let (mut b1, mut b2) = (vec![0.0f32; len], vec![0.0f32; len]);
+        let laser = [0.3, 0.2, 0.0];
+        let dfts = [
+            BandDft::table(&cfg),
+            BandDft::portable_table(&cfg),
+            BandDft::fft(&cfg),
+        ];
+        for dft in &dfts {
+            let mut clean = Vec::new();
+            let mut r1 = RowBuffer::new(&scan, &mut b1).unwrap();
+            let got = load_row(&mut r1, &scan, dft, laser, &bad, &mut clean).unwrap();
+            let mut r2 = RowBuffer::new(&scan, &mut b2).unwrap();
+            let want = r2
+                .load_with(&scan, laser, &zeroed, |b, m| dft.apply(&zeroed, b, m))
+                .unwrap();
+            assert_eq!(got.non_finite(), 3, "{dft:?}");
+            assert_eq!(got.band(), want.band(), "{dft:?}");
+            assert_eq!(got.ungated(), want.ungated(), "{dft:?}");
+            let mut r1 = RowBuffer::new(&scan, &mut b1).unwrap();
+            let ok = load_row(&mut r1, &scan, dft, laser, &finite, &mut clean).unwrap();
+            assert_eq!(ok.non_finite(), 0, "{dft:?}");
+            assert!(
+                ok.band()
+                    .iter()
+                    .all(|z| z.re.is_finite() && z.im.is_finite())
+            );
+            let mut r1 = RowBuffer::new(&scan, &mut b1).unwrap();
+            let over = load_row(&mut r1, &scan, dft, laser, &huge, &mut clean).unwrap();
+            assert_eq!(over.non_finite(), 0, "{dft:?}");
+            assert!(
+                over.band()
+                    .iter()
+                    .any(|z| !z.re.is_finite() || !z.im.is_finite())
+            );
+        }
+    }
 
     /// `all_finite` agrees with `all(is_finite)` for a non-finite sample anywhere (first,
     /// last, inside a block, in the short last block) and for finite extremes (±MAX,

@@ -155,13 +155,33 @@ impl<'m> RowBuffer<'m> {
         hists: &'r [T],
         spectra: impl FnOnce(&mut [Complex32], &mut [Complex32]),
     ) -> Result<Row<'r, T>, ArgumentError> {
+        self.load_counted(scan, laser, hists, |hg, mono| {
+            spectra(hg, mono);
+            hists.iter().map(|s| u32::from(!s.is_valid())).sum()
+        })
+    }
+
+    /// [`RowBuffer::load_with`] where `spectra` also returns the number of non-finite samples
+    /// of `hists`, for a caller that learns it while computing the spectra (for example zero
+    /// when its raw sums over the unmodified row came out finite: a NaN or ±∞ sample makes
+    /// every sum it enters non-finite), so that the row is not read once more to count them.
+    /// The count is reported as [`Row::non_finite`] and is not checked.
+    ///
+    /// # Errors
+    /// As [`RowBuffer::load`]; `spectra` is not called then.
+    pub fn load_counted<'r, T: Sample>(
+        &'r mut self,
+        scan: &Scan<'_>,
+        laser: Point,
+        hists: &'r [T],
+        spectra: impl FnOnce(&mut [Complex32], &mut [Complex32]) -> u32,
+    ) -> Result<Row<'r, T>, ArgumentError> {
         let cfg = &scan.cfg;
         let (ks, nt, j) = (scan.spads.len(), cfg.nt(), cfg.bins());
         check_len("row buffer", ks * j, self.hg.len())?;
         check_len("histograms", ks * nt, hists.len())?;
         check_points("laser", &[laser])?;
-        spectra(self.hg, self.mono);
-        let non_finite = hists.iter().map(|s| u32::from(!s.is_valid())).sum();
+        let non_finite = spectra(self.hg, self.mono);
         self.fold_legs(scan, &laser);
         Ok(Row {
             laser,
