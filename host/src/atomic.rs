@@ -207,11 +207,8 @@ mod tests {
     use super::*;
     use std::io::Write;
 
-    fn dir(name: &str) -> PathBuf {
-        let d = std::env::temp_dir().join(format!("vltm-atomic-{name}-{}", std::process::id()));
-        let _ = fs::remove_dir_all(&d);
-        fs::create_dir_all(&d).unwrap();
-        d
+    fn dir(name: &str) -> crate::scratch::Scratch {
+        crate::scratch::Scratch::dir(&format!("atomic-{name}"))
     }
 
     fn names(d: &Path) -> Vec<String> {

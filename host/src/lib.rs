@@ -11,6 +11,8 @@ pub mod info;
 pub mod io;
 pub mod live;
 pub mod probe;
+#[cfg(test)]
+pub(crate) mod scratch;
 pub mod sim;
 pub mod timings;
 pub mod volume;

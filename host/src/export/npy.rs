@@ -451,10 +451,8 @@ impl DictParser<'_> {
 mod tests {
     use super::*;
 
-    fn tmp(name: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("vltm-npy-test-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        dir.join(name)
+    fn tmp(name: &str) -> crate::scratch::Scratch {
+        crate::scratch::Scratch::file("npy-test", name)
     }
 
     /// A raw `.npy` file with the given header dict and data bytes (version 1.0).

@@ -6,10 +6,8 @@ fn top_colour() -> Rgb<u8> {
     Rgb(colorous::INFERNO.eval_continuous(1.0).into_array())
 }
 
-fn tmp(name: &str) -> std::path::PathBuf {
-    let dir = std::env::temp_dir().join(format!("vltm-figure-test-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir.join(name)
+fn tmp(name: &str) -> crate::scratch::Scratch {
+    crate::scratch::Scratch::file("figure-test", name)
 }
 
 /// Pixels of `img` equal to `c`, outside `exclude`.

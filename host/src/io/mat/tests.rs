@@ -98,10 +98,8 @@ fn write(dir: &std::path::Path, name: &str, bytes: &[u8]) -> std::path::PathBuf 
     p
 }
 
-fn tmp(tag: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("vltm-mat-{tag}-{}", std::process::id()));
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn tmp(tag: &str) -> crate::scratch::Scratch {
+    crate::scratch::Scratch::dir(&format!("mat-{tag}"))
 }
 
 /// rect_data (3, 2, 5) with value 100·i + 10·j + t.

@@ -29,11 +29,8 @@ fn shared(capture: &str) -> PathBuf {
 }
 
 /// A fresh scratch directory for one test.
-fn scratch(test: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("vltm-tal-{}-{test}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn scratch(test: &str) -> crate::scratch::Scratch {
+    crate::scratch::Scratch::dir(&format!("tal-{test}"))
 }
 
 /// The format error's field, or a failure message.

@@ -3,11 +3,8 @@
 
 use super::*;
 
-fn scratch(test: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("vltm-znlos-{}-{test}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).unwrap();
-    d
+fn scratch(test: &str) -> crate::scratch::Scratch {
+    crate::scratch::Scratch::dir(&format!("znlos-{test}"))
 }
 
 /// The value of laser (ix, iy), SPAD (sx, sy), bin n, colour c, bounce b.
