@@ -309,13 +309,12 @@ impl Lanes for Avx {
     }
 }
 
-#[cfg(test)]
+#[cfg(all(test, target_arch = "x86_64"))]
 mod tests {
     use super::*;
 
     /// The AVX loops give the portable loops' values bit for bit (where the CPU has AVX2).
     #[test]
-    #[cfg(target_arch = "x86_64")]
     fn avx_equals_portable() {
         let Some(v3) = pulp::x86::V3::try_new() else {
             return;

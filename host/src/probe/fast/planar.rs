@@ -43,7 +43,7 @@
 //! number of threads: the results are bit-identical.
 
 pub(super) use super::lanes::transpose;
-use super::lanes::{self, Lanes, Portable};
+use super::lanes::{Lanes, Portable};
 use super::lattice::{Layout, layout};
 use num_complex::{Complex32, Complex64};
 use rayon::prelude::*;
@@ -386,7 +386,7 @@ impl Planar {
         }
         #[cfg(target_arch = "x86_64")]
         if let Some(v3) = pulp::x86::V3::try_new() {
-            return v3.vectorize(|| op.run(lanes::Avx(v3)));
+            return v3.vectorize(|| op.run(super::lanes::Avx(v3)));
         }
         pulp::Arch::new().dispatch(op);
     }
