@@ -309,12 +309,14 @@ impl Lanes for Avx {
     }
 }
 
-#[cfg(all(test, target_arch = "x86_64"))]
+#[cfg(test)]
 mod tests {
+    #[cfg(target_arch = "x86_64")]
     use super::*;
 
     /// The AVX loops give the portable loops' values bit for bit (where the CPU has AVX2).
     #[test]
+    #[cfg(target_arch = "x86_64")]
     fn avx_equals_portable() {
         let Some(v3) = pulp::x86::V3::try_new() else {
             return;
