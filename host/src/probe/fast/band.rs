@@ -400,7 +400,10 @@ pub(crate) mod tests {
         // The dispatched product (AVX-512 lanes where the CPU has them) and the portable one.
         let dft = BandDft::table(&cfg);
         let portable = BandDft::portable_table(&cfg);
-        assert!(!portable.uses_avx512() && portable.has_table());
+        assert!(!portable.uses_avx512() && portable.has_table() && dft.has_table());
+        // The AVX-512 product exactly where the CPU has AVX-512.
+        #[cfg(target_arch = "x86_64")]
+        assert_eq!(dft.uses_avx512(), pulp::x86::V4::try_new().is_some());
         for d in [&dft, &portable] {
             let mut r2 = RowBuffer::new(&scan, &mut b2).unwrap();
             let b = r2
