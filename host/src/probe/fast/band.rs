@@ -164,12 +164,7 @@ impl BandDft {
 
     /// Whether the table `W` was made (else the sums run table-free or by FFT).
     pub fn has_table(&self) -> bool {
-        match self.method {
-            Method::Table(_) => true,
-            #[cfg(target_arch = "x86_64")]
-            Method::Packed(_) => true,
-            _ => false,
-        }
+        !matches!(self.method, Method::TableFree | Method::Fft(_))
     }
 
     /// Whether the product runs in AVX-512 lanes ([`super::sgemm`]).
@@ -203,7 +198,7 @@ impl BandDft {
         if ks == 0 || self.nt == 0 {
             return;
         }
-        // Spectra and phasors in one product (module docs), then split.
+        // Spectra and phasors in one product (module docs) of `cols` columns per histogram.
         let mut out = Vec::new();
         let cols = match &self.method {
             Method::Table(w) => {
@@ -219,34 +214,38 @@ impl BandDft {
                 p.product(hists, &mut out);
                 p.stride()
             }
+            // No product: the spectra, then the phasors.
             Method::TableFree => {
                 self.apply_without_table(hists, band, ks);
-                0
+                return self.ungated(hists, ungated);
             }
             Method::Fft(fft) => {
                 self.apply_fft(fft.as_ref(), hists, band, ks);
-                0
+                return self.ungated(hists, ungated);
             }
         };
-        if cols > 0 {
-            let band: &mut [f32] = bytemuck::cast_slice_mut(band);
-            for ((o, b), m) in out
-                .chunks_exact(cols)
-                .zip(band.chunks_exact_mut(2 * self.bins))
-                .zip(ungated.iter_mut())
-            {
-                b.copy_from_slice(&o[..2 * self.bins]);
-                *m = Complex32::new(o[2 * self.bins], o[2 * self.bins + 1]);
-            }
-            return;
-        }
-        for (h, m) in hists.chunks_exact(self.nt).zip(ungated.iter_mut()) {
-            *m = Complex32::new(dot(h, &self.carrier[0]), dot(h, &self.carrier[1]));
+        // Split the product's rows into spectra and phasors.
+        let band: &mut [f32] = bytemuck::cast_slice_mut(band);
+        for ((o, b), m) in out
+            .chunks_exact(cols)
+            .zip(band.chunks_exact_mut(2 * self.bins))
+            .zip(ungated.iter_mut())
+        {
+            b.copy_from_slice(&o[..2 * self.bins]);
+            *m = Complex32::new(o[2 * self.bins], o[2 * self.bins + 1]);
         }
     }
 }
 
 impl BandDft {
+    /// The un-gated phasors `M_s` as dot products with the carrier (the paths without the
+    /// product).
+    fn ungated(&self, hists: &[f32], ungated: &mut [Complex32]) {
+        for (h, m) in hists.chunks_exact(self.nt).zip(ungated.iter_mut()) {
+            *m = Complex32::new(dot(h, &self.carrier[0]), dot(h, &self.carrier[1]));
+        }
+    }
+
     /// The band bins from one N-point FFT per pair of histograms (module docs): `z = h₁ + i·h₂`,
     /// `Z = FFT(z)`, then `H₁[k] = (Z[k] + Z̄[N−k])/2`, `H₂[k] = (Z[k] − Z̄[N−k])/(2i)`.
     fn apply_fft(&self, fft: &dyn Fft<f32>, hists: &[f32], band: &mut [Complex32], ks: usize) {
@@ -430,10 +429,7 @@ pub(crate) mod tests {
         }
         assert!(!free.has_table() && dft.has_table());
         // The FFT gives the same spectra, for an odd number of SPADs (pairs and a single).
-        let fft = BandDft::with_method(
-            &cfg,
-            Method::Fft(FftPlanner::new().plan_fft_forward(cfg.n_fft())),
-        );
+        let fft = BandDft::fft(&cfg);
         let mut b4 = vec![0.0f32; RowBuffer::len(&cfg, spads.len())];
         let mut r4 = RowBuffer::new(&scan, &mut b4).unwrap();
         let d = r4
